@@ -1,0 +1,356 @@
+/* assemble.c — environment, meshes with dof maps, discrete functions, regions, the
+ * element loop that runs generated kernels, point evaluation (interpolation), and
+ * integration of functionals. No PETSc in this file. */
+#include "assemble.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+void lg_seterr(lg_env *env, const char *fmt, ...) {
+  char tmp[LG_ERRLEN];
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(tmp, sizeof tmp, fmt, ap);
+  va_end(ap);
+  memcpy(env->err, tmp, sizeof tmp);
+}
+
+lg_env *lg_env_new(const char *tcc_libdir) {
+  lg_env *env = calloc(1, sizeof *env);
+  if (!env) return NULL;
+  env->c = expr_ctx_new();
+  env->jit = jit_new(JIT_TCC, tcc_libdir);
+  if (!env->c || !env->jit) { lg_env_free(env); return NULL; }
+  return env;
+}
+
+void lg_env_free(lg_env *env) {
+  if (!env) return;
+  expr_ctx_free(env->c);
+  jit_free(env->jit);
+  free(env);
+}
+
+lg_mesh *lg_mesh_wrap(mesh *m) {
+  lg_mesh *lm = calloc(1, sizeof *lm);
+  if (lm) lm->m = m;
+  return lm;
+}
+
+void lg_mesh_changed(lg_mesh *lm) {
+  /* dof maps depend on topology only; geometry changes need a new validity check */
+  lm->validated = 0;
+}
+
+void lg_mesh_free(lg_mesh *lm) {
+  if (!lm) return;
+  for (int i = 0; i < 4; i++) dofmap_free(lm->dm[i]);
+  mesh_free(lm->m);
+  free(lm);
+}
+
+dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree) {
+  if (degree < 1 || degree > 3) { lg_seterr(env, "Lagrange degree %d is not available (1, 2, 3)", degree); return NULL; }
+  if (!lm->dm[degree]) {
+    char err[256];
+    lm->dm[degree] = dofmap_new(lm->m, degree, err);
+    if (!lm->dm[degree]) { lg_seterr(env, "%s", err); return NULL; }
+  }
+  return lm->dm[degree];
+}
+
+int lg_mesh_check(lg_env *env, lg_mesh *lm) {
+  if (lm->validated) return 0;
+  int ids[5], n;
+  mesh_count_invalid(lm->m, 5, ids, &n);
+  if (n) {
+    char list[128] = "";
+    size_t used = 0;
+    for (int i = 0; i < n && i < 5; i++)
+      used += (size_t)snprintf(list + used, sizeof list - used, "%s%d", i ? ", " : "", ids[i] + 1);
+    lg_seterr(env, "the mesh has %d inverted or zero-size cell%s (cell%s %s%s); assembly needs "
+                   "every cell positively oriented",
+              n, n == 1 ? "" : "s", n == 1 ? "" : "s", list, n > 5 ? ", ..." : "");
+    return 1;
+  }
+  lm->validated = 1;
+  return 0;
+}
+
+lg_function *lg_function_new(lg_env *env, lg_mesh *lm, int degree, const char *name) {
+  dofmap *dm = lg_mesh_dofmap(env, lm, degree);
+  if (!dm) return NULL;
+  lg_function *f = calloc(1, sizeof *f);
+  if (!f) { lg_seterr(env, "out of memory"); return NULL; }
+  f->mesh = lm;
+  f->dm = dm;
+  f->degree = degree;
+  f->x = calloc((size_t)dm->ndof, sizeof(double));
+  if (!f->x) { free(f); lg_seterr(env, "out of memory for %d dofs", dm->ndof); return NULL; }
+  f->fid = expr_func_new(env->c, FK_DISCRETE, name ? name : "uh", degree, 1, f);
+  if (f->fid < 0) { free(f->x); free(f); lg_seterr(env, "out of memory"); return NULL; }
+  return f;
+}
+
+void lg_function_free(lg_function *f) {
+  if (!f) return;
+  /* the expression context may still hold leaves naming this function: detach */
+  free(f->x);
+  free(f);
+}
+
+/* ---------------------------------------------------------------- regions */
+
+int lg_region_items(lg_env *env, lg_mesh *lm, const region *r, int *n, int **cells, int **facets) {
+  mesh *m = lm->m;
+  *cells = NULL;
+  *facets = NULL;
+  *n = 0;
+  if (r->kind == REGION_CELLS) {
+    int cnt = 0;
+    for (int c = 0; c < m->ncell; c++) {
+      int in = r->ntag == 0;
+      for (int t = 0; t < r->ntag && !in; t++) in = m->cell_tag[c] == r->tags[t];
+      cnt += in;
+    }
+    *cells = malloc(sizeof(int) * (size_t)(cnt + 1));
+    if (!*cells) { lg_seterr(env, "out of memory"); return 1; }
+    int k = 0;
+    for (int c = 0; c < m->ncell; c++) {
+      int in = r->ntag == 0;
+      for (int t = 0; t < r->ntag && !in; t++) in = m->cell_tag[c] == r->tags[t];
+      if (in) (*cells)[k++] = c;
+    }
+    *n = k;
+    return 0;
+  }
+  if (mesh_build_boundary_cells(m)) { lg_seterr(env, "%s", m->err); return 1; }
+  int cnt = 0;
+  for (int b = 0; b < m->nbf; b++)
+    for (int t = 0; t < r->ntag; t++) cnt += m->bf_tag[b] == r->tags[t];
+  *cells = malloc(sizeof(int) * (size_t)(cnt + 1));
+  *facets = malloc(sizeof(int) * (size_t)(cnt + 1));
+  if (!*cells || !*facets) { free(*cells); free(*facets); *cells = *facets = NULL; lg_seterr(env, "out of memory"); return 1; }
+  int k = 0;
+  for (int b = 0; b < m->nbf; b++)
+    for (int t = 0; t < r->ntag; t++)
+      if (m->bf_tag[b] == r->tags[t]) {
+        (*cells)[k] = m->bf_cell[b];
+        (*facets)[k] = m->bf_local[b];
+        k++;
+        break;
+      }
+  *n = k;
+  return 0;
+}
+
+/* ---------------------------------------------------------------- element loop */
+
+int lg_bind_discrete(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nextra,
+                     const coef_binding *extra, coef_binding *out) {
+  for (int i = 0; i < k->ncoef; i++) {
+    int f = k->coef_func[i];
+    out[i].func = f;
+    int found = 0;
+    for (int j = 0; j < nextra; j++)
+      if (extra[j].func == f) { out[i] = extra[j]; found = 1; }
+    if (found) continue;
+    expr_func_info *fi = expr_func_get(env->c, f);
+    if (!fi || fi->kind != FK_DISCRETE || !fi->user) {
+      lg_seterr(env, "%s %s has no values here: %s", fi && fi->kind == FK_UNKNOWN ? "the unknown" : "the function",
+                fi ? fi->name : "?", fi && fi->kind == FK_UNKNOWN ? "it is not an unknown of this problem; use a discrete function (a solution or lg.interpolate)" : "it was freed");
+      return 1;
+    }
+    lg_function *fn = fi->user;
+    if (fn->mesh != lm) {
+      lg_seterr(env, "the discrete function %s lives on a different mesh", fi->name);
+      return 1;
+    }
+    out[i].dm = fn->dm;
+    out[i].vals = fn->x;
+  }
+  return 0;
+}
+
+int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells,
+                      const int *facets, int nbind, const coef_binding *bind, double *out) {
+  mesh *m = lm->m;
+  (void)nbind;
+  int size = k->arity == 2 ? k->rows.size * k->cols.size : k->arity == 1 ? k->rows.size : 1;
+  double X[8 * 3], A[FEM_MAXLOC * KER_MAXFIELD * FEM_MAXLOC * KER_MAXFIELD / 4 + 64];
+  double *Ab = NULL;
+  double *W = malloc(sizeof(double) * (size_t)(k->wsize + 1));
+  if (!W) { lg_seterr(env, "out of memory"); return 1; }
+  if ((size_t)size > sizeof A / sizeof A[0]) {
+    Ab = malloc(sizeof(double) * (size_t)size);
+    if (!Ab) { free(W); lg_seterr(env, "out of memory"); return 1; }
+  }
+  double *P = expr_param_values(env->c);
+  int nvc = m->nvc, d = m->dim;
+  double sum = 0;
+  for (int it = 0; it < nitems; it++) {
+    int c = cells[it];
+    const int *v = m->cells + (size_t)c * (size_t)nvc;
+    for (int i = 0; i < nvc; i++)
+      for (int j = 0; j < d; j++) X[i * d + j] = m->x[(size_t)v[i] * d + j];
+    for (int ci = 0; ci < k->ncoef; ci++) {
+      const dofmap *dm = bind[ci].dm;
+      const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
+      double *w = W + k->coef_off[ci];
+      for (int i = 0; i < dm->nloc; i++) w[i] = bind[ci].vals[cd[i]];
+    }
+    double *dst = k->arity == 0 ? (Ab ? Ab : A) : out + (size_t)it * (size_t)size;
+    memset(dst, 0, sizeof(double) * (size_t)size);
+    k->fn(X, W, P, facets ? facets[it] : 0, dst);
+    if (k->arity == 0) sum += dst[0];
+  }
+  if (k->arity == 0) out[0] += sum;
+  free(W);
+  free(Ab);
+  return 0;
+}
+
+/* ---------------------------------------------------------------- point evaluation */
+
+typedef struct {
+  lg_env *env;
+  lg_mesh *lm;
+  int cell;
+  double xi[3], x[3], K[3][3];
+  int nbind;
+  const coef_binding *bind;
+} pt_ctx;
+
+static int pt_leaf(void *ud, const expr *e, double *out) {
+  pt_ctx *p = ud;
+  if (e->kind == E_COORD) { *out = p->x[e->i0]; return 0; }
+  if (e->kind == E_NORMAL) { lg_seterr(p->env, "the normal vector has no value at a point"); return 1; }
+  const coef_binding *b = NULL;
+  for (int i = 0; i < p->nbind; i++)
+    if (p->bind[i].func == e->i0) b = &p->bind[i];
+  if (!b) {
+    expr_func_info *fi = expr_func_get(p->env->c, e->i0);
+    lg_seterr(p->env, "%s has no value here", fi ? fi->name : "a function");
+    return 1;
+  }
+  if (e->order > 1) { lg_seterr(p->env, "second derivatives cannot be evaluated at points yet"); return 1; }
+  double val[FEM_MAXLOC], grad[FEM_MAXLOC * 3];
+  lagrange_eval(&b->dm->el, p->xi, val, grad);
+  const int *cd = b->dm->cell_dofs + (size_t)p->cell * (size_t)b->dm->nloc;
+  int dir = -1, dim = p->lm->m->dim;
+  for (int d = 0; d < EXPR_MAXDIM; d++)
+    if (e->alpha[d]) dir = d;
+  double s = 0;
+  for (int i = 0; i < b->dm->nloc; i++) {
+    double phi;
+    if (dir < 0) phi = val[i];
+    else {
+      phi = 0;
+      for (int k = 0; k < dim; k++) phi += grad[i * dim + k] * p->K[k][dir];
+    }
+    s += b->vals[cd[i]] * phi;
+  }
+  *out = s;
+  return 0;
+}
+
+static int bind_all_discrete(lg_env *env, lg_mesh *lm, expr_tape *t, coef_binding *bind, int *nb) {
+  *nb = 0;
+  for (int i = 0; i < t->n; i++) {
+    const expr *e = t->node[i];
+    if (e->kind != E_FIELD) continue;
+    int have = 0;
+    for (int j = 0; j < *nb; j++) have |= bind[j].func == e->i0;
+    if (have) continue;
+    expr_func_info *fi = expr_func_get(env->c, e->i0);
+    if (!fi || fi->kind != FK_DISCRETE || !fi->user) {
+      lg_seterr(env, "the expression contains the %s %s, which has no values; use a discrete "
+                     "function (a solution or lg.interpolate)",
+                fi && fi->kind == FK_TEST ? "test function" : "unknown", fi ? fi->name : "?");
+      return 1;
+    }
+    lg_function *fn = fi->user;
+    if (fn->mesh != lm) { lg_seterr(env, "the discrete function %s lives on a different mesh", fi->name); return 1; }
+    if (*nb >= KER_MAXCOEF) { lg_seterr(env, "too many functions in one expression"); return 1; }
+    bind[*nb].func = e->i0;
+    bind[*nb].dm = fn->dm;
+    bind[*nb].vals = fn->x;
+    (*nb)++;
+  }
+  return 0;
+}
+
+int lg_interpolate(lg_env *env, lg_function *f, expr *e) {
+  if (!e) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
+  if (e->kind == E_LIST) { lg_seterr(env, "lg.interpolate: the expression must be a scalar"); return 1; }
+  expr_tape t;
+  if (expr_tape_build(env->c, 1, &e, &t)) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
+  coef_binding bind[KER_MAXCOEF];
+  int nb;
+  if (bind_all_discrete(env, f->mesh, &t, bind, &nb)) { expr_tape_free(&t); return 1; }
+  double *w = malloc(sizeof(double) * (size_t)(t.n + 1));
+  double *tmp = f->x;
+  int share = 0;
+  for (int i = 0; i < nb; i++) share |= bind[i].vals == f->x;
+  if (share) tmp = malloc(sizeof(double) * (size_t)f->dm->ndof);
+  if (!w || !tmp) { free(w); if (share) free(tmp); expr_tape_free(&t); lg_seterr(env, "out of memory"); return 1; }
+  mesh *m = f->mesh->m;
+  pt_ctx p = {env, f->mesh, 0, {0, 0, 0}, {0, 0, 0}, {{0}}, nb, bind};
+  int rc = 0;
+  for (int c = 0; c < m->ncell && !rc; c++) {
+    double J[3][3];
+    simplex_jacobian(m, c, J, p.K);
+    p.cell = c;
+    for (int k = 0; k < f->dm->nloc && !rc; k++) {
+      memcpy(p.xi, f->dm->el.node + 3 * k, sizeof p.xi);
+      dofmap_node_coords(f->dm, c, k, p.x);
+      double v;
+      rc = expr_tape_eval(&t, expr_param_values(env->c), pt_leaf, &p, w, &v);
+      if (!rc) tmp[f->dm->cell_dofs[(size_t)c * f->dm->nloc + k]] = v;
+    }
+  }
+  if (share && !rc) memcpy(f->x, tmp, sizeof(double) * (size_t)f->dm->ndof);
+  if (share) free(tmp);
+  free(w);
+  expr_tape_free(&t);
+  return rc;
+}
+
+int lg_quad_degree(lg_env *env, expr *e, int order) {
+  if (order >= 0) return order > FEM_MAXDEG ? FEM_MAXDEG : order;
+  int d = expr_degree(env->c, e, 1);
+  return d > FEM_MAXDEG ? FEM_MAXDEG : d;
+}
+
+int lg_integrate(lg_env *env, lg_mesh *lm, const region *r, expr *e, int order, double *result) {
+  if (!e) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
+  if (e->kind == E_LIST) {
+    char s[64];
+    expr_describe_shape(e, s, sizeof s);
+    lg_seterr(env, "lg.integrate: the integrand must be a scalar, got %s", s);
+    return 1;
+  }
+  if (lg_mesh_check(env, lm)) return 1;
+  kernel_spec s = {0, NULL, e};
+  lg_kernel k;
+  int qd = lg_quad_degree(env, e, order);
+  char err[LG_ERRLEN];
+  if (kernel_build(env->jit, env->c, lm->m->type, r->kind == REGION_BOUNDARY, qd, &s, NULL, NULL, &k, err, sizeof err)) {
+    lg_seterr(env, "%s", err);
+    return 1;
+  }
+  env->kernel_ms += k.compile_ms;
+  env->nkernels += !k.cached;
+  coef_binding bind[KER_MAXCOEF];
+  if (lg_bind_discrete(env, lm, &k, 0, NULL, bind)) return 1;
+  int n, *cells, *facets;
+  if (lg_region_items(env, lm, r, &n, &cells, &facets)) return 1;
+  *result = 0;
+  int rc = lg_assemble_items(env, lm, &k, n, cells, facets, k.ncoef, bind, result);
+  free(cells);
+  free(facets);
+  return rc;
+}

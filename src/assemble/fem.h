@@ -1,0 +1,65 @@
+/* fem.h — reference-cell numerics of the assembly layer: Gauss quadrature on simplices
+ * and their facets, Lagrange P1–P3 elements on triangles and tetrahedra, and dof maps.
+ * No PETSc here: this part is plain C on top of src/mesh. */
+#ifndef LUGAL_FEM_H
+#define LUGAL_FEM_H
+
+#include "../mesh/mesh.h"
+
+#define FEM_MAXQ 512
+#define FEM_MAXLOC 20 /* P3 tetrahedron */
+
+/* a rule on the reference cell (or facet): points in reference coordinates and weights
+ * summing to the reference measure (cells) or to 1 (facets, scaled by the facet size) */
+typedef struct {
+  int dim, n, degree;
+  double x[FEM_MAXQ * 3];
+  double w[FEM_MAXQ];
+} quad_rule;
+
+/* Gauss–Jacobi nodes and weights on [-1,1] for (1-x)^a (1+x)^b; returns 0 on success */
+int gauss_jacobi(int n, double a, double b, double *x, double *w);
+/* a rule exact for polynomials of total degree `degree` on the reference simplex of
+ * dimension dim (1: [0,1], 2: triangle, 3: tetrahedron), collapsed (Stroud) product */
+int quad_simplex(int dim, int degree, quad_rule *q);
+/* max degree offered: 30 (well beyond the 10 / 8 the design asks for) */
+#define FEM_MAXDEG 30
+
+typedef struct {
+  cell_type cell;
+  int dim, degree, nloc;
+  double node[FEM_MAXLOC * 3]; /* reference node coordinates */
+  int nmono;
+  int mono[FEM_MAXLOC][3];     /* monomial exponents */
+  double coef[FEM_MAXLOC * FEM_MAXLOC]; /* basis n = sum_m coef[m*nloc+n] mono_m */
+  int nfacet_dofs;             /* dofs on one facet */
+  int facet_dofs[6][FEM_MAXLOC];
+  /* entity of each local node: 0 vertex, 1 edge, 2 face, 3 interior; and its index */
+  int ent_dim[FEM_MAXLOC], ent_id[FEM_MAXLOC], ent_k[FEM_MAXLOC];
+} lagrange_element;
+
+int lagrange_init(lagrange_element *e, cell_type cell, int degree, char *err);
+/* values (nloc) and reference gradients (nloc*dim) at a reference point */
+void lagrange_eval(const lagrange_element *e, const double *xi, double *val, double *grad);
+
+/* reference facet geometry */
+void ref_facet_point(cell_type t, int facet, const double *s, double *xi);
+void ref_facet_normal(cell_type t, int facet, double *n);
+
+/* a Lagrange space of some degree on a mesh: global numbering */
+typedef struct {
+  mesh *m;
+  int degree, nloc, ndof;
+  lagrange_element el;
+  int *cell_dofs; /* ncell*nloc */
+} dofmap;
+
+dofmap *dofmap_new(mesh *m, int degree, char *err);
+void dofmap_free(dofmap *d);
+/* physical coordinates of local node k of cell c */
+void dofmap_node_coords(const dofmap *d, int c, int k, double *x);
+
+/* affine map of a simplex: x = X0 + J xi; J[d][k] = dx_d/dxi_k, K = J^-1; returns det J */
+double simplex_jacobian(const mesh *m, int c, double J[3][3], double K[3][3]);
+
+#endif

@@ -1,0 +1,568 @@
+/* kernel.c — generated element kernels and the JIT. Generated C is self-contained (no
+ * #include: it costs milliseconds in libtcc), names only generated identifiers, bakes the
+ * basis tabulations in as static tables and hoists parameter-only subexpressions out of
+ * the quadrature loop. */
+#include "kernel.h"
+
+#include "../config.h"
+
+#include <dlfcn.h>
+#include <errno.h>
+#include <libtcc.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+/* ---------------------------------------------------------------- JIT */
+
+typedef struct {
+  uint64_t h1, h2;
+  kernel_fn fn;
+  TCCState *tcc;
+  void *dl;
+} jit_entry;
+
+struct lg_jit {
+  jit_backend backend;
+  char libdir[512];
+  size_t n, cap;
+  jit_entry *e;
+};
+
+lg_jit *jit_new(jit_backend b, const char *libdir) {
+  lg_jit *j = calloc(1, sizeof *j);
+  if (!j) return NULL;
+  j->backend = b;
+  snprintf(j->libdir, sizeof j->libdir, "%s", libdir ? libdir : "");
+  return j;
+}
+
+void jit_free(lg_jit *j) {
+  if (!j) return;
+  for (size_t i = 0; i < j->n; i++) {
+    if (j->e[i].tcc) tcc_delete(j->e[i].tcc);
+    if (j->e[i].dl) dlclose(j->e[i].dl);
+  }
+  free(j->e);
+  free(j);
+}
+
+void jit_set_backend(lg_jit *j, jit_backend b) { j->backend = b; }
+size_t jit_count(const lg_jit *j) { return j->n; }
+
+static void hash_src(const char *s, uint64_t *h1, uint64_t *h2) {
+  uint64_t a = 1469598103934665603ull, b = 0x9E3779B97F4A7C15ull;
+  for (; *s; s++) {
+    a = (a ^ (unsigned char)*s) * 1099511628211ull;
+    b = (b ^ (unsigned char)*s) * 0xff51afd7ed558ccdull;
+    b ^= b >> 31;
+  }
+  *h1 = a;
+  *h2 = b;
+}
+
+static double now_ms(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+typedef struct {
+  char *buf;
+  size_t len;
+} tcc_errbuf;
+
+static void tcc_err(void *ud, const char *msg) {
+  tcc_errbuf *e = ud;
+  size_t l = strlen(e->buf);
+  if (l + 2 < e->len) snprintf(e->buf + l, e->len - l, "%s%s", l ? "; " : "", msg);
+}
+
+static double sign_fn(double x) { return (x > 0) - (x < 0); }
+
+static kernel_fn compile_tcc(lg_jit *j, const char *src, jit_entry *ent, char *err, size_t errlen) {
+  TCCState *s = tcc_new();
+  if (!s) { snprintf(err, errlen, "libtcc: cannot create a compiler state"); return NULL; }
+  err[0] = 0;
+  tcc_errbuf eb = {err, errlen};
+  tcc_set_error_func(s, &eb, tcc_err);
+  if (j->libdir[0]) tcc_set_lib_path(s, j->libdir);
+  tcc_set_options(s, "-nostdlib");
+  tcc_set_output_type(s, TCC_OUTPUT_MEMORY);
+  static const struct { const char *n; const void *f; } syms[] = {
+      {"sin", (const void *)sin},   {"cos", (const void *)cos},   {"tan", (const void *)tan},
+      {"exp", (const void *)exp},   {"log", (const void *)log},   {"sqrt", (const void *)sqrt},
+      {"fabs", (const void *)fabs}, {"tanh", (const void *)tanh}, {"sinh", (const void *)sinh},
+      {"cosh", (const void *)cosh}, {"atan", (const void *)atan}, {"asin", (const void *)asin},
+      {"acos", (const void *)acos}, {"pow", (const void *)pow},   {"lugal_sign", (const void *)sign_fn}};
+  for (size_t i = 0; i < sizeof syms / sizeof syms[0]; i++) tcc_add_symbol(s, syms[i].n, syms[i].f);
+  if (tcc_compile_string(s, src) < 0 || tcc_relocate(s, TCC_RELOCATE_AUTO) < 0) {
+    char tmp[1024];
+    snprintf(tmp, sizeof tmp, "libtcc failed to compile a generated kernel: %s", err);
+    snprintf(err, errlen, "%s", tmp);
+    tcc_delete(s);
+    return NULL;
+  }
+  kernel_fn fn = (kernel_fn)tcc_get_symbol(s, "lugal_kernel");
+  if (!fn) { snprintf(err, errlen, "libtcc: generated kernel has no entry point"); tcc_delete(s); return NULL; }
+  ent->tcc = s;
+  return fn;
+}
+
+static kernel_fn compile_cc(const char *src, uint64_t h1, uint64_t h2, jit_entry *ent, char *err,
+                            size_t errlen) {
+  char dir[512], base[700], cpath[800], sopath[800], cmd[2400];
+  const char *xdg = getenv("XDG_CACHE_HOME"), *home = getenv("HOME");
+  if (xdg && *xdg) snprintf(dir, sizeof dir, "%s/lugal", xdg);
+  else snprintf(dir, sizeof dir, "%s/.cache/lugal", home && *home ? home : "/tmp");
+  char parent[512];
+  snprintf(parent, sizeof parent, "%s", dir);
+  char *sl = strrchr(parent, '/');
+  if (sl) { *sl = 0; mkdir(parent, 0755); }
+  if (mkdir(dir, 0755) && errno != EEXIST) {
+    snprintf(err, errlen, "cannot create the kernel cache %s: %s", dir, strerror(errno));
+    return NULL;
+  }
+  snprintf(base, sizeof base, "%s/k%016llx%016llx", dir, (unsigned long long)h1, (unsigned long long)h2);
+  snprintf(cpath, sizeof cpath, "%s.c", base);
+  snprintf(sopath, sizeof sopath, "%s.so", base);
+  struct stat st;
+  if (stat(sopath, &st)) {
+    FILE *f = fopen(cpath, "w");
+    if (!f) { snprintf(err, errlen, "cannot write %s: %s", cpath, strerror(errno)); return NULL; }
+    fputs("double lugal_sign(double x) { return (x > 0) - (x < 0); }\n", f);
+    fputs(src, f);
+    fclose(f);
+    char tmpso[820];
+    snprintf(tmpso, sizeof tmpso, "%s.%d.tmp", sopath, (int)getpid());
+    snprintf(cmd, sizeof cmd, "%s -O3 -march=native -fPIC -shared -o '%s' '%s' -lm 2>&1",
+             LUGAL_CC, tmpso, cpath);
+    FILE *p = popen(cmd, "r");
+    if (!p) { snprintf(err, errlen, "cannot run the C compiler"); return NULL; }
+    char out[512] = "";
+    size_t got = fread(out, 1, sizeof out - 1, p);
+    out[got] = 0;
+    int rc = pclose(p);
+    if (rc != 0) {
+      snprintf(err, errlen, "the C compiler failed on a generated kernel (%s): %s", cpath, out);
+      return NULL;
+    }
+    if (rename(tmpso, sopath)) { snprintf(err, errlen, "cannot rename %s", tmpso); return NULL; }
+  }
+  void *dl = dlopen(sopath, RTLD_NOW | RTLD_LOCAL);
+  if (!dl) { snprintf(err, errlen, "cannot load %s: %s", sopath, dlerror()); return NULL; }
+  kernel_fn fn = (kernel_fn)(uintptr_t)dlsym(dl, "lugal_kernel");
+  if (!fn) { dlclose(dl); snprintf(err, errlen, "%s has no kernel", sopath); return NULL; }
+  ent->dl = dl;
+  return fn;
+}
+
+kernel_fn jit_compile(lg_jit *j, const char *src, double *ms, int *cached, char *err, size_t errlen) {
+  uint64_t h1, h2;
+  hash_src(src, &h1, &h2);
+  h2 ^= (uint64_t)j->backend;
+  for (size_t i = 0; i < j->n; i++)
+    if (j->e[i].h1 == h1 && j->e[i].h2 == h2) {
+      if (ms) *ms = 0;
+      if (cached) *cached = 1;
+      return j->e[i].fn;
+    }
+  if (j->n == j->cap) {
+    size_t cap = j->cap ? 2 * j->cap : 16;
+    jit_entry *ne = realloc(j->e, sizeof *ne * cap);
+    if (!ne) { snprintf(err, errlen, "out of memory"); return NULL; }
+    j->e = ne;
+    j->cap = cap;
+  }
+  jit_entry ent = {h1, h2, NULL, NULL, NULL};
+  double t0 = now_ms();
+  kernel_fn fn = j->backend == JIT_CC ? compile_cc(src, h1, h2, &ent, err, errlen)
+                                      : compile_tcc(j, src, &ent, err, errlen);
+  if (!fn) return NULL;
+  ent.fn = fn;
+  j->e[j->n++] = ent;
+  if (ms) *ms = now_ms() - t0;
+  if (cached) *cached = 0;
+  return fn;
+}
+
+/* ---------------------------------------------------------------- generation */
+
+typedef struct {
+  const lg_kernel *k;
+  int dim;
+} leafctx;
+
+static int coef_index(const lg_kernel *k, int func) {
+  for (int i = 0; i < k->ncoef; i++)
+    if (k->coef_func[i] == func) return i;
+  return -1;
+}
+
+static void leafname(void *ud, const expr *e, char *buf, size_t len) {
+  leafctx *lc = ud;
+  if (e->kind == E_COORD) { snprintf(buf, len, "x%d", e->i0); return; }
+  if (e->kind == E_NORMAL) { snprintf(buf, len, "n%d", e->i0); return; }
+  int ci = coef_index(lc->k, e->i0);
+  int dir = -1;
+  for (int d = 0; d < EXPR_MAXDIM; d++)
+    if (e->alpha[d]) dir = d;
+  if (dir < 0) snprintf(buf, len, "w%dv", ci);
+  else snprintf(buf, len, "w%dg%d", ci, dir);
+}
+
+static void emit_table(strbuf *b, const char *name, const double *v, long n) {
+  sb_printf(b, "static const double %s[%ld] = {", name, n);
+  for (long i = 0; i < n; i++) sb_printf(b, "%s%.17g", i ? (i % 4 ? ", " : ",\n  ") : "", v[i]);
+  sb_printf(b, "};\n");
+}
+
+static int leaf_dir(const expr *e) {
+  for (int d = 0; d < EXPR_MAXDIM; d++)
+    if (e->alpha[d]) return d;
+  return -1;
+}
+
+/* name of the basis array for field leaf e of degree p: values b<p> or gradient g<p>_<d> */
+static void basis_name(const expr *e, int p, char *buf, size_t len) {
+  int d = leaf_dir(e);
+  if (d < 0) snprintf(buf, len, "b%d", p);
+  else snprintf(buf, len, "g%d_%d", p, d);
+}
+
+static int layout_find(const field_layout *l, int func) {
+  for (int i = 0; i < l->n; i++)
+    if (l->func[i] == func) return i;
+  return -1;
+}
+
+#define KERR(...) do { snprintf(err, errlen, __VA_ARGS__); goto fail; } while (0)
+
+char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel_spec *s,
+                    const field_layout *rows, const field_layout *cols, lg_kernel *k,
+                    char *err, size_t errlen) {
+  strbuf b = {0};
+  expr_tape tape = {0};
+  unsigned char *sel = NULL;
+  int dim = cell_dim(ct);
+  int nf = facet ? cell_nfacets(ct) : 1;
+  memset(k, 0, sizeof *k);
+  k->arity = s->arity;
+  k->facet = facet;
+  k->qdeg = qdeg;
+  if (rows) k->rows = *rows;
+  if (cols) k->cols = *cols;
+
+  /* the coefficient expressions */
+  int nroot = s->arity == 2 ? s->tab->njac : s->arity == 1 ? s->tab->nres : 1;
+  expr **roots = malloc(sizeof(expr *) * (size_t)(nroot + 1));
+  if (!roots) KERR("out of memory");
+  for (int i = 0; i < nroot; i++)
+    roots[i] = s->arity == 2 ? s->tab->jac[i] : s->arity == 1 ? s->tab->res[i] : s->integrand;
+  if (expr_tape_build(c, nroot, roots, &tape)) { free(roots); KERR("%s", expr_error(c)); }
+  free(roots);
+
+  /* leaves: coefficient functions, coordinates, normals */
+  int need_val[4] = {0, 0, 0, 0}, need_grad[4] = {0, 0, 0, 0}, need_x = 0, need_n = 0;
+  for (int i = 0; i < tape.n; i++) {
+    const expr *e = tape.node[i];
+    if (e->kind == E_COORD) {
+      if (e->i0 >= dim) KERR("the integrand uses the coordinate %c, but the mesh is %dD", "xyz"[e->i0], dim);
+      need_x = 1;
+    } else if (e->kind == E_NORMAL) {
+      if (!facet) KERR("the normal vector can only be used in boundary integrals");
+      if (e->i0 >= dim) KERR("the integrand uses normal component %d on a %dD mesh", e->i0 + 1, dim);
+      need_n = 1;
+    } else if (e->kind == E_FIELD) {
+      expr_func_info *fi = expr_func_get(c, e->i0);
+      if (!fi) KERR("unknown function in an integrand");
+      if (fi->kind == FK_TEST) KERR("internal error: a test function in a coefficient");
+      if (e->order > 1) KERR("second and higher derivatives of %s are not supported yet", fi->name);
+      int d = leaf_dir(e);
+      if (d >= dim) KERR("the integrand differentiates %s in %c, but the mesh is %dD", fi->name, "xyz"[d], dim);
+      int ci = coef_index(k, e->i0);
+      if (ci < 0) {
+        if (k->ncoef == KER_MAXCOEF) KERR("too many coefficient functions in one form (max %d)", KER_MAXCOEF);
+        ci = k->ncoef++;
+        k->coef_func[ci] = e->i0;
+        k->coef_degree[ci] = fi->degree;
+      }
+      if (fi->degree < 1 || fi->degree > 3) KERR("coefficient %s has unsupported degree %d", fi->name, fi->degree);
+      if (d < 0) need_val[fi->degree] = 1;
+      else need_grad[fi->degree] = 1;
+    }
+  }
+  /* sort coefficients by function id for a canonical W layout */
+  for (int i = 1; i < k->ncoef; i++)
+    for (int j = i; j > 0 && k->coef_func[j - 1] > k->coef_func[j]; j--) {
+      int t = k->coef_func[j]; k->coef_func[j] = k->coef_func[j - 1]; k->coef_func[j - 1] = t;
+      t = k->coef_degree[j]; k->coef_degree[j] = k->coef_degree[j - 1]; k->coef_degree[j - 1] = t;
+    }
+  lagrange_element el[4];
+  for (int p = 1; p <= 3; p++)
+    if (lagrange_init(&el[p], ct, p, err)) goto fail;
+  k->wsize = 0;
+  for (int i = 0; i < k->ncoef; i++) {
+    k->coef_off[i] = k->wsize;
+    k->wsize += el[k->coef_degree[i]].nloc;
+  }
+  /* test and trial basis needs */
+  if (s->arity >= 1) {
+    int n = s->arity == 2 ? s->tab->njac : s->tab->nres;
+    for (int i = 0; i < n; i++) {
+      const expr *tl = s->arity == 2 ? s->tab->jac_test[i] : s->tab->res_leaf[i];
+      int fi = layout_find(rows, tl->i0);
+      if (fi < 0) KERR("internal error: test function not in the row layout");
+      if (tl->order > 1) KERR("second derivatives of test functions are not supported yet");
+      if (leaf_dir(tl) >= dim) KERR("the form differentiates a test function in %c on a %dD mesh", "xyz"[leaf_dir(tl)], dim);
+      if (tl->order) need_grad[rows->degree[fi]] = 1; else need_val[rows->degree[fi]] = 1;
+      if (s->arity == 2) {
+        const expr *ul = s->tab->jac_trial[i];
+        int fj = layout_find(cols, ul->i0);
+        if (fj < 0) KERR("internal error: unknown not in the column layout");
+        if (ul->order > 1) KERR("second derivatives of unknowns are not supported yet");
+        if (leaf_dir(ul) >= dim) KERR("the form differentiates an unknown in %c on a %dD mesh", "xyz"[leaf_dir(ul)], dim);
+        if (ul->order) need_grad[cols->degree[fj]] = 1; else need_val[cols->degree[fj]] = 1;
+      }
+    }
+  }
+
+  /* quadrature */
+  quad_rule q;
+  if (quad_simplex(facet ? dim - 1 : dim, qdeg, &q)) KERR("no quadrature rule of degree %d", qdeg);
+  k->nq = q.n;
+
+  sb_printf(&b, "/* generated by lugal: %s %s kernel, arity %d, quadrature degree %d, %d points */\n",
+            cell_name(ct), facet ? "facet" : "cell", s->arity, q.degree, q.n);
+  sb_printf(&b, "double sin(double); double cos(double); double tan(double); double exp(double);\n"
+                "double log(double); double sqrt(double); double fabs(double); double tanh(double);\n"
+                "double sinh(double); double cosh(double); double atan(double); double asin(double);\n"
+                "double acos(double); double pow(double, double);\n");
+  /* weights and reference points (per facet for facet kernels) */
+  double *qx = malloc(sizeof(double) * (size_t)nf * (size_t)q.n * 3);
+  if (!qx) KERR("out of memory");
+  for (int f = 0; f < nf; f++)
+    for (int i = 0; i < q.n; i++) {
+      double xi[3] = {0, 0, 0};
+      if (facet) ref_facet_point(ct, f, q.x + q.dim * i, xi);
+      else memcpy(xi, q.x + dim * i, sizeof(double) * (size_t)dim);
+      memcpy(qx + ((size_t)f * q.n + i) * dim, xi, sizeof(double) * (size_t)dim);
+    }
+  double wsum = 0;
+  for (int i = 0; i < q.n; i++) wsum += q.w[i];
+  double *qw = malloc(sizeof(double) * (size_t)q.n);
+  if (!qw) { free(qx); KERR("out of memory"); }
+  for (int i = 0; i < q.n; i++) qw[i] = facet ? q.w[i] / wsum : q.w[i];
+  emit_table(&b, "QW", qw, q.n);
+  free(qw);
+  if (need_x) emit_table(&b, "QX", qx, (long)nf * q.n * dim);
+  /* basis tables */
+  for (int p = 1; p <= 3; p++) {
+    if (!need_val[p] && !need_grad[p]) continue;
+    int nl = el[p].nloc;
+    double *bv = malloc(sizeof(double) * (size_t)nf * q.n * nl);
+    double *bg = malloc(sizeof(double) * (size_t)nf * q.n * nl * dim);
+    if (!bv || !bg) { free(bv); free(bg); free(qx); KERR("out of memory"); }
+    for (int f = 0; f < nf; f++)
+      for (int i = 0; i < q.n; i++) {
+        size_t qq = (size_t)f * q.n + i;
+        lagrange_eval(&el[p], qx + qq * dim, bv + qq * nl, bg + qq * nl * dim);
+      }
+    char nm[16];
+    if (need_val[p]) { snprintf(nm, sizeof nm, "B%d", p); emit_table(&b, nm, bv, (long)nf * q.n * nl); }
+    if (need_grad[p]) { snprintf(nm, sizeof nm, "G%d", p); emit_table(&b, nm, bg, (long)nf * q.n * nl * dim); }
+    free(bv);
+    free(bg);
+  }
+  free(qx);
+  if (need_n) {
+    double nr[18];
+    for (int f = 0; f < cell_nfacets(ct); f++) ref_facet_normal(ct, f, nr + f * dim);
+    emit_table(&b, "NR", nr, (long)cell_nfacets(ct) * dim);
+  }
+
+  sb_printf(&b, "void lugal_kernel(const double *restrict X, const double *restrict W, "
+                "const double *restrict P, int facet, double *restrict A)\n{\n");
+  sb_printf(&b, "  (void)W; (void)P; (void)facet;\n");
+  /* geometry */
+  if (dim == 2) {
+    sb_printf(&b, "  const double J00 = X[2] - X[0], J01 = X[4] - X[0], J10 = X[3] - X[1], J11 = X[5] - X[1];\n"
+                  "  const double det = J00*J11 - J01*J10, idet = 1.0/det;\n"
+                  "  const double K00 = J11*idet, K01 = -J01*idet, K10 = -J10*idet, K11 = J00*idet;\n");
+  } else {
+    sb_printf(&b, "  const double J00 = X[3] - X[0], J01 = X[6] - X[0], J02 = X[9] - X[0];\n"
+                  "  const double J10 = X[4] - X[1], J11 = X[7] - X[1], J12 = X[10] - X[1];\n"
+                  "  const double J20 = X[5] - X[2], J21 = X[8] - X[2], J22 = X[11] - X[2];\n"
+                  "  const double C00 = J11*J22 - J12*J21, C01 = J02*J21 - J01*J22, C02 = J01*J12 - J02*J11;\n"
+                  "  const double det = J00*C00 + J10*C01 + J20*C02, idet = 1.0/det;\n"
+                  "  const double K00 = C00*idet, K01 = C01*idet, K02 = C02*idet;\n"
+                  "  const double K10 = (J12*J20 - J10*J22)*idet, K11 = (J00*J22 - J02*J20)*idet, K12 = (J02*J10 - J00*J12)*idet;\n"
+                  "  const double K20 = (J10*J21 - J11*J20)*idet, K21 = (J01*J20 - J00*J21)*idet, K22 = (J00*J11 - J01*J10)*idet;\n");
+  }
+  if (!facet) {
+    sb_printf(&b, "  const double scale = det < 0.0 ? -det : det;\n");
+  } else {
+    /* facet measure from the facet's vertices */
+    int nvf = dim;
+    sb_printf(&b, "  static const int FV[%d][%d] = {", cell_nfacets(ct), nvf);
+    for (int f = 0; f < cell_nfacets(ct); f++) {
+      const int *fv = cell_facet_verts(ct, f);
+      sb_printf(&b, "%s{", f ? ", " : "");
+      for (int i = 0; i < nvf; i++) sb_printf(&b, "%s%d", i ? ", " : "", fv[i]);
+      sb_printf(&b, "}");
+    }
+    sb_printf(&b, "};\n");
+    if (dim == 2) {
+      sb_printf(&b, "  const double *fa = X + 2*FV[facet][0], *fb = X + 2*FV[facet][1];\n"
+                    "  const double scale = sqrt((fb[0]-fa[0])*(fb[0]-fa[0]) + (fb[1]-fa[1])*(fb[1]-fa[1]));\n");
+    } else {
+      sb_printf(&b, "  const double *fa = X + 3*FV[facet][0], *fb = X + 3*FV[facet][1], *fc = X + 3*FV[facet][2];\n"
+                    "  const double e0 = fb[0]-fa[0], e1 = fb[1]-fa[1], e2 = fb[2]-fa[2];\n"
+                    "  const double h0 = fc[0]-fa[0], h1 = fc[1]-fa[1], h2 = fc[2]-fa[2];\n"
+                    "  const double c0 = e1*h2 - e2*h1, c1 = e2*h0 - e0*h2, c2 = e0*h1 - e1*h0;\n"
+                    "  const double scale = 0.5*sqrt(c0*c0 + c1*c1 + c2*c2);\n");
+    }
+    if (need_n) {
+      /* n = K^T n_ref normalized; the sign of det keeps it outward for inverted maps */
+      for (int d = 0; d < dim; d++) {
+        sb_printf(&b, "  double m%d = ", d);
+        for (int kk = 0; kk < dim; kk++) sb_printf(&b, "%sK%d%d*NR[facet*%d+%d]", kk ? " + " : "", kk, d, dim, kk);
+        sb_printf(&b, ";\n");
+      }
+      sb_printf(&b, "  const double mn = 1.0/sqrt(m0*m0 + m1*m1%s);\n", dim == 3 ? " + m2*m2" : "");
+      for (int d = 0; d < dim; d++) sb_printf(&b, "  const double n%d = m%d*mn;\n", d, d);
+    }
+  }
+  /* hoisted parameter-only subexpressions */
+  leafctx lc = {k, dim};
+  sel = malloc((size_t)tape.n + 1);
+  if (!sel) KERR("out of memory");
+  for (int i = 0; i < tape.n; i++) sel[i] = !(tape.node[i]->dep & DEP_POINT);
+  expr_codegen(&b, &tape, "t", "P", sel, leafname, &lc, "  ");
+  sb_printf(&b, "  for (int q = 0; q < %d; ++q) {\n", q.n);
+  if (facet) sb_printf(&b, "    const int qq = facet*%d + q;\n", q.n);
+  else sb_printf(&b, "    const int qq = q;\n");
+  sb_printf(&b, "    const double wq = QW[q]*scale;\n");
+  if (need_x) {
+    for (int d = 0; d < dim; d++) {
+      sb_printf(&b, "    const double x%d = X[%d]", d, d);
+      for (int kk = 0; kk < dim; kk++) sb_printf(&b, " + J%d%d*QX[qq*%d+%d]", d, kk, dim, kk);
+      sb_printf(&b, ";\n");
+    }
+  }
+  for (int p = 1; p <= 3; p++) {
+    int nl = el[p].nloc;
+    if (need_val[p]) sb_printf(&b, "    const double *b%d = B%d + qq*%d;\n", p, p, nl);
+    if (need_grad[p]) {
+      sb_printf(&b, "    double ");
+      for (int d = 0; d < dim; d++) sb_printf(&b, "%sg%d_%d[%d]", d ? ", " : "", p, d, nl);
+      sb_printf(&b, ";\n    for (int i = 0; i < %d; ++i) {\n      const double *gr = G%d + (qq*%d + i)*%d;\n", nl, p, nl, dim);
+      for (int d = 0; d < dim; d++) {
+        sb_printf(&b, "      g%d_%d[i] = ", p, d);
+        for (int kk = 0; kk < dim; kk++) sb_printf(&b, "%sgr[%d]*K%d%d", kk ? " + " : "", kk, kk, d);
+        sb_printf(&b, ";\n");
+      }
+      sb_printf(&b, "    }\n");
+    }
+  }
+  /* coefficient values and gradients */
+  for (int i = 0; i < tape.n; i++) {
+    const expr *e = tape.node[i];
+    if (e->kind != E_FIELD) continue;
+    int ci = coef_index(k, e->i0), p = k->coef_degree[ci], nl = el[p].nloc;
+    char nm[32], bn[32];
+    leafname(&lc, e, nm, sizeof nm);
+    basis_name(e, p, bn, sizeof bn);
+    sb_printf(&b, "    double %s = 0.0;\n    for (int i = 0; i < %d; ++i) %s += W[%d + i]*%s[i];\n",
+              nm, nl, nm, k->coef_off[ci], bn);
+  }
+  for (int i = 0; i < tape.n; i++) sel[i] = !sel[i];
+  expr_codegen(&b, &tape, "t", "P", sel, leafname, &lc, "    ");
+  /* contraction */
+  char ref[128];
+  if (s->arity == 0) {
+    expr_codegen_ref(&tape, tape.root[0], "t", leafname, &lc, ref, sizeof ref);
+    sb_printf(&b, "    A[0] += wq*%s;\n", ref);
+  } else if (s->arity == 1) {
+    for (int a = 0; a < rows->n; a++) {
+      int any = 0;
+      for (int i = 0; i < s->tab->nres; i++) any |= s->tab->res_leaf[i]->i0 == rows->func[a];
+      if (!any) continue;
+      sb_printf(&b, "    for (int i = 0; i < %d; ++i) A[%d + i] += wq*(", rows->nloc[a], rows->off[a]);
+      int first = 1;
+      for (int i = 0; i < s->tab->nres; i++) {
+        const expr *tl = s->tab->res_leaf[i];
+        if (tl->i0 != rows->func[a]) continue;
+        char bn[32];
+        basis_name(tl, rows->degree[a], bn, sizeof bn);
+        expr_codegen_ref(&tape, tape.root[i], "t", leafname, &lc, ref, sizeof ref);
+        sb_printf(&b, "%s%s*%s[i]", first ? "" : " + ", ref, bn);
+        first = 0;
+      }
+      sb_printf(&b, ");\n");
+    }
+  } else {
+    for (int a = 0; a < rows->n; a++)
+      for (int bb = 0; bb < cols->n; bb++) {
+        /* distinct test leaves for this block */
+        const expr *tls[64];
+        int nt = 0;
+        for (int i = 0; i < s->tab->njac; i++) {
+          const expr *tl = s->tab->jac_test[i];
+          if (tl->i0 != rows->func[a] || s->tab->jac_trial[i]->i0 != cols->func[bb]) continue;
+          int found = 0;
+          for (int t = 0; t < nt; t++) found |= tls[t] == tl;
+          if (!found && nt < 64) tls[nt++] = tl;
+        }
+        if (!nt) continue;
+        sb_printf(&b, "    for (int j = 0; j < %d; ++j) {\n", cols->nloc[bb]);
+        for (int t = 0; t < nt; t++) {
+          sb_printf(&b, "      const double u%d = wq*(", t);
+          int first = 1;
+          for (int i = 0; i < s->tab->njac; i++) {
+            if (s->tab->jac_test[i] != tls[t] || s->tab->jac_trial[i]->i0 != cols->func[bb]) continue;
+            char bn[32];
+            basis_name(s->tab->jac_trial[i], cols->degree[bb], bn, sizeof bn);
+            expr_codegen_ref(&tape, tape.root[i], "t", leafname, &lc, ref, sizeof ref);
+            sb_printf(&b, "%s%s*%s[j]", first ? "" : " + ", ref, bn);
+            first = 0;
+          }
+          sb_printf(&b, ");\n");
+        }
+        sb_printf(&b, "      double *Aj = A + %d + j;\n", cols->off[bb]);
+        sb_printf(&b, "      for (int i = 0; i < %d; ++i) Aj[(%d + i)*%d] += ", rows->nloc[a], rows->off[a], cols->size);
+        for (int t = 0; t < nt; t++) {
+          char bn[32];
+          basis_name(tls[t], rows->degree[a], bn, sizeof bn);
+          sb_printf(&b, "%s%s[i]*u%d", t ? " + " : "", bn, t);
+        }
+        sb_printf(&b, ";\n    }\n");
+      }
+  }
+  sb_printf(&b, "  }\n}\n");
+  free(sel);
+  expr_tape_free(&tape);
+  if (b.failed) { sb_free(&b); snprintf(err, errlen, "out of memory generating a kernel"); return NULL; }
+  return b.s;
+fail:
+  free(sel);
+  expr_tape_free(&tape);
+  sb_free(&b);
+  return NULL;
+}
+
+int kernel_build(lg_jit *j, expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel_spec *s,
+                 const field_layout *rows, const field_layout *cols, lg_kernel *k, char *err,
+                 size_t errlen) {
+  char *src = kernel_source(c, ct, facet, qdeg, s, rows, cols, k, err, errlen);
+  if (!src) return 1;
+  if (getenv("LUGAL_SHOW_KERNELS")) fprintf(stderr, "%s\n", src);
+  k->fn = jit_compile(j, src, &k->compile_ms, &k->cached, err, errlen);
+  free(src);
+  return k->fn ? 0 : 1;
+}

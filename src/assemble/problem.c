@@ -1,0 +1,761 @@
+/* problem.c — linear and nonlinear problems on PETSc: linearization of the equation into
+ * coefficient tables, kernels, COO assembly (MatSetPreallocationCOO / MatSetValuesCOO,
+ * a precomputed scatter), essential boundary conditions by row replacement, KSP and SNES
+ * solves with failures reported, never ignored. */
+#include "assemble.h"
+
+#include <math.h>
+#include <petscsnes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+typedef struct {
+  region reg;
+  int qdeg;
+  coef_table tab;
+  lg_kernel kmat, kres;
+  int have_mat, have_res;
+  int nitems;
+  int *cells, *facets;
+  PetscCount coo_off;
+} prob_term;
+
+typedef struct {
+  int field;          /* row/column field */
+  expr_tape tape;     /* roots: a (coefficient of u), r (rest): u = -r/a */
+  int nitems;
+  int *cells, *facets;
+} bc_term;
+
+struct lg_problem {
+  lg_env *env;
+  lg_mesh *lm;
+  int nonlinear, bc_symmetric;
+  field_layout rows, cols;
+  dofmap *rdm[KER_MAXFIELD], *cdm[KER_MAXFIELD];
+  int rglob[KER_MAXFIELD + 1], cglob[KER_MAXFIELD + 1];
+  int N;
+  int nterm;
+  prob_term *t;
+  int nbct;
+  bc_term *bct;
+  int nbc;
+  PetscInt *bc_rows;
+  PetscScalar *bc_vals;
+  PetscCount ncoo;
+  PetscScalar *coo_vals;
+  Mat A;
+  Vec b, x;
+  KSP ksp;
+  SNES snes;
+  double *state;      /* current iterate (N) */
+  double *elem;       /* element tensor scratch */
+  size_t elem_cap;
+  int failed;         /* a callback failed: env->err holds why */
+  char prefix[64];
+};
+
+static double now_ms(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+/* PETSc calls inside functions that return int: on error, record PETSc's message */
+static int petsc_fail(lg_env *env, PetscErrorCode ierr, const char *what) {
+  const char *text = NULL;
+  PetscErrorMessage(ierr, &text, NULL);
+  lg_seterr(env, "%s failed: %s", what, text ? text : "PETSc error");
+  return 1;
+}
+#define PCHK(call, what) do { PetscErrorCode ierr_ = (call); if (ierr_) return petsc_fail(env, ierr_, what); } while (0)
+
+/* ---------------------------------------------------------------- setup */
+
+static int layout(lg_env *env, lg_mesh *lm, int n, const int *funcs, field_layout *l, dofmap **dm,
+                  int *glob, const char *what) {
+  l->n = n;
+  l->size = 0;
+  glob[0] = 0;
+  for (int i = 0; i < n; i++) {
+    expr_func_info *fi = expr_func_get(env->c, funcs[i]);
+    if (!fi) { lg_seterr(env, "bad %s function", what); return 1; }
+    l->func[i] = funcs[i];
+    l->degree[i] = fi->degree;
+    dm[i] = lg_mesh_dofmap(env, lm, fi->degree);
+    if (!dm[i]) return 1;
+    l->nloc[i] = dm[i]->nloc;
+    l->off[i] = l->size;
+    l->size += dm[i]->nloc;
+    glob[i + 1] = glob[i] + dm[i]->ndof;
+  }
+  return 0;
+}
+
+static int contains_funcs(lg_env *env, expr *e, int n, const int *funcs, expr **which) {
+  for (int i = 0; i < n; i++) {
+    expr *leaf[1];
+    if (expr_collect_fields(env->c, 1, &e, funcs[i], 1, leaf) > 0) {
+      if (which) *which = leaf[0];
+      return 1;
+    }
+  }
+  return 0;
+}
+
+static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *test, const int *unk, int nf) {
+  p->nterm = eqn->n;
+  p->t = calloc((size_t)eqn->n + 1, sizeof(prob_term));
+  if (!p->t) { lg_seterr(env, "out of memory"); return 1; }
+  char err[LG_ERRLEN];
+  for (int i = 0; i < eqn->n; i++) {
+    prob_term *t = &p->t[i];
+    t->reg = eqn->t[i].reg;
+    if (t->reg.mesh && t->reg.mesh != (void *)p->lm) {
+      lg_seterr(env, "term %d of the equation integrates over a region of a different mesh", i + 1);
+      return 1;
+    }
+    expr *f = eqn->t[i].integrand;
+    if (form_linearize(env->c, f, nf, test, nf, unk, 1, &t->tab)) {
+      lg_seterr(env, "%s", expr_error(env->c));
+      return 1;
+    }
+    if (!p->nonlinear) {
+      /* a linear problem: J must not depend on u; the right side is -R(0) */
+      for (int j = 0; j < t->tab.njac; j++) {
+        expr *w;
+        if (contains_funcs(env, t->tab.jac[j], nf, unk, &w)) {
+          expr_func_info *fi = expr_func_get(env->c, w->i0);
+          lg_seterr(env, "the equation is not linear in the unknown %s; use lg.nonlinear_problem", fi->name);
+          return 1;
+        }
+      }
+      expr *ul[256];
+      int nu = 0;
+      for (int j = 0; j < nf; j++) nu += expr_collect_fields(env->c, t->tab.nres, t->tab.res, unk[j], 256 - nu, ul + nu);
+      if (nu > 256) { lg_seterr(env, "too many unknown leaves"); return 1; }
+      expr *zero[256];
+      for (int j = 0; j < nu; j++) zero[j] = expr_num(env->c, 0);
+      int k = 0;
+      for (int j = 0; j < t->tab.nres; j++) {
+        expr *r0 = expr_subs(env->c, t->tab.res[j], nu, ul, zero);
+        if (!r0) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
+        if (r0->kind == E_CONST && r0->value == 0) continue;
+        t->tab.res_leaf[k] = t->tab.res_leaf[j];
+        t->tab.res[k++] = r0;
+      }
+      t->tab.nres = k;
+    }
+    t->qdeg = lg_quad_degree(env, f, eqn->t[i].order);
+    int facet = t->reg.kind == REGION_BOUNDARY;
+    if (t->tab.njac > 0) {
+      kernel_spec s = {2, &t->tab, NULL};
+      if (kernel_build(env->jit, env->c, p->lm->m->type, facet, t->qdeg, &s, &p->rows, &p->cols, &t->kmat, err, sizeof err)) {
+        lg_seterr(env, "%s", err);
+        return 1;
+      }
+      t->have_mat = 1;
+      env->kernel_ms += t->kmat.compile_ms;
+      env->nkernels += !t->kmat.cached;
+    }
+    if (t->tab.nres > 0) {
+      kernel_spec s = {1, &t->tab, NULL};
+      if (kernel_build(env->jit, env->c, p->lm->m->type, facet, t->qdeg, &s, &p->rows, &p->cols, &t->kres, err, sizeof err)) {
+        lg_seterr(env, "%s", err);
+        return 1;
+      }
+      t->have_res = 1;
+      env->kernel_ms += t->kres.compile_ms;
+      env->nkernels += !t->kres.cached;
+    }
+    if (lg_region_items(env, p->lm, &t->reg, &t->nitems, &t->cells, &t->facets)) return 1;
+  }
+  return 0;
+}
+
+static int setup_bcs(lg_env *env, lg_problem *p, const form *bc, const int *test, const int *unk, int nf) {
+  if (!bc || !bc->n) return 0;
+  p->bct = calloc((size_t)bc->n * (size_t)nf + 1, sizeof(bc_term));
+  if (!p->bct) { lg_seterr(env, "out of memory"); return 1; }
+  mesh *m = p->lm->m;
+  long cap = 0;
+  for (int i = 0; i < bc->n; i++) {
+    const form_term *ft = &bc->t[i];
+    if (ft->reg.kind != REGION_BOUNDARY) {
+      lg_seterr(env, "an essential boundary condition must be given on boundary facets (mesh:boundary(...))");
+      return 1;
+    }
+    coef_table tab;
+    if (form_linearize(env->c, ft->integrand, nf, test, 0, NULL, 0, &tab)) {
+      lg_seterr(env, "essential_bc: %s", expr_error(env->c));
+      return 1;
+    }
+    for (int j = 0; j < tab.nres; j++) {
+      expr *tl = tab.res_leaf[j];
+      if (tl->order) {
+        coef_table_free(&tab);
+        lg_seterr(env, "essential_bc: the test function must appear without derivatives, as in v*(u - g)");
+        return 1;
+      }
+      int a = -1;
+      for (int k = 0; k < nf; k++)
+        if (test[k] == tl->i0) a = k;
+      expr *r = tab.res[j];
+      /* r = a*u + rest with u the unknown paired with this test function */
+      unsigned char zero3[3] = {0, 0, 0};
+      expr *u = expr_field(env->c, unk[a], 0, zero3);
+      expr *ca = expr_diff(env->c, r, u);
+      expr *z = expr_num(env->c, 0);
+      expr *rest = expr_subs(env->c, r, 1, &u, &z);
+      expr *bad;
+      if (!ca || !rest) { coef_table_free(&tab); lg_seterr(env, "%s", expr_error(env->c)); return 1; }
+      if (contains_funcs(env, ca, nf, unk, &bad) || contains_funcs(env, rest, nf, unk, &bad)) {
+        expr_func_info *fi = expr_func_get(env->c, bad->i0);
+        char buf[200];
+        expr_print(env->c, r, buf, sizeof buf);
+        coef_table_free(&tab);
+        lg_seterr(env, "essential_bc: the condition %s = 0 must be linear in the unknown paired with the "
+                       "test function and contain no derivative of it (found %s)", buf, fi->name);
+        return 1;
+      }
+      if (ca->kind == E_CONST && ca->value == 0) {
+        expr_func_info *fi = expr_func_get(env->c, unk[a]);
+        coef_table_free(&tab);
+        lg_seterr(env, "essential_bc: the condition does not contain the unknown %s; write it as v*(%s - g)", fi->name, fi->name);
+        return 1;
+      }
+      bc_term *bt = &p->bct[p->nbct++];
+      bt->field = a;
+      expr *roots[2] = {ca, rest};
+      if (expr_tape_build(env->c, 2, roots, &bt->tape)) { coef_table_free(&tab); lg_seterr(env, "%s", expr_error(env->c)); return 1; }
+      if (lg_region_items(env, p->lm, &ft->reg, &bt->nitems, &bt->cells, &bt->facets)) { coef_table_free(&tab); return 1; }
+      cap += (long)bt->nitems * p->rdm[a]->el.nfacet_dofs;
+    }
+    coef_table_free(&tab);
+  }
+  p->bc_rows = malloc(sizeof(PetscInt) * (size_t)(cap + 1));
+  p->bc_vals = malloc(sizeof(PetscScalar) * (size_t)(cap + 1));
+  if (!p->bc_rows || !p->bc_vals) { lg_seterr(env, "out of memory"); return 1; }
+  (void)m;
+  return 0;
+}
+
+/* evaluate the boundary values at the boundary nodes: rows and values, deduplicated */
+typedef struct {
+  lg_env *env;
+  lg_problem *p;
+  int cell;
+  double xi[3], x[3], K[3][3];
+} bc_pt;
+
+static int bc_leaf(void *ud, const expr *e, double *val) {
+  bc_pt *b = ud;
+  if (e->kind == E_COORD) { *val = b->x[e->i0]; return 0; }
+  if (e->kind == E_NORMAL) { lg_seterr(b->env, "essential_bc: the normal vector cannot be used in a Dirichlet value"); return 1; }
+  expr_func_info *fi = expr_func_get(b->env->c, e->i0);
+  if (!fi || fi->kind != FK_DISCRETE || !fi->user) { lg_seterr(b->env, "essential_bc: %s has no value here", fi ? fi->name : "?"); return 1; }
+  lg_function *fn = fi->user;
+  if (fn->mesh != b->p->lm) { lg_seterr(b->env, "essential_bc: %s lives on a different mesh", fi->name); return 1; }
+  double v[FEM_MAXLOC], g[FEM_MAXLOC * 3];
+  lagrange_eval(&fn->dm->el, b->xi, v, g);
+  const int *cd = fn->dm->cell_dofs + (size_t)b->cell * fn->dm->nloc;
+  int dir = -1, dim = b->p->lm->m->dim;
+  for (int d = 0; d < EXPR_MAXDIM; d++)
+    if (e->alpha[d]) dir = d;
+  double s = 0;
+  for (int i = 0; i < fn->dm->nloc; i++) {
+    double phi = v[i];
+    if (dir >= 0) {
+      phi = 0;
+      for (int k = 0; k < dim; k++) phi += g[i * dim + k] * b->K[k][dir];
+    }
+    s += fn->x[cd[i]] * phi;
+  }
+  *val = s;
+  return 0;
+}
+
+static int cmp_row(const void *a, const void *b) {
+  const PetscInt *x = a, *y = b;
+  return (x[0] > y[0]) - (x[0] < y[0]);
+}
+
+static int compute_bcs(lg_env *env, lg_problem *p) {
+  p->nbc = 0;
+  mesh *m = p->lm->m;
+  for (int i = 0; i < p->nbct; i++) {
+    bc_term *bt = &p->bct[i];
+    dofmap *dm = p->rdm[bt->field];
+    double *w = malloc(sizeof(double) * (size_t)(bt->tape.n + 1));
+    if (!w) { lg_seterr(env, "out of memory"); return 1; }
+    bc_pt pt = {env, p, 0, {0, 0, 0}, {0, 0, 0}, {{0}}};
+    for (int it = 0; it < bt->nitems; it++) {
+      int c = bt->cells[it], f = bt->facets[it];
+      double J[3][3];
+      simplex_jacobian(m, c, J, pt.K);
+      pt.cell = c;
+      for (int kk = 0; kk < dm->el.nfacet_dofs; kk++) {
+        int k = dm->el.facet_dofs[f][kk];
+        memcpy(pt.xi, dm->el.node + 3 * k, sizeof pt.xi);
+        dofmap_node_coords(dm, c, k, pt.x);
+        double out[2];
+        if (expr_tape_eval(&bt->tape, expr_param_values(env->c), bc_leaf, &pt, w, out)) { free(w); return 1; }
+        if (out[0] == 0 || !isfinite(out[0]) || !isfinite(out[1])) {
+          free(w);
+          lg_seterr(env, "essential_bc: the boundary value is not defined at (%g, %g%s) (division by zero?)",
+                    pt.x[0], pt.x[1], m->dim == 3 ? ", ..." : "");
+          return 1;
+        }
+        p->bc_rows[p->nbc] = p->rglob[bt->field] + dm->cell_dofs[(size_t)c * dm->nloc + k];
+        p->bc_vals[p->nbc] = -out[1] / out[0];
+        p->nbc++;
+      }
+    }
+    free(w);
+  }
+  /* sort by row and drop duplicates (a node shared by facets: same value) */
+  if (p->nbc > 1) {
+    PetscInt *pairs = malloc(sizeof(PetscInt) * 2 * (size_t)p->nbc);
+    if (!pairs) { lg_seterr(env, "out of memory"); return 1; }
+    for (int i = 0; i < p->nbc; i++) { pairs[2 * i] = p->bc_rows[i]; pairs[2 * i + 1] = i; }
+    qsort(pairs, (size_t)p->nbc, 2 * sizeof(PetscInt), cmp_row);
+    PetscScalar *v = malloc(sizeof(PetscScalar) * (size_t)p->nbc);
+    if (!v) { free(pairs); lg_seterr(env, "out of memory"); return 1; }
+    int k = 0;
+    for (int i = 0; i < p->nbc; i++) {
+      if (k && p->bc_rows[k - 1] == pairs[2 * i]) continue;
+      v[k] = p->bc_vals[pairs[2 * i + 1]];
+      p->bc_rows[k] = pairs[2 * i];
+      k++;
+    }
+    memcpy(p->bc_vals, v, sizeof(PetscScalar) * (size_t)k);
+    p->nbc = k;
+    free(v);
+    free(pairs);
+  }
+  return 0;
+}
+
+static int setup_matrix(lg_env *env, lg_problem *p) {
+  PetscCount n = p->N;
+  for (int i = 0; i < p->nterm; i++) {
+    prob_term *t = &p->t[i];
+    if (!t->have_mat) continue;
+    t->coo_off = n;
+    n += (PetscCount)t->nitems * p->rows.size * p->cols.size;
+  }
+  p->ncoo = n;
+  PetscInt *ci = malloc(sizeof(PetscInt) * (size_t)n), *cj = malloc(sizeof(PetscInt) * (size_t)n);
+  p->coo_vals = calloc((size_t)n, sizeof(PetscScalar));
+  if (!ci || !cj || !p->coo_vals) { free(ci); free(cj); lg_seterr(env, "out of memory for %ld matrix entries", (long)n); return 1; }
+  /* the diagonal first: every row has one (row replacement and ILU need it) */
+  for (PetscInt r = 0; r < p->N; r++) ci[r] = cj[r] = r;
+  int rs = p->rows.size, cs = p->cols.size;
+  PetscInt rg[KER_MAXFIELD * FEM_MAXLOC], cg[KER_MAXFIELD * FEM_MAXLOC];
+  for (int i = 0; i < p->nterm; i++) {
+    prob_term *t = &p->t[i];
+    if (!t->have_mat) continue;
+    PetscInt *ii = ci + t->coo_off, *jj = cj + t->coo_off;
+    for (int it = 0; it < t->nitems; it++) {
+      int c = t->cells[it];
+      for (int a = 0; a < p->rows.n; a++)
+        for (int k = 0; k < p->rows.nloc[a]; k++)
+          rg[p->rows.off[a] + k] = p->rglob[a] + p->rdm[a]->cell_dofs[(size_t)c * p->rdm[a]->nloc + k];
+      for (int a = 0; a < p->cols.n; a++)
+        for (int k = 0; k < p->cols.nloc[a]; k++)
+          cg[p->cols.off[a] + k] = p->cglob[a] + p->cdm[a]->cell_dofs[(size_t)c * p->cdm[a]->nloc + k];
+      for (int r = 0; r < rs; r++)
+        for (int s = 0; s < cs; s++) {
+          *ii++ = rg[r];
+          *jj++ = cg[s];
+        }
+    }
+  }
+  PetscErrorCode ierr;
+  ierr = MatCreate(PETSC_COMM_SELF, &p->A);
+  if (!ierr) ierr = MatSetSizes(p->A, p->N, p->N, p->N, p->N);
+  if (!ierr) ierr = MatSetType(p->A, MATSEQAIJ);
+  if (!ierr && p->prefix[0]) ierr = MatSetOptionsPrefix(p->A, p->prefix);
+  if (!ierr) ierr = MatSetPreallocationCOO(p->A, n, ci, cj);
+  free(ci);
+  free(cj);
+  if (ierr) return petsc_fail(env, ierr, "matrix preallocation");
+  PCHK(MatCreateVecs(p->A, &p->x, &p->b), "vector creation");
+  return 0;
+}
+
+lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
+  double t0 = now_ms();
+  if (s->nfield < 1 || s->nfield > KER_MAXFIELD) {
+    lg_seterr(env, "a problem has 1 to %d unknowns (got %d)", KER_MAXFIELD, s->nfield);
+    return NULL;
+  }
+  if (lg_mesh_check(env, s->mesh)) return NULL;
+  lg_problem *p = calloc(1, sizeof *p);
+  if (!p) { lg_seterr(env, "out of memory"); return NULL; }
+  p->env = env;
+  p->lm = s->mesh;
+  p->nonlinear = s->nonlinear;
+  p->bc_symmetric = s->bc_symmetric;
+  if (s->prefix) snprintf(p->prefix, sizeof p->prefix, "%s", s->prefix);
+  for (int i = 0; i < s->nfield; i++) {
+    expr_func_info *ft = expr_func_get(env->c, s->test[i]), *fu = expr_func_get(env->c, s->unknown[i]);
+    if (!ft || ft->kind != FK_TEST) { lg_seterr(env, "test %d is not a test function", i + 1); goto fail; }
+    if (!fu || fu->kind != FK_UNKNOWN) { lg_seterr(env, "unknown %d is not an unknown (lg.unknown)", i + 1); goto fail; }
+    if (ft->degree != fu->degree) {
+      lg_seterr(env, "the test function %s has degree %d but the unknown %s has degree %d; pair "
+                     "each unknown with a test function of the same basis", ft->name, ft->degree, fu->name, fu->degree);
+      goto fail;
+    }
+  }
+  if (layout(env, s->mesh, s->nfield, s->test, &p->rows, p->rdm, p->rglob, "test")) goto fail;
+  if (layout(env, s->mesh, s->nfield, s->unknown, &p->cols, p->cdm, p->cglob, "unknown")) goto fail;
+  p->N = p->rglob[s->nfield];
+  if (!s->eqn || s->eqn->n == 0) { lg_seterr(env, "the equation has no integrals"); goto fail; }
+  if (setup_terms(env, p, s->eqn, s->test, s->unknown, s->nfield)) goto fail;
+  if (setup_bcs(env, p, s->bc, s->test, s->unknown, s->nfield)) goto fail;
+  if (setup_matrix(env, p)) goto fail;
+  p->state = calloc((size_t)p->N + 1, sizeof(double));
+  if (!p->state) { lg_seterr(env, "out of memory"); goto fail; }
+  if (env->verbose)
+    fprintf(stderr, "[lugal] problem: %d dofs, %ld matrix entries before summation, %d kernels compiled in %.2f ms, setup %.2f ms\n",
+            p->N, (long)p->ncoo, env->nkernels, env->kernel_ms, now_ms() - t0);
+  return p;
+fail:
+  lg_problem_free(p);
+  return NULL;
+}
+
+void lg_problem_free(lg_problem *p) {
+  if (!p) return;
+  for (int i = 0; i < p->nterm; i++) {
+    coef_table_free(&p->t[i].tab);
+    free(p->t[i].cells);
+    free(p->t[i].facets);
+  }
+  free(p->t);
+  for (int i = 0; i < p->nbct; i++) {
+    expr_tape_free(&p->bct[i].tape);
+    free(p->bct[i].cells);
+    free(p->bct[i].facets);
+  }
+  free(p->bct);
+  free(p->bc_rows);
+  free(p->bc_vals);
+  free(p->coo_vals);
+  free(p->state);
+  free(p->elem);
+  if (p->A) MatDestroy(&p->A);
+  if (p->b) VecDestroy(&p->b);
+  if (p->x) VecDestroy(&p->x);
+  if (p->ksp) KSPDestroy(&p->ksp);
+  if (p->snes) SNESDestroy(&p->snes);
+  free(p);
+}
+
+int lg_problem_size(const lg_problem *p) { return p->N; }
+long lg_problem_nnz(const lg_problem *p) {
+  MatInfo info;
+  if (!p->A || MatGetInfo(p->A, MAT_LOCAL, &info)) return -1;
+  return (long)info.nz_used;
+}
+
+/* ---------------------------------------------------------------- assembly */
+
+static int bind_unknowns(lg_problem *p, const double *state, coef_binding *extra) {
+  for (int a = 0; a < p->cols.n; a++) {
+    extra[a].func = p->cols.func[a];
+    extra[a].dm = p->cdm[a];
+    extra[a].vals = state + p->cglob[a];
+  }
+  return p->cols.n;
+}
+
+static int assemble_matrix(lg_env *env, lg_problem *p, const double *state, Mat A) {
+  coef_binding extra[KER_MAXFIELD], bind[KER_MAXCOEF];
+  int ne = bind_unknowns(p, state, extra);
+  memset(p->coo_vals, 0, sizeof(PetscScalar) * (size_t)p->N);
+  for (int i = 0; i < p->nterm; i++) {
+    prob_term *t = &p->t[i];
+    if (!t->have_mat) continue;
+    if (lg_bind_discrete(env, p->lm, &t->kmat, ne, extra, bind)) return 1;
+    if (lg_assemble_items(env, p->lm, &t->kmat, t->nitems, t->cells, t->facets, t->kmat.ncoef, bind,
+                          p->coo_vals + t->coo_off))
+      return 1;
+  }
+  PCHK(MatSetValuesCOO(A, p->coo_vals, INSERT_VALUES), "matrix assembly");
+  return 0;
+}
+
+/* R(state) into r (N), before boundary conditions */
+static int assemble_residual(lg_env *env, lg_problem *p, const double *state, double *r) {
+  coef_binding extra[KER_MAXFIELD], bind[KER_MAXCOEF];
+  int ne = bind_unknowns(p, state, extra);
+  memset(r, 0, sizeof(double) * (size_t)p->N);
+  for (int i = 0; i < p->nterm; i++) {
+    prob_term *t = &p->t[i];
+    if (!t->have_res) continue;
+    size_t need = (size_t)t->nitems * (size_t)p->rows.size + 1;
+    if (need > p->elem_cap) {
+      double *ne2 = realloc(p->elem, sizeof(double) * need);
+      if (!ne2) { lg_seterr(env, "out of memory"); return 1; }
+      p->elem = ne2;
+      p->elem_cap = need;
+    }
+    if (lg_bind_discrete(env, p->lm, &t->kres, ne, extra, bind)) return 1;
+    if (lg_assemble_items(env, p->lm, &t->kres, t->nitems, t->cells, t->facets, t->kres.ncoef, bind, p->elem))
+      return 1;
+    for (int it = 0; it < t->nitems; it++) {
+      int c = t->cells[it];
+      const double *ev = p->elem + (size_t)it * p->rows.size;
+      for (int a = 0; a < p->rows.n; a++) {
+        const int *cd = p->rdm[a]->cell_dofs + (size_t)c * p->rdm[a]->nloc;
+        for (int k = 0; k < p->rows.nloc[a]; k++) r[p->rglob[a] + cd[k]] += ev[p->rows.off[a] + k];
+      }
+    }
+  }
+  return 0;
+}
+
+int lg_problem_assemble_matrix(lg_env *env, lg_problem *p, double *ms) {
+  double t0 = now_ms();
+  if (assemble_matrix(env, p, p->state, p->A)) return 1;
+  if (ms) *ms = now_ms() - t0;
+  return 0;
+}
+
+int lg_problem_dense_matrix(lg_env *env, lg_problem *p, double *dense, int n) {
+  if (n != p->N) { lg_seterr(env, "dense matrix size %d != %d", n, p->N); return 1; }
+  if (assemble_matrix(env, p, p->state, p->A)) return 1;
+  for (PetscInt i = 0; i < n; i++) {
+    PetscInt nc;
+    const PetscInt *cols;
+    const PetscScalar *vals;
+    PCHK(MatGetRow(p->A, i, &nc, &cols, &vals), "MatGetRow");
+    for (int j = 0; j < n; j++) dense[(size_t)i * n + j] = 0;
+    for (PetscInt k = 0; k < nc; k++) dense[(size_t)i * n + cols[k]] = vals[k];
+    PCHK(MatRestoreRow(p->A, i, &nc, &cols, &vals), "MatRestoreRow");
+  }
+  return 0;
+}
+
+/* ---------------------------------------------------------------- solving */
+
+static const char *ksp_reason_name(KSPConvergedReason r) {
+  const char *s = KSPConvergedReasons[r];
+  return s ? s : "UNKNOWN";
+}
+
+static int make_outputs(lg_env *env, lg_problem *p, const double *x, lg_function **out) {
+  for (int a = 0; a < p->cols.n; a++) {
+    expr_func_info *fi = expr_func_get(env->c, p->cols.func[a]);
+    char nm[80];
+    snprintf(nm, sizeof nm, "%sh", fi->name);
+    out[a] = lg_function_new(env, p->lm, p->cols.degree[a], nm);
+    if (!out[a]) {
+      for (int b = 0; b < a; b++) lg_function_free(out[b]);
+      return 1;
+    }
+    memcpy(out[a]->x, x + p->cglob[a], sizeof(double) * (size_t)p->cdm[a]->ndof);
+  }
+  return 0;
+}
+
+static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_info *info) {
+  double t0 = now_ms();
+  memset(p->state, 0, sizeof(double) * (size_t)p->N);
+  if (assemble_matrix(env, p, p->state, p->A)) return 1;
+  PetscScalar *b;
+  PCHK(VecGetArray(p->b, &b), "VecGetArray");
+  int rc = assemble_residual(env, p, p->state, b);
+  for (int i = 0; i < p->N; i++) b[i] = -b[i];
+  PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
+  if (rc) return 1;
+  if (compute_bcs(env, p)) return 1;
+  PCHK(VecSet(p->x, 0), "VecSet");
+  PCHK(VecSetValues(p->x, p->nbc, p->bc_rows, p->bc_vals, INSERT_VALUES), "VecSetValues");
+  PCHK(VecAssemblyBegin(p->x), "VecAssembly");
+  PCHK(VecAssemblyEnd(p->x), "VecAssembly");
+  if (p->bc_symmetric) PCHK(MatZeroRowsColumns(p->A, p->nbc, p->bc_rows, 1.0, p->x, p->b), "MatZeroRowsColumns");
+  else PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, p->x, p->b), "MatZeroRows");
+  info->assemble_ms = now_ms() - t0;
+  t0 = now_ms();
+  if (!p->ksp) {
+    PCHK(KSPCreate(PETSC_COMM_SELF, &p->ksp), "KSPCreate");
+    if (p->prefix[0]) PCHK(KSPSetOptionsPrefix(p->ksp, p->prefix), "KSPSetOptionsPrefix");
+    PC pc;
+    PCHK(KSPSetType(p->ksp, KSPPREONLY), "KSPSetType");
+    PCHK(KSPGetPC(p->ksp, &pc), "KSPGetPC");
+    PCHK(PCSetType(pc, PCLU), "PCSetType");
+    PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
+    PCHK(KSPSetFromOptions(p->ksp), "KSPSetFromOptions");
+  } else {
+    PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
+  }
+  PetscErrorCode ierr = KSPSolve(p->ksp, p->b, p->x);
+  if (ierr) return petsc_fail(env, ierr, "the linear solve");
+  KSPConvergedReason reason;
+  PCHK(KSPGetConvergedReason(p->ksp, &reason), "KSPGetConvergedReason");
+  PetscInt its;
+  KSPGetIterationNumber(p->ksp, &its);
+  info->iterations = info->linear_iterations = (int)its;
+  snprintf(info->reason, sizeof info->reason, "%s", ksp_reason_name(reason));
+  info->solve_ms = now_ms() - t0;
+  if (reason < 0) {
+    const char *hint = "";
+    if (reason == KSP_DIVERGED_PC_FAILED) {
+      PC pc;
+      PCFailedReason pr = PC_NOERROR;
+      KSPGetPC(p->ksp, &pc);
+      PCGetFailedReason(pc, &pr);
+      if (pr == PC_FACTOR_NUMERIC_ZEROPIVOT || pr == PC_FACTOR_STRUCT_ZEROPIVOT)
+        hint = " (zero pivot in the factorization: the system is singular; are boundary conditions missing?)";
+    }
+    lg_seterr(env, "the linear solve failed: %s after %d iterations%s", info->reason, info->iterations, hint);
+    return 1;
+  }
+  const PetscScalar *x;
+  PCHK(VecGetArrayRead(p->x, &x), "VecGetArrayRead");
+  for (int i = 0; i < p->N; i++)
+    if (!isfinite(x[i])) {
+      VecRestoreArrayRead(p->x, &x);
+      lg_seterr(env, "the linear solve produced non-finite values (the system is singular or the data is not finite)");
+      return 1;
+    }
+  rc = make_outputs(env, p, x, out);
+  VecRestoreArrayRead(p->x, &x);
+  return rc;
+}
+
+static PetscErrorCode snes_function(SNES snes, Vec X, Vec F, void *ctx) {
+  lg_problem *p = ctx;
+  (void)snes;
+  const PetscScalar *x;
+  PetscScalar *f;
+  PetscCall(VecGetArrayRead(X, &x));
+  PetscCall(VecGetArray(F, &f));
+  memcpy(p->state, x, sizeof(double) * (size_t)p->N);
+  int rc = assemble_residual(p->env, p, p->state, f);
+  if (!rc)
+    for (int i = 0; i < p->nbc; i++) f[p->bc_rows[i]] = x[p->bc_rows[i]] - p->bc_vals[i];
+  PetscCall(VecRestoreArray(F, &f));
+  PetscCall(VecRestoreArrayRead(X, &x));
+  if (rc) {
+    p->failed = 1;
+    PetscCall(SNESSetFunctionDomainError(snes));
+  }
+  return 0;
+}
+
+static PetscErrorCode snes_jacobian(SNES snes, Vec X, Mat J, Mat P, void *ctx) {
+  lg_problem *p = ctx;
+  (void)snes;
+  (void)J;
+  const PetscScalar *x;
+  PetscCall(VecGetArrayRead(X, &x));
+  memcpy(p->state, x, sizeof(double) * (size_t)p->N);
+  PetscCall(VecRestoreArrayRead(X, &x));
+  if (assemble_matrix(p->env, p, p->state, P)) {
+    p->failed = 1;
+    PetscCall(SNESSetJacobianDomainError(snes));
+    return 0;
+  }
+  PetscCall(MatZeroRows(P, p->nbc, p->bc_rows, 1.0, NULL, NULL));
+  return 0;
+}
+
+static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg_function **out,
+                           lg_solve_info *info) {
+  double t0 = now_ms();
+  if (compute_bcs(env, p)) return 1;
+  PetscScalar *x;
+  PCHK(VecGetArray(p->x, &x), "VecGetArray");
+  for (int i = 0; i < p->N; i++) x[i] = 0;
+  for (int a = 0; a < p->cols.n; a++) {
+    lg_function *g = initial ? initial[a] : NULL;
+    if (!g) continue;
+    if (g->mesh != p->lm || g->degree != p->cols.degree[a]) {
+      VecRestoreArray(p->x, &x);
+      lg_seterr(env, "the initial guess for unknown %d must be a discrete function of degree %d on the problem's mesh", a + 1, p->cols.degree[a]);
+      return 1;
+    }
+    memcpy(x + p->cglob[a], g->x, sizeof(double) * (size_t)p->cdm[a]->ndof);
+  }
+  for (int i = 0; i < p->nbc; i++) x[p->bc_rows[i]] = p->bc_vals[i];
+  PCHK(VecRestoreArray(p->x, &x), "VecRestoreArray");
+  if (!p->snes) {
+    PCHK(SNESCreate(PETSC_COMM_SELF, &p->snes), "SNESCreate");
+    if (p->prefix[0]) PCHK(SNESSetOptionsPrefix(p->snes, p->prefix), "SNESSetOptionsPrefix");
+    PCHK(SNESSetFunction(p->snes, p->b, snes_function, p), "SNESSetFunction");
+    PCHK(SNESSetJacobian(p->snes, p->A, p->A, snes_jacobian, p), "SNESSetJacobian");
+    KSP ksp;
+    PC pc;
+    PCHK(SNESGetKSP(p->snes, &ksp), "SNESGetKSP");
+    PCHK(KSPSetType(ksp, KSPPREONLY), "KSPSetType");
+    PCHK(KSPGetPC(ksp, &pc), "KSPGetPC");
+    PCHK(PCSetType(pc, PCLU), "PCSetType");
+    PCHK(SNESSetFromOptions(p->snes), "SNESSetFromOptions");
+  }
+  static PetscReal hist[128];
+  static PetscInt hits[128];
+  PCHK(SNESSetConvergenceHistory(p->snes, hist, hits, 128, PETSC_TRUE), "SNESSetConvergenceHistory");
+  p->failed = 0;
+  info->setup_ms = now_ms() - t0;
+  t0 = now_ms();
+  PetscErrorCode ierr = SNESSolve(p->snes, NULL, p->x);
+  info->solve_ms = now_ms() - t0;
+  if (p->failed) return 1;
+  if (ierr) return petsc_fail(env, ierr, "the nonlinear solve");
+  SNESConvergedReason reason;
+  PetscInt its, lits, nh;
+  SNESGetConvergedReason(p->snes, &reason);
+  SNESGetIterationNumber(p->snes, &its);
+  SNESGetLinearSolveIterations(p->snes, &lits);
+  PetscReal *h;
+  PetscInt *hi;
+  SNESGetConvergenceHistory(p->snes, &h, &hi, &nh);
+  info->iterations = (int)its;
+  info->linear_iterations = (int)lits;
+  info->nres = (int)(nh < 128 ? nh : 128);
+  for (int i = 0; i < info->nres; i++) info->res[i] = h[i];
+  snprintf(info->reason, sizeof info->reason, "%s", SNESConvergedReasons[reason]);
+  if (reason < 0) {
+    lg_seterr(env, "the nonlinear solve did not converge: %s after %d Newton iterations (residual %.3e)",
+              info->reason, info->iterations, info->nres ? info->res[info->nres - 1] : NAN);
+    return 1;
+  }
+  const PetscScalar *xr;
+  PCHK(VecGetArrayRead(p->x, &xr), "VecGetArrayRead");
+  int rc = make_outputs(env, p, xr, out);
+  VecRestoreArrayRead(p->x, &xr);
+  return rc;
+}
+
+int lg_problem_solve(lg_env *env, lg_problem *p, lg_function **initial, lg_function **out,
+                     lg_solve_info *info) {
+  memset(info, 0, sizeof *info);
+  if (lg_mesh_check(env, p->lm)) return 1;
+  return p->nonlinear ? solve_nonlinear(env, p, initial, out, info) : solve_linear(env, p, out, info);
+}
+
+/* ---------------------------------------------------------------- PETSc start-up */
+
+int lg_petsc_init(int *argc, char ***argv) {
+  /* OpenMPI singleton start-up is slow (a helper daemon); when not started by mpiexec,
+   * default to the in-process settings unless the user set them (PERFORMANCE-NOTES) */
+  if (!getenv("OMPI_COMM_WORLD_SIZE") && !getenv("PMI_RANK") && !getenv("PMIX_RANK")) {
+    static const char *kv[][2] = {{"OMPI_MCA_ess_singleton_isolated", "1"}, {"OMPI_MCA_btl", "self"},
+                                  {"OMPI_MCA_pml", "ob1"}, {"OMPI_MCA_mtl", "^ofi,psm2"},
+                                  {"OMPI_MCA_osc", "^ucx"}, {"OMPI_MCA_coll", "^hcoll"}};
+    for (size_t i = 0; i < sizeof kv / sizeof kv[0]; i++) setenv(kv[i][0], kv[i][1], 0);
+  }
+  PetscErrorCode ierr = PetscInitialize(argc, argv, NULL, NULL);
+  if (ierr) return 1;
+  /* errors come back as codes with messages; lugal reports them, PETSc does not print */
+  PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
+  return 0;
+}
+
+void lg_petsc_finalize(void) { PetscFinalize(); }

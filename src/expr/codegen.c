@@ -1,0 +1,302 @@
+/* codegen.c — evaluation tapes (topologically sorted DAG nodes), the tape interpreter
+ * used for boundary values and interpolation, and plain C99 generation with common
+ * subexpressions hoisted into named temporaries. Generated names are t<k>, P[i] and the
+ * leaf names a caller supplies: never user text. */
+#include "expr.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdlib.h>
+#include <string.h>
+
+void sb_printf(strbuf *b, const char *fmt, ...) {
+  if (b->failed) return;
+  for (;;) {
+    va_list ap;
+    va_start(ap, fmt);
+    size_t room = b->cap - b->len;
+    int n = b->s ? vsnprintf(b->s + b->len, room, fmt, ap) : -2;
+    va_end(ap);
+    if (n >= 0 && (size_t)n < room) { b->len += (size_t)n; return; }
+    size_t cap = b->cap ? 2 * b->cap : 4096;
+    while (n >= 0 && cap < b->len + (size_t)n + 1) cap *= 2;
+    char *s = realloc(b->s, cap);
+    if (!s) { b->failed = 1; return; }
+    b->s = s;
+    b->cap = cap;
+  }
+}
+
+void sb_free(strbuf *b) { free(b->s); b->s = NULL; b->len = b->cap = 0; }
+
+/* ---------------------------------------------------------------- tapes */
+
+typedef struct {
+  int *idx; /* node id → tape index + 1 (0: not on the tape) */
+  size_t cap;
+} idmap;
+
+static int tape_visit(expr *e, expr_tape *t, int *cap, int *mark, int maxid) {
+  if (e->id >= maxid) return 1;
+  if (mark[e->id]) return 0;
+  /* iterative post-order to survive deep DAGs */
+  typedef struct { expr *e; int next; } frame;
+  int scap = 64, sp = 0;
+  frame *st = malloc(sizeof(frame) * (size_t)scap);
+  if (!st) return 1;
+  st[sp++] = (frame){e, 0};
+  mark[e->id] = -1;
+  while (sp) {
+    frame *f = &st[sp - 1];
+    if (f->next < f->e->n) {
+      expr *ch = f->e->ch[f->next++];
+      if (mark[ch->id]) continue;
+      mark[ch->id] = -1;
+      if (sp == scap) {
+        scap *= 2;
+        frame *ns = realloc(st, sizeof(frame) * (size_t)scap);
+        if (!ns) { free(st); return 1; }
+        st = ns;
+      }
+      st[sp++] = (frame){ch, 0};
+      continue;
+    }
+    if (t->n == *cap) {
+      *cap *= 2;
+      expr **nn = realloc(t->node, sizeof(expr *) * (size_t)*cap);
+      if (!nn) { free(st); return 1; }
+      t->node = nn;
+    }
+    mark[f->e->id] = t->n + 1;
+    t->node[t->n++] = f->e;
+    sp--;
+  }
+  free(st);
+  return 0;
+}
+
+int expr_tape_build(expr_ctx *c, int nroot, expr **roots, expr_tape *t) {
+  int maxid = (int)expr_node_count(c);
+  int *mark = calloc((size_t)maxid + 1, sizeof(int));
+  int cap = 64;
+  t->n = 0;
+  t->node = malloc(sizeof(expr *) * (size_t)cap);
+  t->nroot = nroot;
+  t->root = malloc(sizeof(int) * (size_t)(nroot + 1));
+  if (!mark || !t->node || !t->root) goto fail;
+  for (int i = 0; i < nroot; i++) {
+    if (!roots[i] || tape_visit(roots[i], t, &cap, mark, maxid)) goto fail;
+    t->root[i] = mark[roots[i]->id] - 1;
+  }
+  free(mark);
+  return 0;
+fail:
+  free(mark);
+  expr_tape_free(t);
+  expr_set_error(c, "out of memory building an evaluation tape");
+  return 1;
+}
+
+void expr_tape_free(expr_tape *t) {
+  free(t->node);
+  free(t->root);
+  t->node = NULL;
+  t->root = NULL;
+  t->n = t->nroot = 0;
+}
+
+/* position of a child on the tape: children always precede parents, so a linear search
+ * backwards from the parent is avoided by storing the index in a side array */
+int expr_tape_eval(const expr_tape *t, const double *params, expr_leaf_fn leaf, void *ud,
+                   double *w, double *out) {
+  /* child indices: found by pointer lookup among earlier nodes. For speed the caller
+   * evaluates the same tape many times, so resolve indices once per call into w-space
+   * using the node ids: a small open hash from id to tape index. */
+  int cap = 16;
+  while (cap < 2 * t->n) cap <<= 1;
+  int *hk = malloc(sizeof(int) * (size_t)cap * 2);
+  if (!hk) return 1;
+  for (int i = 0; i < cap; i++) hk[2 * i] = -1;
+  for (int k = 0; k < t->n; k++) {
+    unsigned h = (unsigned)t->node[k]->id * 2654435761u & (unsigned)(cap - 1);
+    while (hk[2 * h] >= 0) h = (h + 1) & (unsigned)(cap - 1);
+    hk[2 * h] = t->node[k]->id;
+    hk[2 * h + 1] = k;
+  }
+#define CH(e, i) w[lookup(hk, cap, (e)->ch[i]->id)]
+  int rc = 0;
+  for (int k = 0; k < t->n && !rc; k++) {
+    const expr *e = t->node[k];
+    double v = 0;
+    switch (e->kind) {
+    case E_CONST: v = e->value; break;
+    case E_PARAM: v = params[e->i0]; break;
+    case E_COORD: case E_NORMAL: case E_FIELD:
+      if (leaf(ud, e, &v)) rc = 1;
+      break;
+    case E_SUM:
+      for (int i = 0; i < e->n; i++) {
+        int ci = -1;
+        unsigned h = (unsigned)e->ch[i]->id * 2654435761u & (unsigned)(cap - 1);
+        while (hk[2 * h] != e->ch[i]->id) h = (h + 1) & (unsigned)(cap - 1);
+        ci = hk[2 * h + 1];
+        v += w[ci];
+      }
+      break;
+    case E_PROD:
+      v = 1;
+      for (int i = 0; i < e->n; i++) {
+        unsigned h = (unsigned)e->ch[i]->id * 2654435761u & (unsigned)(cap - 1);
+        while (hk[2 * h] != e->ch[i]->id) h = (h + 1) & (unsigned)(cap - 1);
+        v *= w[hk[2 * h + 1]];
+      }
+      break;
+    case E_POW: case E_FUNC: {
+      double a[2];
+      for (int i = 0; i < e->n; i++) {
+        unsigned h = (unsigned)e->ch[i]->id * 2654435761u & (unsigned)(cap - 1);
+        while (hk[2 * h] != e->ch[i]->id) h = (h + 1) & (unsigned)(cap - 1);
+        a[i] = w[hk[2 * h + 1]];
+      }
+      if (e->kind == E_POW) {
+        double p = a[1];
+        if (p == 2) v = a[0] * a[0];
+        else if (p == -1) v = 1.0 / a[0];
+        else if (p == 0.5) v = sqrt(a[0]);
+        else v = pow(a[0], p);
+      } else {
+        double x = a[0];
+        switch ((expr_fn)e->i0) {
+        case FN_SIN: v = sin(x); break;
+        case FN_COS: v = cos(x); break;
+        case FN_TAN: v = tan(x); break;
+        case FN_EXP: v = exp(x); break;
+        case FN_LOG: v = log(x); break;
+        case FN_SQRT: v = sqrt(x); break;
+        case FN_ABS: v = fabs(x); break;
+        case FN_TANH: v = tanh(x); break;
+        case FN_SINH: v = sinh(x); break;
+        case FN_COSH: v = cosh(x); break;
+        case FN_ATAN: v = atan(x); break;
+        case FN_ASIN: v = asin(x); break;
+        case FN_ACOS: v = acos(x); break;
+        case FN_SIGN: v = (x > 0) - (x < 0); break;
+        default: v = NAN;
+        }
+      }
+      break;
+    }
+    case E_LIST: v = NAN; break;
+    }
+    w[k] = v;
+  }
+#undef CH
+  for (int i = 0; i < t->nroot && !rc; i++) out[i] = w[t->root[i]];
+  free(hk);
+  return rc;
+}
+
+/* ---------------------------------------------------------------- C code */
+
+static int tape_index(const expr_tape *t, const expr *e, int upto) {
+  for (int k = upto - 1; k >= 0; k--)
+    if (t->node[k] == e) return k;
+  return -1;
+}
+
+void expr_codegen_ref(const expr_tape *t, int k, const char *prefix, expr_leaf_name_fn leafname,
+                      void *ud, char *buf, size_t len) {
+  const expr *e = t->node[k];
+  switch (e->kind) {
+  case E_CONST:
+    if (e->value < 0) snprintf(buf, len, "(%.17g)", e->value);
+    else snprintf(buf, len, "%.17g", e->value);
+    /* make integer literals doubles */
+    if (!strpbrk(buf, ".eEn")) {
+      size_t l = strlen(buf);
+      if (buf[l - 1] == ')') { buf[l - 1] = 0; snprintf(buf + l - 1, len - l + 1, ".0)"); }
+      else snprintf(buf + l, len - l, ".0");
+    }
+    return;
+  case E_COORD: case E_NORMAL: case E_FIELD:
+    leafname(ud, e, buf, len);
+    return;
+  default:
+    snprintf(buf, len, "%s%d", prefix, k);
+  }
+}
+
+static const char *c_fn(expr_fn fn) {
+  static const char *n[FN_COUNT] = {"sin", "cos", "tan", "exp", "log", "sqrt", "fabs",
+                                    "tanh", "sinh", "cosh", "atan", "asin", "acos", NULL};
+  return n[fn];
+}
+
+void expr_codegen(strbuf *b, const expr_tape *t, const char *prefix, const char *param_array,
+                  const unsigned char *select, expr_leaf_name_fn leafname, void *ud,
+                  const char *indent) {
+  /* child index lookup: map node id → tape index through a hash */
+  int cap = 16;
+  while (cap < 2 * t->n) cap <<= 1;
+  int *hk = malloc(sizeof(int) * (size_t)cap * 2);
+  if (!hk) { b->failed = 1; return; }
+  for (int i = 0; i < cap; i++) hk[2 * i] = -1;
+  for (int k = 0; k < t->n; k++) {
+    unsigned h = (unsigned)t->node[k]->id * 2654435761u & (unsigned)(cap - 1);
+    while (hk[2 * h] >= 0) h = (h + 1) & (unsigned)(cap - 1);
+    hk[2 * h] = t->node[k]->id;
+    hk[2 * h + 1] = k;
+  }
+  char r0[128], r1[128];
+  for (int k = 0; k < t->n; k++) {
+    if (!select[k]) continue;
+    const expr *e = t->node[k];
+    if (e->kind == E_CONST || e->kind == E_COORD || e->kind == E_NORMAL || e->kind == E_FIELD ||
+        e->kind == E_LIST)
+      continue;
+    if (e->kind == E_PARAM) {
+      sb_printf(b, "%sconst double %s%d = %s[%d];\n", indent, prefix, k, param_array, e->i0);
+      continue;
+    }
+    int ci[2] = {0, 0};
+    sb_printf(b, "%sconst double %s%d = ", indent, prefix, k);
+    for (int i = 0; i < e->n; i++) {
+      unsigned h = (unsigned)e->ch[i]->id * 2654435761u & (unsigned)(cap - 1);
+      while (hk[2 * h] != e->ch[i]->id) h = (h + 1) & (unsigned)(cap - 1);
+      int c = hk[2 * h + 1];
+      if (i < 2) ci[i] = c;
+      if (e->kind == E_SUM || e->kind == E_PROD) {
+        expr_codegen_ref(t, c, prefix, leafname, ud, r0, sizeof r0);
+        if (e->ch[i]->kind == E_PARAM) snprintf(r0, sizeof r0, "%s%d", prefix, c);
+        sb_printf(b, "%s%s", i ? (e->kind == E_SUM ? " + " : "*") : "", r0);
+      }
+    }
+    if (e->kind == E_POW || e->kind == E_FUNC) {
+      expr_codegen_ref(t, ci[0], prefix, leafname, ud, r0, sizeof r0);
+      if (t->node[ci[0]]->kind == E_PARAM) snprintf(r0, sizeof r0, "%s%d", prefix, ci[0]);
+      if (e->kind == E_FUNC) {
+        if (e->i0 == FN_SIGN) sb_printf(b, "(double)((%s > 0.0) - (%s < 0.0))", r0, r0);
+        else sb_printf(b, "%s(%s)", c_fn((expr_fn)e->i0), r0);
+      } else {
+        const expr *p = e->ch[1];
+        if (p->kind == E_CONST && p->value == floor(p->value) && fabs(p->value) <= 4) {
+          int n = (int)fabs(p->value);
+          if (p->value < 0) sb_printf(b, "1.0/(");
+          for (int i = 0; i < n; i++) sb_printf(b, "%s%s", i ? "*" : "", r0);
+          if (p->value < 0) sb_printf(b, ")");
+        } else if (p->kind == E_CONST && p->value == 0.5) {
+          sb_printf(b, "sqrt(%s)", r0);
+        } else if (p->kind == E_CONST && p->value == -0.5) {
+          sb_printf(b, "1.0/sqrt(%s)", r0);
+        } else {
+          expr_codegen_ref(t, ci[1], prefix, leafname, ud, r1, sizeof r1);
+          if (t->node[ci[1]]->kind == E_PARAM) snprintf(r1, sizeof r1, "%s%d", prefix, ci[1]);
+          sb_printf(b, "pow(%s, %s)", r0, r1);
+        }
+      }
+    }
+    sb_printf(b, ";\n");
+  }
+  (void)tape_index;
+  free(hk);
+}

@@ -1,0 +1,210 @@
+/* expr.h — the symbolic engine: an immutable, hash-consed expression DAG owned by a
+ * context, simplified at construction, with differentiation with respect to leaves,
+ * spatial derivatives pushed to the leaves, substitution, evaluation tapes, C code
+ * generation, and linearization of integrands into coefficient tables.
+ *
+ * Depends on libc and libm only. Constructors return NULL on a shape or domain error and
+ * leave a message in ctx->err ("cannot add a 2-vector and a scalar").
+ */
+#ifndef LUGAL_EXPR_H
+#define LUGAL_EXPR_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+
+typedef enum {
+  E_CONST,  /* value */
+  E_PARAM,  /* a named scalar parameter: index */
+  E_COORD,  /* spatial coordinate: comp */
+  E_NORMAL, /* outward unit normal on a facet: comp */
+  E_FIELD,  /* D^alpha f_c: func, comp, alpha */
+  E_SUM,    /* n-ary sum */
+  E_PROD,   /* n-ary product */
+  E_POW,    /* ch[0]^ch[1] */
+  E_FUNC,   /* fn(ch[0]) */
+  E_LIST    /* vector / nested list */
+} expr_kind;
+
+typedef enum {
+  FN_SIN, FN_COS, FN_TAN, FN_EXP, FN_LOG, FN_SQRT, FN_ABS, FN_TANH, FN_SINH, FN_COSH,
+  FN_ATAN, FN_ASIN, FN_ACOS, FN_SIGN, FN_COUNT
+} expr_fn;
+
+#define EXPR_MAXDIM 3
+#define EXPR_ERRLEN 512
+
+/* what a node depends on */
+#define DEP_POINT 1 /* coordinates, normals or fields: varies within a cell */
+#define DEP_PARAM 2
+
+typedef struct expr {
+  expr_kind kind;
+  int id;         /* creation index in the context */
+  uint64_t hash;  /* structural hash, the same across runs */
+  int n;          /* children */
+  struct expr **ch;
+  double value;   /* E_CONST */
+  int i0;         /* PARAM: index; COORD/NORMAL: comp; FIELD: function id; FUNC: fn */
+  int i1;         /* FIELD: component */
+  unsigned char alpha[EXPR_MAXDIM]; /* FIELD: derivative orders per direction */
+  int dep;        /* DEP_* */
+  int order;      /* FIELD: |alpha| */
+} expr;
+
+/* kinds of functions a FIELD leaf can refer to */
+typedef enum { FK_TEST, FK_UNKNOWN, FK_DISCRETE } func_kind;
+
+typedef struct {
+  func_kind kind;
+  char name[64]; /* for messages only; never emitted into generated code */
+  int degree;    /* polynomial degree of the basis (for quadrature selection) */
+  int ncomp;
+  void *user;    /* owned by the layer that created it */
+} expr_func_info;
+
+typedef struct expr_ctx expr_ctx;
+
+expr_ctx *expr_ctx_new(void);
+void expr_ctx_free(expr_ctx *c);
+const char *expr_error(const expr_ctx *c);
+void expr_set_error(expr_ctx *c, const char *fmt, ...);
+void expr_set_dim(expr_ctx *c, int dim);
+int expr_dim(const expr_ctx *c);
+size_t expr_node_count(const expr_ctx *c);
+
+/* parameters */
+int expr_param_new(expr_ctx *c, const char *name, double value);
+double *expr_param_values(expr_ctx *c);
+int expr_param_count(const expr_ctx *c);
+const char *expr_param_name(const expr_ctx *c, int i);
+
+/* functions */
+int expr_func_new(expr_ctx *c, func_kind kind, const char *name, int degree, int ncomp, void *user);
+expr_func_info *expr_func_get(expr_ctx *c, int id);
+int expr_func_count(const expr_ctx *c);
+
+/* leaves */
+expr *expr_num(expr_ctx *c, double v);
+expr *expr_param(expr_ctx *c, int index);
+expr *expr_coord(expr_ctx *c, int comp);
+expr *expr_normal(expr_ctx *c, int comp);
+expr *expr_field(expr_ctx *c, int func, int comp, const unsigned char *alpha);
+
+/* operations (NULL propagates: any NULL argument gives NULL) */
+expr *expr_add(expr_ctx *c, expr *a, expr *b);
+expr *expr_sub(expr_ctx *c, expr *a, expr *b);
+expr *expr_mul(expr_ctx *c, expr *a, expr *b);
+expr *expr_div(expr_ctx *c, expr *a, expr *b);
+expr *expr_neg(expr_ctx *c, expr *a);
+expr *expr_pow(expr_ctx *c, expr *a, expr *b);
+expr *expr_apply(expr_ctx *c, expr_fn fn, expr *a);
+expr *expr_list(expr_ctx *c, int n, expr **items);
+expr *expr_sum_n(expr_ctx *c, int n, expr **terms);
+expr *expr_prod_n(expr_ctx *c, int n, expr **factors);
+
+/* vector calculus on lists */
+expr *expr_index(expr_ctx *c, expr *list, int i); /* 0-based */
+expr *expr_dot(expr_ctx *c, expr *a, expr *b);     /* contracts the last/first index */
+expr *expr_inner(expr_ctx *c, expr *a, expr *b);   /* full contraction, same shape */
+expr *expr_grad(expr_ctx *c, expr *a);             /* appends an index of size dim */
+expr *expr_div_op(expr_ctx *c, expr *a);           /* divergence of a vector */
+expr *expr_dx(expr_ctx *c, expr *a, int dir);      /* spatial derivative, pushed to leaves */
+
+/* shape: 0 for scalars, else the list length; *rank the nesting depth */
+int expr_shape(const expr *e, int *rank);
+void expr_describe_shape(const expr *e, char *buf, size_t len);
+
+/* differentiation with respect to a leaf (FIELD, PARAM, COORD or NORMAL node) */
+expr *expr_diff(expr_ctx *c, expr *e, expr *leaf);
+/* replace leaves: from[i] (leaf nodes) by to[i] */
+expr *expr_subs(expr_ctx *c, expr *e, int n, expr **from, expr **to);
+/* every FIELD leaf of function func (or any function when func < 0) in e, deduplicated */
+int expr_collect_fields(expr_ctx *c, int nroot, expr **roots, int func, int max, expr **out);
+int expr_uses(expr *e, expr_kind kind, int *maxcomp);
+/* a polynomial-degree estimate used to choose quadrature orders */
+int expr_degree(expr_ctx *c, expr *e, int cell_degree_of_coords);
+
+/* text form for messages and __tostring */
+void expr_print(expr_ctx *c, const expr *e, char *buf, size_t len);
+
+/* ---- tapes: a topologically sorted list of the nodes under some roots */
+typedef struct {
+  int n;
+  expr **node;  /* nodes in evaluation order */
+  int nroot;
+  int *root;    /* tape index of each root */
+} expr_tape;
+
+int expr_tape_build(expr_ctx *c, int nroot, expr **roots, expr_tape *t);
+void expr_tape_free(expr_tape *t);
+/* evaluate with leaf values from a callback: returns 0 or nonzero if the callback fails */
+typedef int (*expr_leaf_fn)(void *ud, const expr *leaf, double *val);
+int expr_tape_eval(const expr_tape *t, const double *params, expr_leaf_fn leaf, void *ud,
+                   double *work /* t->n */, double *out /* t->nroot */);
+
+/* ---- C code generation: emits "const double tN = ...;" lines for the nodes of tape t
+ * that satisfy (dep & mask) == want (e.g. the parameter-only nodes before a loop), with
+ * leaves named by a callback. Names are generated identifiers only. */
+typedef void (*expr_leaf_name_fn)(void *ud, const expr *leaf, char *buf, size_t len);
+typedef struct {
+  char *s;
+  size_t len, cap;
+  int failed;
+} strbuf;
+void sb_printf(strbuf *b, const char *fmt, ...);
+void sb_free(strbuf *b);
+/* emit code for nodes with index in [0, t->n) selected by `select` (1 = emit); the caller
+ * decides which nodes go before a loop and which inside. Node k is named "<prefix>k". */
+void expr_codegen(strbuf *b, const expr_tape *t, const char *prefix, const char *param_array,
+                  const unsigned char *select, expr_leaf_name_fn leafname, void *ud,
+                  const char *indent);
+/* the C expression naming tape node k (a literal for constants) */
+void expr_codegen_ref(const expr_tape *t, int k, const char *prefix, expr_leaf_name_fn leafname,
+                      void *ud, char *buf, size_t len);
+
+/* ---- forms: sums of integrals of scalar integrands over regions */
+typedef enum { REGION_CELLS, REGION_BOUNDARY } region_kind;
+#define REGION_MAXTAGS 16
+typedef struct {
+  region_kind kind;
+  int ntag;              /* 0: every cell (REGION_CELLS) */
+  int tags[REGION_MAXTAGS];
+  void *mesh;            /* the mesh the region belongs to (opaque here) */
+} region;
+
+typedef struct {
+  region reg;
+  expr *integrand;
+  int order; /* quadrature order, -1 = choose from the integrand */
+} form_term;
+
+typedef struct {
+  int n, cap;
+  form_term *t;
+} form;
+
+form *form_new(void);
+void form_free(form *f);
+form *form_copy(const form *f);
+int form_add_term(form *f, const region *r, expr *integrand, int order);
+/* f + s*g (s = ±1 or any scalar): scales integrands */
+form *form_combine(expr_ctx *c, const form *f, double s, const form *g);
+
+/* linearization of one integrand: entries of the residual table R_i = df/d(test leaf i)
+ * and of the Jacobian table J_ij = d2f/d(test leaf i)d(trial leaf j), where the trial
+ * leaves are the FIELD leaves of the trial functions. Returns nonzero with a message when
+ * the integrand is not linear in the test functions. */
+typedef struct {
+  int nres;
+  expr **res_leaf; /* test leaves */
+  expr **res;      /* coefficients */
+  int njac;
+  expr **jac_test, **jac_trial, **jac;
+} coef_table;
+
+int form_linearize(expr_ctx *c, expr *integrand, int ntest, const int *test_funcs,
+                   int ntrial, const int *trial_funcs, int want_jacobian, coef_table *out);
+void coef_table_free(coef_table *t);
+
+#endif

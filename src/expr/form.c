@@ -1,0 +1,139 @@
+/* form.c — forms (sums of integrals over regions) and their linearization into
+ * coefficient tables: "everything is a derivative" (DESIGN.md). */
+#include "expr.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+form *form_new(void) { return calloc(1, sizeof(form)); }
+
+void form_free(form *f) {
+  if (!f) return;
+  free(f->t);
+  free(f);
+}
+
+int form_add_term(form *f, const region *r, expr *integrand, int order) {
+  if (f->n == f->cap) {
+    int cap = f->cap ? 2 * f->cap : 4;
+    form_term *nt = realloc(f->t, sizeof(form_term) * (size_t)cap);
+    if (!nt) return 1;
+    f->t = nt;
+    f->cap = cap;
+  }
+  f->t[f->n].reg = *r;
+  f->t[f->n].integrand = integrand;
+  f->t[f->n].order = order;
+  f->n++;
+  return 0;
+}
+
+form *form_copy(const form *f) {
+  form *g = form_new();
+  if (!g) return NULL;
+  for (int i = 0; i < f->n; i++)
+    if (form_add_term(g, &f->t[i].reg, f->t[i].integrand, f->t[i].order)) { form_free(g); return NULL; }
+  return g;
+}
+
+form *form_combine(expr_ctx *c, const form *f, double s, const form *g) {
+  form *r = form_copy(f);
+  if (!r) return NULL;
+  for (int i = 0; g && i < g->n; i++) {
+    expr *e = expr_mul(c, expr_num(c, s), g->t[i].integrand);
+    if (!e || form_add_term(r, &g->t[i].reg, e, g->t[i].order)) { form_free(r); return NULL; }
+  }
+  return r;
+}
+
+void coef_table_free(coef_table *t) {
+  free(t->res_leaf);
+  free(t->res);
+  free(t->jac_test);
+  free(t->jac_trial);
+  free(t->jac);
+  memset(t, 0, sizeof *t);
+}
+
+#define MAXLEAF 256
+
+int form_linearize(expr_ctx *c, expr *f, int ntest, const int *test_funcs, int ntrial,
+                   const int *trial_funcs, int want_jacobian, coef_table *out) {
+  memset(out, 0, sizeof *out);
+  expr *tl[MAXLEAF];
+  int nt = 0;
+  for (int i = 0; i < ntest; i++) {
+    int k = expr_collect_fields(c, 1, &f, test_funcs[i], MAXLEAF - nt, tl + nt);
+    if (k > MAXLEAF - nt) { expr_set_error(c, "too many test-function leaves in one integrand"); return 1; }
+    nt += k;
+  }
+  /* the integrand must vanish when the test functions do */
+  expr **zeros = malloc(sizeof(expr *) * (size_t)(nt + 1));
+  if (!zeros) return 1;
+  for (int i = 0; i < nt; i++) zeros[i] = expr_num(c, 0);
+  expr *f0 = expr_subs(c, f, nt, tl, zeros);
+  free(zeros);
+  if (!f0) return 1;
+  if (!(f0->kind == E_CONST && f0->value == 0)) {
+    char buf[200];
+    expr_print(c, f0, buf, sizeof buf);
+    expr_set_error(c, "the form is not linear in the test function: the term %s does not "
+                      "contain it", buf);
+    return 1;
+  }
+  out->res_leaf = malloc(sizeof(expr *) * (size_t)(nt + 1));
+  out->res = malloc(sizeof(expr *) * (size_t)(nt + 1));
+  if (!out->res_leaf || !out->res) { coef_table_free(out); return 1; }
+  int cap = 16;
+  if (want_jacobian) {
+    out->jac_test = malloc(sizeof(expr *) * (size_t)cap);
+    out->jac_trial = malloc(sizeof(expr *) * (size_t)cap);
+    out->jac = malloc(sizeof(expr *) * (size_t)cap);
+    if (!out->jac_test || !out->jac_trial || !out->jac) { coef_table_free(out); return 1; }
+  }
+  for (int i = 0; i < nt; i++) {
+    expr *r = expr_diff(c, f, tl[i]);
+    if (!r) { coef_table_free(out); return 1; }
+    expr *dummy[1];
+    for (int j = 0; j < ntest; j++) {
+      if (expr_collect_fields(c, 1, &r, test_funcs[j], 1, dummy) > 0) {
+        expr_set_error(c, "the form is not linear in the test function: it contains a "
+                          "product of test functions");
+        coef_table_free(out);
+        return 1;
+      }
+    }
+    if (r->kind == E_CONST && r->value == 0) continue;
+    out->res_leaf[out->nres] = tl[i];
+    out->res[out->nres] = r;
+    out->nres++;
+    if (!want_jacobian) continue;
+    expr *ul[MAXLEAF];
+    int nu = 0;
+    for (int j = 0; j < ntrial; j++) {
+      int k = expr_collect_fields(c, 1, &r, trial_funcs[j], MAXLEAF - nu, ul + nu);
+      if (k > MAXLEAF - nu) { expr_set_error(c, "too many unknown leaves"); coef_table_free(out); return 1; }
+      nu += k;
+    }
+    for (int j = 0; j < nu; j++) {
+      expr *jv = expr_diff(c, r, ul[j]);
+      if (!jv) { coef_table_free(out); return 1; }
+      if (jv->kind == E_CONST && jv->value == 0) continue;
+      if (out->njac == cap) {
+        cap *= 2;
+        expr **a = realloc(out->jac_test, sizeof(expr *) * (size_t)cap);
+        if (a) out->jac_test = a;
+        expr **b = realloc(out->jac_trial, sizeof(expr *) * (size_t)cap);
+        if (b) out->jac_trial = b;
+        expr **d = realloc(out->jac, sizeof(expr *) * (size_t)cap);
+        if (d) out->jac = d;
+        if (!a || !b || !d) { coef_table_free(out); return 1; }
+      }
+      out->jac_test[out->njac] = tl[i];
+      out->jac_trial[out->njac] = ul[j];
+      out->jac[out->njac] = jv;
+      out->njac++;
+    }
+  }
+  return 0;
+}

@@ -1,0 +1,83 @@
+/* main.c — the `lugal` runner: initializes PETSc (with fast single-process MPI defaults),
+ * exposes script arguments as `arg`, makes `require "lugal"` available, runs the script,
+ * and reports a Lua error as "script.lua:LINE: message" with exit status 1. */
+#include "../assemble/assemble.h"
+#include "../config.h"
+#include "lmodule.h"
+
+#include <lauxlib.h>
+#include <lua.h>
+#include <lualib.h>
+#include <stdio.h>
+#include <string.h>
+
+static void usage(FILE *f) {
+  fprintf(f,
+          "usage: lugal SCRIPT.lua [ARGS] [PETSc options]\n"
+          "       lugal --version | --help\n\n"
+          "Runs a Lua script with the lugal module (require \"lugal\"). Arguments after the\n"
+          "script are visible to it as arg[1], arg[2], ... and are also read by PETSc, so\n"
+          "options such as -ksp_type cg -pc_type gamg -snes_monitor apply to its solvers.\n\n"
+          "lugal options:\n"
+          "  -lugal_jit tcc|cc     kernel compiler: libtcc in memory (default) or the system\n"
+          "                        C compiler at -O3 into a cached shared object\n"
+          "  -lugal_verbose        timings and kernel statistics on stderr\n"
+          "  -lugal_traceback      print a Lua traceback with errors\n");
+}
+
+static int traceback(lua_State *L) {
+  const char *msg = lua_tostring(L, 1);
+  if (!msg) msg = luaL_tolstring(L, 1, NULL);
+  luaL_traceback(L, L, msg, 1);
+  return 1;
+}
+
+int main(int argc, char **argv) {
+  if (argc < 2) { usage(stderr); return 2; }
+  if (!strcmp(argv[1], "--version") || !strcmp(argv[1], "-v")) {
+    printf("lugal %s\n", LUGAL_VERSION);
+    return 0;
+  }
+  if (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) { usage(stdout); return 0; }
+  const char *script = argv[1];
+  if (script[0] == '-') { fprintf(stderr, "lugal: the first argument must be a script, got %s\n", script); usage(stderr); return 2; }
+  int want_tb = 0;
+  for (int i = 2; i < argc; i++) want_tb |= !strcmp(argv[i], "-lugal_traceback");
+  int pargc = argc;
+  char **pargv = argv;
+  if (lg_petsc_init(&pargc, &pargv)) { fprintf(stderr, "lugal: PETSc failed to initialize\n"); return 1; }
+  lua_State *L = luaL_newstate();
+  if (!L) { fprintf(stderr, "lugal: cannot create a Lua state\n"); lg_petsc_finalize(); return 1; }
+  luaL_openlibs(L);
+  lua_getglobal(L, "package");
+  lua_getfield(L, -1, "preload");
+  lua_pushcfunction(L, luaopen_lugal);
+  lua_setfield(L, -2, "lugal");
+  lua_pop(L, 2);
+  lua_createtable(L, argc, 1);
+  lua_pushstring(L, argv[0]);
+  lua_rawseti(L, -2, -1);
+  for (int i = 1; i < argc; i++) {
+    lua_pushstring(L, argv[i]);
+    lua_rawseti(L, -2, i - 1);
+  }
+  lua_setglobal(L, "arg");
+  int status = 0;
+  lua_pushcfunction(L, traceback);
+  int msgh = lua_gettop(L);
+  if (luaL_loadfile(L, script) != LUA_OK) {
+    fprintf(stderr, "lugal: %s\n", lua_tostring(L, -1));
+    status = 1;
+  } else {
+    for (int i = 2; i < argc; i++) lua_pushstring(L, argv[i]);
+    int rc = lua_pcall(L, argc - 2, 0, want_tb ? msgh : 0);
+    if (rc != LUA_OK) {
+      const char *msg = lua_tostring(L, -1);
+      fprintf(stderr, "%s\n", msg ? msg : "(error object is not a string)");
+      status = 1;
+    }
+  }
+  lua_close(L);
+  lg_petsc_finalize();
+  return status;
+}

@@ -1,0 +1,759 @@
+/* mesh.c — mesh construction, names, generators, derived adjacency, geometry, the
+ * validity check and uniform refinement. Reference-cell numbering follows Gmsh/VTK for
+ * vertices; simplex edges and facets are numbered opposite-vertex style (as in Basix). */
+#include "mesh.h"
+#include "tuplehash.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const int tri_facets[3][2] = {{1, 2}, {2, 0}, {0, 1}};
+static const int tri_edges[3][2] = {{1, 2}, {0, 2}, {0, 1}};
+static const int quad_facets[4][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}};
+static const int tet_facets[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
+static const int tet_edges[6][2] = {{2, 3}, {1, 3}, {1, 2}, {0, 3}, {0, 2}, {0, 1}};
+static const int hex_facets[6][4] = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4},
+                                     {1, 2, 6, 5}, {2, 3, 7, 6}, {3, 0, 4, 7}};
+static const int hex_edges[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6},
+                                     {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
+
+int cell_nfacets(cell_type t) { static const int n[] = {3, 4, 4, 6}; return n[t]; }
+int cell_nedges(cell_type t) { static const int n[] = {3, 4, 6, 12}; return n[t]; }
+int cell_dim(cell_type t) { return t <= CELL_QUADRILATERAL ? 2 : 3; }
+int cell_nverts(cell_type t) { static const int n[] = {3, 4, 4, 8}; return n[t]; }
+const char *cell_name(cell_type t) {
+  static const char *n[] = {"triangle", "quadrilateral", "tetrahedron", "hexahedron"};
+  return n[t];
+}
+static int cell_nvf(cell_type t) { static const int n[] = {2, 2, 3, 4}; return n[t]; }
+
+const int *cell_facet_verts(cell_type t, int f) {
+  switch (t) {
+  case CELL_TRIANGLE: return tri_facets[f];
+  case CELL_QUADRILATERAL: return quad_facets[f];
+  case CELL_TETRAHEDRON: return tet_facets[f];
+  default: return hex_facets[f];
+  }
+}
+const int *cell_edge_verts(cell_type t, int e) {
+  switch (t) {
+  case CELL_TRIANGLE: return tri_edges[e];
+  case CELL_QUADRILATERAL: return quad_facets[e];
+  case CELL_TETRAHEDRON: return tet_edges[e];
+  default: return hex_edges[e];
+  }
+}
+
+static void seterr(char *err, const char *fmt, ...) {
+  if (!err) return;
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(err, MESH_ERRLEN, fmt, ap);
+  va_end(ap);
+}
+
+mesh *mesh_create(cell_type t, int nvert, const double *x, int ncell, const int *cells,
+                  char *err) {
+  if (nvert <= 0 || ncell <= 0) {
+    seterr(err, "a mesh needs at least one vertex and one cell (got %d vertices, %d cells)",
+           nvert, ncell);
+    return NULL;
+  }
+  mesh *m = calloc(1, sizeof *m);
+  if (!m) { seterr(err, "out of memory"); return NULL; }
+  m->type = t;
+  m->dim = cell_dim(t);
+  m->nvc = cell_nverts(t);
+  m->nvf = cell_nvf(t);
+  m->nvert = nvert;
+  m->ncell = ncell;
+  m->x = malloc(sizeof(double) * (size_t)nvert * (size_t)m->dim);
+  m->cells = malloc(sizeof(int) * (size_t)ncell * (size_t)m->nvc);
+  m->cell_tag = calloc((size_t)ncell, sizeof(int));
+  if (!m->x || !m->cells || !m->cell_tag) {
+    mesh_free(m);
+    seterr(err, "out of memory for a mesh of %d vertices and %d cells", nvert, ncell);
+    return NULL;
+  }
+  if (x) memcpy(m->x, x, sizeof(double) * (size_t)nvert * (size_t)m->dim);
+  if (cells) {
+    for (size_t i = 0; i < (size_t)ncell * (size_t)m->nvc; i++) {
+      if (cells[i] < 0 || cells[i] >= nvert) {
+        seterr(err, "cell %zu refers to vertex %d, but the mesh has %d vertices",
+               i / (size_t)m->nvc + 1, cells[i] + 1, nvert);
+        mesh_free(m);
+        return NULL;
+      }
+    }
+    memcpy(m->cells, cells, sizeof(int) * (size_t)ncell * (size_t)m->nvc);
+  }
+  return m;
+}
+
+static void mesh_free_derived(mesh *m) {
+  free(m->edges); free(m->cell_edges); free(m->faces); free(m->cell_faces);
+  free(m->bf_cell); free(m->bf_local);
+  m->edges = m->cell_edges = m->faces = m->cell_faces = m->bf_cell = m->bf_local = NULL;
+  m->nedge = m->nface = 0;
+}
+
+void mesh_free(mesh *m) {
+  if (!m) return;
+  mesh_free_derived(m);
+  free(m->x); free(m->cells); free(m->cell_tag); free(m->bf_verts); free(m->bf_tag);
+  free(m);
+}
+
+mesh *mesh_copy(const mesh *m) {
+  char err[MESH_ERRLEN];
+  mesh *c = mesh_create(m->type, m->nvert, m->x, m->ncell, m->cells, err);
+  if (!c) return NULL;
+  memcpy(c->cell_tag, m->cell_tag, sizeof(int) * (size_t)m->ncell);
+  if (m->nbf) {
+    c->bf_verts = malloc(sizeof(int) * (size_t)m->nbf * (size_t)m->nvf);
+    c->bf_tag = malloc(sizeof(int) * (size_t)m->nbf);
+    if (!c->bf_verts || !c->bf_tag) { mesh_free(c); return NULL; }
+    memcpy(c->bf_verts, m->bf_verts, sizeof(int) * (size_t)m->nbf * (size_t)m->nvf);
+    memcpy(c->bf_tag, m->bf_tag, sizeof(int) * (size_t)m->nbf);
+    c->nbf = m->nbf;
+  }
+  c->nbname = m->nbname; c->ncname = m->ncname;
+  memcpy(c->bnames, m->bnames, sizeof m->bnames);
+  memcpy(c->cnames, m->cnames, sizeof m->cnames);
+  return c;
+}
+
+static int set_name(mesh_name *tab, int *n, int tag, const char *name, char *err) {
+  for (int i = 0; i < *n; i++) {
+    if (tab[i].tag == tag) {
+      snprintf(tab[i].name, sizeof tab[i].name, "%s", name);
+      return 0;
+    }
+  }
+  if (*n >= MESH_MAXNAMES) {
+    seterr(err, "too many names (at most %d)", MESH_MAXNAMES);
+    return 1;
+  }
+  tab[*n].tag = tag;
+  snprintf(tab[*n].name, sizeof tab[*n].name, "%s", name);
+  (*n)++;
+  return 0;
+}
+
+int mesh_set_boundary_name(mesh *m, int tag, const char *name) {
+  return set_name(m->bnames, &m->nbname, tag, name, m->err);
+}
+int mesh_set_region_name(mesh *m, int tag, const char *name) {
+  return set_name(m->cnames, &m->ncname, tag, name, m->err);
+}
+
+int mesh_add_boundary_facets(mesh *m, int n, const int *verts, int tag, const char *name) {
+  if (n < 0) return 1;
+  int *bv = realloc(m->bf_verts, sizeof(int) * (size_t)(m->nbf + n) * (size_t)m->nvf);
+  if (!bv) { seterr(m->err, "out of memory"); return 1; }
+  m->bf_verts = bv;
+  int *bt = realloc(m->bf_tag, sizeof(int) * (size_t)(m->nbf + n));
+  if (!bt) { seterr(m->err, "out of memory"); return 1; }
+  m->bf_tag = bt;
+  for (int i = 0; i < n * m->nvf; i++) {
+    if (verts[i] < 0 || verts[i] >= m->nvert) {
+      seterr(m->err, "boundary facet %d refers to vertex %d, but the mesh has %d vertices",
+             i / m->nvf + 1, verts[i] + 1, m->nvert);
+      return 1;
+    }
+  }
+  memcpy(m->bf_verts + (size_t)m->nbf * (size_t)m->nvf, verts,
+         sizeof(int) * (size_t)n * (size_t)m->nvf);
+  for (int i = 0; i < n; i++) m->bf_tag[m->nbf + i] = tag;
+  m->nbf += n;
+  free(m->bf_cell); free(m->bf_local);
+  m->bf_cell = m->bf_local = NULL;
+  if (name) return mesh_set_boundary_name(m, tag, name);
+  return 0;
+}
+
+static int find_name(const mesh_name *tab, int n, const char *name) {
+  for (int i = 0; i < n; i++)
+    if (!strcmp(tab[i].name, name)) return tab[i].tag;
+  return -1;
+}
+int mesh_boundary_tag(const mesh *m, const char *name) {
+  return find_name(m->bnames, m->nbname, name);
+}
+int mesh_region_tag(const mesh *m, const char *name) {
+  return find_name(m->cnames, m->ncname, name);
+}
+void mesh_boundary_names(const mesh *m, char *buf, size_t len) {
+  size_t used = 0;
+  buf[0] = 0;
+  for (int i = 0; i < m->nbname && used < len; i++)
+    used += (size_t)snprintf(buf + used, len - used, "%s\"%s\"", i ? ", " : "",
+                             m->bnames[i].name);
+  if (!m->nbname) snprintf(buf, len, "(none)");
+}
+
+/* ---------------------------------------------------------------- geometry */
+
+static double det3(const double *a, const double *b, const double *c) {
+  return a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+         a[2] * (b[0] * c[1] - b[1] * c[0]);
+}
+
+/* hexahedron corner neighbours in right-handed order (Knupp / Verdict) */
+static const int hex_corner[8][3] = {{1, 3, 4}, {2, 0, 5}, {3, 1, 6}, {0, 2, 7},
+                                     {7, 5, 0}, {4, 6, 1}, {5, 7, 2}, {6, 4, 3}};
+
+/* minimum corner Jacobian determinant of a quad or hex (the untangling paper's validity:
+ * every corner Jacobian positive) */
+static double min_corner_jacobian(const mesh *m, int c) {
+  const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+  double mn = INFINITY;
+  if (m->type == CELL_QUADRILATERAL) {
+    for (int i = 0; i < 4; i++) {
+      const double *p = m->x + 2 * v[i], *a = m->x + 2 * v[(i + 1) % 4],
+                   *b = m->x + 2 * v[(i + 3) % 4];
+      double j = (a[0] - p[0]) * (b[1] - p[1]) - (a[1] - p[1]) * (b[0] - p[0]);
+      if (j < mn) mn = j;
+    }
+  } else {
+    for (int i = 0; i < 8; i++) {
+      const double *p = m->x + 3 * v[i];
+      double e[3][3];
+      for (int k = 0; k < 3; k++)
+        for (int d = 0; d < 3; d++) e[k][d] = m->x[3 * v[hex_corner[i][k]] + d] - p[d];
+      double j = det3(e[0], e[1], e[2]);
+      if (j < mn) mn = j;
+    }
+  }
+  return mn;
+}
+
+double mesh_cell_signed_measure(const mesh *m, int c) {
+  const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+  const double *x = m->x;
+  switch (m->type) {
+  case CELL_TRIANGLE: {
+    const double *a = x + 2 * v[0], *b = x + 2 * v[1], *d = x + 2 * v[2];
+    return 0.5 * ((b[0] - a[0]) * (d[1] - a[1]) - (b[1] - a[1]) * (d[0] - a[0]));
+  }
+  case CELL_QUADRILATERAL: {
+    double s = 0;
+    for (int i = 0; i < 4; i++) {
+      const double *a = x + 2 * v[i], *b = x + 2 * v[(i + 1) % 4];
+      s += a[0] * b[1] - a[1] * b[0];
+    }
+    return 0.5 * s;
+  }
+  case CELL_TETRAHEDRON: {
+    double e[3][3];
+    for (int k = 0; k < 3; k++)
+      for (int d = 0; d < 3; d++) e[k][d] = x[3 * v[k + 1] + d] - x[3 * v[0] + d];
+    return det3(e[0], e[1], e[2]) / 6.0;
+  }
+  default: {
+    /* volume by the divergence theorem over the 6 (possibly non-planar) faces, each
+     * split into 4 triangles about its centroid */
+    double vol = 0;
+    for (int f = 0; f < 6; f++) {
+      double cf[3] = {0, 0, 0};
+      for (int k = 0; k < 4; k++)
+        for (int d = 0; d < 3; d++) cf[d] += 0.25 * x[3 * v[hex_facets[f][k]] + d];
+      for (int k = 0; k < 4; k++) {
+        const double *a = x + 3 * v[hex_facets[f][k]], *b = x + 3 * v[hex_facets[f][(k + 1) % 4]];
+        vol += det3(cf, a, b) / 6.0;
+      }
+    }
+    return vol; /* hex_facets are oriented outward */
+  }
+  }
+}
+
+double mesh_hmax(const mesh *m) {
+  double h = 0;
+  int ne = cell_nedges(m->type);
+  for (int c = 0; c < m->ncell; c++) {
+    const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+    for (int e = 0; e < ne; e++) {
+      const int *ev = cell_edge_verts(m->type, e);
+      double s = 0;
+      for (int d = 0; d < m->dim; d++) {
+        double t = m->x[m->dim * v[ev[0]] + d] - m->x[m->dim * v[ev[1]] + d];
+        s += t * t;
+      }
+      if (s > h) h = s;
+    }
+  }
+  return sqrt(h);
+}
+
+int mesh_count_invalid(const mesh *m, int maxids, int *ids, int *ninv) {
+  int n = 0;
+  double h = mesh_hmax(m);
+  double tol = 1e-13 * pow(h, m->dim);
+  for (int c = 0; c < m->ncell; c++) {
+    double q;
+    if (m->type == CELL_QUADRILATERAL || m->type == CELL_HEXAHEDRON)
+      q = min_corner_jacobian(m, c);
+    else
+      q = mesh_cell_signed_measure(m, c);
+    if (!(q > tol)) {
+      if (n < maxids && ids) ids[n] = c;
+      n++;
+    }
+  }
+  *ninv = n;
+  return 0;
+}
+
+/* ---------------------------------------------------------------- adjacency */
+
+int mesh_build_edges(mesh *m) {
+  if (m->edges) return 0;
+  int ne = cell_nedges(m->type);
+  tuplehash h;
+  if (th_init(&h, (size_t)m->ncell * (size_t)ne / 2 + 16, 2)) goto oom;
+  m->cell_edges = malloc(sizeof(int) * (size_t)m->ncell * (size_t)ne);
+  if (!m->cell_edges) goto oom;
+  int n = 0;
+  for (int c = 0; c < m->ncell; c++) {
+    const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+    for (int e = 0; e < ne; e++) {
+      const int *ev = cell_edge_verts(m->type, e);
+      int k[2] = {v[ev[0]], v[ev[1]]}, found;
+      int id = th_get(&h, k, n, &found);
+      if (id == -2) goto oom;
+      if (!found) n++;
+      m->cell_edges[(size_t)c * (size_t)ne + (size_t)e] = id;
+    }
+  }
+  m->edges = malloc(sizeof(int) * 2 * (size_t)(n + 1));
+  if (!m->edges) goto oom;
+  for (size_t i = 0; i < h.cap; i++)
+    if (h.e[i].val >= 0) {
+      m->edges[2 * h.e[i].val] = h.e[i].k[0];
+      m->edges[2 * h.e[i].val + 1] = h.e[i].k[1];
+    }
+  m->nedge = n;
+  th_free(&h);
+  return 0;
+oom:
+  th_free(&h);
+  free(m->cell_edges);
+  m->cell_edges = NULL;
+  seterr(m->err, "out of memory building edges");
+  return 1;
+}
+
+int mesh_build_faces(mesh *m) {
+  if (m->faces || m->type != CELL_TETRAHEDRON) return 0;
+  tuplehash h;
+  if (th_init(&h, (size_t)m->ncell * 2 + 16, 3)) goto oom;
+  m->cell_faces = malloc(sizeof(int) * (size_t)m->ncell * 4);
+  if (!m->cell_faces) goto oom;
+  int n = 0;
+  for (int c = 0; c < m->ncell; c++) {
+    const int *v = m->cells + (size_t)c * 4;
+    for (int f = 0; f < 4; f++) {
+      int k[3] = {v[tet_facets[f][0]], v[tet_facets[f][1]], v[tet_facets[f][2]]}, found;
+      int id = th_get(&h, k, n, &found);
+      if (id == -2) goto oom;
+      if (!found) n++;
+      m->cell_faces[(size_t)c * 4 + (size_t)f] = id;
+    }
+  }
+  m->faces = malloc(sizeof(int) * 3 * (size_t)(n + 1));
+  if (!m->faces) goto oom;
+  for (size_t i = 0; i < h.cap; i++)
+    if (h.e[i].val >= 0) memcpy(m->faces + 3 * h.e[i].val, h.e[i].k, 3 * sizeof(int));
+  m->nface = n;
+  th_free(&h);
+  return 0;
+oom:
+  th_free(&h);
+  free(m->cell_faces);
+  m->cell_faces = NULL;
+  seterr(m->err, "out of memory building faces");
+  return 1;
+}
+
+/* hash of all cell facets → (cell*8 + local facet) */
+static int facet_table(const mesh *m, tuplehash *h, int *nexterior, int **count) {
+  int nf = cell_nfacets(m->type);
+  if (th_init(h, (size_t)m->ncell * (size_t)nf / 2 + 16, m->nvf)) return 1;
+  *count = calloc((size_t)m->ncell * (size_t)nf + 1, sizeof(int));
+  if (!*count) { th_free(h); return 1; }
+  int nid = 0;
+  for (int c = 0; c < m->ncell; c++) {
+    const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+    for (int f = 0; f < nf; f++) {
+      const int *fv = cell_facet_verts(m->type, f);
+      int k[4];
+      for (int i = 0; i < m->nvf; i++) k[i] = v[fv[i]];
+      int found;
+      int id = th_get(h, k, nid, &found);
+      if (id == -2) { th_free(h); free(*count); return 1; }
+      if (!found) {
+        (*count)[id] = 0;
+        nid++;
+      }
+      (*count)[id]++;
+    }
+  }
+  int ne = 0;
+  for (int i = 0; i < nid; i++) ne += (*count)[i] == 1;
+  *nexterior = ne;
+  return 0;
+}
+
+int mesh_build_boundary_cells(mesh *m) {
+  if (m->bf_cell || m->nbf == 0) return 0;
+  int nf = cell_nfacets(m->type);
+  tuplehash h;
+  if (th_init(&h, (size_t)m->nbf + 16, m->nvf)) goto oom;
+  for (int b = 0; b < m->nbf; b++) {
+    int found;
+    if (th_get(&h, m->bf_verts + (size_t)b * (size_t)m->nvf, b, &found) == -2) goto oom;
+  }
+  m->bf_cell = malloc(sizeof(int) * (size_t)(unsigned)m->nbf);
+  m->bf_local = malloc(sizeof(int) * (size_t)(unsigned)m->nbf);
+  if (!m->bf_cell || !m->bf_local) goto oom;
+  for (int b = 0; b < m->nbf; b++) m->bf_cell[b] = -1;
+  for (int c = 0; c < m->ncell; c++) {
+    const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+    for (int f = 0; f < nf; f++) {
+      const int *fv = cell_facet_verts(m->type, f);
+      int k[4], found;
+      for (int i = 0; i < m->nvf; i++) k[i] = v[fv[i]];
+      int b = th_get(&h, k, -1, &found);
+      if (b >= 0) {
+        m->bf_cell[b] = c;
+        m->bf_local[b] = f;
+      }
+    }
+  }
+  /* duplicates of the same facet under different tags: resolve by direct lookup */
+  for (int b = 0; b < m->nbf; b++) {
+    if (m->bf_cell[b] >= 0) continue;
+    int found;
+    int first = th_get(&h, m->bf_verts + (size_t)b * (size_t)m->nvf, -1, &found);
+    if (first >= 0 && m->bf_cell[first] >= 0) {
+      m->bf_cell[b] = m->bf_cell[first];
+      m->bf_local[b] = m->bf_local[first];
+    }
+  }
+  th_free(&h);
+  for (int b = 0; b < m->nbf; b++) {
+    if (m->bf_cell[b] < 0) {
+      seterr(m->err, "boundary facet %d (tag %d) is not a facet of any cell", b + 1,
+             m->bf_tag[b]);
+      free(m->bf_cell); free(m->bf_local);
+      m->bf_cell = m->bf_local = NULL;
+      return 1;
+    }
+  }
+  return 0;
+oom:
+  th_free(&h);
+  free(m->bf_cell); free(m->bf_local);
+  m->bf_cell = m->bf_local = NULL;
+  seterr(m->err, "out of memory matching boundary facets");
+  return 1;
+}
+
+/* exterior facets of the mesh (those that belong to one cell), as vertex lists */
+static int exterior_facets(const mesh *m, int *nout, int **out) {
+  tuplehash h;
+  int ne, *count;
+  if (facet_table(m, &h, &ne, &count)) return 1;
+  int nf = cell_nfacets(m->type);
+  *out = malloc(sizeof(int) * (size_t)(ne + 1) * (size_t)m->nvf);
+  if (!*out) { th_free(&h); free(count); return 1; }
+  int n = 0;
+  for (int c = 0; c < m->ncell; c++) {
+    const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+    for (int f = 0; f < nf; f++) {
+      const int *fv = cell_facet_verts(m->type, f);
+      int k[4], found;
+      for (int i = 0; i < m->nvf; i++) k[i] = v[fv[i]];
+      int id = th_get(&h, k, -1, &found);
+      if (id >= 0 && count[id] == 1) {
+        memcpy(*out + (size_t)n * (size_t)m->nvf, k, sizeof(int) * (size_t)m->nvf);
+        n++;
+      }
+    }
+  }
+  th_free(&h);
+  free(count);
+  *nout = n;
+  return 0;
+}
+
+/* tag the exterior facets of a generated box by which side their centroid lies on */
+static int tag_box_sides(mesh *m, const double *lo, const double *hi, const char **names) {
+  int n, *fv;
+  if (exterior_facets(m, &n, &fv)) { seterr(m->err, "out of memory"); return 1; }
+  int nside = 2 * m->dim;
+  int *buf = malloc(sizeof(int) * (size_t)(n + 1) * (size_t)m->nvf);
+  if (!buf) { free(fv); return 1; }
+  for (int s = 0; s < nside; s++) {
+    int d = s / 2, k = 0;
+    double target = (s % 2) ? hi[d] : lo[d];
+    double tol = 1e-9 * (hi[d] - lo[d]);
+    for (int f = 0; f < n; f++) {
+      double cen = 0;
+      for (int i = 0; i < m->nvf; i++) cen += m->x[m->dim * fv[f * m->nvf + i] + d];
+      cen /= m->nvf;
+      if (fabs(cen - target) < tol) {
+        memcpy(buf + (size_t)k * (size_t)m->nvf, fv + (size_t)f * (size_t)m->nvf,
+               sizeof(int) * (size_t)m->nvf);
+        k++;
+      }
+    }
+    if (mesh_add_boundary_facets(m, k, buf, s + 1, names[s])) { free(fv); free(buf); return 1; }
+  }
+  free(fv);
+  free(buf);
+  return 0;
+}
+
+/* make every simplex positively oriented by swapping its last two vertices */
+static void orient_simplices(mesh *m) {
+  if (m->type != CELL_TRIANGLE && m->type != CELL_TETRAHEDRON) return;
+  for (int c = 0; c < m->ncell; c++) {
+    if (mesh_cell_signed_measure(m, c) < 0) {
+      int *v = m->cells + (size_t)c * (size_t)m->nvc;
+      int t = v[m->nvc - 1];
+      v[m->nvc - 1] = v[m->nvc - 2];
+      v[m->nvc - 2] = t;
+    }
+  }
+}
+
+mesh *mesh_rectangle(const mesh_box_opts *o, char *err) {
+  int nx = o->nx, ny = o->ny;
+  if (nx < 1 || ny < 1) { seterr(err, "nx and ny must be at least 1 (got %d, %d)", nx, ny); return NULL; }
+  if (!(o->x1 > o->x0) || !(o->y1 > o->y0)) { seterr(err, "need x0 < x1 and y0 < y1"); return NULL; }
+  if (o->type != CELL_TRIANGLE && o->type != CELL_QUADRILATERAL) {
+    seterr(err, "a rectangle has triangles or quadrilaterals");
+    return NULL;
+  }
+  int crossed = o->type == CELL_TRIANGLE && o->diagonal == 2;
+  long nv = (long)(nx + 1) * (ny + 1) + (crossed ? (long)nx * ny : 0);
+  long nc = (long)nx * ny * (o->type == CELL_QUADRILATERAL ? 1 : crossed ? 4 : 2);
+  if (nv > 2000000000L || nc * 4 > 2000000000L) { seterr(err, "mesh too large"); return NULL; }
+  mesh *m = mesh_create(o->type, (int)nv, NULL, (int)nc, NULL, err);
+  if (!m) return NULL;
+  for (int j = 0; j <= ny; j++)
+    for (int i = 0; i <= nx; i++) {
+      int id = j * (nx + 1) + i;
+      m->x[2 * id] = o->x0 + (o->x1 - o->x0) * i / nx;
+      m->x[2 * id + 1] = o->y0 + (o->y1 - o->y0) * j / ny;
+    }
+  int *c = m->cells;
+  for (int j = 0; j < ny; j++)
+    for (int i = 0; i < nx; i++) {
+      int v0 = j * (nx + 1) + i, v1 = v0 + 1, v3 = v0 + nx + 1, v2 = v3 + 1;
+      if (o->type == CELL_QUADRILATERAL) {
+        *c++ = v0; *c++ = v1; *c++ = v2; *c++ = v3;
+      } else if (crossed) {
+        int vc = (nx + 1) * (ny + 1) + j * nx + i;
+        m->x[2 * vc] = 0.25 * (m->x[2 * v0] + m->x[2 * v1] + m->x[2 * v2] + m->x[2 * v3]);
+        m->x[2 * vc + 1] = 0.25 * (m->x[2 * v0 + 1] + m->x[2 * v1 + 1] + m->x[2 * v2 + 1] + m->x[2 * v3 + 1]);
+        *c++ = v0; *c++ = v1; *c++ = vc;
+        *c++ = v1; *c++ = v2; *c++ = vc;
+        *c++ = v2; *c++ = v3; *c++ = vc;
+        *c++ = v3; *c++ = v0; *c++ = vc;
+      } else if (o->diagonal == 1) {
+        *c++ = v0; *c++ = v1; *c++ = v3;
+        *c++ = v1; *c++ = v2; *c++ = v3;
+      } else {
+        *c++ = v0; *c++ = v1; *c++ = v2;
+        *c++ = v0; *c++ = v2; *c++ = v3;
+      }
+    }
+  double lo[2] = {o->x0, o->y0}, hi[2] = {o->x1, o->y1};
+  static const char *names[] = {"left", "right", "bottom", "top"};
+  if (tag_box_sides(m, lo, hi, names)) {
+    seterr(err, "%s", m->err);
+    mesh_free(m);
+    return NULL;
+  }
+  return m;
+}
+
+mesh *mesh_box(const mesh_box_opts *o, char *err) {
+  int nx = o->nx, ny = o->ny, nz = o->nz;
+  if (nx < 1 || ny < 1 || nz < 1) { seterr(err, "nx, ny and nz must be at least 1"); return NULL; }
+  if (!(o->x1 > o->x0) || !(o->y1 > o->y0) || !(o->z1 > o->z0)) {
+    seterr(err, "need x0 < x1, y0 < y1 and z0 < z1");
+    return NULL;
+  }
+  if (o->type != CELL_TETRAHEDRON && o->type != CELL_HEXAHEDRON) {
+    seterr(err, "a box has tetrahedra or hexahedra");
+    return NULL;
+  }
+  long nv = (long)(nx + 1) * (ny + 1) * (nz + 1);
+  long nc = (long)nx * ny * nz * (o->type == CELL_TETRAHEDRON ? 6 : 1);
+  if (nv > 2000000000L || nc * 8 > 2000000000L) { seterr(err, "mesh too large"); return NULL; }
+  mesh *m = mesh_create(o->type, (int)nv, NULL, (int)nc, NULL, err);
+  if (!m) return NULL;
+#define VID(i, j, k) (((k) * (ny + 1) + (j)) * (nx + 1) + (i))
+  for (int k = 0; k <= nz; k++)
+    for (int j = 0; j <= ny; j++)
+      for (int i = 0; i <= nx; i++) {
+        int id = VID(i, j, k);
+        m->x[3 * id] = o->x0 + (o->x1 - o->x0) * i / nx;
+        m->x[3 * id + 1] = o->y0 + (o->y1 - o->y0) * j / ny;
+        m->x[3 * id + 2] = o->z0 + (o->z1 - o->z0) * k / nz;
+      }
+  /* Kuhn (Freudenthal) split: one tetrahedron per permutation of the axes along the
+   * main diagonal; conforming because every cube is split the same way */
+  static const int perm[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
+  int *c = m->cells;
+  for (int k = 0; k < nz; k++)
+    for (int j = 0; j < ny; j++)
+      for (int i = 0; i < nx; i++) {
+        if (o->type == CELL_HEXAHEDRON) {
+          *c++ = VID(i, j, k); *c++ = VID(i + 1, j, k); *c++ = VID(i + 1, j + 1, k); *c++ = VID(i, j + 1, k);
+          *c++ = VID(i, j, k + 1); *c++ = VID(i + 1, j, k + 1); *c++ = VID(i + 1, j + 1, k + 1); *c++ = VID(i, j + 1, k + 1);
+          continue;
+        }
+        for (int p = 0; p < 6; p++) {
+          int a[3] = {0, 0, 0};
+          *c++ = VID(i, j, k);
+          for (int s = 0; s < 3; s++) {
+            a[perm[p][s]] = 1;
+            *c++ = VID(i + a[0], j + a[1], k + a[2]);
+          }
+        }
+      }
+#undef VID
+  orient_simplices(m);
+  double lo[3] = {o->x0, o->y0, o->z0}, hi[3] = {o->x1, o->y1, o->z1};
+  static const char *names[] = {"left", "right", "front", "back", "bottom", "top"};
+  if (tag_box_sides(m, lo, hi, names)) {
+    seterr(err, "%s", m->err);
+    mesh_free(m);
+    return NULL;
+  }
+  return m;
+}
+
+/* ---------------------------------------------------------------- refinement */
+
+mesh *mesh_refine(const mesh *m, char *err) {
+  if (m->type == CELL_HEXAHEDRON) {
+    seterr(err, "uniform refinement of hexahedral meshes is not implemented yet");
+    return NULL;
+  }
+  mesh *mm = mesh_copy(m);
+  if (!mm || mesh_build_edges(mm)) {
+    seterr(err, "out of memory");
+    mesh_free(mm);
+    return NULL;
+  }
+  int quad = m->type == CELL_QUADRILATERAL;
+  int nchild = m->dim == 2 ? 4 : 8;
+  long nv = (long)m->nvert + mm->nedge + (quad ? m->ncell : 0);
+  long nc = (long)m->ncell * nchild;
+  if (nv > 2000000000L || nc * m->nvc > 2000000000L) {
+    seterr(err, "refined mesh too large");
+    mesh_free(mm);
+    return NULL;
+  }
+  mesh *r = mesh_create(m->type, (int)nv, NULL, (int)nc, NULL, err);
+  if (!r) { mesh_free(mm); return NULL; }
+  int d = m->dim;
+  memcpy(r->x, m->x, sizeof(double) * (size_t)m->nvert * (size_t)d);
+  for (int e = 0; e < mm->nedge; e++)
+    for (int k = 0; k < d; k++)
+      r->x[(size_t)(m->nvert + e) * d + k] =
+          0.5 * (m->x[d * mm->edges[2 * e] + k] + m->x[d * mm->edges[2 * e + 1] + k]);
+  int ne = cell_nedges(m->type);
+  for (int c = 0; c < m->ncell; c++) {
+    const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+    const int *ce = mm->cell_edges + (size_t)c * (size_t)ne;
+    int *o = r->cells + (size_t)c * (size_t)nchild * (size_t)m->nvc;
+    for (int k = 0; k < nchild; k++) r->cell_tag[(size_t)c * nchild + k] = m->cell_tag[c];
+    if (m->type == CELL_TRIANGLE) {
+      /* edges e0=(1,2) e1=(0,2) e2=(0,1) */
+      int m12 = m->nvert + ce[0], m02 = m->nvert + ce[1], m01 = m->nvert + ce[2];
+      int t[4][3] = {{v[0], m01, m02}, {m01, v[1], m12}, {m02, m12, v[2]}, {m01, m12, m02}};
+      memcpy(o, t, sizeof t);
+    } else if (quad) {
+      int cv = m->nvert + mm->nedge + c;
+      for (int k = 0; k < 2; k++) {
+        double s = 0;
+        for (int i = 0; i < 4; i++) s += m->x[2 * v[i] + k];
+        r->x[2 * cv + k] = 0.25 * s;
+      }
+      int m01 = m->nvert + ce[0], m12 = m->nvert + ce[1], m23 = m->nvert + ce[2], m30 = m->nvert + ce[3];
+      int t[4][4] = {{v[0], m01, cv, m30}, {m01, v[1], m12, cv}, {cv, m12, v[2], m23}, {m30, cv, m23, v[3]}};
+      memcpy(o, t, sizeof t);
+    } else {
+      /* edges e0=(2,3) e1=(1,3) e2=(1,2) e3=(0,3) e4=(0,2) e5=(0,1); Bey's subdivision */
+      int x23 = m->nvert + ce[0], x13 = m->nvert + ce[1], x12 = m->nvert + ce[2];
+      int x03 = m->nvert + ce[3], x02 = m->nvert + ce[4], x01 = m->nvert + ce[5];
+      int t[8][4] = {{v[0], x01, x02, x03}, {x01, v[1], x12, x13}, {x02, x12, v[2], x23},
+                     {x03, x13, x23, v[3]}, {x01, x02, x03, x13}, {x01, x02, x12, x13},
+                     {x02, x03, x13, x23}, {x02, x12, x13, x23}};
+      memcpy(o, t, sizeof t);
+    }
+  }
+  /* keep each child's orientation equal to its parent's (so tangled meshes stay tangled) */
+  if (!quad) {
+    for (int c = 0; c < m->ncell; c++) {
+      double sp = mesh_cell_signed_measure(m, c);
+      for (int k = 0; k < nchild; k++) {
+        int cc = c * nchild + k;
+        double sc = mesh_cell_signed_measure(r, cc);
+        if ((sp > 0 && sc < 0) || (sp < 0 && sc > 0)) {
+          int *w = r->cells + (size_t)cc * (size_t)r->nvc;
+          int t = w[r->nvc - 1];
+          w[r->nvc - 1] = w[r->nvc - 2];
+          w[r->nvc - 2] = t;
+        }
+      }
+    }
+  }
+  /* boundary facets */
+  if (m->nbf) {
+    tuplehash h;
+    if (th_init(&h, (size_t)mm->nedge + 16, 2)) goto oom;
+    for (int e = 0; e < mm->nedge; e++) th_get(&h, mm->edges + 2 * e, e, NULL);
+    int per = m->dim == 2 ? 2 : 4;
+    r->bf_verts = malloc(sizeof(int) * (size_t)m->nbf * (size_t)per * (size_t)m->nvf);
+    r->bf_tag = malloc(sizeof(int) * (size_t)m->nbf * (size_t)per);
+    if (!r->bf_verts || !r->bf_tag) { th_free(&h); goto oom; }
+    for (int b = 0; b < m->nbf; b++) {
+      const int *fv = m->bf_verts + (size_t)b * (size_t)m->nvf;
+      int *o = r->bf_verts + (size_t)b * (size_t)per * (size_t)m->nvf;
+      for (int k = 0; k < per; k++) r->bf_tag[b * per + k] = m->bf_tag[b];
+      if (m->dim == 2) {
+        int mid = m->nvert + th_get(&h, fv, -1, NULL);
+        o[0] = fv[0]; o[1] = mid; o[2] = mid; o[3] = fv[1];
+      } else {
+        int k01[2] = {fv[0], fv[1]}, k12[2] = {fv[1], fv[2]}, k02[2] = {fv[0], fv[2]};
+        int a = m->nvert + th_get(&h, k01, -1, NULL), bb = m->nvert + th_get(&h, k12, -1, NULL),
+            cc = m->nvert + th_get(&h, k02, -1, NULL);
+        int t[4][3] = {{fv[0], a, cc}, {a, fv[1], bb}, {cc, bb, fv[2]}, {a, bb, cc}};
+        memcpy(o, t, sizeof t);
+      }
+    }
+    r->nbf = m->nbf * per;
+    th_free(&h);
+  }
+  r->nbname = m->nbname; r->ncname = m->ncname;
+  memcpy(r->bnames, m->bnames, sizeof m->bnames);
+  memcpy(r->cnames, m->cnames, sizeof m->cnames);
+  mesh_free(mm);
+  return r;
+oom:
+  seterr(err, "out of memory refining");
+  mesh_free(mm);
+  mesh_free(r);
+  return NULL;
+}

@@ -1,0 +1,127 @@
+/* mesh.h — the mesh data structure of lugal and everything that reads, writes and
+ * derives from it: generators, Gmsh reader, VTU writer, uniform refinement, derived
+ * adjacency (edges, faces, boundary facets) and the validity check.
+ *
+ * Depends on libc and libm only. Every fallible function returns 0 on success and a
+ * nonzero code on failure, leaving a message in the mesh (or in the caller's buffer
+ * for constructors).
+ */
+#ifndef LUGAL_MESH_H
+#define LUGAL_MESH_H
+
+#include <stddef.h>
+
+typedef enum {
+  CELL_TRIANGLE = 0,
+  CELL_QUADRILATERAL = 1,
+  CELL_TETRAHEDRON = 2,
+  CELL_HEXAHEDRON = 3
+} cell_type;
+
+#define MESH_ERRLEN 512
+#define MESH_MAXNAMES 64
+
+/* a (tag, name) pair: physical names of Gmsh, or generator names */
+typedef struct {
+  int tag;
+  char name[64];
+} mesh_name;
+
+typedef struct mesh {
+  cell_type type;
+  int dim;        /* topological = geometric dimension: 2 or 3 */
+  int nvc;        /* vertices per cell */
+  int nvf;        /* vertices per facet */
+  int nvert;
+  double *x;      /* nvert*dim coordinates */
+  int ncell;
+  int *cells;     /* ncell*nvc vertex ids, 0-based */
+  int *cell_tag;  /* ncell region tags (0 when untagged) */
+  int nbf;        /* tagged boundary facets */
+  int *bf_verts;  /* nbf*nvf */
+  int *bf_tag;    /* nbf */
+  int nbname, ncname;
+  mesh_name bnames[MESH_MAXNAMES]; /* boundary tag names */
+  mesh_name cnames[MESH_MAXNAMES]; /* cell region names */
+
+  /* derived, built on demand (mesh_build_*), freed with the mesh */
+  int nedge;
+  int *edges;      /* nedge*2, sorted vertex pairs */
+  int *cell_edges; /* ncell*nedges_per_cell */
+  int nface;       /* faces of tetrahedra (3D simplices only) */
+  int *faces;      /* nface*3 sorted */
+  int *cell_faces; /* ncell*4 */
+  int *bf_cell;    /* nbf: owning cell of each tagged boundary facet */
+  int *bf_local;   /* nbf: local facet index in that cell */
+
+  char err[MESH_ERRLEN];
+} mesh;
+
+/* number of facets / edges of a cell type, and local numbering tables */
+int cell_nfacets(cell_type t);
+int cell_nedges(cell_type t);
+int cell_dim(cell_type t);
+int cell_nverts(cell_type t);
+const char *cell_name(cell_type t);
+/* local vertex ids of local facet f (nvf entries), local edge e (2 entries) */
+const int *cell_facet_verts(cell_type t, int f);
+const int *cell_edge_verts(cell_type t, int e);
+
+/* construction; on failure return NULL and write a reason to err (MESH_ERRLEN) */
+mesh *mesh_create(cell_type t, int nvert, const double *x, int ncell, const int *cells,
+                  char *err);
+void mesh_free(mesh *m);
+mesh *mesh_copy(const mesh *m);
+int mesh_add_boundary_facets(mesh *m, int n, const int *verts, int tag, const char *name);
+int mesh_set_boundary_name(mesh *m, int tag, const char *name);
+int mesh_set_region_name(mesh *m, int tag, const char *name);
+/* tag of a boundary or region name; -1 when unknown */
+int mesh_boundary_tag(const mesh *m, const char *name);
+int mesh_region_tag(const mesh *m, const char *name);
+/* comma-separated list of known boundary names into buf */
+void mesh_boundary_names(const mesh *m, char *buf, size_t len);
+
+typedef struct {
+  int nx, ny, nz;
+  double x0, x1, y0, y1, z0, z1;
+  cell_type type;
+  int diagonal; /* triangles: 0 right, 1 left, 2 crossed */
+} mesh_box_opts;
+
+mesh *mesh_rectangle(const mesh_box_opts *o, char *err);
+mesh *mesh_box(const mesh_box_opts *o, char *err);
+
+/* Gmsh MSH 2.2 and 4.1 ASCII */
+mesh *mesh_read_gmsh(const char *path, char *err);
+/* Gmsh MSH 2.2 ASCII writer (cells, tagged boundary facets, physical names) */
+int mesh_write_gmsh(mesh *m, const char *path);
+
+/* VTU output: point and cell data arrays of ncomp components (1 or 3) */
+typedef struct {
+  const char *name;
+  int ncomp;
+  int on_cells;      /* 0: point data (nvert values), 1: cell data */
+  const double *val; /* n*ncomp */
+} mesh_field;
+int mesh_write_vtu(mesh *m, const char *path, int nfield, const mesh_field *f);
+/* append (time, file) to a .pvd collection, rewriting it; step 0 starts a new file */
+int mesh_write_pvd(const char *pvd, int nstep, const double *times, char **files,
+                   char *err);
+
+/* derived adjacency */
+int mesh_build_edges(mesh *m);
+int mesh_build_faces(mesh *m);
+int mesh_build_boundary_cells(mesh *m);
+
+/* geometry */
+double mesh_cell_signed_measure(const mesh *m, int c);
+/* the validity check run before assembly: counts cells whose signed measure is not
+ * positive (relative to the mesh size); writes up to maxids ids of such cells */
+int mesh_count_invalid(const mesh *m, int maxids, int *ids, int *ninv);
+double mesh_hmax(const mesh *m);
+
+/* uniform refinement: triangles and quadrilaterals into 4, tetrahedra into 8 (Bey),
+ * hexahedra into 8; boundary facets and tags follow */
+mesh *mesh_refine(const mesh *m, char *err);
+
+#endif

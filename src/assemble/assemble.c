@@ -319,10 +319,14 @@ int lg_interpolate(lg_env *env, lg_function *f, expr *e) {
   return rc;
 }
 
-int lg_quad_degree(lg_env *env, expr *e, int order) {
+int lg_quad_degree(lg_env *env, expr *e, int order, int dim) {
   if (order >= 0) return order > FEM_MAXDEG ? FEM_MAXDEG : order;
+  /* the estimate treats sin, exp, ... as degree +2 (as FEniCS does); products of such
+   * factors overestimate quickly, so automatic orders stop at 12 (2D) and 8 (3D): pass
+   * {order=} for more */
   int d = expr_degree(env->c, e, 1);
-  return d > FEM_MAXDEG ? FEM_MAXDEG : d;
+  int cap = dim == 2 ? 12 : 8;
+  return d > cap ? cap : d;
 }
 
 int lg_integrate(lg_env *env, lg_mesh *lm, const region *r, expr *e, int order, double *result) {
@@ -336,7 +340,7 @@ int lg_integrate(lg_env *env, lg_mesh *lm, const region *r, expr *e, int order, 
   if (lg_mesh_check(env, lm)) return 1;
   kernel_spec s = {0, NULL, e};
   lg_kernel k;
-  int qd = lg_quad_degree(env, e, order);
+  int qd = lg_quad_degree(env, e, order, lm->m->dim);
   char err[LG_ERRLEN];
   if (kernel_build(env->jit, env->c, lm->m->type, r->kind == REGION_BOUNDARY, qd, &s, NULL, NULL, &k, err, sizeof err)) {
     lg_seterr(env, "%s", err);

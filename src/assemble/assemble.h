@@ -72,7 +72,7 @@ int lg_interpolate(lg_env *env, lg_function *f, expr *e);
 /* integrate a scalar expression over a region (cells or boundary) */
 int lg_integrate(lg_env *env, lg_mesh *lm, const region *r, expr *e, int order, double *result);
 /* quadrature degree for an integrand */
-int lg_quad_degree(lg_env *env, expr *e, int order);
+int lg_quad_degree(lg_env *env, expr *e, int order, int dim);
 
 /* ---- problems */
 typedef struct lg_problem lg_problem;

@@ -6,7 +6,7 @@
 
 #include "../mesh/mesh.h"
 
-#define FEM_MAXQ 512
+#define FEM_MAXQ 1331
 #define FEM_MAXLOC 20 /* P3 tetrahedron */
 
 /* a rule on the reference cell (or facet): points in reference coordinates and weights
@@ -22,8 +22,8 @@ int gauss_jacobi(int n, double a, double b, double *x, double *w);
 /* a rule exact for polynomials of total degree `degree` on the reference simplex of
  * dimension dim (1: [0,1], 2: triangle, 3: tetrahedron), collapsed (Stroud) product */
 int quad_simplex(int dim, int degree, quad_rule *q);
-/* max degree offered: 30 (well beyond the 10 / 8 the design asks for) */
-#define FEM_MAXDEG 30
+/* max degree offered: 20 on every simplex (beyond the 10 / 8 the design asks for) */
+#define FEM_MAXDEG 20
 
 typedef struct {
   cell_type cell;

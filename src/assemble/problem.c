@@ -105,6 +105,28 @@ static int contains_funcs(lg_env *env, expr *e, int n, const int *funcs, expr **
   return 0;
 }
 
+/* the polynomial degree of the products a kernel integrates: coefficient degree plus the
+ * degrees of the test and trial basis functions (less their derivative orders), so that a
+ * stiffness matrix is not integrated with the rule a transcendental load needs */
+static int leaf_degree(lg_env *env, const expr *leaf) {
+  expr_func_info *fi = expr_func_get(env->c, leaf->i0);
+  int d = fi ? fi->degree - leaf->order : 0;
+  return d < 0 ? 0 : d;
+}
+
+static int table_degree(lg_env *env, const coef_table *t, int arity, int dim) {
+  int d = 0;
+  int n = arity == 2 ? t->njac : t->nres;
+  for (int i = 0; i < n; i++) {
+    int k;
+    if (arity == 2) k = expr_degree(env->c, t->jac[i], 1) + leaf_degree(env, t->jac_test[i]) + leaf_degree(env, t->jac_trial[i]);
+    else k = expr_degree(env->c, t->res[i], 1) + leaf_degree(env, t->res_leaf[i]);
+    if (k > d) d = k;
+  }
+  int cap = dim == 2 ? 12 : 8;
+  return d > cap ? cap : d;
+}
+
 static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *test, const int *unk, int nf) {
   p->nterm = eqn->n;
   p->t = calloc((size_t)eqn->n + 1, sizeof(prob_term));
@@ -148,11 +170,12 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
       }
       t->tab.nres = k;
     }
-    t->qdeg = lg_quad_degree(env, f, eqn->t[i].order);
+    t->qdeg = lg_quad_degree(env, f, eqn->t[i].order, p->lm->m->dim);
     int facet = t->reg.kind == REGION_BOUNDARY;
     if (t->tab.njac > 0) {
       kernel_spec s = {2, &t->tab, NULL};
-      if (kernel_build(env->jit, env->c, p->lm->m->type, facet, t->qdeg, &s, &p->rows, &p->cols, &t->kmat, err, sizeof err)) {
+      int qd = eqn->t[i].order >= 0 ? t->qdeg : table_degree(env, &t->tab, 2, p->lm->m->dim);
+      if (kernel_build(env->jit, env->c, p->lm->m->type, facet, qd, &s, &p->rows, &p->cols, &t->kmat, err, sizeof err)) {
         lg_seterr(env, "%s", err);
         return 1;
       }
@@ -162,7 +185,8 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
     }
     if (t->tab.nres > 0) {
       kernel_spec s = {1, &t->tab, NULL};
-      if (kernel_build(env->jit, env->c, p->lm->m->type, facet, t->qdeg, &s, &p->rows, &p->cols, &t->kres, err, sizeof err)) {
+      int qd = eqn->t[i].order >= 0 ? t->qdeg : table_degree(env, &t->tab, 1, p->lm->m->dim);
+      if (kernel_build(env->jit, env->c, p->lm->m->type, facet, qd, &s, &p->rows, &p->cols, &t->kres, err, sizeof err)) {
         lg_seterr(env, "%s", err);
         return 1;
       }
@@ -382,6 +406,8 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
   free(ci);
   free(cj);
   if (ierr) return petsc_fail(env, ierr, "matrix preallocation");
+  /* row replacement must not compress the rows: the COO scatter is reused every assembly */
+  PCHK(MatSetOption(p->A, MAT_KEEP_NONZERO_PATTERN, PETSC_TRUE), "MatSetOption");
   PCHK(MatCreateVecs(p->A, &p->x, &p->b), "vector creation");
   return 0;
 }
@@ -563,6 +589,16 @@ static int make_outputs(lg_env *env, lg_problem *p, const double *x, lg_function
   return 0;
 }
 
+/* the default solver: a direct LU factorization, by MUMPS when PETSc has it (several times
+ * faster than PETSc's own LU on 3D problems); -ksp_type / -pc_type override it */
+static int default_lu(lg_env *env, lg_problem *p, PC pc) {
+  PCHK(PCSetType(pc, PCLU), "PCSetType");
+  PetscBool have = PETSC_FALSE;
+  MatGetFactorAvailable(p->A, MATSOLVERMUMPS, MAT_FACTOR_LU, &have);
+  if (have) PCHK(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS), "PCFactorSetMatSolverType");
+  return 0;
+}
+
 static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_info *info) {
   double t0 = now_ms();
   memset(p->state, 0, sizeof(double) * (size_t)p->N);
@@ -588,7 +624,7 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
     PC pc;
     PCHK(KSPSetType(p->ksp, KSPPREONLY), "KSPSetType");
     PCHK(KSPGetPC(p->ksp, &pc), "KSPGetPC");
-    PCHK(PCSetType(pc, PCLU), "PCSetType");
+    if (default_lu(env, p, pc)) return 1;
     PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
     PCHK(KSPSetFromOptions(p->ksp), "KSPSetFromOptions");
   } else {
@@ -695,7 +731,7 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
     PCHK(SNESGetKSP(p->snes, &ksp), "SNESGetKSP");
     PCHK(KSPSetType(ksp, KSPPREONLY), "KSPSetType");
     PCHK(KSPGetPC(ksp, &pc), "KSPGetPC");
-    PCHK(PCSetType(pc, PCLU), "PCSetType");
+    if (default_lu(env, p, pc)) return 1;
     PCHK(SNESSetFromOptions(p->snes), "SNESSetFromOptions");
   }
   static PetscReal hist[128];

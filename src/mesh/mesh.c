@@ -698,8 +698,24 @@ mesh *mesh_refine(const mesh *m, char *err) {
       int x23 = m->nvert + ce[0], x13 = m->nvert + ce[1], x12 = m->nvert + ce[2];
       int x03 = m->nvert + ce[3], x02 = m->nvert + ce[4], x01 = m->nvert + ce[5];
       int t[8][4] = {{v[0], x01, x02, x03}, {x01, v[1], x12, x13}, {x02, x12, v[2], x23},
-                     {x03, x13, x23, v[3]}, {x01, x02, x03, x13}, {x01, x02, x12, x13},
-                     {x02, x03, x13, x23}, {x02, x12, x13, x23}};
+                     {x03, x13, x23, v[3]}, {0, 0, 0, 0}, {0, 0, 0, 0}, {0, 0, 0, 0}, {0, 0, 0, 0}};
+      /* the inner octahedron is split along its shortest diagonal, which keeps the shapes
+       * bounded under repeated refinement; mid[i][j] is the midpoint of edge (i,j) */
+      int mid[4][4] = {{-1, x01, x02, x03}, {x01, -1, x12, x13}, {x02, x12, -1, x23}, {x03, x13, x23, -1}};
+      static const int diag[3][4] = {{0, 1, 2, 3}, {0, 2, 1, 3}, {0, 3, 1, 2}};
+      int best = 0;
+      double bl = INFINITY;
+      for (int k = 0; k < 3; k++) {
+        const double *a = r->x + 3 * mid[diag[k][0]][diag[k][1]], *b = r->x + 3 * mid[diag[k][2]][diag[k][3]];
+        double l = (a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]);
+        if (l < bl) { bl = l; best = k; }
+      }
+      int i = diag[best][0], j = diag[best][1], k = diag[best][2], l = diag[best][3];
+      int d1 = mid[i][j], d2 = mid[k][l];
+      int cyc[4] = {mid[i][k], mid[i][l], mid[j][l], mid[j][k]};
+      for (int q = 0; q < 4; q++) {
+        t[4 + q][0] = d1; t[4 + q][1] = d2; t[4 + q][2] = cyc[q]; t[4 + q][3] = cyc[(q + 1) % 4];
+      }
       memcpy(o, t, sizeof t);
     }
   }

@@ -1,0 +1,38 @@
+#!/bin/sh
+# tests/run.sh BUILD — runs every test: the C unit tests, the Lua script tests and every
+# example; prints one line per test and ends with "N passed, N failed".
+BUILD=${1:-build}
+ROOT=$(pwd)
+LUGAL=$ROOT/$BUILD/lugal
+OUT=$ROOT/tests/out
+mkdir -p "$OUT"
+pass=0
+fail=0
+run() {
+  name=$1
+  shift
+  start=$(date +%s.%N)
+  if "$@" > "$OUT/$name.log" 2>&1; then
+    pass=$((pass + 1))
+    printf 'PASS %-40s %6.2fs\n' "$name" "$(echo "$(date +%s.%N) - $start" | bc)"
+  else
+    fail=$((fail + 1))
+    printf 'FAIL %s (log: tests/out/%s.log)\n' "$name" "$name"
+    tail -n 15 "$OUT/$name.log" | sed 's/^/    /'
+  fi
+}
+for t in "$ROOT/$BUILD"/tests/*; do
+  [ -x "$t" ] || continue
+  run "c/$(basename "$t")" "$t" "$ROOT/tests/data"
+done
+for t in "$ROOT"/tests/lua/test_*.lua; do
+  run "lua/$(basename "$t" .lua)" "$LUGAL" "$t"
+done
+# examples run in a scratch folder so their output files stay out of the tree
+mkdir -p "$OUT/examples"
+for e in "$ROOT"/examples/*.lua; do
+  name=$(basename "$e" .lua)
+  run "example/$name" sh -c "cd '$OUT/examples' && '$LUGAL' '$e'"
+done
+echo "$pass passed, $fail failed"
+[ "$fail" -eq 0 ]

@@ -281,7 +281,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     } else if (e->kind == E_FIELD) {
       expr_func_info *fi = expr_func_get(c, e->i0);
       if (!fi) KERR("unknown function in an integrand");
-      if (fi->kind == FK_TEST) KERR("internal error: a test function in a coefficient");
+      if (fi->kind == FK_TEST) KERR("the integrand contains the test function %s: integrate it inside a form (lg.integral) and solve a problem instead", fi->name);
       if (e->order > 1) KERR("second and higher derivatives of %s are not supported yet", fi->name);
       int d = leaf_dir(e);
       if (d >= dim) KERR("the integrand differentiates %s in %c, but the mesh is %dD", fi->name, "xyz"[d], dim);

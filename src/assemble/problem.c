@@ -652,6 +652,25 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
     lg_seterr(env, "the linear solve failed: %s after %d iterations%s", info->reason, info->iterations, hint);
     return 1;
   }
+  /* a direct solver may return garbage for a singular matrix without failing: check the
+   * residual of what it returned */
+  KSPType kt;
+  KSPGetType(p->ksp, &kt);
+  if (kt && !strcmp(kt, KSPPREONLY)) {
+    Vec r;
+    PetscReal rn, bn;
+    PCHK(VecDuplicate(p->b, &r), "VecDuplicate");
+    PCHK(MatMult(p->A, p->x, r), "MatMult");
+    PCHK(VecAXPY(r, -1.0, p->b), "VecAXPY");
+    VecNorm(r, NORM_2, &rn);
+    VecNorm(p->b, NORM_2, &bn);
+    VecDestroy(&r);
+    if (!(rn <= 1e-8 * (bn > 0 ? bn : 1))) {
+      lg_seterr(env, "the linear solve failed: the matrix is singular (the direct solver's residual is "
+                     "%.2e relative to the right side); are boundary conditions missing?", bn > 0 ? rn / bn : rn);
+      return 1;
+    }
+  }
   const PetscScalar *x;
   PCHK(VecGetArrayRead(p->x, &x), "VecGetArrayRead");
   for (int i = 0; i < p->N; i++)

@@ -1,0 +1,100 @@
+/* test_mesh.c — generators (counts, areas, boundary tags), Gmsh 2.2 and 4.1 reading of the
+ * same mesh, uniform refinement (counts, measure, orientation), the validity check, and
+ * the Gmsh writer round trip. argv[1] is tests/data. */
+#include "../../src/mesh/mesh.h"
+#include "check.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <unistd.h>
+#include <string.h>
+
+static double total(const mesh *m) {
+  double s = 0;
+  for (int c = 0; c < m->ncell; c++) s += mesh_cell_signed_measure(m, c);
+  return s;
+}
+
+int main(int argc, char **argv) {
+  const char *data = argc > 1 ? argv[1] : "tests/data";
+  char err[MESH_ERRLEN], path[1024];
+  mesh_box_opts o = {3, 2, 2, 0, 2, 0, 1, 0, 1, CELL_TRIANGLE, 0};
+  for (int dg = 0; dg < 3; dg++) {
+    o.diagonal = dg;
+    mesh *m = mesh_rectangle(&o, err);
+    CHECK(m != NULL, "%s", err);
+    CHECK(m->ncell == (dg == 2 ? 24 : 12), "cells %d", m->ncell);
+    CHECK_CLOSE(total(m), 2.0, 1e-14);
+    int ninv;
+    mesh_count_invalid(m, 0, NULL, &ninv);
+    CHECK(ninv == 0, "%d inverted", ninv);
+    CHECK(mesh_boundary_tag(m, "top") == 4 && mesh_boundary_tag(m, "nope") == -1, "names");
+    int nb = 0;
+    for (int b = 0; b < m->nbf; b++) nb += m->bf_tag[b] == mesh_boundary_tag(m, "left");
+    CHECK(nb == 2, "left has %d facets", nb);
+    mesh_free(m);
+  }
+  o.type = CELL_QUADRILATERAL;
+  mesh *q = mesh_rectangle(&o, err);
+  CHECK(q && q->ncell == 6 && fabs(total(q) - 2) < 1e-14, "quad rectangle");
+  mesh *qr = mesh_refine(q, err);
+  CHECK(qr && qr->ncell == 24 && fabs(total(qr) - 2) < 1e-14 && qr->nbf == 2 * q->nbf, "quad refine");
+  mesh_free(q);
+  mesh_free(qr);
+  mesh_box_opts b = {2, 3, 2, 0, 1, 0, 1, 0, 2, CELL_TETRAHEDRON, 0};
+  mesh *t = mesh_box(&b, err);
+  CHECK(t && t->ncell == 72 && fabs(total(t) - 2) < 1e-13, "tet box");
+  int ninv;
+  mesh_count_invalid(t, 0, NULL, &ninv);
+  CHECK(ninv == 0, "box has %d inverted", ninv);
+  mesh *tr = mesh_refine(t, err);
+  CHECK(tr && tr->ncell == 8 * 72 && fabs(total(tr) - 2) < 1e-13, "tet refine");
+  mesh_count_invalid(tr, 0, NULL, &ninv);
+  CHECK(ninv == 0, "refined box has %d inverted", ninv);
+  CHECK(tr->nbf == 4 * t->nbf && mesh_build_boundary_cells(tr) == 0, "refined boundary: %s", tr->err);
+  mesh_free(tr);
+  mesh_free(t);
+  b.type = CELL_HEXAHEDRON;
+  mesh *h = mesh_box(&b, err);
+  CHECK(h && h->ncell == 12 && fabs(total(h) - 2) < 1e-13, "hex box volume %g", h ? total(h) : 0);
+  mesh_free(h);
+
+  /* the same mesh in MSH 4.1 and 2.2 */
+  snprintf(path, sizeof path, "%s/square_unstructured.msh", data);
+  mesh *g4 = mesh_read_gmsh(path, err);
+  CHECK(g4 != NULL, "%s", err);
+  snprintf(path, sizeof path, "%s/square_unstructured_v22.msh", data);
+  mesh *g2 = mesh_read_gmsh(path, err);
+  CHECK(g2 != NULL, "%s", err);
+  if (g4 && g2) {
+    CHECK(g4->ncell == g2->ncell && g4->nvert == g2->nvert && g4->nbf == g2->nbf, "4.1 vs 2.2 sizes");
+    CHECK(!memcmp(g4->cells, g2->cells, sizeof(int) * (size_t)g4->ncell * 3), "4.1 vs 2.2 cells");
+    CHECK_CLOSE(total(g4), 1.0, 1e-13);
+    CHECK(mesh_boundary_tag(g4, "left") > 0 && mesh_region_tag(g4, "domain") > 0, "physical names");
+    mesh_count_invalid(g4, 0, NULL, &ninv);
+    CHECK(ninv == 0, "gmsh mesh has %d inverted", ninv);
+    /* round trip through the writer */
+    snprintf(path, sizeof path, "/tmp/lugal_test_%d.msh", (int)getpid());
+    CHECK(mesh_write_gmsh(g4, path) == 0, "%s", g4->err);
+    mesh *rt = mesh_read_gmsh(path, err);
+    CHECK(rt && rt->ncell == g4->ncell && rt->nbf == g4->nbf && mesh_boundary_tag(rt, "top") == mesh_boundary_tag(g4, "top"),
+          "round trip: %s", rt ? "" : err);
+    if (rt) CHECK(!memcmp(rt->x, g4->x, sizeof(double) * 2 * (size_t)g4->nvert), "coordinates survive");
+    mesh_free(rt);
+    remove(path);
+  }
+  mesh_free(g4);
+  mesh_free(g2);
+
+  /* inverted and zero-size cells are counted with their ids */
+  double x[] = {0, 0, 1, 0, 0, 1, 1, 1, 2, 2};
+  int cells[] = {0, 1, 2, 1, 2, 3, 0, 3, 4};
+  mesh *bad = mesh_create(CELL_TRIANGLE, 5, x, 3, cells, err);
+  int ids[3];
+  mesh_count_invalid(bad, 3, ids, &ninv);
+  CHECK(ninv == 2 && ids[0] == 1 && ids[1] == 2, "invalid cells: %d (%d, %d)", ninv, ids[0], ids[1]);
+  mesh_free(bad);
+  int badcells[] = {0, 1, 7};
+  CHECK(mesh_create(CELL_TRIANGLE, 5, x, 1, badcells, err) == NULL && strstr(err, "refers to vertex 8"), "%s", err);
+  return CHECK_DONE();
+}

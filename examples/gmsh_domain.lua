@@ -20,7 +20,8 @@ local bc = {lg.essential_bc(mesh:boundary("inflow"), v*(phi - 1)),
 local ph = lg.linear_problem{mesh = mesh, eqn = eqn, bc = bc, test = v, unknown = phi}:solve()
 
 local n = lg.normal()
-local flux_in = -lg.integrate(mesh:boundary("inflow"), lg.dot(lg.grad(ph), n))
+-- the velocity is -grad(phi): inflow flux -∫ u·n, outflow flux ∫ u·n
+local flux_in = lg.integrate(mesh:boundary("inflow"), lg.dot(lg.grad(ph), n))
 local flux_out = lg.integrate(mesh:boundary("outflow"), -lg.dot(lg.grad(ph), n))
 local flux_wall = lg.integrate(mesh:boundary("wall", "hole"), lg.dot(lg.grad(ph), n))
 print(string.format("  P%d: flux in %.6f, flux out %.6f, through walls and hole %.2e", p, flux_in, flux_out, flux_wall))

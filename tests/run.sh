@@ -11,14 +11,15 @@ fail=0
 run() {
   name=$1
   shift
+  log="$OUT/$(echo "$name" | tr / _).log"
   start=$(date +%s.%N)
-  if "$@" > "$OUT/$name.log" 2>&1; then
+  if "$@" > "$log" 2>&1; then
     pass=$((pass + 1))
-    printf 'PASS %-40s %6.2fs\n' "$name" "$(echo "$(date +%s.%N) - $start" | bc)"
+    printf 'PASS %-32s %7.2fs\n' "$name" "$(awk "BEGIN { print $(date +%s.%N) - $start }")"
   else
     fail=$((fail + 1))
-    printf 'FAIL %s (log: tests/out/%s.log)\n' "$name" "$name"
-    tail -n 15 "$OUT/$name.log" | sed 's/^/    /'
+    printf 'FAIL %s (log: %s)\n' "$name" "${log#$ROOT/}"
+    tail -n 15 "$log" | sed 's/^/    /'
   fi
 }
 for t in "$ROOT/$BUILD"/tests/*; do

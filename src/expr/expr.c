@@ -225,7 +225,7 @@ static expr *intern(expr_ctx *c, expr_kind k, double v, int i0, int i1, const un
   memcpy(e->alpha, alpha, EXPR_MAXDIM);
   e->n = n;
   e->ch = (expr **)(e + 1);
-  memcpy(e->ch, ch, sizeof(expr *) * (size_t)n);
+  if (n) memcpy(e->ch, ch, sizeof(expr *) * (size_t)n);
   e->hash = h;
   e->id = (int)c->nnodes;
   e->order = alpha[0] + alpha[1] + alpha[2];

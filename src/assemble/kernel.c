@@ -248,7 +248,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
                     char *err, size_t errlen) {
   strbuf b = {0};
   expr_tape tape = {0};
-  unsigned char *sel = NULL;
+  unsigned char *sel = NULL, *isconst = NULL;
   int dim = cell_dim(ct);
   int nf = facet ? cell_nfacets(ct) : 1;
   memset(k, 0, sizeof *k);
@@ -311,10 +311,26 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     k->coef_off[i] = k->wsize;
     k->wsize += el[k->coef_degree[i]].nloc;
   }
+  /* Jacobian entries whose coefficient is constant on the cell (no coordinate, field or
+   * normal in it) are integrated exactly on the reference cell ahead of time: on an
+   * affine cell their element matrix is a contraction of reference tensors with
+   * geometry factors, as in FFC's tensor representation; only the others need the
+   * quadrature loop */
+  int nent = s->arity == 2 ? s->tab->njac : 0, nvar = 0;
+  isconst = calloc((size_t)nent + 1, 1);
+  if (!isconst) KERR("out of memory");
+  /* with a one-point rule (P1 stiffness) the quadrature loop is the cheaper of the two */
+  int nq_est = 1;
+  for (int d = 0; d < dim; d++) nq_est *= (qdeg + 2) / 2;
+  for (int i = 0; i < nent; i++) {
+    isconst[i] = !facet && nq_est > 1 && !(s->tab->jac[i]->dep & DEP_POINT);
+    nvar += !isconst[i];
+  }
   /* test and trial basis needs */
   if (s->arity >= 1) {
     int n = s->arity == 2 ? s->tab->njac : s->tab->nres;
     for (int i = 0; i < n; i++) {
+      if (s->arity == 2 && isconst[i]) continue;
       const expr *tl = s->arity == 2 ? s->tab->jac_test[i] : s->tab->res_leaf[i];
       int fi = layout_find(rows, tl->i0);
       if (fi < 0) KERR("internal error: test function not in the row layout");
@@ -386,6 +402,53 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     emit_table(&b, "NR", nr, (long)cell_nfacets(ct) * dim);
   }
 
+  /* reference tensors R[a][b][k][l][i][j] = ∫ D_k phi_i D_l psi_j on the reference cell,
+   * k, l = 0 for values and 1..dim for derivatives, exact (degree pa + pb) */
+  unsigned char rused[KER_MAXFIELD][KER_MAXFIELD][4][4];
+  memset(rused, 0, sizeof rused);
+  for (int i = 0; i < nent; i++) {
+    if (!isconst[i]) continue;
+    int a = layout_find(rows, s->tab->jac_test[i]->i0), bb = layout_find(cols, s->tab->jac_trial[i]->i0);
+    int da = leaf_dir(s->tab->jac_test[i]), db = leaf_dir(s->tab->jac_trial[i]);
+    for (int kk = (da < 0 ? -1 : 0); kk < (da < 0 ? 0 : dim); kk++)
+      for (int ll = (db < 0 ? -1 : 0); ll < (db < 0 ? 0 : dim); ll++) rused[a][bb][kk + 1][ll + 1] = 1;
+  }
+  for (int a = 0; rows && a < rows->n; a++)
+    for (int bb = 0; cols && bb < cols->n; bb++) {
+      int any = 0;
+      for (int kk = 0; kk < 4; kk++)
+        for (int ll = 0; ll < 4; ll++) any |= rused[a][bb][kk][ll];
+      if (!any) continue;
+      const lagrange_element *ea = &el[rows->degree[a]], *eb = &el[cols->degree[bb]];
+      quad_rule rq;
+      if (quad_simplex(dim, ea->degree + eb->degree, &rq)) KERR("no reference rule");
+      int na = ea->nloc, nb = eb->nloc;
+      double *R = calloc((size_t)16 * na * nb, sizeof(double));
+      if (!R) KERR("out of memory");
+      for (int qi = 0; qi < rq.n; qi++) {
+        double va[FEM_MAXLOC], ga[FEM_MAXLOC * 3], vb[FEM_MAXLOC], gb[FEM_MAXLOC * 3];
+        lagrange_eval(ea, rq.x + dim * qi, va, ga);
+        lagrange_eval(eb, rq.x + dim * qi, vb, gb);
+        for (int kk = 0; kk <= dim; kk++)
+          for (int ll = 0; ll <= dim; ll++) {
+            if (!rused[a][bb][kk][ll]) continue;
+            double *r = R + (size_t)(kk * 4 + ll) * na * nb;
+            for (int i = 0; i < na; i++) {
+              double fi = kk ? ga[i * dim + kk - 1] : va[i];
+              for (int j = 0; j < nb; j++) r[i * nb + j] += rq.w[qi] * fi * (ll ? gb[j * dim + ll - 1] : vb[j]);
+            }
+          }
+      }
+      for (int kk = 0; kk <= dim; kk++)
+        for (int ll = 0; ll <= dim; ll++) {
+          if (!rused[a][bb][kk][ll]) continue;
+          char nm[32];
+          snprintf(nm, sizeof nm, "R%d_%d_%d%d", a, bb, kk, ll);
+          emit_table(&b, nm, R + (size_t)(kk * 4 + ll) * na * nb, (long)na * nb);
+        }
+      free(R);
+    }
+
   sb_printf(&b, "void lugal_kernel(const double *restrict X, const double *restrict W, "
                 "const double *restrict P, int facet, double *restrict A)\n{\n");
   sb_printf(&b, "  (void)W; (void)P; (void)facet;\n");
@@ -444,6 +507,53 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   if (!sel) KERR("out of memory");
   for (int i = 0; i < tape.n; i++) sel[i] = !(tape.node[i]->dep & DEP_POINT);
   expr_codegen(&b, &tape, "t", "P", sel, leafname, &lc, "  ");
+  char ref[128];
+  for (int a = 0; rows && a < rows->n; a++)
+    for (int bb = 0; cols && bb < cols->n; bb++) {
+      int any = 0;
+      for (int kk = 0; kk < 4; kk++)
+        for (int ll = 0; ll < 4; ll++) any |= rused[a][bb][kk][ll];
+      if (!any) continue;
+      for (int kk = 0; kk <= dim; kk++)
+        for (int ll = 0; ll <= dim; ll++)
+          if (rused[a][bb][kk][ll]) sb_printf(&b, "  double G%d_%d_%d%d = 0.0;\n", a, bb, kk, ll);
+      for (int i = 0; i < nent; i++) {
+        if (!isconst[i] || layout_find(rows, s->tab->jac_test[i]->i0) != a ||
+            layout_find(cols, s->tab->jac_trial[i]->i0) != bb)
+          continue;
+        int da = leaf_dir(s->tab->jac_test[i]), db = leaf_dir(s->tab->jac_trial[i]);
+        expr_codegen_ref(&tape, tape.root[i], "t", leafname, &lc, ref, sizeof ref);
+        /* physical derivative d/dx_da = sum_k K[k][da] d/dxi_k */
+        for (int kk = (da < 0 ? -1 : 0); kk < (da < 0 ? 0 : dim); kk++)
+          for (int ll = (db < 0 ? -1 : 0); ll < (db < 0 ? 0 : dim); ll++) {
+            sb_printf(&b, "  G%d_%d_%d%d += %s", a, bb, kk + 1, ll + 1, ref);
+            if (da >= 0) sb_printf(&b, "*K%d%d", kk, da);
+            if (db >= 0) sb_printf(&b, "*K%d%d", ll, db);
+            sb_printf(&b, ";\n");
+          }
+      }
+      int na = rows->nloc[a], nb = cols->nloc[bb];
+      sb_printf(&b, "  for (int i = 0; i < %d; ++i) {\n    double *Ai = A + (%d + i)*%d + %d;\n", na,
+                rows->off[a], cols->size, cols->off[bb]);
+      sb_printf(&b, "    for (int j = 0; j < %d; ++j) Ai[j] += scale*(", nb);
+      int first = 1;
+      for (int kk = 0; kk <= dim; kk++)
+        for (int ll = 0; ll <= dim; ll++) {
+          if (!rused[a][bb][kk][ll]) continue;
+          sb_printf(&b, "%sG%d_%d_%d%d*R%d_%d_%d%d[i*%d + j]", first ? "" : " + ", a, bb, kk, ll, a, bb, kk, ll, nb);
+          first = 0;
+        }
+      sb_printf(&b, ");\n  }\n");
+    }
+  if (s->arity == 2 && nvar == 0) {
+    /* everything was exact on the reference cell */
+    sb_printf(&b, "  (void)K00; (void)scale;\n}\n");
+    free(sel);
+    free(isconst);
+    expr_tape_free(&tape);
+    if (b.failed) { sb_free(&b); snprintf(err, errlen, "out of memory generating a kernel"); return NULL; }
+    return b.s;
+  }
   sb_printf(&b, "  for (int q = 0; q < %d; ++q) {\n", q.n);
   if (facet) sb_printf(&b, "    const int qq = facet*%d + q;\n", q.n);
   else sb_printf(&b, "    const int qq = q;\n");
@@ -484,7 +594,6 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   for (int i = 0; i < tape.n; i++) sel[i] = !sel[i];
   expr_codegen(&b, &tape, "t", "P", sel, leafname, &lc, "    ");
   /* contraction */
-  char ref[128];
   if (s->arity == 0) {
     expr_codegen_ref(&tape, tape.root[0], "t", leafname, &lc, ref, sizeof ref);
     sb_printf(&b, "    A[0] += wq*%s;\n", ref);
@@ -514,7 +623,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
         int nt = 0;
         for (int i = 0; i < s->tab->njac; i++) {
           const expr *tl = s->tab->jac_test[i];
-          if (tl->i0 != rows->func[a] || s->tab->jac_trial[i]->i0 != cols->func[bb]) continue;
+          if (isconst[i] || tl->i0 != rows->func[a] || s->tab->jac_trial[i]->i0 != cols->func[bb]) continue;
           int found = 0;
           for (int t = 0; t < nt; t++) found |= tls[t] == tl;
           if (!found && nt < 64) tls[nt++] = tl;
@@ -525,7 +634,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
           sb_printf(&b, "      const double u%d = wq*(", t);
           int first = 1;
           for (int i = 0; i < s->tab->njac; i++) {
-            if (s->tab->jac_test[i] != tls[t] || s->tab->jac_trial[i]->i0 != cols->func[bb]) continue;
+            if (isconst[i] || s->tab->jac_test[i] != tls[t] || s->tab->jac_trial[i]->i0 != cols->func[bb]) continue;
             char bn[32];
             basis_name(s->tab->jac_trial[i], cols->degree[bb], bn, sizeof bn);
             expr_codegen_ref(&tape, tape.root[i], "t", leafname, &lc, ref, sizeof ref);
@@ -546,11 +655,13 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   }
   sb_printf(&b, "  }\n}\n");
   free(sel);
+  free(isconst);
   expr_tape_free(&tape);
   if (b.failed) { sb_free(&b); snprintf(err, errlen, "out of memory generating a kernel"); return NULL; }
   return b.s;
 fail:
   free(sel);
+  free(isconst);
   expr_tape_free(&tape);
   sb_free(&b);
   return NULL;

@@ -1,0 +1,15 @@
+#!/bin/sh
+# bench/run.sh — every benchmark, lugal and (when installed) FEniCSx side by side in one
+# run. Results and the machine go to stdout; bench/RESULTS.md records a run.
+ROOT=$(cd "$(dirname "$0")/.." && pwd)
+echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
+echo "machine: $(nproc) cores, $(awk '/MemTotal/ {printf "%.0f GiB", $2/1048576}' /proc/meminfo), $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
+echo "PETSc $(pkg-config --modversion PETSc), $(tcc -v 2>&1 | head -1)"
+sh "$ROOT/bench/coldstart.sh" 10
+have_fenicsx=0
+/usr/bin/python3 -c "import dolfinx" 2>/dev/null && have_fenicsx=1
+for args in "32 1" "64 1" "24 2"; do
+  "$ROOT/build/lugal" "$ROOT/bench/assembly.lua" $args 5
+  "$ROOT/build/lugal" "$ROOT/bench/assembly.lua" $args 5 -lugal_jit cc | sed 's/^lugal/lugal-cc/'
+  [ $have_fenicsx = 1 ] && /usr/bin/python3 "$ROOT/bench/assembly_fenicsx.py" $args 5 2>/dev/null | tail -1
+done

@@ -241,6 +241,14 @@ static int layout_find(const field_layout *l, int func) {
   return -1;
 }
 
+/* does block (a, b) have any reference tensor */
+static int block_used(unsigned char used[4][4]) {
+  int any = 0;
+  for (int k = 0; k < 4; k++)
+    for (int l = 0; l < 4; l++) any |= used[k][l];
+  return any;
+}
+
 #define KERR(...) do { snprintf(err, errlen, __VA_ARGS__); goto fail; } while (0)
 
 char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel_spec *s,
@@ -415,10 +423,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   }
   for (int a = 0; rows && a < rows->n; a++)
     for (int bb = 0; cols && bb < cols->n; bb++) {
-      int any = 0;
-      for (int kk = 0; kk < 4; kk++)
-        for (int ll = 0; ll < 4; ll++) any |= rused[a][bb][kk][ll];
-      if (!any) continue;
+      if (!block_used(rused[a][bb])) continue;
       const lagrange_element *ea = &el[rows->degree[a]], *eb = &el[cols->degree[bb]];
       quad_rule rq;
       if (quad_simplex(dim, ea->degree + eb->degree, &rq)) KERR("no reference rule");
@@ -510,10 +515,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   char ref[128];
   for (int a = 0; rows && a < rows->n; a++)
     for (int bb = 0; cols && bb < cols->n; bb++) {
-      int any = 0;
-      for (int kk = 0; kk < 4; kk++)
-        for (int ll = 0; ll < 4; ll++) any |= rused[a][bb][kk][ll];
-      if (!any) continue;
+      if (!block_used(rused[a][bb])) continue;
       for (int kk = 0; kk <= dim; kk++)
         for (int ll = 0; ll <= dim; ll++)
           if (rused[a][bb][kk][ll]) sb_printf(&b, "  double G%d_%d_%d%d = 0.0;\n", a, bb, kk, ll);

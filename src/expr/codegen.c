@@ -31,10 +31,33 @@ void sb_free(strbuf *b) { free(b->s); b->s = NULL; b->len = b->cap = 0; }
 
 /* ---------------------------------------------------------------- tapes */
 
+/* node id → tape index: an open-addressing table of (id, index) pairs */
 typedef struct {
-  int *idx; /* node id → tape index + 1 (0: not on the tape) */
-  size_t cap;
-} idmap;
+  int cap;
+  int *kv;
+} tape_index_map;
+
+static int tim_build(const expr_tape *t, tape_index_map *m) {
+  m->cap = 16;
+  while (m->cap < 2 * t->n) m->cap <<= 1;
+  m->kv = malloc(sizeof(int) * (size_t)m->cap * 2);
+  if (!m->kv) return 1;
+  for (int i = 0; i < m->cap; i++) m->kv[2 * i] = -1;
+  for (int k = 0; k < t->n; k++) {
+    unsigned h = (unsigned)t->node[k]->id * 2654435761u & (unsigned)(m->cap - 1);
+    while (m->kv[2 * h] >= 0) h = (h + 1) & (unsigned)(m->cap - 1);
+    m->kv[2 * h] = t->node[k]->id;
+    m->kv[2 * h + 1] = k;
+  }
+  return 0;
+}
+
+/* tape index of a node known to be on the tape */
+static int tim_get(const tape_index_map *m, const expr *e) {
+  unsigned h = (unsigned)e->id * 2654435761u & (unsigned)(m->cap - 1);
+  while (m->kv[2 * h] != e->id) h = (h + 1) & (unsigned)(m->cap - 1);
+  return m->kv[2 * h + 1];
+}
 
 static int tape_visit(expr *e, expr_tape *t, int *cap, int *mark, int maxid) {
   if (e->id >= maxid) return 1;
@@ -105,25 +128,10 @@ void expr_tape_free(expr_tape *t) {
   t->n = t->nroot = 0;
 }
 
-/* position of a child on the tape: children always precede parents, so a linear search
- * backwards from the parent is avoided by storing the index in a side array */
 int expr_tape_eval(const expr_tape *t, const double *params, expr_leaf_fn leaf, void *ud,
                    double *w, double *out) {
-  /* child indices: found by pointer lookup among earlier nodes. For speed the caller
-   * evaluates the same tape many times, so resolve indices once per call into w-space
-   * using the node ids: a small open hash from id to tape index. */
-  int cap = 16;
-  while (cap < 2 * t->n) cap <<= 1;
-  int *hk = malloc(sizeof(int) * (size_t)cap * 2);
-  if (!hk) return 1;
-  for (int i = 0; i < cap; i++) hk[2 * i] = -1;
-  for (int k = 0; k < t->n; k++) {
-    unsigned h = (unsigned)t->node[k]->id * 2654435761u & (unsigned)(cap - 1);
-    while (hk[2 * h] >= 0) h = (h + 1) & (unsigned)(cap - 1);
-    hk[2 * h] = t->node[k]->id;
-    hk[2 * h + 1] = k;
-  }
-#define CH(e, i) w[lookup(hk, cap, (e)->ch[i]->id)]
+  tape_index_map m;
+  if (tim_build(t, &m)) return 1;
   int rc = 0;
   for (int k = 0; k < t->n && !rc; k++) {
     const expr *e = t->node[k];
@@ -135,29 +143,15 @@ int expr_tape_eval(const expr_tape *t, const double *params, expr_leaf_fn leaf, 
       if (leaf(ud, e, &v)) rc = 1;
       break;
     case E_SUM:
-      for (int i = 0; i < e->n; i++) {
-        int ci = -1;
-        unsigned h = (unsigned)e->ch[i]->id * 2654435761u & (unsigned)(cap - 1);
-        while (hk[2 * h] != e->ch[i]->id) h = (h + 1) & (unsigned)(cap - 1);
-        ci = hk[2 * h + 1];
-        v += w[ci];
-      }
+      for (int i = 0; i < e->n; i++) v += w[tim_get(&m, e->ch[i])];
       break;
     case E_PROD:
       v = 1;
-      for (int i = 0; i < e->n; i++) {
-        unsigned h = (unsigned)e->ch[i]->id * 2654435761u & (unsigned)(cap - 1);
-        while (hk[2 * h] != e->ch[i]->id) h = (h + 1) & (unsigned)(cap - 1);
-        v *= w[hk[2 * h + 1]];
-      }
+      for (int i = 0; i < e->n; i++) v *= w[tim_get(&m, e->ch[i])];
       break;
     case E_POW: case E_FUNC: {
       double a[2];
-      for (int i = 0; i < e->n; i++) {
-        unsigned h = (unsigned)e->ch[i]->id * 2654435761u & (unsigned)(cap - 1);
-        while (hk[2 * h] != e->ch[i]->id) h = (h + 1) & (unsigned)(cap - 1);
-        a[i] = w[hk[2 * h + 1]];
-      }
+      for (int i = 0; i < e->n; i++) a[i] = w[tim_get(&m, e->ch[i])];
       if (e->kind == E_POW) {
         double p = a[1];
         if (p == 2) v = a[0] * a[0];
@@ -190,19 +184,12 @@ int expr_tape_eval(const expr_tape *t, const double *params, expr_leaf_fn leaf, 
     }
     w[k] = v;
   }
-#undef CH
   for (int i = 0; i < t->nroot && !rc; i++) out[i] = w[t->root[i]];
-  free(hk);
+  free(m.kv);
   return rc;
 }
 
 /* ---------------------------------------------------------------- C code */
-
-static int tape_index(const expr_tape *t, const expr *e, int upto) {
-  for (int k = upto - 1; k >= 0; k--)
-    if (t->node[k] == e) return k;
-  return -1;
-}
 
 void expr_codegen_ref(const expr_tape *t, int k, const char *prefix, expr_leaf_name_fn leafname,
                       void *ud, char *buf, size_t len) {
@@ -235,18 +222,8 @@ static const char *c_fn(expr_fn fn) {
 void expr_codegen(strbuf *b, const expr_tape *t, const char *prefix, const char *param_array,
                   const unsigned char *select, expr_leaf_name_fn leafname, void *ud,
                   const char *indent) {
-  /* child index lookup: map node id → tape index through a hash */
-  int cap = 16;
-  while (cap < 2 * t->n) cap <<= 1;
-  int *hk = malloc(sizeof(int) * (size_t)cap * 2);
-  if (!hk) { b->failed = 1; return; }
-  for (int i = 0; i < cap; i++) hk[2 * i] = -1;
-  for (int k = 0; k < t->n; k++) {
-    unsigned h = (unsigned)t->node[k]->id * 2654435761u & (unsigned)(cap - 1);
-    while (hk[2 * h] >= 0) h = (h + 1) & (unsigned)(cap - 1);
-    hk[2 * h] = t->node[k]->id;
-    hk[2 * h + 1] = k;
-  }
+  tape_index_map m;
+  if (tim_build(t, &m)) { b->failed = 1; return; }
   char r0[128], r1[128];
   for (int k = 0; k < t->n; k++) {
     if (!select[k]) continue;
@@ -261,9 +238,7 @@ void expr_codegen(strbuf *b, const expr_tape *t, const char *prefix, const char 
     int ci[2] = {0, 0};
     sb_printf(b, "%sconst double %s%d = ", indent, prefix, k);
     for (int i = 0; i < e->n; i++) {
-      unsigned h = (unsigned)e->ch[i]->id * 2654435761u & (unsigned)(cap - 1);
-      while (hk[2 * h] != e->ch[i]->id) h = (h + 1) & (unsigned)(cap - 1);
-      int c = hk[2 * h + 1];
+      int c = tim_get(&m, e->ch[i]);
       if (i < 2) ci[i] = c;
       if (e->kind == E_SUM || e->kind == E_PROD) {
         expr_codegen_ref(t, c, prefix, leafname, ud, r0, sizeof r0);
@@ -297,6 +272,5 @@ void expr_codegen(strbuf *b, const expr_tape *t, const char *prefix, const char 
     }
     sb_printf(b, ";\n");
   }
-  (void)tape_index;
-  free(hk);
+  free(m.kv);
 }

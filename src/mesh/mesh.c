@@ -310,73 +310,53 @@ int mesh_count_invalid(const mesh *m, int maxids, int *ids, int *ninv) {
 
 /* ---------------------------------------------------------------- adjacency */
 
-int mesh_build_edges(mesh *m) {
-  if (m->edges) return 0;
-  int ne = cell_nedges(m->type);
+/* number the distinct vertex tuples (edges or faces) of the cells: per cell, the ids of its
+ * `nper` local entities (from `local`, klen vertices each); the sorted tuples go to *list */
+static int number_entities(mesh *m, int nper, int klen, const int *(*local)(cell_type, int),
+                           int **cell_ids, int **list, int *count) {
   tuplehash h;
-  if (th_init(&h, (size_t)m->ncell * (size_t)ne / 2 + 16, 2)) goto oom;
-  m->cell_edges = malloc(sizeof(int) * (size_t)m->ncell * (size_t)ne);
-  if (!m->cell_edges) goto oom;
+  *cell_ids = NULL;
+  *list = NULL;
+  if (th_init(&h, (size_t)m->ncell * (size_t)nper / 2 + 16, klen)) goto oom;
+  *cell_ids = malloc(sizeof(int) * (size_t)m->ncell * (size_t)nper);
+  if (!*cell_ids) goto oom;
   int n = 0;
   for (int c = 0; c < m->ncell; c++) {
     const int *v = m->cells + (size_t)c * (size_t)m->nvc;
-    for (int e = 0; e < ne; e++) {
-      const int *ev = cell_edge_verts(m->type, e);
-      int k[2] = {v[ev[0]], v[ev[1]]}, found;
+    for (int e = 0; e < nper; e++) {
+      const int *lv = local(m->type, e);
+      int k[4], found;
+      for (int i = 0; i < klen; i++) k[i] = v[lv[i]];
       int id = th_get(&h, k, n, &found);
       if (id == -2) goto oom;
       if (!found) n++;
-      m->cell_edges[(size_t)c * (size_t)ne + (size_t)e] = id;
+      (*cell_ids)[(size_t)c * (size_t)nper + (size_t)e] = id;
     }
   }
-  m->edges = malloc(sizeof(int) * 2 * (size_t)(n + 1));
-  if (!m->edges) goto oom;
+  *list = malloc(sizeof(int) * (size_t)klen * (size_t)(n + 1));
+  if (!*list) goto oom;
   for (size_t i = 0; i < h.cap; i++)
-    if (h.e[i].val >= 0) {
-      m->edges[2 * h.e[i].val] = h.e[i].k[0];
-      m->edges[2 * h.e[i].val + 1] = h.e[i].k[1];
-    }
-  m->nedge = n;
+    if (h.e[i].val >= 0) memcpy(*list + (size_t)klen * (size_t)h.e[i].val, h.e[i].k, sizeof(int) * (size_t)klen);
+  *count = n;
   th_free(&h);
   return 0;
 oom:
   th_free(&h);
-  free(m->cell_edges);
-  m->cell_edges = NULL;
-  seterr(m->err, "out of memory building edges");
+  free(*cell_ids);
+  free(*list);
+  *cell_ids = *list = NULL;
+  seterr(m->err, "out of memory numbering mesh entities");
   return 1;
+}
+
+int mesh_build_edges(mesh *m) {
+  if (m->edges) return 0;
+  return number_entities(m, cell_nedges(m->type), 2, cell_edge_verts, &m->cell_edges, &m->edges, &m->nedge);
 }
 
 int mesh_build_faces(mesh *m) {
   if (m->faces || m->type != CELL_TETRAHEDRON) return 0;
-  tuplehash h;
-  if (th_init(&h, (size_t)m->ncell * 2 + 16, 3)) goto oom;
-  m->cell_faces = malloc(sizeof(int) * (size_t)m->ncell * 4);
-  if (!m->cell_faces) goto oom;
-  int n = 0;
-  for (int c = 0; c < m->ncell; c++) {
-    const int *v = m->cells + (size_t)c * 4;
-    for (int f = 0; f < 4; f++) {
-      int k[3] = {v[tet_facets[f][0]], v[tet_facets[f][1]], v[tet_facets[f][2]]}, found;
-      int id = th_get(&h, k, n, &found);
-      if (id == -2) goto oom;
-      if (!found) n++;
-      m->cell_faces[(size_t)c * 4 + (size_t)f] = id;
-    }
-  }
-  m->faces = malloc(sizeof(int) * 3 * (size_t)(n + 1));
-  if (!m->faces) goto oom;
-  for (size_t i = 0; i < h.cap; i++)
-    if (h.e[i].val >= 0) memcpy(m->faces + 3 * h.e[i].val, h.e[i].k, 3 * sizeof(int));
-  m->nface = n;
-  th_free(&h);
-  return 0;
-oom:
-  th_free(&h);
-  free(m->cell_faces);
-  m->cell_faces = NULL;
-  seterr(m->err, "out of memory building faces");
-  return 1;
+  return number_entities(m, 4, 3, cell_facet_verts, &m->cell_faces, &m->faces, &m->nface);
 }
 
 /* hash of all cell facets → (cell*8 + local facet) */

@@ -35,5 +35,9 @@ for e in "$ROOT"/examples/*.lua; do
   name=$(basename "$e" .lua)
   run "example/$name" sh -c "cd '$OUT/examples' && '$LUGAL' '$e'"
 done
+# the standalone module in a plain Lua interpreter
+if command -v lua5.4 > /dev/null 2>&1 && [ -f "$ROOT/$BUILD/lugal.so" ]; then
+  run "module/poisson-lua5.4" sh -c "cd '$OUT/examples' && XDG_CACHE_HOME='$OUT/cache' lua5.4 -e \"package.cpath='$ROOT/$BUILD/?.so;'..package.cpath\" '$ROOT/examples/poisson.lua' 16 2"
+fi
 echo "$pass passed, $fail failed"
 [ "$fail" -eq 0 ]

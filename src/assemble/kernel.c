@@ -8,7 +8,14 @@
 
 #include <dlfcn.h>
 #include <errno.h>
+#ifndef LUGAL_NO_TCC
 #include <libtcc.h>
+#else
+/* the standalone Lua module: Debian's libtcc is a non-PIC static archive that cannot be
+ * linked into a shared object, so the module compiles kernels with the C compiler only */
+typedef struct TCCState TCCState;
+static void tcc_delete(TCCState *s) { (void)s; }
+#endif
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -37,6 +44,9 @@ struct lg_jit {
 lg_jit *jit_new(jit_backend b, const char *libdir) {
   lg_jit *j = calloc(1, sizeof *j);
   if (!j) return NULL;
+#ifdef LUGAL_NO_TCC
+  b = JIT_CC;
+#endif
   j->backend = b;
   snprintf(j->libdir, sizeof j->libdir, "%s", libdir ? libdir : "");
   return j;
@@ -52,7 +62,12 @@ void jit_free(lg_jit *j) {
   free(j);
 }
 
-void jit_set_backend(lg_jit *j, jit_backend b) { j->backend = b; }
+void jit_set_backend(lg_jit *j, jit_backend b) {
+#ifdef LUGAL_NO_TCC
+  b = JIT_CC;
+#endif
+  j->backend = b;
+}
 size_t jit_count(const lg_jit *j) { return j->n; }
 
 static void hash_src(const char *s, uint64_t *h1, uint64_t *h2) {
@@ -72,6 +87,7 @@ static double now_ms(void) {
   return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
 }
 
+#ifndef LUGAL_NO_TCC
 typedef struct {
   char *buf;
   size_t len;
@@ -113,6 +129,8 @@ static kernel_fn compile_tcc(lg_jit *j, const char *src, jit_entry *ent, char *e
   ent->tcc = s;
   return fn;
 }
+
+#endif
 
 static kernel_fn compile_cc(const char *src, uint64_t h1, uint64_t h2, jit_entry *ent, char *err,
                             size_t errlen) {
@@ -181,8 +199,12 @@ kernel_fn jit_compile(lg_jit *j, const char *src, double *ms, int *cached, char 
   }
   jit_entry ent = {h1, h2, NULL, NULL, NULL};
   double t0 = now_ms();
+#ifdef LUGAL_NO_TCC
+  kernel_fn fn = compile_cc(src, h1, h2, &ent, err, errlen);
+#else
   kernel_fn fn = j->backend == JIT_CC ? compile_cc(src, h1, h2, &ent, err, errlen)
                                       : compile_tcc(j, src, &ent, err, errlen);
+#endif
   if (!fn) return NULL;
   ent.fn = fn;
   j->e[j->n++] = ent;

@@ -36,7 +36,7 @@ typedef struct { lg_function *f; } ud_func;
 typedef struct { form *f; } ud_form;
 typedef struct { lg_problem *p; int nfield; int nonlinear; } ud_prob;
 typedef struct { char path[512]; int n, cap; double *t; char **files; } ud_series;
-typedef struct { lg_env *env; } ud_env;
+typedef struct { lg_env *env; int owns_petsc; } ud_env;
 
 static lg_env *get_env(lua_State *L) {
   lua_getfield(L, LUA_REGISTRYINDEX, "lugal.env");
@@ -50,6 +50,10 @@ static int env_gc(lua_State *L) {
   ud_env *u = luaL_checkudata(L, 1, MT_ENV);
   lg_env_free(u->env);
   u->env = NULL;
+  /* the module loaded into a plain Lua interpreter started PETSc; the environment is
+   * finalized after every other lugal object, so PETSc can stop now */
+  if (u->owns_petsc) lg_petsc_finalize();
+  u->owns_petsc = 0;
   return 0;
 }
 
@@ -1324,6 +1328,15 @@ int luaopen_lugal(lua_State *L) {
   if (lua_getfield(L, LUA_REGISTRYINDEX, "lugal.env") == LUA_TNIL) {
     lua_pop(L, 1);
     ud_env *ue = lua_newuserdatauv(L, sizeof *ue, 0);
+    ue->owns_petsc = 0;
+    PetscBool inited = PETSC_FALSE;
+    PetscInitialized(&inited);
+    if (!inited) {
+      /* loaded by a plain Lua interpreter (lua5.4 with package.cpath): start PETSc here;
+       * options come from PETSC_OPTIONS and lg.options */
+      if (lg_petsc_init(NULL, NULL)) return luaL_error(L, "lugal: PETSc failed to initialize");
+      ue->owns_petsc = 1;
+    }
     ue->env = lg_env_new(LUGAL_TCC_LIBDIR);
     if (!ue->env) return luaL_error(L, "lugal: out of memory");
     if (luaL_newmetatable(L, MT_ENV)) { lua_pushcfunction(L, env_gc); lua_setfield(L, -2, "__gc"); }

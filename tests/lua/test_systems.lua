@@ -63,3 +63,12 @@ local c = lg.interpolate(P1, mesh, 3)
 local m = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), c*u*v - c*lg.x*v), test = v, unknown = u}
 local proj = m:solve()
 T.close(lg.integrate(mesh, proj), 0.5, 1e-12, "L2 projection of x")
+
+-- named cell regions and boundaries from Gmsh physical names
+local data = arg[0]:match("(.*/)") .. "../data/"
+local g = lg.mesh.read(data .. "square_unstructured.msh")
+T.close(lg.integrate(g:cells("domain"), 1), 1.0, 1e-13, "area of the physical surface 'domain'")
+T.close(lg.integrate(g:cells(), lg.x), 0.5, 1e-13, "∫ x over the Gmsh square")
+T.close(lg.integrate(g:boundary("left", "top"), 1), 2.0, 1e-13, "length of left + top")
+T.fails(function() return g:cells("steel") end, "unknown region name \"steel\"", "\"domain\"")
+print("regions: ok")

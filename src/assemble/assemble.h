@@ -115,5 +115,7 @@ long lg_problem_nnz(const lg_problem *p);
 /* PETSc start-up and shutdown with lugal's defaults (see the runner) */
 int lg_petsc_init(int *argc, char ***argv);
 void lg_petsc_finalize(void);
+/* number of MPI processes */
+int lg_petsc_size(void);
 
 #endif

@@ -814,3 +814,9 @@ int lg_petsc_init(int *argc, char ***argv) {
 }
 
 void lg_petsc_finalize(void) { PetscFinalize(); }
+
+int lg_petsc_size(void) {
+  PetscMPIInt size = 1;
+  MPI_Comm_size(PETSC_COMM_WORLD, &size);
+  return (int)size;
+}

@@ -46,6 +46,13 @@ int main(int argc, char **argv) {
   int pargc = argc;
   char **pargv = argv;
   if (lg_petsc_init(&pargc, &pargv)) { fprintf(stderr, "lugal: PETSc failed to initialize\n"); return 1; }
+  if (lg_petsc_size() > 1) {
+    /* every rank would redo the whole serial run: refuse rather than mislead */
+    fprintf(stderr, "lugal: parallel runs are not supported yet (this is %d processes); run "
+                    "lugal without mpiexec\n", lg_petsc_size());
+    lg_petsc_finalize();
+    return 1;
+  }
   lua_State *L = luaL_newstate();
   if (!L) { fprintf(stderr, "lugal: cannot create a Lua state\n"); lg_petsc_finalize(); return 1; }
   luaL_openlibs(L);

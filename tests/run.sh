@@ -36,8 +36,13 @@ for e in "$ROOT"/examples/*.lua; do
   run "example/$name" sh -c "cd '$OUT/examples' && '$LUGAL' '$e'"
 done
 # the standalone module in a plain Lua interpreter
+# (a sanitized module needs the sanitizer runtimes preloaded into the plain interpreter)
 if command -v lua5.4 > /dev/null 2>&1 && [ -f "$ROOT/$BUILD/lugal.so" ]; then
-  run "module/poisson-lua5.4" sh -c "cd '$OUT/examples' && XDG_CACHE_HOME='$OUT/cache' lua5.4 -e \"package.cpath='$ROOT/$BUILD/?.so;'..package.cpath\" '$ROOT/examples/poisson.lua' 16 2"
+  preload=
+  if nm -D "$ROOT/$BUILD/lugal.so" 2>/dev/null | grep -q __asan_init; then
+    preload="$(gcc -print-file-name=libasan.so):$(gcc -print-file-name=libubsan.so)"
+  fi
+  run "module/poisson-lua5.4" sh -c "cd '$OUT/examples' && LD_PRELOAD='$preload' XDG_CACHE_HOME='$OUT/cache' lua5.4 -e \"package.cpath='$ROOT/$BUILD/?.so;'..package.cpath\" '$ROOT/examples/poisson.lua' 16 2"
 fi
 echo "$pass passed, $fail failed"
 [ "$fail" -eq 0 ]

@@ -9,11 +9,13 @@
 
 #include "../assemble/assemble.h"
 #include "../config.h"
+#include "../mesh/quality.h"
 
 #include <lauxlib.h>
 #include <lua.h>
 #include <math.h>
 #include <petscsys.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -27,6 +29,7 @@
 #define MT_PROB "lugal.Problem"
 #define MT_SERIES "lugal.Series"
 #define MT_ENV "lugal.Env"
+#define MT_QARRAY "lugal.QualityArray"
 
 typedef struct { lg_mesh *lm; } ud_mesh;
 typedef struct { region r; } ud_region;
@@ -37,6 +40,7 @@ typedef struct { form *f; } ud_form;
 typedef struct { lg_problem *p; int nfield; int nonlinear; } ud_prob;
 typedef struct { char path[512]; int n, cap; double *t; char **files; } ud_series;
 typedef struct { lg_env *env; int owns_petsc; } ud_env;
+typedef struct { int n; int measure; double v[1]; } ud_qarray; /* n values follow */
 
 static lg_env *get_env(lua_State *L) {
   lua_getfield(L, LUA_REGISTRYINDEX, "lugal.env");
@@ -663,7 +667,15 @@ static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, in
       if (nf >= 64) return luaL_error(L, "%s: at most 64 fields", fn);
       if (lua_type(L, -2) != LUA_TSTRING) return luaL_error(L, "%s: field names must be strings", fn);
       ud_func *uf = luaL_testudata(L, -1, MT_FUNC);
-      if (uf) {
+      ud_qarray *qa = luaL_testudata(L, -1, MT_QARRAY);
+      if (qa) {
+        if (qa->n != m->ncell) return luaL_error(L, "%s: quality array '%s' belongs to a mesh of %d cells", fn, lua_tostring(L, -2), qa->n);
+        fl[nf].name = lua_tostring(L, -2);
+        fl[nf].ncomp = 1;
+        fl[nf].on_cells = 1;
+        fl[nf].val = qa->v;
+        nf++;
+      } else if (uf) {
         if (uf->f->mesh != lm) return luaL_error(L, "%s: field '%s' lives on a different mesh", fn, lua_tostring(L, -2));
         fl[nf].name = lua_tostring(L, -2);
         fl[nf].ncomp = 1;
@@ -718,6 +730,195 @@ static int mesh_tostring(lua_State *L) {
   ud_mesh *u = check_mesh(L, 1, "tostring");
   mesh *m = u->lm->m;
   lua_pushfstring(L, "mesh: %d %ss, %d vertices, %dD", m->ncell, cell_name(m->type), m->nvert, m->dim);
+  return 1;
+}
+
+/* ---------------------------------------------------------------- quality */
+
+/* {metric = {{a, b}, {b, c}}} (constant) or {metric = {M_1, ..., M_nvert}} (per vertex) */
+static int read_metric(lua_State *L, int t, mesh *m, double **buf, quality_metric *qm, const char *fn) {
+  int d = m->dim;
+  qm->kind = 0;
+  qm->m = NULL;
+  *buf = NULL;
+  if (lua_getfield(L, t, "metric") == LUA_TNIL) { lua_pop(L, 1); return 0; }
+  if (!lua_istable(L, -1)) return luaL_error(L, "%s: option 'metric' must be a %dx%d table or one per vertex", fn, d, d);
+  int n = (int)luaL_len(L, -1);
+  lua_geti(L, -1, 1);
+  int nested = lua_istable(L, -1), pervertex = 0;
+  if (nested) {
+    lua_geti(L, -1, 1);
+    pervertex = lua_istable(L, -1);
+    lua_pop(L, 1);
+  }
+  lua_pop(L, 1);
+  if (!nested) return luaL_error(L, "%s: option 'metric' must be a %dx%d table or a list of %d of them (one per vertex)", fn, d, d, m->nvert);
+  int count = pervertex ? m->nvert : 1;
+  if ((pervertex && n != m->nvert) || (!pervertex && n != d))
+    return luaL_error(L, "%s: option 'metric' must be a %dx%d table or a list of %d of them (one per vertex)", fn, d, d, m->nvert);
+  double *b = lua_newuserdatauv(L, sizeof(double) * (size_t)count * d * d, 0);
+  lua_insert(L, -2); /* keep the buffer below the table while reading */
+  for (int v = 0; v < count; v++) {
+    if (pervertex) lua_geti(L, -1, v + 1);
+    for (int i = 0; i < d; i++) {
+      if (lua_geti(L, -1, i + 1) != LUA_TTABLE || luaL_len(L, -1) != d)
+        return luaL_error(L, "%s: metric row %d must have %d numbers", fn, i + 1, d);
+      for (int j = 0; j < d; j++) {
+        lua_geti(L, -1, j + 1);
+        if (!lua_isnumber(L, -1)) return luaL_error(L, "%s: metric entries must be numbers", fn);
+        b[(size_t)v * d * d + (size_t)i * d + j] = lua_tonumber(L, -1);
+        lua_pop(L, 1);
+      }
+      lua_pop(L, 1);
+    }
+    if (pervertex) lua_pop(L, 1);
+  }
+  lua_pop(L, 1); /* the metric table; the buffer stays on the stack */
+  qm->kind = pervertex ? 2 : 1;
+  qm->m = b;
+  *buf = b;
+  return 1;
+}
+
+static ud_qarray *push_quality(lua_State *L, int midx, const char *name, int tidx, const char *fn) {
+  ud_mesh *um = check_mesh(L, midx, fn);
+  mesh *m = um->lm->m;
+  int q = quality_from_name(name);
+  if (q < 0) {
+    char list[1024];
+    quality_names(list, sizeof list);
+    luaL_error(L, "%s: unknown measure \"%s\" (measures: %s)", fn, name, list);
+  }
+  quality_metric qm = {0, NULL};
+  double *buf = NULL;
+  int pushed = 0;
+  if (tidx && !lua_isnoneornil(L, tidx)) {
+    if (!lua_istable(L, tidx)) typeerror(L, fn, tidx, "a table of options {metric=}");
+    static const char *const keys[] = {"metric", NULL};
+    check_keys(L, tidx, fn, keys);
+    pushed = read_metric(L, tidx, m, &buf, &qm, fn);
+  }
+  ud_qarray *a = lua_newuserdatauv(L, sizeof(ud_qarray) + sizeof(double) * (size_t)m->ncell, 0);
+  a->n = m->ncell;
+  a->measure = q;
+  luaL_setmetatable(L, MT_QARRAY);
+  char err[MESH_ERRLEN];
+  if (mesh_quality(m, q, qm.kind ? &qm : NULL, a->v, err)) luaL_error(L, "%s: %s", fn, err);
+  if (pushed) lua_remove(L, -2); /* the metric buffer */
+  return a;
+}
+
+static int mesh_quality_l(lua_State *L) {
+  push_quality(L, 1, luaL_checkstring(L, 2), 3, "mesh:quality");
+  return 1;
+}
+
+static ud_qarray *check_qarray(lua_State *L, int i) { return luaL_checkudata(L, i, MT_QARRAY); }
+
+static int qa_index(lua_State *L) {
+  ud_qarray *a = check_qarray(L, 1);
+  if (lua_type(L, 2) == LUA_TSTRING) {
+    luaL_getmetatable(L, MT_QARRAY);
+    lua_getfield(L, -1, "methods");
+    lua_getfield(L, -1, lua_tostring(L, 2));
+    if (!lua_isnil(L, -1)) return 1;
+    return luaL_error(L, "quality arrays have no field '%s'", lua_tostring(L, 2));
+  }
+  lua_Integer i = luaL_checkinteger(L, 2);
+  if (i < 1 || i > a->n) return luaL_error(L, "quality index %d out of range 1..%d", (int)i, a->n);
+  lua_pushnumber(L, a->v[i - 1]);
+  return 1;
+}
+static int qa_len(lua_State *L) { lua_pushinteger(L, check_qarray(L, 1)->n); return 1; }
+static int qa_totable(lua_State *L) {
+  ud_qarray *a = check_qarray(L, 1);
+  lua_createtable(L, a->n, 0);
+  for (int i = 0; i < a->n; i++) { lua_pushnumber(L, a->v[i]); lua_rawseti(L, -2, i + 1); }
+  return 1;
+}
+static int qa_stat(lua_State *L, int which) {
+  ud_qarray *a = check_qarray(L, 1);
+  quality_stats st;
+  quality_stats_compute(a->v, a->n, &st);
+  lua_pushnumber(L, which == 0 ? st.min : which == 1 ? st.max : st.mean);
+  if (which == 2) return 1;
+  lua_pushinteger(L, (which == 0 ? st.argmin : st.argmax) + 1);
+  return 2;
+}
+static int qa_min(lua_State *L) { return qa_stat(L, 0); }
+static int qa_max(lua_State *L) { return qa_stat(L, 1); }
+static int qa_mean(lua_State *L) { return qa_stat(L, 2); }
+static int qa_histogram(lua_State *L) {
+  ud_qarray *a = check_qarray(L, 1);
+  lua_Integer nb = luaL_optinteger(L, 2, 10);
+  if (nb < 1 || nb > 10000) return luaL_error(L, "q:histogram: argument 1 must be a bin count 1..10000, got %d", (int)nb);
+  quality_stats st;
+  quality_stats_compute(a->v, a->n, &st);
+  double lo = luaL_optnumber(L, 3, st.min), hi = luaL_optnumber(L, 4, st.max);
+  int *c = lua_newuserdatauv(L, sizeof(int) * (size_t)nb, 0);
+  quality_histogram(a->v, a->n, (int)nb, lo, hi, c);
+  lua_createtable(L, 0, 3);
+  lua_createtable(L, (int)nb, 0);
+  for (int i = 0; i < nb; i++) { lua_pushinteger(L, c[i]); lua_rawseti(L, -2, i + 1); }
+  lua_setfield(L, -2, "counts");
+  lua_pushnumber(L, lo); lua_setfield(L, -2, "lo");
+  lua_pushnumber(L, hi); lua_setfield(L, -2, "hi");
+  return 1;
+}
+static int qa_worst(lua_State *L) {
+  ud_qarray *a = check_qarray(L, 1);
+  lua_Integer k = luaL_optinteger(L, 2, 10);
+  if (k < 1) return luaL_error(L, "q:worst: argument 1 must be a positive count, got %d", (int)k);
+  if (k > a->n) k = a->n;
+  int *ids = lua_newuserdatauv(L, sizeof(int) * (size_t)(k + 1), 0);
+  quality_worst(a->v, a->n, (int)k, ids);
+  lua_createtable(L, (int)k, 0);
+  for (int i = 0; i < k; i++) {
+    lua_createtable(L, 0, 2);
+    lua_pushinteger(L, ids[i] + 1); lua_setfield(L, -2, "cell");
+    lua_pushnumber(L, a->v[ids[i]]); lua_setfield(L, -2, "value");
+    lua_rawseti(L, -2, i + 1);
+  }
+  return 1;
+}
+static int qa_tostring(lua_State *L) {
+  ud_qarray *a = check_qarray(L, 1);
+  quality_stats st;
+  quality_stats_compute(a->v, a->n, &st);
+  lua_pushfstring(L, "%s of %d cells: min %f, max %f, mean %f", quality_name(a->measure), a->n, st.min, st.max, st.mean);
+  return 1;
+}
+
+/* every measure that applies, with statistics, as a table; printed unless quiet */
+static int mesh_quality_report(lua_State *L) {
+  const char *fn = "mesh:quality_report";
+  ud_mesh *um = check_mesh(L, 1, fn);
+  mesh *m = um->lm->m;
+  int quiet = lua_toboolean(L, 2);
+  int ninv, ids[10];
+  mesh_count_invalid(m, 10, ids, &ninv);
+  lua_createtable(L, 0, QM_COUNT + 3);
+  int rep = lua_gettop(L);
+  lua_pushinteger(L, m->ncell); lua_setfield(L, rep, "cells");
+  lua_pushinteger(L, ninv); lua_setfield(L, rep, "inverted");
+  if (!quiet) printf("mesh quality: %d %ss, %d inverted or degenerate\n  %-26s %12s %12s %12s %8s\n", m->ncell,
+                     cell_name(m->type), ninv, "measure", "min", "mean", "max", "worst");
+  for (int q = 0; q < QM_COUNT; q++) {
+    if (!quality_applies(q, m->type)) continue;
+    ud_qarray *a = push_quality(L, 1, quality_name(q), 0, fn);
+    quality_stats st;
+    quality_stats_compute(a->v, a->n, &st);
+    lua_pop(L, 1);
+    lua_createtable(L, 0, 4);
+    lua_pushnumber(L, st.min); lua_setfield(L, -2, "min");
+    lua_pushnumber(L, st.max); lua_setfield(L, -2, "max");
+    lua_pushnumber(L, st.mean); lua_setfield(L, -2, "mean");
+    lua_pushinteger(L, st.argmin + 1); lua_setfield(L, -2, "worst");
+    lua_setfield(L, rep, quality_name(q));
+    if (!quiet) printf("  %-26s %12.6g %12.6g %12.6g %8d\n", quality_name(q), st.min, st.mean, st.max, st.argmin + 1);
+  }
+  if (!quiet) fflush(stdout);
+  lua_settop(L, rep);
   return 1;
 }
 
@@ -1382,7 +1583,8 @@ int luaopen_lugal(lua_State *L) {
                                           {"write", mesh_write}, {"refine", lmesh_refine}, {"hmax", lmesh_hmax},
                                           {"check", mesh_check}, {"nvertices", mesh_nvertices}, {"ncells", mesh_ncells},
                                           {"dim", mesh_dim}, {"coordinates", mesh_coordinates},
-                                          {"set_coordinates", mesh_set_coordinates}, {NULL, NULL}};
+                                          {"set_coordinates", mesh_set_coordinates}, {"quality", mesh_quality_l},
+                                          {"quality_report", mesh_quality_report}, {NULL, NULL}};
   new_mt(L, MT_MESH, mesh_mm, mesh_methods);
   new_mt(L, MT_REGION, NULL, NULL);
   static const luaL_Reg basis_mm[] = {{"__tostring", basis_tostring}, {NULL, NULL}};
@@ -1391,6 +1593,15 @@ int luaopen_lugal(lua_State *L) {
   static const luaL_Reg prob_methods[] = {{"solve", prob_solve}, {"matrix", prob_matrix}, {"assemble", prob_assemble},
                                           {"size", prob_size}, {NULL, NULL}};
   new_mt(L, MT_PROB, prob_mm, prob_methods);
+  static const luaL_Reg qa_mm[] = {{"__index", qa_index}, {"__len", qa_len}, {"__tostring", qa_tostring}, {NULL, NULL}};
+  static const luaL_Reg qa_methods[] = {{"totable", qa_totable}, {"min", qa_min}, {"max", qa_max}, {"mean", qa_mean},
+                                        {"histogram", qa_histogram}, {"worst", qa_worst}, {NULL, NULL}};
+  luaL_newmetatable(L, MT_QARRAY);
+  luaL_setfuncs(L, qa_mm, 0);
+  lua_newtable(L);
+  luaL_setfuncs(L, qa_methods, 0);
+  lua_setfield(L, -2, "methods");
+  lua_pop(L, 1);
   static const luaL_Reg series_mm[] = {{"__gc", series_gc}, {NULL, NULL}};
   static const luaL_Reg series_methods[] = {{"write", series_write}, {NULL, NULL}};
   new_mt(L, MT_SERIES, series_mm, series_methods);

@@ -206,9 +206,11 @@ static double det3(const double *a, const double *b, const double *c) {
 static const int hex_corner[8][3] = {{1, 3, 4}, {2, 0, 5}, {3, 1, 6}, {0, 2, 7},
                                      {7, 5, 0}, {4, 6, 1}, {5, 7, 2}, {6, 4, 3}};
 
+const int *hex_corner_neighbors(int i) { return hex_corner[i]; }
+
 /* minimum corner Jacobian determinant of a quad or hex (the untangling paper's validity:
  * every corner Jacobian positive) */
-static double min_corner_jacobian(const mesh *m, int c) {
+double mesh_min_corner_jacobian(const mesh *m, int c) {
   const int *v = m->cells + (size_t)c * (size_t)m->nvc;
   double mn = INFINITY;
   if (m->type == CELL_QUADRILATERAL) {
@@ -254,21 +256,28 @@ double mesh_cell_signed_measure(const mesh *m, int c) {
     return det3(e[0], e[1], e[2]) / 6.0;
   }
   default: {
-    /* volume by the divergence theorem over the 6 (possibly non-planar) faces, each
-     * split into 4 triangles about its centroid */
-    double vol = 0;
-    for (int f = 0; f < 6; f++) {
-      double cf[3] = {0, 0, 0};
-      for (int k = 0; k < 4; k++)
-        for (int d = 0; d < 3; d++) cf[d] += 0.25 * x[3 * v[hex_facets[f][k]] + d];
-      for (int k = 0; k < 4; k++) {
-        const double *a = x + 3 * v[hex_facets[f][k]], *b = x + 3 * v[hex_facets[f][(k + 1) % 4]];
-        vol += det3(cf, a, b) / 6.0;
-      }
+    double h[24];
+    for (int i = 0; i < 8; i++)
+      for (int d = 0; d < 3; d++) h[3 * i + d] = x[3 * v[i] + d];
+    return hex_signed_volume(h);
+  }
+  }
+}
+
+double hex_signed_volume(const double *x) {
+  /* divergence theorem over the 6 (possibly non-planar) faces, each split into 4 triangles
+   * about its centroid; hex_facets are oriented outward */
+  double vol = 0;
+  for (int f = 0; f < 6; f++) {
+    double cf[3] = {0, 0, 0};
+    for (int k = 0; k < 4; k++)
+      for (int d = 0; d < 3; d++) cf[d] += 0.25 * x[3 * hex_facets[f][k] + d];
+    for (int k = 0; k < 4; k++) {
+      const double *a = x + 3 * hex_facets[f][k], *b = x + 3 * hex_facets[f][(k + 1) % 4];
+      vol += det3(cf, a, b) / 6.0;
     }
-    return vol; /* hex_facets are oriented outward */
   }
-  }
+  return vol;
 }
 
 double mesh_hmax(const mesh *m) {
@@ -296,7 +305,7 @@ int mesh_count_invalid(const mesh *m, int maxids, int *ids, int *ninv) {
   for (int c = 0; c < m->ncell; c++) {
     double q;
     if (m->type == CELL_QUADRILATERAL || m->type == CELL_HEXAHEDRON)
-      q = min_corner_jacobian(m, c);
+      q = mesh_min_corner_jacobian(m, c);
     else
       q = mesh_cell_signed_measure(m, c);
     if (!(q > tol)) {

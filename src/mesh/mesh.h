@@ -119,6 +119,13 @@ double mesh_cell_signed_measure(const mesh *m, int c);
  * positive (relative to the mesh size); writes up to maxids ids of such cells */
 int mesh_count_invalid(const mesh *m, int maxids, int *ids, int *ninv);
 double mesh_hmax(const mesh *m);
+/* minimum corner Jacobian determinant of a quadrilateral or hexahedron (the untangling
+ * paper's validity: every corner Jacobian positive) */
+double mesh_min_corner_jacobian(const mesh *m, int c);
+/* signed volume of a hexahedron given its 8 vertices (24 coordinates) */
+double hex_signed_volume(const double *x);
+/* the three neighbours of hexahedron corner i, in right-handed order */
+const int *hex_corner_neighbors(int i);
 
 /* uniform refinement: triangles and quadrilaterals into 4, tetrahedra into 8 (Bey),
  * hexahedra into 8; boundary facets and tags follow */

@@ -1,0 +1,486 @@
+/* quality.c — cell quality measures. Equation numbers refer to the seed paper "On simplex
+ * shape measures with extension for anisotropic meshes" (Definition 2.1: 1 for the regular
+ * simplex, 0 for every degenerate one; invariant under translation, rotation, reflection
+ * and uniform scaling) and its Appendices B and C. Riemannian versions (2.10–2.12) map
+ * the cell by N with N^T N = M (the Cholesky factor of the averaged metric), so lengths,
+ * areas and volumes are the metric ones and every measure follows. */
+#include "quality.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char *names[QM_COUNT] = {
+    "mean_ratio", "radius_ratio", "condition", "frobenius_condition", "interpolation_coefficient",
+    "min_solid_angle", "sigma_min", "min_dihedral_angle", "edge_ratio", "signed_measure",
+    "min_angle", "max_angle", "min_edge", "max_edge", "min_corner_jacobian", "scaled_jacobian",
+    "corner_condition"};
+
+int quality_from_name(const char *name) {
+  for (int i = 0; i < QM_COUNT; i++)
+    if (!strcmp(names[i], name)) return i;
+  return -1;
+}
+const char *quality_name(int q) { return q >= 0 && q < QM_COUNT ? names[q] : "?"; }
+
+void quality_names(char *buf, size_t len) {
+  size_t used = 0;
+  buf[0] = 0;
+  for (int i = 0; i < QM_COUNT && used < len; i++)
+    used += (size_t)snprintf(buf + used, len - used, "%s%s", i ? ", " : "", names[i]);
+}
+
+int quality_applies(int q, cell_type t) {
+  int simplex = t == CELL_TRIANGLE || t == CELL_TETRAHEDRON;
+  switch (q) {
+  case QM_MIN_DIHEDRAL_ANGLE: return t == CELL_TETRAHEDRON;
+  case QM_MIN_ANGLE: case QM_MAX_ANGLE: return t != CELL_HEXAHEDRON;
+  case QM_SIGNED_MEASURE: case QM_MIN_EDGE: case QM_MAX_EDGE: case QM_MIN_CORNER_JACOBIAN:
+  case QM_SCALED_JACOBIAN: case QM_CORNER_CONDITION:
+    return 1;
+  default: return simplex;
+  }
+}
+
+/* ---------------------------------------------------------------- small linear algebra */
+
+static void sub(int d, const double *a, const double *b, double *r) {
+  for (int i = 0; i < d; i++) r[i] = a[i] - b[i];
+}
+static double dot(int d, const double *a, const double *b) {
+  double s = 0;
+  for (int i = 0; i < d; i++) s += a[i] * b[i];
+  return s;
+}
+static double norm(int d, const double *a) { return sqrt(dot(d, a, a)); }
+static double cross2(const double *a, const double *b) { return a[0] * b[1] - a[1] * b[0]; }
+static void cross3(const double *a, const double *b, double *r) {
+  r[0] = a[1] * b[2] - a[2] * b[1];
+  r[1] = a[2] * b[0] - a[0] * b[2];
+  r[2] = a[0] * b[1] - a[1] * b[0];
+}
+static double det3(const double *a, const double *b, const double *c) {
+  double r[3];
+  cross3(b, c, r);
+  return dot(3, a, r);
+}
+
+/* eigenvalues of a symmetric 3×3 matrix (closed form), ascending */
+static void eig_sym3(const double A[3][3], double *l) {
+  double p1 = A[0][1] * A[0][1] + A[0][2] * A[0][2] + A[1][2] * A[1][2];
+  if (p1 == 0) {
+    l[0] = A[0][0]; l[1] = A[1][1]; l[2] = A[2][2];
+  } else {
+    double q = (A[0][0] + A[1][1] + A[2][2]) / 3;
+    double p2 = (A[0][0] - q) * (A[0][0] - q) + (A[1][1] - q) * (A[1][1] - q) + (A[2][2] - q) * (A[2][2] - q) + 2 * p1;
+    double p = sqrt(p2 / 6), B[3][3];
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 3; j++) B[i][j] = (A[i][j] - (i == j) * q) / p;
+    double r = (B[0][0] * (B[1][1] * B[2][2] - B[1][2] * B[2][1]) - B[0][1] * (B[1][0] * B[2][2] - B[1][2] * B[2][0]) +
+                B[0][2] * (B[1][0] * B[2][1] - B[1][1] * B[2][0])) / 2;
+    if (r < -1) r = -1;
+    if (r > 1) r = 1;
+    double phi = acos(r) / 3;
+    l[2] = q + 2 * p * cos(phi);
+    l[0] = q + 2 * p * cos(phi + 2 * M_PI / 3);
+    l[1] = 3 * q - l[0] - l[2];
+  }
+  for (int i = 1; i < 3; i++)
+    for (int j = i; j > 0 && l[j - 1] > l[j]; j--) { double t = l[j]; l[j] = l[j - 1]; l[j - 1] = t; }
+}
+
+/* G = S^T S with S = T W^-1, W the edge matrix of the unit regular simplex (2.2, 2.3) */
+static void gram_regular(int d, const double *x, double G[3][3]) {
+  double T[3][3], S[3][3];
+  for (int k = 0; k < d; k++)
+    for (int i = 0; i < d; i++) T[i][k] = x[(k + 1) * d + i] - x[i];
+  if (d == 2) {
+    static const double Wi[2][2] = {{1, -0.57735026918962576}, {0, 1.1547005383792515}};
+    for (int i = 0; i < 2; i++)
+      for (int j = 0; j < 2; j++) S[i][j] = T[i][0] * Wi[0][j] + T[i][1] * Wi[1][j];
+  } else {
+    /* W = [(1,0,0) (1/2,√3/2,0) (1/2,√3/6,√(2/3))]; its inverse: */
+    static const double Wi[3][3] = {{1, -0.57735026918962576, -0.40824829046386302},
+                                    {0, 1.1547005383792515, -0.40824829046386302},
+                                    {0, 0, 1.2247448713915890}};
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 3; j++) S[i][j] = T[i][0] * Wi[0][j] + T[i][1] * Wi[1][j] + T[i][2] * Wi[2][j];
+  }
+  for (int i = 0; i < d; i++)
+    for (int j = 0; j < d; j++) {
+      double s = 0;
+      for (int k = 0; k < d; k++) s += S[k][i] * S[k][j];
+      G[i][j] = s;
+    }
+}
+
+/* ---------------------------------------------------------------- simplices */
+
+static double tri_quality(const double *x, int q) {
+  const double *P[3] = {x, x + 2, x + 4};
+  double e01[2], e02[2], e12[2];
+  sub(2, P[1], P[0], e01);
+  sub(2, P[2], P[0], e02);
+  sub(2, P[2], P[1], e12);
+  double L01 = norm(2, e01), L02 = norm(2, e02), L12 = norm(2, e12);
+  double S = 0.5 * cross2(e01, e02), A = fabs(S);
+  double hmin = fmin(L01, fmin(L02, L12)), hmax = fmax(L01, fmax(L02, L12));
+  double sumL2 = L01 * L01 + L02 * L02 + L12 * L12;
+  /* vertex angles (B.3), computed with atan2 to stay exact near π */
+  double th[3], s0[2], s1[2];
+  for (int i = 0; i < 3; i++) {
+    sub(2, P[(i + 1) % 3], P[i], s0);
+    sub(2, P[(i + 2) % 3], P[i], s1);
+    th[i] = atan2(fabs(cross2(s0, s1)), dot(2, s0, s1));
+  }
+  double thmin = fmin(th[0], fmin(th[1], th[2])), thmax = fmax(th[0], fmax(th[1], th[2]));
+  double p = 0.5 * (L01 + L02 + L12);
+  switch (q) {
+  case QM_MEAN_RATIO: return sumL2 > 0 ? 4 * sqrt(3.0) * A / sumL2 : 0; /* (2.1) */
+  case QM_RADIUS_RATIO: { /* (2.4): 2 ρ_K / r_K = 8 S² / (p L12 L13 L23) */
+    double den = p * L01 * L02 * L12;
+    return den > 0 ? 8 * A * A / den : 0;
+  }
+  case QM_CONDITION: case QM_FROBENIUS_CONDITION: {
+    double G[3][3];
+    gram_regular(2, x, G);
+    double tr = G[0][0] + G[1][1], det = G[0][0] * G[1][1] - G[0][1] * G[1][0];
+    if (det <= 0 || tr <= 0) return 0;
+    if (q == QM_FROBENIUS_CONDITION) return 2 * sqrt(det) / tr; /* (2.3), ≡ η in 2D */
+    double disc = sqrt(fmax(0, tr * tr / 4 - det));
+    double lmax = tr / 2 + disc, lmin = det / lmax; /* (2.2) */
+    return lmin / lmax;
+  }
+  case QM_INTERPOLATION_COEFF: return hmax > 0 && p > 0 ? 2 * sqrt(3.0) * (A / p) / hmax : 0; /* (2.7) */
+  case QM_MIN_SOLID_ANGLE: return thmin / (M_PI / 3); /* (2.5) */
+  case QM_SIGMA_MIN: /* (2.6): σ_i = sin θ_i, β = √3/2 */
+    return fmin(sin(th[0]), fmin(sin(th[1]), sin(th[2]))) / (sqrt(3.0) / 2);
+  case QM_EDGE_RATIO: return hmax > 0 ? hmin / hmax : 0; /* (2.9) */
+  case QM_SIGNED_MEASURE: return S;
+  case QM_MIN_ANGLE: return thmin * 180 / M_PI;
+  case QM_MAX_ANGLE: return thmax * 180 / M_PI;
+  case QM_MIN_EDGE: return hmin;
+  case QM_MAX_EDGE: return hmax;
+  case QM_MIN_CORNER_JACOBIAN: return 2 * S;
+  case QM_SCALED_JACOBIAN: { /* 2S / (largest product of a corner's two edges), × 2/√3 */
+    double m = fmax(L01 * L02, fmax(L01 * L12, L02 * L12));
+    return m > 0 ? 2 * S / m * 2 / sqrt(3.0) : 0;
+  }
+  case QM_CORNER_CONDITION: {
+    if (S <= 0) return 0;
+    return tri_quality(x, QM_FROBENIUS_CONDITION);
+  }
+  default: return NAN;
+  }
+}
+
+static double tet_quality(const double *x, int q) {
+  const double *P[4] = {x, x + 3, x + 6, x + 9};
+  double L[4][4];
+  double hmin = INFINITY, hmax = 0, sumL2 = 0;
+  for (int i = 0; i < 4; i++)
+    for (int j = i + 1; j < 4; j++) {
+      double e[3];
+      sub(3, P[j], P[i], e);
+      L[i][j] = L[j][i] = norm(3, e);
+      hmin = fmin(hmin, L[i][j]);
+      hmax = fmax(hmax, L[i][j]);
+      sumL2 += L[i][j] * L[i][j];
+    }
+  double e1[3], e2[3], e3[3];
+  sub(3, P[1], P[0], e1);
+  sub(3, P[2], P[0], e2);
+  sub(3, P[3], P[0], e3);
+  double V = det3(e1, e2, e3) / 6, A = fabs(V);
+  /* face areas S_k (face opposite vertex k) and outward unit normals */
+  double Sf[4], nrm[4][3], sumS = 0;
+  for (int k = 0; k < 4; k++) {
+    int a = (k + 1) % 4, b = (k + 2) % 4, c = (k + 3) % 4;
+    double u[3], w[3], n[3], toK[3];
+    sub(3, P[b], P[a], u);
+    sub(3, P[c], P[a], w);
+    cross3(u, w, n);
+    double nn = norm(3, n);
+    Sf[k] = 0.5 * nn;
+    sumS += Sf[k];
+    sub(3, P[k], P[a], toK);
+    double sgn = dot(3, n, toK) > 0 ? -1 : 1; /* away from the opposite vertex */
+    for (int i = 0; i < 3; i++) nrm[k][i] = nn > 0 ? sgn * n[i] / nn : 0;
+  }
+  switch (q) {
+  case QM_MEAN_RATIO: return sumL2 > 0 ? 12 * cbrt(9 * V * V) / sumL2 : 0; /* (2.1) */
+  case QM_RADIUS_RATIO: { /* (2.4) */
+    double a = L[0][1] * L[2][3], b = L[0][2] * L[1][3], c = L[0][3] * L[1][2];
+    double r = (a + b + c) * (a + b - c) * (a + c - b) * (b + c - a);
+    double den = sqrt(fmax(0, r)) * sumS;
+    return den > 0 ? 216 * V * V / den : 0;
+  }
+  case QM_CONDITION: case QM_FROBENIUS_CONDITION: {
+    double G[3][3];
+    gram_regular(3, x, G);
+    double det = G[0][0] * (G[1][1] * G[2][2] - G[1][2] * G[2][1]) - G[0][1] * (G[1][0] * G[2][2] - G[1][2] * G[2][0]) +
+                 G[0][2] * (G[1][0] * G[2][1] - G[1][1] * G[2][0]);
+    double tr = G[0][0] + G[1][1] + G[2][2];
+    if (det <= 0 || tr <= 0) return 0;
+    if (q == QM_FROBENIUS_CONDITION) { /* (2.3): 3 / (|S| |S^-1|), tr G^-1 = tr adj G / det G */
+      double tradj = (G[1][1] * G[2][2] - G[1][2] * G[2][1]) + (G[0][0] * G[2][2] - G[0][2] * G[2][0]) +
+                     (G[0][0] * G[1][1] - G[0][1] * G[1][0]);
+      return 3 * sqrt(det / (tr * tradj));
+    }
+    double l[3];
+    eig_sym3((const double(*)[3])G, l); /* (2.2) */
+    return l[2] > 0 ? fmax(0, l[0]) / l[2] : 0;
+  }
+  case QM_INTERPOLATION_COEFF: return hmax > 0 && sumS > 0 ? 2 * sqrt(6.0) * (3 * A / sumS) / hmax : 0; /* (2.7) */
+  case QM_MIN_SOLID_ANGLE: case QM_SIGMA_MIN: {
+    /* solid angles by the Van Oosterom–Strackee formula (exact on [0, 2π], unlike the
+     * arcsine of (C.3)) */
+    double mn = INFINITY, smn = INFINITY;
+    for (int i = 0; i < 4; i++) {
+      double a[3], b[3], c[3];
+      sub(3, P[(i + 1) % 4], P[i], a);
+      sub(3, P[(i + 2) % 4], P[i], b);
+      sub(3, P[(i + 3) % 4], P[i], c);
+      double la = norm(3, a), lb = norm(3, b), lc = norm(3, c);
+      double num = fabs(det3(a, b, c));
+      double den = la * lb * lc + dot(3, a, b) * lc + dot(3, a, c) * lb + dot(3, b, c) * la;
+      double om = 2 * atan2(num, den);
+      mn = fmin(mn, om);
+      smn = fmin(smn, sin(om / 2));
+    }
+    if (q == QM_MIN_SOLID_ANGLE) return mn / (6 * asin(sqrt(3.0) / 3) - M_PI); /* (2.5) */
+    return smn / (sqrt(6.0) / 9);                                             /* (2.6) */
+  }
+  case QM_MIN_DIHEDRAL_ANGLE: case QM_MIN_ANGLE: case QM_MAX_ANGLE: {
+    /* dihedral angle at edge (i,j): π − angle between the outward normals of the two
+     * faces that contain it, the faces opposite the other two vertices k, l (2.8) */
+    double mn = INFINITY, mx = 0;
+    for (int i = 0; i < 4; i++)
+      for (int j = i + 1; j < 4; j++) {
+        int k = -1, l = -1;
+        for (int m = 0; m < 4; m++)
+          if (m != i && m != j) { if (k < 0) k = m; else l = m; }
+        double c = dot(3, nrm[k], nrm[l]);
+        if (c > 1) c = 1;
+        if (c < -1) c = -1;
+        double phi = (Sf[k] > 0 && Sf[l] > 0) ? M_PI - acos(c) : 0;
+        mn = fmin(mn, phi);
+        mx = fmax(mx, phi);
+      }
+    if (q == QM_MIN_DIHEDRAL_ANGLE) return mn / acos(1.0 / 3);
+    return (q == QM_MIN_ANGLE ? mn : mx) * 180 / M_PI;
+  }
+  case QM_EDGE_RATIO: return hmax > 0 ? hmin / hmax : 0;
+  case QM_SIGNED_MEASURE: return V;
+  case QM_MIN_EDGE: return hmin;
+  case QM_MAX_EDGE: return hmax;
+  case QM_MIN_CORNER_JACOBIAN: return 6 * V;
+  case QM_SCALED_JACOBIAN: { /* 6V / (largest product of a corner's three edges), × √2 */
+    double m = 0;
+    for (int i = 0; i < 4; i++) {
+      double pr = 1;
+      for (int j = 0; j < 4; j++)
+        if (j != i) pr *= L[i][j];
+      m = fmax(m, pr);
+    }
+    return m > 0 ? 6 * V / m * sqrt(2.0) : 0;
+  }
+  case QM_CORNER_CONDITION: return V <= 0 ? 0 : tet_quality(x, QM_FROBENIUS_CONDITION);
+  default: return NAN;
+  }
+}
+
+double simplex_quality(int dim, const double *x, int q) {
+  return dim == 2 ? tri_quality(x, q) : tet_quality(x, q);
+}
+
+/* ---------------------------------------------------------------- quads and hexes */
+
+static double quad_quality(const double *x, int q) {
+  double mnJ = INFINITY, mnS = INFINITY, mnC = INFINITY, mnA = INFINITY, mxA = 0, mnE = INFINITY, mxE = 0;
+  for (int i = 0; i < 4; i++) {
+    const double *p = x + 2 * i, *a = x + 2 * ((i + 1) % 4), *b = x + 2 * ((i + 3) % 4);
+    double e1[2], e2[2];
+    sub(2, a, p, e1);
+    sub(2, b, p, e2);
+    double det = cross2(e1, e2), l1 = norm(2, e1), l2 = norm(2, e2);
+    mnJ = fmin(mnJ, det);
+    mnS = fmin(mnS, l1 > 0 && l2 > 0 ? det / (l1 * l2) : 0);
+    mnC = fmin(mnC, det > 0 ? 2 * det / (l1 * l1 + l2 * l2) : 0);
+    double ang = atan2(det, dot(2, e1, e2)); /* interior angle, reflex when negative */
+    if (ang < 0) ang += 2 * M_PI;
+    mnA = fmin(mnA, ang);
+    mxA = fmax(mxA, ang);
+    mnE = fmin(mnE, l1);
+    mxE = fmax(mxE, l1);
+  }
+  switch (q) {
+  case QM_MIN_CORNER_JACOBIAN: return mnJ;
+  case QM_SCALED_JACOBIAN: return mnS;
+  case QM_CORNER_CONDITION: return mnC;
+  case QM_MIN_ANGLE: return mnA * 180 / M_PI;
+  case QM_MAX_ANGLE: return mxA * 180 / M_PI;
+  case QM_MIN_EDGE: return mnE;
+  case QM_MAX_EDGE: return mxE;
+  default: return NAN;
+  }
+}
+
+static double hex_quality(const double *x, int q) {
+  double mnJ = INFINITY, mnS = INFINITY, mnC = INFINITY;
+  for (int i = 0; i < 8; i++) {
+    const int *nb = hex_corner_neighbors(i);
+    double e[3][3], ln[3];
+    for (int k = 0; k < 3; k++) {
+      sub(3, x + 3 * nb[k], x + 3 * i, e[k]);
+      ln[k] = norm(3, e[k]);
+    }
+    double det = det3(e[0], e[1], e[2]);
+    mnJ = fmin(mnJ, det);
+    mnS = fmin(mnS, ln[0] > 0 && ln[1] > 0 && ln[2] > 0 ? det / (ln[0] * ln[1] * ln[2]) : 0);
+    /* κ = |A| |A^-1| with |A^-1| = |adj A| / |det A|; adj rows are cross products */
+    double c01[3], c12[3], c20[3];
+    cross3(e[0], e[1], c01);
+    cross3(e[1], e[2], c12);
+    cross3(e[2], e[0], c20);
+    double fa = sqrt(ln[0] * ln[0] + ln[1] * ln[1] + ln[2] * ln[2]);
+    double fadj = sqrt(dot(3, c01, c01) + dot(3, c12, c12) + dot(3, c20, c20));
+    mnC = fmin(mnC, det > 0 && fa > 0 && fadj > 0 ? 3 * det / (fa * fadj) : 0);
+  }
+  static const int edges[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6},
+                                   {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
+  double mnE = INFINITY, mxE = 0;
+  for (int k = 0; k < 12; k++) {
+    double e[3];
+    sub(3, x + 3 * edges[k][1], x + 3 * edges[k][0], e);
+    double l = norm(3, e);
+    mnE = fmin(mnE, l);
+    mxE = fmax(mxE, l);
+  }
+  switch (q) {
+  case QM_MIN_CORNER_JACOBIAN: return mnJ;
+  case QM_SCALED_JACOBIAN: return mnS;
+  case QM_CORNER_CONDITION: return mnC;
+  case QM_MIN_EDGE: return mnE;
+  case QM_MAX_EDGE: return mxE;
+  default: return NAN;
+  }
+}
+
+/* ---------------------------------------------------------------- meshes */
+
+/* N with N^T N = M: the transpose of the Cholesky factor L (M = L L^T); 0 when M is not
+ * symmetric positive definite */
+static int metric_map(int d, const double *M, double N[3][3]) {
+  double Lc[3][3] = {{0}};
+  for (int i = 0; i < d; i++)
+    for (int j = 0; j < d; j++)
+      if (fabs(M[i * d + j] - M[j * d + i]) > 1e-12 * (fabs(M[i * d + j]) + fabs(M[j * d + i]) + 1e-300)) return 0;
+  for (int j = 0; j < d; j++) {
+    double s = M[j * d + j];
+    for (int k = 0; k < j; k++) s -= Lc[j][k] * Lc[j][k];
+    if (!(s > 0)) return 0;
+    Lc[j][j] = sqrt(s);
+    for (int i = j + 1; i < d; i++) {
+      double t = M[i * d + j];
+      for (int k = 0; k < j; k++) t -= Lc[i][k] * Lc[j][k];
+      Lc[i][j] = t / Lc[j][j];
+    }
+  }
+  for (int i = 0; i < d; i++)
+    for (int j = 0; j < d; j++) N[i][j] = Lc[j][i];
+  return 1;
+}
+
+int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out, char *err) {
+  if (q < 0 || q >= QM_COUNT) { snprintf(err, MESH_ERRLEN, "unknown quality measure"); return 1; }
+  if (!quality_applies(q, m->type)) {
+    snprintf(err, MESH_ERRLEN, "the measure %s does not apply to %ss", names[q], cell_name(m->type));
+    return 1;
+  }
+  int d = m->dim, nvc = m->nvc;
+  double N[3][3];
+  int kind = metric ? metric->kind : 0;
+  if (kind == 1 && !metric_map(d, metric->m, N)) {
+    snprintf(err, MESH_ERRLEN, "the metric tensor is not symmetric positive definite");
+    return 1;
+  }
+  double x[8 * 3], y[8 * 3];
+  for (int c = 0; c < m->ncell; c++) {
+    const int *v = m->cells + (size_t)c * (size_t)nvc;
+    for (int i = 0; i < nvc; i++)
+      for (int k = 0; k < d; k++) x[i * d + k] = m->x[(size_t)v[i] * d + k];
+    if (kind == 2) { /* the vertex tensors averaged over the cell (section 2.8) */
+      double Mb[9] = {0};
+      for (int i = 0; i < nvc; i++)
+        for (int k = 0; k < d * d; k++) Mb[k] += metric->m[(size_t)v[i] * d * d + k] / nvc;
+      if (!metric_map(d, Mb, N)) {
+        snprintf(err, MESH_ERRLEN, "the metric tensor averaged over cell %d is not symmetric positive definite", c + 1);
+        return 1;
+      }
+    }
+    const double *xc = x;
+    if (kind) {
+      for (int i = 0; i < nvc; i++)
+        for (int r = 0; r < d; r++) {
+          double s = 0;
+          for (int k = 0; k < d; k++) s += N[r][k] * x[i * d + k];
+          y[i * d + r] = s;
+        }
+      xc = y;
+    }
+    double val;
+    if (m->type == CELL_TRIANGLE) val = tri_quality(xc, q);
+    else if (m->type == CELL_TETRAHEDRON) val = tet_quality(xc, q);
+    else if (m->type == CELL_QUADRILATERAL) {
+      if (q == QM_SIGNED_MEASURE) {
+        double s = 0;
+        for (int i = 0; i < 4; i++) s += cross2(xc + 2 * i, xc + 2 * ((i + 1) % 4));
+        val = 0.5 * s;
+      } else val = quad_quality(xc, q);
+    } else {
+      val = q == QM_SIGNED_MEASURE ? hex_signed_volume(xc) : hex_quality(xc, q);
+    }
+    out[c] = val;
+  }
+  return 0;
+}
+
+void quality_stats_compute(const double *q, int n, quality_stats *s) {
+  s->n = n;
+  s->min = INFINITY;
+  s->max = -INFINITY;
+  s->mean = 0;
+  s->argmin = s->argmax = -1;
+  for (int i = 0; i < n; i++) {
+    if (q[i] < s->min) { s->min = q[i]; s->argmin = i; }
+    if (q[i] > s->max) { s->max = q[i]; s->argmax = i; }
+    s->mean += q[i];
+  }
+  s->mean = n ? s->mean / n : NAN;
+}
+
+void quality_histogram(const double *q, int n, int nbins, double lo, double hi, int *counts) {
+  for (int b = 0; b < nbins; b++) counts[b] = 0;
+  double w = (hi - lo) / nbins;
+  for (int i = 0; i < n; i++) {
+    int b = w > 0 ? (int)floor((q[i] - lo) / w) : 0;
+    if (b < 0) b = 0;
+    if (b >= nbins) b = nbins - 1;
+    counts[b]++;
+  }
+}
+
+/* ---------------------------------------------------------------- worst cells */
+
+void quality_worst(const double *q, int n, int k, int *ids) {
+  /* a bounded insertion into the k smallest: O(n k), fine for the small k users ask for */
+  int m = 0;
+  for (int i = 0; i < n; i++) {
+    if (m == k && !(q[i] < q[ids[m - 1]])) continue;
+    int j = m < k ? m++ : k - 1;
+    while (j > 0 && q[ids[j - 1]] > q[i]) { ids[j] = ids[j - 1]; j--; }
+    ids[j] = i;
+  }
+}

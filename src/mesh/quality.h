@@ -1,0 +1,64 @@
+/* quality.h — cell quality measures (seed: "On simplex shape measures with extension for
+ * anisotropic meshes", eqs. 2.1–2.12), corner Jacobians, scaled Jacobians and corner
+ * condition numbers for every cell type, and mesh-level statistics. libc + libm only. */
+#ifndef LUGAL_QUALITY_H
+#define LUGAL_QUALITY_H
+
+#include "mesh.h"
+
+typedef enum {
+  QM_MEAN_RATIO,            /* η (2.1), simplices */
+  QM_RADIUS_RATIO,          /* ρ (2.4) */
+  QM_CONDITION,             /* κ (2.2) */
+  QM_FROBENIUS_CONDITION,   /* κ̃ (2.3) */
+  QM_INTERPOLATION_COEFF,   /* γ (2.7) */
+  QM_MIN_SOLID_ANGLE,       /* θmin (2.5) */
+  QM_SIGMA_MIN,             /* σmin (2.6) */
+  QM_MIN_DIHEDRAL_ANGLE,    /* φmin (2.8), tetrahedra */
+  QM_EDGE_RATIO,            /* r (2.9) */
+  QM_SIGNED_MEASURE,        /* signed area / volume */
+  QM_MIN_ANGLE,             /* degrees: triangle and quadrilateral corner angles, tetrahedron dihedral angles */
+  QM_MAX_ANGLE,
+  QM_MIN_EDGE,
+  QM_MAX_EDGE,
+  QM_MIN_CORNER_JACOBIAN,   /* every cell type */
+  QM_SCALED_JACOBIAN,       /* min over corners of det / product of edge lengths, 1 for regular cells */
+  QM_CORNER_CONDITION,      /* Knupp: min over corners of d / (|A W^-1| |W A^-1|), 1 for regular cells */
+  QM_COUNT
+} quality_measure;
+
+/* -1 when unknown; names are the strings users pass (issue 3) */
+int quality_from_name(const char *name);
+const char *quality_name(int q);
+/* comma-separated list of the valid names */
+void quality_names(char *buf, size_t len);
+/* does measure q apply to cells of type t */
+int quality_applies(int q, cell_type t);
+
+/* a metric for the Riemannian versions (2.10–2.12): none, one constant tensor, or one per
+ * vertex averaged over each cell; tensors are dim×dim, symmetric positive definite */
+typedef struct {
+  int kind;             /* 0 none, 1 constant, 2 per vertex */
+  const double *m;      /* dim*dim, or nvert*dim*dim */
+} quality_metric;
+
+/* per-cell values of measure q into out[ncell]; nonzero with a message in err when the
+ * measure does not apply or the metric is not positive definite */
+int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out, char *err);
+
+/* one simplex given its vertices (d+1 points of dimension d, already in metric space) */
+double simplex_quality(int dim, const double *x, int q);
+
+typedef struct {
+  int n;
+  double min, max, mean;
+  int argmin, argmax;
+} quality_stats;
+
+void quality_stats_compute(const double *q, int n, quality_stats *s);
+/* counts of n values in nbins equal bins over [lo, hi] (values outside go to the ends) */
+void quality_histogram(const double *q, int n, int nbins, double lo, double hi, int *counts);
+/* ids of the k lowest values (k <= n), ascending */
+void quality_worst(const double *q, int n, int k, int *ids);
+
+#endif

@@ -1,0 +1,207 @@
+/* test_quality.c — the simplex shape measures of the seed (eqs. 2.1–2.9, Definition 2.1):
+ * 1 for regular simplices, → 0 for every degeneracy of Tables 1–3, invariance under
+ * translation, rotation, reflection and uniform scaling, the equivalence inequalities of
+ * section 4.2 on random cells, Riemannian versions equal to the Euclidean ones after the
+ * metric's square root is applied, and corner measures of quadrilaterals and hexahedra. */
+#include "../../src/mesh/quality.h"
+#include "check.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+static const int valid2[] = {QM_MEAN_RATIO, QM_RADIUS_RATIO, QM_CONDITION, QM_FROBENIUS_CONDITION,
+                             QM_INTERPOLATION_COEFF, QM_MIN_SOLID_ANGLE, QM_SIGMA_MIN};
+#define NVALID (int)(sizeof valid2 / sizeof valid2[0])
+
+static double urand(void) { return rand() / (double)RAND_MAX; }
+
+typedef struct { const char *name; double x[12]; } shape;
+
+int main(void) {
+  srand(4242);
+  const double s3 = sqrt(3.0);
+  double tri[6] = {0, 0, 1, 0, 0.5, s3 / 2};
+  double tet[12] = {0, 0, 0, 1, 0, 0, 0.5, s3 / 2, 0, 0.5, s3 / 6, sqrt(2.0 / 3)};
+  int all1[] = {QM_MEAN_RATIO, QM_RADIUS_RATIO, QM_CONDITION, QM_FROBENIUS_CONDITION, QM_INTERPOLATION_COEFF,
+                QM_MIN_SOLID_ANGLE, QM_SIGMA_MIN, QM_EDGE_RATIO, QM_SCALED_JACOBIAN, QM_CORNER_CONDITION};
+  for (size_t i = 0; i < sizeof all1 / sizeof all1[0]; i++) {
+    CHECK_CLOSE(simplex_quality(2, tri, all1[i]), 1.0, 1e-13);
+    CHECK_CLOSE(simplex_quality(3, tet, all1[i]), 1.0, 1e-13);
+  }
+  CHECK_CLOSE(simplex_quality(3, tet, QM_MIN_DIHEDRAL_ANGLE), 1.0, 1e-13);
+  CHECK_CLOSE(simplex_quality(2, tri, QM_MIN_ANGLE), 60.0, 1e-13);
+  CHECK_CLOSE(simplex_quality(3, tet, QM_MIN_ANGLE), acos(1.0 / 3) * 180 / M_PI, 1e-13);
+  CHECK_CLOSE(simplex_quality(2, tri, QM_SIGNED_MEASURE), s3 / 4, 1e-14);
+  CHECK_CLOSE(simplex_quality(3, tet, QM_SIGNED_MEASURE), sqrt(2.0) / 12, 1e-14);
+
+  /* degeneracies (Tables 1–3) at h = 1e-7: every valid measure below 1e-3 */
+  const double h = 1e-7;
+  shape tris[] = {{"cap", {0, 0, 1, 0, 0.5, h}},
+                  {"needle", {0, 0, 1, 0, 1, h}},
+                  {"big crunch", {0, 0, h, 0, h / 2, h * h}}};
+  shape tets[] = {{"fin", {0, 0, 0, 1, 0, 0, 0.5, 1, 0, 0.5, 0, h}},
+                  {"cap", {0, 0, 0, 1, 0, 0, 0.5, 1, 0, 0.5, 1.0 / 3, h}},
+                  {"sliver", {0, 0, 0, 1, 0, h, 1, 1, 0, 0, 1, h}},
+                  {"wedge", {0, 0, 0, 1, 0, 0, 0.5, 1, 0, 1, h, h}},
+                  {"crystal", {0, 0, 0, 1, h, 0, 2, 0, h, 3, h, h}},
+                  {"spindle", {0, 0, 0, 1, h, 0, 1, 0, h, 2, h, h}},
+                  {"splitter", {0, 0, 0, 0, h, h, 1, h, 0, 2, 0, h}},
+                  {"slat", {0, 0, 0, 0, h, 0, 1, 0, h, 1, h, h}},
+                  {"needle", {0, 0, 0, h, 0, 0, 0, h, 0, 1, 1, 1}},
+                  {"big crunch", {0, 0, 0, h, 0, 0, 0, h, 0, h / 3, h / 3, h * h}}};
+  for (size_t s = 0; s < 3; s++)
+    for (int i = 0; i < NVALID; i++) {
+      double v = simplex_quality(2, tris[s].x, valid2[i]);
+      CHECK(v >= 0 && v < 1e-3, "triangle %s: %s = %g", tris[s].name, quality_name(valid2[i]), v);
+    }
+  for (size_t s = 0; s < sizeof tets / sizeof tets[0]; s++)
+    for (int i = 0; i < NVALID; i++) {
+      double v = simplex_quality(3, tets[s].x, valid2[i]);
+      CHECK(v >= 0 && v < 1e-3, "tetrahedron %s: %s = %g", tets[s].name, quality_name(valid2[i]), v);
+    }
+  /* the invalid measures of the paper really are invalid: the edge ratio stays near 1/2
+   * for the triangle cap, the dihedral measure near 1/3·π / α for the tetrahedral needle */
+  CHECK(simplex_quality(2, tris[0].x, QM_EDGE_RATIO) > 0.4, "edge ratio of the cap %g", simplex_quality(2, tris[0].x, QM_EDGE_RATIO));
+  CHECK(simplex_quality(3, tets[2].x, QM_EDGE_RATIO) > 0.6, "edge ratio of the sliver");
+  CHECK(simplex_quality(3, tets[8].x, QM_MIN_DIHEDRAL_ANGLE) > 0.2, "min dihedral of the needle %g",
+        simplex_quality(3, tets[8].x, QM_MIN_DIHEDRAL_ANGLE));
+
+  /* invariance and the equivalence inequalities of section 4.2 on random simplices */
+  int ncheck = 0;
+  for (int trial = 0; trial < 4000; trial++) {
+    int d = 2 + trial % 2;
+    double x[12], y[12];
+    for (int i = 0; i < (d + 1) * d; i++) x[i] = urand();
+    if (fabs(simplex_quality(d, x, QM_SIGNED_MEASURE)) < 1e-6) continue;
+    /* random orthogonal Q (Gram–Schmidt), reflection, scale, shift */
+    double Q[3][3];
+    for (int i = 0; i < d; i++) {
+      for (int k = 0; k < d; k++) Q[i][k] = urand() - 0.5;
+      for (int j = 0; j < i; j++) {
+        double p = 0;
+        for (int k = 0; k < d; k++) p += Q[i][k] * Q[j][k];
+        for (int k = 0; k < d; k++) Q[i][k] -= p * Q[j][k];
+      }
+      double n = 0;
+      for (int k = 0; k < d; k++) n += Q[i][k] * Q[i][k];
+      for (int k = 0; k < d; k++) Q[i][k] /= sqrt(n);
+    }
+    double sc = 0.01 + 100 * urand(), sh[3] = {urand() * 50, urand() * 50, urand() * 50};
+    for (int v = 0; v <= d; v++)
+      for (int i = 0; i < d; i++) {
+        double s = 0;
+        for (int k = 0; k < d; k++) s += Q[i][k] * x[v * d + k];
+        y[v * d + i] = sc * s * (i == 0 && trial % 4 < 2 ? -1 : 1) + sh[i];
+      }
+    for (int i = 0; i < NVALID; i++)
+      CHECK_CLOSE(simplex_quality(d, y, valid2[i]), simplex_quality(d, x, valid2[i]), 1e-9);
+    double eta = simplex_quality(d, x, QM_MEAN_RATIO), rho = simplex_quality(d, x, QM_RADIUS_RATIO);
+    double kap = simplex_quality(d, x, QM_CONDITION), kt = simplex_quality(d, x, QM_FROBENIUS_CONDITION);
+    double gam = simplex_quality(d, x, QM_INTERPOLATION_COEFF), sig = simplex_quality(d, x, QM_SIGMA_MIN);
+    const double e = 1e-12;
+    CHECK(kap <= eta + e && eta <= d * pow(kap, 1.0 / d) + e, "kappa %g eta %g", kap, eta);
+    CHECK(sqrt(kap) <= kt + e && kt <= d * sqrt(kap) + e, "kappa %g kappa~ %g", kap, kt);
+    for (int i = 0; i < NVALID; i++) {
+      double v = simplex_quality(d, x, valid2[i]);
+      CHECK(v > 0 && v <= 1 + 1e-12, "%s = %g outside (0, 1]", quality_name(valid2[i]), v);
+    }
+    if (d == 2) {
+      CHECK_CLOSE(kt, eta, 1e-12);
+      CHECK(2.0 / 3 * gam * gam <= rho + e && rho <= 2 / s3 * gam + e, "gamma %g rho %g", gam, rho);
+    } else {
+      CHECK(sqrt(2.0 / 3) * pow(eta, 1.5) <= kt + e && kt <= 3 * sqrt(eta) + e, "eta %g kappa~ %g", eta, kt);
+      CHECK(pow(eta, 3) <= rho + e && rho <= pow(eta, 0.75) + e, "eta %g rho %g", eta, rho);
+      CHECK(0.2296 * pow(eta, 1.5) <= sig + e && sig <= 1.1398 * pow(eta, 0.75) + e, "eta %g sigma %g", eta, sig);
+      CHECK(0.2651 * rho * rho <= sig + e && sig <= sqrt(rho) + e, "rho %g sigma %g", rho, sig);
+    }
+    ncheck++;
+  }
+  printf("%d random simplices checked\n", ncheck);
+
+  /* Riemannian versions: a constant metric equals the Euclidean measure of the cell mapped
+   * by N (N^T N = M), on a mesh of 2 triangles and a box of tetrahedra */
+  char err[MESH_ERRLEN];
+  for (int d = 2; d <= 3; d++) {
+    mesh_box_opts o = {2, 2, 2, 0, 1, 0, 1, 0, 1, d == 2 ? CELL_TRIANGLE : CELL_TETRAHEDRON, 0};
+    mesh *m = d == 2 ? mesh_rectangle(&o, err) : mesh_box(&o, err);
+    double M2[4] = {4, 1, 1, 2}, M3[9] = {3, 1, 0, 1, 2, 0.5, 0, 0.5, 1};
+    double *M = d == 2 ? M2 : M3;
+    /* N from a hand Cholesky to compare with */
+    double Lc[3][3] = {{0}};
+    for (int j = 0; j < d; j++) {
+      double s = M[j * d + j];
+      for (int k = 0; k < j; k++) s -= Lc[j][k] * Lc[j][k];
+      Lc[j][j] = sqrt(s);
+      for (int i = j + 1; i < d; i++) {
+        double t = M[i * d + j];
+        for (int k = 0; k < j; k++) t -= Lc[i][k] * Lc[j][k];
+        Lc[i][j] = t / Lc[j][j];
+      }
+    }
+    mesh *mm = mesh_copy(m);
+    for (int v = 0; v < m->nvert; v++)
+      for (int r = 0; r < d; r++) {
+        double s = 0;
+        for (int k = 0; k < d; k++) s += Lc[k][r] * m->x[v * d + k];
+        mm->x[v * d + r] = s;
+      }
+    double *a = malloc(sizeof(double) * (size_t)m->ncell), *b = malloc(sizeof(double) * (size_t)m->ncell);
+    double *pv = malloc(sizeof(double) * (size_t)m->nvert * d * d);
+    for (int v = 0; v < m->nvert; v++) memcpy(pv + (size_t)v * d * d, M, sizeof(double) * d * d);
+    for (int i = 0; i < NVALID; i++) {
+      quality_metric cm = {1, M}, vm = {2, pv};
+      CHECK(mesh_quality(m, valid2[i], &cm, a, err) == 0, "%s", err);
+      CHECK(mesh_quality(mm, valid2[i], NULL, b, err) == 0, "%s", err);
+      for (int c = 0; c < m->ncell; c++) CHECK_CLOSE(a[c], b[c], 1e-12);
+      CHECK(mesh_quality(m, valid2[i], &vm, a, err) == 0, "%s", err);
+      for (int c = 0; c < m->ncell; c++) CHECK_CLOSE(a[c], b[c], 1e-12);
+    }
+    /* the metric volume is the Euclidean one times sqrt(det M) (2.11, 2.12) */
+    quality_metric cm = {1, M};
+    mesh_quality(m, QM_SIGNED_MEASURE, &cm, a, err);
+    mesh_quality(m, QM_SIGNED_MEASURE, NULL, b, err);
+    double detM = d == 2 ? M[0] * M[3] - M[1] * M[2]
+                         : M[0] * (M[4] * M[8] - M[5] * M[7]) - M[1] * (M[3] * M[8] - M[5] * M[6]) + M[2] * (M[3] * M[7] - M[4] * M[6]);
+    for (int c = 0; c < m->ncell; c++) CHECK_CLOSE(a[c], b[c] * sqrt(detM), 1e-12);
+    double bad[9] = {1, 2, 2, 1, 0, 0, 0, 0, 1};
+    quality_metric bm = {1, bad};
+    CHECK(mesh_quality(m, QM_MEAN_RATIO, &bm, a, err) != 0 && strstr(err, "positive definite"), "indefinite metric accepted");
+    free(a); free(b); free(pv);
+    mesh_free(m);
+    mesh_free(mm);
+  }
+
+  /* quadrilaterals and hexahedra: unit square / cube give 1; a non-convex quad is invalid */
+  double sq[8] = {0, 0, 1, 0, 1, 1, 0, 1};
+  int qc[4] = {0, 1, 2, 3};
+  mesh *qm = mesh_create(CELL_QUADRILATERAL, 4, sq, 1, qc, err);
+  double v;
+  mesh_quality(qm, QM_SCALED_JACOBIAN, NULL, &v, err); CHECK_CLOSE(v, 1, 1e-14);
+  mesh_quality(qm, QM_CORNER_CONDITION, NULL, &v, err); CHECK_CLOSE(v, 1, 1e-14);
+  mesh_quality(qm, QM_MIN_ANGLE, NULL, &v, err); CHECK_CLOSE(v, 90, 1e-12);
+  CHECK(mesh_quality(qm, QM_MEAN_RATIO, NULL, &v, err) != 0 && strstr(err, "does not apply to quadrilaterals"), "%s", err);
+  qm->x[4] = 0.3; qm->x[5] = 0.2; /* vertex 2 pulled inside: a dart */
+  mesh_quality(qm, QM_MIN_CORNER_JACOBIAN, NULL, &v, err); CHECK(v < 0, "dart corner Jacobian %g", v);
+  mesh_quality(qm, QM_MAX_ANGLE, NULL, &v, err); CHECK(v > 180, "dart reflex angle %g", v);
+  mesh_free(qm);
+  mesh_box_opts ho = {1, 1, 1, 0, 2, 0, 2, 0, 2, CELL_HEXAHEDRON, 0};
+  mesh *hm = mesh_box(&ho, err);
+  mesh_quality(hm, QM_SCALED_JACOBIAN, NULL, &v, err); CHECK_CLOSE(v, 1, 1e-14);
+  mesh_quality(hm, QM_CORNER_CONDITION, NULL, &v, err); CHECK_CLOSE(v, 1, 1e-14);
+  mesh_quality(hm, QM_SIGNED_MEASURE, NULL, &v, err); CHECK_CLOSE(v, 8, 1e-14);
+  mesh_quality(hm, QM_MIN_CORNER_JACOBIAN, NULL, &v, err); CHECK_CLOSE(v, 8, 1e-14);
+  mesh_free(hm);
+
+  /* statistics helpers */
+  double q[6] = {0.5, 0.1, 0.9, 0.3, 0.1, 0.7};
+  quality_stats st;
+  quality_stats_compute(q, 6, &st);
+  CHECK(st.argmin == 1 && st.argmax == 2 && fabs(st.mean - 2.6 / 6) < 1e-15, "stats");
+  int ids[3];
+  quality_worst(q, 6, 3, ids);
+  CHECK(ids[0] == 1 && ids[1] == 4 && ids[2] == 3, "worst %d %d %d", ids[0], ids[1], ids[2]);
+  int counts[2];
+  quality_histogram(q, 6, 2, 0, 1, counts);
+  CHECK(counts[0] == 3 && counts[1] == 3, "histogram %d %d", counts[0], counts[1]);
+  return CHECK_DONE();
+}

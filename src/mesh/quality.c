@@ -15,7 +15,7 @@ static const char *names[QM_COUNT] = {
     "mean_ratio", "radius_ratio", "condition", "frobenius_condition", "interpolation_coefficient",
     "min_solid_angle", "sigma_min", "min_dihedral_angle", "edge_ratio", "signed_measure",
     "min_angle", "max_angle", "min_edge", "max_edge", "min_corner_jacobian", "scaled_jacobian",
-    "corner_condition"};
+    "corner_condition", "stretching", "skewness", "zeta", "iota", "q", "kappa2_mean", "kappa2_max"};
 
 int quality_from_name(const char *name) {
   for (int i = 0; i < QM_COUNT; i++)
@@ -36,6 +36,9 @@ int quality_applies(int q, cell_type t) {
   switch (q) {
   case QM_MIN_DIHEDRAL_ANGLE: return t == CELL_TETRAHEDRON;
   case QM_MIN_ANGLE: case QM_MAX_ANGLE: return t != CELL_HEXAHEDRON;
+  case QM_STRETCHING: case QM_SKEWNESS: case QM_ZETA: case QM_IOTA: case QM_Q: case QM_KAPPA2_MEAN:
+  case QM_KAPPA2_MAX:
+    return t == CELL_QUADRILATERAL;
   case QM_SIGNED_MEASURE: case QM_MIN_EDGE: case QM_MAX_EDGE: case QM_MIN_CORNER_JACOBIAN:
   case QM_SCALED_JACOBIAN: case QM_CORNER_CONDITION:
     return 1;
@@ -327,6 +330,74 @@ static double quad_quality(const double *x, int q) {
   }
 }
 
+double quad_corner_area(const double *x, quad_class *cls) {
+  /* A_i: the triangle of the two edges at corner i; a convex quadrilateral has all four
+   * positive and A = (A_A + A_B + A_C + A_D) / 2 (both diagonal splittings averaged) */
+  double Ai[4];
+  int neg = 0, zero = 0;
+  for (int i = 0; i < 4; i++) {
+    const double *p = x + 2 * i, *a = x + 2 * ((i + 1) % 4), *b = x + 2 * ((i + 3) % 4);
+    double e1[2], e2[2];
+    sub(2, a, p, e1);
+    sub(2, b, p, e2);
+    Ai[i] = 0.5 * cross2(e1, e2);
+    neg += Ai[i] < 0;
+    zero += Ai[i] == 0;
+  }
+  if (cls) *cls = zero ? QUAD_DEGENERATE : neg == 0 ? QUAD_CONVEX : neg == 1 || neg == 3 ? QUAD_NONCONVEX : QUAD_CROSSED;
+  return 0.5 * (Ai[0] + Ai[1] + Ai[2] + Ai[3]);
+}
+
+double quad_quality_measure(const double *x, int q) {
+  double len[4], ang[4], Ai[4];
+  for (int i = 0; i < 4; i++) {
+    const double *p = x + 2 * i, *a = x + 2 * ((i + 1) % 4), *b = x + 2 * ((i + 3) % 4);
+    double e1[2], e2[2];
+    sub(2, a, p, e1);
+    sub(2, b, p, e2);
+    len[i] = norm(2, e1); /* edge i runs from vertex i to vertex i+1: a = AB, b = BC, ... */
+    Ai[i] = 0.5 * cross2(e1, e2);
+    ang[i] = atan2(cross2(e1, e2), dot(2, e1, e2));
+    if (ang[i] < 0) ang[i] += 2 * M_PI;
+  }
+  double A = quad_corner_area(x, NULL);
+  double lmin = fmin(fmin(len[0], len[1]), fmin(len[2], len[3]));
+  double lmax = fmax(fmax(len[0], len[1]), fmax(len[2], len[3]));
+  double p = 0.5 * (len[0] + len[1] + len[2] + len[3]);
+  switch (q) {
+  case QM_STRETCHING: return lmin > 0 ? lmax / lmin : INFINITY; /* (3.1) */
+  case QM_SKEWNESS: { /* (4.1), θ the mean of the angles at A and C (the torsion) */
+    double th = 0.5 * (ang[0] + ang[2]);
+    double den = 1 - fabs(1 - 2 * th / M_PI);
+    return den > 0 ? 1 / den : INFINITY;
+  }
+  case QM_ZETA: return A > 0 ? p * p / A : INFINITY;    /* (5.2) */
+  case QM_IOTA: return A > 0 ? p * lmax / A : INFINITY; /* (5.3) */
+  case QM_Q: {                                           /* (6.1) */
+    double ac[2], bd[2];
+    sub(2, x + 4, x, ac);
+    sub(2, x + 6, x + 2, bd);
+    double hm = fmax(fmax(norm(2, ac), norm(2, bd)), lmax);
+    double l2 = sqrt(len[0] * len[0] + len[1] * len[1] + len[2] * len[2] + len[3] * len[3]);
+    double amin = fmin(fmin(Ai[0], Ai[1]), fmin(Ai[2], Ai[3]));
+    return amin > 0 ? l2 * hm / amin : INFINITY;
+  }
+  case QM_KAPPA2_MEAN: case QM_KAPPA2_MAX: {
+    /* (8.3, 8.4): κ₂⊥ of the corner triangle at vertex i, whose edges are edge i and
+     * edge i-1: (l_i² + l_{i-1}²) / (2 A_i) */
+    double s = 0, m = 0;
+    for (int i = 0; i < 4; i++) {
+      double la = len[i], lb = len[(i + 3) % 4];
+      double k = Ai[i] > 0 ? (la * la + lb * lb) / (2 * Ai[i]) : INFINITY;
+      s += k;
+      m = fmax(m, k);
+    }
+    return q == QM_KAPPA2_MAX ? m : s / 4;
+  }
+  default: return quad_quality(x, q);
+  }
+}
+
 static double hex_quality(const double *x, int q) {
   double mnJ = INFINITY, mnS = INFINITY, mnC = INFINITY;
   for (int i = 0; i < 8; i++) {
@@ -438,7 +509,7 @@ int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out
         double s = 0;
         for (int i = 0; i < 4; i++) s += cross2(xc + 2 * i, xc + 2 * ((i + 1) % 4));
         val = 0.5 * s;
-      } else val = quad_quality(xc, q);
+      } else val = quad_quality_measure(xc, q);
     } else {
       val = q == QM_SIGNED_MEASURE ? hex_signed_volume(xc) : hex_quality(xc, q);
     }

@@ -24,6 +24,14 @@ typedef enum {
   QM_MIN_CORNER_JACOBIAN,   /* every cell type */
   QM_SCALED_JACOBIAN,       /* min over corners of det / product of edge lengths, 1 for regular cells */
   QM_CORNER_CONDITION,      /* Knupp: min over corners of d / (|A W^-1| |W A^-1|), 1 for regular cells */
+  /* quadrilaterals ("New results on quality measures for planar quadrilateral meshes") */
+  QM_STRETCHING,            /* τ (3.1) = |q|∞ / |q|0, 1 for squares */
+  QM_SKEWNESS,              /* σ (4.1), 1 for cyclic quadrilaterals */
+  QM_ZETA,                  /* ζ (5.2) = p² / A, 4 for squares */
+  QM_IOTA,                  /* ι (5.3) = p |q|∞ / A, 2 for squares */
+  QM_Q,                     /* Q (6.1) = |q|₂ h_max / min A_i, 4√2 for squares */
+  QM_KAPPA2_MEAN,           /* κ₂¹ (8.6), 2 for squares */
+  QM_KAPPA2_MAX,            /* κ₂^∞ (8.5), 2 for squares */
   QM_COUNT
 } quality_measure;
 
@@ -45,6 +53,12 @@ typedef struct {
 /* per-cell values of measure q into out[ncell]; nonzero with a message in err when the
  * measure does not apply or the metric is not positive definite */
 int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out, char *err);
+
+/* one quadrilateral (4 points, 8 coordinates) */
+double quad_quality_measure(const double *x, int q);
+/* Remark 1.1: area from the four corner triangles and the classification */
+typedef enum { QUAD_CONVEX, QUAD_NONCONVEX, QUAD_DEGENERATE, QUAD_CROSSED } quad_class;
+double quad_corner_area(const double *x, quad_class *cls);
 
 /* one simplex given its vertices (d+1 points of dimension d, already in metric space) */
 double simplex_quality(int dim, const double *x, int q);

@@ -192,6 +192,44 @@ int main(void) {
   mesh_quality(hm, QM_MIN_CORNER_JACOBIAN, NULL, &v, err); CHECK_CLOSE(v, 8, 1e-14);
   mesh_free(hm);
 
+  /* Table 1 of "New results on quality measures for planar quadrilateral meshes", to its
+   * printed digits (normalized: τ, σ, ζ/4, ι/2, Q/(4√2), κ₂¹/2, κ₂^∞/2). Rows q1 and q2
+   * are defined only by the paper's Figure 8, whose coordinates are not in the text. The
+   * cyclic row uses (2,0), (√3,1), (√2,√2), (−√3,1) (issue 3: Example 1.1's list does not
+   * give it). */
+  {
+    double a5 = 2 * asin(0.1), h1 = sqrt(0.51 * 0.51 - 0.25), h2 = sqrt(0.501 * 0.501 - 0.25);
+    struct { const char *name; double x[8]; const char *want[7]; } rows[] = {
+        {"square", {0, 0, 1, 0, 1, 1, 0, 1}, {"1", "1", "1", "1", "1", "1", "1"}},
+        {"rectangle 2", {0, 0, 2, 0, 2, 1, 0, 1}, {"2", "1", "1.125", "1.5", "1.25", "1.25", "1.25"}},
+        {"rectangle 100", {0, 0, 100, 0, 100, 1, 0, 1}, {"100", "1", "25.5", "50.5", "50", "50.01", "50.01"}},
+        {"rhombus 60", {0, 0, 1, 0, 1.5, s3 / 2, 0.5, s3 / 2}, {"1", "1.5", "1.155", "1.155", "1.414", "1.155", "1.155"}},
+        {"rhombus AB=5AC", {0, 0, 1, 0, 1 + cos(a5), sin(a5), cos(a5), sin(a5)}, {"1", "7.841", "5.025", "5.025", "7.071", "5.025", "5.025"}},
+        {"kite 0.51", {0, 0, 0.5, -s3 / 2, 1, 0, 0.5, h1}, {"1.961", "1.261", "1.18", "1.562", "5.585", "1.588", "2.588"}},
+        {"kite 0.501", {0, 0, 0.5, -s3 / 2, 1, 0, 0.5, h2}, {"1.996", "1.415", "1.255", "1.672", "17.68", "2.969", "7.933"}},
+        {"cyclic", {2, 0, s3, 1, sqrt(2.0), sqrt(2.0), -s3, 1}, {"7.4", "1", "1.885", "3.389", "33.9", "2.957", "3.604"}}};
+    int qs[7] = {QM_STRETCHING, QM_SKEWNESS, QM_ZETA, QM_IOTA, QM_Q, QM_KAPPA2_MEAN, QM_KAPPA2_MAX};
+    double sc[7] = {1, 1, 0.25, 0.5, 1 / (4 * sqrt(2.0)), 0.5, 0.5};
+    for (size_t r = 0; r < sizeof rows / sizeof rows[0]; r++)
+      for (int k = 0; k < 7; k++) {
+        char got[32];
+        snprintf(got, sizeof got, "%.4g", quad_quality_measure(rows[r].x, qs[k]) * sc[k]);
+        CHECK(!strcmp(got, rows[r].want[k]), "Table 1, %s, %s: %s, printed %s", rows[r].name, quality_name(qs[k]), got,
+              rows[r].want[k]);
+      }
+    /* Remark 1.1: corner-triangle area and classification */
+    quad_class cls;
+    CHECK_CLOSE(quad_corner_area(rows[1].x, &cls), 2, 1e-15);
+    CHECK(cls == QUAD_CONVEX, "rectangle is convex");
+    double dart[8] = {0, 0, 2, 0, 0.5, 0.5, 0, 2}, bow[8] = {0, 0, 1, 1, 1, 0, 0, 1}, flat[8] = {0, 0, 1, 0, 2, 0, 0, 1};
+    CHECK_CLOSE(quad_corner_area(dart, &cls), 1.0, 1e-15);
+    CHECK(cls == QUAD_NONCONVEX, "dart is non-convex (%d)", (int)cls);
+    quad_corner_area(bow, &cls);
+    CHECK(cls == QUAD_CROSSED, "bow-tie is crossed (%d)", (int)cls);
+    quad_corner_area(flat, &cls);
+    CHECK(cls == QUAD_DEGENERATE, "flat corner is degenerate (%d)", (int)cls);
+  }
+
   /* statistics helpers */
   double q[6] = {0.5, 0.1, 0.9, 0.3, 0.1, 0.7};
   quality_stats st;

@@ -619,6 +619,14 @@ static int lmesh_refine(lua_State *L) {
   return 1;
 }
 
+static int lmesh_copy(lua_State *L) {
+  ud_mesh *u = check_mesh(L, 1, "mesh:copy");
+  mesh *c = mesh_copy(u->lm->m);
+  if (!c) return luaL_error(L, "mesh:copy: out of memory");
+  push_mesh(L, c);
+  return 1;
+}
+
 static int lmesh_hmax(lua_State *L) { lua_pushnumber(L, mesh_hmax(check_mesh(L, 1, "mesh:hmax")->lm->m)); return 1; }
 
 static int mesh_check(lua_State *L) {
@@ -792,18 +800,34 @@ static ud_qarray *push_quality(lua_State *L, int midx, const char *name, int tid
   quality_metric qm = {0, NULL};
   double *buf = NULL;
   int pushed = 0;
+  const mesh *ref = NULL;
+  double pexp = 2;
   if (tidx && !lua_isnoneornil(L, tidx)) {
-    if (!lua_istable(L, tidx)) typeerror(L, fn, tidx, "a table of options {metric=}");
-    static const char *const keys[] = {"metric", NULL};
+    if (!lua_istable(L, tidx)) typeerror(L, fn, tidx, "a table of options {metric=, reference=, p=}");
+    static const char *const keys[] = {"metric", "reference", "p", NULL};
     check_keys(L, tidx, fn, keys);
+    if (lua_getfield(L, tidx, "reference") != LUA_TNIL) {
+      ud_mesh *ur = luaL_testudata(L, -1, MT_MESH);
+      if (!ur) luaL_error(L, "%s: option 'reference' must be a mesh (the same mesh in another configuration)", fn);
+      ref = ur->lm->m;
+      if (ref->type != m->type || ref->nvert != m->nvert || ref->ncell != m->ncell ||
+          memcmp(ref->cells, m->cells, sizeof(int) * (size_t)m->ncell * (size_t)m->nvc))
+        luaL_error(L, "%s: the reference must be the same mesh (same cells) in another configuration", fn);
+    }
+    lua_pop(L, 1);
+    pexp = opt_num(L, tidx, "p", 2, fn);
     pushed = read_metric(L, tidx, m, &buf, &qm, fn);
   }
+  if (q >= QM_DEFORMATION_MIN_SV && !ref)
+    luaL_error(L, "%s: %s compares two configurations: pass {reference = mesh}", fn, name);
+  if (q < QM_DEFORMATION_MIN_SV && ref) luaL_error(L, "%s: option 'reference' is for the deformation measures", fn);
   ud_qarray *a = lua_newuserdatauv(L, sizeof(ud_qarray) + sizeof(double) * (size_t)m->ncell, 0);
   a->n = m->ncell;
   a->measure = q;
   luaL_setmetatable(L, MT_QARRAY);
   char err[MESH_ERRLEN];
-  if (mesh_quality(m, q, qm.kind ? &qm : NULL, a->v, err)) luaL_error(L, "%s: %s", fn, err);
+  int rc = ref ? mesh_deformation(m, ref->x, q, pexp, a->v, err) : mesh_quality(m, q, qm.kind ? &qm : NULL, a->v, err);
+  if (rc) luaL_error(L, "%s: %s", fn, err);
   if (pushed) lua_remove(L, -2); /* the metric buffer */
   return a;
 }
@@ -903,7 +927,7 @@ static int mesh_quality_report(lua_State *L) {
   lua_pushinteger(L, ninv); lua_setfield(L, rep, "inverted");
   if (!quiet) printf("mesh quality: %d %ss, %d inverted or degenerate\n  %-26s %12s %12s %12s %8s\n", m->ncell,
                      cell_name(m->type), ninv, "measure", "min", "mean", "max", "worst");
-  for (int q = 0; q < QM_COUNT; q++) {
+  for (int q = 0; q < QM_DEFORMATION_MIN_SV; q++) {
     if (!quality_applies(q, m->type)) continue;
     ud_qarray *a = push_quality(L, 1, quality_name(q), 0, fn);
     quality_stats st;
@@ -1580,7 +1604,7 @@ int luaopen_lugal(lua_State *L) {
 
   static const luaL_Reg mesh_mm[] = {{"__gc", mesh_gc}, {"__tostring", mesh_tostring}, {NULL, NULL}};
   static const luaL_Reg mesh_methods[] = {{"cells", mesh_cells}, {"boundary", mesh_boundary}, {"info", mesh_info},
-                                          {"write", mesh_write}, {"refine", lmesh_refine}, {"hmax", lmesh_hmax},
+                                          {"write", mesh_write}, {"refine", lmesh_refine}, {"copy", lmesh_copy}, {"hmax", lmesh_hmax},
                                           {"check", mesh_check}, {"nvertices", mesh_nvertices}, {"ncells", mesh_ncells},
                                           {"dim", mesh_dim}, {"coordinates", mesh_coordinates},
                                           {"set_coordinates", mesh_set_coordinates}, {"quality", mesh_quality_l},

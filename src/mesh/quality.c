@@ -15,7 +15,8 @@ static const char *names[QM_COUNT] = {
     "mean_ratio", "radius_ratio", "condition", "frobenius_condition", "interpolation_coefficient",
     "min_solid_angle", "sigma_min", "min_dihedral_angle", "edge_ratio", "signed_measure",
     "min_angle", "max_angle", "min_edge", "max_edge", "min_corner_jacobian", "scaled_jacobian",
-    "corner_condition", "stretching", "skewness", "zeta", "iota", "q", "kappa2_mean", "kappa2_max"};
+    "corner_condition", "stretching", "skewness", "zeta", "iota", "q", "kappa2_mean", "kappa2_max",
+    "deformation_min_sv", "deformation_max_sv", "deformation_quality"};
 
 int quality_from_name(const char *name) {
   for (int i = 0; i < QM_COUNT; i++)
@@ -40,7 +41,8 @@ int quality_applies(int q, cell_type t) {
   case QM_KAPPA2_MAX:
     return t == CELL_QUADRILATERAL;
   case QM_SIGNED_MEASURE: case QM_MIN_EDGE: case QM_MAX_EDGE: case QM_MIN_CORNER_JACOBIAN:
-  case QM_SCALED_JACOBIAN: case QM_CORNER_CONDITION:
+  case QM_SCALED_JACOBIAN: case QM_CORNER_CONDITION: case QM_DEFORMATION_MIN_SV: case QM_DEFORMATION_MAX_SV:
+  case QM_DEFORMATION_QUALITY:
     return 1;
   default: return simplex;
   }
@@ -69,26 +71,37 @@ static double det3(const double *a, const double *b, const double *c) {
   return dot(3, a, r);
 }
 
-/* eigenvalues of a symmetric 3×3 matrix (closed form), ascending */
+/* eigenvalues of a symmetric 3×3 matrix, ascending, by cyclic Jacobi rotations: accurate to
+ * round-off also for repeated eigenvalues, where the closed (trigonometric) form loses half
+ * the digits */
 static void eig_sym3(const double A[3][3], double *l) {
-  double p1 = A[0][1] * A[0][1] + A[0][2] * A[0][2] + A[1][2] * A[1][2];
-  if (p1 == 0) {
-    l[0] = A[0][0]; l[1] = A[1][1]; l[2] = A[2][2];
-  } else {
-    double q = (A[0][0] + A[1][1] + A[2][2]) / 3;
-    double p2 = (A[0][0] - q) * (A[0][0] - q) + (A[1][1] - q) * (A[1][1] - q) + (A[2][2] - q) * (A[2][2] - q) + 2 * p1;
-    double p = sqrt(p2 / 6), B[3][3];
-    for (int i = 0; i < 3; i++)
-      for (int j = 0; j < 3; j++) B[i][j] = (A[i][j] - (i == j) * q) / p;
-    double r = (B[0][0] * (B[1][1] * B[2][2] - B[1][2] * B[2][1]) - B[0][1] * (B[1][0] * B[2][2] - B[1][2] * B[2][0]) +
-                B[0][2] * (B[1][0] * B[2][1] - B[1][1] * B[2][0])) / 2;
-    if (r < -1) r = -1;
-    if (r > 1) r = 1;
-    double phi = acos(r) / 3;
-    l[2] = q + 2 * p * cos(phi);
-    l[0] = q + 2 * p * cos(phi + 2 * M_PI / 3);
-    l[1] = 3 * q - l[0] - l[2];
+  double a[3][3];
+  memcpy(a, A, sizeof a);
+  for (int sweep = 0; sweep < 50; sweep++) {
+    double off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+    double diag = a[0][0] * a[0][0] + a[1][1] * a[1][1] + a[2][2] * a[2][2];
+    if (off <= 1e-32 * diag || off == 0) break;
+    for (int p = 0; p < 2; p++)
+      for (int q = p + 1; q < 3; q++) {
+        if (a[p][q] == 0) continue;
+        double theta = (a[q][q] - a[p][p]) / (2 * a[p][q]);
+        double t = (theta >= 0 ? 1 : -1) / (fabs(theta) + sqrt(theta * theta + 1));
+        double c = 1 / sqrt(t * t + 1), sn = t * c;
+        for (int k = 0; k < 3; k++) {
+          double akp = a[k][p], akq = a[k][q];
+          a[k][p] = c * akp - sn * akq;
+          a[k][q] = sn * akp + c * akq;
+        }
+        for (int k = 0; k < 3; k++) {
+          double apk = a[p][k], aqk = a[q][k];
+          a[p][k] = c * apk - sn * aqk;
+          a[q][k] = sn * apk + c * aqk;
+        }
+      }
   }
+  l[0] = a[0][0];
+  l[1] = a[1][1];
+  l[2] = a[2][2];
   for (int i = 1; i < 3; i++)
     for (int j = i; j > 0 && l[j - 1] > l[j]; j--) { double t = l[j]; l[j] = l[j - 1]; l[j - 1] = t; }
 }
@@ -470,6 +483,10 @@ int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out
     snprintf(err, MESH_ERRLEN, "the measure %s does not apply to %ss", names[q], cell_name(m->type));
     return 1;
   }
+  if (q >= QM_DEFORMATION_MIN_SV) {
+    snprintf(err, MESH_ERRLEN, "the measure %s compares two configurations: give a reference", names[q]);
+    return 1;
+  }
   int d = m->dim, nvc = m->nvc;
   double N[3][3];
   int kind = metric ? metric->kind : 0;
@@ -514,6 +531,111 @@ int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out
       val = q == QM_SIGNED_MEASURE ? hex_signed_volume(xc) : hex_quality(xc, q);
     }
     out[c] = val;
+  }
+  return 0;
+}
+
+/* singular values of a d×d matrix (ascending) through the eigenvalues of B^T B */
+static void singular_values(int d, const double B[3][3], double *sv) {
+  double G[3][3] = {{0}};
+  for (int i = 0; i < d; i++)
+    for (int j = 0; j < d; j++) {
+      double s = 0;
+      for (int k = 0; k < d; k++) s += B[k][i] * B[k][j];
+      G[i][j] = s;
+    }
+  double l[3];
+  if (d == 2) {
+    double tr = G[0][0] + G[1][1], det = G[0][0] * G[1][1] - G[0][1] * G[1][0];
+    double disc = sqrt(fmax(0, tr * tr / 4 - det));
+    l[1] = tr / 2 + disc;
+    l[0] = l[1] > 0 ? det / l[1] : 0;
+  } else eig_sym3((const double(*)[3])G, l);
+  for (int i = 0; i < d; i++) sv[i] = sqrt(fmax(0, l[i]));
+}
+
+/* B = T̃ T⁻¹ for corner matrices with columns e_k (reference) and f_k (current) */
+static int deformation_matrix(int d, double T[3][3], double Tt[3][3], double B[3][3], double *detB) {
+  double det, inv[3][3];
+  if (d == 2) {
+    det = T[0][0] * T[1][1] - T[0][1] * T[1][0];
+    if (det == 0) return 1;
+    inv[0][0] = T[1][1] / det; inv[0][1] = -T[0][1] / det;
+    inv[1][0] = -T[1][0] / det; inv[1][1] = T[0][0] / det;
+  } else {
+    double c[3][3];
+    c[0][0] = T[1][1] * T[2][2] - T[1][2] * T[2][1];
+    c[0][1] = T[0][2] * T[2][1] - T[0][1] * T[2][2];
+    c[0][2] = T[0][1] * T[1][2] - T[0][2] * T[1][1];
+    c[1][0] = T[1][2] * T[2][0] - T[1][0] * T[2][2];
+    c[1][1] = T[0][0] * T[2][2] - T[0][2] * T[2][0];
+    c[1][2] = T[0][2] * T[1][0] - T[0][0] * T[1][2];
+    c[2][0] = T[1][0] * T[2][1] - T[1][1] * T[2][0];
+    c[2][1] = T[0][1] * T[2][0] - T[0][0] * T[2][1];
+    c[2][2] = T[0][0] * T[1][1] - T[0][1] * T[1][0];
+    det = T[0][0] * c[0][0] + T[0][1] * c[1][0] + T[0][2] * c[2][0];
+    if (det == 0) return 1;
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 3; j++) inv[i][j] = c[i][j] / det;
+  }
+  for (int i = 0; i < d; i++)
+    for (int j = 0; j < d; j++) {
+      double s = 0;
+      for (int k = 0; k < d; k++) s += Tt[i][k] * inv[k][j];
+      B[i][j] = s;
+    }
+  double dt = d == 2 ? Tt[0][0] * Tt[1][1] - Tt[0][1] * Tt[1][0]
+                     : Tt[0][0] * (Tt[1][1] * Tt[2][2] - Tt[1][2] * Tt[2][1]) - Tt[0][1] * (Tt[1][0] * Tt[2][2] - Tt[1][2] * Tt[2][0]) +
+                           Tt[0][2] * (Tt[1][0] * Tt[2][1] - Tt[1][1] * Tt[2][0]);
+  *detB = dt / det;
+  return 0;
+}
+
+int mesh_deformation(const mesh *m, const double *xref, int q, double p, double *out, char *err) {
+  if (q < QM_DEFORMATION_MIN_SV || q > QM_DEFORMATION_QUALITY) {
+    snprintf(err, MESH_ERRLEN, "%s is not a deformation measure", quality_name(q));
+    return 1;
+  }
+  if (!(p >= 1)) { snprintf(err, MESH_ERRLEN, "the Schatten exponent p must be >= 1 (or infinity), got %g", p); return 1; }
+  int d = m->dim, nvc = m->nvc;
+  int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON;
+  int ncorner = simplex ? 1 : nvc;
+  for (int c = 0; c < m->ncell; c++) {
+    const int *v = m->cells + (size_t)c * (size_t)nvc;
+    double mn = INFINITY, mx = 0, qual = INFINITY;
+    int bad = 0;
+    for (int corner = 0; corner < ncorner; corner++) {
+      int nb[3];
+      if (simplex) { nb[0] = 1; nb[1] = 2; nb[2] = 3; }
+      else if (m->type == CELL_QUADRILATERAL) { nb[0] = (corner + 1) % 4; nb[1] = (corner + 3) % 4; }
+      else memcpy(nb, hex_corner_neighbors(corner), sizeof nb);
+      int o = simplex ? 0 : corner;
+      double T[3][3], Tt[3][3], B[3][3], detB;
+      for (int k = 0; k < d; k++)
+        for (int i = 0; i < d; i++) {
+          T[i][k] = xref[(size_t)v[nb[k]] * d + i] - xref[(size_t)v[o] * d + i];
+          Tt[i][k] = m->x[(size_t)v[nb[k]] * d + i] - m->x[(size_t)v[o] * d + i];
+        }
+      if (deformation_matrix(d, T, Tt, B, &detB)) { bad = 1; break; }
+      double sv[3];
+      singular_values(d, (const double(*)[3])B, sv);
+      mn = fmin(mn, sv[0]);
+      mx = fmax(mx, sv[d - 1]);
+      double t;
+      if (detB <= 0 || sv[0] <= 0) t = 0;
+      else if (isinf(p)) t = sv[0] / sv[d - 1]; /* (4.18) */
+      else {                                    /* d^(2/p) / κ_p, κ_p from (4.16) */
+        double a = 0, b = 0;
+        for (int i = 0; i < d; i++) { a += pow(sv[i], p); b += pow(sv[i], -p); }
+        t = pow((double)d, 2 / p) / pow(a * b, 1 / p);
+      }
+      qual = fmin(qual, t);
+    }
+    if (bad) {
+      snprintf(err, MESH_ERRLEN, "cell %d is degenerate in the reference configuration", c + 1);
+      return 1;
+    }
+    out[c] = q == QM_DEFORMATION_MIN_SV ? mn : q == QM_DEFORMATION_MAX_SV ? mx : qual;
   }
   return 0;
 }

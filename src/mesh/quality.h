@@ -32,6 +32,10 @@ typedef enum {
   QM_Q,                     /* Q (6.1) = |q|₂ h_max / min A_i, 4√2 for squares */
   QM_KAPPA2_MEAN,           /* κ₂¹ (8.6), 2 for squares */
   QM_KAPPA2_MAX,            /* κ₂^∞ (8.5), 2 for squares */
+  /* deformation between two configurations (morphing paper, 4.1–4.5, 4.13–4.19) */
+  QM_DEFORMATION_MIN_SV,    /* smallest singular value of B = T̃ T⁻¹ */
+  QM_DEFORMATION_MAX_SV,    /* largest */
+  QM_DEFORMATION_QUALITY,   /* τ_p = d^(2/p) / κ_p(B) (4.16, 4.19), τ_∞ = σmin/σmax (4.18); 0 if inverted */
   QM_COUNT
 } quality_measure;
 
@@ -53,6 +57,11 @@ typedef struct {
 /* per-cell values of measure q into out[ncell]; nonzero with a message in err when the
  * measure does not apply or the metric is not positive definite */
 int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out, char *err);
+
+/* deformation measures of the mesh's current coordinates relative to xref (a reference
+ * configuration of the same mesh, nvert*dim); p >= 1 or INFINITY for the Schatten norm.
+ * Quadrilaterals and hexahedra use the corner matrices and report the worst corner. */
+int mesh_deformation(const mesh *m, const double *xref, int q, double p, double *out, char *err);
 
 /* one quadrilateral (4 points, 8 coordinates) */
 double quad_quality_measure(const double *x, int q);

@@ -230,6 +230,51 @@ int main(void) {
     CHECK(cls == QUAD_DEGENERATE, "flat corner is degenerate (%d)", (int)cls);
   }
 
+  /* deformation measures: an affine map x -> A x + b gives B = A on every cell and corner */
+  {
+    mesh_box_opts o2 = {3, 2, 1, 0, 1, 0, 1, 0, 1, CELL_TRIANGLE, 0};
+    mesh_box_opts o3 = {2, 2, 2, 0, 1, 0, 1, 0, 1, CELL_TETRAHEDRON, 0};
+    mesh *ms[4];
+    ms[0] = mesh_rectangle(&o2, err);
+    o2.type = CELL_QUADRILATERAL;
+    ms[1] = mesh_rectangle(&o2, err);
+    ms[2] = mesh_box(&o3, err);
+    o3.type = CELL_HEXAHEDRON;
+    ms[3] = mesh_box(&o3, err);
+    for (int k = 0; k < 4; k++) {
+      mesh *m = ms[k];
+      int d = m->dim;
+      double *ref = malloc(sizeof(double) * (size_t)m->nvert * d), *val = malloc(sizeof(double) * (size_t)m->ncell);
+      memcpy(ref, m->x, sizeof(double) * (size_t)m->nvert * d);
+      /* A = R diag(2, 1, 1) with R a rotation about z: singular values 2, 1 (, 1) */
+      double c = cos(0.3), sn = sin(0.3);
+      for (int v = 0; v < m->nvert; v++) {
+        double x0 = 2 * ref[v * d], x1 = ref[v * d + 1];
+        m->x[v * d] = c * x0 - sn * x1 + 5;
+        m->x[v * d + 1] = sn * x0 + c * x1 - 1;
+      }
+      mesh_deformation(m, ref, QM_DEFORMATION_MIN_SV, 2, val, err);
+      for (int i = 0; i < m->ncell; i++) CHECK_CLOSE(val[i], 1, 1e-12);
+      mesh_deformation(m, ref, QM_DEFORMATION_MAX_SV, 2, val, err);
+      for (int i = 0; i < m->ncell; i++) CHECK_CLOSE(val[i], 2, 1e-12);
+      mesh_deformation(m, ref, QM_DEFORMATION_QUALITY, INFINITY, val, err);
+      for (int i = 0; i < m->ncell; i++) CHECK_CLOSE(val[i], 0.5, 1e-12);
+      /* τ_2 = d / sqrt((Σσ²)(Σσ⁻²)): 2D 2/sqrt(5·1.25) = 0.8; 3D 3/sqrt(6·2.25) */
+      mesh_deformation(m, ref, QM_DEFORMATION_QUALITY, 2, val, err);
+      double want = d == 2 ? 0.8 : 3 / sqrt(6 * 2.25);
+      for (int i = 0; i < m->ncell; i++) CHECK_CLOSE(val[i], want, 1e-12);
+      /* a reflection inverts every cell relative to the reference: quality 0 */
+      for (int v = 0; v < m->nvert; v++) m->x[v * d] = -ref[v * d];
+      mesh_deformation(m, ref, QM_DEFORMATION_QUALITY, 2, val, err);
+      for (int i = 0; i < m->ncell; i++) CHECK(val[i] == 0, "reflected cell quality %g", val[i]);
+      CHECK(mesh_quality(m, QM_DEFORMATION_QUALITY, NULL, val, err) != 0 && strstr(err, "give a reference"), "%s", err);
+      CHECK(mesh_deformation(m, ref, QM_DEFORMATION_QUALITY, 0.5, val, err) != 0, "p < 1 accepted");
+      free(ref);
+      free(val);
+      mesh_free(m);
+    }
+  }
+
   /* statistics helpers */
   double q[6] = {0.5, 0.1, 0.9, 0.3, 0.1, 0.7};
   quality_stats st;

@@ -50,6 +50,18 @@ local text = assert(io.open(path)):read("a")
 os.remove(path)
 T.check(text:find('<CellData>', 1, true) and text:find('Name="mean_ratio"', 1, true), "VTU has the cell data")
 
+-- deformation between two configurations of one mesh
+local before = lg.mesh.rectangle{nx = 2, ny = 2}
+local after = before:copy()
+for i = 1, after:nvertices() do
+  local x, y = after:coordinates(i)
+  after:set_coordinates(i, 3*x, y)          -- stretch x by 3: singular values 3 and 1
+end
+T.close(after:quality("deformation_max_sv", {reference = before}):min(), 3, 1e-13, "max singular value")
+T.close(after:quality("deformation_quality", {reference = before, p = math.huge}):max(), 1/3, 1e-13, "tau_inf")
+T.fails(function() return after:quality("deformation_quality") end, "pass {reference = mesh}")
+T.fails(function() return after:quality("deformation_quality", {reference = box}) end, "same mesh")
+
 -- errors
 T.fails(function() return m:quality("nope") end, "mesh:quality: unknown measure \"nope\"", "mean_ratio", "scaled_jacobian")
 T.fails(function() return m:quality("min_dihedral_angle") end, "does not apply to triangles")

@@ -29,6 +29,9 @@ done
 for t in "$ROOT"/tests/lua/test_*.lua; do
   run "lua/$(basename "$t" .lua)" "$LUGAL" "$t"
 done
+for t in "$ROOT"/tests/sh/test_*.sh; do
+  run "sh/$(basename "$t" .sh)" sh "$t" "$ROOT/$BUILD"
+done
 # examples run in a scratch folder so their output files stay out of the tree
 mkdir -p "$OUT/examples"
 for e in "$ROOT"/examples/*.lua; do

@@ -895,7 +895,7 @@ static int qa_worst(lua_State *L) {
   if (k < 1) return luaL_error(L, "q:worst: argument 1 must be a positive count, got %d", (int)k);
   if (k > a->n) k = a->n;
   int *ids = lua_newuserdatauv(L, sizeof(int) * (size_t)(k + 1), 0);
-  quality_worst(a->v, a->n, (int)k, ids);
+  quality_worst(a->v, a->n, (int)k, quality_larger_is_better(a->measure), ids);
   lua_createtable(L, (int)k, 0);
   for (int i = 0; i < k; i++) {
     lua_createtable(L, 0, 2);
@@ -937,9 +937,10 @@ static int mesh_quality_report(lua_State *L) {
     lua_pushnumber(L, st.min); lua_setfield(L, -2, "min");
     lua_pushnumber(L, st.max); lua_setfield(L, -2, "max");
     lua_pushnumber(L, st.mean); lua_setfield(L, -2, "mean");
-    lua_pushinteger(L, st.argmin + 1); lua_setfield(L, -2, "worst");
+    int wi = quality_worst_index(a->v, a->n, quality_larger_is_better(q));
+    lua_pushinteger(L, wi + 1); lua_setfield(L, -2, "worst");
     lua_setfield(L, rep, quality_name(q));
-    if (!quiet) printf("  %-26s %12.6g %12.6g %12.6g %8d\n", quality_name(q), st.min, st.mean, st.max, st.argmin + 1);
+    if (!quiet) printf("  %-26s %12.6g %12.6g %12.6g %8d\n", quality_name(q), st.min, st.mean, st.max, wi + 1);
   }
   if (!quiet) fflush(stdout);
   lua_settop(L, rep);

@@ -667,13 +667,31 @@ void quality_histogram(const double *q, int n, int nbins, double lo, double hi, 
 
 /* ---------------------------------------------------------------- worst cells */
 
-void quality_worst(const double *q, int n, int k, int *ids) {
-  /* a bounded insertion into the k smallest: O(n k), fine for the small k users ask for */
+int quality_larger_is_better(int q) {
+  switch (q) {
+  case QM_MAX_ANGLE: case QM_STRETCHING: case QM_SKEWNESS: case QM_ZETA: case QM_IOTA: case QM_Q:
+  case QM_KAPPA2_MEAN: case QM_KAPPA2_MAX:
+    return 0;
+  default: return 1;
+  }
+}
+
+/* "a is worse than b" */
+static int worse(double a, double b, int larger_is_better) { return larger_is_better ? a < b : a > b; }
+
+void quality_worst(const double *q, int n, int k, int larger_is_better, int *ids) {
+  /* a bounded insertion into the k worst: O(n k), fine for the small k users ask for */
   int m = 0;
   for (int i = 0; i < n; i++) {
-    if (m == k && !(q[i] < q[ids[m - 1]])) continue;
+    if (m == k && !worse(q[i], q[ids[m - 1]], larger_is_better)) continue;
     int j = m < k ? m++ : k - 1;
-    while (j > 0 && q[ids[j - 1]] > q[i]) { ids[j] = ids[j - 1]; j--; }
+    while (j > 0 && worse(q[i], q[ids[j - 1]], larger_is_better)) { ids[j] = ids[j - 1]; j--; }
     ids[j] = i;
   }
+}
+
+int quality_worst_index(const double *q, int n, int larger_is_better) {
+  int id = -1;
+  if (n > 0) quality_worst(q, n, 1, larger_is_better, &id);
+  return id;
 }

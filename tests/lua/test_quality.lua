@@ -62,6 +62,18 @@ T.close(after:quality("deformation_quality", {reference = before, p = math.huge}
 T.fails(function() return after:quality("deformation_quality") end, "pass {reference = mesh}")
 T.fails(function() return after:quality("deformation_quality", {reference = box}) end, "same mesh")
 
+-- inverted, degenerate and the quadrilateral classes in the report
+local qmesh = lg.mesh.rectangle{nx = 3, ny = 3, cell = "quadrilateral"}
+local x6, y6 = qmesh:coordinates(6)
+qmesh:set_coordinates(6, x6 + 0.45, y6 + 0.4)   -- over its neighbours: some cells invert
+local r = qmesh:quality_report(true)
+T.check(r.inverted >= 1 and r.degenerate == 0, "inverted %d degenerate %d", r.inverted, r.degenerate)
+T.check(r.quadrilaterals.convex + r.quadrilaterals.nonconvex + r.quadrilaterals.crossed + r.quadrilaterals.degenerate == 9,
+        "quadrilateral classes add up")
+T.check(r.quadrilaterals.nonconvex + r.quadrilaterals.crossed >= 1, "a tangled cell is not convex")
+local flat = lg.mesh.new{cell = "triangle", vertices = {{0, 0}, {1, 0}, {2, 0}, {0, 1}}, cells = {{1, 2, 3}, {1, 2, 4}}}
+T.check(flat:quality_report(true).degenerate == 1, "a flat triangle is degenerate")
+
 -- errors
 T.fails(function() return m:quality("nope") end, "mesh:quality: unknown measure \"nope\"", "mean_ratio", "scaled_jacobian")
 T.fails(function() return m:quality("min_dihedral_angle") end, "does not apply to triangles")

@@ -181,8 +181,8 @@ static int gauss_solve(int n, double *A, int m, double *B) {
 int lagrange_init(lagrange_element *e, cell_type cell, int p, char *err) {
   memset(e, 0, sizeof *e);
   if (cell != CELL_TRIANGLE && cell != CELL_TETRAHEDRON) {
-    snprintf(err, 256, "Lagrange elements on %ss are not implemented yet (triangles and "
-                       "tetrahedra are)", cell_name(cell));
+    snprintf(err, 256, "Lagrange elements on %s are not implemented yet (triangles and "
+                       "tetrahedra are)", cell_plural(cell));
     return 1;
   }
   if (p < 1 || p > 3) {

@@ -738,7 +738,7 @@ static int mesh_write(lua_State *L) {
 static int mesh_tostring(lua_State *L) {
   ud_mesh *u = check_mesh(L, 1, "tostring");
   mesh *m = u->lm->m;
-  lua_pushfstring(L, "mesh: %d %ss, %d vertices, %dD", m->ncell, cell_name(m->type), m->nvert, m->dim);
+  lua_pushfstring(L, "mesh: %d %s, %d vertices, %dD", m->ncell, cell_plural(m->type), m->nvert, m->dim);
   return 1;
 }
 
@@ -819,9 +819,9 @@ static ud_qarray *push_quality(lua_State *L, int midx, const char *name, int tid
     pexp = opt_num(L, tidx, "p", 2, fn);
     pushed = read_metric(L, tidx, m, &buf, &qm, fn);
   }
-  if (q >= QM_DEFORMATION_MIN_SV && !ref)
+  if (quality_is_deformation(q) && !ref)
     luaL_error(L, "%s: %s compares two configurations: pass {reference = mesh}", fn, name);
-  if (q < QM_DEFORMATION_MIN_SV && ref) luaL_error(L, "%s: option 'reference' is for the deformation measures", fn);
+  if (!quality_is_deformation(q) && ref) luaL_error(L, "%s: option 'reference' is for the deformation measures", fn);
   ud_qarray *a = lua_newuserdatauv(L, sizeof(ud_qarray), 0);
   a->n = 0;
   a->measure = q;
@@ -968,10 +968,10 @@ static int mesh_quality_report(lua_State *L) {
     if (!quiet) printf("quadrilaterals: %d convex, %d non-convex, %d degenerate, %d crossed\n", cls[0], cls[1], cls[2], cls[3]);
   }
   (void)ninv;
-  if (!quiet) printf("mesh quality: %d %ss, %d inverted, %d degenerate\n  %-26s %12s %12s %12s %8s\n", m->ncell,
-                     cell_name(m->type), ninverted, ndegenerate, "measure", "min", "mean", "max", "worst");
-  for (int q = 0; q < QM_DEFORMATION_MIN_SV; q++) {
-    if (!quality_applies(q, m->type)) continue;
+  if (!quiet) printf("mesh quality: %d %s, %d inverted, %d degenerate\n  %-26s %12s %12s %12s %8s\n", m->ncell,
+                     cell_plural(m->type), ninverted, ndegenerate, "measure", "min", "mean", "max", "worst");
+  for (int q = 0; q < QM_COUNT; q++) {
+    if (!quality_applies(q, m->type) || quality_is_deformation(q)) continue;
     ud_qarray *a = push_quality(L, 1, quality_name(q), 0, fn);
     quality_stats st;
     quality_stats_compute(a->v, a->n, &st);

@@ -44,17 +44,17 @@ static int quality_cmd(int argc, char **argv) {
   if (!m) { fprintf(stderr, "lugal-mesh: %s\n", err); return 1; }
   int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON;
   int sel = quality_from_name(measure ? measure : simplex ? "mean_ratio" : "scaled_jacobian");
-  if (sel < 0 || !quality_applies(sel, m->type) || sel >= QM_DEFORMATION_MIN_SV) {
+  if (sel < 0 || !quality_applies(sel, m->type) || quality_is_deformation(sel)) {
     char names[1024];
     quality_names(names, sizeof names);
-    fprintf(stderr, "lugal-mesh quality: --measure %s does not apply to %ss (measures: %s)\n", measure,
-            cell_name(m->type), names);
+    fprintf(stderr, "lugal-mesh quality: --measure %s does not apply to %s (measures: %s)\n", measure,
+            cell_plural(m->type), names);
     mesh_free(m);
     return 2;
   }
   int ninv, ids[5];
   mesh_count_invalid(m, 5, ids, &ninv);
-  printf("%s: %d %ss, %d vertices, %d tagged boundary facets\n", file, m->ncell, cell_name(m->type), m->nvert, m->nbf);
+  printf("%s: %d %s, %d vertices, %d tagged boundary facets\n", file, m->ncell, cell_plural(m->type), m->nvert, m->nbf);
   printf("inverted or degenerate cells: %d", ninv);
   for (int i = 0; i < ninv && i < 5; i++) printf("%s%d", i ? ", " : " (cells ", ids[i] + 1);
   printf("%s\n\n  %-26s %12s %12s %12s %9s\n", ninv ? (ninv > 5 ? ", ...)" : ")") : "", "measure", "min", "mean", "max", "worst");
@@ -62,8 +62,8 @@ static int quality_cmd(int argc, char **argv) {
   mesh_field fl[QM_COUNT];
   int nf = 0;
   if (!val) { fprintf(stderr, "lugal-mesh: out of memory\n"); mesh_free(m); return 1; }
-  for (int q = 0; q < QM_DEFORMATION_MIN_SV; q++) {
-    if (!quality_applies(q, m->type)) continue;
+  for (int q = 0; q < QM_COUNT; q++) {
+    if (!quality_applies(q, m->type) || quality_is_deformation(q)) continue;
     double *v = val + (size_t)q * m->ncell;
     if (mesh_quality(m, q, NULL, v, err)) { fprintf(stderr, "lugal-mesh: %s\n", err); continue; }
     quality_stats st;

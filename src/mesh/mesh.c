@@ -31,6 +31,10 @@ const char *cell_name(cell_type t) {
   static const char *n[] = {"triangle", "quadrilateral", "tetrahedron", "hexahedron"};
   return n[t];
 }
+const char *cell_plural(cell_type t) {
+  static const char *n[] = {"triangles", "quadrilaterals", "tetrahedra", "hexahedra"};
+  return n[t];
+}
 static int cell_nvf(cell_type t) { static const int n[] = {2, 2, 3, 4}; return n[t]; }
 
 const int *cell_facet_verts(cell_type t, int f) {

@@ -63,6 +63,8 @@ int cell_nedges(cell_type t);
 int cell_dim(cell_type t);
 int cell_nverts(cell_type t);
 const char *cell_name(cell_type t);
+/* "triangles", "quadrilaterals", "tetrahedra", "hexahedra" */
+const char *cell_plural(cell_type t);
 /* local vertex ids of local facet f (nvf entries), local edge e (2 entries) */
 const int *cell_facet_verts(cell_type t, int f);
 const int *cell_edge_verts(cell_type t, int e);

@@ -17,7 +17,12 @@ static const char *names[QM_COUNT] = {
     "min_solid_angle", "sigma_min", "min_dihedral_angle", "edge_ratio", "signed_measure",
     "min_angle", "max_angle", "min_edge", "max_edge", "min_corner_jacobian", "scaled_jacobian",
     "corner_condition", "stretching", "skewness", "zeta", "iota", "q", "kappa2_mean", "kappa2_max",
-    "deformation_min_sv", "deformation_max_sv", "deformation_quality"};
+    "deformation_min_sv", "deformation_max_sv", "deformation_quality",
+    "verdict.area", "verdict.aspect_frobenius", "verdict.aspect_ratio", "verdict.condition",
+    "verdict.distortion", "verdict.edge_ratio", "verdict.max_angle", "verdict.min_angle",
+    "verdict.radius_ratio", "verdict.scaled_jacobian", "verdict.shape"};
+
+int quality_is_deformation(int q) { return q >= QM_DEFORMATION_MIN_SV && q <= QM_DEFORMATION_QUALITY; }
 
 int quality_from_name(const char *name) {
   for (int i = 0; i < QM_COUNT; i++)
@@ -45,6 +50,10 @@ int quality_applies(int q, cell_type t) {
   case QM_SCALED_JACOBIAN: case QM_CORNER_CONDITION: case QM_DEFORMATION_MIN_SV: case QM_DEFORMATION_MAX_SV:
   case QM_DEFORMATION_QUALITY:
     return 1;
+  case QM_V_AREA: case QM_V_ASPECT_FROBENIUS: case QM_V_ASPECT_RATIO: case QM_V_CONDITION: case QM_V_DISTORTION:
+  case QM_V_EDGE_RATIO: case QM_V_MAX_ANGLE: case QM_V_MIN_ANGLE: case QM_V_RADIUS_RATIO: case QM_V_SCALED_JACOBIAN:
+  case QM_V_SHAPE:
+    return t == CELL_TRIANGLE;
   default: return simplex;
   }
 }
@@ -312,6 +321,50 @@ static double tet_quality(const double *x, int q) {
   }
 }
 
+/* Verdict's triangle metrics (as in VTK 9.1), from their definitions. Verdict works in 3D
+ * and takes |cross products|, so its area and scaled Jacobian are unsigned (an inverted
+ * triangle looks like a valid one), unlike signed_measure and scaled_jacobian above.
+ * Degenerate triangles give Verdict's sentinel 1e30 where it does. */
+#define VERDICT_MAX 1e30
+static double verdict_tri(const double *x, int q) {
+  double a[2], b[2], c[2], v2[2];
+  sub(2, x + 2, x, a);     /* P0 → P1 */
+  sub(2, x + 4, x + 2, b); /* P1 → P2 */
+  sub(2, x, x + 4, c);     /* P2 → P0 */
+  sub(2, x + 4, x, v2);    /* P0 → P2 */
+  double la = norm(2, a), lb = norm(2, b), lc = norm(2, c);
+  double a2 = la * la, b2 = lb * lb, c2 = lc * lc;
+  double twoA = fabs(cross2(a, v2)); /* |a × b| = |a × (P2 − P0)| = 2 area */
+  double hmax = fmax(la, fmax(lb, lc)), hmin = fmin(la, fmin(lb, lc));
+  double cond = twoA > 0 ? (a2 + dot(2, v2, v2) - dot(2, a, v2)) / (twoA * sqrt(3.0)) : VERDICT_MAX;
+  switch (q) {
+  case QM_V_AREA: return 0.5 * twoA;
+  case QM_V_ASPECT_FROBENIUS: return twoA > 0 ? (a2 + b2 + c2) / (2 * sqrt(3.0) * twoA) : VERDICT_MAX;
+  case QM_V_ASPECT_RATIO: return twoA > 0 ? sqrt(3.0) / 6 * hmax * (la + lb + lc) / twoA : VERDICT_MAX;
+  case QM_V_RADIUS_RATIO: return twoA > 0 ? 0.25 * la * lb * lc * (la + lb + lc) / (twoA * twoA) : VERDICT_MAX;
+  case QM_V_CONDITION: return fmin(cond, VERDICT_MAX);
+  case QM_V_SHAPE: return cond > 0 && cond < VERDICT_MAX ? 1 / cond : 0;
+  case QM_V_DISTORTION: return 1; /* linear triangles */
+  case QM_V_EDGE_RATIO: return hmin > 0 ? hmax / hmin : VERDICT_MAX;
+  case QM_V_MAX_ANGLE: case QM_V_MIN_ANGLE: {
+    if (hmin == 0) return 0;
+    double th[3], s0[2], s1[2];
+    for (int i = 0; i < 3; i++) {
+      sub(2, x + 2 * ((i + 1) % 3), x + 2 * i, s0);
+      sub(2, x + 2 * ((i + 2) % 3), x + 2 * i, s1);
+      th[i] = atan2(fabs(cross2(s0, s1)), dot(2, s0, s1));
+    }
+    double v = q == QM_V_MAX_ANGLE ? fmax(th[0], fmax(th[1], th[2])) : fmin(th[0], fmin(th[1], th[2]));
+    return v * 180 / M_PI;
+  }
+  case QM_V_SCALED_JACOBIAN: {
+    double m = fmax(la * lc, fmax(lc * lb, la * lb));
+    return m > 0 ? twoA * (2 / sqrt(3.0)) / m : 0;
+  }
+  default: return NAN;
+  }
+}
+
 double simplex_quality(int dim, const double *x, int q) {
   return dim == 2 ? tri_quality(x, q) : tet_quality(x, q);
 }
@@ -533,10 +586,10 @@ static void tet_fast(const mesh *m, int q, double *out) {
 int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out, char *err) {
   if (q < 0 || q >= QM_COUNT) { snprintf(err, MESH_ERRLEN, "unknown quality measure"); return 1; }
   if (!quality_applies(q, m->type)) {
-    snprintf(err, MESH_ERRLEN, "the measure %s does not apply to %ss", names[q], cell_name(m->type));
+    snprintf(err, MESH_ERRLEN, "the measure %s does not apply to %s", names[q], cell_plural(m->type));
     return 1;
   }
-  if (q >= QM_DEFORMATION_MIN_SV) {
+  if (quality_is_deformation(q)) {
     snprintf(err, MESH_ERRLEN, "the measure %s compares two configurations: give a reference", names[q]);
     return 1;
   }
@@ -576,7 +629,7 @@ int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out
       xc = y;
     }
     double val;
-    if (m->type == CELL_TRIANGLE) val = tri_quality(xc, q);
+    if (m->type == CELL_TRIANGLE) val = q >= QM_V_AREA ? verdict_tri(xc, q) : tri_quality(xc, q);
     else if (m->type == CELL_TETRAHEDRON) val = tet_quality(xc, q);
     else if (m->type == CELL_QUADRILATERAL) {
       if (q == QM_SIGNED_MEASURE) {
@@ -649,7 +702,7 @@ static int deformation_matrix(int d, double T[3][3], double Tt[3][3], double B[3
 }
 
 int mesh_deformation(const mesh *m, const double *xref, int q, double p, double *out, char *err) {
-  if (q < QM_DEFORMATION_MIN_SV || q > QM_DEFORMATION_QUALITY) {
+  if (!quality_is_deformation(q)) {
     snprintf(err, MESH_ERRLEN, "%s is not a deformation measure", quality_name(q));
     return 1;
   }

@@ -17,7 +17,8 @@ static double urand(void) { return rand() / (double)RAND_MAX; }
 
 typedef struct { const char *name; double x[12]; } shape;
 
-int main(void) {
+int main(int argc, char **argv) {
+  const char *data = argc > 1 ? argv[1] : "tests/data";
   srand(4242);
   const double s3 = sqrt(3.0);
   double tri[6] = {0, 0, 1, 0, 0.5, s3 / 2};
@@ -296,6 +297,45 @@ int main(void) {
     printf("fast loops checked on %d perturbed tetrahedra (%d inverted)\n", m->ncell, ninv);
     free(fast);
     mesh_free(m);
+  }
+
+  /* Verdict triangle metrics against VTK 9.1's vtkMeshQuality (tests/data/verdict_tri.txt,
+   * made by tests/data/gen_verdict.py) */
+  {
+    char path[1024];
+    snprintf(path, sizeof path, "%s/verdict_tri.txt", data);
+    FILE *f = fopen(path, "r");
+    CHECK(f != NULL, "cannot open %s", path);
+    int vq[11] = {QM_V_AREA, QM_V_ASPECT_FROBENIUS, QM_V_ASPECT_RATIO, QM_V_CONDITION, QM_V_DISTORTION, QM_V_EDGE_RATIO,
+                  QM_V_MAX_ANGLE, QM_V_MIN_ANGLE, QM_V_RADIUS_RATIO, QM_V_SCALED_JACOBIAN, QM_V_SHAPE};
+    char line[4096];
+    int rows = 0;
+    while (f && fgets(line, sizeof line, f)) {
+      if (line[0] == '#') continue;
+      double v[17];
+      char *p = line;
+      int k;
+      for (k = 0; k < 17; k++) {
+        char *end;
+        v[k] = strtod(p, &end);
+        if (end == p) break;
+        p = end;
+      }
+      if (k != 17) continue;
+      int cells[3] = {0, 1, 2};
+      mesh *tm = mesh_create(CELL_TRIANGLE, 3, v, 1, cells, err);
+      for (int i = 0; i < 11; i++) {
+        double got;
+        CHECK(mesh_quality(tm, vq[i], NULL, &got, err) == 0, "%s", err);
+        CHECK(fabs(got - v[6 + i]) <= 1e-11 * fmax(1, fabs(v[6 + i])), "row %d %s: %.17g, VTK %.17g", rows + 1,
+              quality_name(vq[i]), got, v[6 + i]);
+      }
+      mesh_free(tm);
+      rows++;
+    }
+    if (f) fclose(f);
+    CHECK(rows >= 40, "only %d rows of VTK values", rows);
+    printf("verdict triangle metrics match VTK on %d triangles\n", rows);
   }
 
   /* statistics helpers */

@@ -74,6 +74,14 @@ T.check(r.quadrilaterals.nonconvex + r.quadrilaterals.crossed >= 1, "a tangled c
 local flat = lg.mesh.new{cell = "triangle", vertices = {{0, 0}, {1, 0}, {2, 0}, {0, 1}}, cells = {{1, 2, 3}, {1, 2, 4}}}
 T.check(flat:quality_report(true).degenerate == 1, "a flat triangle is degenerate")
 
+-- Verdict names: 1/η, 1/κ̃ relations on the two triangles, and an unsigned scaled Jacobian
+T.close(m:quality("verdict.aspect_frobenius")[2], 1 / m:quality("mean_ratio")[2], 1e-13, "verdict aspect frobenius")
+T.close(m:quality("verdict.shape")[1], 1, 1e-13, "verdict shape of the regular triangle")
+local inv = lg.mesh.new{cell = "triangle", vertices = {{0, 0}, {0, 1}, {1, 0}}, cells = {{1, 2, 3}}}
+T.check(inv:quality("verdict.scaled_jacobian")[1] > 0 and inv:quality("scaled_jacobian")[1] < 0,
+        "Verdict's scaled Jacobian is unsigned, lugal's is not")
+T.fails(function() return box:quality("verdict.shape") end, "does not apply to tetrahedra")
+
 -- errors
 T.fails(function() return m:quality("nope") end, "mesh:quality: unknown measure \"nope\"", "mean_ratio", "scaled_jacobian")
 T.fails(function() return m:quality("min_dihedral_angle") end, "does not apply to triangles")

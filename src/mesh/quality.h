@@ -36,10 +36,12 @@ typedef enum {
   QM_DEFORMATION_MIN_SV,    /* smallest singular value of B = T̃ T⁻¹ */
   QM_DEFORMATION_MAX_SV,    /* largest */
   QM_DEFORMATION_QUALITY,   /* τ_p = d^(2/p) / κ_p(B) (4.16, 4.19), τ_∞ = σmin/σmax (4.18); 0 if inverted */
-  /* Sandia's Verdict metrics as VTK 9.1's vtkMeshQuality computes them (triangles so far) */
+  /* Sandia's Verdict metrics as VTK 9.1's vtkMeshQuality computes them (triangles and
+   * tetrahedra so far) */
   QM_V_AREA, QM_V_ASPECT_FROBENIUS, QM_V_ASPECT_RATIO, QM_V_CONDITION, QM_V_DISTORTION,
   QM_V_EDGE_RATIO, QM_V_MAX_ANGLE, QM_V_MIN_ANGLE, QM_V_RADIUS_RATIO, QM_V_SCALED_JACOBIAN,
   QM_V_SHAPE,
+  QM_V_ASPECT_BETA, QM_V_ASPECT_GAMMA, QM_V_COLLAPSE_RATIO, QM_V_JACOBIAN, QM_V_VOLUME,
   QM_COUNT
 } quality_measure;
 

@@ -337,6 +337,43 @@ int main(int argc, char **argv) {
     CHECK(rows >= 40, "only %d rows of VTK values", rows);
     printf("verdict triangle metrics match VTK on %d triangles\n", rows);
   }
+  {
+    char path[1024];
+    snprintf(path, sizeof path, "%s/verdict_tet.txt", data);
+    FILE *f = fopen(path, "r");
+    CHECK(f != NULL, "cannot open %s", path);
+    int vq[14] = {QM_V_ASPECT_BETA, QM_V_ASPECT_FROBENIUS, QM_V_ASPECT_GAMMA, QM_V_ASPECT_RATIO, QM_V_COLLAPSE_RATIO,
+                  QM_V_CONDITION, QM_V_DISTORTION, QM_V_EDGE_RATIO, QM_V_JACOBIAN, QM_V_MIN_ANGLE, QM_V_RADIUS_RATIO,
+                  QM_V_SCALED_JACOBIAN, QM_V_SHAPE, QM_V_VOLUME};
+    char line[4096];
+    int rows = 0;
+    while (f && fgets(line, sizeof line, f)) {
+      if (line[0] == '#') continue;
+      double v[26];
+      char *p = line;
+      int k;
+      for (k = 0; k < 26; k++) {
+        char *end;
+        v[k] = strtod(p, &end);
+        if (end == p) break;
+        p = end;
+      }
+      if (k != 26) continue;
+      int cells[4] = {0, 1, 2, 3};
+      mesh *tm = mesh_create(CELL_TETRAHEDRON, 4, v, 1, cells, err);
+      for (int i = 0; i < 14; i++) {
+        double got;
+        CHECK(mesh_quality(tm, vq[i], NULL, &got, err) == 0, "%s", err);
+        CHECK(fabs(got - v[12 + i]) <= 1e-10 * fmax(1, fabs(v[12 + i])), "tet row %d %s: %.17g, VTK %.17g", rows + 1,
+              quality_name(vq[i]), got, v[12 + i]);
+      }
+      mesh_free(tm);
+      rows++;
+    }
+    if (f) fclose(f);
+    CHECK(rows >= 40, "only %d rows of VTK tetrahedron values", rows);
+    printf("verdict tetrahedron metrics match VTK on %d tetrahedra\n", rows);
+  }
 
   /* statistics helpers */
   double q[6] = {0.5, 0.1, 0.9, 0.3, 0.1, 0.7};

@@ -15,6 +15,44 @@ static const int valid2[] = {QM_MEAN_RATIO, QM_RADIUS_RATIO, QM_CONDITION, QM_FR
 
 static double urand(void) { return rand() / (double)RAND_MAX; }
 
+/* compare one cell type's Verdict measures with a file of VTK values: each row holds the
+ * vertex coordinates then one value per measure; returns the number of rows */
+static int check_verdict_file(const char *data, const char *name, cell_type t, const int *measures, int nm,
+                              double tol) {
+  char path[1024], line[4096], err[MESH_ERRLEN];
+  snprintf(path, sizeof path, "%s/%s", data, name);
+  FILE *f = fopen(path, "r");
+  CHECK(f != NULL, "cannot open %s", path);
+  if (!f) return 0;
+  int nv = cell_nverts(t), dim = cell_dim(t), ncoord = nv * dim, rows = 0;
+  int cells[8] = {0, 1, 2, 3, 4, 5, 6, 7};
+  while (fgets(line, sizeof line, f)) {
+    if (line[0] == '#') continue;
+    double v[64];
+    char *p = line;
+    int k;
+    for (k = 0; k < ncoord + nm; k++) {
+      char *end;
+      v[k] = strtod(p, &end);
+      if (end == p) break;
+      p = end;
+    }
+    if (k != ncoord + nm) continue;
+    mesh *m = mesh_create(t, nv, v, 1, cells, err);
+    for (int i = 0; i < nm; i++) {
+      double got;
+      CHECK(mesh_quality(m, measures[i], NULL, &got, err) == 0, "%s", err);
+      double want = v[ncoord + i];
+      CHECK(fabs(got - want) <= tol * fmax(1, fabs(want)), "%s row %d %s: %.17g, VTK %.17g", name, rows + 1,
+            quality_name(measures[i]), got, want);
+    }
+    mesh_free(m);
+    rows++;
+  }
+  fclose(f);
+  return rows;
+}
+
 typedef struct { const char *name; double x[12]; } shape;
 
 int main(int argc, char **argv) {
@@ -299,80 +337,18 @@ int main(int argc, char **argv) {
     mesh_free(m);
   }
 
-  /* Verdict triangle metrics against VTK 9.1's vtkMeshQuality (tests/data/verdict_tri.txt,
-   * made by tests/data/gen_verdict.py) */
+  /* Verdict metrics against VTK 9.1's vtkMeshQuality (tests/data/verdict_*.txt, made by
+   * tests/data/gen_verdict.py) */
   {
-    char path[1024];
-    snprintf(path, sizeof path, "%s/verdict_tri.txt", data);
-    FILE *f = fopen(path, "r");
-    CHECK(f != NULL, "cannot open %s", path);
-    int vq[11] = {QM_V_AREA, QM_V_ASPECT_FROBENIUS, QM_V_ASPECT_RATIO, QM_V_CONDITION, QM_V_DISTORTION, QM_V_EDGE_RATIO,
+    int vt[11] = {QM_V_AREA, QM_V_ASPECT_FROBENIUS, QM_V_ASPECT_RATIO, QM_V_CONDITION, QM_V_DISTORTION, QM_V_EDGE_RATIO,
                   QM_V_MAX_ANGLE, QM_V_MIN_ANGLE, QM_V_RADIUS_RATIO, QM_V_SCALED_JACOBIAN, QM_V_SHAPE};
-    char line[4096];
-    int rows = 0;
-    while (f && fgets(line, sizeof line, f)) {
-      if (line[0] == '#') continue;
-      double v[17];
-      char *p = line;
-      int k;
-      for (k = 0; k < 17; k++) {
-        char *end;
-        v[k] = strtod(p, &end);
-        if (end == p) break;
-        p = end;
-      }
-      if (k != 17) continue;
-      int cells[3] = {0, 1, 2};
-      mesh *tm = mesh_create(CELL_TRIANGLE, 3, v, 1, cells, err);
-      for (int i = 0; i < 11; i++) {
-        double got;
-        CHECK(mesh_quality(tm, vq[i], NULL, &got, err) == 0, "%s", err);
-        CHECK(fabs(got - v[6 + i]) <= 1e-11 * fmax(1, fabs(v[6 + i])), "row %d %s: %.17g, VTK %.17g", rows + 1,
-              quality_name(vq[i]), got, v[6 + i]);
-      }
-      mesh_free(tm);
-      rows++;
-    }
-    if (f) fclose(f);
-    CHECK(rows >= 40, "only %d rows of VTK values", rows);
-    printf("verdict triangle metrics match VTK on %d triangles\n", rows);
-  }
-  {
-    char path[1024];
-    snprintf(path, sizeof path, "%s/verdict_tet.txt", data);
-    FILE *f = fopen(path, "r");
-    CHECK(f != NULL, "cannot open %s", path);
     int vq[14] = {QM_V_ASPECT_BETA, QM_V_ASPECT_FROBENIUS, QM_V_ASPECT_GAMMA, QM_V_ASPECT_RATIO, QM_V_COLLAPSE_RATIO,
                   QM_V_CONDITION, QM_V_DISTORTION, QM_V_EDGE_RATIO, QM_V_JACOBIAN, QM_V_MIN_ANGLE, QM_V_RADIUS_RATIO,
                   QM_V_SCALED_JACOBIAN, QM_V_SHAPE, QM_V_VOLUME};
-    char line[4096];
-    int rows = 0;
-    while (f && fgets(line, sizeof line, f)) {
-      if (line[0] == '#') continue;
-      double v[26];
-      char *p = line;
-      int k;
-      for (k = 0; k < 26; k++) {
-        char *end;
-        v[k] = strtod(p, &end);
-        if (end == p) break;
-        p = end;
-      }
-      if (k != 26) continue;
-      int cells[4] = {0, 1, 2, 3};
-      mesh *tm = mesh_create(CELL_TETRAHEDRON, 4, v, 1, cells, err);
-      for (int i = 0; i < 14; i++) {
-        double got;
-        CHECK(mesh_quality(tm, vq[i], NULL, &got, err) == 0, "%s", err);
-        CHECK(fabs(got - v[12 + i]) <= 1e-10 * fmax(1, fabs(v[12 + i])), "tet row %d %s: %.17g, VTK %.17g", rows + 1,
-              quality_name(vq[i]), got, v[12 + i]);
-      }
-      mesh_free(tm);
-      rows++;
-    }
-    if (f) fclose(f);
-    CHECK(rows >= 40, "only %d rows of VTK tetrahedron values", rows);
-    printf("verdict tetrahedron metrics match VTK on %d tetrahedra\n", rows);
+    int nt = check_verdict_file(data, "verdict_tri.txt", CELL_TRIANGLE, vt, 11, 1e-11);
+    int nq = check_verdict_file(data, "verdict_tet.txt", CELL_TETRAHEDRON, vq, 14, 1e-10);
+    CHECK(nt >= 40 && nq >= 40, "only %d / %d rows of VTK values", nt, nq);
+    printf("verdict metrics match VTK on %d triangles and %d tetrahedra\n", nt, nq);
   }
 
   /* statistics helpers */

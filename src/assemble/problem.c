@@ -203,7 +203,6 @@ static int setup_bcs(lg_env *env, lg_problem *p, const form *bc, const int *test
   if (!bc || !bc->n) return 0;
   p->bct = calloc((size_t)bc->n * (size_t)nf + 1, sizeof(bc_term));
   if (!p->bct) { lg_seterr(env, "out of memory"); return 1; }
-  mesh *m = p->lm->m;
   long cap = 0;
   for (int i = 0; i < bc->n; i++) {
     const form_term *ft = &bc->t[i];
@@ -262,7 +261,6 @@ static int setup_bcs(lg_env *env, lg_problem *p, const form *bc, const int *test
   p->bc_rows = malloc(sizeof(PetscInt) * (size_t)(cap + 1));
   p->bc_vals = malloc(sizeof(PetscScalar) * (size_t)(cap + 1));
   if (!p->bc_rows || !p->bc_vals) { lg_seterr(env, "out of memory"); return 1; }
-  (void)m;
   return 0;
 }
 

@@ -931,8 +931,6 @@ static int mesh_quality_report(lua_State *L) {
   ud_mesh *um = check_mesh(L, 1, fn);
   mesh *m = um->lm->m;
   int quiet = lua_toboolean(L, 2);
-  int ninv, ids[10];
-  mesh_count_invalid(m, 10, ids, &ninv);
   /* split the invalid cells: inverted (clearly negative) and degenerate (about zero) */
   double *jac = mesh_big_alloc(sizeof(double) * (size_t)(m->ncell + 1));
   if (!jac) return luaL_error(L, "%s: out of memory", fn);
@@ -967,7 +965,6 @@ static int mesh_quality_report(lua_State *L) {
     lua_setfield(L, rep, "quadrilaterals");
     if (!quiet) printf("quadrilaterals: %d convex, %d non-convex, %d degenerate, %d crossed\n", cls[0], cls[1], cls[2], cls[3]);
   }
-  (void)ninv;
   if (!quiet) printf("mesh quality: %d %s, %d inverted, %d degenerate\n  %-26s %12s %12s %12s %8s\n", m->ncell,
                      cell_plural(m->type), ninverted, ndegenerate, "measure", "min", "mean", "max", "worst");
   for (int q = 0; q < QM_COUNT; q++) {
@@ -1431,10 +1428,8 @@ static int prob_solve(lua_State *L) {
   lg_function *out[KER_MAXFIELD];
   lg_solve_info info;
   if (lg_problem_solve(env, u->p, init, out, &info)) return lgerror(L, fn, env);
-  lua_getiuservalue(L, 1, 1);
-  lua_rawgeti(L, -1, 0); /* unused slot: fetch the mesh from the deps below */
-  lua_pop(L, 1);
   /* find the mesh userdata among the dependencies to anchor the outputs */
+  lua_getiuservalue(L, 1, 1);
   int mesh_idx = 0;
   lua_pushnil(L);
   while (lua_next(L, -2)) {

@@ -58,26 +58,35 @@ static int quality_cmd(int argc, char **argv) {
   printf("inverted or degenerate cells: %d", ninv);
   for (int i = 0; i < ninv && i < 5; i++) printf("%s%d", i ? ", " : " (cells ", ids[i] + 1);
   printf("%s\n\n  %-26s %12s %12s %12s %9s\n", ninv ? (ninv > 5 ? ", ...)" : ")") : "", "measure", "min", "mean", "max", "worst");
-  double *val = malloc(sizeof(double) * (size_t)m->ncell * QM_COUNT);
+  /* one buffer per measure only when the VTU wants them all; otherwise one scratch buffer
+   * (every measure of a 10-million-cell mesh at once would be gigabytes) */
+  double *sv = mesh_big_alloc(sizeof(double) * (size_t)(m->ncell + 1));
+  double *scratch = vtu ? NULL : mesh_big_alloc(sizeof(double) * (size_t)(m->ncell + 1));
   mesh_field fl[QM_COUNT];
   int nf = 0;
-  if (!val) { fprintf(stderr, "lugal-mesh: out of memory\n"); mesh_free(m); return 1; }
+  if (!sv || (!vtu && !scratch)) { fprintf(stderr, "lugal-mesh: out of memory\n"); mesh_free(m); return 1; }
   for (int q = 0; q < QM_COUNT; q++) {
     if (!quality_applies(q, m->type) || quality_is_deformation(q)) continue;
-    double *v = val + (size_t)q * m->ncell;
-    if (mesh_quality(m, q, NULL, v, err)) { fprintf(stderr, "lugal-mesh: %s\n", err); continue; }
+    double *v = q == sel ? sv : vtu ? mesh_big_alloc(sizeof(double) * (size_t)(m->ncell + 1)) : scratch;
+    if (!v) { fprintf(stderr, "lugal-mesh: out of memory for %s\n", quality_name(q)); continue; }
+    if (mesh_quality(m, q, NULL, v, err)) {
+      fprintf(stderr, "lugal-mesh: %s\n", err);
+      if (vtu && v != sv) mesh_big_free(v);
+      continue;
+    }
     quality_stats st;
     quality_stats_compute(v, m->ncell, &st);
     printf("  %-26s %12.6g %12.6g %12.6g %9d\n", quality_name(q), st.min, st.mean, st.max,
            quality_worst_index(v, m->ncell, quality_larger_is_better(q)) + 1);
-    fl[nf].name = quality_name(q);
-    fl[nf].ncomp = 1;
-    fl[nf].on_cells = 1;
-    fl[nf].val = v;
-    nf++;
+    if (vtu) {
+      fl[nf].name = quality_name(q);
+      fl[nf].ncomp = 1;
+      fl[nf].on_cells = 1;
+      fl[nf].val = v;
+      nf++;
+    }
   }
   int rc = 0;
-  const double *sv = val + (size_t)sel * m->ncell;
   quality_stats st;
   quality_stats_compute(sv, m->ncell, &st);
   char title[256];
@@ -97,7 +106,10 @@ static int quality_cmd(int argc, char **argv) {
     if (mesh_write_vtu(m, vtu, nf, fl)) { fprintf(stderr, "lugal-mesh: %s\n", m->err); rc = 1; }
     else printf("every measure as cell data: %s\n", vtu);
   }
-  free(val);
+  for (int i = 0; i < nf; i++)
+    if (fl[i].val != sv) mesh_big_free((double *)fl[i].val);
+  mesh_big_free(sv);
+  mesh_big_free(scratch);
   mesh_free(m);
   return rc;
 }

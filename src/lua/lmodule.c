@@ -965,7 +965,7 @@ static int mesh_quality_report(lua_State *L) {
     lua_setfield(L, rep, "quadrilaterals");
     if (!quiet) printf("quadrilaterals: %d convex, %d non-convex, %d degenerate, %d crossed\n", cls[0], cls[1], cls[2], cls[3]);
   }
-  if (!quiet) printf("mesh quality: %d %s, %d inverted, %d degenerate\n  %-26s %12s %12s %12s %8s\n", m->ncell,
+  if (!quiet) printf("mesh quality: %d %s, %d inverted, %d degenerate\n  %-28s %12s %12s %12s %8s\n", m->ncell,
                      cell_plural(m->type), ninverted, ndegenerate, "measure", "min", "mean", "max", "worst");
   for (int q = 0; q < QM_COUNT; q++) {
     if (!quality_applies(q, m->type) || quality_is_deformation(q)) continue;
@@ -980,7 +980,7 @@ static int mesh_quality_report(lua_State *L) {
     int wi = quality_worst_index(a->v, a->n, quality_larger_is_better(q));
     lua_pushinteger(L, wi + 1); lua_setfield(L, -2, "worst");
     lua_setfield(L, rep, quality_name(q));
-    if (!quiet) printf("  %-26s %12.6g %12.6g %12.6g %8d\n", quality_name(q), st.min, st.mean, st.max, wi + 1);
+    if (!quiet) printf("  %-28s %12.6g %12.6g %12.6g %8d\n", quality_name(q), st.min, st.mean, st.max, wi + 1);
   }
   if (!quiet) fflush(stdout);
   lua_settop(L, rep);

@@ -57,7 +57,7 @@ static int quality_cmd(int argc, char **argv) {
   printf("%s: %d %s, %d vertices, %d tagged boundary facets\n", file, m->ncell, cell_plural(m->type), m->nvert, m->nbf);
   printf("inverted or degenerate cells: %d", ninv);
   for (int i = 0; i < ninv && i < 5; i++) printf("%s%d", i ? ", " : " (cells ", ids[i] + 1);
-  printf("%s\n\n  %-26s %12s %12s %12s %9s\n", ninv ? (ninv > 5 ? ", ...)" : ")") : "", "measure", "min", "mean", "max", "worst");
+  printf("%s\n\n  %-28s %12s %12s %12s %9s\n", ninv ? (ninv > 5 ? ", ...)" : ")") : "", "measure", "min", "mean", "max", "worst");
   /* one buffer per measure only when the VTU wants them all; otherwise one scratch buffer
    * (every measure of a 10-million-cell mesh at once would be gigabytes) */
   double *sv = mesh_big_alloc(sizeof(double) * (size_t)(m->ncell + 1));
@@ -76,7 +76,7 @@ static int quality_cmd(int argc, char **argv) {
     }
     quality_stats st;
     quality_stats_compute(v, m->ncell, &st);
-    printf("  %-26s %12.6g %12.6g %12.6g %9d\n", quality_name(q), st.min, st.mean, st.max,
+    printf("  %-28s %12.6g %12.6g %12.6g %9d\n", quality_name(q), st.min, st.mean, st.max,
            quality_worst_index(v, m->ncell, quality_larger_is_better(q)) + 1);
     if (vtu) {
       fl[nf].name = quality_name(q);

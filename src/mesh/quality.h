@@ -36,12 +36,14 @@ typedef enum {
   QM_DEFORMATION_MIN_SV,    /* smallest singular value of B = T̃ T⁻¹ */
   QM_DEFORMATION_MAX_SV,    /* largest */
   QM_DEFORMATION_QUALITY,   /* τ_p = d^(2/p) / κ_p(B) (4.16, 4.19), τ_∞ = σmin/σmax (4.18); 0 if inverted */
-  /* Sandia's Verdict metrics as VTK 9.1's vtkMeshQuality computes them (triangles and
-   * tetrahedra so far) */
+  /* Sandia's Verdict metrics as VTK 9.1's vtkMeshQuality computes them, for the cell types
+   * VTK offers each one on (quality_applies) */
   QM_V_AREA, QM_V_ASPECT_FROBENIUS, QM_V_ASPECT_RATIO, QM_V_CONDITION, QM_V_DISTORTION,
   QM_V_EDGE_RATIO, QM_V_MAX_ANGLE, QM_V_MIN_ANGLE, QM_V_RADIUS_RATIO, QM_V_SCALED_JACOBIAN,
   QM_V_SHAPE,
   QM_V_ASPECT_BETA, QM_V_ASPECT_GAMMA, QM_V_COLLAPSE_RATIO, QM_V_JACOBIAN, QM_V_VOLUME,
+  QM_V_MAX_ASPECT_FROBENIUS, QM_V_MAX_EDGE_RATIOS, QM_V_MED_ASPECT_FROBENIUS, QM_V_ODDY, QM_V_SHEAR,
+  QM_V_SKEW, QM_V_STRETCH, QM_V_TAPER, QM_V_WARPAGE, QM_V_DIAGONAL, QM_V_DIMENSION,
   QM_COUNT
 } quality_measure;
 

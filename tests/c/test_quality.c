@@ -345,10 +345,75 @@ int main(int argc, char **argv) {
     int vq[14] = {QM_V_ASPECT_BETA, QM_V_ASPECT_FROBENIUS, QM_V_ASPECT_GAMMA, QM_V_ASPECT_RATIO, QM_V_COLLAPSE_RATIO,
                   QM_V_CONDITION, QM_V_DISTORTION, QM_V_EDGE_RATIO, QM_V_JACOBIAN, QM_V_MIN_ANGLE, QM_V_RADIUS_RATIO,
                   QM_V_SCALED_JACOBIAN, QM_V_SHAPE, QM_V_VOLUME};
+    int vu[20] = {QM_V_AREA, QM_V_ASPECT_RATIO, QM_V_CONDITION, QM_V_DISTORTION, QM_V_EDGE_RATIO, QM_V_JACOBIAN,
+                  QM_V_MAX_ANGLE, QM_V_MAX_ASPECT_FROBENIUS, QM_V_MAX_EDGE_RATIOS, QM_V_MED_ASPECT_FROBENIUS,
+                  QM_V_MIN_ANGLE, QM_V_ODDY, QM_V_RADIUS_RATIO, QM_V_SCALED_JACOBIAN, QM_V_SHAPE, QM_V_SHEAR,
+                  QM_V_SKEW, QM_V_STRETCH, QM_V_TAPER, QM_V_WARPAGE};
+    int vh[17] = {QM_V_CONDITION, QM_V_DIAGONAL, QM_V_DIMENSION, QM_V_DISTORTION, QM_V_EDGE_RATIO, QM_V_JACOBIAN,
+                  QM_V_MAX_ASPECT_FROBENIUS, QM_V_MAX_EDGE_RATIOS, QM_V_MED_ASPECT_FROBENIUS, QM_V_ODDY,
+                  QM_V_SCALED_JACOBIAN, QM_V_SHAPE, QM_V_SHEAR, QM_V_SKEW, QM_V_STRETCH, QM_V_TAPER, QM_V_VOLUME};
     int nt = check_verdict_file(data, "verdict_tri.txt", CELL_TRIANGLE, vt, 11, 1e-11);
     int nq = check_verdict_file(data, "verdict_tet.txt", CELL_TETRAHEDRON, vq, 14, 1e-10);
-    CHECK(nt >= 40 && nq >= 40, "only %d / %d rows of VTK values", nt, nq);
-    printf("verdict metrics match VTK on %d triangles and %d tetrahedra\n", nt, nq);
+    int nu = check_verdict_file(data, "verdict_quad.txt", CELL_QUADRILATERAL, vu, 20, 1e-10);
+    int nh = check_verdict_file(data, "verdict_hex.txt", CELL_HEXAHEDRON, vh, 17, 1e-10);
+    CHECK(nt >= 40 && nq >= 40 && nu >= 45 && nh >= 45, "only %d / %d / %d / %d rows of VTK values", nt, nq, nu, nh);
+    printf("verdict metrics match VTK on %d triangles, %d tetrahedra, %d quadrilaterals, %d hexahedra\n", nt, nq, nu,
+           nh);
+    /* Verdict's hex edge ratio takes the longest of the first six edges only: on a 1×2×3 box
+     * it says 2, the seed's edge_ratio (hmin/hmax over all edges) says 1/3 */
+    {
+      double bx[24];
+      for (int i = 0; i < 8; i++) {
+        bx[3 * i] = (i == 1 || i == 2 || i == 5 || i == 6);
+        bx[3 * i + 1] = 2.0 * (i == 2 || i == 3 || i == 6 || i == 7);
+        bx[3 * i + 2] = 3.0 * (i >= 4);
+      }
+      int hc[8] = {0, 1, 2, 3, 4, 5, 6, 7};
+      char err[MESH_ERRLEN];
+      mesh *h = mesh_create(CELL_HEXAHEDRON, 8, bx, 1, hc, err);
+      double ve, se, vol;
+      mesh_quality(h, QM_V_EDGE_RATIO, NULL, &ve, err);
+      mesh_quality(h, QM_EDGE_RATIO, NULL, &se, err);
+      mesh_quality(h, QM_V_VOLUME, NULL, &vol, err);
+      CHECK(ve == 2 && fabs(se - 1.0 / 3) < 1e-15 && fabs(vol - 6) < 1e-14, "box: verdict %g, seed %g, volume %g", ve,
+            se, vol);
+      mesh_free(h);
+    }
+    /* the issue's correspondences on convex quadrilaterals: τ = Verdict's edge ratio, ι/2 its
+     * aspect ratio, Q/(4√2) its radius ratio, κ₂¹/2 and κ₂^∞/2 its med and max aspect Frobenius */
+    {
+      const int seed[5] = {QM_STRETCHING, QM_IOTA, QM_Q, QM_KAPPA2_MEAN, QM_KAPPA2_MAX};
+      const int verd[5] = {QM_V_EDGE_RATIO, QM_V_ASPECT_RATIO, QM_V_RADIUS_RATIO, QM_V_MED_ASPECT_FROBENIUS,
+                           QM_V_MAX_ASPECT_FROBENIUS};
+      const double fac[5] = {1, 0.5, 1 / (4 * sqrt(2.0)), 0.5, 0.5};
+      int nconvex = 0, qc[4] = {0, 1, 2, 3};
+      char err[MESH_ERRLEN];
+      for (int t = 0; t < 500; t++) {
+        double x[8] = {0, 0, 1, 0, 1, 1, 0, 1};
+        for (int i = 0; i < 8; i++) x[i] += 0.6 * (urand() - 0.5);
+        quad_class cls;
+        quad_corner_area(x, &cls);
+        if (cls != QUAD_CONVEX) continue;
+        nconvex++;
+        mesh *mq = mesh_create(CELL_QUADRILATERAL, 4, x, 1, qc, err);
+        for (int k = 0; k < 5; k++) {
+          double a, b;
+          mesh_quality(mq, seed[k], NULL, &a, err);
+          mesh_quality(mq, verd[k], NULL, &b, err);
+          CHECK(fabs(fac[k] * a - b) <= 1e-14 * b, "%s vs %s: %.17g %.17g", quality_name(seed[k]),
+                quality_name(verd[k]), fac[k] * a, b);
+        }
+        mesh_free(mq);
+      }
+      CHECK(nconvex > 300, "only %d convex quadrilaterals", nconvex);
+    }
+    /* every Verdict name applies to exactly the cell types VTK 9.1 offers it on */
+    int count[4] = {0, 0, 0, 0};
+    for (int q = QM_V_AREA; q < QM_COUNT; q++)
+      for (int t = 0; t < 4; t++) count[t] += quality_applies(q, (cell_type)t);
+    CHECK(count[CELL_TRIANGLE] == 11 && count[CELL_TETRAHEDRON] == 14 && count[CELL_QUADRILATERAL] == 20 &&
+              count[CELL_HEXAHEDRON] == 17,
+          "verdict metrics per type %d %d %d %d", count[0], count[1], count[2], count[3]);
   }
 
   /* statistics helpers */

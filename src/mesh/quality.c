@@ -1239,6 +1239,28 @@ static void tet_fast(const mesh *m, int q, double *out) {
   }
 }
 
+/* measure q of one cell of type t given its vertex coordinates */
+static double coords_quality(cell_type t, const double *xc, int q) {
+  if (t == CELL_TRIANGLE) return q >= QM_V_AREA ? verdict_tri(xc, q) : tri_quality(xc, q);
+  if (t == CELL_TETRAHEDRON) return q >= QM_V_AREA ? verdict_tet(xc, q) : tet_quality(xc, q);
+  if (q >= QM_V_AREA) return t == CELL_QUADRILATERAL ? verdict_quad(xc, q) : verdict_hex(xc, q);
+  if (t == CELL_QUADRILATERAL) {
+    if (q != QM_SIGNED_MEASURE) return quad_quality_measure(xc, q);
+    double s = 0;
+    for (int i = 0; i < 4; i++) s += cross2(xc + 2 * i, xc + 2 * ((i + 1) % 4));
+    return 0.5 * s;
+  }
+  return q == QM_SIGNED_MEASURE ? hex_signed_volume(xc) : hex_quality(xc, q);
+}
+
+double mesh_cell_quality(const mesh *m, int c, int q) {
+  double x[8 * 3];
+  const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+  for (int i = 0; i < m->nvc; i++)
+    for (int k = 0; k < m->dim; k++) x[i * m->dim + k] = m->x[(size_t)v[i] * m->dim + k];
+  return coords_quality(m->type, x, q);
+}
+
 int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out, char *err) {
   if (q < 0 || q >= QM_COUNT) { snprintf(err, MESH_ERRLEN, "unknown quality measure"); return 1; }
   if (!quality_applies(q, m->type)) {
@@ -1284,19 +1306,7 @@ int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out
         }
       xc = y;
     }
-    double val;
-    if (m->type == CELL_TRIANGLE) val = q >= QM_V_AREA ? verdict_tri(xc, q) : tri_quality(xc, q);
-    else if (m->type == CELL_TETRAHEDRON) val = q >= QM_V_AREA ? verdict_tet(xc, q) : tet_quality(xc, q);
-    else if (q >= QM_V_AREA) val = m->type == CELL_QUADRILATERAL ? verdict_quad(xc, q) : verdict_hex(xc, q);
-    else if (m->type == CELL_QUADRILATERAL) {
-      if (q == QM_SIGNED_MEASURE) {
-        double s = 0;
-        for (int i = 0; i < 4; i++) s += cross2(xc + 2 * i, xc + 2 * ((i + 1) % 4));
-        val = 0.5 * s;
-      } else val = quad_quality_measure(xc, q);
-    } else {
-      val = q == QM_SIGNED_MEASURE ? hex_signed_volume(xc) : hex_quality(xc, q);
-    }
+    double val = coords_quality(m->type, xc, q);
     out[c] = val;
   }
   return 0;

@@ -69,6 +69,9 @@ typedef struct {
  * measure does not apply or the metric is not positive definite */
 int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out, char *err);
 
+/* measure q (not a deformation measure, no metric) of cell c */
+double mesh_cell_quality(const mesh *m, int c, int q);
+
 /* deformation measures of the mesh's current coordinates relative to xref (a reference
  * configuration of the same mesh, nvert*dim); p >= 1 or INFINITY for the Schatten norm.
  * Quadrilaterals and hexahedra use the corner matrices and report the worst corner. */

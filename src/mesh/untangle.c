@@ -1,0 +1,821 @@
+/* untangle.c — untangling (seed: "Untangling of 2D triangular and quadrilateral meshes in ALE
+ * simulations", sections 1–4), quality-guarded smoothing and Laplacian mesh motion (seed:
+ * "Morphing and modification of unstructured meshes", eqs. 1.1–1.3). See untangle.h. */
+#include "untangle.h"
+
+#include "quality.h"
+#include "tuplehash.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+static double now(void) {
+  struct timespec t;
+  clock_gettime(CLOCK_MONOTONIC, &t);
+  return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+/* ---------------------------------------------------------------- corners and adjacency */
+
+/* The corners of a cell (section 1: "an element is valid if each corner is valid"): the
+ * corner vertex, then its d neighbours in right-handed order. A simplex has one corner (its
+ * Jacobian is d! times the signed measure). */
+typedef struct {
+  mesh *m;
+  int d, nvc, ncorner;
+  int ct[8][4];
+  int *vc_off, *vc; /* vertex -> cells */
+  unsigned char *bnd;   /* on the topological boundary */
+  unsigned char *fixed; /* may not move: boundary corners, or every boundary vertex */
+  int *bnb;             /* 2D: the two boundary neighbours of a boundary vertex */
+  double jtol;          /* corner Jacobians <= jtol count as invalid */
+  double jscale;        /* a typical corner Jacobian, to scale the objective */
+} ctx;
+
+static void ctx_free(ctx *C) {
+  free(C->vc_off);
+  free(C->vc);
+  free(C->bnd);
+  free(C->fixed);
+  free(C->bnb);
+}
+
+static double bbox_diag(const mesh *m) {
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY}, s = 0;
+  for (int v = 0; v < m->nvert; v++)
+    for (int k = 0; k < m->dim; k++) {
+      lo[k] = fmin(lo[k], m->x[(size_t)v * m->dim + k]);
+      hi[k] = fmax(hi[k], m->x[(size_t)v * m->dim + k]);
+    }
+  for (int k = 0; k < m->dim; k++) s += (hi[k] - lo[k]) * (hi[k] - lo[k]);
+  return sqrt(s);
+}
+
+double untangle_default_beta(const mesh *m) {
+  /* section 3: "10% of the problem size (diagonal of the bounding box) normalized by the
+   * number of elements in either direction" — a length; raised to the dimension it is
+   * comparable with corner Jacobians (≈ 1–2% of a regular cell's) */
+  double n = pow((double)m->ncell / (m->type == CELL_TRIANGLE ? 2 : m->type == CELL_TETRAHEDRON ? 6 : 1),
+                 1.0 / m->dim);
+  return pow(0.1 * bbox_diag(m) / fmax(n, 1), m->dim);
+}
+
+int mesh_boundary_vertices(const mesh *m, unsigned char *flags, char *err) {
+  int nf = cell_nfacets(m->type), nvf = m->nvf;
+  tuplehash h;
+  if (th_init(&h, (size_t)m->ncell * (size_t)nf / 2 + 16, nvf)) goto oom;
+  int *count = calloc((size_t)m->ncell * (size_t)nf + 1, sizeof(int)), *first = malloc(sizeof(int) * ((size_t)m->ncell * nf + 1));
+  if (!count || !first) { free(count); free(first); th_free(&h); goto oom; }
+  int n = 0;
+  for (int c = 0; c < m->ncell; c++)
+    for (int f = 0; f < nf; f++) {
+      const int *lv = cell_facet_verts(m->type, f);
+      int k[4], found;
+      for (int i = 0; i < nvf; i++) k[i] = m->cells[(size_t)c * m->nvc + lv[i]];
+      int id = th_get(&h, k, n, &found);
+      if (id == -2) { free(count); free(first); th_free(&h); goto oom; }
+      if (!found) first[n++] = c * nf + f;
+      count[id]++;
+    }
+  memset(flags, 0, (size_t)m->nvert);
+  for (int i = 0; i < n; i++)
+    if (count[i] == 1) {
+      int c = first[i] / nf, f = first[i] % nf;
+      const int *lv = cell_facet_verts(m->type, f);
+      for (int j = 0; j < nvf; j++) flags[m->cells[(size_t)c * m->nvc + lv[j]]] = 1;
+    }
+  free(count);
+  free(first);
+  th_free(&h);
+  return 0;
+oom:
+  snprintf(err, MESH_ERRLEN, "out of memory");
+  return 1;
+}
+
+/* 2D boundary edges: the two boundary neighbours of every boundary vertex; a vertex with
+ * other than two, or whose two edges are not collinear, is a corner of the boundary */
+static int boundary_2d(ctx *C, char *err) {
+  mesh *m = C->m;
+  C->bnb = malloc(sizeof(int) * 2 * (size_t)m->nvert);
+  if (!C->bnb) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  for (int i = 0; i < 2 * m->nvert; i++) C->bnb[i] = -1;
+  int *nb = calloc((size_t)m->nvert, sizeof(int));
+  tuplehash h;
+  if (!nb || th_init(&h, (size_t)m->ncell * 2 + 16, 2)) { free(nb); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  int nf = cell_nfacets(m->type), n = 0;
+  int *cnt = calloc((size_t)m->ncell * nf + 1, sizeof(int)), *ev = malloc(sizeof(int) * 2 * ((size_t)m->ncell * nf + 1));
+  if (!cnt || !ev) { free(nb); free(cnt); free(ev); th_free(&h); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  for (int c = 0; c < m->ncell; c++)
+    for (int f = 0; f < nf; f++) {
+      const int *lv = cell_facet_verts(m->type, f);
+      int k[2] = {m->cells[(size_t)c * m->nvc + lv[0]], m->cells[(size_t)c * m->nvc + lv[1]]}, found;
+      int id = th_get(&h, k, n, &found);
+      if (!found) { ev[2 * n] = k[0]; ev[2 * n + 1] = k[1]; n++; }
+      cnt[id]++;
+    }
+  for (int i = 0; i < n; i++) {
+    if (cnt[i] != 1) continue;
+    for (int s = 0; s < 2; s++) {
+      int a = ev[2 * i + s], b = ev[2 * i + 1 - s];
+      if (nb[a] < 2) C->bnb[2 * a + nb[a]] = b;
+      nb[a]++;
+    }
+  }
+  for (int v = 0; v < m->nvert; v++) {
+    if (!C->bnd[v]) continue;
+    int corner = nb[v] != 2;
+    if (!corner) {
+      const double *p = m->x + 2 * v, *a = m->x + 2 * C->bnb[2 * v], *b = m->x + 2 * C->bnb[2 * v + 1];
+      double ax = a[0] - p[0], ay = a[1] - p[1], bx = b[0] - p[0], by = b[1] - p[1];
+      double cr = ax * by - ay * bx, dt = ax * bx + ay * by;
+      corner = !(dt < 0 && fabs(cr) <= 1e-12 * sqrt((ax * ax + ay * ay) * (bx * bx + by * by)));
+    }
+    if (corner) C->fixed[v] = 1;
+  }
+  free(nb);
+  free(cnt);
+  free(ev);
+  th_free(&h);
+  return 0;
+}
+
+static int ctx_init(ctx *C, mesh *m, int slide, char *err) {
+  memset(C, 0, sizeof *C);
+  C->m = m;
+  C->d = m->dim;
+  C->nvc = m->nvc;
+  switch (m->type) {
+  case CELL_TRIANGLE: C->ncorner = 1; C->ct[0][0] = 0; C->ct[0][1] = 1; C->ct[0][2] = 2; break;
+  case CELL_TETRAHEDRON: C->ncorner = 1; for (int i = 0; i < 4; i++) C->ct[0][i] = i; break;
+  case CELL_QUADRILATERAL:
+    C->ncorner = 4;
+    for (int i = 0; i < 4; i++) { C->ct[i][0] = i; C->ct[i][1] = (i + 1) % 4; C->ct[i][2] = (i + 3) % 4; }
+    break;
+  case CELL_HEXAHEDRON:
+    C->ncorner = 8;
+    for (int i = 0; i < 8; i++) {
+      const int *nb = hex_corner_neighbors(i);
+      C->ct[i][0] = i;
+      for (int k = 0; k < 3; k++) C->ct[i][k + 1] = nb[k];
+    }
+    break;
+  }
+  int nv = m->nvert;
+  C->vc_off = calloc((size_t)nv + 1, sizeof(int));
+  C->vc = malloc(sizeof(int) * ((size_t)m->ncell * m->nvc + 1));
+  C->bnd = malloc((size_t)nv + 1);
+  C->fixed = malloc((size_t)nv + 1);
+  if (!C->vc_off || !C->vc || !C->bnd || !C->fixed) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  for (size_t i = 0; i < (size_t)m->ncell * m->nvc; i++) C->vc_off[m->cells[i] + 1]++;
+  for (int v = 0; v < nv; v++) C->vc_off[v + 1] += C->vc_off[v];
+  int *pos = malloc(sizeof(int) * ((size_t)nv + 1));
+  if (!pos) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  memcpy(pos, C->vc_off, sizeof(int) * (size_t)nv);
+  for (int c = 0; c < m->ncell; c++)
+    for (int i = 0; i < m->nvc; i++) C->vc[pos[m->cells[(size_t)c * m->nvc + i]]++] = c;
+  free(pos);
+  if (mesh_boundary_vertices(m, C->bnd, err)) return 1;
+  for (int v = 0; v < nv; v++) C->fixed[v] = C->bnd[v] && !(slide && m->dim == 2);
+  if (m->dim == 2 && boundary_2d(C, err)) return 1;
+  double h = bbox_diag(m) / pow(fmax((double)m->ncell, 1), 1.0 / m->dim);
+  C->jscale = pow(h, m->dim);
+  C->jtol = 1e-13 * pow(mesh_hmax(m), m->dim);
+  return 0;
+}
+
+/* corner k of cell (global vertex ids) at coordinates x: J = det(x_n1 − x_c, ..., x_nd − x_c),
+ * and, when g is given, ∂J/∂x of each of the d+1 corner vertices (J is affine in each) */
+static double corner_jac(const ctx *C, const double *x, const int *cell, int k, double g[4][3]) {
+  const int *t = C->ct[k];
+  int d = C->d;
+  const double *p = x + (size_t)d * cell[t[0]];
+  double e[3][3];
+  for (int i = 0; i < d; i++)
+    for (int j = 0; j < d; j++) e[i][j] = x[(size_t)d * cell[t[i + 1]] + j] - p[j];
+  double J;
+  if (d == 2) {
+    J = e[0][0] * e[1][1] - e[0][1] * e[1][0];
+    if (g) {
+      g[1][0] = e[1][1]; g[1][1] = -e[1][0];
+      g[2][0] = -e[0][1]; g[2][1] = e[0][0];
+    }
+  } else {
+    double c12[3] = {e[1][1] * e[2][2] - e[1][2] * e[2][1], e[1][2] * e[2][0] - e[1][0] * e[2][2],
+                     e[1][0] * e[2][1] - e[1][1] * e[2][0]};
+    J = e[0][0] * c12[0] + e[0][1] * c12[1] + e[0][2] * c12[2];
+    if (g) {
+      for (int j = 0; j < 3; j++) g[1][j] = c12[j];
+      g[2][0] = e[2][1] * e[0][2] - e[2][2] * e[0][1];
+      g[2][1] = e[2][2] * e[0][0] - e[2][0] * e[0][2];
+      g[2][2] = e[2][0] * e[0][1] - e[2][1] * e[0][0];
+      g[3][0] = e[0][1] * e[1][2] - e[0][2] * e[1][1];
+      g[3][1] = e[0][2] * e[1][0] - e[0][0] * e[1][2];
+      g[3][2] = e[0][0] * e[1][1] - e[0][1] * e[1][0];
+    }
+  }
+  if (g)
+    for (int j = 0; j < d; j++) {
+      g[0][j] = 0;
+      for (int i = 1; i <= d; i++) g[0][j] -= g[i][j];
+    }
+  return J;
+}
+
+static const int *cell_of(const ctx *C, int c) { return C->m->cells + (size_t)c * C->nvc; }
+
+static double cell_min_jac(const ctx *C, const double *x, int c) {
+  double mn = INFINITY;
+  for (int k = 0; k < C->ncorner; k++) mn = fmin(mn, corner_jac(C, x, cell_of(C, c), k, NULL));
+  return mn;
+}
+
+static void count_cells(const ctx *C, const double *x, double beta, int *ninv, int *nbelow) {
+  int a = 0, b = 0;
+  for (int c = 0; c < C->m->ncell; c++) {
+    double j = cell_min_jac(C, x, c);
+    a += !(j > C->jtol);
+    b += !(j >= beta);
+  }
+  *ninv = a;
+  if (nbelow) *nbelow = b;
+}
+
+/* ---------------------------------------------------------------- small linear programs */
+
+/* maximize c·z subject to A z <= b, z >= 0, where b >= 0 so that the slack basis is
+ * feasible; dense tableau, Bland's rule (no cycling). m rows, n columns. Returns 0 with the
+ * optimum in z, 1 when unbounded or out of iterations. */
+static int lp_max(int m, int n, const double *A, const double *b, const double *c, double *z) {
+  int W = n + m + 1;
+  double *T = calloc((size_t)(m + 1) * W, sizeof(double));
+  int *basis = malloc(sizeof(int) * (size_t)m);
+  if (!T || !basis) { free(T); free(basis); return 1; }
+  for (int i = 0; i < m; i++) {
+    for (int j = 0; j < n; j++) T[i * W + j] = A[i * n + j];
+    T[i * W + n + i] = 1;
+    T[i * W + W - 1] = b[i];
+    basis[i] = n + i;
+  }
+  for (int j = 0; j < n; j++) T[m * W + j] = -c[j];
+  int status = 1;
+  for (int it = 0; it < 50 * (m + n); it++) {
+    int e = -1;
+    for (int j = 0; j < n + m; j++)
+      if (T[m * W + j] < -1e-12) { e = j; break; }
+    if (e < 0) { status = 0; break; }
+    int r = -1;
+    double best = INFINITY;
+    for (int i = 0; i < m; i++) {
+      double a = T[i * W + e];
+      if (a <= 1e-12) continue;
+      double q = T[i * W + W - 1] / a;
+      if (q < best || (q == best && basis[i] < basis[r])) { best = q; r = i; }
+    }
+    if (r < 0) break; /* unbounded */
+    double pv = T[r * W + e];
+    for (int j = 0; j < W; j++) T[r * W + j] /= pv;
+    for (int i = 0; i <= m; i++) {
+      if (i == r) continue;
+      double f = T[i * W + e];
+      if (f == 0) continue;
+      for (int j = 0; j < W; j++) T[i * W + j] -= f * T[r * W + j];
+    }
+    basis[r] = e;
+  }
+  if (!status) {
+    for (int j = 0; j < n; j++) z[j] = 0;
+    for (int i = 0; i < m; i++)
+      if (basis[i] < n) z[basis[i]] = T[i * W + W - 1];
+  }
+  free(T);
+  free(basis);
+  return status;
+}
+
+/* the constraints of vertex v: every corner of every cell around v that v takes part in,
+ * J_k + g_k·δ >= target. Returns the count (at most cap) and whether one is violated. */
+#define MAXCON 512
+typedef struct {
+  int n;
+  double g[MAXCON][3], J[MAXCON];
+} constraints;
+
+static void vertex_constraints(const ctx *C, const double *x, int v, constraints *K) {
+  K->n = 0;
+  for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++) {
+    const int *cell = cell_of(C, C->vc[p]);
+    for (int k = 0; k < C->ncorner; k++) {
+      int who = -1;
+      for (int i = 0; i <= C->d; i++)
+        if (cell[C->ct[k][i]] == v) who = i;
+      if (who < 0 || K->n >= MAXCON) continue;
+      double g[4][3];
+      K->J[K->n] = corner_jac(C, x, cell, k, g);
+      for (int j = 0; j < C->d; j++) K->g[K->n][j] = g[who][j];
+      K->n++;
+    }
+  }
+}
+
+/* a new position for v inside {δ : J_k + g_k·δ >= target for all k}, or 0 when that set has
+ * no interior. placement 0: the Chebyshev centre (the point farthest from the nearest
+ * constraint, within a box of half-width R); 1: the mean of 2d−1 corners found by linear
+ * objectives (x, −x, y[, −y, z]), as in section 2 of the paper. */
+static int feasible_position(const ctx *C, const double *x, int v, double target, int placement, double *out) {
+  constraints K;
+  vertex_constraints(C, x, v, &K);
+  int d = C->d;
+  const double *p = x + (size_t)d * v;
+  double R = 0;
+  for (int q = C->vc_off[v]; q < C->vc_off[v + 1]; q++) {
+    const int *cell = cell_of(C, C->vc[q]);
+    for (int i = 0; i < C->nvc; i++) {
+      double s = 0;
+      for (int j = 0; j < d; j++) s += (x[(size_t)d * cell[i] + j] - p[j]) * (x[(size_t)d * cell[i] + j] - p[j]);
+      R = fmax(R, sqrt(s));
+    }
+  }
+  R *= 2;
+  if (!(R > 0) || K.n == 0) return 0;
+  int m = K.n + 2 * d + 1, n = 2 * d + 1;
+  double *A = calloc((size_t)m * n, sizeof(double)), *b = malloc(sizeof(double) * m), c[7] = {0}, z[7];
+  if (!A || !b) { free(A); free(b); return 0; }
+  double T0 = 0, ng[MAXCON];
+  for (int k = 0; k < K.n; k++) {
+    double s = 0;
+    for (int j = 0; j < d; j++) s += K.g[k][j] * K.g[k][j];
+    ng[k] = sqrt(s);
+    if (ng[k] == 0) { /* a corner v cannot change: it decides alone */
+      if (!(K.J[k] > target)) { free(A); free(b); return 0; }
+      continue;
+    }
+    T0 = fmax(T0, (target - K.J[k]) / ng[k]);
+  }
+  /* variables δ⁺ (d), δ⁻ (d), s with t = s − T0; rows: −a·δ⁺ + a·δ⁻ + s <= (J − target)/|g| + T0 */
+  for (int k = 0; k < K.n; k++) {
+    if (ng[k] == 0) { b[k] = 1; continue; }
+    for (int j = 0; j < d; j++) {
+      A[k * n + j] = -K.g[k][j] / ng[k];
+      A[k * n + d + j] = K.g[k][j] / ng[k];
+    }
+    A[k * n + 2 * d] = 1;
+    b[k] = fmax(0, (K.J[k] - target) / ng[k] + T0);
+  }
+  for (int j = 0; j < 2 * d; j++) {
+    A[(K.n + j) * n + j] = 1;
+    b[K.n + j] = R;
+  }
+  A[(K.n + 2 * d) * n + 2 * d] = 1;
+  b[K.n + 2 * d] = T0 + R;
+  c[2 * d] = 1;
+  int ok = 0;
+  if (!lp_max(m, n, A, b, c, z)) {
+    double t = z[2 * d] - T0;
+    if (t > 1e-10 * R) {
+      double delta[3];
+      for (int j = 0; j < d; j++) delta[j] = z[j] - z[d + j];
+      ok = 1;
+      if (placement == 1) {
+        /* corners of the feasible set, from the interior point δ: rows −g·δ⁺ + g·δ⁻ <= J + g·δ − target */
+        double mean[3] = {0, 0, 0};
+        int ncorner = 0;
+        for (int o = 0; o < 2 * d - 1; o++) {
+          double *A2 = calloc((size_t)(K.n + 2 * d) * 2 * d, sizeof(double)), *b2 = malloc(sizeof(double) * (K.n + 2 * d));
+          double c2[6] = {0}, z2[6];
+          if (!A2 || !b2) { free(A2); free(b2); break; }
+          for (int k = 0; k < K.n; k++) {
+            double s = K.J[k] - target;
+            for (int j = 0; j < d; j++) {
+              s += K.g[k][j] * delta[j];
+              A2[k * 2 * d + j] = -K.g[k][j];
+              A2[k * 2 * d + d + j] = K.g[k][j];
+            }
+            b2[k] = fmax(0, s);
+          }
+          for (int j = 0; j < 2 * d; j++) {
+            A2[(K.n + j) * 2 * d + j] = 1;
+            b2[K.n + j] = R;
+          }
+          int axis = (o + 1) / 2, sign = o == 0 ? 1 : (o % 2 ? -1 : 1);
+          /* minimize sign·δ_axis: maximize −sign·(δ⁺ − δ⁻) */
+          c2[axis] = -sign;
+          c2[d + axis] = sign;
+          if (!lp_max(K.n + 2 * d, 2 * d, A2, b2, c2, z2)) {
+            for (int j = 0; j < d; j++) mean[j] += delta[j] + z2[j] - z2[d + j];
+            ncorner++;
+          }
+          free(A2);
+          free(b2);
+        }
+        if (ncorner == 2 * d - 1) {
+          /* keep the mean only when it is strictly inside (corners may coincide) */
+          int inside = 1;
+          for (int j = 0; j < d; j++) mean[j] /= ncorner;
+          for (int k = 0; k < K.n && inside; k++) {
+            double s = K.J[k] - target;
+            for (int j = 0; j < d; j++) s += K.g[k][j] * mean[j];
+            inside = s > 1e-10 * R * ng[k];
+          }
+          if (inside)
+            for (int j = 0; j < d; j++) delta[j] = mean[j];
+        }
+      }
+      for (int j = 0; j < d; j++) out[j] = p[j] + delta[j];
+    }
+  }
+  free(A);
+  free(b);
+  return ok;
+}
+
+/* stages 1 and 3: repeated passes over the free vertices of `active` cells whose constraints
+ * are violated (J <= jtol in stage 1, J < β in stage 3); a pass that moves nothing ends it */
+static int feasible_passes(ctx *C, double *x, double target, int stage3, const unsigned char *region, int placement,
+                           int maxpass, unsigned char *moved, int *npass) {
+  int d = C->d, total = 0, pass;
+  mesh *m = C->m;
+  for (pass = 0; pass < maxpass; pass++) {
+    int changed = 0;
+    for (int v = 0; v < m->nvert; v++) {
+      if (C->fixed[v] || C->bnd[v] || (region && !region[v])) continue;
+      constraints K;
+      vertex_constraints(C, x, v, &K);
+      int bad = 0;
+      for (int k = 0; k < K.n && !bad; k++) bad = stage3 ? K.J[k] < target : !(K.J[k] > C->jtol);
+      if (!bad) continue;
+      double np[3];
+      if (!feasible_position(C, x, v, stage3 ? target : 0, placement, np)) continue;
+      for (int j = 0; j < d; j++) x[(size_t)d * v + j] = np[j];
+      if (!moved[v]) total++;
+      moved[v] = 1;
+      changed++;
+    }
+    if (!changed) break;
+  }
+  *npass = pass + 1 > maxpass ? maxpass : pass + 1;
+  return total;
+}
+
+/* ---------------------------------------------------------------- stage 2: optimization */
+
+/* f = Σ ((|J − β| − (J − β)) / (2 S))² = Σ (max(0, β − J)/S)² over the corners of cells,
+ * the quadratic objective (3.3) scaled by a typical corner Jacobian S */
+typedef struct {
+  ctx *C;
+  double beta, S;
+  int ncell;
+  const int *cells; /* cells whose corners enter f */
+  const int *fidx;  /* vertex -> free index or -1 */
+} objective;
+
+static double obj_eval(const objective *o, const double *x, double *grad, int nfree) {
+  const ctx *C = o->C;
+  int d = C->d;
+  double f = 0;
+  if (grad) memset(grad, 0, sizeof(double) * (size_t)nfree * d);
+  for (int i = 0; i < o->ncell; i++) {
+    const int *cell = cell_of(C, o->cells[i]);
+    for (int k = 0; k < C->ncorner; k++) {
+      double g[4][3];
+      double J = corner_jac(C, x, cell, k, grad ? g : NULL);
+      double r = (o->beta - J) / o->S;
+      if (!(r > 0)) continue;
+      f += r * r;
+      if (!grad) continue;
+      for (int a = 0; a <= d; a++) {
+        int fi = o->fidx[cell[C->ct[k][a]]];
+        if (fi < 0) continue;
+        for (int j = 0; j < d; j++) grad[(size_t)fi * d + j] -= 2 * r / o->S * g[a][j];
+      }
+    }
+  }
+  return f;
+}
+
+/* L-BFGS (memory 8, Armijo backtracking) on the free vertices' coordinates */
+static int lbfgs(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout) {
+  int d = o->C->d, n = nfree * d, M = 8, it;
+  double *g = malloc(sizeof(double) * n), *gn = malloc(sizeof(double) * n), *p = malloc(sizeof(double) * n),
+         *x0 = malloc(sizeof(double) * n), *S = malloc(sizeof(double) * n * M), *Y = malloc(sizeof(double) * n * M),
+         rho[8], alpha[8];
+  if (!g || !gn || !p || !x0 || !S || !Y) {
+    free(g); free(gn); free(p); free(x0); free(S); free(Y);
+    return -1;
+  }
+  int mem = 0, head = 0;
+  double f = obj_eval(o, x, g, nfree), h0 = pow(o->S, 1.0 / d);
+  for (it = 0; it < maxit && f > 0; it++) {
+    /* two-loop recursion */
+    for (int i = 0; i < n; i++) p[i] = -g[i];
+    for (int q = 0; q < mem; q++) {
+      int k = (head - 1 - q + M) % M;
+      double a = 0;
+      for (int i = 0; i < n; i++) a += S[k * n + i] * p[i];
+      alpha[k] = rho[k] * a;
+      for (int i = 0; i < n; i++) p[i] -= alpha[k] * Y[k * n + i];
+    }
+    double gamma;
+    if (mem) {
+      int k = (head - 1 + M) % M;
+      double sy = 0, yy = 0;
+      for (int i = 0; i < n; i++) { sy += S[k * n + i] * Y[k * n + i]; yy += Y[k * n + i] * Y[k * n + i]; }
+      gamma = sy / yy;
+    } else {
+      double gi = 0;
+      for (int i = 0; i < n; i++) gi = fmax(gi, fabs(g[i]));
+      gamma = 0.1 * h0 / gi;
+    }
+    for (int i = 0; i < n; i++) p[i] *= gamma;
+    for (int q = mem - 1; q >= 0; q--) {
+      int k = (head - 1 - q + M) % M;
+      double bb = 0;
+      for (int i = 0; i < n; i++) bb += Y[k * n + i] * p[i];
+      bb *= rho[k];
+      for (int i = 0; i < n; i++) p[i] += S[k * n + i] * (alpha[k] - bb);
+    }
+    double gp = 0;
+    for (int i = 0; i < n; i++) gp += g[i] * p[i];
+    if (!(gp < 0)) { /* not a descent direction: restart from the gradient */
+      mem = 0;
+      double gi = 0;
+      for (int i = 0; i < n; i++) gi = fmax(gi, fabs(g[i]));
+      gp = 0;
+      for (int i = 0; i < n; i++) { p[i] = -0.1 * h0 / gi * g[i]; gp += g[i] * p[i]; }
+    }
+    for (int i = 0; i < nfree; i++)
+      for (int j = 0; j < d; j++) x0[i * d + j] = x[(size_t)freev[i] * d + j];
+    double t = 1, fn = f;
+    int ls;
+    for (ls = 0; ls < 50; ls++) {
+      for (int i = 0; i < nfree; i++)
+        for (int j = 0; j < d; j++) x[(size_t)freev[i] * d + j] = x0[i * d + j] + t * p[i * d + j];
+      fn = obj_eval(o, x, NULL, nfree);
+      if (fn <= f + 1e-4 * t * gp) break;
+      t *= 0.5;
+    }
+    if (ls == 50) { /* no decrease: restore and stop */
+      for (int i = 0; i < nfree; i++)
+        for (int j = 0; j < d; j++) x[(size_t)freev[i] * d + j] = x0[i * d + j];
+      break;
+    }
+    obj_eval(o, x, gn, nfree);
+    double sy = 0;
+    for (int i = 0; i < n; i++) {
+      S[head * n + i] = t * p[i];
+      Y[head * n + i] = gn[i] - g[i];
+      sy += S[head * n + i] * Y[head * n + i];
+    }
+    if (sy > 0) {
+      rho[head] = 1 / sy;
+      head = (head + 1) % M;
+      if (mem < M) mem++;
+    }
+    memcpy(g, gn, sizeof(double) * n);
+    double fprev = f;
+    f = fn;
+    if (f < 1e-28 || fprev - f <= 1e-15 * fprev) {
+      if (f < 1e-28 || fprev - f <= 0) break;
+    }
+  }
+  *fout = f;
+  free(g); free(gn); free(p); free(x0); free(S); free(Y);
+  return it;
+}
+
+/* 2D boundary vertex v slides along its boundary polyline: the best position on either
+ * boundary edge for the objective restricted to v's corners (golden section on each side) */
+static double local_penalty(const ctx *C, const double *x, int v, double beta, double S) {
+  double f = 0;
+  for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++) {
+    const int *cell = cell_of(C, C->vc[p]);
+    for (int k = 0; k < C->ncorner; k++) {
+      double r = (beta - corner_jac(C, x, cell, k, NULL)) / S;
+      if (r > 0) f += r * r;
+    }
+  }
+  return f;
+}
+
+static int slide_boundary(ctx *C, double *x, double beta, const unsigned char *region, unsigned char *moved) {
+  int total = 0;
+  mesh *m = C->m;
+  for (int pass = 0; pass < 10; pass++) {
+    int changed = 0;
+    for (int v = 0; v < m->nvert; v++) {
+      if (!C->bnd[v] || C->fixed[v] || !region[v]) continue;
+      double f0 = local_penalty(C, x, v, beta, C->jscale);
+      if (f0 == 0) continue;
+      double p0[2] = {x[2 * v], x[2 * v + 1]}, best = f0, bp[2] = {p0[0], p0[1]};
+      for (int side = 0; side < 2; side++) {
+        const double *a = x + 2 * C->bnb[2 * v + side];
+        double lo = 0, hi = 0.95, gr = (sqrt(5.0) - 1) / 2;
+        double s1 = hi - gr * (hi - lo), s2 = lo + gr * (hi - lo), f1, f2;
+#define AT(s) (x[2 * v] = p0[0] + (s) * (a[0] - p0[0]), x[2 * v + 1] = p0[1] + (s) * (a[1] - p0[1]), \
+               local_penalty(C, x, v, beta, C->jscale))
+        f1 = AT(s1);
+        f2 = AT(s2);
+        for (int it = 0; it < 60; it++) {
+          if (f1 <= f2) { hi = s2; s2 = s1; f2 = f1; s1 = hi - gr * (hi - lo); f1 = AT(s1); }
+          else { lo = s1; s1 = s2; f1 = f2; s2 = lo + gr * (hi - lo); f2 = AT(s2); }
+        }
+        double s = 0.5 * (lo + hi), f = AT(s);
+#undef AT
+        if (f < best) { best = f; bp[0] = x[2 * v]; bp[1] = x[2 * v + 1]; }
+      }
+      x[2 * v] = bp[0];
+      x[2 * v + 1] = bp[1];
+      if (best < f0) {
+        changed++;
+        if (!moved[v]) total++;
+        moved[v] = 1;
+      }
+    }
+    if (!changed) break;
+  }
+  return total;
+}
+
+/* the region of stage 2: the vertices of invalid cells grown by `rings` layers of cells */
+static void grow_region(const ctx *C, const double *x, int rings, unsigned char *region) {
+  mesh *m = C->m;
+  memset(region, 0, (size_t)m->nvert);
+  for (int c = 0; c < m->ncell; c++)
+    if (!(cell_min_jac(C, x, c) > C->jtol))
+      for (int i = 0; i < C->nvc; i++) region[cell_of(C, c)[i]] = 1;
+  unsigned char *next = malloc((size_t)m->nvert);
+  if (!next) return;
+  for (int r = 0; r < rings; r++) {
+    memcpy(next, region, (size_t)m->nvert);
+    for (int v = 0; v < m->nvert; v++) {
+      if (!region[v]) continue;
+      for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++)
+        for (int i = 0; i < C->nvc; i++) next[cell_of(C, C->vc[p])[i]] = 1;
+    }
+    memcpy(region, next, (size_t)m->nvert);
+  }
+  free(next);
+}
+
+static int optimize_region(ctx *C, double *x, double beta, const unsigned char *region, int maxit,
+                           unsigned char *moved, int *iters) {
+  mesh *m = C->m;
+  int *fidx = malloc(sizeof(int) * (size_t)m->nvert), *freev = malloc(sizeof(int) * (size_t)m->nvert);
+  int *cells = malloc(sizeof(int) * ((size_t)m->ncell + 1));
+  unsigned char *cmark = calloc((size_t)m->ncell + 1, 1);
+  double *xs = malloc(sizeof(double) * (size_t)m->nvert * C->d);
+  if (!fidx || !freev || !cells || !cmark || !xs) {
+    free(fidx); free(freev); free(cells); free(cmark); free(xs);
+    return -1;
+  }
+  int nfree = 0, ncell = 0;
+  for (int v = 0; v < m->nvert; v++) {
+    fidx[v] = -1;
+    if (region[v] && !C->bnd[v]) { fidx[v] = nfree; freev[nfree++] = v; }
+  }
+  for (int i = 0; i < nfree; i++)
+    for (int p = C->vc_off[freev[i]]; p < C->vc_off[freev[i] + 1]; p++)
+      if (!cmark[C->vc[p]]) { cmark[C->vc[p]] = 1; cells[ncell++] = C->vc[p]; }
+  objective o = {C, beta, C->jscale, ncell, cells, fidx};
+  double f = 0;
+  memcpy(xs, x, sizeof(double) * (size_t)m->nvert * C->d);
+  int it = nfree ? lbfgs(&o, x, freev, nfree, maxit, &f) : 0;
+  int total = 0;
+  for (int i = 0; i < nfree; i++) {
+    int v = freev[i], ch = 0;
+    for (int j = 0; j < C->d; j++) ch |= x[(size_t)v * C->d + j] != xs[(size_t)v * C->d + j];
+    if (ch && !moved[v]) { moved[v] = 1; total++; }
+  }
+  *iters += it > 0 ? it : 0;
+  free(fidx); free(freev); free(cells); free(cmark); free(xs);
+  return total;
+}
+
+void untangle_defaults(untangle_opts *o) {
+  o->beta = -1;
+  o->max_iterations = 100;
+  o->slide = 1;
+  o->placement = 0;
+  o->verbose = 0;
+}
+
+static void stage_print(const untangle_stage *s, const mesh *m) {
+  printf("  %-28s invalid %d -> %d, below beta %d, moved %d vertices, %d %s, %.3f s\n", s->name, s->invalid_before,
+         s->invalid_after, s->below_beta_after, s->moved, s->iterations,
+         s->iterations == 1 ? "iteration" : "iterations", s->seconds);
+  (void)m;
+}
+
+int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err) {
+  double t0 = now();
+  memset(r, 0, sizeof *r);
+  if (m->ncell == 0) { snprintf(err, MESH_ERRLEN, "the mesh has no cells"); return 1; }
+  ctx C;
+  if (ctx_init(&C, m, o->slide, err)) { ctx_free(&C); return 1; }
+  double beta = o->beta < 0 ? untangle_default_beta(m) : o->beta;
+  r->beta = beta;
+  size_t nx = (size_t)m->nvert * m->dim;
+  double *x0 = malloc(sizeof(double) * nx);
+  unsigned char *moved = calloc((size_t)m->nvert + 1, 1), *region = calloc((size_t)m->nvert + 1, 1),
+                *touched = calloc((size_t)m->nvert + 1, 1);
+  if (!x0 || !moved || !region || !touched) {
+    free(x0); free(moved); free(region); free(touched); ctx_free(&C);
+    snprintf(err, MESH_ERRLEN, "out of memory");
+    return 1;
+  }
+  memcpy(x0, m->x, sizeof(double) * nx);
+  int maxit = o->max_iterations > 0 ? o->max_iterations : 100;
+  count_cells(&C, m->x, beta, &r->invalid_before, NULL);
+  if (o->verbose)
+    printf("untangle: %d %s, %d invalid, beta %.3g, boundary %s\n", m->ncell, cell_plural(m->type), r->invalid_before,
+           beta, o->slide && m->dim == 2 ? "slides" : "fixed");
+  /* the cells that may change: everything around the invalid cells (and, after stage 2,
+   * around what moved) — the rest of the mesh keeps its coordinates bit for bit */
+  untangle_stage *s = &r->stage[0];
+
+  /* stage 1: feasible set, J > 0 */
+  double ts = now();
+  s->name = "1 feasible set";
+  s->invalid_before = r->invalid_before;
+  s->moved = r->invalid_before ? feasible_passes(&C, m->x, 0, 0, NULL, o->placement, maxit, moved, &s->iterations) : 0;
+  count_cells(&C, m->x, beta, &s->invalid_after, &s->below_beta_after);
+  s->seconds = now() - ts;
+  if (o->verbose) stage_print(s, m);
+
+  /* stage 2: optimization of (3.3); boundary vertices one by one along the boundary, then
+   * the interior vertices of a growing region around the invalid cells together */
+  s = &r->stage[1];
+  ts = now();
+  s->name = "2 optimization";
+  s->invalid_before = r->stage[0].invalid_after;
+  int ninv = s->invalid_before;
+  for (int rings = 2; ninv > 0 && rings <= 64; rings *= 2) {
+    grow_region(&C, m->x, rings, region);
+    for (int v = 0; v < m->nvert; v++) touched[v] |= region[v];
+    if (o->slide && m->dim == 2) s->moved += slide_boundary(&C, m->x, beta, region, moved);
+    int k = optimize_region(&C, m->x, beta, region, 10 * maxit, moved, &s->iterations);
+    if (k < 0) { snprintf(err, MESH_ERRLEN, "out of memory"); break; }
+    s->moved += k;
+    count_cells(&C, m->x, beta, &ninv, NULL);
+  }
+  count_cells(&C, m->x, beta, &s->invalid_after, &s->below_beta_after);
+  s->seconds = now() - ts;
+  if (o->verbose) stage_print(s, m);
+
+  /* stage 3: feasible set with J >= β, around what stages 1–2 touched */
+  s = &r->stage[2];
+  ts = now();
+  s->name = "3 feasible set (J >= beta)";
+  s->invalid_before = r->stage[1].invalid_after;
+  for (int v = 0; v < m->nvert; v++) touched[v] |= moved[v];
+  /* the neighbours of moved vertices too: their cells changed */
+  unsigned char *t2 = malloc((size_t)m->nvert + 1);
+  if (t2) {
+    memcpy(t2, touched, (size_t)m->nvert);
+    for (int v = 0; v < m->nvert; v++)
+      if (moved[v])
+        for (int p = C.vc_off[v]; p < C.vc_off[v + 1]; p++)
+          for (int i = 0; i < C.nvc; i++) t2[cell_of(&C, C.vc[p])[i]] = 1;
+    s->moved = beta > 0 ? feasible_passes(&C, m->x, beta, 1, t2, o->placement, maxit, moved, &s->iterations) : 0;
+    free(t2);
+  }
+  count_cells(&C, m->x, beta, &s->invalid_after, &s->below_beta_after);
+  s->seconds = now() - ts;
+  if (o->verbose) stage_print(s, m);
+  r->nstage = 3;
+  r->invalid_after = s->invalid_after;
+
+  double sum = 0;
+  for (int v = 0; v < m->nvert; v++) {
+    double dd = 0;
+    int ch = 0;
+    for (int j = 0; j < m->dim; j++) {
+      double e = m->x[(size_t)v * m->dim + j] - x0[(size_t)v * m->dim + j];
+      ch |= m->x[(size_t)v * m->dim + j] != x0[(size_t)v * m->dim + j];
+      dd += e * e;
+    }
+    if (!ch) continue;
+    r->moved++;
+    sum += sqrt(dd);
+    r->max_displacement = fmax(r->max_displacement, sqrt(dd));
+  }
+  r->mean_displacement = r->moved ? sum / r->moved : 0;
+  r->seconds = now() - t0;
+  if (o->verbose)
+    printf("untangle: %s — %d invalid left, %d vertices moved (mean %.3g, max %.3g), %.3f s\n",
+           r->invalid_after ? "FAILED" : "done", r->invalid_after, r->moved, r->mean_displacement,
+           r->max_displacement, r->seconds);
+  free(x0); free(moved); free(region); free(touched);
+  ctx_free(&C);
+  return 0;
+}
+
+void untangle_report_print(const untangle_report *r, const mesh *m) {
+  printf("untangle: %d %s, beta %.3g: invalid %d -> %d, %d vertices moved (mean %.3g, max %.3g), %.3f s\n",
+         m->ncell, cell_plural(m->type), r->beta, r->invalid_before, r->invalid_after, r->moved,
+         r->mean_displacement, r->max_displacement, r->seconds);
+  for (int i = 0; i < r->nstage; i++) stage_print(&r->stage[i], m);
+}

@@ -1,0 +1,86 @@
+/* untangle.h — mesh repair and motion by vertex repositioning: the three-stage untangler
+ * of the seed's "Untangling of 2D triangular and quadrilateral meshes in ALE simulations"
+ * (feasible set, optimization of eq. 3.3, feasible set with a minimum corner Jacobian β),
+ * quality-guarded smoothing, and the Laplacian mesh motion with variable diffusivity of
+ * "Morphing and modification of unstructured meshes" (eqs. 1.1–1.3). libc + libm only.
+ *
+ * Validity is the untangling paper's: every corner Jacobian determinant positive (for
+ * simplices the one corner is the cell). Corner Jacobians are affine in each vertex, so the
+ * feasible set of a vertex is a convex polygon/polyhedron cut out by half-spaces. */
+#ifndef LUGAL_UNTANGLE_H
+#define LUGAL_UNTANGLE_H
+
+#include "mesh.h"
+
+typedef struct {
+  double beta;         /* target minimum corner Jacobian; < 0 selects the paper's default */
+  int max_iterations;  /* passes of stages 1 and 3, and the cap on optimizer iterations / 10 */
+  int slide;           /* 2D: boundary vertices slide along the boundary polyline (corners fixed) */
+  int placement;       /* stage 1/3 position in the feasible set: 0 Chebyshev centre, 1 mean of
+                          three LP corners (the paper) */
+  int verbose;         /* stage reports on stdout as they finish */
+} untangle_opts;
+
+typedef struct {
+  const char *name;
+  int invalid_before, invalid_after; /* cells with a corner Jacobian <= 0 */
+  int below_beta_after;              /* cells with a corner Jacobian < beta */
+  int moved;                         /* vertices this stage moved */
+  int iterations;                    /* passes (stages 1, 3) or optimizer iterations (2) */
+  double seconds;
+} untangle_stage;
+
+typedef struct {
+  double beta;
+  int invalid_before, invalid_after;
+  int moved;                        /* vertices whose coordinates changed */
+  double max_displacement, mean_displacement; /* over the moved vertices */
+  double seconds;
+  int nstage;
+  untangle_stage stage[3];
+} untangle_report;
+
+void untangle_defaults(untangle_opts *o);
+/* repair m in place; returns 0 when run (check r->invalid_after), nonzero with a message in
+ * err (MESH_ERRLEN) on bad input or out of memory */
+int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err);
+void untangle_report_print(const untangle_report *r, const mesh *m);
+/* the paper's default β: (10% of the bounding-box diagonal / cells per direction)^d, a
+ * length raised to the dimension so that it compares with corner Jacobians */
+double untangle_default_beta(const mesh *m);
+
+typedef struct {
+  int measure;     /* a quality_measure that is larger-is-better and positive on valid cells */
+  int iterations;  /* sweeps */
+  int slide;       /* 2D: boundary vertices slide along the boundary polyline */
+  int verbose;
+} smooth_opts;
+
+typedef struct {
+  int measure, sweeps, moved;
+  double min_before, min_after, mean_before, mean_after, seconds;
+} smooth_report;
+
+/* quality-guarded local smoothing: each free vertex descends Σ 1/q over its cells (q the
+ * measure) and a step is taken only when every cell around it stays valid and the smallest q
+ * around it does not decrease, so the mesh minimum never decreases. The mesh must be valid. */
+int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err);
+
+typedef struct {
+  int iterations;  /* CG iterations used per component */
+  double residual; /* final relative residual */
+  double tau_max;  /* largest diffusivity Vmax/Vmin-ish */
+  int invalid_after;
+  double seconds;
+} move_report;
+
+/* Laplacian mesh motion (morphing paper eqs. 1.1–1.3): vertices with fixed[v] != 0 move by
+ * disp[v*dim..], every other vertex by the solution of Σ_k σ_0k (u_k − u_0) = 0 with edge
+ * weights σ_0k = Σ τ_j over the cells j around the edge and τ = 1 + (Vmax − Vmin)/V; the
+ * fixed point of the Jacobi iteration (1.3), reached by Jacobi-preconditioned CG. */
+int mesh_move(mesh *m, const double *disp, const unsigned char *fixed, move_report *r, char *err);
+
+/* topological boundary vertices (on a facet of one cell only): flags[nvert] */
+int mesh_boundary_vertices(const mesh *m, unsigned char *flags, char *err);
+
+#endif

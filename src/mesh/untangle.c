@@ -660,38 +660,170 @@ static void grow_region(const ctx *C, const double *x, int rings, unsigned char 
   free(next);
 }
 
-static int optimize_region(ctx *C, double *x, double beta, const unsigned char *region, int maxit,
-                           unsigned char *moved, int *iters) {
-  mesh *m = C->m;
-  int *fidx = malloc(sizeof(int) * (size_t)m->nvert), *freev = malloc(sizeof(int) * (size_t)m->nvert);
-  int *cells = malloc(sizeof(int) * ((size_t)m->ncell + 1));
-  unsigned char *cmark = calloc((size_t)m->ncell + 1, 1);
-  double *xs = malloc(sizeof(double) * (size_t)m->nvert * C->d);
-  if (!fidx || !freev || !cells || !cmark || !xs) {
-    free(fidx); free(freev); free(cells); free(cmark); free(xs);
-    return -1;
-  }
-  int nfree = 0, ncell = 0;
-  for (int v = 0; v < m->nvert; v++) {
-    fidx[v] = -1;
-    if (region[v] && !C->bnd[v]) { fidx[v] = nfree; freev[nfree++] = v; }
-  }
+/* reusable per-vertex / per-cell marks, kept at their rest values (-1 / 0) between uses */
+typedef struct {
+  int *fidx;            /* vertex -> free index, -1 */
+  unsigned char *cmark; /* cell taken, 0 */
+  int *cells;
+} work;
+
+/* the cells around the free vertices (each once) */
+static int cells_around(const ctx *C, work *W, const int *freev, int nfree) {
+  int n = 0;
   for (int i = 0; i < nfree; i++)
     for (int p = C->vc_off[freev[i]]; p < C->vc_off[freev[i] + 1]; p++)
-      if (!cmark[C->vc[p]]) { cmark[C->vc[p]] = 1; cells[ncell++] = C->vc[p]; }
-  objective o = {C, beta, C->jscale, ncell, cells, fidx};
+      if (!W->cmark[C->vc[p]]) { W->cmark[C->vc[p]] = 1; W->cells[n++] = C->vc[p]; }
+  for (int i = 0; i < n; i++) W->cmark[W->cells[i]] = 0;
+  return n;
+}
+
+/* Σ_k σ_0k (z_k − z_0) = 0 at the free vertices (eq. 1.2 of the morphing paper), z given
+ * elsewhere; σ_0k = Σ τ_j over the cells j that have the edge 0k (τ = 1 when tau is NULL).
+ * Jacobi-preconditioned CG, one component at a time, matrix-free over the cells. */
+static int laplace_solve(const ctx *C, work *W, double *z, const int *freev, int nfree, const double *tau,
+                         int maxit, double tol, int *iters, double *res) {
+  int d = C->d, ne = cell_nedges(C->m->type);
+  for (int i = 0; i < nfree; i++) W->fidx[freev[i]] = i;
+  int ncell = cells_around(C, W, freev, nfree);
+  double *b = malloc(sizeof(double) * nfree), *u = malloc(sizeof(double) * nfree), *r = malloc(sizeof(double) * nfree),
+         *pp = malloc(sizeof(double) * nfree), *q = malloc(sizeof(double) * nfree), *dg = calloc((size_t)nfree, sizeof(double));
+  int status = 0;
+  *iters = 0;
+  *res = 0;
+  if (!b || !u || !r || !pp || !q || !dg) { status = 1; goto done; }
+  for (int i = 0; i < ncell; i++) {
+    int c = W->cells[i];
+    const int *cell = cell_of(C, c);
+    double w = tau ? tau[c] : 1;
+    for (int e = 0; e < ne; e++) {
+      const int *ev = cell_edge_verts(C->m->type, e);
+      int a = W->fidx[cell[ev[0]]], bb = W->fidx[cell[ev[1]]];
+      if (a >= 0) dg[a] += w;
+      if (bb >= 0) dg[bb] += w;
+    }
+  }
+  for (int comp = 0; comp < d; comp++) {
+    /* b = contributions of the fixed neighbours; u = current values */
+    for (int i = 0; i < nfree; i++) { b[i] = 0; u[i] = z[(size_t)freev[i] * d + comp]; }
+    for (int i = 0; i < ncell; i++) {
+      int c = W->cells[i];
+      const int *cell = cell_of(C, c);
+      double w = tau ? tau[c] : 1;
+      for (int e = 0; e < ne; e++) {
+        const int *ev = cell_edge_verts(C->m->type, e);
+        int va = cell[ev[0]], vb = cell[ev[1]], a = W->fidx[va], bb = W->fidx[vb];
+        if (a >= 0 && bb < 0) b[a] += w * z[(size_t)vb * d + comp];
+        if (bb >= 0 && a < 0) b[bb] += w * z[(size_t)va * d + comp];
+      }
+    }
+#define APPLY(in, out)                                                                            \
+  do {                                                                                            \
+    for (int i = 0; i < nfree; i++) out[i] = dg[i] * in[i];                                       \
+    for (int i = 0; i < ncell; i++) {                                                             \
+      int c = W->cells[i];                                                                        \
+      const int *cell = cell_of(C, c);                                                            \
+      double w = tau ? tau[c] : 1;                                                                \
+      for (int e = 0; e < ne; e++) {                                                              \
+        const int *ev = cell_edge_verts(C->m->type, e);                                           \
+        int a = W->fidx[cell[ev[0]]], bb = W->fidx[cell[ev[1]]];                                  \
+        if (a >= 0 && bb >= 0) { out[a] -= w * in[bb]; out[bb] -= w * in[a]; }                   \
+      }                                                                                           \
+    }                                                                                             \
+  } while (0)
+    APPLY(u, q);
+    double bn = 0, rz = 0;
+    for (int i = 0; i < nfree; i++) { r[i] = b[i] - q[i]; bn += b[i] * b[i]; }
+    bn = sqrt(bn);
+    for (int i = 0; i < nfree; i++) { pp[i] = r[i] / dg[i]; rz += r[i] * pp[i]; }
+    int it;
+    double rn = 0;
+    for (it = 0; it < maxit; it++) {
+      rn = 0;
+      for (int i = 0; i < nfree; i++) rn += r[i] * r[i];
+      rn = sqrt(rn);
+      if (rn <= tol * fmax(bn, 1e-300)) break;
+      APPLY(pp, q);
+      double pq = 0;
+      for (int i = 0; i < nfree; i++) pq += pp[i] * q[i];
+      if (!(pq > 0)) break;
+      double al = rz / pq, rz2 = 0;
+      for (int i = 0; i < nfree; i++) { u[i] += al * pp[i]; r[i] -= al * q[i]; }
+      for (int i = 0; i < nfree; i++) rz2 += r[i] * r[i] / dg[i];
+      double be = rz2 / rz;
+      rz = rz2;
+      for (int i = 0; i < nfree; i++) pp[i] = r[i] / dg[i] + be * pp[i];
+    }
+#undef APPLY
+    for (int i = 0; i < nfree; i++) z[(size_t)freev[i] * d + comp] = u[i];
+    *iters = it > *iters ? it : *iters;
+    *res = fmax(*res, bn > 0 ? rn / bn : rn);
+  }
+done:
+  for (int i = 0; i < nfree; i++) W->fidx[freev[i]] = -1;
+  free(b); free(u); free(r); free(pp); free(q); free(dg);
+  return status;
+}
+
+/* L-BFGS on the interior vertices among verts (n); counts newly moved vertices */
+static int optimize_vertices(ctx *C, work *W, double *x, double beta, const int *verts, int n, int maxit,
+                             unsigned char *moved, int *iters) {
+  int d = C->d, nfree = 0;
+  int *freev = calloc((size_t)n + 1, sizeof(int));
+  double *xs = malloc(sizeof(double) * ((size_t)n + 1) * d);
+  if (!freev || !xs) { free(freev); free(xs); return -1; }
+  for (int i = 0; i < n; i++)
+    if (!C->bnd[verts[i]]) freev[nfree++] = verts[i];
+  for (int i = 0; i < nfree; i++) {
+    W->fidx[freev[i]] = i;
+    for (int j = 0; j < d; j++) xs[i * d + j] = x[(size_t)freev[i] * d + j];
+  }
+  int ncell = cells_around(C, W, freev, nfree);
+  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx};
   double f = 0;
-  memcpy(xs, x, sizeof(double) * (size_t)m->nvert * C->d);
   int it = nfree ? lbfgs(&o, x, freev, nfree, maxit, &f) : 0;
   int total = 0;
   for (int i = 0; i < nfree; i++) {
     int v = freev[i], ch = 0;
-    for (int j = 0; j < C->d; j++) ch |= x[(size_t)v * C->d + j] != xs[(size_t)v * C->d + j];
+    W->fidx[v] = -1;
+    for (int j = 0; j < d; j++) ch |= x[(size_t)v * d + j] != xs[i * d + j];
     if (ch && !moved[v]) { moved[v] = 1; total++; }
   }
   *iters += it > 0 ? it : 0;
-  free(fidx); free(freev); free(cells); free(cmark); free(xs);
+  free(freev);
+  free(xs);
   return total;
+}
+
+/* the connected pieces of the region (vertices joined through cells), as one list with
+ * offsets; returns the number of pieces */
+static int region_pieces(const ctx *C, const unsigned char *region, int *list, int *off) {
+  mesh *m = C->m;
+  int *seen = calloc((size_t)m->nvert + 1, sizeof(int)), np = 0, n = 0;
+  if (!seen) return -1;
+  for (int s = 0; s < m->nvert; s++) {
+    if (!region[s] || seen[s]) continue;
+    off[np] = n;
+    seen[s] = 1;
+    list[n++] = s;
+    for (int h = off[np]; h < n; h++) {
+      int v = list[h];
+      for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++) {
+        const int *cell = cell_of(C, C->vc[p]);
+        for (int i = 0; i < C->nvc; i++)
+          if (region[cell[i]] && !seen[cell[i]]) { seen[cell[i]] = 1; list[n++] = cell[i]; }
+      }
+    }
+    np++;
+  }
+  off[np] = n;
+  free(seen);
+  return np;
+}
+
+static int piece_invalid(const ctx *C, work *W, const double *x, const int *verts, int n) {
+  int ncell = cells_around(C, W, verts, n), bad = 0;
+  for (int i = 0; i < ncell; i++) bad += !(cell_min_jac(C, x, W->cells[i]) > C->jtol);
+  return bad;
 }
 
 void untangle_defaults(untangle_opts *o) {
@@ -752,15 +884,54 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
   s->name = "2 optimization";
   s->invalid_before = r->stage[0].invalid_after;
   int ninv = s->invalid_before;
-  for (int rings = 2; ninv > 0 && rings <= 64; rings *= 2) {
+  work W;
+  W.fidx = malloc(sizeof(int) * ((size_t)m->nvert + 1));
+  W.cmark = calloc((size_t)m->ncell + 1, 1);
+  W.cells = malloc(sizeof(int) * ((size_t)m->ncell + 1));
+  int *list = malloc(sizeof(int) * ((size_t)m->nvert + 1)), *off = malloc(sizeof(int) * ((size_t)m->nvert + 2));
+  if (!W.fidx || !W.cmark || !W.cells || !list || !off) {
+    snprintf(err, MESH_ERRLEN, "out of memory");
+    ninv = 0;
+  } else
+    for (int v = 0; v < m->nvert; v++) W.fidx[v] = -1;
+  for (int rings = 2; ninv > 0 && rings <= 1 << 20; rings *= 2) {
     grow_region(&C, m->x, rings, region);
     for (int v = 0; v < m->nvert; v++) touched[v] |= region[v];
     if (o->slide && m->dim == 2) s->moved += slide_boundary(&C, m->x, beta, region, moved);
-    int k = optimize_region(&C, m->x, beta, region, 10 * maxit, moved, &s->iterations);
-    if (k < 0) { snprintf(err, MESH_ERRLEN, "out of memory"); break; }
-    s->moved += k;
+    /* each connected piece of the region on its own: small problems converge fast */
+    int np = region_pieces(&C, region, list, off), all = 1;
+    for (int k = 0; k < np; k++) {
+      int *pv = list + off[k], n = off[k + 1] - off[k];
+      int bad = piece_invalid(&C, &W, m->x, pv, n);
+      if (!bad) continue;
+      /* a piece where more than a quarter of the cells are inverted is a scrambled knot:
+       * go straight to the harmonic restart below */
+      int knot = bad > cells_around(&C, &W, pv, n) / 4;
+      if (!knot) {
+        int got = optimize_vertices(&C, &W, m->x, beta, pv, n, 10 * maxit, moved, &s->iterations);
+        if (got < 0) break;
+        s->moved += got;
+      }
+      if ((knot || rings >= 8) && piece_invalid(&C, &W, m->x, pv, n)) {
+        /* the optimizer is stuck in a knot: restart the piece from the harmonic (Tutte)
+         * position of its interior vertices, valid for triangles inside a convex boundary */
+        int nf = 0, it;
+        double res;
+        for (int i = 0; i < n; i++)
+          if (!C.bnd[pv[i]]) pv[nf++] = pv[i];
+        laplace_solve(&C, &W, m->x, pv, nf, NULL, 10000, 1e-12, &it, &res);
+        s->moved += optimize_vertices(&C, &W, m->x, beta, pv, nf, 10 * maxit, moved, &s->iterations);
+        for (int i = 0; i < nf; i++)
+          if (!moved[pv[i]]) { moved[pv[i]] = 1; s->moved++; }
+      }
+      all = 0;
+    }
+    int pass;
+    s->moved += feasible_passes(&C, m->x, 0, 0, region, o->placement, maxit, moved, &pass);
     count_cells(&C, m->x, beta, &ninv, NULL);
+    if (all && rings > 64) break;
   }
+  free(W.fidx); free(W.cmark); free(W.cells); free(list); free(off);
   count_cells(&C, m->x, beta, &s->invalid_after, &s->below_beta_after);
   s->seconds = now() - ts;
   if (o->verbose) stage_print(s, m);
@@ -818,4 +989,177 @@ void untangle_report_print(const untangle_report *r, const mesh *m) {
          m->ncell, cell_plural(m->type), r->beta, r->invalid_before, r->invalid_after, r->moved,
          r->mean_displacement, r->max_displacement, r->seconds);
   for (int i = 0; i < r->nstage; i++) stage_print(&r->stage[i], m);
+}
+
+/* ---------------------------------------------------------------- motion */
+
+int mesh_move(mesh *m, const double *disp, const unsigned char *fixed, move_report *r, char *err) {
+  double t0 = now();
+  memset(r, 0, sizeof *r);
+  ctx C;
+  if (ctx_init(&C, m, 0, err)) { ctx_free(&C); return 1; }
+  int d = m->dim, nfree = 0, status = 0;
+  double *z = malloc(sizeof(double) * (size_t)m->nvert * d), *tau = malloc(sizeof(double) * ((size_t)m->ncell + 1));
+  int *freev = malloc(sizeof(int) * ((size_t)m->nvert + 1));
+  work W = {malloc(sizeof(int) * ((size_t)m->nvert + 1)), calloc((size_t)m->ncell + 1, 1),
+            malloc(sizeof(int) * ((size_t)m->ncell + 1))};
+  if (!z || !tau || !freev || !W.fidx || !W.cmark || !W.cells) {
+    snprintf(err, MESH_ERRLEN, "out of memory");
+    status = 1;
+    goto done;
+  }
+  /* τ = 1 + (Vmax − Vmin)/V (eq. 1.1): stiff where cells are small */
+  double vmin = INFINITY, vmax = 0;
+  for (int c = 0; c < m->ncell; c++) {
+    tau[c] = fabs(mesh_cell_signed_measure(m, c));
+    vmin = fmin(vmin, tau[c]);
+    vmax = fmax(vmax, tau[c]);
+  }
+  if (!(vmin > 0)) {
+    snprintf(err, MESH_ERRLEN, "the mesh has zero-size cells: the diffusivity 1 + (Vmax - Vmin)/V is undefined");
+    status = 1;
+    goto done;
+  }
+  for (int c = 0; c < m->ncell; c++) {
+    tau[c] = 1 + (vmax - vmin) / tau[c];
+    r->tau_max = fmax(r->tau_max, tau[c]);
+  }
+  for (int v = 0; v < m->nvert; v++) {
+    W.fidx[v] = -1;
+    for (int j = 0; j < d; j++) z[(size_t)v * d + j] = fixed[v] ? disp[(size_t)v * d + j] : 0;
+    if (!fixed[v]) freev[nfree++] = v;
+  }
+  if (nfree && laplace_solve(&C, &W, z, freev, nfree, tau, 20 * m->nvert + 100, 1e-10, &r->iterations, &r->residual)) {
+    snprintf(err, MESH_ERRLEN, "out of memory");
+    status = 1;
+    goto done;
+  }
+  for (size_t i = 0; i < (size_t)m->nvert * d; i++) m->x[i] += z[i];
+  count_cells(&C, m->x, 0, &r->invalid_after, NULL);
+done:
+  r->seconds = now() - t0;
+  free(z); free(tau); free(freev); free(W.fidx); free(W.cmark); free(W.cells);
+  ctx_free(&C);
+  return status;
+}
+
+/* ---------------------------------------------------------------- smoothing */
+
+/* Σ 1/q over the cells of v, +∞ when one is invalid; the smallest q in *qmin */
+static double star_objective(const ctx *C, int v, int q, double *qmin) {
+  double s = 0, mn = INFINITY;
+  for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++) {
+    int c = C->vc[p];
+    if (!(cell_min_jac(C, C->m->x, c) > C->jtol)) { *qmin = -INFINITY; return INFINITY; }
+    double val = mesh_cell_quality(C->m, c, q);
+    if (!(val > 0)) { *qmin = -INFINITY; return INFINITY; }
+    s += 1 / val;
+    mn = fmin(mn, val);
+  }
+  *qmin = mn;
+  return s;
+}
+
+int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
+  double t0 = now();
+  memset(r, 0, sizeof *r);
+  r->measure = o->measure;
+  if (o->measure < 0 || o->measure >= QM_COUNT || !quality_applies(o->measure, m->type) ||
+      !quality_larger_is_better(o->measure) || quality_is_deformation(o->measure) || o->measure == QM_SIGNED_MEASURE ||
+      o->measure == QM_MIN_CORNER_JACOBIAN || o->measure == QM_MIN_EDGE || o->measure == QM_MAX_EDGE ||
+      o->measure == QM_MIN_ANGLE || (o->measure >= QM_V_AREA && o->measure != QM_V_SHAPE && o->measure != QM_V_SCALED_JACOBIAN)) {
+    snprintf(err, MESH_ERRLEN, "smoothing needs a shape measure in (0, 1] that applies to %s (e.g. %s)",
+             cell_plural(m->type), m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? "mean_ratio" : "corner_condition");
+    return 1;
+  }
+  ctx C;
+  if (ctx_init(&C, m, o->slide, err)) { ctx_free(&C); return 1; }
+  int ninv;
+  count_cells(&C, m->x, 0, &ninv, NULL);
+  if (ninv) {
+    snprintf(err, MESH_ERRLEN, "the mesh has %d invalid cell%s: untangle it first (mesh:untangle())", ninv,
+             ninv == 1 ? "" : "s");
+    ctx_free(&C);
+    return 1;
+  }
+  double *q = mesh_big_alloc(sizeof(double) * ((size_t)m->ncell + 1));
+  unsigned char *moved = calloc((size_t)m->nvert + 1, 1);
+  if (!q || !moved) { mesh_big_free(q); free(moved); ctx_free(&C); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  quality_stats st;
+  mesh_quality(m, o->measure, NULL, q, err);
+  quality_stats_compute(q, m->ncell, &st);
+  r->min_before = st.min;
+  r->mean_before = st.mean;
+  int d = m->dim;
+  for (int sweep = 0; sweep < o->iterations; sweep++) {
+    int changed = 0;
+    for (int v = 0; v < m->nvert; v++) {
+      if (C.fixed[v] || (C.bnd[v] && d != 2)) continue;
+      double *p = m->x + (size_t)v * d, p0[3], qmin0, f0 = star_objective(&C, v, o->measure, &qmin0);
+      for (int j = 0; j < d; j++) p0[j] = p[j];
+      /* search directions: the free plane (interior) or the boundary edges (sliding) */
+      double h = INFINITY;
+      for (int pp = C.vc_off[v]; pp < C.vc_off[v + 1]; pp++) {
+        const int *cell = cell_of(&C, C.vc[pp]);
+        for (int i = 0; i < C.nvc; i++) {
+          if (cell[i] == v) continue;
+          double s2 = 0;
+          for (int j = 0; j < d; j++) s2 += (m->x[(size_t)cell[i] * d + j] - p0[j]) * (m->x[(size_t)cell[i] * d + j] - p0[j]);
+          h = fmin(h, sqrt(s2));
+        }
+      }
+      double dir[3] = {0, 0, 0};
+      if (C.bnd[v]) { /* 2D sliding: the better of the two boundary edges, by a probe */
+        double best = f0, bq;
+        for (int side = 0; side < 2; side++) {
+          const double *a = m->x + 2 * C.bnb[2 * v + side];
+          for (int j = 0; j < 2; j++) p[j] = p0[j] + 1e-3 * (a[j] - p0[j]);
+          double f = star_objective(&C, v, o->measure, &bq);
+          if (f < best) { best = f; for (int j = 0; j < 2; j++) dir[j] = a[j] - p0[j]; }
+        }
+        for (int j = 0; j < 2; j++) p[j] = p0[j];
+        if (best == f0) continue;
+      } else { /* interior: minus the central-difference gradient, scaled to the star's size */
+        double e = 1e-6 * h, gn = 0, qq;
+        for (int j = 0; j < d; j++) {
+          p[j] = p0[j] + e;
+          double fp = star_objective(&C, v, o->measure, &qq);
+          p[j] = p0[j] - e;
+          double fm = star_objective(&C, v, o->measure, &qq);
+          p[j] = p0[j];
+          dir[j] = isfinite(fp) && isfinite(fm) ? -(fp - fm) / (2 * e) : 0;
+          gn += dir[j] * dir[j];
+        }
+        gn = sqrt(gn);
+        if (!(gn > 0)) continue;
+        for (int j = 0; j < d; j++) dir[j] *= 0.5 * h / gn;
+      }
+      /* backtracking: accept only a step that keeps every cell valid, lowers Σ 1/q and
+       * does not lower the smallest q around v — so the mesh minimum never decreases */
+      int ok = 0;
+      for (double t = C.bnd[v] ? 0.5 : 1; t > 1e-4; t *= 0.5) {
+        for (int j = 0; j < d; j++) p[j] = p0[j] + t * dir[j];
+        double qmin, f = star_objective(&C, v, o->measure, &qmin);
+        if (f < f0 && qmin >= qmin0) { ok = 1; break; }
+      }
+      if (!ok) {
+        for (int j = 0; j < d; j++) p[j] = p0[j];
+        continue;
+      }
+      changed++;
+      if (!moved[v]) { moved[v] = 1; r->moved++; }
+    }
+    r->sweeps = sweep + 1;
+    if (o->verbose) printf("smooth: sweep %d moved %d vertices\n", sweep + 1, changed);
+    if (!changed) break;
+  }
+  mesh_quality(m, o->measure, NULL, q, err);
+  quality_stats_compute(q, m->ncell, &st);
+  r->min_after = st.min;
+  r->mean_after = st.mean;
+  r->seconds = now() - t0;
+  mesh_big_free(q);
+  free(moved);
+  ctx_free(&C);
+  return 0;
 }

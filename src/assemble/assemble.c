@@ -72,7 +72,7 @@ int lg_mesh_check(lg_env *env, lg_mesh *lm) {
     for (int i = 0; i < n && i < 5; i++)
       used += (size_t)snprintf(list + used, sizeof list - used, "%s%d", i ? ", " : "", ids[i] + 1);
     lg_seterr(env, "the mesh has %d inverted or zero-size cell%s (cell%s %s%s); assembly needs "
-                   "every cell positively oriented",
+                   "every cell positively oriented: repair it with mesh:untangle()",
               n, n == 1 ? "" : "s", n == 1 ? "" : "s", list, n > 5 ? ", ..." : "");
     return 1;
   }

@@ -10,6 +10,7 @@
 #include "../assemble/assemble.h"
 #include "../config.h"
 #include "../mesh/quality.h"
+#include "../mesh/untangle.h"
 
 #include <lauxlib.h>
 #include <lua.h>
@@ -629,6 +630,260 @@ static int lmesh_copy(lua_State *L) {
 }
 
 static int lmesh_hmax(lua_State *L) { lua_pushnumber(L, mesh_hmax(check_mesh(L, 1, "mesh:hmax")->lm->m)); return 1; }
+
+/* ---------------------------------------------------------------- untangle, smooth, move */
+
+/* a report table whose tostring is the readable text in its field `text` */
+static int report_tostring(lua_State *L) {
+  lua_getfield(L, 1, "text");
+  return 1;
+}
+
+static void push_report_meta(lua_State *L) {
+  if (luaL_newmetatable(L, "lugal.report")) {
+    lua_pushcfunction(L, report_tostring);
+    lua_setfield(L, -2, "__tostring");
+  }
+  lua_setmetatable(L, -2);
+}
+
+static void set_num(lua_State *L, const char *k, double v) { lua_pushnumber(L, v); lua_setfield(L, -2, k); }
+static void set_int(lua_State *L, const char *k, lua_Integer v) { lua_pushinteger(L, v); lua_setfield(L, -2, k); }
+
+static int opt_boundary(lua_State *L, int t, const char *fn) {
+  const char *b = t ? opt_str(L, t, "boundary", "slide", fn) : "slide";
+  if (!strcmp(b, "slide")) return 1;
+  if (!strcmp(b, "fixed")) return 0;
+  return luaL_error(L, "%s: option 'boundary' must be \"slide\" or \"fixed\", got \"%s\"", fn, b);
+}
+
+static int lmesh_untangle(lua_State *L) {
+  const char *fn = "mesh:untangle";
+  ud_mesh *u = check_mesh(L, 1, fn);
+  int t = 0;
+  if (!lua_isnoneornil(L, 2)) {
+    if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {beta=, max_iterations=, boundary=, placement=, quiet=}");
+    static const char *const keys[] = {"beta", "max_iterations", "boundary", "placement", "quiet", NULL};
+    check_keys(L, 2, fn, keys);
+    t = 2;
+  }
+  untangle_opts o;
+  untangle_defaults(&o);
+  int quiet = 0;
+  if (t) {
+    o.beta = opt_num(L, t, "beta", -1, fn);
+    if (lua_getfield(L, t, "beta") != LUA_TNIL && !(o.beta >= 0))
+      return luaL_error(L, "%s: option 'beta' must be >= 0 (a minimum corner Jacobian), got %f", fn, o.beta);
+    lua_pop(L, 1);
+    o.max_iterations = opt_int(L, t, "max_iterations", 100, fn);
+    if (o.max_iterations < 1) return luaL_error(L, "%s: option 'max_iterations' must be >= 1", fn);
+    const char *pl = opt_str(L, t, "placement", "chebyshev", fn);
+    if (!strcmp(pl, "chebyshev")) o.placement = 0;
+    else if (!strcmp(pl, "corners")) o.placement = 1;
+    else return luaL_error(L, "%s: option 'placement' must be \"chebyshev\" or \"corners\", got \"%s\"", fn, pl);
+    lua_getfield(L, t, "quiet");
+    quiet = lua_toboolean(L, -1);
+    lua_pop(L, 1);
+  }
+  o.slide = opt_boundary(L, t, fn);
+  mesh *m = u->lm->m;
+  untangle_report r;
+  char err[MESH_ERRLEN];
+  if (mesh_untangle(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
+  lg_mesh_changed(u->lm);
+  char text[2048];
+  size_t n = (size_t)snprintf(text, sizeof text,
+                              "untangle: %d %s, beta %.3g: invalid %d -> %d (%s), %d vertices moved (mean %.3g, max "
+                              "%.3g), %.3f s",
+                              m->ncell, cell_plural(m->type), r.beta, r.invalid_before, r.invalid_after,
+                              r.invalid_after ? "FAILED" : "valid", r.moved, r.mean_displacement, r.max_displacement,
+                              r.seconds);
+  lua_createtable(L, 0, 12);
+  set_num(L, "beta", r.beta);
+  set_int(L, "invalid_before", r.invalid_before);
+  set_int(L, "invalid_after", r.invalid_after);
+  lua_pushboolean(L, r.invalid_after == 0);
+  lua_setfield(L, -2, "success");
+  set_int(L, "moved", r.moved);
+  set_num(L, "mean_displacement", r.mean_displacement);
+  set_num(L, "max_displacement", r.max_displacement);
+  set_num(L, "seconds", r.seconds);
+  lua_createtable(L, r.nstage, 0);
+  for (int i = 0; i < r.nstage; i++) {
+    untangle_stage *st = &r.stage[i];
+    lua_createtable(L, 0, 7);
+    lua_pushstring(L, st->name);
+    lua_setfield(L, -2, "name");
+    set_int(L, "invalid_before", st->invalid_before);
+    set_int(L, "invalid_after", st->invalid_after);
+    set_int(L, "below_beta", st->below_beta_after);
+    set_int(L, "moved", st->moved);
+    set_int(L, "iterations", st->iterations);
+    set_num(L, "seconds", st->seconds);
+    lua_rawseti(L, -2, i + 1);
+    if (n < sizeof text)
+      n += (size_t)snprintf(text + n, sizeof text - n,
+                            "\n  stage %-26s invalid %d -> %d, below beta %d, moved %d vertices, %d iterations, %.3f s",
+                            st->name, st->invalid_before, st->invalid_after, st->below_beta_after, st->moved,
+                            st->iterations, st->seconds);
+  }
+  lua_setfield(L, -2, "stages");
+  lua_pushstring(L, text);
+  lua_setfield(L, -2, "text");
+  push_report_meta(L);
+  if (!quiet) printf("%s\n", text);
+  return 1;
+}
+
+static int lmesh_smooth(lua_State *L) {
+  const char *fn = "mesh:smooth";
+  ud_mesh *u = check_mesh(L, 1, fn);
+  mesh *m = u->lm->m;
+  int t = 0;
+  if (!lua_isnoneornil(L, 2)) {
+    if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {measure=, iterations=, boundary=, quiet=}");
+    static const char *const keys[] = {"measure", "iterations", "boundary", "quiet", NULL};
+    check_keys(L, 2, fn, keys);
+    t = 2;
+  }
+  smooth_opts o = {m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 20, 1, 0};
+  int quiet = 0;
+  if (t) {
+    const char *name = opt_str(L, t, "measure", NULL, fn);
+    if (name) {
+      o.measure = quality_from_name(name);
+      if (o.measure < 0) return luaL_error(L, "%s: unknown measure '%s'", fn, name);
+    }
+    o.iterations = opt_int(L, t, "iterations", 20, fn);
+    if (o.iterations < 1) return luaL_error(L, "%s: option 'iterations' must be >= 1", fn);
+    lua_getfield(L, t, "quiet");
+    quiet = lua_toboolean(L, -1);
+    lua_pop(L, 1);
+  }
+  o.slide = opt_boundary(L, t, fn);
+  smooth_report r;
+  char err[MESH_ERRLEN];
+  if (mesh_smooth(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
+  lg_mesh_changed(u->lm);
+  char text[512];
+  snprintf(text, sizeof text, "smooth: %s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d sweeps, %.3f s",
+           quality_name(o.measure), r.min_before, r.min_after, r.mean_before, r.mean_after, r.moved, r.sweeps, r.seconds);
+  lua_createtable(L, 0, 9);
+  lua_pushstring(L, quality_name(o.measure));
+  lua_setfield(L, -2, "measure");
+  set_num(L, "min_before", r.min_before);
+  set_num(L, "min_after", r.min_after);
+  set_num(L, "mean_before", r.mean_before);
+  set_num(L, "mean_after", r.mean_after);
+  set_int(L, "moved", r.moved);
+  set_int(L, "sweeps", r.sweeps);
+  set_num(L, "seconds", r.seconds);
+  lua_pushstring(L, text);
+  lua_setfield(L, -2, "text");
+  push_report_meta(L);
+  if (!quiet) printf("%s\n", text);
+  return 1;
+}
+
+/* a displacement per vertex from a Lua function (x, y[, z]) -> dx, dy[, dz] (or a table), or
+ * from a table of dim P1/P2/P3 functions on this mesh (one per component); only vertices with
+ * want[v] (all when NULL) are evaluated */
+static void displacement_field(lua_State *L, int idx, ud_mesh *u, const unsigned char *want, double *out,
+                               const char *fn) {
+  mesh *m = u->lm->m;
+  int d = m->dim;
+  if (lua_isfunction(L, idx)) {
+    for (int v = 0; v < m->nvert; v++) {
+      if (want && !want[v]) continue;
+      lua_pushvalue(L, idx);
+      for (int j = 0; j < d; j++) lua_pushnumber(L, m->x[(size_t)v * d + j]);
+      lua_call(L, d, d);
+      if (lua_istable(L, -d)) { /* one table {dx, dy[, dz]} */
+        int tb = lua_gettop(L) - d + 1;
+        for (int j = 0; j < d; j++) {
+          lua_rawgeti(L, tb, j + 1);
+          if (!lua_isnumber(L, -1)) luaL_error(L, "%s: the displacement function returned a table without %d numbers", fn, d);
+          out[(size_t)v * d + j] = lua_tonumber(L, -1);
+          lua_pop(L, 1);
+        }
+      } else
+        for (int j = 0; j < d; j++) {
+          if (!lua_isnumber(L, -d + j))
+            luaL_error(L, "%s: the displacement function must return %d numbers (or one table of them) at vertex %d, got %s",
+                       fn, d, v + 1, luaL_typename(L, -d + j));
+          out[(size_t)v * d + j] = lua_tonumber(L, -d + j);
+        }
+      lua_pop(L, d);
+    }
+    return;
+  }
+  if (lua_istable(L, idx) && (int)luaL_len(L, idx) == d) {
+    for (int j = 0; j < d; j++) {
+      lua_rawgeti(L, idx, j + 1);
+      ud_func *uf = luaL_testudata(L, -1, MT_FUNC);
+      if (!uf) luaL_error(L, "%s: component %d of the displacement must be a discrete function, got %s", fn, j + 1, luaL_typename(L, -1));
+      if (uf->f->mesh != u->lm) luaL_error(L, "%s: component %d of the displacement lives on a different mesh", fn, j + 1);
+      for (int v = 0; v < m->nvert; v++) out[(size_t)v * d + j] = uf->f->x[v]; /* vertex dofs come first */
+      lua_pop(L, 1);
+    }
+    return;
+  }
+  typeerror(L, fn, idx, d == 2 ? "a function (x, y) -> dx, dy or a table {fx, fy} of discrete functions"
+                                : "a function (x, y, z) -> dx, dy, dz or a table {fx, fy, fz} of discrete functions");
+}
+
+static int lmesh_move(lua_State *L) {
+  const char *fn = "mesh:move";
+  ud_mesh *u = check_mesh(L, 1, fn);
+  mesh *m = u->lm->m;
+  if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {displacement = function or {fx, fy[, fz]}, quiet=}");
+  static const char *const keys[] = {"displacement", "quiet", NULL};
+  check_keys(L, 2, fn, keys);
+  lua_getfield(L, 2, "quiet");
+  int quiet = lua_toboolean(L, -1);
+  lua_pop(L, 1);
+  lua_getfield(L, 2, "displacement");
+  if (lua_isnil(L, -1)) return luaL_error(L, "%s: option 'displacement' is required (the boundary displacement)", fn);
+  int idx = lua_gettop(L);
+  unsigned char *fixed = lua_newuserdatauv(L, (size_t)m->nvert + 1, 0);
+  double *disp = lua_newuserdatauv(L, sizeof(double) * ((size_t)m->nvert * m->dim + 1), 0);
+  char err[MESH_ERRLEN];
+  if (mesh_boundary_vertices(m, fixed, err)) return luaL_error(L, "%s: %s", fn, err);
+  memset(disp, 0, sizeof(double) * (size_t)m->nvert * m->dim);
+  displacement_field(L, idx, u, fixed, disp, fn);
+  move_report r;
+  if (mesh_move(m, disp, fixed, &r, err)) return luaL_error(L, "%s: %s", fn, err);
+  lg_mesh_changed(u->lm);
+  char text[512];
+  snprintf(text, sizeof text, "move: Laplacian motion, tau_max %.3g, %d CG iterations (residual %.1e), %d invalid cells after, %.3f s",
+           r.tau_max, r.iterations, r.residual, r.invalid_after, r.seconds);
+  lua_createtable(L, 0, 6);
+  set_int(L, "iterations", r.iterations);
+  set_num(L, "residual", r.residual);
+  set_num(L, "tau_max", r.tau_max);
+  set_int(L, "invalid_after", r.invalid_after);
+  set_num(L, "seconds", r.seconds);
+  lua_pushstring(L, text);
+  lua_setfield(L, -2, "text");
+  push_report_meta(L);
+  if (!quiet) printf("%s\n", text);
+  return 1;
+}
+
+static int lmesh_displace(lua_State *L) {
+  const char *fn = "mesh:displace";
+  ud_mesh *u = check_mesh(L, 1, fn);
+  mesh *m = u->lm->m;
+  if (lua_isnoneornil(L, 2)) return typeerror(L, fn, 2, "a function (x, y[, z]) -> displacement or a table of discrete functions");
+  double *disp = lua_newuserdatauv(L, sizeof(double) * ((size_t)m->nvert * m->dim + 1), 0);
+  displacement_field(L, 2, u, NULL, disp, fn);
+  for (size_t i = 0; i < (size_t)m->nvert * m->dim; i++) m->x[i] += disp[i];
+  lg_mesh_changed(u->lm);
+  int ninv;
+  mesh_count_invalid(m, 0, NULL, &ninv);
+  lua_pushinteger(L, ninv);
+  return 1;
+}
 
 static int mesh_check(lua_State *L) {
   ud_mesh *u = check_mesh(L, 1, "mesh:check");
@@ -1655,7 +1910,8 @@ int luaopen_lugal(lua_State *L) {
                                           {"check", mesh_check}, {"nvertices", mesh_nvertices}, {"ncells", mesh_ncells},
                                           {"dim", mesh_dim}, {"coordinates", mesh_coordinates},
                                           {"set_coordinates", mesh_set_coordinates}, {"quality", mesh_quality_l},
-                                          {"quality_report", mesh_quality_report}, {NULL, NULL}};
+                                          {"quality_report", mesh_quality_report}, {"untangle", lmesh_untangle}, {"smooth", lmesh_smooth},
+                                          {"move", lmesh_move}, {"displace", lmesh_displace}, {NULL, NULL}};
   new_mt(L, MT_MESH, mesh_mm, mesh_methods);
   new_mt(L, MT_REGION, NULL, NULL);
   static const luaL_Reg basis_mm[] = {{"__tostring", basis_tostring}, {NULL, NULL}};

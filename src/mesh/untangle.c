@@ -131,8 +131,9 @@ static int boundary_2d(ctx *C, char *err) {
     if (!corner) {
       const double *p = m->x + 2 * v, *a = m->x + 2 * C->bnb[2 * v], *b = m->x + 2 * C->bnb[2 * v + 1];
       double ax = a[0] - p[0], ay = a[1] - p[1], bx = b[0] - p[0], by = b[1] - p[1];
-      double cr = ax * by - ay * bx, dt = ax * bx + ay * by;
-      corner = !(dt < 0 && fabs(cr) <= 1e-12 * sqrt((ax * ax + ay * ay) * (bx * bx + by * by)));
+      double cr = ax * by - ay * bx;
+      /* straight: the two edges collinear (possibly folded back by a tangle) */
+      corner = !(fabs(cr) <= 1e-12 * sqrt((ax * ax + ay * ay) * (bx * bx + by * by)));
     }
     if (corner) C->fixed[v] = 1;
   }
@@ -894,9 +895,14 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
     ninv = 0;
   } else
     for (int v = 0; v < m->nvert; v++) W.fidx[v] = -1;
+  int prev_inv = ninv;
   for (int rings = 2; ninv > 0 && rings <= 1 << 20; rings *= 2) {
     grow_region(&C, m->x, rings, region);
-    for (int v = 0; v < m->nvert; v++) touched[v] |= region[v];
+    int whole = 1;
+    for (int v = 0; v < m->nvert; v++) {
+      touched[v] |= region[v];
+      whole &= region[v];
+    }
     if (o->slide && m->dim == 2) s->moved += slide_boundary(&C, m->x, beta, region, moved);
     /* each connected piece of the region on its own: small problems converge fast */
     int np = region_pieces(&C, region, list, off), all = 1;
@@ -929,7 +935,9 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
     int pass;
     s->moved += feasible_passes(&C, m->x, 0, 0, region, o->placement, maxit, moved, &pass);
     count_cells(&C, m->x, beta, &ninv, NULL);
-    if (all && rings > 64) break;
+    /* stop when there is nothing left to grow into and the last round did not help */
+    if ((all && rings > 64) || (whole && ninv >= prev_inv)) break;
+    prev_inv = ninv;
   }
   free(W.fidx); free(W.cmark); free(W.cells); free(list); free(off);
   count_cells(&C, m->x, beta, &s->invalid_after, &s->below_beta_after);

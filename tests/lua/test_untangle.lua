@@ -1,0 +1,213 @@
+-- Untangling (seed: "Untangling of 2D triangular and quadrilateral meshes in ALE
+-- simulations"), quality-guarded smoothing and Laplacian motion (morphing paper 1.1-1.3).
+package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
+local T = require "testlib"
+local lg = require "lugal"
+
+local function coords(m)
+  local c = {}
+  for i = 1, m:nvertices() do c[i] = {m:coordinates(i)} end
+  return c
+end
+local function nearest(m, ...)
+  local p, best, bi = {...}, math.huge
+  for i = 1, m:nvertices() do
+    local q, d = {m:coordinates(i)}, 0
+    for k = 1, #p do d = d + (q[k] - p[k])^2 end
+    if d < best then best, bi = d, i end
+  end
+  return bi
+end
+
+-- 1. The paper's small quadrilateral case: a 2x2 patch whose interior vertex is pulled out
+-- of the patch. Stage 1 puts it back inside its feasible set (the Chebyshev centre of the
+-- kernel: the middle of the patch); nothing else moves.
+do
+  local m = lg.mesh.rectangle{nx = 2, cell = "quadrilateral"}
+  local c = nearest(m, 0.5, 0.5)
+  m:set_coordinates(c, 1.3, 0.7)
+  local ninv = m:check()
+  T.check(ninv >= 2, "the pulled patch has %d invalid cells", ninv)
+  local r = m:untangle{quiet = true}
+  T.check(r.success and r.invalid_before == ninv and r.invalid_after == 0, "patch: %s", tostring(r))
+  T.check(r.stages[1].invalid_after == 0 and r.stages[1].moved == 1 and r.moved == 1, "stage 1 alone fixes the patch")
+  local x, y = m:coordinates(c)
+  T.close(x, 0.5, 1e-12, "patch centre x")
+  T.close(y, 0.5, 1e-12, "patch centre y")
+  T.check(m:quality("min_corner_jacobian"):min() > 0.2, "the patch is well shaped again")
+end
+
+-- 2. A vertex whose feasible set is empty: two neighbouring interior vertices swapped
+-- across each other (a 4x4 quadrilateral mesh). Stage 1 cannot place them all; stage 2 (optimization) fixes the mesh.
+do
+  local m = lg.mesh.rectangle{nx = 4, cell = "quadrilateral"}
+  local a, b = nearest(m, 0.25, 0.25), nearest(m, 0.5, 0.5)
+  m:set_coordinates(a, 0.75, 0.75)
+  m:set_coordinates(b, 0.05, 0.05)
+  local r = m:untangle{quiet = true}
+  T.check(r.stages[1].invalid_after > 0, "stage 1 should leave invalid cells here (%d)", r.stages[1].invalid_after)
+  T.check(r.stages[2].invalid_after == 0 and r.success, "stage 2 fixes what stage 1 cannot: %s", tostring(r))
+  T.check(m:check() == 0, "valid after")
+end
+
+-- 3. Random tangles (the seed's Texas experiment): interior vertices displaced by up to 20%
+-- of the domain size, a third of them or all of them; always untangled, boundary vertices
+-- stay on the boundary (sliding) to 1e-12, boundary corners fixed.
+local function on_boundary(x, y) return math.min(math.abs(x), math.abs(x - 1), math.abs(y), math.abs(y - 1)) end
+local rnd = 12345
+local function rand() rnd = (rnd * 1103515245 + 12345) % 2147483648; return rnd / 2147483648 end
+local function tangle(m, frac)
+  local bnd = {}
+  local d = m:dim()
+  for i = 1, m:nvertices() do
+    local p = {m:coordinates(i)}
+    local onb = false
+    for k = 1, d do onb = onb or p[k] == 0 or p[k] == 1 end
+    bnd[i] = onb
+    if not onb and rand() < frac then
+      for k = 1, d do p[k] = p[k] + 0.2 * (2 * rand() - 1) end
+      m:set_coordinates(i, table.unpack(p))
+    end
+  end
+  return bnd
+end
+local cases = {{"triangle", 16}, {"quadrilateral", 16}, {"tetrahedron", 6}}
+local runs = 0
+for _, case in ipairs(cases) do
+  for _, frac in ipairs{0.3, 1.0} do
+    for seed = 1, 3 do
+      local m = case[1] == "tetrahedron" and lg.mesh.box{nx = case[2], cell = case[1]}
+                or lg.mesh.rectangle{nx = case[2], cell = case[1]}
+      local bnd = tangle(m, frac)
+      local before = coords(m)
+      local inv = m:check()
+      T.check(inv > 0, "%s tangle %g/%d has no invalid cells", case[1], frac, seed)
+      local r = m:untangle{quiet = true}
+      T.check(r.success and m:check() == 0, "%s frac %g seed %d not untangled: %s", case[1], frac, seed, tostring(r))
+      for i = 1, m:nvertices() do
+        if bnd[i] then
+          local p = {m:coordinates(i)}
+          if m:dim() == 2 then
+            T.check(on_boundary(p[1], p[2]) <= 1e-12, "boundary vertex %d left the boundary (%g, %g)", i, p[1], p[2])
+            local corner = (before[i][1] == 0 or before[i][1] == 1) and (before[i][2] == 0 or before[i][2] == 1)
+            if corner then T.check(p[1] == before[i][1] and p[2] == before[i][2], "corner %d moved", i) end
+          else
+            for k = 1, 3 do T.check(p[k] == before[i][k], "3D boundary vertex %d moved", i) end
+          end
+        end
+      end
+      runs = runs + 1
+    end
+  end
+end
+print(string.format("%d random tangles untangled", runs))
+
+-- 4. Sliding: a bottom boundary vertex pushed along the boundary past its neighbour can only
+-- be fixed by moving boundary vertices; they stay on y = 0 exactly.
+do
+  local m = lg.mesh.rectangle{nx = 10, cell = "triangle"}
+  local v = nearest(m, 0.3, 0)
+  m:set_coordinates(v, 0.45, 0)
+  T.check(m:check() > 0, "pushed boundary vertex tangles")
+  local fixed = m:copy()
+  local rf = fixed:untangle{boundary = "fixed", quiet = true}
+  T.check(not rf.success, "with fixed boundary vertices this tangle cannot be undone")
+  local r = m:untangle{quiet = true}
+  T.check(r.success, "sliding untangles: %s", tostring(r))
+  for i = 1, m:nvertices() do
+    local x, y = m:coordinates(i)
+    T.check(on_boundary(x, y) <= 1e-12 or (x > 0 and x < 1 and y > 0 and y < 1), "vertex %d outside", i)
+  end
+  local x, y = m:coordinates(v)
+  T.check(y == 0, "the pushed vertex stays on y = 0 (%g)", y)
+end
+
+-- 5. Only what must move moves: one vertex pulled out in a 20x20 triangle mesh; every
+-- vertex more than 3 cells away keeps its coordinates bit for bit.
+do
+  local m = lg.mesh.rectangle{nx = 20, cell = "triangle"}
+  local c = nearest(m, 0.5, 0.5)
+  local before = coords(m)
+  m:set_coordinates(c, 0.5 + 0.12, 0.5 - 0.07)
+  local r = m:untangle{quiet = true}
+  T.check(r.success, "single pull")
+  local far, same = 0, 0
+  for i = 1, m:nvertices() do
+    local x, y = m:coordinates(i)
+    if math.max(math.abs(before[i][1] - 0.5), math.abs(before[i][2] - 0.5)) > 3 / 20 + 1e-9 then
+      far = far + 1
+      if x == before[i][1] and y == before[i][2] then same = same + 1 end
+    end
+  end
+  T.check(far > 300 and same == far, "%d of %d far vertices unchanged", same, far)
+end
+
+-- 6. Smoothing never lowers the minimum quality (and raises the mean) on perturbed valid
+-- meshes of every cell type.
+for _, case in ipairs{{"triangle", "mean_ratio"}, {"quadrilateral", "corner_condition"},
+                      {"tetrahedron", "mean_ratio"}, {"quadrilateral", "scaled_jacobian"}} do
+  local m = case[1] == "tetrahedron" and lg.mesh.box{nx = 5, cell = case[1]}
+            or lg.mesh.rectangle{nx = 12, cell = case[1]}
+  local h = 1 / (case[1] == "tetrahedron" and 5 or 12)
+  for i = 1, m:nvertices() do
+    local p = {m:coordinates(i)}
+    local inside = true
+    for k = 1, #p do inside = inside and p[k] > 0 and p[k] < 1 end
+    if inside then
+      for k = 1, #p do p[k] = p[k] + 0.2 * h * (2 * rand() - 1) end
+      m:set_coordinates(i, table.unpack(p))
+    end
+  end
+  T.check(m:check() == 0, "perturbed %s mesh valid", case[1])
+  local q0 = m:quality(case[2])
+  local s = m:smooth{measure = case[2], iterations = 10, quiet = true}
+  local q1 = m:quality(case[2])
+  T.check(q1:min() >= q0:min(), "%s %s: min %g -> %g", case[1], case[2], q0:min(), q1:min())
+  T.check(q1:mean() > q0:mean() + 1e-3, "%s %s: mean %g -> %g", case[1], case[2], q0:mean(), q1:mean())
+  T.close(s.min_after, q1:min(), 1e-14, "report min")
+end
+
+-- 7. Laplacian motion: an affine boundary displacement moves a uniform mesh affinely
+-- (τ = 1 there, and linear functions are discrete-harmonic on these grids); τ_max =
+-- Vmax/Vmin on a graded mesh.
+do
+  for _, cell in ipairs{"triangle", "quadrilateral"} do
+    local m = lg.mesh.rectangle{nx = 8, cell = cell}
+    local before = coords(m)
+    local r = m:move{displacement = function(x, y) return 0.1 * x + 0.05 * y, -0.02 * x + 0.1 * y end, quiet = true}
+    T.close(r.tau_max, 1, 1e-14, "uniform mesh tau")
+    for i = 1, m:nvertices() do
+      local x, y = m:coordinates(i)
+      local x0, y0 = before[i][1], before[i][2]
+      T.close(x, x0 + 0.1 * x0 + 0.05 * y0, 1e-9, "affine motion x")
+      T.close(y, y0 - 0.02 * x0 + 0.1 * y0, 1e-9, "affine motion y")
+    end
+  end
+  local g = lg.mesh.rectangle{nx = 8, cell = "triangle"}
+  g:displace(function(x, y) return x * x - x, 0 end)   -- x -> x^2: graded cells
+  local V = g:quality("signed_measure")
+  local r = g:move{displacement = function() return 0, 0 end, quiet = true}
+  T.close(r.tau_max, V:max() / V:min(), 1e-12, "tau_max = Vmax/Vmin")
+end
+
+-- 8. Assembly refuses an invalid mesh and names the repair; argument errors.
+do
+  local m = lg.mesh.rectangle{nx = 4, cell = "triangle"}
+  m:set_coordinates(nearest(m, 0.5, 0.5), 0.9, 0.9)
+  local P1 = lg.lagrange(1)
+  local u, v = lg.unknown(P1, "u"), lg.test(P1, "v")
+  T.fails(function()
+    return lg.linear_problem{mesh = m, eqn = lg.integral(m:cells(), u*v - v), test = v, unknown = u}
+  end, "inverted", "mesh:untangle()")
+  T.fails(function() m:untangle{beta = -1} end, "mesh:untangle", "beta")
+  T.fails(function() m:untangle{boundary = "wobble"} end, "mesh:untangle", "boundary", "slide")
+  T.fails(function() m:untangle{placement = 3} end, "mesh:untangle", "placement")
+  T.fails(function() m:untangle{betta = 1} end, "unknown option 'betta'")
+  T.fails(function() m:smooth() end, "mesh:smooth", "untangle it first")
+  T.fails(function() m:move{} end, "mesh:move", "displacement")
+  T.fails(function() m:move{displacement = function() return 1 end} end, "mesh:move", "2 numbers")
+  T.fails(function() m:displace(42) end, "mesh:displace", "argument 2")
+  local q = lg.mesh.rectangle{nx = 3, cell = "quadrilateral"}
+  T.fails(function() q:smooth{measure = "mean_ratio"} end, "mesh:smooth", "corner_condition")
+end
+print("untangle tests passed")

@@ -435,19 +435,41 @@ static int feasible_position(const ctx *C, const double *x, int v, double target
 
 /* stages 1 and 3: repeated passes over the free vertices of `active` cells whose constraints
  * are violated (J <= jtol in stage 1, J < β in stage 3); a pass that moves nothing ends it */
+typedef struct {
+  int v, bad;
+} cand;
+static int cand_cmp(const void *a, const void *b) {
+  const cand *x = a, *y = b;
+  return x->bad != y->bad ? y->bad - x->bad : x->v - y->v;
+}
+
 static int feasible_passes(ctx *C, double *x, double target, int stage3, const unsigned char *region, int placement,
                            int maxpass, unsigned char *moved, int *npass) {
   int d = C->d, total = 0, pass;
   mesh *m = C->m;
+  cand *list = malloc(sizeof(cand) * ((size_t)m->nvert + 1));
+  if (!list) return 0;
   for (pass = 0; pass < maxpass; pass++) {
-    int changed = 0;
+    /* the vertices with violated corners, the most violated first: a vertex pulled out of
+     * its patch is put back before its neighbours react to it */
+    int n = 0;
     for (int v = 0; v < m->nvert; v++) {
       if (C->fixed[v] || C->bnd[v] || (region && !region[v])) continue;
       constraints K;
       vertex_constraints(C, x, v, &K);
       int bad = 0;
+      for (int k = 0; k < K.n; k++) bad += stage3 ? K.J[k] < target : !(K.J[k] > C->jtol);
+      if (bad) list[n++] = (cand){v, bad};
+    }
+    qsort(list, (size_t)n, sizeof(cand), cand_cmp);
+    int changed = 0;
+    for (int i = 0; i < n; i++) {
+      int v = list[i].v;
+      constraints K;
+      vertex_constraints(C, x, v, &K);
+      int bad = 0;
       for (int k = 0; k < K.n && !bad; k++) bad = stage3 ? K.J[k] < target : !(K.J[k] > C->jtol);
-      if (!bad) continue;
+      if (!bad) continue; /* fixed by an earlier move in this pass */
       double np[3];
       if (!feasible_position(C, x, v, stage3 ? target : 0, placement, np)) continue;
       for (int j = 0; j < d; j++) x[(size_t)d * v + j] = np[j];
@@ -457,6 +479,7 @@ static int feasible_passes(ctx *C, double *x, double target, int stage3, const u
     }
     if (!changed) break;
   }
+  free(list);
   *npass = pass + 1 > maxpass ? maxpass : pass + 1;
   return total;
 }

@@ -35,4 +35,34 @@ if "$BUILD/lugal-mesh" quality "$T/tangled.msh" --measure mean_ratio 2> "$T/err"
 grep -q "does not apply to quadrilaterals" "$T/err"
 if "$BUILD/lugal-mesh" quality "$T/none.msh" 2> "$T/err"; then exit 1; fi
 grep -q "cannot open" "$T/err"
+# untangle: the tangled mesh comes back valid, only the pulled vertex moves, and quality
+# agrees; --report prints the three stages; smooth keeps the minimum and raises the mean
+out=$("$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/fixed.msh" --report)
+echo "$out"
+echo "$out" | grep -q "1 feasible set .*invalid 3 -> 0"
+echo "$out" | grep -q "3 feasible set (J >= beta)"
+echo "$out" | grep -q "untangle: done — 0 invalid left, 1 vertices moved"
+"$BUILD/lugal-mesh" quality "$T/fixed.msh" | grep -q "inverted or degenerate cells: 0"
+out=$("$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/smooth.msh")
+echo "$out"
+echo "$out" | grep -q "smooth: corner_condition min"
+if "$BUILD/lugal-mesh" smooth "$T/tangled.msh" "$T/x.msh" 2> "$T/err"; then exit 1; fi
+grep -q "untangle it first" "$T/err"
+if "$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/x.msh" --beta -1 2> "$T/err"; then exit 1; fi
+grep -q "beta must be a number >= 0" "$T/err"
+# a tangle that cannot be undone with the boundary fixed: exit status 3, file still written
+cat > "$T/edge.lua" <<'LUA'
+local lg = require "lugal"
+local m = lg.mesh.rectangle{nx = 10, cell = "triangle"}
+m:set_coordinates(4, 0.45, 0)
+m:write(arg[1])
+LUA
+"$BUILD/lugal" "$T/edge.lua" "$T/edge.msh"
+set +e
+"$BUILD/lugal-mesh" untangle "$T/edge.msh" "$T/edge_fixed.msh" --boundary fixed > "$T/out"
+rc=$?
+set -e
+[ "$rc" -eq 3 ] || { echo "expected exit status 3, got $rc"; exit 1; }
+[ -s "$T/edge_fixed.msh" ]
+"$BUILD/lugal-mesh" untangle "$T/edge.msh" "$T/edge_slide.msh" | grep -q "invalid 1 -> 0"
 echo "lugal-mesh: ok"

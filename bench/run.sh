@@ -15,3 +15,6 @@ for args in "32 1" "64 1" "24 2"; do
   "$ROOT/build/lugal" "$ROOT/bench/assembly.lua" $args 5 -lugal_jit cc | sed 's/^lugal/lugal-cc/'
   [ $have_fenicsx = 1 ] && /usr/bin/python3 "$ROOT/bench/assembly_fenicsx.py" $args 5 2>/dev/null | tail -1
 done
+# untangling (issue 4): tangled meshes at 1k / 10k / 100k vertices, and placement in stage 1
+"$ROOT/build/lugal" "$ROOT/bench/untangle.lua" 3
+"$ROOT/build/lugal" "$ROOT/bench/placement.lua"

@@ -601,6 +601,11 @@ static int lbfgs(const objective *o, double *x, const int *freev, int nfree, int
     memcpy(g, gn, sizeof(double) * n);
     double fprev = f;
     f = fn;
+    if (it % 10 == 9) { /* every cell valid: stop here, stage 3 lifts what is below β */
+      int ok = 1;
+      for (int i = 0; i < o->ncell && ok; i++) ok = cell_min_jac(o->C, x, o->cells[i]) > o->C->jtol;
+      if (ok) { it++; break; }
+    }
     if (f < 1e-28 || fprev - f <= 1e-15 * fprev) {
       if (f < 1e-28 || fprev - f <= 0) break;
     }

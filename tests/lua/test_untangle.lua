@@ -50,7 +50,8 @@ do
   T.check(m:check() == 0, "valid after")
 end
 
--- 3. Random tangles (the seed's Texas experiment): interior vertices displaced by up to 20%
+-- 3. Random tangles (the seed's Texas experiment) of triangle, quad, tet and hex meshes:
+-- interior vertices displaced by up to 20%
 -- of the domain size, a third of them or all of them; always untangled, boundary vertices
 -- stay on the boundary (sliding) to 1e-12, boundary corners fixed.
 local function on_boundary(x, y) return math.min(math.abs(x), math.abs(x - 1), math.abs(y), math.abs(y - 1)) end
@@ -71,12 +72,12 @@ local function tangle(m, frac)
   end
   return bnd
 end
-local cases = {{"triangle", 16}, {"quadrilateral", 16}, {"tetrahedron", 6}}
+local cases = {{"triangle", 16}, {"quadrilateral", 16}, {"tetrahedron", 6}, {"hexahedron", 6}}
 local runs = 0
 for _, case in ipairs(cases) do
   for _, frac in ipairs{0.3, 1.0} do
     for seed = 1, 3 do
-      local m = case[1] == "tetrahedron" and lg.mesh.box{nx = case[2], cell = case[1]}
+      local m = (case[1] == "tetrahedron" or case[1] == "hexahedron") and lg.mesh.box{nx = case[2], cell = case[1]}
                 or lg.mesh.rectangle{nx = case[2], cell = case[1]}
       local bnd = tangle(m, frac)
       local before = coords(m)

@@ -647,6 +647,15 @@ static void push_report_meta(lua_State *L) {
   lua_setmetatable(L, -2);
 }
 
+/* the report table on the stack gets its text and metatable, and is printed unless quiet */
+static int finish_report(lua_State *L, const char *text, int quiet) {
+  lua_pushstring(L, text);
+  lua_setfield(L, -2, "text");
+  push_report_meta(L);
+  if (!quiet) printf("%s\n", text);
+  return 1;
+}
+
 static void set_num(lua_State *L, const char *k, double v) { lua_pushnumber(L, v); lua_setfield(L, -2, k); }
 static void set_int(lua_State *L, const char *k, lua_Integer v) { lua_pushinteger(L, v); lua_setfield(L, -2, k); }
 
@@ -728,11 +737,7 @@ static int lmesh_untangle(lua_State *L) {
                             st->iterations, st->seconds);
   }
   lua_setfield(L, -2, "stages");
-  lua_pushstring(L, text);
-  lua_setfield(L, -2, "text");
-  push_report_meta(L);
-  if (!quiet) printf("%s\n", text);
-  return 1;
+  return finish_report(L, text, quiet);
 }
 
 static int lmesh_smooth(lua_State *L) {
@@ -778,11 +783,7 @@ static int lmesh_smooth(lua_State *L) {
   set_int(L, "moved", r.moved);
   set_int(L, "sweeps", r.sweeps);
   set_num(L, "seconds", r.seconds);
-  lua_pushstring(L, text);
-  lua_setfield(L, -2, "text");
-  push_report_meta(L);
-  if (!quiet) printf("%s\n", text);
-  return 1;
+  return finish_report(L, text, quiet);
 }
 
 /* a displacement per vertex from a Lua function (x, y[, z]) -> dx, dy[, dz] (or a table), or
@@ -863,11 +864,7 @@ static int lmesh_move(lua_State *L) {
   set_num(L, "tau_max", r.tau_max);
   set_int(L, "invalid_after", r.invalid_after);
   set_num(L, "seconds", r.seconds);
-  lua_pushstring(L, text);
-  lua_setfield(L, -2, "text");
-  push_report_meta(L);
-  if (!quiet) printf("%s\n", text);
-  return 1;
+  return finish_report(L, text, quiet);
 }
 
 static int lmesh_displace(lua_State *L) {

@@ -863,11 +863,22 @@ void untangle_defaults(untangle_opts *o) {
   o->verbose = 0;
 }
 
-static void stage_print(const untangle_stage *s, const mesh *m) {
+static void stage_print(const untangle_stage *s) {
   printf("  %-28s invalid %d -> %d, below beta %d, moved %d vertices, %d %s, %.3f s\n", s->name, s->invalid_before,
          s->invalid_after, s->below_beta_after, s->moved, s->iterations,
          s->iterations == 1 ? "iteration" : "iterations", s->seconds);
-  (void)m;
+}
+
+/* a stage starts from the previous one's invalid count and ends with fresh counts */
+static double stage_begin(untangle_stage *s, const char *name, int invalid_before) {
+  s->name = name;
+  s->invalid_before = invalid_before;
+  return now();
+}
+static void stage_end(const ctx *C, const double *x, double beta, untangle_stage *s, double ts, int verbose) {
+  count_cells(C, x, beta, &s->invalid_after, &s->below_beta_after);
+  s->seconds = now() - ts;
+  if (verbose) stage_print(s);
 }
 
 int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err) {
@@ -898,20 +909,14 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
   untangle_stage *s = &r->stage[0];
 
   /* stage 1: feasible set, J > 0 */
-  double ts = now();
-  s->name = "1 feasible set";
-  s->invalid_before = r->invalid_before;
+  double ts = stage_begin(s, "1 feasible set", r->invalid_before);
   s->moved = r->invalid_before ? feasible_passes(&C, m->x, 0, 0, NULL, o->placement, maxit, moved, &s->iterations) : 0;
-  count_cells(&C, m->x, beta, &s->invalid_after, &s->below_beta_after);
-  s->seconds = now() - ts;
-  if (o->verbose) stage_print(s, m);
+  stage_end(&C, m->x, beta, s, ts, o->verbose);
 
   /* stage 2: optimization of (3.3); boundary vertices one by one along the boundary, then
    * the interior vertices of a growing region around the invalid cells together */
   s = &r->stage[1];
-  ts = now();
-  s->name = "2 optimization";
-  s->invalid_before = r->stage[0].invalid_after;
+  ts = stage_begin(s, "2 optimization", r->stage[0].invalid_after);
   int ninv = s->invalid_before;
   work W;
   W.fidx = malloc(sizeof(int) * ((size_t)m->nvert + 1));
@@ -968,15 +973,11 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
     prev_inv = ninv;
   }
   free(W.fidx); free(W.cmark); free(W.cells); free(list); free(off);
-  count_cells(&C, m->x, beta, &s->invalid_after, &s->below_beta_after);
-  s->seconds = now() - ts;
-  if (o->verbose) stage_print(s, m);
+  stage_end(&C, m->x, beta, s, ts, o->verbose);
 
   /* stage 3: feasible set with J >= β, around what stages 1–2 touched */
   s = &r->stage[2];
-  ts = now();
-  s->name = "3 feasible set (J >= beta)";
-  s->invalid_before = r->stage[1].invalid_after;
+  ts = stage_begin(s, "3 feasible set (J >= beta)", r->stage[1].invalid_after);
   for (int v = 0; v < m->nvert; v++) touched[v] |= moved[v];
   /* the neighbours of moved vertices too: their cells changed */
   unsigned char *t2 = malloc((size_t)m->nvert + 1);
@@ -989,9 +990,7 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
     s->moved = beta > 0 ? feasible_passes(&C, m->x, beta, 1, t2, o->placement, maxit, moved, &s->iterations) : 0;
     free(t2);
   }
-  count_cells(&C, m->x, beta, &s->invalid_after, &s->below_beta_after);
-  s->seconds = now() - ts;
-  if (o->verbose) stage_print(s, m);
+  stage_end(&C, m->x, beta, s, ts, o->verbose);
   r->nstage = 3;
   r->invalid_after = s->invalid_after;
 
@@ -1024,7 +1023,7 @@ void untangle_report_print(const untangle_report *r, const mesh *m) {
   printf("untangle: %d %s, beta %.3g: invalid %d -> %d, %d vertices moved (mean %.3g, max %.3g), %.3f s\n",
          m->ncell, cell_plural(m->type), r->beta, r->invalid_before, r->invalid_after, r->moved,
          r->mean_displacement, r->max_displacement, r->seconds);
-  for (int i = 0; i < r->nstage; i++) stage_print(&r->stage[i], m);
+  for (int i = 0; i < r->nstage; i++) stage_print(&r->stage[i]);
 }
 
 /* ---------------------------------------------------------------- motion */

@@ -980,9 +980,10 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
   ts = stage_begin(s, "3 feasible set (J >= beta)", r->stage[1].invalid_after);
   for (int v = 0; v < m->nvert; v++) touched[v] |= moved[v];
   /* the neighbours of moved vertices too: their cells changed */
-  unsigned char *t2 = malloc((size_t)m->nvert + 1);
+  size_t nvb = m->nvert > 0 ? (size_t)m->nvert : 0;
+  unsigned char *t2 = malloc(nvb + 1);
   if (t2) {
-    memcpy(t2, touched, (size_t)m->nvert);
+    memcpy(t2, touched, nvb);
     for (int v = 0; v < m->nvert; v++)
       if (moved[v])
         for (int p = C.vc_off[v]; p < C.vc_off[v + 1]; p++)

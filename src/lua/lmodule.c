@@ -757,7 +757,11 @@ static int lmesh_smooth(lua_State *L) {
     const char *name = opt_str(L, t, "measure", NULL, fn);
     if (name) {
       o.measure = quality_from_name(name);
-      if (o.measure < 0) return luaL_error(L, "%s: unknown measure '%s'", fn, name);
+      if (o.measure < 0) {
+        char names[4096];
+        quality_names(names, sizeof names);
+        return luaL_error(L, "%s: unknown measure '%s' (measures: %s)", fn, name, names);
+      }
     }
     o.iterations = opt_int(L, t, "iterations", 20, fn);
     if (o.iterations < 1) return luaL_error(L, "%s: option 'iterations' must be >= 1", fn);

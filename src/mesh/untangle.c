@@ -706,12 +706,41 @@ static int cells_around(const ctx *C, work *W, const int *freev, int nfree) {
   return n;
 }
 
+/* one sweep over the edges of the cells around the free vertices, with weight τ of the cell
+ * (1 when tau is NULL): EDGE_DIAG adds σ to both free ends of out; EDGE_FIXED adds σ·z_fixed
+ * (component comp of the vertex array in) to the free end of an edge with one fixed end;
+ * EDGE_OFFDIAG subtracts σ·in_other at both ends of an edge between free vertices */
+enum { EDGE_DIAG, EDGE_FIXED, EDGE_OFFDIAG };
+static void edge_sweep(const ctx *C, const work *W, int ncell, const double *tau, int mode, const double *in, int comp,
+                       double *out) {
+  int ne = cell_nedges(C->m->type), d = C->d;
+  for (int i = 0; i < ncell; i++) {
+    int c = W->cells[i];
+    const int *cell = cell_of(C, c);
+    double w = tau ? tau[c] : 1;
+    for (int e = 0; e < ne; e++) {
+      const int *ev = cell_edge_verts(C->m->type, e);
+      int va = cell[ev[0]], vb = cell[ev[1]], a = W->fidx[va], b = W->fidx[vb];
+      if (mode == EDGE_DIAG) {
+        if (a >= 0) out[a] += w;
+        if (b >= 0) out[b] += w;
+      } else if (mode == EDGE_FIXED) {
+        if (a >= 0 && b < 0) out[a] += w * in[(size_t)vb * d + comp];
+        if (b >= 0 && a < 0) out[b] += w * in[(size_t)va * d + comp];
+      } else if (a >= 0 && b >= 0) {
+        out[a] -= w * in[b];
+        out[b] -= w * in[a];
+      }
+    }
+  }
+}
+
 /* Σ_k σ_0k (z_k − z_0) = 0 at the free vertices (eq. 1.2 of the morphing paper), z given
  * elsewhere; σ_0k = Σ τ_j over the cells j that have the edge 0k (τ = 1 when tau is NULL).
  * Jacobi-preconditioned CG, one component at a time, matrix-free over the cells. */
 static int laplace_solve(const ctx *C, work *W, double *z, const int *freev, int nfree, const double *tau,
                          int maxit, double tol, int *iters, double *res) {
-  int d = C->d, ne = cell_nedges(C->m->type);
+  int d = C->d;
   for (int i = 0; i < nfree; i++) W->fidx[freev[i]] = i;
   int ncell = cells_around(C, W, freev, nfree);
   double *b = malloc(sizeof(double) * nfree), *u = malloc(sizeof(double) * nfree), *r = malloc(sizeof(double) * nfree),
@@ -720,46 +749,12 @@ static int laplace_solve(const ctx *C, work *W, double *z, const int *freev, int
   *iters = 0;
   *res = 0;
   if (!b || !u || !r || !pp || !q || !dg) { status = 1; goto done; }
-  for (int i = 0; i < ncell; i++) {
-    int c = W->cells[i];
-    const int *cell = cell_of(C, c);
-    double w = tau ? tau[c] : 1;
-    for (int e = 0; e < ne; e++) {
-      const int *ev = cell_edge_verts(C->m->type, e);
-      int a = W->fidx[cell[ev[0]]], bb = W->fidx[cell[ev[1]]];
-      if (a >= 0) dg[a] += w;
-      if (bb >= 0) dg[bb] += w;
-    }
-  }
+  edge_sweep(C, W, ncell, tau, EDGE_DIAG, NULL, 0, dg);
   for (int comp = 0; comp < d; comp++) {
-    /* b = contributions of the fixed neighbours; u = current values */
-    for (int i = 0; i < nfree; i++) { b[i] = 0; u[i] = z[(size_t)freev[i] * d + comp]; }
-    for (int i = 0; i < ncell; i++) {
-      int c = W->cells[i];
-      const int *cell = cell_of(C, c);
-      double w = tau ? tau[c] : 1;
-      for (int e = 0; e < ne; e++) {
-        const int *ev = cell_edge_verts(C->m->type, e);
-        int va = cell[ev[0]], vb = cell[ev[1]], a = W->fidx[va], bb = W->fidx[vb];
-        if (a >= 0 && bb < 0) b[a] += w * z[(size_t)vb * d + comp];
-        if (bb >= 0 && a < 0) b[bb] += w * z[(size_t)va * d + comp];
-      }
-    }
-#define APPLY(in, out)                                                                            \
-  do {                                                                                            \
-    for (int i = 0; i < nfree; i++) out[i] = dg[i] * in[i];                                       \
-    for (int i = 0; i < ncell; i++) {                                                             \
-      int c = W->cells[i];                                                                        \
-      const int *cell = cell_of(C, c);                                                            \
-      double w = tau ? tau[c] : 1;                                                                \
-      for (int e = 0; e < ne; e++) {                                                              \
-        const int *ev = cell_edge_verts(C->m->type, e);                                           \
-        int a = W->fidx[cell[ev[0]]], bb = W->fidx[cell[ev[1]]];                                  \
-        if (a >= 0 && bb >= 0) { out[a] -= w * in[bb]; out[bb] -= w * in[a]; }                   \
-      }                                                                                           \
-    }                                                                                             \
-  } while (0)
-    APPLY(u, q);
+    /* b = contributions of the fixed neighbours; u = current values; q = A u */
+    for (int i = 0; i < nfree; i++) { b[i] = 0; u[i] = z[(size_t)freev[i] * d + comp]; q[i] = dg[i] * u[i]; }
+    edge_sweep(C, W, ncell, tau, EDGE_FIXED, z, comp, b);
+    edge_sweep(C, W, ncell, tau, EDGE_OFFDIAG, u, 0, q);
     double bn = 0, rz = 0;
     for (int i = 0; i < nfree; i++) { r[i] = b[i] - q[i]; bn += b[i] * b[i]; }
     bn = sqrt(bn);
@@ -771,7 +766,8 @@ static int laplace_solve(const ctx *C, work *W, double *z, const int *freev, int
       for (int i = 0; i < nfree; i++) rn += r[i] * r[i];
       rn = sqrt(rn);
       if (rn <= tol * fmax(bn, 1e-300)) break;
-      APPLY(pp, q);
+      for (int i = 0; i < nfree; i++) q[i] = dg[i] * pp[i];
+      edge_sweep(C, W, ncell, tau, EDGE_OFFDIAG, pp, 0, q);
       double pq = 0;
       for (int i = 0; i < nfree; i++) pq += pp[i] * q[i];
       if (!(pq > 0)) break;
@@ -782,7 +778,6 @@ static int laplace_solve(const ctx *C, work *W, double *z, const int *freev, int
       rz = rz2;
       for (int i = 0; i < nfree; i++) pp[i] = r[i] / dg[i] + be * pp[i];
     }
-#undef APPLY
     for (int i = 0; i < nfree; i++) z[(size_t)freev[i] * d + comp] = u[i];
     *iters = it > *iters ? it : *iters;
     *res = fmax(*res, bn > 0 ? rn / bn : rn);

@@ -210,5 +210,6 @@ do
   T.fails(function() m:displace(42) end, "mesh:displace", "argument 2")
   local q = lg.mesh.rectangle{nx = 3, cell = "quadrilateral"}
   T.fails(function() q:smooth{measure = "mean_ratio"} end, "mesh:smooth", "corner_condition")
+  T.fails(function() q:smooth{measure = "meanratio"} end, "mesh:smooth", "unknown measure 'meanratio'", "mean_ratio")
 end
 print("untangle tests passed")

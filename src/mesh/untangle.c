@@ -6,6 +6,7 @@
 #include "quality.h"
 #include "tuplehash.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -63,35 +64,68 @@ double untangle_default_beta(const mesh *m) {
   return pow(0.1 * bbox_diag(m) / fmax(n, 1), m->dim);
 }
 
+/* a facet is on the boundary when no other cell has it. Each facet is examined at its
+ * smallest vertex v, among the facets of v's cells: their keys (the other vertices, sorted)
+ * are sorted and a key that occurs once is a boundary facet. Linear and cache-local (a
+ * global facet hash table is 4x slower on a 500k-tet mesh). */
+typedef struct {
+  int k[3];
+} fkey;
+static int fkey_cmp(const void *a, const void *b) { return memcmp(a, b, sizeof(fkey)); }
+
 int mesh_boundary_vertices(const mesh *m, unsigned char *flags, char *err) {
-  int nf = cell_nfacets(m->type), nvf = m->nvf;
-  tuplehash h;
-  if (th_init(&h, (size_t)m->ncell * (size_t)nf / 2 + 16, nvf)) goto oom;
-  int *count = calloc((size_t)m->ncell * (size_t)nf + 1, sizeof(int)), *first = malloc(sizeof(int) * ((size_t)m->ncell * nf + 1));
-  if (!count || !first) { free(count); free(first); th_free(&h); goto oom; }
-  int n = 0;
+  int nf = cell_nfacets(m->type), nvf = m->nvf, nv = m->nvert, nvc = m->nvc;
+  int *off = calloc((size_t)nv + 2, sizeof(int)), *vc = malloc(sizeof(int) * ((size_t)m->ncell * nvc + 1));
+  fkey *keys = NULL;
+  if (!off || !vc) goto oom;
+  for (size_t i = 0; i < (size_t)m->ncell * nvc; i++) off[m->cells[i] + 1]++;
+  int maxdeg = 0;
+  for (int v = 0; v < nv; v++) {
+    maxdeg = off[v + 1] > maxdeg ? off[v + 1] : maxdeg;
+    off[v + 1] += off[v];
+  }
   for (int c = 0; c < m->ncell; c++)
-    for (int f = 0; f < nf; f++) {
-      const int *lv = cell_facet_verts(m->type, f);
-      int k[4], found;
-      for (int i = 0; i < nvf; i++) k[i] = m->cells[(size_t)c * m->nvc + lv[i]];
-      int id = th_get(&h, k, n, &found);
-      if (id == -2) { free(count); free(first); th_free(&h); goto oom; }
-      if (!found) first[n++] = c * nf + f;
-      count[id]++;
+    for (int i = 0; i < nvc; i++) vc[off[m->cells[(size_t)c * nvc + i]]++] = c;
+  for (int v = nv; v > 0; v--) off[v] = off[v - 1];
+  off[0] = 0;
+  keys = malloc(sizeof(fkey) * ((size_t)maxdeg * nf + 1));
+  if (!keys) goto oom;
+  memset(flags, 0, (size_t)nv);
+  for (int v = 0; v < nv; v++) {
+    int n = 0;
+    for (int p = off[v]; p < off[v + 1]; p++) {
+      const int *cell = m->cells + (size_t)vc[p] * nvc;
+      for (int f = 0; f < nf; f++) {
+        const int *lv = cell_facet_verts(m->type, f);
+        int has = 0, smallest = 1, k = 0;
+        fkey key = {{-1, -1, -1}};
+        for (int i = 0; i < nvf; i++) {
+          int w = cell[lv[i]];
+          if (w == v) { has = 1; continue; }
+          if (w < v) smallest = 0;
+          key.k[k++] = w;
+        }
+        if (!has || !smallest) continue;
+        for (int i = 1; i < k; i++) /* insertion sort of at most 3 */
+          for (int j = i; j > 0 && key.k[j - 1] > key.k[j]; j--) { int t = key.k[j]; key.k[j] = key.k[j - 1]; key.k[j - 1] = t; }
+        keys[n++] = key;
+      }
     }
-  memset(flags, 0, (size_t)m->nvert);
-  for (int i = 0; i < n; i++)
-    if (count[i] == 1) {
-      int c = first[i] / nf, f = first[i] % nf;
-      const int *lv = cell_facet_verts(m->type, f);
-      for (int j = 0; j < nvf; j++) flags[m->cells[(size_t)c * m->nvc + lv[j]]] = 1;
+    qsort(keys, (size_t)n, sizeof(fkey), fkey_cmp);
+    for (int i = 0; i < n;) {
+      int j = i + 1;
+      while (j < n && !fkey_cmp(keys + i, keys + j)) j++;
+      if (j == i + 1) {
+        flags[v] = 1;
+        for (int t = 0; t < nvf - 1; t++) flags[keys[i].k[t]] = 1;
+      }
+      i = j;
     }
-  free(count);
-  free(first);
-  th_free(&h);
+  }
+  free(off); free(vc); free(keys);
   return 0;
 oom:
+  free(off); free(vc); free(keys);
   snprintf(err, MESH_ERRLEN, "out of memory");
   return 1;
 }
@@ -494,7 +528,17 @@ typedef struct {
   int ncell;
   const int *cells; /* cells whose corners enter f */
   const int *fidx;  /* vertex -> free index or -1 */
+  int lift;         /* a cell counts as bad when below β (stage 3), else when invalid */
 } objective;
+
+static int obj_bad(const objective *o, const double *x) {
+  int bad = 0;
+  for (int i = 0; i < o->ncell; i++) {
+    double J = cell_min_jac(o->C, x, o->cells[i]);
+    bad += o->lift ? !(J >= o->beta) : !(J > o->C->jtol);
+  }
+  return bad;
+}
 
 static double obj_eval(const objective *o, const double *x, double *grad, int nfree) {
   const ctx *C = o->C;
@@ -530,7 +574,7 @@ static int lbfgs(const objective *o, double *x, const int *freev, int nfree, int
     free(g); free(gn); free(p); free(x0); free(S); free(Y);
     return -1;
   }
-  int mem = 0, head = 0;
+  int mem = 0, head = 0, best_bad = obj_bad(o, x), start_bad = best_bad, stale = 0, worse = 0;
   double f = obj_eval(o, x, g, nfree), h0 = pow(o->S, 1.0 / d);
   for (it = 0; it < maxit && f > 0; it++) {
     /* two-loop recursion */
@@ -577,7 +621,7 @@ static int lbfgs(const objective *o, double *x, const int *freev, int nfree, int
     for (ls = 0; ls < 50; ls++) {
       for (int i = 0; i < nfree; i++)
         for (int j = 0; j < d; j++) x[(size_t)freev[i] * d + j] = x0[i * d + j] + t * p[i * d + j];
-      fn = obj_eval(o, x, NULL, nfree);
+      fn = obj_eval(o, x, gn, nfree); /* with the gradient: the first step is usually taken */
       if (fn <= f + 1e-4 * t * gp) break;
       t *= 0.5;
     }
@@ -586,7 +630,6 @@ static int lbfgs(const objective *o, double *x, const int *freev, int nfree, int
         for (int j = 0; j < d; j++) x[(size_t)freev[i] * d + j] = x0[i * d + j];
       break;
     }
-    obj_eval(o, x, gn, nfree);
     double sy = 0;
     for (int i = 0; i < n; i++) {
       S[head * n + i] = t * p[i];
@@ -601,10 +644,14 @@ static int lbfgs(const objective *o, double *x, const int *freev, int nfree, int
     memcpy(g, gn, sizeof(double) * n);
     double fprev = f;
     f = fn;
-    if (it % 10 == 9) { /* every cell valid: stop here, stage 3 lifts what is below β */
-      int ok = 1;
-      for (int i = 0; i < o->ncell && ok; i++) ok = cell_min_jac(o->C, x, o->cells[i]) > o->C->jtol;
-      if (ok) { it++; break; }
+    if (it % 10 == 9) { /* every cell valid (stage 2) or at least β (stage 3): stop here */
+      int bad = obj_bad(o, x);
+      if (!bad) { it++; break; }
+      /* stagnation — the number of bad cells has not dropped by 10% for five checks, or
+       * has been above its start for two (stage 2 only): a local minimum of (3.3) the caller escapes by
+       * growing the region or restarting from the harmonic position */
+      if (bad <= 0.9 * best_bad) { best_bad = bad; stale = 0; }
+      else if (++stale >= 5 || (!o->lift && bad > start_bad && ++worse >= 2)) { it++; break; }
     }
     if (f < 1e-28 || fprev - f <= 1e-15 * fprev) {
       if (f < 1e-28 || fprev - f <= 0) break;
@@ -706,90 +753,111 @@ static int cells_around(const ctx *C, work *W, const int *freev, int nfree) {
   return n;
 }
 
-/* one sweep over the edges of the cells around the free vertices, with weight τ of the cell
- * (1 when tau is NULL): EDGE_DIAG adds σ to both free ends of out; EDGE_FIXED adds σ·z_fixed
- * (component comp of the vertex array in) to the free end of an edge with one fixed end;
- * EDGE_OFFDIAG subtracts σ·in_other at both ends of an edge between free vertices */
-enum { EDGE_DIAG, EDGE_FIXED, EDGE_OFFDIAG };
-static void edge_sweep(const ctx *C, const work *W, int ncell, const double *tau, int mode, const double *in, int comp,
-                       double *out) {
-  int ne = cell_nedges(C->m->type), d = C->d;
-  for (int i = 0; i < ncell; i++) {
-    int c = W->cells[i];
-    const int *cell = cell_of(C, c);
-    double w = tau ? tau[c] : 1;
-    for (int e = 0; e < ne; e++) {
-      const int *ev = cell_edge_verts(C->m->type, e);
-      int va = cell[ev[0]], vb = cell[ev[1]], a = W->fidx[va], b = W->fidx[vb];
-      if (mode == EDGE_DIAG) {
-        if (a >= 0) out[a] += w;
-        if (b >= 0) out[b] += w;
-      } else if (mode == EDGE_FIXED) {
-        if (a >= 0 && b < 0) out[a] += w * in[(size_t)vb * d + comp];
-        if (b >= 0 && a < 0) out[b] += w * in[(size_t)va * d + comp];
-      } else if (a >= 0 && b >= 0) {
-        out[a] -= w * in[b];
-        out[b] -= w * in[a];
+/* Σ_k σ_0k (z_k − z_0) = 0 at the free vertices (eq. 1.2 of the morphing paper), z given
+ * elsewhere; σ_0k = Σ τ_j over the cells j that have the edge 0k (τ = 1 when tau is NULL).
+ * The operator is assembled once (CSR over the free vertices, a row per vertex built from
+ * its cells, so a shared edge is one entry), then Jacobi-preconditioned CG solves one
+ * component at a time; the fixed neighbours' values go into the right-hand sides. */
+static int laplace_solve(const ctx *C, work *W, double *z, const int *freev, int nfree, const double *tau,
+                         int maxit, double tol, int *iters, double *res) {
+  int d = C->d, ne = cell_nedges(C->m->type), status = 0;
+  *iters = 0;
+  *res = 0;
+  for (int i = 0; i < nfree; i++) W->fidx[freev[i]] = i;
+  size_t cap = (size_t)nfree * 8 + 16, nnz = 0;
+  int *rp = malloc(sizeof(int) * ((size_t)nfree + 1)), *col = malloc(sizeof(int) * cap),
+      *pos = malloc(sizeof(int) * ((size_t)nfree + 1));
+  double *val = malloc(sizeof(double) * cap), *b = calloc((size_t)nfree * d + 1, sizeof(double)),
+         *dg = calloc((size_t)nfree + 1, sizeof(double)), *u = malloc(sizeof(double) * ((size_t)nfree + 1)),
+         *r = malloc(sizeof(double) * ((size_t)nfree + 1)), *pp = malloc(sizeof(double) * ((size_t)nfree + 1)),
+         *q = malloc(sizeof(double) * ((size_t)nfree + 1));
+  if (!rp || !col || !pos || !val || !b || !dg || !u || !r || !pp || !q) { status = 1; goto done; }
+  for (int i = 0; i < nfree; i++) pos[i] = -1;
+  for (int i = 0; i < nfree; i++) {
+    int v = freev[i];
+    rp[i] = (int)nnz;
+    for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++) {
+      int c = C->vc[p];
+      const int *cell = cell_of(C, c);
+      double w = tau ? tau[c] : 1;
+      for (int e = 0; e < ne; e++) {
+        const int *ev = cell_edge_verts(C->m->type, e);
+        int o;
+        if (cell[ev[0]] == v) o = cell[ev[1]];
+        else if (cell[ev[1]] == v) o = cell[ev[0]];
+        else continue;
+        dg[i] += w;
+        int j = W->fidx[o];
+        if (j < 0) {
+          for (int k = 0; k < d; k++) b[(size_t)i * d + k] += w * z[(size_t)o * d + k];
+          continue;
+        }
+        if (pos[j] >= rp[i]) { val[pos[j]] -= w; continue; }
+        if (nnz == cap) {
+          cap *= 2;
+          int *nc = realloc(col, sizeof(int) * cap);
+          if (nc) col = nc;
+          double *nv = realloc(val, sizeof(double) * cap);
+          if (nv) val = nv;
+          if (!nc || !nv) { status = 1; goto done; }
+        }
+        pos[j] = (int)nnz;
+        col[nnz] = j;
+        val[nnz++] = -w;
       }
     }
   }
-}
-
-/* Σ_k σ_0k (z_k − z_0) = 0 at the free vertices (eq. 1.2 of the morphing paper), z given
- * elsewhere; σ_0k = Σ τ_j over the cells j that have the edge 0k (τ = 1 when tau is NULL).
- * Jacobi-preconditioned CG, one component at a time, matrix-free over the cells. */
-static int laplace_solve(const ctx *C, work *W, double *z, const int *freev, int nfree, const double *tau,
-                         int maxit, double tol, int *iters, double *res) {
-  int d = C->d;
-  for (int i = 0; i < nfree; i++) W->fidx[freev[i]] = i;
-  int ncell = cells_around(C, W, freev, nfree);
-  double *b = malloc(sizeof(double) * nfree), *u = malloc(sizeof(double) * nfree), *r = malloc(sizeof(double) * nfree),
-         *pp = malloc(sizeof(double) * nfree), *q = malloc(sizeof(double) * nfree), *dg = calloc((size_t)nfree, sizeof(double));
-  int status = 0;
-  *iters = 0;
-  *res = 0;
-  if (!b || !u || !r || !pp || !q || !dg) { status = 1; goto done; }
-  edge_sweep(C, W, ncell, tau, EDGE_DIAG, NULL, 0, dg);
+  rp[nfree] = (int)nnz;
+#define SPMV(in, out)                                              \
+  for (int i = 0; i < nfree; i++) {                                \
+    double acc = dg[i] * (in)[i];                                  \
+    for (int k = rp[i]; k < rp[i + 1]; k++) acc += val[k] * (in)[col[k]]; \
+    (out)[i] = acc;                                                \
+  }
   for (int comp = 0; comp < d; comp++) {
-    /* b = contributions of the fixed neighbours; u = current values; q = A u */
-    for (int i = 0; i < nfree; i++) { b[i] = 0; u[i] = z[(size_t)freev[i] * d + comp]; q[i] = dg[i] * u[i]; }
-    edge_sweep(C, W, ncell, tau, EDGE_FIXED, z, comp, b);
-    edge_sweep(C, W, ncell, tau, EDGE_OFFDIAG, u, 0, q);
-    double bn = 0, rz = 0;
-    for (int i = 0; i < nfree; i++) { r[i] = b[i] - q[i]; bn += b[i] * b[i]; }
+    double bn = 0, rz = 0, rn = 0;
+    for (int i = 0; i < nfree; i++) u[i] = z[(size_t)freev[i] * d + comp];
+    SPMV(u, q);
+    for (int i = 0; i < nfree; i++) {
+      r[i] = b[(size_t)i * d + comp] - q[i];
+      bn += b[(size_t)i * d + comp] * b[(size_t)i * d + comp];
+      pp[i] = r[i] / dg[i];
+      rz += r[i] * pp[i];
+    }
     bn = sqrt(bn);
-    for (int i = 0; i < nfree; i++) { pp[i] = r[i] / dg[i]; rz += r[i] * pp[i]; }
     int it;
-    double rn = 0;
     for (it = 0; it < maxit; it++) {
       rn = 0;
       for (int i = 0; i < nfree; i++) rn += r[i] * r[i];
       rn = sqrt(rn);
       if (rn <= tol * fmax(bn, 1e-300)) break;
-      for (int i = 0; i < nfree; i++) q[i] = dg[i] * pp[i];
-      edge_sweep(C, W, ncell, tau, EDGE_OFFDIAG, pp, 0, q);
+      SPMV(pp, q);
       double pq = 0;
       for (int i = 0; i < nfree; i++) pq += pp[i] * q[i];
       if (!(pq > 0)) break;
       double al = rz / pq, rz2 = 0;
-      for (int i = 0; i < nfree; i++) { u[i] += al * pp[i]; r[i] -= al * q[i]; }
-      for (int i = 0; i < nfree; i++) rz2 += r[i] * r[i] / dg[i];
+      for (int i = 0; i < nfree; i++) {
+        u[i] += al * pp[i];
+        r[i] -= al * q[i];
+        rz2 += r[i] * r[i] / dg[i];
+      }
       double be = rz2 / rz;
       rz = rz2;
       for (int i = 0; i < nfree; i++) pp[i] = r[i] / dg[i] + be * pp[i];
     }
+#undef SPMV
     for (int i = 0; i < nfree; i++) z[(size_t)freev[i] * d + comp] = u[i];
     *iters = it > *iters ? it : *iters;
     *res = fmax(*res, bn > 0 ? rn / bn : rn);
   }
 done:
   for (int i = 0; i < nfree; i++) W->fidx[freev[i]] = -1;
-  free(b); free(u); free(r); free(pp); free(q); free(dg);
+  free(rp); free(col); free(pos); free(val); free(b); free(dg); free(u); free(r); free(pp); free(q);
   return status;
 }
 
 /* L-BFGS on the interior vertices among verts (n); counts newly moved vertices */
-static int optimize_vertices(ctx *C, work *W, double *x, double beta, const int *verts, int n, int maxit,
+static int optimize_vertices(ctx *C, work *W, double *x, double beta, int lift, const int *verts, int n, int maxit,
                              unsigned char *moved, int *iters) {
   int d = C->d, nfree = 0;
   int *freev = calloc((size_t)n + 1, sizeof(int));
@@ -802,7 +870,7 @@ static int optimize_vertices(ctx *C, work *W, double *x, double beta, const int 
     for (int j = 0; j < d; j++) xs[i * d + j] = x[(size_t)freev[i] * d + j];
   }
   int ncell = cells_around(C, W, freev, nfree);
-  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx};
+  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx, lift};
   double f = 0;
   int it = nfree ? lbfgs(&o, x, freev, nfree, maxit, &f) : 0;
   int total = 0;
@@ -848,6 +916,13 @@ static int piece_invalid(const ctx *C, work *W, const double *x, const int *vert
   int ncell = cells_around(C, W, verts, n), bad = 0;
   for (int i = 0; i < ncell; i++) bad += !(cell_min_jac(C, x, W->cells[i]) > C->jtol);
   return bad;
+}
+
+static double piece_min_jac(const ctx *C, work *W, const double *x, const int *verts, int n) {
+  int ncell = cells_around(C, W, verts, n);
+  double mn = INFINITY;
+  for (int i = 0; i < ncell; i++) mn = fmin(mn, cell_min_jac(C, x, W->cells[i]));
+  return mn;
 }
 
 void untangle_defaults(untangle_opts *o) {
@@ -918,7 +993,9 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
   W.cmark = calloc((size_t)m->ncell + 1, 1);
   W.cells = malloc(sizeof(int) * ((size_t)m->ncell + 1));
   int *list = malloc(sizeof(int) * ((size_t)m->nvert + 1)), *off = malloc(sizeof(int) * ((size_t)m->nvert + 2));
-  if (!W.fidx || !W.cmark || !W.cells || !list || !off) {
+  double *save = malloc(sizeof(double) * (nx + 1));
+  unsigned char *trial = calloc((size_t)m->nvert + 1, 1);
+  if (!W.fidx || !W.cmark || !W.cells || !list || !off || !save || !trial) {
     snprintf(err, MESH_ERRLEN, "out of memory");
     ninv = 0;
   } else
@@ -942,21 +1019,37 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
        * go straight to the harmonic restart below */
       int knot = bad > cells_around(&C, &W, pv, n) / 4;
       if (!knot) {
-        int got = optimize_vertices(&C, &W, m->x, beta, pv, n, 10 * maxit, moved, &s->iterations);
+        int got = optimize_vertices(&C, &W, m->x, beta, 0, pv, n, 10 * maxit, moved, &s->iterations);
         if (got < 0) break;
         s->moved += got;
       }
-      if ((knot || rings >= 8) && piece_invalid(&C, &W, m->x, pv, n)) {
-        /* the optimizer is stuck in a knot: restart the piece from the harmonic (Tutte)
-         * position of its interior vertices, valid for triangles inside a convex boundary */
+      int left = piece_invalid(&C, &W, m->x, pv, n);
+      if (left) {
+        /* the optimizer is stuck in a local minimum of (3.3) or a knot: restart the piece
+         * from the harmonic (Tutte) position of its interior vertices — valid for triangles
+         * inside a convex boundary, and the way out of knots in practice — and keep it when
+         * it leaves fewer invalid cells than the optimizer did */
         int nf = 0, it;
         double res;
         for (int i = 0; i < n; i++)
           if (!C.bnd[pv[i]]) pv[nf++] = pv[i];
-        laplace_solve(&C, &W, m->x, pv, nf, NULL, 10000, 1e-12, &it, &res);
-        s->moved += optimize_vertices(&C, &W, m->x, beta, pv, nf, 10 * maxit, moved, &s->iterations);
         for (int i = 0; i < nf; i++)
-          if (!moved[pv[i]]) { moved[pv[i]] = 1; s->moved++; }
+          for (int j = 0; j < C.d; j++) save[(size_t)i * C.d + j] = m->x[(size_t)pv[i] * C.d + j];
+        left = piece_invalid(&C, &W, m->x, pv, nf);
+        laplace_solve(&C, &W, m->x, pv, nf, NULL, 10000, 1e-10, &it, &res);
+        int its = 0;
+        optimize_vertices(&C, &W, m->x, beta, 0, pv, nf, 10 * maxit, trial, &its);
+        if (piece_invalid(&C, &W, m->x, pv, nf) <= left) {
+          s->iterations += its;
+          for (int i = 0; i < nf; i++) {
+            int ch = 0;
+            for (int j = 0; j < C.d; j++) ch |= m->x[(size_t)pv[i] * C.d + j] != save[(size_t)i * C.d + j];
+            if (ch && !moved[pv[i]]) { moved[pv[i]] = 1; s->moved++; }
+          }
+        } else
+          for (int i = 0; i < nf; i++)
+            for (int j = 0; j < C.d; j++) m->x[(size_t)pv[i] * C.d + j] = save[(size_t)i * C.d + j];
+        for (int i = 0; i < nf; i++) trial[pv[i]] = 0;
       }
       all = 0;
     }
@@ -967,7 +1060,6 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
     if ((all && rings > 64) || (whole && ninv >= prev_inv)) break;
     prev_inv = ninv;
   }
-  free(W.fidx); free(W.cmark); free(W.cells); free(list); free(off);
   stage_end(&C, m->x, beta, s, ts, o->verbose);
 
   /* stage 3: feasible set with J >= β, around what stages 1–2 touched */
@@ -984,9 +1076,40 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
         for (int p = C.vc_off[v]; p < C.vc_off[v + 1]; p++)
           for (int i = 0; i < C.nvc; i++) t2[cell_of(&C, C.vc[p])[i]] = 1;
     s->moved = beta > 0 ? feasible_passes(&C, m->x, beta, 1, t2, o->placement, maxit, moved, &s->iterations) : 0;
+    /* what one vertex at a time cannot lift (neighbours below β together): (3.3) once more
+     * over the vertices of those cells, stopping when every cell is at least β; kept only
+     * if no cell became invalid and the smallest corner Jacobian grew */
+    int nlift = 0, ok = W.fidx && W.cmark && W.cells && list && save && trial && beta > 0;
+    for (int c = 0; ok && c < m->ncell; c++) {
+      const int *cell = cell_of(&C, c);
+      int near = 0;
+      for (int i = 0; i < C.nvc; i++) near |= t2[cell[i]];
+      if (!near || cell_min_jac(&C, m->x, c) >= beta) continue;
+      for (int i = 0; i < C.nvc; i++)
+        if (!C.bnd[cell[i]] && !trial[cell[i]]) { trial[cell[i]] = 1; list[nlift++] = cell[i]; }
+    }
+    if (nlift && !piece_invalid(&C, &W, m->x, list, nlift)) {
+      double jmin = piece_min_jac(&C, &W, m->x, list, nlift);
+      for (int i = 0; i < nlift; i++)
+        for (int j = 0; j < C.d; j++) save[(size_t)i * C.d + j] = m->x[(size_t)list[i] * C.d + j];
+      unsigned char *mv = trial; /* reused: cleared below */
+      for (int i = 0; i < nlift; i++) mv[list[i]] = 0;
+      int its = 0;
+      optimize_vertices(&C, &W, m->x, beta, 1, list, nlift, 10 * maxit, mv, &its);
+      if (piece_invalid(&C, &W, m->x, list, nlift) || piece_min_jac(&C, &W, m->x, list, nlift) <= jmin)
+        for (int i = 0; i < nlift; i++)
+          for (int j = 0; j < C.d; j++) m->x[(size_t)list[i] * C.d + j] = save[(size_t)i * C.d + j];
+      else {
+        s->iterations += its;
+        for (int i = 0; i < nlift; i++)
+          if (mv[list[i]] && !moved[list[i]]) { moved[list[i]] = 1; s->moved++; }
+      }
+    }
+    for (int i = 0; i < nlift; i++) trial[list[i]] = 0;
     free(t2);
   }
   stage_end(&C, m->x, beta, s, ts, o->verbose);
+  free(W.fidx); free(W.cmark); free(W.cells); free(list); free(off); free(save); free(trial);
   r->nstage = 3;
   r->invalid_after = s->invalid_after;
 

@@ -184,6 +184,22 @@ do
       T.close(y, y0 - 0.02 * x0 + 0.1 * y0, 1e-9, "affine motion y")
     end
   end
+  -- 3D: the displacement is asked for at the boundary vertices only (5^3 - 3^3 = 98 of
+  -- them on a 4x4x4 box, both cell types), and the interior follows affinely
+  for _, cell in ipairs{"tetrahedron", "hexahedron"} do
+    local m = lg.mesh.box{nx = 4, cell = cell}
+    local before, calls = coords(m), 0
+    m:move{displacement = function(x, y, z) calls = calls + 1; return 0.1 * y, 0.05 * z - 0.1 * x, 0.02 * x end,
+           quiet = true}
+    T.check(calls == 98, "%s: displacement asked at %d vertices, expected the 98 boundary ones", cell, calls)
+    for i = 1, m:nvertices() do
+      local x, y, z = m:coordinates(i)
+      local p = before[i]
+      T.close(x, p[1] + 0.1 * p[2], 1e-9, "3D affine motion x")
+      T.close(y, p[2] + 0.05 * p[3] - 0.1 * p[1], 1e-9, "3D affine motion y")
+      T.close(z, p[3] + 0.02 * p[1], 1e-9, "3D affine motion z")
+    end
+  end
   local g = lg.mesh.rectangle{nx = 8, cell = "triangle"}
   g:displace(function(x, y) return x * x - x, 0 end)   -- x -> x^2: graded cells
   local V = g:quality("signed_measure")

@@ -746,12 +746,12 @@ static int lmesh_smooth(lua_State *L) {
   mesh *m = u->lm->m;
   int t = 0;
   if (!lua_isnoneornil(L, 2)) {
-    if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {measure=, iterations=, boundary=, quiet=}");
-    static const char *const keys[] = {"measure", "iterations", "boundary", "quiet", NULL};
+    if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {measure=, method=, iterations=, boundary=, quiet=}");
+    static const char *const keys[] = {"measure", "method", "iterations", "boundary", "quiet", NULL};
     check_keys(L, 2, fn, keys);
     t = 2;
   }
-  smooth_opts o = {m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 20, 1, 0};
+  smooth_opts o = {m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 20, 1, 0, 0};
   int quiet = 0;
   if (t) {
     const char *name = opt_str(L, t, "measure", NULL, fn);
@@ -763,6 +763,10 @@ static int lmesh_smooth(lua_State *L) {
         return luaL_error(L, "%s: unknown measure '%s' (measures: %s)", fn, name, names);
       }
     }
+    const char *method = opt_str(L, t, "method", "local", fn);
+    if (!strcmp(method, "global")) o.global = 1;
+    else if (strcmp(method, "local"))
+      return luaL_error(L, "%s: option 'method' must be \"local\" or \"global\", got '%s'", fn, method);
     o.iterations = opt_int(L, t, "iterations", 20, fn);
     if (o.iterations < 1) return luaL_error(L, "%s: option 'iterations' must be >= 1", fn);
     lua_getfield(L, t, "quiet");
@@ -775,11 +779,14 @@ static int lmesh_smooth(lua_State *L) {
   if (mesh_smooth(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
   lg_mesh_changed(u->lm);
   char text[512];
-  snprintf(text, sizeof text, "smooth: %s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d sweeps, %.3f s",
-           quality_name(o.measure), r.min_before, r.min_after, r.mean_before, r.mean_after, r.moved, r.sweeps, r.seconds);
-  lua_createtable(L, 0, 9);
+  snprintf(text, sizeof text, "smooth (%s): %s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s",
+           o.global ? "global" : "local", quality_name(o.measure), r.min_before, r.min_after, r.mean_before, r.mean_after,
+           r.moved, r.sweeps, o.global ? "rounds" : "sweeps", r.seconds);
+  lua_createtable(L, 0, 10);
   lua_pushstring(L, quality_name(o.measure));
   lua_setfield(L, -2, "measure");
+  lua_pushstring(L, o.global ? "global" : "local");
+  lua_setfield(L, -2, "method");
   set_num(L, "min_before", r.min_before);
   set_num(L, "min_after", r.min_after);
   set_num(L, "mean_before", r.mean_before);

@@ -529,7 +529,15 @@ typedef struct {
   const int *cells; /* cells whose corners enter f */
   const int *fidx;  /* vertex -> free index or -1 */
   int lift;         /* a cell counts as bad when below β (stage 3), else when invalid */
+  /* global smoothing instead of (3.3): f = Σ 1/q over the cells, +∞ when a cell is invalid
+   * or the smallest q falls below qfloor; gradient by central differences over each free
+   * vertex's star (exact up to O(e²): only the star's cells depend on the vertex) */
+  int smooth, measure;
+  double qfloor;
+  const int *freev;
+  const double *hv; /* per free vertex: its shortest edge, for the difference step */
 } objective;
+
 
 static int obj_bad(const objective *o, const double *x) {
   int bad = 0;
@@ -564,6 +572,44 @@ static double obj_eval(const objective *o, const double *x, double *grad, int nf
   return f;
 }
 
+static double star_objective(const ctx *C, int v, int q, double *qmin);
+
+static double smooth_eval(const objective *o, const double *x, double *grad, int nfree) {
+  const ctx *C = o->C;
+  mesh *m = C->m; /* x is m->x: the quality measures read the mesh */
+  int d = C->d;
+  double f = 0, mn = INFINITY, qq;
+  (void)x;
+  for (int i = 0; i < o->ncell; i++) {
+    int c = o->cells[i];
+    if (!(cell_min_jac(C, m->x, c) > C->jtol)) return INFINITY;
+    double val = mesh_cell_quality(m, c, o->measure);
+    if (!(val > 0)) return INFINITY;
+    f += 1 / val;
+    mn = fmin(mn, val);
+  }
+  if (mn < o->qfloor) return INFINITY;
+  if (grad)
+    for (int i = 0; i < nfree; i++) {
+      int v = o->freev[i];
+      double e = 1e-6 * o->hv[i];
+      for (int j = 0; j < d; j++) {
+        double *p = m->x + (size_t)v * d + j, p0 = *p;
+        *p = p0 + e;
+        double fp = star_objective(C, v, o->measure, &qq);
+        *p = p0 - e;
+        double fm = star_objective(C, v, o->measure, &qq);
+        *p = p0;
+        grad[(size_t)i * d + j] = isfinite(fp) && isfinite(fm) ? (fp - fm) / (2 * e) : 0;
+      }
+    }
+  return f;
+}
+
+static double eval(const objective *o, const double *x, double *grad, int nfree) {
+  return o->smooth ? smooth_eval(o, x, grad, nfree) : obj_eval(o, x, grad, nfree);
+}
+
 /* L-BFGS (memory 8, Armijo backtracking) on the free vertices' coordinates */
 static int lbfgs(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout) {
   int d = o->C->d, n = nfree * d, M = 8, it;
@@ -574,8 +620,8 @@ static int lbfgs(const objective *o, double *x, const int *freev, int nfree, int
     free(g); free(gn); free(p); free(x0); free(S); free(Y);
     return -1;
   }
-  int mem = 0, head = 0, best_bad = obj_bad(o, x), start_bad = best_bad, stale = 0, worse = 0;
-  double f = obj_eval(o, x, g, nfree), h0 = pow(o->S, 1.0 / d);
+  int mem = 0, head = 0, best_bad = o->smooth ? 0 : obj_bad(o, x), start_bad = best_bad, stale = 0, worse = 0;
+  double f = eval(o, x, g, nfree), h0 = pow(o->S, 1.0 / d);
   for (it = 0; it < maxit && f > 0; it++) {
     /* two-loop recursion */
     for (int i = 0; i < n; i++) p[i] = -g[i];
@@ -621,7 +667,7 @@ static int lbfgs(const objective *o, double *x, const int *freev, int nfree, int
     for (ls = 0; ls < 50; ls++) {
       for (int i = 0; i < nfree; i++)
         for (int j = 0; j < d; j++) x[(size_t)freev[i] * d + j] = x0[i * d + j] + t * p[i * d + j];
-      fn = obj_eval(o, x, gn, nfree); /* with the gradient: the first step is usually taken */
+      fn = eval(o, x, gn, nfree); /* with the gradient: the first step is usually taken */
       if (fn <= f + 1e-4 * t * gp) break;
       t *= 0.5;
     }
@@ -644,6 +690,10 @@ static int lbfgs(const objective *o, double *x, const int *freev, int nfree, int
     memcpy(g, gn, sizeof(double) * n);
     double fprev = f;
     f = fn;
+    if (o->smooth) {
+      if (fprev - f <= 1e-9 * fprev) break;
+      continue;
+    }
     if (it % 10 == 9) { /* every cell valid (stage 2) or at least β (stage 3): stop here */
       int bad = obj_bad(o, x);
       if (!bad) { it++; break; }
@@ -870,7 +920,7 @@ static int optimize_vertices(ctx *C, work *W, double *x, double beta, int lift, 
     for (int j = 0; j < d; j++) xs[i * d + j] = x[(size_t)freev[i] * d + j];
   }
   int ncell = cells_around(C, W, freev, nfree);
-  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx, lift};
+  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx, lift, 0, 0, 0, NULL, NULL};
   double f = 0;
   int it = nfree ? lbfgs(&o, x, freev, nfree, maxit, &f) : 0;
   int total = 0;
@@ -1214,6 +1264,117 @@ static double star_objective(const ctx *C, int v, int q, double *qmin) {
   return s;
 }
 
+/* the shortest edge at v */
+static double star_h(const ctx *C, int v) {
+  int d = C->d;
+  const double *p0 = C->m->x + (size_t)v * d;
+  double h = INFINITY;
+  for (int pp = C->vc_off[v]; pp < C->vc_off[v + 1]; pp++) {
+    const int *cell = cell_of(C, C->vc[pp]);
+    for (int i = 0; i < C->nvc; i++) {
+      if (cell[i] == v) continue;
+      double s2 = 0;
+      for (int j = 0; j < d; j++) s2 += (C->m->x[(size_t)cell[i] * d + j] - p0[j]) * (C->m->x[(size_t)cell[i] * d + j] - p0[j]);
+      h = fmin(h, sqrt(s2));
+    }
+  }
+  return h;
+}
+
+/* one local step at v (interior: along minus the central-difference gradient of Σ 1/q over
+ * its star; 2D sliding boundary vertex: along the better boundary edge); 1 if v moved */
+static int smooth_vertex(ctx *C, int v, int measure) {
+  mesh *m = C->m;
+  int d = m->dim;
+  if (C->fixed[v] || (C->bnd[v] && d != 2)) return 0;
+  double *p = m->x + (size_t)v * d, p0[3], qmin0, f0 = star_objective(C, v, measure, &qmin0);
+  for (int j = 0; j < d; j++) p0[j] = p[j];
+  double h = star_h(C, v), dir[3] = {0, 0, 0};
+  if (C->bnd[v]) { /* 2D sliding: the better of the two boundary edges, by a probe */
+    double best = f0, bq;
+    for (int side = 0; side < 2; side++) {
+      const double *a = m->x + 2 * C->bnb[2 * v + side];
+      for (int j = 0; j < 2; j++) p[j] = p0[j] + 1e-3 * (a[j] - p0[j]);
+      double f = star_objective(C, v, measure, &bq);
+      if (f < best) { best = f; for (int j = 0; j < 2; j++) dir[j] = a[j] - p0[j]; }
+    }
+    for (int j = 0; j < 2; j++) p[j] = p0[j];
+    if (best == f0) return 0;
+  } else { /* interior: minus the central-difference gradient, scaled to the star's size */
+    double e = 1e-6 * h, gn = 0, qq;
+    for (int j = 0; j < d; j++) {
+      p[j] = p0[j] + e;
+      double fp = star_objective(C, v, measure, &qq);
+      p[j] = p0[j] - e;
+      double fm = star_objective(C, v, measure, &qq);
+      p[j] = p0[j];
+      dir[j] = isfinite(fp) && isfinite(fm) ? -(fp - fm) / (2 * e) : 0;
+      gn += dir[j] * dir[j];
+    }
+    gn = sqrt(gn);
+    if (!(gn > 0)) return 0;
+    for (int j = 0; j < d; j++) dir[j] *= 0.5 * h / gn;
+  }
+  /* backtracking: accept only a step that keeps every cell valid, lowers Σ 1/q and does
+   * not lower the smallest q around v — so the mesh minimum never decreases */
+  for (double t = C->bnd[v] ? 0.5 : 1; t > 1e-4; t *= 0.5) {
+    for (int j = 0; j < d; j++) p[j] = p0[j] + t * dir[j];
+    double qmin, f = star_objective(C, v, measure, &qmin);
+    if (f < f0 && qmin >= qmin0) return 1;
+  }
+  for (int j = 0; j < d; j++) p[j] = p0[j];
+  return 0;
+}
+
+/* global smoothing: L-BFGS on Σ 1/q over all interior vertices together (Mesquite's
+ * inverse-mean-ratio objective when q is the mean ratio), rounds of up to 20 iterations;
+ * a step is taken only when every cell stays valid and no q falls below the mesh's
+ * smallest q before smoothing (a floor that rises with every round blocks the steps
+ * once many cells share the minimum). 2D sliding boundary vertices take one local step
+ * each between rounds. Stops when a round lowers Σ 1/q by less than 1e-4 (relative). */
+static int smooth_global(ctx *C, const smooth_opts *o, smooth_report *r, char *err) {
+  mesh *m = C->m;
+  int nfree = 0;
+  int *freev = malloc(sizeof(int) * ((size_t)m->nvert + 1)), *fidx = malloc(sizeof(int) * ((size_t)m->nvert + 1)),
+      *cells = malloc(sizeof(int) * ((size_t)m->ncell + 1));
+  unsigned char *cmark = calloc((size_t)m->ncell + 1, 1);
+  double *hv = malloc(sizeof(double) * ((size_t)m->nvert + 1));
+  if (!freev || !fidx || !cells || !cmark || !hv) {
+    free(freev); free(fidx); free(cells); free(cmark); free(hv);
+    snprintf(err, MESH_ERRLEN, "out of memory");
+    return 1;
+  }
+  for (int v = 0; v < m->nvert; v++) {
+    fidx[v] = -1;
+    if (!C->bnd[v]) { fidx[v] = nfree; hv[nfree] = star_h(C, v); freev[nfree++] = v; }
+  }
+  work W = {fidx, cmark, cells};
+  int ncell = cells_around(C, &W, freev, nfree), status = 0;
+  objective ob = {C, 0, C->jscale, ncell, cells, fidx, 0, 1, o->measure, 0, freev, hv};
+  double fprev = INFINITY;
+  ob.qfloor = INFINITY;
+  for (int i = 0; i < ncell; i++) ob.qfloor = fmin(ob.qfloor, mesh_cell_quality(m, cells[i], o->measure));
+  for (int round = 0; round < o->iterations; round++) {
+    double f0 = 0;
+    for (int i = 0; i < ncell; i++) f0 += 1 / mesh_cell_quality(m, cells[i], o->measure);
+    /* the last round (optimization and sliding together) gained less than 1e-4: done */
+    if (!(f0 < fprev * (1 - 1e-4))) break;
+    fprev = f0;
+    double f = f0;
+    int its = nfree ? lbfgs(&ob, m->x, freev, nfree, 20, &f) : 0, slid = 0;
+    if (its < 0) { snprintf(err, MESH_ERRLEN, "out of memory"); status = 1; break; }
+    if (o->slide && m->dim == 2)
+      for (int v = 0; v < m->nvert; v++)
+        if (C->bnd[v]) slid += smooth_vertex(C, v, o->measure);
+    r->sweeps = round + 1;
+    if (o->verbose) printf("smooth: round %d, %d L-BFGS iterations, sum 1/q %.6g -> %.6g, %d boundary vertices slid\n",
+                           round + 1, its, f0, f, slid);
+    if (!its && !slid) break;
+  }
+  free(freev); free(fidx); free(cells); free(cmark); free(hv);
+  return status;
+}
+
 int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
   double t0 = now();
   memset(r, 0, sizeof *r);
@@ -1245,68 +1406,28 @@ int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
   r->min_before = st.min;
   r->mean_before = st.mean;
   int d = m->dim;
-  for (int sweep = 0; sweep < o->iterations; sweep++) {
-    int changed = 0;
-    for (int v = 0; v < m->nvert; v++) {
-      if (C.fixed[v] || (C.bnd[v] && d != 2)) continue;
-      double *p = m->x + (size_t)v * d, p0[3], qmin0, f0 = star_objective(&C, v, o->measure, &qmin0);
-      for (int j = 0; j < d; j++) p0[j] = p[j];
-      /* search directions: the free plane (interior) or the boundary edges (sliding) */
-      double h = INFINITY;
-      for (int pp = C.vc_off[v]; pp < C.vc_off[v + 1]; pp++) {
-        const int *cell = cell_of(&C, C.vc[pp]);
-        for (int i = 0; i < C.nvc; i++) {
-          if (cell[i] == v) continue;
-          double s2 = 0;
-          for (int j = 0; j < d; j++) s2 += (m->x[(size_t)cell[i] * d + j] - p0[j]) * (m->x[(size_t)cell[i] * d + j] - p0[j]);
-          h = fmin(h, sqrt(s2));
-        }
-      }
-      double dir[3] = {0, 0, 0};
-      if (C.bnd[v]) { /* 2D sliding: the better of the two boundary edges, by a probe */
-        double best = f0, bq;
-        for (int side = 0; side < 2; side++) {
-          const double *a = m->x + 2 * C.bnb[2 * v + side];
-          for (int j = 0; j < 2; j++) p[j] = p0[j] + 1e-3 * (a[j] - p0[j]);
-          double f = star_objective(&C, v, o->measure, &bq);
-          if (f < best) { best = f; for (int j = 0; j < 2; j++) dir[j] = a[j] - p0[j]; }
-        }
-        for (int j = 0; j < 2; j++) p[j] = p0[j];
-        if (best == f0) continue;
-      } else { /* interior: minus the central-difference gradient, scaled to the star's size */
-        double e = 1e-6 * h, gn = 0, qq;
-        for (int j = 0; j < d; j++) {
-          p[j] = p0[j] + e;
-          double fp = star_objective(&C, v, o->measure, &qq);
-          p[j] = p0[j] - e;
-          double fm = star_objective(&C, v, o->measure, &qq);
-          p[j] = p0[j];
-          dir[j] = isfinite(fp) && isfinite(fm) ? -(fp - fm) / (2 * e) : 0;
-          gn += dir[j] * dir[j];
-        }
-        gn = sqrt(gn);
-        if (!(gn > 0)) continue;
-        for (int j = 0; j < d; j++) dir[j] *= 0.5 * h / gn;
-      }
-      /* backtracking: accept only a step that keeps every cell valid, lowers Σ 1/q and
-       * does not lower the smallest q around v — so the mesh minimum never decreases */
-      int ok = 0;
-      for (double t = C.bnd[v] ? 0.5 : 1; t > 1e-4; t *= 0.5) {
-        for (int j = 0; j < d; j++) p[j] = p0[j] + t * dir[j];
-        double qmin, f = star_objective(&C, v, o->measure, &qmin);
-        if (f < f0 && qmin >= qmin0) { ok = 1; break; }
-      }
-      if (!ok) {
-        for (int j = 0; j < d; j++) p[j] = p0[j];
-        continue;
-      }
-      changed++;
-      if (!moved[v]) { moved[v] = 1; r->moved++; }
+  double *x0 = malloc(sizeof(double) * ((size_t)m->nvert * d + 1));
+  if (!x0) { mesh_big_free(q); free(moved); ctx_free(&C); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  memcpy(x0, m->x, sizeof(double) * (size_t)m->nvert * d);
+  if (!o->global)
+    for (int sweep = 0; sweep < o->iterations; sweep++) {
+      int changed = 0;
+      for (int v = 0; v < m->nvert; v++) changed += smooth_vertex(&C, v, o->measure);
+      r->sweeps = sweep + 1;
+      if (o->verbose) printf("smooth: sweep %d moved %d vertices\n", sweep + 1, changed);
+      if (!changed) break;
     }
-    r->sweeps = sweep + 1;
-    if (o->verbose) printf("smooth: sweep %d moved %d vertices\n", sweep + 1, changed);
-    if (!changed) break;
+  else if (smooth_global(&C, o, r, err)) {
+    memcpy(m->x, x0, sizeof(double) * (size_t)m->nvert * d);
+    free(x0); mesh_big_free(q); free(moved); ctx_free(&C);
+    return 1;
   }
+  for (int v = 0; v < m->nvert; v++) {
+    int ch = 0;
+    for (int j = 0; j < d; j++) ch |= m->x[(size_t)v * d + j] != x0[(size_t)v * d + j];
+    r->moved += ch;
+  }
+  free(x0);
   mesh_quality(m, o->measure, NULL, q, err);
   quality_stats_compute(q, m->ncell, &st);
   r->min_after = st.min;

@@ -54,6 +54,7 @@ typedef struct {
   int iterations;  /* sweeps */
   int slide;       /* 2D: boundary vertices slide along the boundary polyline */
   int verbose;
+  int global;      /* 0: vertex by vertex; 1: all interior vertices together (L-BFGS) */
 } smooth_opts;
 
 typedef struct {
@@ -61,9 +62,12 @@ typedef struct {
   double min_before, min_after, mean_before, mean_after, seconds;
 } smooth_report;
 
-/* quality-guarded local smoothing: each free vertex descends Σ 1/q over its cells (q the
- * measure) and a step is taken only when every cell around it stays valid and the smallest q
- * around it does not decrease, so the mesh minimum never decreases. The mesh must be valid. */
+/* quality-guarded smoothing of Σ 1/q (q the measure). Local: each free vertex descends its
+ * star's sum and a step is taken only when every cell around it stays valid and the smallest
+ * q around it does not decrease. Global: L-BFGS over all interior vertices, a step taken only
+ * when every cell stays valid and the mesh's smallest q does not decrease. Either way the
+ * mesh minimum never decreases. The mesh must be valid. iterations: sweeps (local) or rounds
+ * of up to 20 L-BFGS iterations (global). */
 int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err);
 
 typedef struct {

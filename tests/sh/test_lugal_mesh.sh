@@ -45,7 +45,11 @@ echo "$out" | grep -q "untangle: done — 0 invalid left, 1 vertices moved"
 "$BUILD/lugal-mesh" quality "$T/fixed.msh" | grep -q "inverted or degenerate cells: 0"
 out=$("$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/smooth.msh")
 echo "$out"
-echo "$out" | grep -q "smooth: corner_condition min"
+echo "$out" | grep -q "smooth (local): corner_condition min"
+out=$("$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/smooth.msh" --method global)
+echo "$out" | grep -q "smooth (global): corner_condition min"
+if "$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/x.msh" --method newton 2> "$T/err"; then exit 1; fi
+grep -q "method must be local or global" "$T/err"
 if "$BUILD/lugal-mesh" smooth "$T/tangled.msh" "$T/x.msh" 2> "$T/err"; then exit 1; fi
 grep -q "untangle it first" "$T/err"
 if "$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/x.msh" --beta -1 2> "$T/err"; then exit 1; fi

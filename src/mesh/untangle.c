@@ -4,7 +4,6 @@
 #include "untangle.h"
 
 #include "quality.h"
-#include "tuplehash.h"
 
 #include <limits.h>
 #include <math.h>
@@ -35,6 +34,8 @@ typedef struct {
   double jtol;          /* corner Jacobians <= jtol count as invalid */
   double jscale;        /* a typical corner Jacobian, to scale the objective */
 } ctx;
+
+static const int *cell_of(const ctx *C, int c) { return C->m->cells + (size_t)c * C->nvc; }
 
 static void ctx_free(ctx *C) {
   free(C->vc_off);
@@ -67,17 +68,20 @@ double untangle_default_beta(const mesh *m) {
 /* a facet is on the boundary when no other cell has it. Each facet is examined at its
  * smallest vertex v, among the facets of v's cells: their keys (the other vertices, sorted)
  * are sorted and a key that occurs once is a boundary facet. Linear and cache-local (a
- * global facet hash table is 4x slower on a 500k-tet mesh). */
+ * global facet hash table is 4x slower on a 500k-tet mesh). The boundary facets come back
+ * as cell * nfacets + local facet, in a malloc'ed array. */
 typedef struct {
   int k[3];
+  int id;
 } fkey;
-static int fkey_cmp(const void *a, const void *b) { return memcmp(a, b, sizeof(fkey)); }
+static int fkey_cmp(const void *a, const void *b) { return memcmp(a, b, sizeof(int) * 3); }
 
-int mesh_boundary_vertices(const mesh *m, unsigned char *flags, char *err) {
-  int nf = cell_nfacets(m->type), nvf = m->nvf, nv = m->nvert, nvc = m->nvc;
+static int boundary_facets(const mesh *m, int **out, int *nout, char *err) {
+  int nf = cell_nfacets(m->type), nvf = m->nvf, nv = m->nvert, nvc = m->nvc, n_out = 0, cap = 64;
   int *off = calloc((size_t)nv + 2, sizeof(int)), *vc = malloc(sizeof(int) * ((size_t)m->ncell * nvc + 1));
+  int *res = malloc(sizeof(int) * (size_t)cap);
   fkey *keys = NULL;
-  if (!off || !vc) goto oom;
+  if (!off || !vc || !res) goto oom;
   for (size_t i = 0; i < (size_t)m->ncell * nvc; i++) off[m->cells[i] + 1]++;
   int maxdeg = 0;
   for (int v = 0; v < nv; v++) {
@@ -90,7 +94,6 @@ int mesh_boundary_vertices(const mesh *m, unsigned char *flags, char *err) {
   off[0] = 0;
   keys = malloc(sizeof(fkey) * ((size_t)maxdeg * nf + 1));
   if (!keys) goto oom;
-  memset(flags, 0, (size_t)nv);
   for (int v = 0; v < nv; v++) {
     int n = 0;
     for (int p = off[v]; p < off[v + 1]; p++) {
@@ -98,7 +101,7 @@ int mesh_boundary_vertices(const mesh *m, unsigned char *flags, char *err) {
       for (int f = 0; f < nf; f++) {
         const int *lv = cell_facet_verts(m->type, f);
         int has = 0, smallest = 1, k = 0;
-        fkey key = {{-1, -1, -1}};
+        fkey key = {{-1, -1, -1}, vc[p] * nf + f};
         for (int i = 0; i < nvf; i++) {
           int w = cell[lv[i]];
           if (w == v) { has = 1; continue; }
@@ -116,18 +119,36 @@ int mesh_boundary_vertices(const mesh *m, unsigned char *flags, char *err) {
       int j = i + 1;
       while (j < n && !fkey_cmp(keys + i, keys + j)) j++;
       if (j == i + 1) {
-        flags[v] = 1;
-        for (int t = 0; t < nvf - 1; t++) flags[keys[i].k[t]] = 1;
+        if (n_out == cap) {
+          int *nr = realloc(res, sizeof(int) * (size_t)(cap *= 2));
+          if (!nr) goto oom;
+          res = nr;
+        }
+        res[n_out++] = keys[i].id;
       }
       i = j;
     }
   }
   free(off); free(vc); free(keys);
+  *out = res;
+  *nout = n_out;
   return 0;
 oom:
-  free(off); free(vc); free(keys);
+  free(off); free(vc); free(keys); free(res);
   snprintf(err, MESH_ERRLEN, "out of memory");
   return 1;
+}
+
+int mesh_boundary_vertices(const mesh *m, unsigned char *flags, char *err) {
+  int *bf, n, nf = cell_nfacets(m->type);
+  if (boundary_facets(m, &bf, &n, err)) return 1;
+  memset(flags, 0, (size_t)m->nvert);
+  for (int i = 0; i < n; i++) {
+    const int *lv = cell_facet_verts(m->type, bf[i] % nf);
+    for (int j = 0; j < m->nvf; j++) flags[m->cells[(size_t)(bf[i] / nf) * m->nvc + lv[j]]] = 1;
+  }
+  free(bf);
+  return 0;
 }
 
 /* 2D boundary edges: the two boundary neighbours of every boundary vertex; a vertex with
@@ -135,26 +156,17 @@ oom:
 static int boundary_2d(ctx *C, char *err) {
   mesh *m = C->m;
   C->bnb = malloc(sizeof(int) * 2 * (size_t)m->nvert);
-  if (!C->bnb) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  int *nb = calloc((size_t)m->nvert, sizeof(int)), *bf = NULL, n = 0, nf = cell_nfacets(m->type);
+  if (!C->bnb || !nb || boundary_facets(m, &bf, &n, err)) {
+    free(nb);
+    snprintf(err, MESH_ERRLEN, "out of memory");
+    return 1;
+  }
   for (int i = 0; i < 2 * m->nvert; i++) C->bnb[i] = -1;
-  int *nb = calloc((size_t)m->nvert, sizeof(int));
-  tuplehash h;
-  if (!nb || th_init(&h, (size_t)m->ncell * 2 + 16, 2)) { free(nb); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
-  int nf = cell_nfacets(m->type), n = 0;
-  int *cnt = calloc((size_t)m->ncell * nf + 1, sizeof(int)), *ev = malloc(sizeof(int) * 2 * ((size_t)m->ncell * nf + 1));
-  if (!cnt || !ev) { free(nb); free(cnt); free(ev); th_free(&h); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
-  for (int c = 0; c < m->ncell; c++)
-    for (int f = 0; f < nf; f++) {
-      const int *lv = cell_facet_verts(m->type, f);
-      int k[2] = {m->cells[(size_t)c * m->nvc + lv[0]], m->cells[(size_t)c * m->nvc + lv[1]]}, found;
-      int id = th_get(&h, k, n, &found);
-      if (!found) { ev[2 * n] = k[0]; ev[2 * n + 1] = k[1]; n++; }
-      cnt[id]++;
-    }
   for (int i = 0; i < n; i++) {
-    if (cnt[i] != 1) continue;
+    const int *lv = cell_facet_verts(m->type, bf[i] % nf), *cell = cell_of(C, bf[i] / nf);
     for (int s = 0; s < 2; s++) {
-      int a = ev[2 * i + s], b = ev[2 * i + 1 - s];
+      int a = cell[lv[s]], b = cell[lv[1 - s]];
       if (nb[a] < 2) C->bnb[2 * a + nb[a]] = b;
       nb[a]++;
     }
@@ -172,9 +184,7 @@ static int boundary_2d(ctx *C, char *err) {
     if (corner) C->fixed[v] = 1;
   }
   free(nb);
-  free(cnt);
-  free(ev);
-  th_free(&h);
+  free(bf);
   return 0;
 }
 
@@ -260,7 +270,6 @@ static double corner_jac(const ctx *C, const double *x, const int *cell, int k, 
   return J;
 }
 
-static const int *cell_of(const ctx *C, int c) { return C->m->cells + (size_t)c * C->nvc; }
 
 static double cell_min_jac(const ctx *C, const double *x, int c) {
   double mn = INFINITY;

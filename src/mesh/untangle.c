@@ -31,6 +31,10 @@ typedef struct {
   unsigned char *bnd;   /* on the topological boundary */
   unsigned char *fixed; /* may not move: boundary corners, or every boundary vertex */
   int *bnb;             /* 2D: the two boundary neighbours of a boundary vertex */
+  int *bf_off, *bf;     /* 3D: vertex -> its boundary facets (cell * nfacets + facet) */
+  unsigned char *ntan;  /* 3D: directions a boundary vertex may slide in: 2 on a flat face,
+                         * 1 on a straight edge between two flat faces, 0 elsewhere */
+  double *tan;          /* 3D: those directions, 2 unit vectors per vertex */
   double jtol;          /* corner Jacobians <= jtol count as invalid */
   double jscale;        /* a typical corner Jacobian, to scale the objective */
 } ctx;
@@ -43,6 +47,27 @@ static void ctx_free(ctx *C) {
   free(C->bnd);
   free(C->fixed);
   free(C->bnb);
+  free(C->bf_off);
+  free(C->bf);
+  free(C->ntan);
+  free(C->tan);
+}
+
+/* the shortest edge at v */
+static double star_h(const ctx *C, int v) {
+  int d = C->d;
+  const double *p0 = C->m->x + (size_t)v * d;
+  double h = INFINITY;
+  for (int pp = C->vc_off[v]; pp < C->vc_off[v + 1]; pp++) {
+    const int *cell = cell_of(C, C->vc[pp]);
+    for (int i = 0; i < C->nvc; i++) {
+      if (cell[i] == v) continue;
+      double s2 = 0;
+      for (int j = 0; j < d; j++) s2 += (C->m->x[(size_t)cell[i] * d + j] - p0[j]) * (C->m->x[(size_t)cell[i] * d + j] - p0[j]);
+      h = fmin(h, sqrt(s2));
+    }
+  }
+  return h;
 }
 
 static double bbox_diag(const mesh *m) {
@@ -188,6 +213,159 @@ static int boundary_2d(ctx *C, char *err) {
   return 0;
 }
 
+static void cross3(const double *a, const double *b, double *c) {
+  c[0] = a[1] * b[2] - a[2] * b[1];
+  c[1] = a[2] * b[0] - a[0] * b[2];
+  c[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+/* 3D sliding (the paper's 2D "move only along the discrete boundary", carried to surfaces):
+ * a boundary vertex whose boundary facets are all coplanar slides in their plane; one where
+ * they lie in two planes slides along the planes' intersection (a straight edge of the
+ * domain); any other (a corner, a curved surface) stays. */
+static int boundary_3d(ctx *C, char *err) {
+  mesh *m = C->m;
+  int nv = m->nvert, nf = cell_nfacets(m->type), *bfl = NULL, n = 0;
+  C->bf_off = calloc((size_t)nv + 2, sizeof(int));
+  C->ntan = calloc((size_t)nv + 1, 1);
+  C->tan = calloc((size_t)nv * 6 + 1, sizeof(double));
+  if (!C->bf_off || !C->ntan || !C->tan || boundary_facets(m, &bfl, &n, err)) goto oom;
+  C->bf = malloc(sizeof(int) * ((size_t)n * m->nvf + 1));
+  if (!C->bf) goto oom;
+  for (int i = 0; i < n; i++) {
+    const int *lv = cell_facet_verts(m->type, bfl[i] % nf), *cell = cell_of(C, bfl[i] / nf);
+    for (int j = 0; j < m->nvf; j++) C->bf_off[cell[lv[j]] + 2]++;
+  }
+  for (int v = 0; v < nv; v++) C->bf_off[v + 2] += C->bf_off[v + 1];
+  for (int i = 0; i < n; i++) {
+    const int *lv = cell_facet_verts(m->type, bfl[i] % nf), *cell = cell_of(C, bfl[i] / nf);
+    for (int j = 0; j < m->nvf; j++) C->bf[C->bf_off[cell[lv[j]] + 1]++] = bfl[i];
+  }
+  free(bfl);
+  for (int v = 0; v < nv; v++) {
+    if (!C->bnd[v]) continue;
+    double cl[2][3]; /* up to two distinct plane normals */
+    int ncl = 0;
+    for (int p = C->bf_off[v]; p < C->bf_off[v + 1] && ncl <= 2; p++) {
+      const int *lv = cell_facet_verts(m->type, C->bf[p] % nf), *cell = cell_of(C, C->bf[p] / nf);
+      double nrm[3] = {0, 0, 0}, e1[3], e2[3], c[3];
+      for (int j = 0; j < m->nvf; j++) { /* Newell-like: sum of the corner cross products */
+        const double *a = m->x + 3 * cell[lv[j]], *b = m->x + 3 * cell[lv[(j + 1) % m->nvf]],
+                     *z = m->x + 3 * cell[lv[(j + m->nvf - 1) % m->nvf]];
+        for (int k = 0; k < 3; k++) { e1[k] = b[k] - a[k]; e2[k] = z[k] - a[k]; }
+        cross3(e1, e2, c);
+        for (int k = 0; k < 3; k++) nrm[k] += c[k];
+      }
+      double len = sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]);
+      if (!(len > 0)) { ncl = 3; break; } /* degenerate facet: keep the vertex */
+      for (int k = 0; k < 3; k++) nrm[k] /= len;
+      int same = -1;
+      for (int q = 0; q < ncl && same < 0; q++) {
+        cross3(nrm, cl[q], c);
+        if (sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) <= 1e-10) same = q;
+      }
+      if (same < 0) {
+        if (ncl < 2) memcpy(cl[ncl], nrm, sizeof nrm);
+        ncl++;
+      }
+    }
+    double *t = C->tan + 6 * (size_t)v;
+    if (ncl == 1) {
+      /* a unit vector orthogonal to the normal, then the normal cross it */
+      const double *nn = cl[0];
+      double a[3] = {0, 0, 0};
+      a[fabs(nn[0]) < 0.6 ? 0 : fabs(nn[1]) < 0.6 ? 1 : 2] = 1;
+      cross3(nn, a, t);
+      double l = sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]);
+      for (int k = 0; k < 3; k++) t[k] /= l;
+      cross3(nn, t, t + 3);
+      C->ntan[v] = 2;
+    } else if (ncl == 2) {
+      cross3(cl[0], cl[1], t);
+      double l = sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]);
+      for (int k = 0; k < 3; k++) t[k] /= l;
+      C->ntan[v] = 1;
+    }
+    if (!C->ntan[v]) C->fixed[v] = 1;
+  }
+  return 0;
+oom:
+  free(bfl);
+  snprintf(err, MESH_ERRLEN, "out of memory");
+  return 1;
+}
+
+/* 3D: p (the new position of v) lies on v's current boundary star: in one of the triangles
+ * (v, a, b) the boundary facets at v make (a quadrilateral facet v a b c gives two), with
+ * weight at least 5% on v so the star's outer edges are not reached (the 2D slide stops at
+ * 95% of a boundary edge likewise) */
+static int on_star(const ctx *C, const double *x, int v, const double *p) {
+  mesh *m = C->m;
+  int nf = cell_nfacets(m->type), nvf = m->nvf;
+  const double *o = x + 3 * (size_t)v;
+  for (int q = C->bf_off[v]; q < C->bf_off[v + 1]; q++) {
+    const int *lv = cell_facet_verts(m->type, C->bf[q] % nf), *cell = cell_of(C, C->bf[q] / nf);
+    int at = 0;
+    while (cell[lv[at]] != v) at++;
+    for (int tri = 0; tri < nvf - 2; tri++) {
+      const double *a = x + 3 * (size_t)cell[lv[(at + 1 + tri) % nvf]], *b = x + 3 * (size_t)cell[lv[(at + 2 + tri) % nvf]];
+      double ab[3], ob[3], n[3], u[3], w[3], c[3];
+      for (int k = 0; k < 3; k++) { ab[k] = a[k] - o[k]; ob[k] = b[k] - o[k]; }
+      cross3(ab, ob, n);
+      double nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+      if (!(nn > 0)) continue;
+      /* barycentric weights of p in (o, a, b) */
+      for (int k = 0; k < 3; k++) { u[k] = a[k] - p[k]; w[k] = b[k] - p[k]; }
+      cross3(u, w, c);
+      double lo = (c[0] * n[0] + c[1] * n[1] + c[2] * n[2]) / nn;
+      for (int k = 0; k < 3; k++) { u[k] = b[k] - p[k]; w[k] = o[k] - p[k]; }
+      cross3(u, w, c);
+      double la = (c[0] * n[0] + c[1] * n[1] + c[2] * n[2]) / nn, lb = 1 - lo - la;
+      if (lo >= 0.05 && la >= -1e-12 && lb >= -1e-12) return 1;
+    }
+  }
+  return 0;
+}
+
+/* 3D: one boundary vertex descends pen (evaluated at the current coordinates) along its
+ * slide directions — central-difference gradient in the tangent basis, backtracking — while
+ * it stays on its boundary star; 1 if it moved */
+typedef double (*vertex_penalty)(const ctx *C, int v, const void *arg, int probe); /* probe: for the gradient, no guard */
+static int slide_3d(const ctx *C, double *x, int v, vertex_penalty pen, const void *arg) {
+  int nt = C->ntan[v], moved = 0;
+  const double *t = C->tan + 6 * (size_t)v;
+  double *p = x + 3 * (size_t)v, h = star_h(C, v), f = pen(C, v, arg, 0);
+  if (!nt || !(f > 0) || !isfinite(f)) return 0;
+  for (int it = 0; it < 20; it++) {
+    double p0[3] = {p[0], p[1], p[2]}, g[2] = {0, 0}, e = 1e-6 * h, dir[3] = {0, 0, 0}, gn = 0;
+    for (int k = 0; k < nt; k++) {
+      for (int j = 0; j < 3; j++) p[j] = p0[j] + e * t[3 * k + j];
+      double fp = pen(C, v, arg, 1);
+      for (int j = 0; j < 3; j++) p[j] = p0[j] - e * t[3 * k + j];
+      double fm = pen(C, v, arg, 1);
+      g[k] = isfinite(fp) && isfinite(fm) ? (fp - fm) / (2 * e) : 0;
+      gn += g[k] * g[k];
+    }
+    for (int j = 0; j < 3; j++) p[j] = p0[j];
+    if (!(gn > 0)) break;
+    for (int k = 0; k < nt; k++)
+      for (int j = 0; j < 3; j++) dir[j] -= g[k] / sqrt(gn) * 0.5 * h * t[3 * k + j];
+    int ok = 0;
+    for (double s = 1; s > 1e-4 && !ok; s *= 0.5) {
+      double q[3] = {p0[0] + s * dir[0], p0[1] + s * dir[1], p0[2] + s * dir[2]};
+      if (!on_star(C, x, v, q)) continue;
+      memcpy(p, q, sizeof q);
+      double fn = pen(C, v, arg, 0);
+      if (fn < f) { f = fn; ok = 1; }
+      else memcpy(p, p0, sizeof p0);
+    }
+    if (!ok) break;
+    moved = 1;
+    if (f == 0) break;
+  }
+  return moved;
+}
+
 static int ctx_init(ctx *C, mesh *m, int slide, char *err) {
   memset(C, 0, sizeof *C);
   C->m = m;
@@ -224,8 +402,9 @@ static int ctx_init(ctx *C, mesh *m, int slide, char *err) {
     for (int i = 0; i < m->nvc; i++) C->vc[pos[m->cells[(size_t)c * m->nvc + i]]++] = c;
   free(pos);
   if (mesh_boundary_vertices(m, C->bnd, err)) return 1;
-  for (int v = 0; v < nv; v++) C->fixed[v] = C->bnd[v] && !(slide && m->dim == 2);
+  for (int v = 0; v < nv; v++) C->fixed[v] = C->bnd[v] && !slide;
   if (m->dim == 2 && boundary_2d(C, err)) return 1;
+  if (m->dim == 3 && slide && boundary_3d(C, err)) return 1;
   double h = bbox_diag(m) / pow(fmax((double)m->ncell, 1), 1.0 / m->dim);
   C->jscale = pow(h, m->dim);
   C->jtol = 1e-13 * pow(mesh_hmax(m), m->dim);
@@ -735,13 +914,32 @@ static double local_penalty(const ctx *C, const double *x, int v, double beta, d
   return f;
 }
 
+typedef struct {
+  const double *x;
+  double beta;
+} penalty_arg;
+static double untangle_penalty(const ctx *C, int v, const void *arg, int probe) {
+  const penalty_arg *a = arg;
+  (void)probe;
+  return local_penalty(C, a->x, v, a->beta, C->jscale);
+}
+
 static int slide_boundary(ctx *C, double *x, double beta, const unsigned char *region, unsigned char *moved) {
   int total = 0;
   mesh *m = C->m;
+  penalty_arg pa = {x, beta};
   for (int pass = 0; pass < 10; pass++) {
     int changed = 0;
     for (int v = 0; v < m->nvert; v++) {
       if (!C->bnd[v] || C->fixed[v] || !region[v]) continue;
+      if (C->d == 3) {
+        if (slide_3d(C, x, v, untangle_penalty, &pa)) {
+          changed++;
+          if (!moved[v]) total++;
+          moved[v] = 1;
+        }
+        continue;
+      }
       double f0 = local_penalty(C, x, v, beta, C->jscale);
       if (f0 == 0) continue;
       double p0[2] = {x[2 * v], x[2 * v + 1]}, best = f0, bp[2] = {p0[0], p0[1]};
@@ -1032,7 +1230,7 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
   count_cells(&C, m->x, beta, &r->invalid_before, NULL);
   if (o->verbose)
     printf("untangle: %d %s, %d invalid, beta %.3g, boundary %s\n", m->ncell, cell_plural(m->type), r->invalid_before,
-           beta, o->slide && m->dim == 2 ? "slides" : "fixed");
+           beta, o->slide ? "slides" : "fixed");
   /* the cells that may change: everything around the invalid cells (and, after stage 2,
    * around what moved) — the rest of the mesh keeps its coordinates bit for bit */
   untangle_stage *s = &r->stage[0];
@@ -1067,7 +1265,10 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
       touched[v] |= region[v];
       whole &= region[v];
     }
-    if (o->slide && m->dim == 2) s->moved += slide_boundary(&C, m->x, beta, region, moved);
+    /* boundary vertices slide only once the interior alone has failed a round (the paper
+     * slides them first; on 3D tangles that moved boundary vertices the interior did not
+     * need moved and could leave a tangle that the fixed-boundary run undoes) */
+    if (o->slide && rings > 2) s->moved += slide_boundary(&C, m->x, beta, region, moved);
     /* each connected piece of the region on its own: small problems converge fast */
     int np = region_pieces(&C, region, list, off), all = 1;
     for (int k = 0; k < np; k++) {
@@ -1273,30 +1474,28 @@ static double star_objective(const ctx *C, int v, int q, double *qmin) {
   return s;
 }
 
-/* the shortest edge at v */
-static double star_h(const ctx *C, int v) {
-  int d = C->d;
-  const double *p0 = C->m->x + (size_t)v * d;
-  double h = INFINITY;
-  for (int pp = C->vc_off[v]; pp < C->vc_off[v + 1]; pp++) {
-    const int *cell = cell_of(C, C->vc[pp]);
-    for (int i = 0; i < C->nvc; i++) {
-      if (cell[i] == v) continue;
-      double s2 = 0;
-      for (int j = 0; j < d; j++) s2 += (C->m->x[(size_t)cell[i] * d + j] - p0[j]) * (C->m->x[(size_t)cell[i] * d + j] - p0[j]);
-      h = fmin(h, sqrt(s2));
-    }
-  }
-  return h;
-}
 
 /* one local step at v (interior: along minus the central-difference gradient of Σ 1/q over
  * its star; 2D sliding boundary vertex: along the better boundary edge); 1 if v moved */
+typedef struct {
+  int measure;
+  double qmin0;
+} smooth_arg;
+static double smooth_penalty(const ctx *C, int v, const void *arg, int probe) {
+  const smooth_arg *a = arg;
+  double qmin, f = star_objective(C, v, a->measure, &qmin);
+  return probe || qmin >= a->qmin0 ? f : INFINITY;
+}
+
 static int smooth_vertex(ctx *C, int v, int measure) {
   mesh *m = C->m;
   int d = m->dim;
-  if (C->fixed[v] || (C->bnd[v] && d != 2)) return 0;
+  if (C->fixed[v]) return 0;
   double *p = m->x + (size_t)v * d, p0[3], qmin0, f0 = star_objective(C, v, measure, &qmin0);
+  if (C->bnd[v] && d == 3) { /* along the flat face or straight edge, never lowering the star's minimum */
+    smooth_arg a = {measure, qmin0};
+    return slide_3d(C, m->x, v, smooth_penalty, &a);
+  }
   for (int j = 0; j < d; j++) p0[j] = p[j];
   double h = star_h(C, v), dir[3] = {0, 0, 0};
   if (C->bnd[v]) { /* 2D sliding: the better of the two boundary edges, by a probe */
@@ -1372,7 +1571,7 @@ static int smooth_global(ctx *C, const smooth_opts *o, smooth_report *r, char *e
     double f = f0;
     int its = nfree ? lbfgs(&ob, m->x, freev, nfree, 20, &f) : 0, slid = 0;
     if (its < 0) { snprintf(err, MESH_ERRLEN, "out of memory"); status = 1; break; }
-    if (o->slide && m->dim == 2)
+    if (o->slide)
       for (int v = 0; v < m->nvert; v++)
         if (C->bnd[v]) slid += smooth_vertex(C, v, o->measure);
     r->sweeps = round + 1;

@@ -93,7 +93,18 @@ for _, case in ipairs(cases) do
             local corner = (before[i][1] == 0 or before[i][1] == 1) and (before[i][2] == 0 or before[i][2] == 1)
             if corner then T.check(p[1] == before[i][1] and p[2] == before[i][2], "corner %d moved", i) end
           else
-            for k = 1, 3 do T.check(p[k] == before[i][k], "3D boundary vertex %d moved", i) end
+            -- 3D: a boundary vertex keeps every box face it was on (to 1e-12), inside [0, 1]^3;
+            -- edge and corner vertices therefore move only along their edge or not at all
+            local faces = 0
+            for k = 1, 3 do
+              local b = before[i][k]
+              if b == 0 or b == 1 then
+                faces = faces + 1
+                T.check(math.abs(p[k] - b) <= 1e-12, "3D boundary vertex %d left its face (coordinate %d: %g)", i, k, p[k])
+              end
+              T.check(p[k] >= -1e-12 and p[k] <= 1 + 1e-12, "3D boundary vertex %d outside the box", i)
+            end
+            if faces == 3 then for k = 1, 3 do T.check(p[k] == before[i][k], "3D corner %d moved", i) end end
           end
         end
       end
@@ -121,6 +132,35 @@ do
   end
   local x, y = m:coordinates(v)
   T.check(y == 0, "the pushed vertex stays on y = 0 (%g)", y)
+end
+-- ... and in 3D: a vertex of the face z = 0 pushed in its face past its neighbour, and a
+-- vertex of the edge y = z = 0 pushed along the edge past its neighbour (tetrahedra and
+-- hexahedra); boundary vertices slide in their face or along their edge, corners stay.
+for _, cell in ipairs{"tetrahedron", "hexahedron"} do
+  for _, push in ipairs{{{0.4, 0.4, 0}, {0.65, 0.55, 0}}, {{0.4, 0, 0}, {0.7, 0, 0}}} do
+    local m = lg.mesh.box{nx = 5, cell = cell}
+    local v = nearest(m, table.unpack(push[1]))
+    m:set_coordinates(v, table.unpack(push[2]))
+    local before = coords(m)
+    T.check(m:check() > 0, "%s: pushed boundary vertex tangles", cell)
+    local rf = m:copy():untangle{boundary = "fixed", quiet = true}
+    T.check(not rf.success, "%s: with fixed boundary vertices this tangle cannot be undone", cell)
+    local r = m:untangle{quiet = true}
+    T.check(r.success and m:check() == 0, "%s: sliding untangles: %s", cell, tostring(r))
+    for i = 1, m:nvertices() do
+      local p, faces = {m:coordinates(i)}, 0
+      for k = 1, 3 do
+        local b = before[i][k]
+        if b == 0 or b == 1 then
+          faces = faces + 1
+          T.check(math.abs(p[k] - b) <= 1e-12, "%s: vertex %d left its face (coordinate %d: %g)", cell, i, k, p[k])
+        end
+      end
+      if faces == 3 then for k = 1, 3 do T.check(p[k] == before[i][k], "%s: corner %d moved", cell, i) end end
+    end
+    local p = {m:coordinates(v)}
+    T.check(p[3] == 0 and (push[2][2] ~= 0 or p[2] == 0), "%s: the pushed vertex stays on its face/edge", cell)
+  end
 end
 
 -- 5. Only what must move moves: one vertex pulled out in a 20x20 triangle mesh; every
@@ -152,14 +192,12 @@ for _, case in ipairs{{"triangle", "mean_ratio"}, {"quadrilateral", "corner_cond
   local solid = case[1]:match("hedron")
   local m0 = solid and lg.mesh.box{nx = 5, cell = case[1]} or lg.mesh.rectangle{nx = 12, cell = case[1]}
   local h = 1 / (solid and 5 or 12)
-  for i = 1, m0:nvertices() do
+  for i = 1, m0:nvertices() do -- every coordinate not on a box face; boundary vertices in their faces
     local p = {m0:coordinates(i)}
-    local inside = true
-    for k = 1, #p do inside = inside and p[k] > 0 and p[k] < 1 end
-    if inside then
-      for k = 1, #p do p[k] = p[k] + (case[1] == "hexahedron" and 0.1 or 0.2) * h * (2 * rand() - 1) end
-      m0:set_coordinates(i, table.unpack(p))
+    for k = 1, #p do
+      if p[k] > 0 and p[k] < 1 then p[k] = p[k] + (case[1] == "hexahedron" and 0.1 or 0.2) * h * (2 * rand() - 1) end
     end
+    m0:set_coordinates(i, table.unpack(p))
   end
   T.check(m0:check() == 0, "perturbed %s mesh valid", case[1])
   local q0 = m0:quality(case[2])
@@ -173,8 +211,25 @@ for _, case in ipairs{{"triangle", "mean_ratio"}, {"quadrilateral", "corner_cond
     T.check(q1:min() >= q0:min(), "%s %s %s: min %g -> %g", case[1], case[2], method, q0:min(), q1:min())
     T.check(q1:mean() > q0:mean() + 1e-3, "%s %s %s: mean %g -> %g", case[1], case[2], method, q0:mean(), q1:mean())
     T.close(s.min_after, q1:min(), 1e-14, "report min")
+    local slid = 0
+    for i = 1, m:nvertices() do -- boundary vertices keep their faces (they slide in them)
+      local p, p0, onb, free_moved = {m:coordinates(i)}, {m0:coordinates(i)}, false, false
+      for k = 1, #p do
+        if p0[k] == 0 or p0[k] == 1 then
+          onb = true
+          T.check(math.abs(p[k] - p0[k]) <= 1e-12, "%s %s: boundary vertex %d left its face", case[1], method, i)
+        elseif p[k] ~= p0[k] then free_moved = true end
+      end
+      if onb and free_moved then slid = slid + 1 end
+    end
+    T.check(slid > 0, "%s %s: no boundary vertex slid", case[1], method)
+    -- the objectives compared with the boundary held (sliding takes one local step per
+    -- global round, so with sliding the two differ in how the boundary moved)
+    local mf = m0:copy()
+    mf:smooth{measure = case[2], method = method, iterations = 10, boundary = "fixed", quiet = true}
+    local qf = mf:quality(case[2])
     inv[method] = 0
-    for c = 1, #q1 do inv[method] = inv[method] + 1 / q1[c] end
+    for c = 1, #qf do inv[method] = inv[method] + 1 / qf[c] end
   end
   T.check(inv.global <= inv["local"] * (1 + 1e-3), "%s %s: sum 1/q global %g, local %g", case[1], case[2],
           inv.global, inv["local"])

@@ -129,9 +129,9 @@ static int boundary_facets(const mesh *m, int **out, int *nout, char *err) {
         fkey key = {{-1, -1, -1}, vc[p] * nf + f};
         for (int i = 0; i < nvf; i++) {
           int w = cell[lv[i]];
-          if (w == v) { has = 1; continue; }
-          if (w < v) smallest = 0;
-          key.k[k++] = w;
+          if (w == v) has = 1;
+          else if (w < v) { smallest = 0; break; }
+          else if (k < 3) key.k[k++] = w; /* a facet without v has nvf others: skipped below */
         }
         if (!has || !smallest) continue;
         for (int i = 1; i < k; i++) /* insertion sort of at most 3 */

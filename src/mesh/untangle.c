@@ -1236,8 +1236,15 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
   untangle_stage *s = &r->stage[0];
 
   /* stage 1: feasible set, J > 0 */
-  double ts = stage_begin(s, "1 feasible set", r->invalid_before);
-  s->moved = r->invalid_before ? feasible_passes(&C, m->x, 0, 0, NULL, o->placement, maxit, moved, &s->iterations) : 0;
+  /* more than a quarter of the cells inverted is a scrambled knot (stage 2's rule for a
+   * piece): vertex-by-vertex placement finds almost every feasible set empty there (100k
+   * tetrahedra, all thrown: 1.5 s to move 4 vertices), so it is left to stage 2's harmonic
+   * restart. Small tangles (up to 1000 invalid cells) keep the paper's stage 1: it is cheap
+   * there and puts a single pulled vertex back exactly. */
+  int knot = r->invalid_before > m->ncell / 4 && r->invalid_before > 1000;
+  double ts = stage_begin(s, knot ? "1 feasible set (knot: skip)" : "1 feasible set", r->invalid_before);
+  s->moved = r->invalid_before && !knot
+                 ? feasible_passes(&C, m->x, 0, 0, NULL, o->placement, maxit, moved, &s->iterations) : 0;
   stage_end(&C, m->x, beta, s, ts, o->verbose);
 
   /* stage 2: optimization of (3.3); boundary vertices one by one along the boundary, then
@@ -1296,7 +1303,7 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
         for (int i = 0; i < nf; i++)
           for (int j = 0; j < C.d; j++) save[(size_t)i * C.d + j] = m->x[(size_t)pv[i] * C.d + j];
         left = piece_invalid(&C, &W, m->x, pv, nf);
-        laplace_solve(&C, &W, m->x, pv, nf, NULL, 10000, 1e-10, &it, &res);
+        laplace_solve(&C, &W, m->x, pv, nf, NULL, 10000, 1e-8, &it, &res);
         int its = 0;
         optimize_vertices(&C, &W, m->x, beta, 0, pv, nf, 10 * maxit, trial, &its);
         if (piece_invalid(&C, &W, m->x, pv, nf) <= left) {
@@ -1487,7 +1494,7 @@ static double smooth_penalty(const ctx *C, int v, const void *arg, int probe) {
   return probe || qmin >= a->qmin0 ? f : INFINITY;
 }
 
-static int smooth_vertex(ctx *C, int v, int measure) {
+static int smooth_vertex_step(ctx *C, int v, int measure) {
   mesh *m = C->m;
   int d = m->dim;
   if (C->fixed[v]) return 0;
@@ -1534,6 +1541,15 @@ static int smooth_vertex(ctx *C, int v, int measure) {
   return 0;
 }
 
+/* the step, and what it gained: f0 − f of the star is the change of Σ 1/q over the mesh */
+static int smooth_vertex(ctx *C, int v, int measure, double *gain) {
+  if (C->fixed[v]) return 0;
+  double q0, q1, f0 = star_objective(C, v, measure, &q0);
+  if (!smooth_vertex_step(C, v, measure)) return 0;
+  *gain += f0 - star_objective(C, v, measure, &q1);
+  return 1;
+}
+
 /* global smoothing: L-BFGS on Σ 1/q over all interior vertices together (Mesquite's
  * inverse-mean-ratio objective when q is the mean ratio), rounds of up to 20 iterations;
  * a step is taken only when every cell stays valid and no q falls below the mesh's
@@ -1570,10 +1586,11 @@ static int smooth_global(ctx *C, const smooth_opts *o, smooth_report *r, char *e
     fprev = f0;
     double f = f0;
     int its = nfree ? lbfgs(&ob, m->x, freev, nfree, 20, &f) : 0, slid = 0;
+    double gain = 0;
     if (its < 0) { snprintf(err, MESH_ERRLEN, "out of memory"); status = 1; break; }
     if (o->slide)
       for (int v = 0; v < m->nvert; v++)
-        if (C->bnd[v]) slid += smooth_vertex(C, v, o->measure);
+        if (C->bnd[v]) slid += smooth_vertex(C, v, o->measure, &gain);
     r->sweeps = round + 1;
     if (o->verbose) printf("smooth: round %d, %d L-BFGS iterations, sum 1/q %.6g -> %.6g, %d boundary vertices slid\n",
                            round + 1, its, f0, f, slid);
@@ -1620,10 +1637,14 @@ int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
   if (!o->global)
     for (int sweep = 0; sweep < o->iterations; sweep++) {
       int changed = 0;
-      for (int v = 0; v < m->nvert; v++) changed += smooth_vertex(&C, v, o->measure);
+      double total = 0, gain = 0;
+      for (int c = 0; c < m->ncell; c++) total += 1 / mesh_cell_quality(m, c, o->measure);
+      for (int v = 0; v < m->nvert; v++) changed += smooth_vertex(&C, v, o->measure, &gain);
       r->sweeps = sweep + 1;
-      if (o->verbose) printf("smooth: sweep %d moved %d vertices\n", sweep + 1, changed);
-      if (!changed) break;
+      if (o->verbose) printf("smooth: sweep %d moved %d vertices, sum 1/q %.6g -> %.6g\n", sweep + 1, changed, total,
+                             total - gain);
+      /* converged: the sweep lowered Σ 1/q by less than 1e-4 of it */
+      if (!changed || gain < 1e-4 * total) break;
     }
   else if (smooth_global(&C, o, r, err)) {
     memcpy(m->x, x0, sizeof(double) * (size_t)m->nvert * d);

@@ -18,3 +18,6 @@ done
 # untangling (issue 4): tangled meshes at 1k / 10k / 100k vertices, and placement in stage 1
 "$ROOT/build/lugal" "$ROOT/bench/untangle.lua" 3
 "$ROOT/build/lugal" "$ROOT/bench/placement.lua"
+# smoothing (issue 4): local against global, two sizes
+"$ROOT/build/lugal" "$ROOT/bench/smooth.lua"
+"$ROOT/build/lugal" "$ROOT/bench/smooth.lua" 100 16

@@ -99,4 +99,11 @@ local nl = lg.nonlinear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.
                                 bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}
 fails(function() return nl:solve() end, "problem:solve: the nonlinear solve did not converge")
 
+-- Lagrange elements exist on triangles and tetrahedra only: a quadrilateral mesh is refused
+-- with a message naming the cell type and the supported ones
+local qm = lg.mesh.rectangle{nx = 2, cell = "quadrilateral"}
+fails(function()
+  return lg.linear_problem{mesh = qm, eqn = lg.integral(qm:cells(), u*v - v), test = v, unknown = u}
+end, "quadrilaterals", "triangles and tetrahedra are")
+
 print(n .. " bad inputs reported as errors")

@@ -104,6 +104,11 @@ void lg_function_free(lg_function *f) {
 
 /* ---------------------------------------------------------------- regions */
 
+static int cmp_long(const void *a, const void *b) {
+  long x = *(const long *)a, y = *(const long *)b;
+  return (x > y) - (x < y);
+}
+
 int lg_region_items(lg_env *env, lg_mesh *lm, const region *r, int *n, int **cells, int **facets) {
   mesh *m = lm->m;
   *cells = NULL;
@@ -129,21 +134,40 @@ int lg_region_items(lg_env *env, lg_mesh *lm, const region *r, int *n, int **cel
   }
   if (mesh_build_boundary_cells(m)) { lg_seterr(env, "%s", m->err); return 1; }
   int cnt = 0;
-  for (int b = 0; b < m->nbf; b++)
-    for (int t = 0; t < r->ntag; t++) cnt += m->bf_tag[b] == r->tags[t];
+  for (int b = 0; b < m->nbf; b++) {
+    int in = r->ntag == 0;
+    for (int t = 0; t < r->ntag && !in; t++) in = m->bf_tag[b] == r->tags[t];
+    cnt += in;
+  }
   *cells = malloc(sizeof(int) * (size_t)(cnt + 1));
   *facets = malloc(sizeof(int) * (size_t)(cnt + 1));
   if (!*cells || !*facets) { free(*cells); free(*facets); *cells = *facets = NULL; lg_seterr(env, "out of memory"); return 1; }
   int k = 0;
-  for (int b = 0; b < m->nbf; b++)
-    for (int t = 0; t < r->ntag; t++)
-      if (m->bf_tag[b] == r->tags[t]) {
-        (*cells)[k] = m->bf_cell[b];
-        (*facets)[k] = m->bf_local[b];
-        k++;
-        break;
-      }
-  *n = k;
+  for (int b = 0; b < m->nbf; b++) {
+    int in = r->ntag == 0;
+    for (int t = 0; t < r->ntag && !in; t++) in = m->bf_tag[b] == r->tags[t];
+    if (in) {
+      (*cells)[k] = m->bf_cell[b];
+      (*facets)[k] = m->bf_local[b];
+      k++;
+    }
+  }
+  /* a facet under two of the region's tags is one facet of the region, integrated once */
+  long *key = malloc(sizeof(long) * (size_t)(k + 1));
+  if (!key) { free(*cells); free(*facets); *cells = *facets = NULL; lg_seterr(env, "out of memory"); return 1; }
+  for (int i = 0; i < k; i++) key[i] = (long)(*cells)[i] * 8 + (*facets)[i];
+  qsort(key, (size_t)k, sizeof(long), cmp_long);
+  int u = 0;
+  for (int i = 0; i < k; i++) {
+    if (u && key[u - 1] == key[i]) continue;
+    key[u++] = key[i];
+  }
+  for (int i = 0; i < u; i++) {
+    (*cells)[i] = (int)(key[i] / 8);
+    (*facets)[i] = (int)(key[i] % 8);
+  }
+  free(key);
+  *n = u;
   return 0;
 }
 

@@ -115,6 +115,9 @@ long lg_problem_nnz(const lg_problem *p);
 /* PETSc start-up and shutdown with lugal's defaults (see the runner) */
 int lg_petsc_init(int *argc, char ***argv);
 void lg_petsc_finalize(void);
+/* PETSc options that nothing used (a mistyped -ksp_tpye), one warning each on stderr, as
+ * -options_left does; returns how many */
+int lg_petsc_report_unused_options(void);
 /* number of MPI processes */
 int lg_petsc_size(void);
 

@@ -813,6 +813,17 @@ int lg_petsc_init(int *argc, char ***argv) {
 
 void lg_petsc_finalize(void) { PetscFinalize(); }
 
+int lg_petsc_report_unused_options(void) {
+  PetscInt n = 0;
+  char **names = NULL, **values = NULL;
+  if (PetscOptionsLeftGet(NULL, &n, &names, &values)) return 0;
+  for (PetscInt i = 0; i < n; i++)
+    fprintf(stderr, "lugal: warning: the option -%s%s%s was not used (misspelt? -help lists the options of the solvers the "
+                    "script creates)\n", names[i], values[i] ? " " : "", values[i] ? values[i] : "");
+  PetscOptionsLeftRestore(NULL, &n, &names, &values);
+  return (int)n;
+}
+
 int lg_petsc_size(void) {
   PetscMPIInt size = 1;
   MPI_Comm_size(PETSC_COMM_WORLD, &size);

@@ -165,10 +165,10 @@ void expr_codegen_ref(const expr_tape *t, int k, const char *prefix, expr_leaf_n
 
 /* ---- forms: sums of integrals of scalar integrands over regions */
 typedef enum { REGION_CELLS, REGION_BOUNDARY } region_kind;
-#define REGION_MAXTAGS 16
+#define REGION_MAXTAGS 64
 typedef struct {
   region_kind kind;
-  int ntag;              /* 0: every cell (REGION_CELLS) */
+  int ntag;              /* 0: every cell (REGION_CELLS), every tagged facet (REGION_BOUNDARY) */
   int tags[REGION_MAXTAGS];
   void *mesh;            /* the mesh the region belongs to (opaque here) */
 } region;

@@ -8,6 +8,7 @@
 #include <lauxlib.h>
 #include <lua.h>
 #include <lualib.h>
+#include <petscsys.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -41,11 +42,11 @@ int main(int argc, char **argv) {
   if (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) { usage(stdout); return 0; }
   const char *script = argv[1];
   if (script[0] == '-') { fprintf(stderr, "lugal: the first argument must be a script, got %s\n", script); usage(stderr); return 2; }
-  int want_tb = 0;
-  for (int i = 2; i < argc; i++) want_tb |= !strcmp(argv[i], "-lugal_traceback");
   int pargc = argc;
   char **pargv = argv;
   if (lg_petsc_init(&pargc, &pargv)) { fprintf(stderr, "lugal: PETSc failed to initialize\n"); return 1; }
+  PetscBool want_tb = PETSC_FALSE;
+  PetscOptionsHasName(NULL, NULL, "-lugal_traceback", &want_tb);
   if (lg_petsc_size() > 1) {
     /* every rank would redo the whole serial run: refuse rather than mislead */
     fprintf(stderr, "lugal: parallel runs are not supported yet (this is %d processes); run "
@@ -85,6 +86,7 @@ int main(int argc, char **argv) {
     }
   }
   lua_close(L);
+  lg_petsc_report_unused_options();
   lg_petsc_finalize();
   return status;
 }

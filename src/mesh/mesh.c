@@ -134,6 +134,9 @@ mesh *mesh_create(cell_type t, int nvert, const double *x, int ncell, const int 
   return m;
 }
 
+static void free_names(mesh_name *tab, int n);
+static int copy_names(mesh_name **dst, int *nd, int *capd, const mesh_name *src, int n);
+
 static void mesh_free_derived(mesh *m) {
   free(m->edges); free(m->cell_edges); free(m->faces); free(m->cell_faces);
   free(m->bf_cell); free(m->bf_local);
@@ -145,6 +148,8 @@ void mesh_free(mesh *m) {
   if (!m) return;
   mesh_free_derived(m);
   mesh_big_free(m->x); mesh_big_free(m->cells); free(m->cell_tag); free(m->bf_verts); free(m->bf_tag);
+  free_names(m->bnames, m->nbname);
+  free_names(m->cnames, m->ncname);
   free(m);
 }
 
@@ -161,44 +166,61 @@ mesh *mesh_copy(const mesh *m) {
     memcpy(c->bf_tag, m->bf_tag, sizeof(int) * (size_t)m->nbf);
     c->nbf = m->nbf;
   }
-  c->nbname = m->nbname; c->ncname = m->ncname;
-  memcpy(c->bnames, m->bnames, sizeof m->bnames);
-  memcpy(c->cnames, m->cnames, sizeof m->cnames);
+  if (copy_names(&c->bnames, &c->nbname, &c->capbname, m->bnames, m->nbname) ||
+      copy_names(&c->cnames, &c->ncname, &c->capcname, m->cnames, m->ncname)) {
+    mesh_free(c);
+    return NULL;
+  }
   return c;
 }
 
-static int set_name(mesh_name *tab, int *n, int tag, const char *name, char *err) {
+static int set_name(mesh_name **tab, int *n, int *cap, int tag, const char *name, char *err) {
   for (int i = 0; i < *n; i++) {
-    if (tab[i].tag == tag) {
-      snprintf(tab[i].name, sizeof tab[i].name, "%s", name);
+    if ((*tab)[i].tag == tag) {
+      char *s = strdup(name);
+      if (!s) { seterr(err, "out of memory"); return 1; }
+      free((*tab)[i].name);
+      (*tab)[i].name = s;
       return 0;
     }
   }
-  if (*n >= MESH_MAXNAMES) {
-    seterr(err, "too many names (at most %d)", MESH_MAXNAMES);
-    return 1;
+  if (*n == *cap) {
+    int nc = *cap ? 2 * *cap : 8;
+    mesh_name *nt = realloc(*tab, sizeof(mesh_name) * (size_t)nc);
+    if (!nt) { seterr(err, "out of memory"); return 1; }
+    *tab = nt;
+    *cap = nc;
   }
-  tab[*n].tag = tag;
-  snprintf(tab[*n].name, sizeof tab[*n].name, "%s", name);
+  char *s = strdup(name);
+  if (!s) { seterr(err, "out of memory"); return 1; }
+  (*tab)[*n].tag = tag;
+  (*tab)[*n].name = s;
   (*n)++;
   return 0;
 }
 
+static void free_names(mesh_name *tab, int n) {
+  for (int i = 0; i < n; i++) free(tab[i].name);
+  free(tab);
+}
+
+static int copy_names(mesh_name **dst, int *nd, int *capd, const mesh_name *src, int n) {
+  *dst = NULL;
+  *nd = *capd = 0;
+  for (int i = 0; i < n; i++)
+    if (set_name(dst, nd, capd, src[i].tag, src[i].name, NULL)) return 1;
+  return 0;
+}
+
 int mesh_set_boundary_name(mesh *m, int tag, const char *name) {
-  return set_name(m->bnames, &m->nbname, tag, name, m->err);
+  return set_name(&m->bnames, &m->nbname, &m->capbname, tag, name, m->err);
 }
 int mesh_set_region_name(mesh *m, int tag, const char *name) {
-  return set_name(m->cnames, &m->ncname, tag, name, m->err);
+  return set_name(&m->cnames, &m->ncname, &m->capcname, tag, name, m->err);
 }
 
 int mesh_add_boundary_facets(mesh *m, int n, const int *verts, int tag, const char *name) {
-  if (n < 0) return 1;
-  int *bv = realloc(m->bf_verts, sizeof(int) * (size_t)(m->nbf + n) * (size_t)m->nvf);
-  if (!bv) { seterr(m->err, "out of memory"); return 1; }
-  m->bf_verts = bv;
-  int *bt = realloc(m->bf_tag, sizeof(int) * (size_t)(m->nbf + n));
-  if (!bt) { seterr(m->err, "out of memory"); return 1; }
-  m->bf_tag = bt;
+  if (n < 0 || n > 0x3fffffff - m->nbf) { seterr(m->err, "bad boundary facet count %d", n); return 1; }
   for (int i = 0; i < n * m->nvf; i++) {
     if (verts[i] < 0 || verts[i] >= m->nvert) {
       seterr(m->err, "boundary facet %d refers to vertex %d, but the mesh has %d vertices",
@@ -206,6 +228,12 @@ int mesh_add_boundary_facets(mesh *m, int n, const int *verts, int tag, const ch
       return 1;
     }
   }
+  int *bv = realloc(m->bf_verts, sizeof(int) * (size_t)(m->nbf + n) * (size_t)m->nvf + 1);
+  if (!bv) { seterr(m->err, "out of memory"); return 1; }
+  m->bf_verts = bv;
+  int *bt = realloc(m->bf_tag, sizeof(int) * (size_t)(m->nbf + n) + 1);
+  if (!bt) { seterr(m->err, "out of memory"); return 1; }
+  m->bf_tag = bt;
   memcpy(m->bf_verts + (size_t)m->nbf * (size_t)m->nvf, verts,
          sizeof(int) * (size_t)n * (size_t)m->nvf);
   for (int i = 0; i < n; i++) m->bf_tag[m->nbf + i] = tag;
@@ -216,25 +244,76 @@ int mesh_add_boundary_facets(mesh *m, int n, const int *verts, int tag, const ch
   return 0;
 }
 
-static int find_name(const mesh_name *tab, int n, const char *name) {
+static int icmp(const void *a, const void *b) {
+  int x = *(const int *)a, y = *(const int *)b;
+  return (x > y) - (x < y);
+}
+
+static int find_names(const mesh_name *tab, int n, const char *name, int *tags, int max) {
+  int k = 0;
   for (int i = 0; i < n; i++)
-    if (!strcmp(tab[i].name, name)) return tab[i].tag;
-  return -1;
+    if (!strcmp(tab[i].name, name)) {
+      if (k < max) tags[k] = tab[i].tag;
+      k++;
+    }
+  if (tags) qsort(tags, (size_t)(k < max ? k : max), sizeof(int), icmp);
+  return k;
 }
-int mesh_boundary_tag(const mesh *m, const char *name) {
-  return find_name(m->bnames, m->nbname, name);
+int mesh_boundary_tags(const mesh *m, const char *name, int *tags, int max) {
+  return find_names(m->bnames, m->nbname, name, tags, max);
 }
-int mesh_region_tag(const mesh *m, const char *name) {
-  return find_name(m->cnames, m->ncname, name);
+int mesh_region_tags(const mesh *m, const char *name, int *tags, int max) {
+  return find_names(m->cnames, m->ncname, name, tags, max);
 }
-void mesh_boundary_names(const mesh *m, char *buf, size_t len) {
+
+/* distinct nonzero values of v[0..n) ascending: count, up to max written */
+static int distinct_tags(const int *v, int n, int *tags, int max) {
+  int *s = malloc(sizeof(int) * (size_t)n + 1);
+  if (!s) return -1;
+  int k = 0;
+  for (int i = 0; i < n; i++)
+    if (v[i]) s[k++] = v[i];
+  qsort(s, (size_t)k, sizeof(int), icmp);
+  int d = 0;
+  for (int i = 0; i < k; i++) {
+    if (i && s[i] == s[i - 1]) continue;
+    if (d < max) tags[d] = s[i];
+    d++;
+  }
+  free(s);
+  return d;
+}
+int mesh_used_boundary_tags(const mesh *m, int *tags, int max) { return distinct_tags(m->bf_tag, m->nbf, tags, max); }
+int mesh_used_region_tags(const mesh *m, int *tags, int max) { return distinct_tags(m->cell_tag, m->ncell, tags, max); }
+int mesh_has_boundary_tag(const mesh *m, int tag) {
+  for (int b = 0; b < m->nbf; b++)
+    if (m->bf_tag[b] == tag) return 1;
+  return 0;
+}
+int mesh_has_region_tag(const mesh *m, int tag) {
+  for (int c = 0; c < m->ncell; c++)
+    if (m->cell_tag[c] == tag) return 1;
+  return 0;
+}
+
+static void list_names(const mesh_name *tab, int n, char *buf, size_t len) {
   size_t used = 0;
   buf[0] = 0;
-  for (int i = 0; i < m->nbname && used < len; i++)
-    used += (size_t)snprintf(buf + used, len - used, "%s\"%s\"", i ? ", " : "",
-                             m->bnames[i].name);
-  if (!m->nbname) snprintf(buf, len, "(none)");
+  for (int i = 0; i < n; i++) {
+    int dup = 0;
+    for (int j = 0; j < i && !dup; j++) dup = !strcmp(tab[j].name, tab[i].name);
+    if (dup) continue;
+    size_t need = strlen(tab[i].name) + 4;
+    if (used + need + 6 >= len) {
+      snprintf(buf + used, len - used, "%s...", used ? ", " : "");
+      return;
+    }
+    used += (size_t)snprintf(buf + used, len - used, "%s\"%s\"", used ? ", " : "", tab[i].name);
+  }
+  if (!n) snprintf(buf, len, "(none)");
 }
+void mesh_boundary_names(const mesh *m, char *buf, size_t len) { list_names(m->bnames, m->nbname, buf, len); }
+void mesh_region_names(const mesh *m, char *buf, size_t len) { list_names(m->cnames, m->ncname, buf, len); }
 
 /* ---------------------------------------------------------------- geometry */
 
@@ -321,41 +400,184 @@ double hex_signed_volume(const double *x) {
   return vol;
 }
 
+/* the length of a d-vector without overflow or underflow of its squares */
+static double vec_length(const double *t, int d) {
+  double a = 0;
+  for (int k = 0; k < d; k++) a = fmax(a, fabs(t[k]));
+  if (a == 0 || !(a < INFINITY)) return a;
+  if (a > 1e-150 && a < 1e150) {
+    double s = 0;
+    for (int k = 0; k < d; k++) s += t[k] * t[k];
+    return sqrt(s);
+  }
+  double s = 0;
+  for (int k = 0; k < d; k++) s += (t[k] / a) * (t[k] / a);
+  return a * sqrt(s);
+}
+
 double mesh_hmax(const mesh *m) {
   double h = 0;
-  int ne = cell_nedges(m->type);
+  int ne = cell_nedges(m->type), d = m->dim;
   for (int c = 0; c < m->ncell; c++) {
     const int *v = m->cells + (size_t)c * (size_t)m->nvc;
     for (int e = 0; e < ne; e++) {
       const int *ev = cell_edge_verts(m->type, e);
-      double s = 0;
-      for (int d = 0; d < m->dim; d++) {
-        double t = m->x[m->dim * v[ev[0]] + d] - m->x[m->dim * v[ev[1]] + d];
-        s += t * t;
-      }
-      if (s > h) h = s;
+      double t[3];
+      for (int k = 0; k < d; k++) t[k] = m->x[(size_t)d * v[ev[0]] + k] - m->x[(size_t)d * v[ev[1]] + k];
+      double l = vec_length(t, d);
+      if (l > h || isnan(l)) h = l;
+      if (isnan(h)) return h;
     }
   }
-  return sqrt(h);
+  return h;
+}
+
+int points_normalized(int nv, int d, const double *in, double *out) {
+  int n = nv * d;
+  double amax = 0;
+  for (int i = 0; i < n; i++) {
+    double a = fabs(in[i]);
+    if (!(a <= 1.79e308)) { /* NaN or infinite */
+      for (int k = 0; k < n; k++) out[k] = NAN;
+      return 0;
+    }
+    if (a > amax) amax = a;
+  }
+  /* huge coordinates: scale first so that differences cannot overflow */
+  int e1 = 0;
+  if (amax > 0x1p900) {
+    frexp(amax, &e1);
+    for (int i = 0; i < n; i++) out[i] = ldexp(in[i], -e1);
+    for (int i = n - 1; i >= 0; i--) out[i] -= out[i % d];
+  } else {
+    for (int i = 0; i < n; i++) out[i] = in[i] - in[i % d];
+  }
+  double dmax = 0;
+  for (int i = d; i < n; i++) {
+    double a = fabs(out[i]);
+    if (a > dmax) dmax = a;
+  }
+  if (dmax == 0) return 0;
+  int e2;
+  frexp(dmax, &e2);
+  if (e2 != 0) {
+    if (e2 > -1000 && e2 < 1000) { /* a multiplication by a power of two is exact */
+      double s = ldexp(1.0, -e2);
+      for (int i = d; i < n; i++) out[i] *= s;
+    } else
+      for (int i = d; i < n; i++) out[i] = ldexp(out[i], -e2);
+  }
+  return e1 + e2;
+}
+
+int mesh_cell_normalized(const mesh *m, int c, double *out) {
+  double x[8 * 3];
+  const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+  int d = m->dim;
+  for (int i = 0; i < m->nvc; i++)
+    for (int k = 0; k < d; k++) x[i * d + k] = m->x[(size_t)v[i] * d + k];
+  return points_normalized(m->nvc, d, x, out);
+}
+
+/* signed measure of a cell given its (normalized) coordinates */
+static double coords_signed_measure(cell_type t, const double *x) {
+  switch (t) {
+  case CELL_TRIANGLE:
+    return 0.5 * ((x[2] - x[0]) * (x[5] - x[1]) - (x[3] - x[1]) * (x[4] - x[0]));
+  case CELL_QUADRILATERAL: {
+    double s = 0;
+    for (int i = 0; i < 4; i++) s += x[2 * i] * x[2 * ((i + 1) % 4) + 1] - x[2 * i + 1] * x[2 * ((i + 1) % 4)];
+    return 0.5 * s;
+  }
+  case CELL_TETRAHEDRON: {
+    double e[3][3];
+    for (int k = 0; k < 3; k++)
+      for (int d = 0; d < 3; d++) e[k][d] = x[3 * (k + 1) + d] - x[d];
+    return det3(e[0], e[1], e[2]) / 6.0;
+  }
+  default: return hex_signed_volume(x);
+  }
+}
+
+static double coords_min_corner_jacobian(cell_type t, const double *x) {
+  double mn = INFINITY;
+  if (t == CELL_QUADRILATERAL) {
+    for (int i = 0; i < 4; i++) {
+      const double *p = x + 2 * i, *a = x + 2 * ((i + 1) % 4), *b = x + 2 * ((i + 3) % 4);
+      double j = (a[0] - p[0]) * (b[1] - p[1]) - (a[1] - p[1]) * (b[0] - p[0]);
+      if (j < mn) mn = j;
+    }
+    return mn;
+  }
+  for (int i = 0; i < 8; i++) {
+    const double *p = x + 3 * i;
+    double e[3][3];
+    for (int k = 0; k < 3; k++)
+      for (int d = 0; d < 3; d++) e[k][d] = x[3 * hex_corner[i][k] + d] - p[d];
+    double j = det3(e[0], e[1], e[2]);
+    if (j < mn) mn = j;
+  }
+  return mn;
+}
+
+double mesh_cell_relative_validity(const mesh *m, int c) {
+  double x[8 * 3];
+  mesh_cell_normalized(m, c, x);
+  if (isnan(x[0])) return NAN;
+  double q = m->type == CELL_QUADRILATERAL || m->type == CELL_HEXAHEDRON ? coords_min_corner_jacobian(m->type, x)
+                                                                           : coords_signed_measure(m->type, x);
+  /* relative to the longest edge to the power dim (the coordinates are O(1) now) */
+  double h = 0;
+  int ne = cell_nedges(m->type), d = m->dim;
+  for (int e = 0; e < ne; e++) {
+    const int *ev = cell_edge_verts(m->type, e);
+    double s = 0;
+    for (int k = 0; k < d; k++) {
+      double t = x[ev[0] * d + k] - x[ev[1] * d + k];
+      s += t * t;
+    }
+    if (s > h) h = s;
+  }
+  if (h == 0) return 0;
+  return q / (d == 2 ? h : h * sqrt(h));
 }
 
 int mesh_count_invalid(const mesh *m, int maxids, int *ids, int *ninv) {
   int n = 0;
-  double h = mesh_hmax(m);
-  double tol = 1e-13 * pow(h, m->dim);
   for (int c = 0; c < m->ncell; c++) {
-    double q;
-    if (m->type == CELL_QUADRILATERAL || m->type == CELL_HEXAHEDRON)
-      q = mesh_min_corner_jacobian(m, c);
-    else
-      q = mesh_cell_signed_measure(m, c);
-    if (!(q > tol)) {
+    double q = mesh_cell_relative_validity(m, c);
+    if (!(q > 1e-13)) {
       if (n < maxids && ids) ids[n] = c;
       n++;
     }
   }
   *ninv = n;
   return 0;
+}
+
+int mesh_orient_consistently(mesh *m) {
+  if (m->ncell == 0) return 0;
+  double x[8 * 3];
+  for (int c = 0; c < m->ncell; c++) {
+    mesh_cell_normalized(m, c, x);
+    if (!(coords_signed_measure(m->type, x) < 0)) return 0;
+  }
+  int nvc = m->nvc;
+  for (int c = 0; c < m->ncell; c++) {
+    int *v = m->cells + (size_t)c * (size_t)nvc, t;
+    switch (m->type) {
+    case CELL_TRIANGLE: case CELL_TETRAHEDRON:
+      t = v[nvc - 1]; v[nvc - 1] = v[nvc - 2]; v[nvc - 2] = t;
+      break;
+    case CELL_QUADRILATERAL:
+      t = v[1]; v[1] = v[3]; v[3] = t;
+      break;
+    case CELL_HEXAHEDRON:
+      for (int k = 0; k < 4; k++) { t = v[k]; v[k] = v[k + 4]; v[k + 4] = t; }
+      break;
+    }
+  }
+  return 1;
 }
 
 /* ---------------------------------------------------------------- adjacency */
@@ -670,7 +892,7 @@ mesh *mesh_refine(const mesh *m, char *err) {
   for (int e = 0; e < mm->nedge; e++)
     for (int k = 0; k < d; k++)
       r->x[(size_t)(m->nvert + e) * d + k] =
-          0.5 * (m->x[d * mm->edges[2 * e] + k] + m->x[d * mm->edges[2 * e + 1] + k]);
+          0.5 * m->x[d * mm->edges[2 * e] + k] + 0.5 * m->x[d * mm->edges[2 * e + 1] + k]; /* no overflow */
   int ne = cell_nedges(m->type);
   for (int c = 0; c < m->ncell; c++) {
     const int *v = m->cells + (size_t)c * (size_t)m->nvc;
@@ -686,8 +908,8 @@ mesh *mesh_refine(const mesh *m, char *err) {
       int cv = m->nvert + mm->nedge + c;
       for (int k = 0; k < 2; k++) {
         double s = 0;
-        for (int i = 0; i < 4; i++) s += m->x[2 * v[i] + k];
-        r->x[2 * cv + k] = 0.25 * s;
+        for (int i = 0; i < 4; i++) s += 0.25 * m->x[2 * v[i] + k];
+        r->x[2 * cv + k] = s;
       }
       int m01 = m->nvert + ce[0], m12 = m->nvert + ce[1], m23 = m->nvert + ce[2], m30 = m->nvert + ce[3];
       int t[4][4] = {{v[0], m01, cv, m30}, {m01, v[1], m12, cv}, {cv, m12, v[2], m23}, {m30, cv, m23, v[3]}};
@@ -761,9 +983,9 @@ mesh *mesh_refine(const mesh *m, char *err) {
     r->nbf = m->nbf * per;
     th_free(&h);
   }
-  r->nbname = m->nbname; r->ncname = m->ncname;
-  memcpy(r->bnames, m->bnames, sizeof m->bnames);
-  memcpy(r->cnames, m->cnames, sizeof m->cnames);
+  if (copy_names(&r->bnames, &r->nbname, &r->capbname, m->bnames, m->nbname) ||
+      copy_names(&r->cnames, &r->ncname, &r->capcname, m->cnames, m->ncname))
+    goto oom;
   mesh_free(mm);
   return r;
 oom:

@@ -19,12 +19,12 @@ typedef enum {
 } cell_type;
 
 #define MESH_ERRLEN 512
-#define MESH_MAXNAMES 64
 
-/* a (tag, name) pair: physical names of Gmsh, or generator names */
+/* a (tag, name) pair: physical names of Gmsh, or generator names. Names have any length;
+ * several tags may share a name (a name then means all of them), a tag has one name. */
 typedef struct {
   int tag;
-  char name[64];
+  char *name; /* owned by the mesh */
 } mesh_name;
 
 typedef struct mesh {
@@ -40,9 +40,9 @@ typedef struct mesh {
   int nbf;        /* tagged boundary facets */
   int *bf_verts;  /* nbf*nvf */
   int *bf_tag;    /* nbf */
-  int nbname, ncname;
-  mesh_name bnames[MESH_MAXNAMES]; /* boundary tag names */
-  mesh_name cnames[MESH_MAXNAMES]; /* cell region names */
+  int nbname, ncname, capbname, capcname;
+  mesh_name *bnames; /* boundary tag names */
+  mesh_name *cnames; /* cell region names */
 
   /* derived, built on demand (mesh_build_*), freed with the mesh */
   int nedge;
@@ -83,11 +83,20 @@ mesh *mesh_copy(const mesh *m);
 int mesh_add_boundary_facets(mesh *m, int n, const int *verts, int tag, const char *name);
 int mesh_set_boundary_name(mesh *m, int tag, const char *name);
 int mesh_set_region_name(mesh *m, int tag, const char *name);
-/* tag of a boundary or region name; -1 when unknown */
-int mesh_boundary_tag(const mesh *m, const char *name);
-int mesh_region_tag(const mesh *m, const char *name);
-/* comma-separated list of known boundary names into buf */
+/* the tags named `name` (every tag of that name, in tag order): returns how many there are
+ * (0 when the name is unknown) and writes up to max of them */
+int mesh_boundary_tags(const mesh *m, const char *name, int *tags, int max);
+int mesh_region_tags(const mesh *m, const char *name, int *tags, int max);
+/* the distinct tags in use: boundary facet tags or cell region tags (0, untagged, excluded),
+ * ascending; returns how many and writes up to max */
+int mesh_used_boundary_tags(const mesh *m, int *tags, int max);
+int mesh_used_region_tags(const mesh *m, int *tags, int max);
+/* is tag t used by a boundary facet / a cell */
+int mesh_has_boundary_tag(const mesh *m, int tag);
+int mesh_has_region_tag(const mesh *m, int tag);
+/* comma-separated list of known boundary / region names into buf ("..." when cut) */
 void mesh_boundary_names(const mesh *m, char *buf, size_t len);
+void mesh_region_names(const mesh *m, char *buf, size_t len);
 
 typedef struct {
   int nx, ny, nz;
@@ -99,12 +108,18 @@ typedef struct {
 mesh *mesh_rectangle(const mesh_box_opts *o, char *err);
 mesh *mesh_box(const mesh_box_opts *o, char *err);
 
-/* Gmsh MSH 2.2 and 4.1 ASCII */
+/* Gmsh MSH 2.2 and 4.1 ASCII (gmsh.c): from a file (a regular file or a pipe) or from
+ * len bytes in memory (name labels the messages). Hostile input gives an error naming the
+ * file, line and what was expected, never a crash, a hang or an allocation beyond what the
+ * data can hold. */
 mesh *mesh_read_gmsh(const char *path, char *err);
-/* Gmsh MSH 2.2 ASCII writer (cells, tagged boundary facets, physical names) */
+mesh *mesh_read_gmsh_buffer(const char *buf, size_t len, const char *name, char *err);
+/* Gmsh MSH 2.2 ASCII writer (cells, tagged boundary facets, physical names with `"`, `\`
+ * and newlines escaped as the reader unescapes them) */
 int mesh_write_gmsh(mesh *m, const char *path);
 
-/* VTU output: point and cell data arrays of ncomp components (1 or 3) */
+/* VTU output (vtk.c): point and cell data arrays of ncomp components (1 or 3). Every
+ * writer of the mesh layer writes to a temporary file renamed over the target (outfile.h). */
 typedef struct {
   const char *name;
   int ncomp;
@@ -123,8 +138,21 @@ int mesh_build_boundary_cells(mesh *m);
 
 /* geometry */
 double mesh_cell_signed_measure(const mesh *m, int c);
-/* the validity check run before assembly: counts cells whose signed measure is not
- * positive (relative to the mesh size); writes up to maxids ids of such cells */
+/* the coordinates of cell c (nvc*dim values) translated to its first vertex and scaled by a
+ * power of two (exact) so that the largest coordinate difference lies in [0.5, 1); returns
+ * the binary exponent e of the scale (true coordinates = out * 2^e + vertex 0), so that
+ * scale-invariant measures and signs are computed without overflow or underflow at any
+ * scale (1e-200 or 1e300). A cell whose vertices coincide gets zeros and e = 0; a cell with
+ * a non-finite coordinate gets NaN. */
+int mesh_cell_normalized(const mesh *m, int c, double *out);
+/* the same for nv points of dimension d */
+int points_normalized(int nv, int d, const double *in, double *out);
+/* signed measure of cell c relative to its longest edge to the power dim (scale-free; about
+ * 0.43 for an equilateral triangle); for quadrilaterals and hexahedra the smallest corner
+ * Jacobian relative to the same; NaN for non-finite coordinates */
+double mesh_cell_relative_validity(const mesh *m, int c);
+/* the validity check run before assembly: counts cells that are inverted or degenerate
+ * (relative validity not above 1e-13, or non-finite coordinates); writes up to maxids ids */
 int mesh_count_invalid(const mesh *m, int maxids, int *ids, int *ninv);
 double mesh_hmax(const mesh *m);
 /* minimum corner Jacobian determinant of a quadrilateral or hexahedron (the untangling
@@ -134,6 +162,12 @@ double mesh_min_corner_jacobian(const mesh *m, int c);
 double hex_signed_volume(const double *x);
 /* the three neighbours of hexahedron corner i, in right-handed order */
 const int *hex_corner_neighbors(int i);
+
+/* a mesh whose every cell is negatively oriented was written with the opposite convention
+ * (clockwise): reverse every cell (simplices swap their last two vertices, quadrilaterals
+ * reverse their cycle, hexahedra swap their bottom and top faces). A mixed mesh is left as
+ * it is (it is tangled). Returns 1 when it flipped the cells. */
+int mesh_orient_consistently(mesh *m);
 
 /* uniform refinement: triangles and quadrilaterals into 4, tetrahedra into 8 (Bey),
  * hexahedra into 8; boundary facets and tags follow */

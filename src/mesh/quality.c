@@ -1225,9 +1225,13 @@ static void tet_fast(const mesh *m, int q, double *out) {
     double la = a[0] * a[0] + a[1] * a[1] + a[2] * a[2], lb = b[0] * b[0] + b[1] * b[1] + b[2] * b[2];
     double ld = d[0] * d[0] + d[1] * d[1] + d[2] * d[2], le = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
     double lf = f[0] * f[0] + f[1] * f[1] + f[2] * f[2], lg = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
+    double s = la + lb + ld + le + lf + lg;
+    if (!(s > 1e-60 && s < 1e60)) { /* far from unit size (or not finite): the scaled path */
+      out[c] = mesh_cell_quality(m, c, q);
+      continue;
+    }
     if (q == QM_MEAN_RATIO) {
       /* (2.1): 12 (9 V²)^(1/3) / Σ L², V = det/6 → 12 (det²/4)^(1/3) / Σ L² */
-      double s = la + lb + ld + le + lf + lg;
       double t = 0.25 * det * det;
       out[c] = s > 0 && t > 0 ? 12 * cbrt_pos(t) / s : 0;
     } else {
@@ -1253,12 +1257,31 @@ static double coords_quality(cell_type t, const double *xc, int q) {
   return q == QM_SIGNED_MEASURE ? hex_signed_volume(xc) : hex_quality(xc, q);
 }
 
+/* the power of length that measure q scales with (0 for the shape measures, which are
+ * computed on coordinates scaled to unit size so that no scale overflows or underflows) */
+static int length_power(int q, cell_type t) {
+  int d = cell_dim(t);
+  switch (q) {
+  case QM_SIGNED_MEASURE: case QM_MIN_CORNER_JACOBIAN: case QM_V_JACOBIAN: return d;
+  case QM_MIN_EDGE: case QM_MAX_EDGE: case QM_V_DIMENSION: return 1;
+  case QM_V_AREA: return 2;
+  case QM_V_VOLUME: return 3;
+  default: return 0;
+  }
+}
+
+/* measure q of a cell from its normalized coordinates (mesh_cell_normalized, exponent e) */
+static double scaled_quality(cell_type t, const double *xn, int e, int q) {
+  if (isnan(xn[0])) return NAN;
+  double v = coords_quality(t, xn, q);
+  int p = length_power(q, t);
+  return p && e ? ldexp(v, p * e) : v;
+}
+
 double mesh_cell_quality(const mesh *m, int c, int q) {
   double x[8 * 3];
-  const int *v = m->cells + (size_t)c * (size_t)m->nvc;
-  for (int i = 0; i < m->nvc; i++)
-    for (int k = 0; k < m->dim; k++) x[i * m->dim + k] = m->x[(size_t)v[i] * m->dim + k];
-  return coords_quality(m->type, x, q);
+  int e = mesh_cell_normalized(m, c, x);
+  return scaled_quality(m->type, x, e, q);
 }
 
 int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out, char *err) {
@@ -1285,8 +1308,7 @@ int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out
   double x[8 * 3], y[8 * 3];
   for (int c = 0; c < m->ncell; c++) {
     const int *v = m->cells + (size_t)c * (size_t)nvc;
-    for (int i = 0; i < nvc; i++)
-      for (int k = 0; k < d; k++) x[i * d + k] = m->x[(size_t)v[i] * d + k];
+    int e = mesh_cell_normalized(m, c, x);
     if (kind == 2) { /* the vertex tensors averaged over the cell (section 2.8) */
       double Mb[9] = {0};
       for (int i = 0; i < nvc; i++)
@@ -1306,8 +1328,7 @@ int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out
         }
       xc = y;
     }
-    double val = coords_quality(m->type, xc, q);
-    out[c] = val;
+    out[c] = scaled_quality(m->type, xc, e, q);
   }
   return 0;
 }
@@ -1387,15 +1408,29 @@ int mesh_deformation(const mesh *m, const double *xref, int q, double p, double 
       else if (m->type == CELL_QUADRILATERAL) { nb[0] = (corner + 1) % 4; nb[1] = (corner + 3) % 4; }
       else memcpy(nb, hex_corner_neighbors(corner), sizeof nb);
       int o = simplex ? 0 : corner;
+      /* the corner's edges in both configurations, each scaled to unit size (B is then off
+       * by 2^(ec - er), which only the singular values feel) */
+      double pr[4 * 3], pc[4 * 3], nr[4 * 3], nc[4 * 3];
+      for (int i = 0; i < d; i++) {
+        pr[i] = xref[(size_t)v[o] * d + i];
+        pc[i] = m->x[(size_t)v[o] * d + i];
+        for (int k = 0; k < d; k++) {
+          pr[(k + 1) * d + i] = xref[(size_t)v[nb[k]] * d + i];
+          pc[(k + 1) * d + i] = m->x[(size_t)v[nb[k]] * d + i];
+        }
+      }
+      int er = points_normalized(d + 1, d, pr, nr), ec = points_normalized(d + 1, d, pc, nc);
+      if (isnan(nr[0]) || isnan(nc[0])) { mn = mx = qual = NAN; break; }
       double T[3][3], Tt[3][3], B[3][3], detB;
       for (int k = 0; k < d; k++)
         for (int i = 0; i < d; i++) {
-          T[i][k] = xref[(size_t)v[nb[k]] * d + i] - xref[(size_t)v[o] * d + i];
-          Tt[i][k] = m->x[(size_t)v[nb[k]] * d + i] - m->x[(size_t)v[o] * d + i];
+          T[i][k] = nr[(k + 1) * d + i];
+          Tt[i][k] = nc[(k + 1) * d + i];
         }
       if (deformation_matrix(d, T, Tt, B, &detB)) { bad = 1; break; }
       double sv[3];
       singular_values(d, (const double(*)[3])B, sv);
+      for (int i = 0; i < d; i++) sv[i] = ldexp(sv[i], ec - er);
       mn = fmin(mn, sv[0]);
       mx = fmax(mx, sv[d - 1]);
       double t;
@@ -1424,23 +1459,33 @@ void quality_stats_compute(const double *q, int n, quality_stats *s) {
   s->mean = 0;
   s->argmin = s->argmax = -1;
   double sum = 0, comp = 0; /* compensated: 10 million equal values average to themselves */
+  int pinf = 0, ninf = 0, nan = 0;
   for (int i = 0; i < n; i++) {
-    if (q[i] < s->min) { s->min = q[i]; s->argmin = i; }
-    if (q[i] > s->max) { s->max = q[i]; s->argmax = i; }
-    double y = q[i] - comp, t = sum + y;
+    double v = q[i];
+    if (v < s->min || (s->argmin < 0 && v == s->min)) { s->min = v; s->argmin = i; }
+    if (v > s->max || (s->argmax < 0 && v == s->max)) { s->max = v; s->argmax = i; }
+    if (isnan(v)) { nan++; continue; }
+    if (isinf(v)) { if (v > 0) pinf++; else ninf++; continue; }
+    double y = v - comp, t = sum + y;
     comp = (t - sum) - y;
     sum = t;
   }
-  s->mean = n ? sum / n : NAN;
+  /* infinities dominate the mean (+Inf and -Inf together have none); NaN propagates */
+  if (!n || nan || (pinf && ninf)) s->mean = NAN;
+  else if (pinf) s->mean = INFINITY;
+  else if (ninf) s->mean = -INFINITY;
+  else s->mean = sum / n;
+  if (s->argmin < 0) s->min = NAN;
+  if (s->argmax < 0) s->max = NAN;
 }
 
 void quality_histogram(const double *q, int n, int nbins, double lo, double hi, int *counts) {
   for (int b = 0; b < nbins; b++) counts[b] = 0;
   double w = (hi - lo) / nbins;
   for (int i = 0; i < n; i++) {
-    int b = w > 0 ? (int)floor((q[i] - lo) / w) : 0;
-    if (b < 0) b = 0;
-    if (b >= nbins) b = nbins - 1;
+    if (isnan(q[i])) continue; /* a value that is not a number has no bin */
+    double t = w > 0 && w < INFINITY ? (q[i] - lo) / w : 0;
+    int b = !(t >= 0) ? 0 : t >= nbins ? nbins - 1 : (int)t;
     counts[b]++;
   }
 }

@@ -92,8 +92,11 @@ typedef struct {
   int argmin, argmax;
 } quality_stats;
 
+/* min, max (NaN values are skipped; NaN when every value is), mean (+Inf when a value is
+ * +Inf, -Inf likewise, NaN with both or with a NaN value) */
 void quality_stats_compute(const double *q, int n, quality_stats *s);
-/* counts of n values in nbins equal bins over [lo, hi] (values outside go to the ends) */
+/* counts of n values in nbins equal bins over [lo, hi] (values outside go to the ends,
+ * NaN values to none) */
 void quality_histogram(const double *q, int n, int nbins, double lo, double hi, int *counts);
 /* 1 when larger values are better (η, ρ, ..., scaled Jacobian), 0 when larger values are
  * worse (max angle, τ, σ, ζ, ι, Q, κ₂) */

@@ -1,8 +1,8 @@
 /* svg.c — pictures for people: a 2D mesh with cells coloured by a per-cell value and
  * invalid cells outlined in red, and a histogram of a per-cell value. Plain SVG 1.1. */
 #include "svg.h"
+#include "outfile.h"
 
-#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -34,8 +34,9 @@ static void xml_text(FILE *f, const char *s) {
 int mesh_write_svg(const mesh *m, const char *path, const double *val, double lo, double hi,
                    const char *title, char *err) {
   if (m->dim != 2) { snprintf(err, MESH_ERRLEN, "pictures are for 2D meshes (this one is %dD)", m->dim); return 1; }
-  FILE *f = fopen(path, "w");
-  if (!f) { snprintf(err, MESH_ERRLEN, "cannot write %s: %s", path, strerror(errno)); return 1; }
+  outfile o;
+  if (outfile_open(&o, path, err, MESH_ERRLEN)) return 1;
+  FILE *f = o.f;
   double xmin = INFINITY, xmax = -INFINITY, ymin = INFINITY, ymax = -INFINITY;
   for (int v = 0; v < m->nvert; v++) {
     xmin = fmin(xmin, m->x[2 * v]); xmax = fmax(xmax, m->x[2 * v]);
@@ -55,15 +56,13 @@ int mesh_write_svg(const mesh *m, const char *path, const double *val, double lo
   fprintf(f, "</text>\n<g stroke=\"#555\" stroke-width=\"0.5\" stroke-linejoin=\"round\">\n");
   int ninv;
   mesh_count_invalid(m, 0, NULL, &ninv);
-  double hm = mesh_hmax(m), tol = 1e-13 * hm * hm;
 #define PX(v) (margin + (m->x[2 * (v)] - xmin) * sc)
 #define PY(v) (30 + margin + (ymax - m->x[2 * (v) + 1]) * sc)
   for (int pass = 0; pass < 2; pass++) {
     if (pass == 1) fprintf(f, "</g>\n<g fill=\"none\" stroke=\"#e00\" stroke-width=\"2.5\" stroke-linejoin=\"round\">\n");
     for (int c = 0; c < m->ncell; c++) {
       const int *v = m->cells + (size_t)c * m->nvc;
-      double jac = m->type == CELL_QUADRILATERAL ? mesh_min_corner_jacobian(m, c) : mesh_cell_signed_measure(m, c);
-      int invalid = !(jac > tol);
+      int invalid = !(mesh_cell_relative_validity(m, c) > 1e-13);
       if (pass == 1 && !invalid) continue;
       fprintf(f, "<polygon points=\"");
       for (int i = 0; i < m->nvc; i++) fprintf(f, "%s%.2f,%.2f", i ? " " : "", PX(v[i]), PY(v[i]));
@@ -92,14 +91,14 @@ int mesh_write_svg(const mesh *m, const char *path, const double *val, double lo
     fprintf(f, "<text x=\"%.1f\" y=\"%.1f\" font-family=\"sans-serif\" font-size=\"11\" fill=\"#e00\">%d invalid</text>\n",
             bx - 10, by + bh + 20, ninv);
   fprintf(f, "</svg>\n");
-  if (fclose(f)) { snprintf(err, MESH_ERRLEN, "error writing %s", path); return 1; }
-  return 0;
+  return outfile_commit(&o, err, MESH_ERRLEN);
 }
 
 int write_svg_histogram(const char *path, const int *counts, int nbins, double lo, double hi,
                         const char *title, char *err) {
-  FILE *f = fopen(path, "w");
-  if (!f) { snprintf(err, MESH_ERRLEN, "cannot write %s: %s", path, strerror(errno)); return 1; }
+  outfile o;
+  if (outfile_open(&o, path, err, MESH_ERRLEN)) return 1;
+  FILE *f = o.f;
   const double W = 640, H = 400, L = 60, R = 20, T = 40, B = 50;
   int cmax = 1;
   long total = 0;
@@ -136,6 +135,5 @@ int write_svg_histogram(const char *path, const int *counts, int nbins, double l
           L + pw / 2, H - 12);
   fprintf(f, "<text x=\"14\" y=\"%.0f\" font-family=\"sans-serif\" font-size=\"12\" transform=\"rotate(-90 14 %.0f)\" "
              "text-anchor=\"middle\">cells</text>\n</svg>\n", T + ph / 2, T + ph / 2);
-  if (fclose(f)) { snprintf(err, MESH_ERRLEN, "error writing %s", path); return 1; }
-  return 0;
+  return outfile_commit(&o, err, MESH_ERRLEN);
 }

@@ -1208,7 +1208,32 @@ static void stage_end(const ctx *C, const double *x, double beta, untangle_stage
   if (verbose) stage_print(s);
 }
 
-int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err) {
+typedef struct {
+  double *x;
+  int ninv;
+  double jmin;
+  int stage; /* after which stage (0: the input) */
+} best_state;
+
+static void best_offer(const ctx *C, const double *x, best_state *b, size_t nx, int stage) {
+  if (!b->x) return;
+  int ninv = 0;
+  double jmin = INFINITY;
+  for (int c = 0; c < C->m->ncell; c++) {
+    double j = cell_min_jac(C, x, c);
+    ninv += !(j > C->jtol);
+    jmin = fmin(jmin, j);
+  }
+  if (isnan(jmin)) jmin = -INFINITY;
+  if (ninv < b->ninv || (ninv == b->ninv && jmin >= b->jmin)) {
+    memcpy(b->x, x, sizeof(double) * nx);
+    b->ninv = ninv;
+    b->jmin = jmin;
+    b->stage = stage;
+  }
+}
+
+static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, char *err) {
   double t0 = now();
   memset(r, 0, sizeof *r);
   if (m->ncell == 0) { snprintf(err, MESH_ERRLEN, "the mesh has no cells"); return 1; }
@@ -1228,6 +1253,10 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
   memcpy(x0, m->x, sizeof(double) * nx);
   int maxit = o->max_iterations > 0 ? o->max_iterations : 100;
   count_cells(&C, m->x, beta, &r->invalid_before, NULL);
+  /* the best state seen (fewest invalid cells, then the largest smallest corner Jacobian):
+   * a mesh with no valid embedding may defeat the stages, but is never left worse */
+  best_state best = {malloc(sizeof(double) * (nx + 1)), INT_MAX, -INFINITY, -1};
+  best_offer(&C, m->x, &best, nx, 0);
   if (o->verbose)
     printf("untangle: %d %s, %d invalid, beta %.3g, boundary %s\n", m->ncell, cell_plural(m->type), r->invalid_before,
            beta, o->slide ? "slides" : "fixed");
@@ -1246,6 +1275,7 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
   s->moved = r->invalid_before && !knot
                  ? feasible_passes(&C, m->x, 0, 0, NULL, o->placement, maxit, moved, &s->iterations) : 0;
   stage_end(&C, m->x, beta, s, ts, o->verbose);
+  best_offer(&C, m->x, &best, nx, 1);
 
   /* stage 2: optimization of (3.3); boundary vertices one by one along the boundary, then
    * the interior vertices of a growing region around the invalid cells together */
@@ -1328,6 +1358,7 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
     prev_inv = ninv;
   }
   stage_end(&C, m->x, beta, s, ts, o->verbose);
+  best_offer(&C, m->x, &best, nx, 2);
 
   /* stage 3: feasible set with J >= β, around what stages 1–2 touched */
   s = &r->stage[2];
@@ -1376,9 +1407,19 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
     free(t2);
   }
   stage_end(&C, m->x, beta, s, ts, o->verbose);
+  best_offer(&C, m->x, &best, nx, 3);
   free(W.fidx); free(W.cmark); free(W.cells); free(list); free(off); free(save); free(trial);
   r->nstage = 3;
   r->invalid_after = s->invalid_after;
+  if (best.x && best.stage >= 0 && best.stage < 3) {
+    memcpy(m->x, best.x, sizeof(double) * nx);
+    r->invalid_after = best.ninv;
+    r->kept_stage = best.stage;
+    if (o->verbose)
+      printf("untangle: the stages did not end in the best state seen; kept the one after %s (%d invalid)\n",
+             best.stage ? r->stage[best.stage - 1].name : "nothing (the input)", best.ninv);
+  } else r->kept_stage = 3;
+  free(best.x);
 
   double sum = 0;
   for (int v = 0; v < m->nvert; v++) {
@@ -1414,7 +1455,7 @@ void untangle_report_print(const untangle_report *r, const mesh *m) {
 
 /* ---------------------------------------------------------------- motion */
 
-int mesh_move(mesh *m, const double *disp, const unsigned char *fixed, move_report *r, char *err) {
+static int move_run(mesh *m, const double *disp, const unsigned char *fixed, move_report *r, char *err) {
   double t0 = now();
   memset(r, 0, sizeof *r);
   ctx C;
@@ -1600,7 +1641,7 @@ static int smooth_global(ctx *C, const smooth_opts *o, smooth_report *r, char *e
   return status;
 }
 
-int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
+static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
   double t0 = now();
   memset(r, 0, sizeof *r);
   r->measure = o->measure;
@@ -1666,4 +1707,136 @@ int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
   free(moved);
   ctx_free(&C);
   return 0;
+}
+
+/* ---------------------------------------------------------------- entry points */
+
+/* every vertex coordinate finite, or a message naming the first that is not */
+static int check_finite(const mesh *m, const char *what, char *err) {
+  for (size_t i = 0; i < (size_t)m->nvert * m->dim; i++)
+    if (!isfinite(m->x[i])) {
+      snprintf(err, MESH_ERRLEN, "vertex %zu has a non-finite coordinate %c = %g: %s needs finite coordinates", i / m->dim + 1,
+               "xyz"[i % m->dim], m->x[i], what);
+      return 1;
+    }
+  return 0;
+}
+
+/* A mesh far from unit size (bounding box below 1e-100 or above 1e100) is worked on in
+ * coordinates translated to its box centre and scaled by a power of two, then mapped back:
+ * corner Jacobians (lengths to the power d) and the tolerances would underflow or overflow.
+ * Vertices that did not move get their original coordinates back bit for bit. */
+typedef struct {
+  int e;          /* true = unit * 2^e + c */
+  double c[3];    /* the centre, scaled by 2^-e */
+  double *orig;   /* NULL: not active */
+} unit_frame;
+
+static int frame_enter(mesh *m, unit_frame *f, char *err) {
+  memset(f, 0, sizeof *f);
+  int d = m->dim;
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (int v = 0; v < m->nvert; v++)
+    for (int j = 0; j < d; j++) {
+      lo[j] = fmin(lo[j], m->x[(size_t)v * d + j]);
+      hi[j] = fmax(hi[j], m->x[(size_t)v * d + j]);
+    }
+  double size = 0;
+  for (int j = 0; j < d; j++) size = fmax(size, 0.5 * hi[j] - 0.5 * lo[j]);
+  if (size == 0 || (size > 1e-100 && size < 1e100)) return 0;
+  f->orig = malloc(sizeof(double) * ((size_t)m->nvert * d + 1));
+  if (!f->orig) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  memcpy(f->orig, m->x, sizeof(double) * (size_t)m->nvert * d);
+  frexp(size, &f->e);
+  for (int j = 0; j < d; j++) f->c[j] = 0.5 * ldexp(lo[j], -f->e) + 0.5 * ldexp(hi[j], -f->e);
+  for (int v = 0; v < m->nvert; v++)
+    for (int j = 0; j < d; j++) m->x[(size_t)v * d + j] = ldexp(f->orig[(size_t)v * d + j], -f->e) - f->c[j];
+  return 0;
+}
+
+static void frame_leave(mesh *m, unit_frame *f) {
+  if (!f->orig) return;
+  int d = m->dim;
+  for (int v = 0; v < m->nvert; v++) {
+    int moved = 0;
+    for (int j = 0; j < d; j++) moved |= m->x[(size_t)v * d + j] != ldexp(f->orig[(size_t)v * d + j], -f->e) - f->c[j];
+    for (int j = 0; j < d; j++)
+      m->x[(size_t)v * d + j] = moved ? ldexp(m->x[(size_t)v * d + j] + f->c[j], f->e) : f->orig[(size_t)v * d + j];
+  }
+  free(f->orig);
+  f->orig = NULL;
+}
+
+static int check_opts(const untangle_opts *o, char *err) {
+  if (!(o->beta < 0) && !(o->beta >= 0 && o->beta < INFINITY)) {
+    snprintf(err, MESH_ERRLEN, "beta must be a finite number >= 0 (or negative for the default), got %g", o->beta);
+    return 1;
+  }
+  if (o->max_iterations < 1 || o->max_iterations > 1000000) {
+    snprintf(err, MESH_ERRLEN, "max_iterations must be 1 to 1000000, got %d", o->max_iterations);
+    return 1;
+  }
+  if (o->placement != 0 && o->placement != 1) { snprintf(err, MESH_ERRLEN, "placement must be 0 or 1"); return 1; }
+  return 0;
+}
+
+int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err) {
+  memset(r, 0, sizeof *r);
+  if (check_opts(o, err) || check_finite(m, "untangling", err)) return 1;
+  unit_frame f;
+  if (frame_enter(m, &f, err)) return 1;
+  untangle_opts oo = *o;
+  if (f.orig && oo.beta > 0) oo.beta = ldexp(oo.beta, -m->dim * f.e); /* beta is a length^d */
+  int rc = untangle_run(m, &oo, r, err);
+  if (f.orig) {
+    r->beta = ldexp(r->beta, m->dim * f.e);
+    r->mean_displacement = ldexp(r->mean_displacement, f.e);
+    r->max_displacement = ldexp(r->max_displacement, f.e);
+  }
+  frame_leave(m, &f);
+  return rc;
+}
+
+int mesh_move(mesh *m, const double *disp, const unsigned char *fixed, move_report *r, char *err) {
+  memset(r, 0, sizeof *r);
+  if (check_finite(m, "mesh motion", err)) return 1;
+  for (int v = 0; v < m->nvert; v++)
+    for (int j = 0; fixed[v] && j < m->dim; j++)
+      if (!isfinite(disp[(size_t)v * m->dim + j])) {
+        snprintf(err, MESH_ERRLEN, "the displacement of vertex %d is not finite (%c = %g)", v + 1, "xyz"[j],
+                 disp[(size_t)v * m->dim + j]);
+        return 1;
+      }
+  unit_frame f;
+  if (frame_enter(m, &f, err)) return 1;
+  double *ds = NULL;
+  if (f.orig) {
+    ds = malloc(sizeof(double) * ((size_t)m->nvert * m->dim + 1));
+    if (!ds) { frame_leave(m, &f); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+    for (size_t i = 0; i < (size_t)m->nvert * m->dim; i++) ds[i] = ldexp(disp[i], -f.e);
+  }
+  int rc = move_run(m, ds ? ds : disp, fixed, r, err);
+  free(ds);
+  frame_leave(m, &f);
+  if (!rc) {
+    /* what the motion left, counted on the true coordinates */
+    int n;
+    mesh_count_invalid(m, 0, NULL, &n);
+    if (n > r->invalid_after) r->invalid_after = n;
+  }
+  return rc;
+}
+
+int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
+  memset(r, 0, sizeof *r);
+  if (o->iterations < 1 || o->iterations > 1000000) {
+    snprintf(err, MESH_ERRLEN, "iterations must be 1 to 1000000, got %d", o->iterations);
+    return 1;
+  }
+  if (check_finite(m, "smoothing", err)) return 1;
+  unit_frame f;
+  if (frame_enter(m, &f, err)) return 1;
+  int rc = smooth_run(m, o, r, err);
+  frame_leave(m, &f);
+  return rc;
 }

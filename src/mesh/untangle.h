@@ -38,11 +38,17 @@ typedef struct {
   double seconds;
   int nstage;
   untangle_stage stage[3];
+  int kept_stage;                   /* the state returned: after stage 3, or an earlier better
+                                       one (0: the input) when the stages made it worse */
 } untangle_report;
 
 void untangle_defaults(untangle_opts *o);
 /* repair m in place; returns 0 when run (check r->invalid_after), nonzero with a message in
- * err (MESH_ERRLEN) on bad input or out of memory */
+ * err (MESH_ERRLEN) on bad input (non-finite coordinates, a bad option) or out of memory.
+ * The mesh returned is the best state seen (fewest invalid cells, then the largest smallest
+ * corner Jacobian), never worse than the input. Meshes of any scale (1e-200 or 1e300) are
+ * repaired in coordinates scaled to unit size and mapped back; vertices that did not move
+ * keep their coordinates bit for bit. */
 int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err);
 void untangle_report_print(const untangle_report *r, const mesh *m);
 /* the paper's default β: (10% of the bounding-box diagonal / cells per direction)^d, a

@@ -1,18 +1,82 @@
 /* test_mesh.c — generators (counts, areas, boundary tags), Gmsh 2.2 and 4.1 reading of the
  * same mesh, uniform refinement (counts, measure, orientation), the validity check, and
- * the Gmsh writer round trip. argv[1] is tests/data. */
+ * the Gmsh writer round trip, folders and pipes as input, escaped names, and writes that
+ * fail (with the reason, leaving the old file). argv[1] is tests/data. */
 #include "../../src/mesh/mesh.h"
 #include "check.h"
 
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
-#include <unistd.h>
 #include <string.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 static double total(const mesh *m) {
   double s = 0;
   for (int c = 0; c < m->ncell; c++) s += mesh_cell_signed_measure(m, c);
   return s;
+}
+
+/* the first tag of a name, -1 when unknown */
+static int btag(const mesh *m, const char *n) { int t; return mesh_boundary_tags(m, n, &t, 1) ? t : -1; }
+static int rtag(const mesh *m, const char *n) { int t; return mesh_region_tags(m, n, &t, 1) ? t : -1; }
+
+/* reading from folders and pipes, writing names with quotes, and writes that fail */
+static void files(const char *data) {
+  char err[MESH_ERRLEN], path[600], tmp[600];
+  CHECK(mesh_read_gmsh("/tmp", err) == NULL && strstr(err, "Is a directory"), "a folder: %s", err);
+  /* a pipe is read to its end */
+  snprintf(path, sizeof path, "%s/square_unstructured_v22.msh", data);
+  snprintf(tmp, sizeof tmp, "/tmp/lugal_fifo_%d", (int)getpid());
+  if (mkfifo(tmp, 0600) == 0) {
+    pid_t pid = fork();
+    if (pid == 0) {
+      FILE *in = fopen(path, "rb"), *out = fopen(tmp, "wb");
+      for (int c; in && out && (c = fgetc(in)) != EOF;) fputc(c, out);
+      if (out) fclose(out);
+      _exit(0);
+    }
+    mesh *p = mesh_read_gmsh(tmp, err);
+    waitpid(pid, NULL, 0);
+    CHECK(p && p->ncell > 100, "a mesh from a pipe: %s", p ? "" : err);
+    mesh_free(p);
+    unlink(tmp);
+  }
+  mesh_box_opts b = {2, 2, 0, 0, 1, 0, 1, 0, 1, CELL_TRIANGLE, 0};
+  mesh *m = mesh_rectangle(&b, err);
+  CHECK(m && mesh_set_boundary_name(m, 1, "say \"hi\"\\\nnext") == 0, "names");
+  snprintf(tmp, sizeof tmp, "/tmp/lugal_names_%d.msh", (int)getpid());
+  CHECK(mesh_write_gmsh(m, tmp) == 0, "%s", m->err);
+  mesh *r = mesh_read_gmsh(tmp, err);
+  CHECK(r && btag(r, "say \"hi\"\\\nnext") == 1, "a name with quotes, a backslash and a newline survives: %s", r ? "" : err);
+  mesh_free(r);
+  /* errors carry the reason; a failed write leaves the old file as it was */
+  CHECK(mesh_write_gmsh(m, "/nonexistent/x.msh") && strstr(m->err, "No such file or directory"), "%s", m->err);
+  CHECK(mesh_write_vtu(m, "/tmp", 0, NULL) && strstr(m->err, "/tmp"), "%s", m->err);
+  struct stat st0, st1;
+  stat(tmp, &st0);
+  pid_t pid = fork();
+  if (pid == 0) { /* a file size limit makes the write fail half way */
+    signal(SIGXFSZ, SIG_IGN);
+    struct rlimit rl = {200, 200};
+    setrlimit(RLIMIT_FSIZE, &rl);
+    mesh_box_opts big = {40, 40, 0, 0, 1, 0, 1, 0, 1, CELL_TRIANGLE, 0};
+    mesh *bm = mesh_rectangle(&big, err);
+    int rc = mesh_write_gmsh(bm, tmp);
+    if (!rc || !strstr(bm->err, "File too large")) fprintf(stderr, "write under a size limit: %d %s\n", rc, bm->err);
+    _exit(rc && strstr(bm->err, "File too large") ? 0 : 1);
+  }
+  int status = 0;
+  waitpid(pid, &status, 0);
+  CHECK(WIFEXITED(status) && WEXITSTATUS(status) == 0, "the failed write reports the reason");
+  stat(tmp, &st1);
+  CHECK(st1.st_size == st0.st_size && st1.st_mtime == st0.st_mtime, "the old file is untouched (%ld bytes, was %ld)",
+        (long)st1.st_size, (long)st0.st_size);
+  unlink(tmp);
+  mesh_free(m);
 }
 
 int main(int argc, char **argv) {
@@ -28,9 +92,9 @@ int main(int argc, char **argv) {
     int ninv;
     mesh_count_invalid(m, 0, NULL, &ninv);
     CHECK(ninv == 0, "%d inverted", ninv);
-    CHECK(mesh_boundary_tag(m, "top") == 4 && mesh_boundary_tag(m, "nope") == -1, "names");
+    CHECK(btag(m, "top") == 4 && btag(m, "nope") == -1, "names");
     int nb = 0;
-    for (int b = 0; b < m->nbf; b++) nb += m->bf_tag[b] == mesh_boundary_tag(m, "left");
+    for (int b = 0; b < m->nbf; b++) nb += m->bf_tag[b] == btag(m, "left");
     CHECK(nb == 2, "left has %d facets", nb);
     mesh_free(m);
   }
@@ -70,14 +134,14 @@ int main(int argc, char **argv) {
     CHECK(g4->ncell == g2->ncell && g4->nvert == g2->nvert && g4->nbf == g2->nbf, "4.1 vs 2.2 sizes");
     CHECK(!memcmp(g4->cells, g2->cells, sizeof(int) * (size_t)g4->ncell * 3), "4.1 vs 2.2 cells");
     CHECK_CLOSE(total(g4), 1.0, 1e-13);
-    CHECK(mesh_boundary_tag(g4, "left") > 0 && mesh_region_tag(g4, "domain") > 0, "physical names");
+    CHECK(btag(g4, "left") > 0 && rtag(g4, "domain") > 0, "physical names");
     mesh_count_invalid(g4, 0, NULL, &ninv);
     CHECK(ninv == 0, "gmsh mesh has %d inverted", ninv);
     /* round trip through the writer */
     snprintf(path, sizeof path, "/tmp/lugal_test_%d.msh", (int)getpid());
     CHECK(mesh_write_gmsh(g4, path) == 0, "%s", g4->err);
     mesh *rt = mesh_read_gmsh(path, err);
-    CHECK(rt && rt->ncell == g4->ncell && rt->nbf == g4->nbf && mesh_boundary_tag(rt, "top") == mesh_boundary_tag(g4, "top"),
+    CHECK(rt && rt->ncell == g4->ncell && rt->nbf == g4->nbf && btag(rt, "top") == btag(g4, "top"),
           "round trip: %s", rt ? "" : err);
     if (rt) CHECK(!memcmp(rt->x, g4->x, sizeof(double) * 2 * (size_t)g4->nvert), "coordinates survive");
     mesh_free(rt);
@@ -96,5 +160,6 @@ int main(int argc, char **argv) {
   mesh_free(bad);
   int badcells[] = {0, 1, 7};
   CHECK(mesh_create(CELL_TRIANGLE, 5, x, 1, badcells, err) == NULL && strstr(err, "refers to vertex 8"), "%s", err);
+  files(data);
   return CHECK_DONE();
 }

@@ -45,7 +45,7 @@ local function write(text)
 end
 local full = assert(io.open(data .. "square_unstructured_v22.msh")):read("a")
 local truncated = write(full:sub(1, math.floor(#full / 2)))
-fails(function() return lg.mesh.read(truncated) end, "lg.mesh.read", truncated, "file ends early")
+fails(function() return lg.mesh.read(truncated) end, "lg.mesh.read", truncated, "truncated")
 local malformed = write((full:gsub("\n2 1 2 1 1 5 6\n", "\n2 1 2 x 1 5 6\n", 1)))
 fails(function() return lg.mesh.read(malformed) end, "expected element tag (an integer), found \"x\"")
 local noelems = write("$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n1\n1 0 0 0\n$EndNodes\n")

@@ -1,0 +1,235 @@
+/* largs.c — what every binding file of the Lua module shares (largs.h): the environment,
+ * errors that name the function and the argument, dependency tables that keep meshes and
+ * functions alive, conversion of Lua values to expressions, option tables, reports. */
+#include "largs.h"
+
+#include <lauxlib.h>
+#include <limits.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+lg_env *get_env(lua_State *L) {
+  lua_getfield(L, LUA_REGISTRYINDEX, "lugal.env");
+  ud_env *u = lua_touserdata(L, -1);
+  lua_pop(L, 1);
+  if (!u || !u->env) luaL_error(L, "lugal: the module is not initialized");
+  return u->env;
+}
+
+int typeerror(lua_State *L, const char *fn, int arg, const char *expected) {
+  const char *got = luaL_typename(L, arg);
+  if (lua_type(L, arg) == LUA_TUSERDATA && luaL_getmetafield(L, arg, "__name") == LUA_TSTRING) {
+    got = lua_tostring(L, -1);
+    if (!strncmp(got, "lugal.", 6)) got += 6;
+  }
+  return luaL_error(L, "%s: argument %d must be %s, got %s", fn, arg, expected, got);
+}
+
+int lgerror(lua_State *L, const char *fn, lg_env *env) {
+  return luaL_error(L, "%s: %s", fn, env->err);
+}
+
+int exprerror(lua_State *L, const char *fn) {
+  return luaL_error(L, "%s: %s", fn, expr_error(get_env(L)->c));
+}
+
+/* merge the dependency table of the value at idx (or the value itself when it is a
+ * discrete function or mesh) into the table at the top of the stack */
+static void deps_merge(lua_State *L, int idx) {
+  idx = lua_absindex(L, idx);
+  if (luaL_testudata(L, idx, MT_FUNC) || luaL_testudata(L, idx, MT_MESH)) {
+    lua_pushvalue(L, idx);
+    lua_pushboolean(L, 1);
+    lua_rawset(L, -3);
+  }
+  if (lua_type(L, idx) != LUA_TUSERDATA) return;
+  if (lua_getiuservalue(L, idx, 1) == LUA_TTABLE) {
+    lua_pushnil(L);
+    while (lua_next(L, -2)) {
+      lua_pushvalue(L, -2);
+      lua_insert(L, -2);
+      lua_rawset(L, -5);
+    }
+  }
+  lua_pop(L, 1);
+}
+
+/* a new userdata with one user value: a dependency table merged from the given slots */
+void *new_ud(lua_State *L, size_t size, const char *mt, int ndeps, const int *deps) {
+  int abs[8];
+  for (int i = 0; i < ndeps && i < 8; i++) abs[i] = lua_absindex(L, deps[i]);
+  void *u = lua_newuserdatauv(L, size, 1);
+  memset(u, 0, size);
+  luaL_setmetatable(L, mt);
+  if (ndeps) {
+    lua_newtable(L);
+    for (int i = 0; i < ndeps && i < 8; i++) deps_merge(L, abs[i]);
+    lua_setiuservalue(L, -2, 1);
+  }
+  return u;
+}
+
+void push_expr(lua_State *L, expr *e, int ndeps, const int *deps, const char *fn) {
+  if (!e) exprerror(L, fn);
+  ud_expr *u = new_ud(L, sizeof *u, MT_EXPR, ndeps, deps);
+  u->e = e;
+}
+
+expr *to_expr_opt(lua_State *L, int idx, int *ok);
+
+static expr *table_to_list(lua_State *L, int idx, int *ok) {
+  lg_env *env = get_env(L);
+  int n = (int)luaL_len(L, idx);
+  if (n < 1 || n > 64) { *ok = 0; return NULL; }
+  expr *items[64];
+  for (int i = 1; i <= n; i++) {
+    lua_geti(L, idx, i);
+    items[i - 1] = to_expr_opt(L, -1, ok);
+    lua_pop(L, 1);
+    if (!*ok) return NULL;
+  }
+  return expr_list(env->c, n, items);
+}
+
+/* number, Expr, Function or table of those; *ok = 0 when the type does not fit */
+expr *to_expr_opt(lua_State *L, int idx, int *ok) {
+  lg_env *env = get_env(L);
+  *ok = 1;
+  if (lua_type(L, idx) == LUA_TNUMBER) return expr_num(env->c, lua_tonumber(L, idx));
+  ud_expr *ue = luaL_testudata(L, idx, MT_EXPR);
+  if (ue) return ue->e;
+  ud_func *uf = luaL_testudata(L, idx, MT_FUNC);
+  if (uf) {
+    unsigned char z[3] = {0, 0, 0};
+    return expr_field(env->c, uf->f->fid, 0, z);
+  }
+  if (lua_type(L, idx) == LUA_TTABLE) return table_to_list(L, lua_absindex(L, idx), ok);
+  *ok = 0;
+  return NULL;
+}
+
+expr *check_expr(lua_State *L, int idx, const char *fn) {
+  int ok;
+  expr *e = to_expr_opt(L, idx, &ok);
+  if (!ok) typeerror(L, fn, idx, "an expression, a number or a discrete function");
+  if (!e) exprerror(L, fn);
+  return e;
+}
+
+ud_mesh *check_mesh(lua_State *L, int idx, const char *fn) {
+  ud_mesh *u = luaL_testudata(L, idx, MT_MESH);
+  if (!u) typeerror(L, fn, idx, "a mesh");
+  return u;
+}
+
+void push_mesh(lua_State *L, mesh *m) {
+  lg_env *env = get_env(L);
+  ud_mesh *u = lua_newuserdatauv(L, sizeof *u, 1);
+  u->lm = lg_mesh_wrap(m);
+  if (!u->lm) { mesh_free(m); luaL_error(L, "out of memory"); }
+  luaL_setmetatable(L, MT_MESH);
+  expr_set_dim(env->c, m->dim);
+}
+
+double opt_num(lua_State *L, int t, const char *key, double def, const char *fn) {
+  double v = def;
+  int ty = lua_getfield(L, t, key);
+  if (ty == LUA_TNUMBER) v = lua_tonumber(L, -1);
+  else if (ty != LUA_TNIL) luaL_error(L, "%s: option '%s' must be a number, got %s", fn, key, luaL_typename(L, -1));
+  lua_pop(L, 1);
+  return v;
+}
+
+int opt_int(lua_State *L, int t, const char *key, int def, const char *fn) {
+  int v = def;
+  int ty = lua_getfield(L, t, key);
+  if (ty == LUA_TNUMBER && lua_isinteger(L, -1)) v = (int)lua_tointeger(L, -1);
+  else if (ty != LUA_TNIL) luaL_error(L, "%s: option '%s' must be an integer, got %s", fn, key, ty == LUA_TNUMBER ? "a fraction" : luaL_typename(L, -1));
+  lua_pop(L, 1);
+  return v;
+}
+
+const char *opt_str(lua_State *L, int t, const char *key, const char *def, const char *fn) {
+  const char *v = def;
+  int ty = lua_getfield(L, t, key);
+  if (ty == LUA_TSTRING) v = lua_tostring(L, -1);
+  else if (ty != LUA_TNIL) luaL_error(L, "%s: option '%s' must be a string, got %s", fn, key, luaL_typename(L, -1));
+  lua_pop(L, 1);
+  return v; /* valid while the table holds it */
+}
+
+void check_keys(lua_State *L, int t, const char *fn, const char *const *allowed) {
+  lua_pushnil(L);
+  while (lua_next(L, t)) {
+    lua_pop(L, 1);
+    if (lua_type(L, -1) != LUA_TSTRING) luaL_error(L, "%s: options must be named (key = value)", fn);
+    const char *k = lua_tostring(L, -1);
+    int ok = 0;
+    for (int i = 0; allowed[i]; i++) ok |= !strcmp(allowed[i], k);
+    if (!ok) {
+      char list[512] = "";
+      size_t used = 0;
+      for (int i = 0; allowed[i] && used < sizeof list; i++)
+        used += (size_t)snprintf(list + used, sizeof list - used, "%s%s", i ? ", " : "", allowed[i]);
+      luaL_error(L, "%s: unknown option '%s' (options: %s)", fn, k, list);
+    }
+  }
+}
+
+/* a report table whose tostring is the readable text in its field `text` */
+static int report_tostring(lua_State *L) {
+  lua_getfield(L, 1, "text");
+  return 1;
+}
+
+static void push_report_meta(lua_State *L) {
+  if (luaL_newmetatable(L, "lugal.report")) {
+    lua_pushcfunction(L, report_tostring);
+    lua_setfield(L, -2, "__tostring");
+  }
+  lua_setmetatable(L, -2);
+}
+
+/* the report table on the stack gets its text and metatable, and is printed unless quiet */
+int finish_report(lua_State *L, const char *text, int quiet) {
+  lua_pushstring(L, text);
+  lua_setfield(L, -2, "text");
+  push_report_meta(L);
+  if (!quiet) printf("%s\n", text);
+  return 1;
+}
+
+void set_num(lua_State *L, const char *k, double v) { lua_pushnumber(L, v); lua_setfield(L, -2, k); }
+
+void set_int(lua_State *L, const char *k, lua_Integer v) { lua_pushinteger(L, v); lua_setfield(L, -2, k); }
+
+/* values of a discrete function at the mesh vertices */
+ud_func *check_func(lua_State *L, int idx, const char *fn) {
+  ud_func *u = luaL_testudata(L, idx, MT_FUNC);
+  if (!u) typeerror(L, fn, idx, "a discrete function");
+  return u;
+}
+
+void push_function(lua_State *L, lg_function *f, int mesh_idx) {
+  int deps[1] = {mesh_idx};
+  ud_func *u = new_ud(L, sizeof *u, MT_FUNC, 1, deps);
+  u->f = f;
+}
+
+void new_mt(lua_State *L, const char *name, const luaL_Reg *mm, const luaL_Reg *methods) {
+  luaL_newmetatable(L, name);
+  if (mm) luaL_setfuncs(L, mm, 0);
+  if (methods) {
+    lua_newtable(L);
+    luaL_setfuncs(L, methods, 0);
+    lua_pushvalue(L, -1);
+    lua_setfield(L, -3, "methods");
+    if (lua_getfield(L, -2, "__index") == LUA_TNIL) {
+      lua_pop(L, 1);
+      lua_setfield(L, -2, "__index");
+    } else lua_pop(L, 2);
+  }
+  lua_pop(L, 1);
+}

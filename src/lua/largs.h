@@ -1,0 +1,69 @@
+/* largs.h — the shared header of the Lua bindings (DESIGN.md: "one bindings file per layer
+ * it binds, sharing one small header of argument checkers"): metatable names, userdata
+ * types, and the helpers that check arguments and raise errors naming the function, the
+ * argument and what was expected. Internal to src/lua. */
+#ifndef LUGAL_LARGS_H
+#define LUGAL_LARGS_H
+
+#include "../assemble/assemble.h"
+#include "../mesh/quality.h"
+
+#include <lauxlib.h>
+#include <lua.h>
+
+#define MT_MESH "lugal.Mesh"
+#define MT_REGION "lugal.Region"
+#define MT_BASIS "lugal.Basis"
+#define MT_EXPR "lugal.Expr"
+#define MT_FUNC "lugal.Function"
+#define MT_FORM "lugal.Form"
+#define MT_BC "lugal.BC"
+#define MT_PROB "lugal.Problem"
+#define MT_SERIES "lugal.Series"
+#define MT_ENV "lugal.Env"
+#define MT_QARRAY "lugal.QualityArray"
+
+typedef struct { lg_mesh *lm; } ud_mesh;
+typedef struct { region r; } ud_region;
+typedef struct { int degree; } ud_basis;
+typedef struct { expr *e; } ud_expr;
+typedef struct { lg_function *f; } ud_func;
+typedef struct { form *f; } ud_form;
+typedef struct { lg_problem *p; int nfield; int nonlinear; } ud_prob;
+typedef struct { char path[512]; int n, cap; double *t; char **files; } ud_series;
+typedef struct { lg_env *env; int owns_petsc; } ud_env;
+typedef struct { int n; int measure; double *v; } ud_qarray; /* v from mesh_big_alloc */
+
+/* the environment of this Lua state (symbolic context, JIT) */
+lg_env *get_env(lua_State *L);
+int typeerror(lua_State *L, const char *fn, int arg, const char *expected);
+int lgerror(lua_State *L, const char *fn, lg_env *env);
+int exprerror(lua_State *L, const char *fn);
+void *new_ud(lua_State *L, size_t size, const char *mt, int ndeps, const int *deps);
+void push_expr(lua_State *L, expr *e, int ndeps, const int *deps, const char *fn);
+expr *to_expr_opt(lua_State *L, int idx, int *ok);
+expr *check_expr(lua_State *L, int idx, const char *fn);
+ud_mesh *check_mesh(lua_State *L, int idx, const char *fn);
+void push_mesh(lua_State *L, mesh *m);
+double opt_num(lua_State *L, int t, const char *key, double def, const char *fn);
+int opt_int(lua_State *L, int t, const char *key, int def, const char *fn);
+const char *opt_str(lua_State *L, int t, const char *key, const char *def, const char *fn);
+void check_keys(lua_State *L, int t, const char *fn, const char *const *allowed);
+int finish_report(lua_State *L, const char *text, int quiet);
+void set_num(lua_State *L, const char *k, double v);
+void set_int(lua_State *L, const char *k, lua_Integer v);
+ud_func *check_func(lua_State *L, int idx, const char *fn);
+void push_function(lua_State *L, lg_function *f, int mesh_idx);
+void new_mt(lua_State *L, const char *name, const luaL_Reg *mm, const luaL_Reg *methods);
+
+/* the bindings of each layer: metatables (register) and library functions */
+extern const luaL_Reg lg_arith_mm[]; /* + - * / ^ unary- for expressions and functions */
+void lg_lua_expr_register(lua_State *L);
+extern const luaL_Reg lg_expr_lib[];
+void lg_lua_mesh_register(lua_State *L);
+extern const luaL_Reg lg_mesh_lib[];     /* lg.mesh.* */
+extern const luaL_Reg lg_output_lib[];   /* lg.series */
+void lg_lua_problem_register(lua_State *L);
+extern const luaL_Reg lg_problem_lib[];
+
+#endif

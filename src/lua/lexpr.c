@@ -1,0 +1,402 @@
+/* lexpr.c — Lua bindings of the symbolic layer: expressions and their operators, forms
+ * (lg.integral, lg.essential_bc), bases and symbols, vector calculus, lg.integrate. */
+#include "largs.h"
+
+#include <lauxlib.h>
+#include <limits.h>
+#include <math.h>
+#include <petscsys.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+typedef expr *(*binop_fn)(expr_ctx *, expr *, expr *);
+
+static int form_arith(lua_State *L, double s, const char *name);
+static int m_mul(lua_State *L);
+
+static int arith(lua_State *L, binop_fn op, const char *name) {
+  lg_env *env = get_env(L);
+  expr *a = check_expr(L, 1, name), *b = check_expr(L, 2, name);
+  int deps[2] = {1, 2};
+  push_expr(L, op(env->c, a, b), 2, deps, name);
+  return 1;
+}
+
+static int m_add(lua_State *L) {
+  if (luaL_testudata(L, 1, MT_FORM) || luaL_testudata(L, 2, MT_FORM) || luaL_testudata(L, 1, MT_BC) ||
+      luaL_testudata(L, 2, MT_BC))
+    return form_arith(L, 1, "+");
+  return arith(L, expr_add, "operator +");
+}
+
+static int m_sub(lua_State *L) {
+  if (luaL_testudata(L, 1, MT_FORM) || luaL_testudata(L, 2, MT_FORM)) return form_arith(L, -1, "-");
+  return arith(L, expr_sub, "operator -");
+}
+
+static int m_div(lua_State *L) { return arith(L, expr_div, "operator /"); }
+
+static int m_pow(lua_State *L) { return arith(L, expr_pow, "operator ^"); }
+
+static int m_unm(lua_State *L) {
+  lg_env *env = get_env(L);
+  expr *a = check_expr(L, 1, "unary -");
+  int deps[1] = {1};
+  push_expr(L, expr_neg(env->c, a), 1, deps, "unary -");
+  return 1;
+}
+
+static int expr_tostring(lua_State *L) {
+  lg_env *env = get_env(L);
+  int ok;
+  expr *e = to_expr_opt(L, 1, &ok);
+  char buf[2048];
+  expr_print(env->c, e, buf, sizeof buf);
+  lua_pushstring(L, buf);
+  return 1;
+}
+
+static int expr_len(lua_State *L) {
+  ud_expr *u = luaL_checkudata(L, 1, MT_EXPR);
+  lua_pushinteger(L, expr_shape(u->e, NULL));
+  return 1;
+}
+
+static int param_set(lua_State *L) {
+  ud_expr *u = luaL_checkudata(L, 1, MT_EXPR);
+  if (u->e->kind != E_PARAM) return luaL_error(L, "set: only parameters (lg.parameter) can be set");
+  double v = luaL_checknumber(L, 2);
+  expr_param_values(get_env(L)->c)[u->e->i0] = v;
+  return 0;
+}
+
+static int param_value(lua_State *L) {
+  ud_expr *u = luaL_checkudata(L, 1, MT_EXPR);
+  if (u->e->kind == E_CONST) { lua_pushnumber(L, u->e->value); return 1; }
+  if (u->e->kind != E_PARAM) return luaL_error(L, "value: only parameters and constants have a value");
+  lua_pushnumber(L, expr_param_values(get_env(L)->c)[u->e->i0]);
+  return 1;
+}
+
+static int expr_index_mm(lua_State *L) {
+  ud_expr *u = luaL_checkudata(L, 1, MT_EXPR);
+  if (lua_type(L, 2) == LUA_TSTRING) {
+    const char *k = lua_tostring(L, 2);
+    if (!strcmp(k, "set")) { lua_pushcfunction(L, param_set); return 1; }
+    if (!strcmp(k, "value")) { lua_pushcfunction(L, param_value); return 1; }
+    return luaL_error(L, "expressions have no field '%s'", k);
+  }
+  lua_Integer i = luaL_checkinteger(L, 2);
+  if (u->e->kind != E_LIST) return luaL_error(L, "cannot index a scalar expression");
+  if (i < 1 || i > u->e->n) return luaL_error(L, "index %d out of range 1..%d", (int)i, u->e->n);
+  int deps[1] = {1};
+  push_expr(L, u->e->ch[i - 1], 1, deps, "index");
+  return 1;
+}
+
+static form *check_form(lua_State *L, int idx, const char *fn) {
+  ud_form *u = luaL_testudata(L, idx, MT_FORM);
+  if (!u) u = luaL_testudata(L, idx, MT_BC);
+  if (!u) typeerror(L, fn, idx, "a form (lg.integral)");
+  return u->f;
+}
+
+static int form_arith(lua_State *L, double s, const char *name) {
+  lg_env *env = get_env(L);
+  int isbc = luaL_testudata(L, 1, MT_BC) != NULL;
+  if (isbc != (luaL_testudata(L, 2, MT_BC) != NULL))
+    return luaL_error(L, "operator %s: cannot combine an equation with a boundary condition; pass bc= separately", name);
+  const char *mt = isbc ? MT_BC : MT_FORM;
+  if (!luaL_testudata(L, 1, mt)) typeerror(L, "operator +", 1, "a form");
+  if (!luaL_testudata(L, 2, mt)) typeerror(L, "operator +", 2, "a form");
+  form *a = check_form(L, 1, name), *b = check_form(L, 2, name);
+  form *r = form_combine(env->c, a, s, b);
+  if (!r) return exprerror(L, name);
+  int deps[2] = {1, 2};
+  ud_form *u = new_ud(L, sizeof *u, mt, 2, deps);
+  u->f = r;
+  return 1;
+}
+
+static int form_scale(lua_State *L, int fidx, int nidx) {
+  lg_env *env = get_env(L);
+  form *a = check_form(L, fidx, "operator *");
+  double s = luaL_checknumber(L, nidx);
+  form *r = form_combine(env->c, &(form){0, 0, NULL}, s, a);
+  if (!r) return exprerror(L, "operator *");
+  int deps[1] = {fidx};
+  ud_form *u = new_ud(L, sizeof *u, luaL_testudata(L, fidx, MT_BC) ? MT_BC : MT_FORM, 1, deps);
+  u->f = r;
+  return 1;
+}
+
+static int m_mul(lua_State *L) {
+  if (luaL_testudata(L, 1, MT_FORM)) return form_scale(L, 1, 2);
+  if (luaL_testudata(L, 2, MT_FORM)) return form_scale(L, 2, 1);
+  return arith(L, expr_mul, "operator *");
+}
+
+static int form_unm(lua_State *L) {
+  lua_pushnumber(L, -1);
+  return form_scale(L, 1, 2);
+}
+
+static int form_gc(lua_State *L) {
+  ud_form *u = lua_touserdata(L, 1);
+  form_free(u->f);
+  u->f = NULL;
+  return 0;
+}
+
+static int form_tostring(lua_State *L) {
+  lg_env *env = get_env(L);
+  form *f = check_form(L, 1, "tostring");
+  luaL_Buffer b;
+  luaL_buffinit(L, &b);
+  for (int i = 0; i < f->n; i++) {
+    char buf[1024];
+    expr_print(env->c, f->t[i].integrand, buf, sizeof buf);
+    if (i) luaL_addstring(&b, " + ");
+    luaL_addstring(&b, f->t[i].reg.kind == REGION_CELLS ? "∫_cells " : "∫_boundary ");
+    luaL_addstring(&b, buf);
+  }
+  luaL_pushresult(&b);
+  return 1;
+}
+
+static int l_lagrange(lua_State *L) {
+  lua_Integer p = luaL_checkinteger(L, 1);
+  if (p < 1 || p > 3) return luaL_error(L, "lg.lagrange: argument 1 must be a degree 1, 2 or 3, got %d", (int)p);
+  ud_basis *u = new_ud(L, sizeof *u, MT_BASIS, 0, NULL);
+  u->degree = (int)p;
+  return 1;
+}
+
+static int basis_tostring(lua_State *L) {
+  ud_basis *u = luaL_checkudata(L, 1, MT_BASIS);
+  lua_pushfstring(L, "Lagrange P%d", u->degree);
+  return 1;
+}
+
+static int new_symbol(lua_State *L, func_kind kind, const char *fn) {
+  ud_basis *b = luaL_testudata(L, 1, MT_BASIS);
+  if (!b) return typeerror(L, fn, 1, "a basis (lg.lagrange(p))");
+  const char *name = luaL_optstring(L, 2, kind == FK_TEST ? "v" : "u");
+  lg_env *env = get_env(L);
+  int id = expr_func_new(env->c, kind, name, b->degree, 1, NULL);
+  if (id < 0) return luaL_error(L, "%s: out of memory", fn);
+  unsigned char z[3] = {0, 0, 0};
+  push_expr(L, expr_field(env->c, id, 0, z), 0, NULL, fn);
+  return 1;
+}
+
+static int l_unknown(lua_State *L) { return new_symbol(L, FK_UNKNOWN, "lg.unknown"); }
+
+static int l_test(lua_State *L) { return new_symbol(L, FK_TEST, "lg.test"); }
+
+static int l_coord(lua_State *L) {
+  lua_Integer i = luaL_checkinteger(L, 1);
+  if (i < 1 || i > 3) return luaL_error(L, "lg.coord: argument 1 must be 1, 2 or 3, got %d", (int)i);
+  push_expr(L, expr_coord(get_env(L)->c, (int)i - 1), 0, NULL, "lg.coord");
+  return 1;
+}
+
+static int l_normal(lua_State *L) {
+  lg_env *env = get_env(L);
+  int dim = expr_dim(env->c);
+  expr *n[3];
+  for (int d = 0; d < dim; d++) n[d] = expr_normal(env->c, d);
+  push_expr(L, expr_list(env->c, dim, n), 0, NULL, "lg.normal");
+  return 1;
+}
+
+static int l_parameter(lua_State *L) {
+  const char *name = luaL_checkstring(L, 1);
+  double v = luaL_optnumber(L, 2, 0);
+  lg_env *env = get_env(L);
+  int id = expr_param_new(env->c, name, v);
+  if (id < 0) return luaL_error(L, "lg.parameter: out of memory");
+  push_expr(L, expr_param(env->c, id), 0, NULL, "lg.parameter");
+  return 1;
+}
+
+#define UNARY(NAME, FN)                                                   \
+  static int l_##NAME(lua_State *L) {                                     \
+    if (lua_type(L, 1) == LUA_TNUMBER) {                                  \
+      expr *e = expr_apply(get_env(L)->c, FN, expr_num(get_env(L)->c, lua_tonumber(L, 1))); \
+      if (!e) return exprerror(L, "lg." #NAME);                           \
+      lua_pushnumber(L, e->value);                                        \
+      return 1;                                                           \
+    }                                                                     \
+    expr *a = check_expr(L, 1, "lg." #NAME);                              \
+    int deps[1] = {1};                                                    \
+    push_expr(L, expr_apply(get_env(L)->c, FN, a), 1, deps, "lg." #NAME); \
+    return 1;                                                             \
+  }
+UNARY(sin, FN_SIN)
+UNARY(cos, FN_COS)
+UNARY(tan, FN_TAN)
+UNARY(exp, FN_EXP)
+UNARY(log, FN_LOG)
+UNARY(sqrt, FN_SQRT)
+UNARY(abs, FN_ABS)
+UNARY(tanh, FN_TANH)
+UNARY(sinh, FN_SINH)
+UNARY(cosh, FN_COSH)
+UNARY(atan, FN_ATAN)
+UNARY(asin, FN_ASIN)
+UNARY(acos, FN_ACOS)
+UNARY(sign, FN_SIGN)
+
+static int l_pow(lua_State *L) { return arith(L, expr_pow, "lg.pow"); }
+
+static int l_dot(lua_State *L) { return arith(L, expr_dot, "lg.dot"); }
+
+static int l_inner(lua_State *L) { return arith(L, expr_inner, "lg.inner"); }
+
+static int l_grad(lua_State *L) {
+  expr *a = check_expr(L, 1, "lg.grad");
+  int deps[1] = {1};
+  push_expr(L, expr_grad(get_env(L)->c, a), 1, deps, "lg.grad");
+  return 1;
+}
+
+static int l_div(lua_State *L) {
+  expr *a = check_expr(L, 1, "lg.div");
+  int deps[1] = {1};
+  push_expr(L, expr_div_op(get_env(L)->c, a), 1, deps, "lg.div");
+  return 1;
+}
+
+static int l_dx(lua_State *L) {
+  expr *a = check_expr(L, 1, "lg.dx");
+  lua_Integer i = luaL_checkinteger(L, 2);
+  if (i < 1 || i > 3) return luaL_error(L, "lg.dx: argument 2 must be a direction 1, 2 or 3, got %d", (int)i);
+  int deps[1] = {1};
+  push_expr(L, expr_dx(get_env(L)->c, a, (int)i - 1), 1, deps, "lg.dx");
+  return 1;
+}
+
+static int l_diff(lua_State *L) {
+  expr *a = check_expr(L, 1, "lg.diff");
+  expr *v = check_expr(L, 2, "lg.diff");
+  int deps[2] = {1, 2};
+  push_expr(L, expr_diff(get_env(L)->c, a, v), 2, deps, "lg.diff");
+  return 1;
+}
+
+static int l_list(lua_State *L) {
+  int n = lua_gettop(L);
+  if (n == 1 && lua_istable(L, 1)) {
+    int ok;
+    expr *e = to_expr_opt(L, 1, &ok);
+    if (!ok) return typeerror(L, "lg.list", 1, "a table of expressions");
+    int deps[1] = {1};
+    push_expr(L, e, 1, deps, "lg.list");
+    return 1;
+  }
+  if (n < 1 || n > 8) return luaL_error(L, "lg.list: give 1 to 8 entries, or one table");
+  expr *items[8];
+  int deps[8];
+  for (int i = 0; i < n; i++) {
+    items[i] = check_expr(L, i + 1, "lg.list");
+    deps[i] = i + 1;
+  }
+  push_expr(L, expr_list(get_env(L)->c, n, items), n, deps, "lg.list");
+  return 1;
+}
+
+static int quad_order(lua_State *L, int idx, const char *fn) {
+  if (lua_isnoneornil(L, idx)) return -1;
+  if (!lua_istable(L, idx)) return typeerror(L, fn, idx, "a table of options {order=}");
+  static const char *const keys[] = {"order", NULL};
+  check_keys(L, idx, fn, keys);
+  int o = opt_int(L, idx, "order", -1, fn);
+  if (o != -1 && (o < 0 || o > FEM_MAXDEG)) return luaL_error(L, "%s: option 'order' must be 0..%d, got %d", fn, FEM_MAXDEG, o);
+  return o;
+}
+
+static int make_integral(lua_State *L, const char *fn, const char *mt) {
+  ud_region *r = luaL_testudata(L, 1, MT_REGION);
+  if (!r) return typeerror(L, fn, 1, "a region (mesh:cells() or mesh:boundary(...))");
+  expr *e = check_expr(L, 2, fn);
+  if (e->kind == E_LIST) {
+    char s[64];
+    expr_describe_shape(e, s, sizeof s);
+    return luaL_error(L, "%s: argument 2 must be a scalar expression, got %s", fn, s);
+  }
+  int order = quad_order(L, 3, fn);
+  form *f = form_new();
+  if (!f || form_add_term(f, &r->r, e, order)) { form_free(f); return luaL_error(L, "%s: out of memory", fn); }
+  int deps[2] = {1, 2};
+  ud_form *u = new_ud(L, sizeof *u, mt, 2, deps);
+  u->f = f;
+  return 1;
+}
+
+static int l_integral(lua_State *L) { return make_integral(L, "lg.integral", MT_FORM); }
+
+static int l_essential_bc(lua_State *L) {
+  ud_region *r = luaL_testudata(L, 1, MT_REGION);
+  if (r && r->r.kind != REGION_BOUNDARY)
+    return luaL_error(L, "lg.essential_bc: argument 1 must be a boundary region (mesh:boundary(...)), got cells");
+  return make_integral(L, "lg.essential_bc", MT_BC);
+}
+
+static lg_mesh *region_or_mesh(lua_State *L, int idx, const char *fn, region *r) {
+  ud_region *ur = luaL_testudata(L, idx, MT_REGION);
+  if (ur) { *r = ur->r; return ur->r.mesh; }
+  ud_mesh *um = luaL_testudata(L, idx, MT_MESH);
+  if (um) {
+    memset(r, 0, sizeof *r);
+    r->kind = REGION_CELLS;
+    r->mesh = um->lm;
+    return um->lm;
+  }
+  typeerror(L, fn, idx, "a mesh or a region");
+  return NULL;
+}
+
+static int l_integrate(lua_State *L) {
+  const char *fn = "lg.integrate";
+  region r;
+  lg_mesh *lm = region_or_mesh(L, 1, fn, &r);
+  expr *e = check_expr(L, 2, fn);
+  int order = quad_order(L, 3, fn);
+  lg_env *env = get_env(L);
+  double v;
+  if (lg_integrate(env, lm, &r, e, order, &v)) return lgerror(L, fn, env);
+  lua_pushnumber(L, v);
+  return 1;
+}
+
+/* ---------------------------------------------------------------- registration */
+
+const luaL_Reg lg_arith_mm[] = {{"__add", m_add}, {"__sub", m_sub}, {"__mul", m_mul}, {"__div", m_div},
+                                {"__pow", m_pow}, {"__unm", m_unm}, {NULL, NULL}};
+
+void lg_lua_expr_register(lua_State *L) {
+  luaL_newmetatable(L, MT_EXPR);
+  luaL_setfuncs(L, lg_arith_mm, 0);
+  lua_pushcfunction(L, expr_tostring); lua_setfield(L, -2, "__tostring");
+  lua_pushcfunction(L, expr_len); lua_setfield(L, -2, "__len");
+  lua_pushcfunction(L, expr_index_mm); lua_setfield(L, -2, "__index");
+  lua_pop(L, 1);
+  static const luaL_Reg form_mm[] = {{"__add", m_add}, {"__sub", m_sub}, {"__mul", m_mul}, {"__unm", form_unm},
+                                     {"__gc", form_gc}, {"__tostring", form_tostring}, {NULL, NULL}};
+  new_mt(L, MT_FORM, form_mm, NULL);
+  new_mt(L, MT_BC, form_mm, NULL);
+  static const luaL_Reg basis_mm[] = {{"__tostring", basis_tostring}, {NULL, NULL}};
+  new_mt(L, MT_BASIS, basis_mm, NULL);
+}
+
+const luaL_Reg lg_expr_lib[] = {
+    {"lagrange", l_lagrange}, {"unknown", l_unknown}, {"test", l_test}, {"coord", l_coord},
+    {"normal", l_normal}, {"parameter", l_parameter}, {"sin", l_sin}, {"cos", l_cos}, {"tan", l_tan},
+    {"exp", l_exp}, {"log", l_log}, {"sqrt", l_sqrt}, {"abs", l_abs}, {"tanh", l_tanh}, {"sinh", l_sinh},
+    {"cosh", l_cosh}, {"atan", l_atan}, {"asin", l_asin}, {"acos", l_acos}, {"sign", l_sign},
+    {"pow", l_pow}, {"grad", l_grad}, {"div", l_div}, {"dot", l_dot}, {"inner", l_inner}, {"dx", l_dx},
+    {"diff", l_diff}, {"list", l_list}, {"integral", l_integral}, {"essential_bc", l_essential_bc},
+    {"integrate", l_integrate}, {NULL, NULL}};

@@ -1,0 +1,965 @@
+/* lmesh.c — Lua bindings of the mesh layer: generators, Gmsh reading, lg.mesh.new, regions
+ * (mesh:cells, mesh:boundary), output (VTU, MSH, .pvd series), quality arrays and reports,
+ * untangling, smoothing and motion. */
+#include "largs.h"
+
+#include "../mesh/untangle.h"
+
+#include <lauxlib.h>
+#include <limits.h>
+#include <math.h>
+#include <petscsys.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+static int mesh_gc(lua_State *L) {
+  ud_mesh *u = lua_touserdata(L, 1);
+  lg_mesh_free(u->lm);
+  u->lm = NULL;
+  return 0;
+}
+
+static int l_rectangle(lua_State *L) {
+  const char *fn = "lg.mesh.rectangle";
+  if (lua_isnoneornil(L, 1)) lua_newtable(L);
+  if (!lua_istable(L, 1)) typeerror(L, fn, 1, "a table of options");
+  static const char *const keys[] = {"nx", "ny", "x0", "x1", "y0", "y1", "cell", "diagonal", NULL};
+  check_keys(L, 1, fn, keys);
+  mesh_box_opts o;
+  memset(&o, 0, sizeof o);
+  o.nx = opt_int(L, 1, "nx", 8, fn);
+  o.ny = opt_int(L, 1, "ny", o.nx, fn);
+  o.x0 = opt_num(L, 1, "x0", 0, fn);
+  o.x1 = opt_num(L, 1, "x1", 1, fn);
+  o.y0 = opt_num(L, 1, "y0", 0, fn);
+  o.y1 = opt_num(L, 1, "y1", 1, fn);
+  const char *cell = opt_str(L, 1, "cell", "triangle", fn);
+  if (!strcmp(cell, "triangle")) o.type = CELL_TRIANGLE;
+  else if (!strcmp(cell, "quadrilateral")) o.type = CELL_QUADRILATERAL;
+  else return luaL_error(L, "%s: option 'cell' must be \"triangle\" or \"quadrilateral\", got \"%s\"", fn, cell);
+  const char *dg = opt_str(L, 1, "diagonal", "right", fn);
+  if (!strcmp(dg, "right")) o.diagonal = 0;
+  else if (!strcmp(dg, "left")) o.diagonal = 1;
+  else if (!strcmp(dg, "crossed")) o.diagonal = 2;
+  else return luaL_error(L, "%s: option 'diagonal' must be \"right\", \"left\" or \"crossed\", got \"%s\"", fn, dg);
+  char err[MESH_ERRLEN];
+  mesh *m = mesh_rectangle(&o, err);
+  if (!m) return luaL_error(L, "%s: %s", fn, err);
+  push_mesh(L, m);
+  return 1;
+}
+
+static int l_box(lua_State *L) {
+  const char *fn = "lg.mesh.box";
+  if (lua_isnoneornil(L, 1)) lua_newtable(L);
+  if (!lua_istable(L, 1)) typeerror(L, fn, 1, "a table of options");
+  static const char *const keys[] = {"nx", "ny", "nz", "x0", "x1", "y0", "y1", "z0", "z1", "cell", NULL};
+  check_keys(L, 1, fn, keys);
+  mesh_box_opts o;
+  memset(&o, 0, sizeof o);
+  o.nx = opt_int(L, 1, "nx", 4, fn);
+  o.ny = opt_int(L, 1, "ny", o.nx, fn);
+  o.nz = opt_int(L, 1, "nz", o.nx, fn);
+  o.x0 = opt_num(L, 1, "x0", 0, fn);
+  o.x1 = opt_num(L, 1, "x1", 1, fn);
+  o.y0 = opt_num(L, 1, "y0", 0, fn);
+  o.y1 = opt_num(L, 1, "y1", 1, fn);
+  o.z0 = opt_num(L, 1, "z0", 0, fn);
+  o.z1 = opt_num(L, 1, "z1", 1, fn);
+  const char *cell = opt_str(L, 1, "cell", "tetrahedron", fn);
+  if (!strcmp(cell, "tetrahedron")) o.type = CELL_TETRAHEDRON;
+  else if (!strcmp(cell, "hexahedron")) o.type = CELL_HEXAHEDRON;
+  else return luaL_error(L, "%s: option 'cell' must be \"tetrahedron\" or \"hexahedron\", got \"%s\"", fn, cell);
+  char err[MESH_ERRLEN];
+  mesh *m = mesh_box(&o, err);
+  if (!m) return luaL_error(L, "%s: %s", fn, err);
+  push_mesh(L, m);
+  return 1;
+}
+
+static int l_read(lua_State *L) {
+  const char *path = luaL_checkstring(L, 1);
+  char err[MESH_ERRLEN];
+  mesh *m = mesh_read_gmsh(path, err);
+  if (!m) return luaL_error(L, "lg.mesh.read: %s", err);
+  push_mesh(L, m);
+  return 1;
+}
+
+/* lg.mesh.new{cell=, vertices={{x,y},...}, cells={{1,2,3},...}, boundary={name={{a,b},...}}} */
+static int l_mesh_new(lua_State *L) {
+  const char *fn = "lg.mesh.new";
+  if (!lua_istable(L, 1)) typeerror(L, fn, 1, "a table {cell=, vertices=, cells=, boundary=}");
+  static const char *const keys[] = {"cell", "vertices", "cells", "boundary", NULL};
+  check_keys(L, 1, fn, keys);
+  const char *cell = opt_str(L, 1, "cell", "triangle", fn);
+  cell_type t;
+  if (!strcmp(cell, "triangle")) t = CELL_TRIANGLE;
+  else if (!strcmp(cell, "quadrilateral")) t = CELL_QUADRILATERAL;
+  else if (!strcmp(cell, "tetrahedron")) t = CELL_TETRAHEDRON;
+  else if (!strcmp(cell, "hexahedron")) t = CELL_HEXAHEDRON;
+  else return luaL_error(L, "%s: 'cell' must be triangle, quadrilateral, tetrahedron or hexahedron, got \"%s\"", fn, cell);
+  int dim = cell_dim(t), nvc = cell_nverts(t);
+  if (lua_getfield(L, 1, "vertices") != LUA_TTABLE) return luaL_error(L, "%s: 'vertices' must be a table of coordinate tables", fn);
+  int nv = (int)luaL_len(L, -1);
+  if (lua_getfield(L, 1, "cells") != LUA_TTABLE) return luaL_error(L, "%s: 'cells' must be a table of vertex-index tables", fn);
+  int nc = (int)luaL_len(L, -1);
+  if (nv < 1 || nc < 1) return luaL_error(L, "%s: need at least one vertex and one cell", fn);
+  double *x = malloc(sizeof(double) * (size_t)nv * dim);
+  int *c = malloc(sizeof(int) * (size_t)nc * nvc);
+  if (!x || !c) { free(x); free(c); return luaL_error(L, "%s: out of memory", fn); }
+  for (int i = 1; i <= nv; i++) {
+    if (lua_geti(L, -2, i) != LUA_TTABLE || luaL_len(L, -1) != dim) {
+      free(x); free(c);
+      return luaL_error(L, "%s: vertex %d must be a table of %d numbers", fn, i, dim);
+    }
+    for (int d = 1; d <= dim; d++) {
+      lua_geti(L, -1, d);
+      if (!lua_isnumber(L, -1)) { free(x); free(c); return luaL_error(L, "%s: vertex %d coordinate %d is not a number", fn, i, d); }
+      x[(size_t)(i - 1) * dim + d - 1] = lua_tonumber(L, -1);
+      lua_pop(L, 1);
+    }
+    lua_pop(L, 1);
+  }
+  for (int i = 1; i <= nc; i++) {
+    if (lua_geti(L, -1, i) != LUA_TTABLE || luaL_len(L, -1) != nvc) {
+      free(x); free(c);
+      return luaL_error(L, "%s: cell %d must be a table of %d vertex indices", fn, i, nvc);
+    }
+    for (int k = 1; k <= nvc; k++) {
+      lua_geti(L, -1, k);
+      if (!lua_isinteger(L, -1)) { free(x); free(c); return luaL_error(L, "%s: cell %d entry %d is not an integer", fn, i, k); }
+      c[(size_t)(i - 1) * nvc + k - 1] = (int)lua_tointeger(L, -1) - 1;
+      lua_pop(L, 1);
+    }
+    lua_pop(L, 1);
+  }
+  lua_pop(L, 2);
+  char err[MESH_ERRLEN];
+  mesh *m = mesh_create(t, nv, x, nc, c, err);
+  free(x);
+  free(c);
+  if (!m) return luaL_error(L, "%s: %s", fn, err);
+  push_mesh(L, m);
+  int midx = lua_gettop(L);
+  if (lua_getfield(L, 1, "boundary") == LUA_TTABLE) {
+    int tag = 1;
+    lua_pushnil(L);
+    while (lua_next(L, -2)) {
+      if (lua_type(L, -2) != LUA_TSTRING || lua_type(L, -1) != LUA_TTABLE)
+        return luaL_error(L, "%s: 'boundary' maps names to tables of facets", fn);
+      const char *name = lua_tostring(L, -2);
+      int n = (int)luaL_len(L, -1), nvf = m->nvf;
+      int *fv = malloc(sizeof(int) * (size_t)(n + 1) * nvf);
+      if (!fv) return luaL_error(L, "%s: out of memory", fn);
+      for (int i = 1; i <= n; i++) {
+        if (lua_geti(L, -1, i) != LUA_TTABLE || luaL_len(L, -1) != nvf) {
+          free(fv);
+          return luaL_error(L, "%s: boundary '%s' facet %d must list %d vertices", fn, name, i, nvf);
+        }
+        for (int k = 1; k <= nvf; k++) {
+          lua_geti(L, -1, k);
+          fv[(i - 1) * nvf + k - 1] = (int)lua_tointeger(L, -1) - 1;
+          lua_pop(L, 1);
+        }
+        lua_pop(L, 1);
+      }
+      int rc = mesh_add_boundary_facets(m, n, fv, tag++, name);
+      free(fv);
+      if (rc) return luaL_error(L, "%s: %s", fn, m->err);
+      lua_pop(L, 1);
+    }
+    if (mesh_build_boundary_cells(m)) return luaL_error(L, "%s: %s", fn, m->err);
+  }
+  lua_pop(L, 1);
+  lua_pushvalue(L, midx);
+  return 1;
+}
+
+/* "1, 2, 3" (the tags in use), cut with "..." */
+static void tag_list(const mesh *m, region_kind kind, char *buf, size_t len) {
+  int tags[64];
+  int n = kind == REGION_BOUNDARY ? mesh_used_boundary_tags(m, tags, 64) : mesh_used_region_tags(m, tags, 64);
+  size_t used = 0;
+  buf[0] = 0;
+  for (int i = 0; i < n && i < 64 && used + 16 < len; i++) used += (size_t)snprintf(buf + used, len - used, "%s%d", i ? ", " : "", tags[i]);
+  if (n > 64 || used + 16 >= len) snprintf(buf + used, len - used, ", ...");
+  if (n <= 0) snprintf(buf, len, kind == REGION_BOUNDARY ? "none" : "none: every cell has tag 0");
+}
+
+static void region_add_tag(lua_State *L, region *r, int tag, const char *fn) {
+  for (int i = 0; i < r->ntag; i++)
+    if (r->tags[i] == tag) return;
+  if (r->ntag == REGION_MAXTAGS) luaL_error(L, "%s: the names and tags given cover more than %d tags", fn, REGION_MAXTAGS);
+  r->tags[r->ntag++] = tag;
+}
+
+static int region_new(lua_State *L, region_kind kind, const char *fn) {
+  ud_mesh *um = check_mesh(L, 1, fn);
+  mesh *m = um->lm->m;
+  int n = lua_gettop(L) - 1;
+  region r;
+  memset(&r, 0, sizeof r);
+  r.kind = kind;
+  r.mesh = um->lm;
+  const char *what = kind == REGION_BOUNDARY ? "boundary" : "region";
+  /* no names: every cell, or every tagged boundary facet (ntag = 0) */
+  if (kind == REGION_BOUNDARY && n == 0 && m->nbf == 0)
+    return luaL_error(L, "%s: this mesh has no tagged boundary facets (lg.mesh.new takes them as boundary = "
+                         "{name = {facets}}; Gmsh files as physical groups)", fn);
+  for (int i = 0; i < n; i++) {
+    int arg = i + 2;
+    if (lua_isinteger(L, arg)) {
+      lua_Integer t = lua_tointeger(L, arg);
+      int known = t >= INT_MIN && t <= INT_MAX &&
+                  (kind == REGION_BOUNDARY ? mesh_has_boundary_tag(m, (int)t) : mesh_has_region_tag(m, (int)t));
+      if (!known) {
+        char list[256];
+        tag_list(m, kind, list, sizeof list);
+        return luaL_error(L, "%s: no %s has tag %I (this mesh's %s tags: %s)", fn,
+                          kind == REGION_BOUNDARY ? "boundary facet" : "cell", t, what, list);
+      }
+      region_add_tag(L, &r, (int)t, fn);
+    } else if (lua_type(L, arg) == LUA_TSTRING) {
+      const char *name = lua_tostring(L, arg);
+      int tags[REGION_MAXTAGS];
+      int k = kind == REGION_BOUNDARY ? mesh_boundary_tags(m, name, tags, REGION_MAXTAGS) : mesh_region_tags(m, name, tags, REGION_MAXTAGS);
+      if (k == 0) {
+        char list[512];
+        if (kind == REGION_BOUNDARY) mesh_boundary_names(m, list, sizeof list);
+        else mesh_region_names(m, list, sizeof list);
+        return luaL_error(L, "%s: unknown %s name \"%s\" (this mesh has: %s)", fn, what, name, list);
+      }
+      if (k > REGION_MAXTAGS) return luaL_error(L, "%s: the name \"%s\" covers more than %d tags", fn, name, REGION_MAXTAGS);
+      int used = 0;
+      for (int j = 0; j < k; j++) {
+        used |= kind == REGION_BOUNDARY ? mesh_has_boundary_tag(m, tags[j]) : mesh_has_region_tag(m, tags[j]);
+        region_add_tag(L, &r, tags[j], fn);
+      }
+      if (!used) return luaL_error(L, "%s: the %s \"%s\" has no %s in this mesh", fn, what, name,
+                                   kind == REGION_BOUNDARY ? "facets" : "cells");
+    } else return typeerror(L, fn, arg, kind == REGION_BOUNDARY ? "a boundary name or an integer tag" : "a region name or an integer tag");
+  }
+  int deps[1] = {1};
+  ud_region *u = new_ud(L, sizeof *u, MT_REGION, 1, deps);
+  u->r = r;
+  return 1;
+}
+
+static int mesh_cells(lua_State *L) { return region_new(L, REGION_CELLS, "mesh:cells"); }
+
+static int mesh_boundary(lua_State *L) { return region_new(L, REGION_BOUNDARY, "mesh:boundary"); }
+
+static int mesh_info(lua_State *L) {
+  ud_mesh *u = check_mesh(L, 1, "mesh:info");
+  mesh *m = u->lm->m;
+  lua_createtable(L, 0, 6);
+  lua_pushinteger(L, m->nvert); lua_setfield(L, -2, "vertices");
+  lua_pushinteger(L, m->ncell); lua_setfield(L, -2, "cells");
+  lua_pushinteger(L, m->dim); lua_setfield(L, -2, "dim");
+  lua_pushstring(L, cell_name(m->type)); lua_setfield(L, -2, "cell");
+  lua_pushinteger(L, m->nbf); lua_setfield(L, -2, "boundary_facets");
+  lua_newtable(L);
+  for (int i = 0; i < m->nbname; i++) { lua_pushstring(L, m->bnames[i].name); lua_rawseti(L, -2, i + 1); }
+  lua_setfield(L, -2, "boundaries");
+  return 1;
+}
+
+static int mesh_nvertices(lua_State *L) { lua_pushinteger(L, check_mesh(L, 1, "mesh:nvertices")->lm->m->nvert); return 1; }
+
+static int mesh_ncells(lua_State *L) { lua_pushinteger(L, check_mesh(L, 1, "mesh:ncells")->lm->m->ncell); return 1; }
+
+static int mesh_dim(lua_State *L) { lua_pushinteger(L, check_mesh(L, 1, "mesh:dim")->lm->m->dim); return 1; }
+
+static int lmesh_refine(lua_State *L) {
+  ud_mesh *u = check_mesh(L, 1, "mesh:refine");
+  char err[MESH_ERRLEN];
+  mesh *r = mesh_refine(u->lm->m, err);
+  if (!r) return luaL_error(L, "mesh:refine: %s", err);
+  push_mesh(L, r);
+  return 1;
+}
+
+static int lmesh_copy(lua_State *L) {
+  ud_mesh *u = check_mesh(L, 1, "mesh:copy");
+  mesh *c = mesh_copy(u->lm->m);
+  if (!c) return luaL_error(L, "mesh:copy: out of memory");
+  push_mesh(L, c);
+  return 1;
+}
+
+static int lmesh_hmax(lua_State *L) { lua_pushnumber(L, mesh_hmax(check_mesh(L, 1, "mesh:hmax")->lm->m)); return 1; }
+
+static int opt_boundary(lua_State *L, int t, const char *fn) {
+  const char *b = t ? opt_str(L, t, "boundary", "slide", fn) : "slide";
+  if (!strcmp(b, "slide")) return 1;
+  if (!strcmp(b, "fixed")) return 0;
+  return luaL_error(L, "%s: option 'boundary' must be \"slide\" or \"fixed\", got \"%s\"", fn, b);
+}
+
+static int lmesh_untangle(lua_State *L) {
+  const char *fn = "mesh:untangle";
+  ud_mesh *u = check_mesh(L, 1, fn);
+  int t = 0;
+  if (!lua_isnoneornil(L, 2)) {
+    if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {beta=, max_iterations=, boundary=, placement=, quiet=}");
+    static const char *const keys[] = {"beta", "max_iterations", "boundary", "placement", "quiet", NULL};
+    check_keys(L, 2, fn, keys);
+    t = 2;
+  }
+  untangle_opts o;
+  untangle_defaults(&o);
+  int quiet = 0;
+  if (t) {
+    o.beta = opt_num(L, t, "beta", -1, fn);
+    if (lua_getfield(L, t, "beta") != LUA_TNIL && !(o.beta >= 0))
+      return luaL_error(L, "%s: option 'beta' must be >= 0 (a minimum corner Jacobian), got %f", fn, o.beta);
+    lua_pop(L, 1);
+    o.max_iterations = opt_int(L, t, "max_iterations", 100, fn);
+    if (o.max_iterations < 1) return luaL_error(L, "%s: option 'max_iterations' must be >= 1", fn);
+    const char *pl = opt_str(L, t, "placement", "chebyshev", fn);
+    if (!strcmp(pl, "chebyshev")) o.placement = 0;
+    else if (!strcmp(pl, "corners")) o.placement = 1;
+    else return luaL_error(L, "%s: option 'placement' must be \"chebyshev\" or \"corners\", got \"%s\"", fn, pl);
+    lua_getfield(L, t, "quiet");
+    quiet = lua_toboolean(L, -1);
+    lua_pop(L, 1);
+  }
+  o.slide = opt_boundary(L, t, fn);
+  mesh *m = u->lm->m;
+  untangle_report r;
+  char err[MESH_ERRLEN];
+  if (mesh_untangle(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
+  lg_mesh_changed(u->lm);
+  char text[2048];
+  size_t n = (size_t)snprintf(text, sizeof text,
+                              "untangle: %d %s, beta %.3g: invalid %d -> %d (%s), %d vertices moved (mean %.3g, max "
+                              "%.3g), %.3f s",
+                              m->ncell, cell_plural(m->type), r.beta, r.invalid_before, r.invalid_after,
+                              r.invalid_after ? "FAILED" : "valid", r.moved, r.mean_displacement, r.max_displacement,
+                              r.seconds);
+  lua_createtable(L, 0, 12);
+  set_num(L, "beta", r.beta);
+  set_int(L, "invalid_before", r.invalid_before);
+  set_int(L, "invalid_after", r.invalid_after);
+  lua_pushboolean(L, r.invalid_after == 0);
+  lua_setfield(L, -2, "success");
+  set_int(L, "moved", r.moved);
+  set_num(L, "mean_displacement", r.mean_displacement);
+  set_num(L, "max_displacement", r.max_displacement);
+  set_num(L, "seconds", r.seconds);
+  lua_createtable(L, r.nstage, 0);
+  for (int i = 0; i < r.nstage; i++) {
+    untangle_stage *st = &r.stage[i];
+    lua_createtable(L, 0, 7);
+    lua_pushstring(L, st->name);
+    lua_setfield(L, -2, "name");
+    set_int(L, "invalid_before", st->invalid_before);
+    set_int(L, "invalid_after", st->invalid_after);
+    set_int(L, "below_beta", st->below_beta_after);
+    set_int(L, "moved", st->moved);
+    set_int(L, "iterations", st->iterations);
+    set_num(L, "seconds", st->seconds);
+    lua_rawseti(L, -2, i + 1);
+    if (n < sizeof text)
+      n += (size_t)snprintf(text + n, sizeof text - n,
+                            "\n  stage %-26s invalid %d -> %d, below beta %d, moved %d vertices, %d iterations, %.3f s",
+                            st->name, st->invalid_before, st->invalid_after, st->below_beta_after, st->moved,
+                            st->iterations, st->seconds);
+  }
+  lua_setfield(L, -2, "stages");
+  return finish_report(L, text, quiet);
+}
+
+static int lmesh_smooth(lua_State *L) {
+  const char *fn = "mesh:smooth";
+  ud_mesh *u = check_mesh(L, 1, fn);
+  mesh *m = u->lm->m;
+  int t = 0;
+  if (!lua_isnoneornil(L, 2)) {
+    if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {measure=, method=, iterations=, boundary=, quiet=}");
+    static const char *const keys[] = {"measure", "method", "iterations", "boundary", "quiet", NULL};
+    check_keys(L, 2, fn, keys);
+    t = 2;
+  }
+  smooth_opts o = {m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 20, 1, 0, 0};
+  int quiet = 0;
+  if (t) {
+    const char *name = opt_str(L, t, "measure", NULL, fn);
+    if (name) {
+      o.measure = quality_from_name(name);
+      if (o.measure < 0) {
+        char names[4096];
+        quality_names(names, sizeof names);
+        return luaL_error(L, "%s: unknown measure '%s' (measures: %s)", fn, name, names);
+      }
+    }
+    const char *method = opt_str(L, t, "method", "local", fn);
+    if (!strcmp(method, "global")) o.global = 1;
+    else if (strcmp(method, "local"))
+      return luaL_error(L, "%s: option 'method' must be \"local\" or \"global\", got '%s'", fn, method);
+    o.iterations = opt_int(L, t, "iterations", 20, fn);
+    if (o.iterations < 1) return luaL_error(L, "%s: option 'iterations' must be >= 1", fn);
+    lua_getfield(L, t, "quiet");
+    quiet = lua_toboolean(L, -1);
+    lua_pop(L, 1);
+  }
+  o.slide = opt_boundary(L, t, fn);
+  smooth_report r;
+  char err[MESH_ERRLEN];
+  if (mesh_smooth(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
+  lg_mesh_changed(u->lm);
+  char text[512];
+  snprintf(text, sizeof text, "smooth (%s): %s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s",
+           o.global ? "global" : "local", quality_name(o.measure), r.min_before, r.min_after, r.mean_before, r.mean_after,
+           r.moved, r.sweeps, o.global ? "rounds" : "sweeps", r.seconds);
+  lua_createtable(L, 0, 10);
+  lua_pushstring(L, quality_name(o.measure));
+  lua_setfield(L, -2, "measure");
+  lua_pushstring(L, o.global ? "global" : "local");
+  lua_setfield(L, -2, "method");
+  set_num(L, "min_before", r.min_before);
+  set_num(L, "min_after", r.min_after);
+  set_num(L, "mean_before", r.mean_before);
+  set_num(L, "mean_after", r.mean_after);
+  set_int(L, "moved", r.moved);
+  set_int(L, "sweeps", r.sweeps);
+  set_num(L, "seconds", r.seconds);
+  return finish_report(L, text, quiet);
+}
+
+/* a displacement per vertex from a Lua function (x, y[, z]) -> dx, dy[, dz] (or a table), or
+ * from a table of dim P1/P2/P3 functions on this mesh (one per component); only vertices with
+ * want[v] (all when NULL) are evaluated */
+static void displacement_field(lua_State *L, int idx, ud_mesh *u, const unsigned char *want, double *out,
+                               const char *fn) {
+  mesh *m = u->lm->m;
+  int d = m->dim;
+  if (lua_isfunction(L, idx)) {
+    for (int v = 0; v < m->nvert; v++) {
+      if (want && !want[v]) continue;
+      lua_pushvalue(L, idx);
+      for (int j = 0; j < d; j++) lua_pushnumber(L, m->x[(size_t)v * d + j]);
+      lua_call(L, d, d);
+      if (lua_istable(L, -d)) { /* one table {dx, dy[, dz]} */
+        int tb = lua_gettop(L) - d + 1;
+        for (int j = 0; j < d; j++) {
+          lua_rawgeti(L, tb, j + 1);
+          if (!lua_isnumber(L, -1)) luaL_error(L, "%s: the displacement function returned a table without %d numbers", fn, d);
+          out[(size_t)v * d + j] = lua_tonumber(L, -1);
+          lua_pop(L, 1);
+        }
+      } else
+        for (int j = 0; j < d; j++) {
+          if (!lua_isnumber(L, -d + j))
+            luaL_error(L, "%s: the displacement function must return %d numbers (or one table of them) at vertex %d, got %s",
+                       fn, d, v + 1, luaL_typename(L, -d + j));
+          out[(size_t)v * d + j] = lua_tonumber(L, -d + j);
+        }
+      lua_pop(L, d);
+    }
+    return;
+  }
+  if (lua_istable(L, idx) && (int)luaL_len(L, idx) == d) {
+    for (int j = 0; j < d; j++) {
+      lua_rawgeti(L, idx, j + 1);
+      ud_func *uf = luaL_testudata(L, -1, MT_FUNC);
+      if (!uf) luaL_error(L, "%s: component %d of the displacement must be a discrete function, got %s", fn, j + 1, luaL_typename(L, -1));
+      if (uf->f->mesh != u->lm) luaL_error(L, "%s: component %d of the displacement lives on a different mesh", fn, j + 1);
+      for (int v = 0; v < m->nvert; v++) out[(size_t)v * d + j] = uf->f->x[v]; /* vertex dofs come first */
+      lua_pop(L, 1);
+    }
+    return;
+  }
+  typeerror(L, fn, idx, d == 2 ? "a function (x, y) -> dx, dy or a table {fx, fy} of discrete functions"
+                                : "a function (x, y, z) -> dx, dy, dz or a table {fx, fy, fz} of discrete functions");
+}
+
+static int lmesh_move(lua_State *L) {
+  const char *fn = "mesh:move";
+  ud_mesh *u = check_mesh(L, 1, fn);
+  mesh *m = u->lm->m;
+  if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {displacement = function or {fx, fy[, fz]}, quiet=}");
+  static const char *const keys[] = {"displacement", "quiet", NULL};
+  check_keys(L, 2, fn, keys);
+  lua_getfield(L, 2, "quiet");
+  int quiet = lua_toboolean(L, -1);
+  lua_pop(L, 1);
+  lua_getfield(L, 2, "displacement");
+  if (lua_isnil(L, -1)) return luaL_error(L, "%s: option 'displacement' is required (the boundary displacement)", fn);
+  int idx = lua_gettop(L);
+  unsigned char *fixed = lua_newuserdatauv(L, (size_t)m->nvert + 1, 0);
+  double *disp = lua_newuserdatauv(L, sizeof(double) * ((size_t)m->nvert * m->dim + 1), 0);
+  char err[MESH_ERRLEN];
+  if (mesh_boundary_vertices(m, fixed, err)) return luaL_error(L, "%s: %s", fn, err);
+  memset(disp, 0, sizeof(double) * (size_t)m->nvert * m->dim);
+  displacement_field(L, idx, u, fixed, disp, fn);
+  move_report r;
+  if (mesh_move(m, disp, fixed, &r, err)) return luaL_error(L, "%s: %s", fn, err);
+  lg_mesh_changed(u->lm);
+  char text[512];
+  snprintf(text, sizeof text, "move: Laplacian motion, tau_max %.3g, %d CG iterations (residual %.1e), %d invalid cells after, %.3f s",
+           r.tau_max, r.iterations, r.residual, r.invalid_after, r.seconds);
+  lua_createtable(L, 0, 6);
+  set_int(L, "iterations", r.iterations);
+  set_num(L, "residual", r.residual);
+  set_num(L, "tau_max", r.tau_max);
+  set_int(L, "invalid_after", r.invalid_after);
+  set_num(L, "seconds", r.seconds);
+  return finish_report(L, text, quiet);
+}
+
+static int lmesh_displace(lua_State *L) {
+  const char *fn = "mesh:displace";
+  ud_mesh *u = check_mesh(L, 1, fn);
+  mesh *m = u->lm->m;
+  if (lua_isnoneornil(L, 2)) return typeerror(L, fn, 2, "a function (x, y[, z]) -> displacement or a table of discrete functions");
+  double *disp = lua_newuserdatauv(L, sizeof(double) * ((size_t)m->nvert * m->dim + 1), 0);
+  displacement_field(L, 2, u, NULL, disp, fn);
+  for (size_t i = 0; i < (size_t)m->nvert * m->dim; i++) m->x[i] += disp[i];
+  lg_mesh_changed(u->lm);
+  int ninv;
+  mesh_count_invalid(m, 0, NULL, &ninv);
+  lua_pushinteger(L, ninv);
+  return 1;
+}
+
+static int mesh_check(lua_State *L) {
+  ud_mesh *u = check_mesh(L, 1, "mesh:check");
+  int ids[10], n;
+  mesh_count_invalid(u->lm->m, 10, ids, &n);
+  lua_pushinteger(L, n);
+  lua_newtable(L);
+  for (int i = 0; i < n && i < 10; i++) { lua_pushinteger(L, ids[i] + 1); lua_rawseti(L, -2, i + 1); }
+  return 2;
+}
+
+static int mesh_coordinates(lua_State *L) {
+  ud_mesh *u = check_mesh(L, 1, "mesh:coordinates");
+  mesh *m = u->lm->m;
+  lua_Integer i = luaL_checkinteger(L, 2);
+  if (i < 1 || i > m->nvert) return luaL_error(L, "mesh:coordinates: vertex %d out of range 1..%d", (int)i, m->nvert);
+  for (int d = 0; d < m->dim; d++) lua_pushnumber(L, m->x[(size_t)(i - 1) * m->dim + d]);
+  return m->dim;
+}
+
+static int mesh_set_coordinates(lua_State *L) {
+  ud_mesh *u = check_mesh(L, 1, "mesh:set_coordinates");
+  mesh *m = u->lm->m;
+  lua_Integer i = luaL_checkinteger(L, 2);
+  if (i < 1 || i > m->nvert) return luaL_error(L, "mesh:set_coordinates: vertex %d out of range 1..%d", (int)i, m->nvert);
+  for (int d = 0; d < m->dim; d++) m->x[(size_t)(i - 1) * m->dim + d] = luaL_checknumber(L, 3 + d);
+  lg_mesh_changed(u->lm);
+  return 0;
+}
+
+static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, int tidx, const char *fn) {
+  mesh_field fl[64];
+  int nf = 0;
+  if (!lua_isnoneornil(L, tidx)) {
+    if (!lua_istable(L, tidx)) return typeerror(L, fn, tidx, "a table {name = function or array}");
+    lua_pushnil(L);
+    while (lua_next(L, tidx)) {
+      if (nf >= 64) return luaL_error(L, "%s: at most 64 fields", fn);
+      if (lua_type(L, -2) != LUA_TSTRING) return luaL_error(L, "%s: field names must be strings", fn);
+      ud_func *uf = luaL_testudata(L, -1, MT_FUNC);
+      ud_qarray *qa = luaL_testudata(L, -1, MT_QARRAY);
+      if (qa) {
+        if (qa->n != m->ncell) return luaL_error(L, "%s: quality array '%s' belongs to a mesh of %d cells", fn, lua_tostring(L, -2), qa->n);
+        fl[nf].name = lua_tostring(L, -2);
+        fl[nf].ncomp = 1;
+        fl[nf].on_cells = 1;
+        fl[nf].val = qa->v;
+        nf++;
+      } else if (uf) {
+        if (uf->f->mesh != lm) return luaL_error(L, "%s: field '%s' lives on a different mesh", fn, lua_tostring(L, -2));
+        fl[nf].name = lua_tostring(L, -2);
+        fl[nf].ncomp = 1;
+        fl[nf].on_cells = 0;
+        fl[nf].val = uf->f->x; /* vertex dofs come first in every Lagrange numbering */
+        nf++;
+      } else if (lua_istable(L, -1)) {
+        int n = (int)luaL_len(L, -1);
+        if (n != m->ncell && n != m->nvert)
+          return luaL_error(L, "%s: array '%s' has %d entries; need one per cell (%d) or vertex (%d)", fn, lua_tostring(L, -2), n, m->ncell, m->nvert);
+        double *v = lua_newuserdatauv(L, sizeof(double) * (size_t)n, 0);
+        lua_setfield(L, LUA_REGISTRYINDEX, lua_tostring(L, -3)); /* keep alive until written */
+        for (int i = 1; i <= n; i++) {
+          lua_geti(L, -1, i);
+          v[i - 1] = lua_tonumber(L, -1);
+          lua_pop(L, 1);
+        }
+        fl[nf].name = lua_tostring(L, -2);
+        fl[nf].ncomp = 1;
+        fl[nf].on_cells = n == m->ncell && n != m->nvert;
+        fl[nf].val = v;
+        nf++;
+      } else return luaL_error(L, "%s: field '%s' must be a discrete function or an array", fn, lua_tostring(L, -2));
+      lua_pop(L, 1);
+    }
+  }
+  int rc = mesh_write_vtu(m, path, nf, fl);
+  for (int i = 0; i < nf; i++) {
+    lua_pushnil(L);
+    lua_setfield(L, LUA_REGISTRYINDEX, fl[i].name);
+  }
+  if (rc) return luaL_error(L, "%s: %s", fn, m->err);
+  return 0;
+}
+
+static int mesh_write(lua_State *L) {
+  const char *fn = "mesh:write";
+  ud_mesh *u = check_mesh(L, 1, fn);
+  const char *path = luaL_checkstring(L, 2);
+  size_t l = strlen(path);
+  if (l > 4 && !strcmp(path + l - 4, ".msh")) {
+    if (mesh_write_gmsh(u->lm->m, path)) return luaL_error(L, "%s: %s", fn, u->lm->m->err);
+    return 0;
+  }
+  if (!(l > 4 && !strcmp(path + l - 4, ".vtu")))
+    return luaL_error(L, "%s: argument 1 must end in .vtu (ParaView) or .msh (Gmsh), got \"%s\"", fn, path);
+  write_fields(L, u->lm->m, u->lm, path, 3, fn);
+  return 0;
+}
+
+static int mesh_tostring(lua_State *L) {
+  ud_mesh *u = check_mesh(L, 1, "tostring");
+  mesh *m = u->lm->m;
+  lua_pushfstring(L, "mesh: %d %s, %d vertices, %dD", m->ncell, cell_plural(m->type), m->nvert, m->dim);
+  return 1;
+}
+
+/* {metric = {{a, b}, {b, c}}} (constant) or {metric = {M_1, ..., M_nvert}} (per vertex) */
+static int read_metric(lua_State *L, int t, mesh *m, double **buf, quality_metric *qm, const char *fn) {
+  int d = m->dim;
+  qm->kind = 0;
+  qm->m = NULL;
+  *buf = NULL;
+  if (lua_getfield(L, t, "metric") == LUA_TNIL) { lua_pop(L, 1); return 0; }
+  if (!lua_istable(L, -1)) return luaL_error(L, "%s: option 'metric' must be a %dx%d table or one per vertex", fn, d, d);
+  int n = (int)luaL_len(L, -1);
+  lua_geti(L, -1, 1);
+  int nested = lua_istable(L, -1), pervertex = 0;
+  if (nested) {
+    lua_geti(L, -1, 1);
+    pervertex = lua_istable(L, -1);
+    lua_pop(L, 1);
+  }
+  lua_pop(L, 1);
+  if (!nested) return luaL_error(L, "%s: option 'metric' must be a %dx%d table or a list of %d of them (one per vertex)", fn, d, d, m->nvert);
+  int count = pervertex ? m->nvert : 1;
+  if ((pervertex && n != m->nvert) || (!pervertex && n != d))
+    return luaL_error(L, "%s: option 'metric' must be a %dx%d table or a list of %d of them (one per vertex)", fn, d, d, m->nvert);
+  double *b = lua_newuserdatauv(L, sizeof(double) * (size_t)count * d * d, 0);
+  lua_insert(L, -2); /* keep the buffer below the table while reading */
+  for (int v = 0; v < count; v++) {
+    if (pervertex) lua_geti(L, -1, v + 1);
+    for (int i = 0; i < d; i++) {
+      if (lua_geti(L, -1, i + 1) != LUA_TTABLE || luaL_len(L, -1) != d)
+        return luaL_error(L, "%s: metric row %d must have %d numbers", fn, i + 1, d);
+      for (int j = 0; j < d; j++) {
+        lua_geti(L, -1, j + 1);
+        if (!lua_isnumber(L, -1)) return luaL_error(L, "%s: metric entries must be numbers", fn);
+        b[(size_t)v * d * d + (size_t)i * d + j] = lua_tonumber(L, -1);
+        lua_pop(L, 1);
+      }
+      lua_pop(L, 1);
+    }
+    if (pervertex) lua_pop(L, 1);
+  }
+  lua_pop(L, 1); /* the metric table; the buffer stays on the stack */
+  qm->kind = pervertex ? 2 : 1;
+  qm->m = b;
+  *buf = b;
+  return 1;
+}
+
+static ud_qarray *push_quality(lua_State *L, int midx, const char *name, int tidx, const char *fn) {
+  ud_mesh *um = check_mesh(L, midx, fn);
+  mesh *m = um->lm->m;
+  int q = quality_from_name(name);
+  if (q < 0) {
+    char list[1024];
+    quality_names(list, sizeof list);
+    luaL_error(L, "%s: unknown measure \"%s\" (measures: %s)", fn, name, list);
+  }
+  quality_metric qm = {0, NULL};
+  double *buf = NULL;
+  int pushed = 0;
+  const mesh *ref = NULL;
+  double pexp = 2;
+  if (tidx && !lua_isnoneornil(L, tidx)) {
+    if (!lua_istable(L, tidx)) typeerror(L, fn, tidx, "a table of options {metric=, reference=, p=}");
+    static const char *const keys[] = {"metric", "reference", "p", NULL};
+    check_keys(L, tidx, fn, keys);
+    if (lua_getfield(L, tidx, "reference") != LUA_TNIL) {
+      ud_mesh *ur = luaL_testudata(L, -1, MT_MESH);
+      if (!ur) luaL_error(L, "%s: option 'reference' must be a mesh (the same mesh in another configuration)", fn);
+      ref = ur->lm->m;
+      if (ref->type != m->type || ref->nvert != m->nvert || ref->ncell != m->ncell ||
+          memcmp(ref->cells, m->cells, sizeof(int) * (size_t)m->ncell * (size_t)m->nvc))
+        luaL_error(L, "%s: the reference must be the same mesh (same cells) in another configuration", fn);
+    }
+    lua_pop(L, 1);
+    pexp = opt_num(L, tidx, "p", 2, fn);
+    pushed = read_metric(L, tidx, m, &buf, &qm, fn);
+  }
+  if (quality_is_deformation(q) && !ref)
+    luaL_error(L, "%s: %s compares two configurations: pass {reference = mesh}", fn, name);
+  if (!quality_is_deformation(q) && ref) luaL_error(L, "%s: option 'reference' is for the deformation measures", fn);
+  ud_qarray *a = lua_newuserdatauv(L, sizeof(ud_qarray), 0);
+  a->n = 0;
+  a->measure = q;
+  a->v = NULL;
+  luaL_setmetatable(L, MT_QARRAY);
+  a->v = mesh_big_alloc(sizeof(double) * (size_t)(m->ncell + 1));
+  if (!a->v) luaL_error(L, "%s: out of memory for %d values", fn, m->ncell);
+  a->n = m->ncell;
+  char err[MESH_ERRLEN];
+  int rc = ref ? mesh_deformation(m, ref->x, q, pexp, a->v, err) : mesh_quality(m, q, qm.kind ? &qm : NULL, a->v, err);
+  if (rc) luaL_error(L, "%s: %s", fn, err);
+  if (pushed) lua_remove(L, -2); /* the metric buffer */
+  return a;
+}
+
+static int mesh_quality_l(lua_State *L) {
+  push_quality(L, 1, luaL_checkstring(L, 2), 3, "mesh:quality");
+  return 1;
+}
+
+static ud_qarray *check_qarray(lua_State *L, int i) { return luaL_checkudata(L, i, MT_QARRAY); }
+
+static int qa_index(lua_State *L) {
+  ud_qarray *a = check_qarray(L, 1);
+  if (lua_type(L, 2) == LUA_TSTRING) {
+    luaL_getmetatable(L, MT_QARRAY);
+    lua_getfield(L, -1, "methods");
+    lua_getfield(L, -1, lua_tostring(L, 2));
+    if (!lua_isnil(L, -1)) return 1;
+    return luaL_error(L, "quality arrays have no field '%s'", lua_tostring(L, 2));
+  }
+  lua_Integer i = luaL_checkinteger(L, 2);
+  if (i < 1 || i > a->n) return luaL_error(L, "quality index %d out of range 1..%d", (int)i, a->n);
+  lua_pushnumber(L, a->v[i - 1]);
+  return 1;
+}
+
+static int qa_len(lua_State *L) { lua_pushinteger(L, check_qarray(L, 1)->n); return 1; }
+
+static int qa_gc(lua_State *L) {
+  ud_qarray *a = lua_touserdata(L, 1);
+  mesh_big_free(a->v);
+  a->v = NULL;
+  a->n = 0;
+  return 0;
+}
+
+static int qa_totable(lua_State *L) {
+  ud_qarray *a = check_qarray(L, 1);
+  lua_createtable(L, a->n, 0);
+  for (int i = 0; i < a->n; i++) { lua_pushnumber(L, a->v[i]); lua_rawseti(L, -2, i + 1); }
+  return 1;
+}
+
+static int qa_stat(lua_State *L, int which) {
+  ud_qarray *a = check_qarray(L, 1);
+  quality_stats st;
+  quality_stats_compute(a->v, a->n, &st);
+  lua_pushnumber(L, which == 0 ? st.min : which == 1 ? st.max : st.mean);
+  if (which == 2) return 1;
+  lua_pushinteger(L, (which == 0 ? st.argmin : st.argmax) + 1);
+  return 2;
+}
+
+static int qa_min(lua_State *L) { return qa_stat(L, 0); }
+
+static int qa_max(lua_State *L) { return qa_stat(L, 1); }
+
+static int qa_mean(lua_State *L) { return qa_stat(L, 2); }
+
+static int qa_histogram(lua_State *L) {
+  ud_qarray *a = check_qarray(L, 1);
+  lua_Integer nb = luaL_optinteger(L, 2, 10);
+  if (nb < 1 || nb > 10000) return luaL_error(L, "q:histogram: argument 1 must be a bin count 1..10000, got %d", (int)nb);
+  quality_stats st;
+  quality_stats_compute(a->v, a->n, &st);
+  double lo = luaL_optnumber(L, 3, st.min), hi = luaL_optnumber(L, 4, st.max);
+  int *c = lua_newuserdatauv(L, sizeof(int) * (size_t)nb, 0);
+  quality_histogram(a->v, a->n, (int)nb, lo, hi, c);
+  lua_createtable(L, 0, 3);
+  lua_createtable(L, (int)nb, 0);
+  for (int i = 0; i < nb; i++) { lua_pushinteger(L, c[i]); lua_rawseti(L, -2, i + 1); }
+  lua_setfield(L, -2, "counts");
+  lua_pushnumber(L, lo); lua_setfield(L, -2, "lo");
+  lua_pushnumber(L, hi); lua_setfield(L, -2, "hi");
+  return 1;
+}
+
+static int qa_worst(lua_State *L) {
+  ud_qarray *a = check_qarray(L, 1);
+  lua_Integer k = luaL_optinteger(L, 2, 10);
+  if (k < 1) return luaL_error(L, "q:worst: argument 1 must be a positive count, got %d", (int)k);
+  if (k > a->n) k = a->n;
+  int *ids = lua_newuserdatauv(L, sizeof(int) * (size_t)(k + 1), 0);
+  quality_worst(a->v, a->n, (int)k, quality_larger_is_better(a->measure), ids);
+  lua_createtable(L, (int)k, 0);
+  for (int i = 0; i < k; i++) {
+    lua_createtable(L, 0, 2);
+    lua_pushinteger(L, ids[i] + 1); lua_setfield(L, -2, "cell");
+    lua_pushnumber(L, a->v[ids[i]]); lua_setfield(L, -2, "value");
+    lua_rawseti(L, -2, i + 1);
+  }
+  return 1;
+}
+
+static int qa_tostring(lua_State *L) {
+  ud_qarray *a = check_qarray(L, 1);
+  quality_stats st;
+  quality_stats_compute(a->v, a->n, &st);
+  lua_pushfstring(L, "%s of %d cells: min %f, max %f, mean %f", quality_name(a->measure), a->n, st.min, st.max, st.mean);
+  return 1;
+}
+
+/* every measure that applies, with statistics, as a table; printed unless quiet */
+static int mesh_quality_report(lua_State *L) {
+  const char *fn = "mesh:quality_report";
+  ud_mesh *um = check_mesh(L, 1, fn);
+  mesh *m = um->lm->m;
+  int quiet = lua_toboolean(L, 2);
+  /* split the invalid cells: inverted (clearly negative) and degenerate (about zero),
+   * relative to each cell's size */
+  int ninverted = 0, ndegenerate = 0;
+  for (int c = 0; c < m->ncell; c++) {
+    double q = mesh_cell_relative_validity(m, c);
+    if (q < -1e-13) ninverted++;
+    else if (!(q > 1e-13)) ndegenerate++;
+  }
+  lua_createtable(L, 0, QM_COUNT + 4);
+  int rep = lua_gettop(L);
+  lua_pushinteger(L, m->ncell); lua_setfield(L, rep, "cells");
+  lua_pushinteger(L, ninverted); lua_setfield(L, rep, "inverted");
+  lua_pushinteger(L, ndegenerate); lua_setfield(L, rep, "degenerate");
+  if (m->type == CELL_QUADRILATERAL) { /* Remark 1.1 classes */
+    int cls[4] = {0, 0, 0, 0};
+    for (int c = 0; c < m->ncell; c++) {
+      double x[8];
+      for (int i = 0; i < 4; i++) { x[2 * i] = m->x[2 * m->cells[4 * c + i]]; x[2 * i + 1] = m->x[2 * m->cells[4 * c + i] + 1]; }
+      quad_class k;
+      quad_corner_area(x, &k);
+      cls[k]++;
+    }
+    lua_createtable(L, 0, 4);
+    lua_pushinteger(L, cls[QUAD_CONVEX]); lua_setfield(L, -2, "convex");
+    lua_pushinteger(L, cls[QUAD_NONCONVEX]); lua_setfield(L, -2, "nonconvex");
+    lua_pushinteger(L, cls[QUAD_DEGENERATE]); lua_setfield(L, -2, "degenerate");
+    lua_pushinteger(L, cls[QUAD_CROSSED]); lua_setfield(L, -2, "crossed");
+    lua_setfield(L, rep, "quadrilaterals");
+    if (!quiet) printf("quadrilaterals: %d convex, %d non-convex, %d degenerate, %d crossed\n", cls[0], cls[1], cls[2], cls[3]);
+  }
+  if (!quiet) printf("mesh quality: %d %s, %d inverted, %d degenerate\n  %-28s %12s %12s %12s %8s\n", m->ncell,
+                     cell_plural(m->type), ninverted, ndegenerate, "measure", "min", "mean", "max", "worst");
+  for (int q = 0; q < QM_COUNT; q++) {
+    if (!quality_applies(q, m->type) || quality_is_deformation(q)) continue;
+    ud_qarray *a = push_quality(L, 1, quality_name(q), 0, fn);
+    quality_stats st;
+    quality_stats_compute(a->v, a->n, &st);
+    lua_pop(L, 1);
+    lua_createtable(L, 0, 4);
+    lua_pushnumber(L, st.min); lua_setfield(L, -2, "min");
+    lua_pushnumber(L, st.max); lua_setfield(L, -2, "max");
+    lua_pushnumber(L, st.mean); lua_setfield(L, -2, "mean");
+    int wi = quality_worst_index(a->v, a->n, quality_larger_is_better(q));
+    lua_pushinteger(L, wi + 1); lua_setfield(L, -2, "worst");
+    lua_setfield(L, rep, quality_name(q));
+    if (!quiet) printf("  %-28s %12.6g %12.6g %12.6g %8d\n", quality_name(q), st.min, st.mean, st.max, wi + 1);
+  }
+  if (!quiet) fflush(stdout);
+  lua_settop(L, rep);
+  return 1;
+}
+
+/* ---------------------------------------------------------------- series */
+
+static int l_series(lua_State *L) {
+  const char *path = luaL_checkstring(L, 1);
+  size_t l = strlen(path);
+  if (l < 5 || strcmp(path + l - 4, ".pvd")) return luaL_error(L, "lg.series: argument 1 must be a path ending in .pvd, got \"%s\"", path);
+  if (l >= 500) return luaL_error(L, "lg.series: path too long");
+  ud_series *u = new_ud(L, sizeof *u, MT_SERIES, 0, NULL);
+  snprintf(u->path, sizeof u->path, "%s", path);
+  return 1;
+}
+
+static int series_write(lua_State *L) {
+  const char *fn = "series:write";
+  ud_series *u = luaL_checkudata(L, 1, MT_SERIES);
+  ud_mesh *um = check_mesh(L, 2, fn);
+  double t = luaL_optnumber(L, 4, u->n);
+  if (u->n == u->cap) {
+    int cap = u->cap ? 2 * u->cap : 16;
+    double *nt = realloc(u->t, sizeof(double) * (size_t)cap);
+    if (!nt) return luaL_error(L, "%s: out of memory", fn);
+    u->t = nt;
+    char **nf = realloc(u->files, sizeof(char *) * (size_t)cap);
+    if (!nf) return luaL_error(L, "%s: out of memory", fn);
+    u->files = nf;
+    u->cap = cap;
+  }
+  char file[600];
+  snprintf(file, sizeof file, "%.*s_%04d.vtu", (int)(strlen(u->path) - 4), u->path, u->n);
+  write_fields(L, um->lm->m, um->lm, file, 3, fn);
+  u->files[u->n] = strdup(file);
+  u->t[u->n] = t;
+  if (!u->files[u->n]) return luaL_error(L, "%s: out of memory", fn);
+  u->n++;
+  char err[MESH_ERRLEN];
+  if (mesh_write_pvd(u->path, u->n, u->t, u->files, err)) return luaL_error(L, "%s: %s", fn, err);
+  lua_pushstring(L, file);
+  return 1;
+}
+
+static int series_gc(lua_State *L) {
+  ud_series *u = lua_touserdata(L, 1);
+  for (int i = 0; i < u->n; i++) free(u->files[i]);
+  free(u->files);
+  free(u->t);
+  u->files = NULL;
+  u->t = NULL;
+  u->n = 0;
+  return 0;
+}
+
+/* ---------------------------------------------------------------- registration */
+
+void lg_lua_mesh_register(lua_State *L) {
+  static const luaL_Reg mesh_mm[] = {{"__gc", mesh_gc}, {"__tostring", mesh_tostring}, {NULL, NULL}};
+  static const luaL_Reg mesh_methods[] = {{"cells", mesh_cells}, {"boundary", mesh_boundary}, {"info", mesh_info},
+                                          {"write", mesh_write}, {"refine", lmesh_refine}, {"copy", lmesh_copy}, {"hmax", lmesh_hmax},
+                                          {"check", mesh_check}, {"nvertices", mesh_nvertices}, {"ncells", mesh_ncells},
+                                          {"dim", mesh_dim}, {"coordinates", mesh_coordinates},
+                                          {"set_coordinates", mesh_set_coordinates}, {"quality", mesh_quality_l},
+                                          {"quality_report", mesh_quality_report}, {"untangle", lmesh_untangle}, {"smooth", lmesh_smooth},
+                                          {"move", lmesh_move}, {"displace", lmesh_displace}, {NULL, NULL}};
+  new_mt(L, MT_MESH, mesh_mm, mesh_methods);
+  new_mt(L, MT_REGION, NULL, NULL);
+  static const luaL_Reg qa_mm[] = {{"__index", qa_index}, {"__len", qa_len}, {"__tostring", qa_tostring},
+                                   {"__gc", qa_gc}, {NULL, NULL}};
+  static const luaL_Reg qa_methods[] = {{"totable", qa_totable}, {"min", qa_min}, {"max", qa_max}, {"mean", qa_mean},
+                                        {"histogram", qa_histogram}, {"worst", qa_worst}, {NULL, NULL}};
+  luaL_newmetatable(L, MT_QARRAY);
+  luaL_setfuncs(L, qa_mm, 0);
+  lua_newtable(L);
+  luaL_setfuncs(L, qa_methods, 0);
+  lua_setfield(L, -2, "methods");
+  lua_pop(L, 1);
+  static const luaL_Reg series_mm[] = {{"__gc", series_gc}, {NULL, NULL}};
+  static const luaL_Reg series_methods[] = {{"write", series_write}, {NULL, NULL}};
+  new_mt(L, MT_SERIES, series_mm, series_methods);
+}
+
+const luaL_Reg lg_output_lib[] = {{"series", l_series}, {NULL, NULL}};
+
+const luaL_Reg lg_mesh_lib[] = {{"rectangle", l_rectangle}, {"box", l_box}, {"read", l_read},
+                                {"new", l_mesh_new}, {NULL, NULL}};

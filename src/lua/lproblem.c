@@ -1,0 +1,362 @@
+/* lproblem.c — Lua bindings of the assembly layer: discrete functions (lg.function,
+ * lg.interpolate), linear and nonlinear problems, PETSc options and the JIT. */
+#include "largs.h"
+
+#include <lauxlib.h>
+#include <limits.h>
+#include <math.h>
+#include <petscsys.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+static int func_gc(lua_State *L) {
+  ud_func *u = lua_touserdata(L, 1);
+  if (!u->f) return 0;
+  lua_getfield(L, LUA_REGISTRYINDEX, "lugal.env");
+  ud_env *ue = lua_touserdata(L, -1);
+  lua_pop(L, 1);
+  if (ue && ue->env) {
+    expr_func_info *fi = expr_func_get(ue->env->c, u->f->fid);
+    if (fi) fi->user = NULL;
+  }
+  lg_function_free(u->f);
+  u->f = NULL;
+  return 0;
+}
+
+static int func_values(lua_State *L) {
+  ud_func *u = check_func(L, 1, "f:values");
+  lua_createtable(L, u->f->dm->ndof, 0);
+  for (int i = 0; i < u->f->dm->ndof; i++) { lua_pushnumber(L, u->f->x[i]); lua_rawseti(L, -2, i + 1); }
+  return 1;
+}
+
+static int func_assign(lua_State *L) {
+  ud_func *u = check_func(L, 1, "f:assign");
+  ud_func *g = luaL_testudata(L, 2, MT_FUNC);
+  if (g) {
+    if (g->f->mesh != u->f->mesh || g->f->degree != u->f->degree)
+      return luaL_error(L, "f:assign: argument 1 must be a discrete function of the same basis and mesh");
+    memcpy(u->f->x, g->f->x, sizeof(double) * (size_t)u->f->dm->ndof);
+    return 0;
+  }
+  if (lua_istable(L, 2)) {
+    int n = (int)luaL_len(L, 2);
+    if (n != u->f->dm->ndof) return luaL_error(L, "f:assign: the table has %d values, the function %d dofs", n, u->f->dm->ndof);
+    for (int i = 1; i <= n; i++) {
+      lua_geti(L, 2, i);
+      u->f->x[i - 1] = luaL_checknumber(L, -1);
+      lua_pop(L, 1);
+    }
+    return 0;
+  }
+  lg_env *env = get_env(L);
+  expr *e = check_expr(L, 2, "f:assign");
+  if (lg_interpolate(env, u->f, e)) return lgerror(L, "f:assign", env);
+  return 0;
+}
+
+static int func_ndof(lua_State *L) { lua_pushinteger(L, check_func(L, 1, "f:ndof")->f->dm->ndof); return 1; }
+
+static int func_degree(lua_State *L) { lua_pushinteger(L, check_func(L, 1, "f:degree")->f->degree); return 1; }
+
+static int func_index(lua_State *L) {
+  if (lua_type(L, 2) == LUA_TSTRING) {
+    luaL_getmetatable(L, MT_FUNC);
+    lua_getfield(L, -1, "methods");
+    lua_getfield(L, -1, lua_tostring(L, 2));
+    if (!lua_isnil(L, -1)) return 1;
+    return luaL_error(L, "discrete functions have no field '%s'", lua_tostring(L, 2));
+  }
+  return luaL_error(L, "discrete functions are scalar: they cannot be indexed");
+}
+
+static int func_tostring(lua_State *L) {
+  ud_func *u = check_func(L, 1, "tostring");
+  expr_func_info *fi = expr_func_get(get_env(L)->c, u->f->fid);
+  lua_pushfstring(L, "discrete function %s (P%d, %d dofs)", fi ? fi->name : "?", u->f->degree, u->f->dm->ndof);
+  return 1;
+}
+
+static int l_interpolate(lua_State *L) {
+  const char *fn = "lg.interpolate";
+  ud_basis *b = luaL_testudata(L, 1, MT_BASIS);
+  if (!b) return typeerror(L, fn, 1, "a basis (lg.lagrange(p))");
+  ud_mesh *um = check_mesh(L, 2, fn);
+  expr *e = check_expr(L, 3, fn);
+  lg_env *env = get_env(L);
+  const char *name = luaL_optstring(L, 4, "f");
+  lg_function *f = lg_function_new(env, um->lm, b->degree, name);
+  if (!f) return lgerror(L, fn, env);
+  push_function(L, f, 2);
+  if (lg_interpolate(env, f, e)) return lgerror(L, fn, env);
+  return 1;
+}
+
+static int l_function(lua_State *L) {
+  const char *fn = "lg.function";
+  ud_basis *b = luaL_testudata(L, 1, MT_BASIS);
+  if (!b) return typeerror(L, fn, 1, "a basis (lg.lagrange(p))");
+  ud_mesh *um = check_mesh(L, 2, fn);
+  lg_env *env = get_env(L);
+  lg_function *f = lg_function_new(env, um->lm, b->degree, luaL_optstring(L, 3, "f"));
+  if (!f) return lgerror(L, fn, env);
+  push_function(L, f, 2);
+  return 1;
+}
+
+static int symbol_list(lua_State *L, int t, const char *key, func_kind kind, int *ids, const char *fn) {
+  int ty = lua_getfield(L, t, key);
+  int n = 0;
+  const char *what = kind == FK_TEST ? "a test function (lg.test) or a table of them" : "an unknown (lg.unknown) or a table of them";
+  if (ty == LUA_TTABLE) {
+    n = (int)luaL_len(L, -1);
+    if (n < 1 || n > KER_MAXFIELD) luaL_error(L, "%s: option '%s' must list 1 to %d functions", fn, key, KER_MAXFIELD);
+    for (int i = 1; i <= n; i++) {
+      lua_geti(L, -1, i);
+      ud_expr *u = luaL_testudata(L, -1, MT_EXPR);
+      if (!u || u->e->kind != E_FIELD || u->e->order || expr_func_get(get_env(L)->c, u->e->i0)->kind != kind)
+        luaL_error(L, "%s: option '%s' entry %d must be %s", fn, key, i, what);
+      ids[i - 1] = u->e->i0;
+      lua_pop(L, 1);
+    }
+  } else {
+    ud_expr *u = luaL_testudata(L, -1, MT_EXPR);
+    if (!u || u->e->kind != E_FIELD || u->e->order || expr_func_get(get_env(L)->c, u->e->i0)->kind != kind)
+      luaL_error(L, "%s: option '%s' must be %s, got %s", fn, key, what, ty == LUA_TNIL ? "nothing" : luaL_typename(L, -1));
+    ids[0] = u->e->i0;
+    n = 1;
+  }
+  lua_pop(L, 1);
+  return n;
+}
+
+static int make_problem(lua_State *L, int nonlinear) {
+  const char *fn = nonlinear ? "lg.nonlinear_problem" : "lg.linear_problem";
+  if (!lua_istable(L, 1)) return typeerror(L, fn, 1, "a table {mesh=, eqn=, bc=, test=, unknown=}");
+  static const char *const keys[] = {"mesh", "eqn", "bc", "test", "unknown", "initial", "symmetric", "prefix", NULL};
+  check_keys(L, 1, fn, keys);
+  lua_getfield(L, 1, "mesh");
+  ud_mesh *um = luaL_testudata(L, -1, MT_MESH);
+  if (!um) return luaL_error(L, "%s: option 'mesh' must be a mesh, got %s", fn, luaL_typename(L, -1));
+  int mesh_idx = lua_gettop(L);
+  lua_getfield(L, 1, "eqn");
+  ud_form *ue = luaL_testudata(L, -1, MT_FORM);
+  if (!ue) return luaL_error(L, "%s: option 'eqn' must be a form (lg.integral(...) + ...), got %s", fn,
+                             luaL_testudata(L, -1, MT_BC) ? "a boundary condition" : luaL_typename(L, -1));
+  int eqn_idx = lua_gettop(L);
+  lua_getfield(L, 1, "bc");
+  form *bcf = NULL;
+  int bc_idx = lua_gettop(L);
+  form *bc_owned = NULL;
+  if (lua_istable(L, bc_idx)) {
+    /* a table of boundary conditions: combine */
+    bc_owned = form_new();
+    int n = (int)luaL_len(L, bc_idx);
+    for (int i = 1; i <= n; i++) {
+      lua_geti(L, bc_idx, i);
+      ud_form *ub = luaL_testudata(L, -1, MT_BC);
+      if (!ub) { form_free(bc_owned); return luaL_error(L, "%s: option 'bc' entry %d must be lg.essential_bc(...)", fn, i); }
+      for (int k = 0; k < ub->f->n; k++) form_add_term(bc_owned, &ub->f->t[k].reg, ub->f->t[k].integrand, -1);
+      lua_pop(L, 1);
+    }
+    bcf = bc_owned;
+  } else if (!lua_isnil(L, bc_idx)) {
+    ud_form *ub = luaL_testudata(L, bc_idx, MT_BC);
+    if (!ub) return luaL_error(L, "%s: option 'bc' must be lg.essential_bc(...) or a table of them, got %s", fn, luaL_typename(L, bc_idx));
+    bcf = ub->f;
+  }
+  int test[KER_MAXFIELD], unk[KER_MAXFIELD];
+  int nt = symbol_list(L, 1, "test", FK_TEST, test, fn);
+  int nu = symbol_list(L, 1, "unknown", FK_UNKNOWN, unk, fn);
+  if (nt != nu) { form_free(bc_owned); return luaL_error(L, "%s: %d test functions for %d unknowns", fn, nt, nu); }
+  lua_getfield(L, 1, "symmetric");
+  int sym = lua_toboolean(L, -1);
+  lua_pop(L, 1);
+  const char *prefix = opt_str(L, 1, "prefix", NULL, fn);
+  for (int i = 0; ue && i < ue->f->n; i++)
+    if (ue->f->t[i].reg.mesh != um->lm) { form_free(bc_owned); return luaL_error(L, "%s: the equation integrates over a different mesh than 'mesh'", fn); }
+  for (int i = 0; bcf && i < bcf->n; i++)
+    if (bcf->t[i].reg.mesh != um->lm) { form_free(bc_owned); return luaL_error(L, "%s: a boundary condition is on a different mesh than 'mesh'", fn); }
+  lg_env *env = get_env(L);
+  lg_problem_spec s = {um->lm, ue->f, bcf, nt, test, unk, nonlinear, sym, prefix};
+  lg_problem *p = lg_problem_new(env, &s);
+  form_free(bc_owned);
+  if (!p) return lgerror(L, fn, env);
+  int deps[3] = {mesh_idx, eqn_idx, bc_idx};
+  ud_prob *u = new_ud(L, sizeof *u, MT_PROB, lua_isnil(L, bc_idx) ? 2 : 3, deps);
+  u->p = p;
+  u->nfield = nt;
+  u->nonlinear = nonlinear;
+  /* the initial guess is kept with the problem */
+  lua_getfield(L, 1, "initial");
+  lua_getiuservalue(L, -2, 1);
+  lua_insert(L, -2);
+  lua_setfield(L, -2, "__initial");
+  lua_pop(L, 1);
+  return 1;
+}
+
+static int l_linear_problem(lua_State *L) { return make_problem(L, 0); }
+
+static int l_nonlinear_problem(lua_State *L) { return make_problem(L, 1); }
+
+static int prob_gc(lua_State *L) {
+  ud_prob *u = lua_touserdata(L, 1);
+  lg_problem_free(u->p);
+  u->p = NULL;
+  return 0;
+}
+
+static int prob_solve(lua_State *L) {
+  const char *fn = "problem:solve";
+  ud_prob *u = luaL_checkudata(L, 1, MT_PROB);
+  lg_env *env = get_env(L);
+  lg_function *init[KER_MAXFIELD] = {NULL};
+  int init_idx = 2;
+  if (lua_isnoneornil(L, 2)) {
+    lua_settop(L, 1);
+    lua_getiuservalue(L, 1, 1);
+    lua_getfield(L, -1, "__initial");
+    lua_remove(L, 2);
+  }
+  lua_settop(L, 2);
+  if (!lua_isnil(L, init_idx)) {
+    if (u->nfield == 1 && luaL_testudata(L, init_idx, MT_FUNC)) init[0] = ((ud_func *)lua_touserdata(L, init_idx))->f;
+    else if (lua_istable(L, init_idx)) {
+      for (int i = 1; i <= u->nfield; i++) {
+        lua_geti(L, init_idx, i);
+        ud_func *g = luaL_testudata(L, -1, MT_FUNC);
+        if (!g && !lua_isnil(L, -1)) return luaL_error(L, "%s: initial guess %d must be a discrete function", fn, i);
+        init[i - 1] = g ? g->f : NULL;
+        lua_pop(L, 1);
+      }
+    } else return typeerror(L, fn, init_idx, "a discrete function (initial guess)");
+  }
+  lg_function *out[KER_MAXFIELD];
+  lg_solve_info info;
+  if (lg_problem_solve(env, u->p, init, out, &info)) return lgerror(L, fn, env);
+  /* find the mesh userdata among the dependencies to anchor the outputs */
+  lua_getiuservalue(L, 1, 1);
+  int mesh_idx = 0;
+  lua_pushnil(L);
+  while (lua_next(L, -2)) {
+    lua_pop(L, 1);
+    ud_mesh *um = luaL_testudata(L, -1, MT_MESH);
+    if (um && um->lm == out[0]->mesh) { mesh_idx = lua_gettop(L); break; }
+  }
+  int base = lua_gettop(L);
+  for (int a = 0; a < u->nfield; a++) {
+    if (mesh_idx) push_function(L, out[a], mesh_idx);
+    else {
+      ud_func *uf = new_ud(L, sizeof *uf, MT_FUNC, 0, NULL);
+      uf->f = out[a];
+    }
+  }
+  /* info table */
+  lua_createtable(L, 0, 8);
+  lua_pushinteger(L, info.iterations); lua_setfield(L, -2, "iterations");
+  lua_pushinteger(L, info.linear_iterations); lua_setfield(L, -2, "linear_iterations");
+  lua_pushstring(L, info.reason); lua_setfield(L, -2, "reason");
+  lua_pushnumber(L, info.assemble_ms); lua_setfield(L, -2, "assemble_ms");
+  lua_pushnumber(L, info.solve_ms); lua_setfield(L, -2, "solve_ms");
+  lua_createtable(L, info.nres, 0);
+  for (int i = 0; i < info.nres; i++) { lua_pushnumber(L, info.res[i]); lua_rawseti(L, -2, i + 1); }
+  lua_setfield(L, -2, "residuals");
+  lua_pushinteger(L, lg_problem_size(u->p)); lua_setfield(L, -2, "dofs");
+  return lua_gettop(L) - base;
+}
+
+static int prob_matrix(lua_State *L) {
+  const char *fn = "problem:matrix";
+  ud_prob *u = luaL_checkudata(L, 1, MT_PROB);
+  int n = lg_problem_size(u->p);
+  if (n > 2000) return luaL_error(L, "%s: the dense matrix is for small problems (n <= 2000, this one has %d)", fn, n);
+  double *d = malloc(sizeof(double) * (size_t)n * n);
+  if (!d) return luaL_error(L, "%s: out of memory", fn);
+  lg_env *env = get_env(L);
+  if (lg_problem_dense_matrix(env, u->p, d, n)) { free(d); return lgerror(L, fn, env); }
+  lua_createtable(L, n, 0);
+  for (int i = 0; i < n; i++) {
+    lua_createtable(L, n, 0);
+    for (int j = 0; j < n; j++) { lua_pushnumber(L, d[(size_t)i * n + j]); lua_rawseti(L, -2, j + 1); }
+    lua_rawseti(L, -2, i + 1);
+  }
+  free(d);
+  return 1;
+}
+
+static int prob_assemble(lua_State *L) {
+  ud_prob *u = luaL_checkudata(L, 1, MT_PROB);
+  lg_env *env = get_env(L);
+  double ms;
+  if (lg_problem_assemble_matrix(env, u->p, &ms)) return lgerror(L, "problem:assemble", env);
+  lua_pushnumber(L, ms / 1000.0);
+  lua_pushinteger(L, lg_problem_nnz(u->p));
+  return 2;
+}
+
+static int prob_size(lua_State *L) {
+  ud_prob *u = luaL_checkudata(L, 1, MT_PROB);
+  lua_pushinteger(L, lg_problem_size(u->p));
+  return 1;
+}
+
+static int l_options(lua_State *L) {
+  const char *s = luaL_checkstring(L, 1);
+  if (PetscOptionsInsertString(NULL, s)) return luaL_error(L, "lg.options: PETSc could not parse \"%s\"", s);
+  return 0;
+}
+
+static int l_jit(lua_State *L) {
+  const char *b = luaL_checkstring(L, 1);
+  lg_env *env = get_env(L);
+  if (!strcmp(b, "tcc")) jit_set_backend(env->jit, JIT_TCC);
+  else if (!strcmp(b, "cc")) jit_set_backend(env->jit, JIT_CC);
+  else return luaL_error(L, "lg.jit: argument 1 must be \"tcc\" or \"cc\", got \"%s\"", b);
+  return 0;
+}
+
+/* wall-clock seconds from a monotonic clock (os.clock is CPU time of every thread) */
+static int l_wtime(lua_State *L) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  lua_pushnumber(L, ts.tv_sec + 1e-9 * ts.tv_nsec);
+  return 1;
+}
+
+static int l_stats(lua_State *L) {
+  lg_env *env = get_env(L);
+  lua_createtable(L, 0, 3);
+  lua_pushinteger(L, env->nkernels); lua_setfield(L, -2, "kernels");
+  lua_pushnumber(L, env->kernel_ms); lua_setfield(L, -2, "kernel_ms");
+  lua_pushinteger(L, (lua_Integer)expr_node_count(env->c)); lua_setfield(L, -2, "nodes");
+  return 1;
+}
+
+/* ---------------------------------------------------------------- registration */
+
+void lg_lua_problem_register(lua_State *L) {
+  static const luaL_Reg func_methods[] = {{"values", func_values}, {"assign", func_assign}, {"ndof", func_ndof},
+                                          {"degree", func_degree}, {NULL, NULL}};
+  luaL_newmetatable(L, MT_FUNC);
+  luaL_setfuncs(L, lg_arith_mm, 0);
+  lua_pushcfunction(L, func_gc); lua_setfield(L, -2, "__gc");
+  lua_pushcfunction(L, func_tostring); lua_setfield(L, -2, "__tostring");
+  lua_pushcfunction(L, func_index); lua_setfield(L, -2, "__index");
+  lua_newtable(L);
+  luaL_setfuncs(L, func_methods, 0);
+  lua_setfield(L, -2, "methods");
+  lua_pop(L, 1);
+  static const luaL_Reg prob_mm[] = {{"__gc", prob_gc}, {NULL, NULL}};
+  static const luaL_Reg prob_methods[] = {{"solve", prob_solve}, {"matrix", prob_matrix}, {"assemble", prob_assemble},
+                                          {"size", prob_size}, {NULL, NULL}};
+  new_mt(L, MT_PROB, prob_mm, prob_methods);
+}
+
+const luaL_Reg lg_problem_lib[] = {
+    {"interpolate", l_interpolate}, {"function", l_function}, {"linear_problem", l_linear_problem},
+    {"nonlinear_problem", l_nonlinear_problem}, {"options", l_options}, {"jit", l_jit},
+    {"stats", l_stats}, {"wtime", l_wtime}, {NULL, NULL}};

@@ -99,6 +99,7 @@ static int tape_visit(expr *e, expr_tape *t, int *cap, int *mark, int maxid) {
 }
 
 int expr_tape_build(expr_ctx *c, int nroot, expr **roots, expr_tape *t) {
+  for (int i = 0; i < nroot; i++) roots[i] = expr_canon(c, roots[i]); /* may make nodes */
   int maxid = (int)expr_node_count(c);
   int *mark = calloc((size_t)maxid + 1, sizeof(int));
   int cap = 64;
@@ -180,7 +181,7 @@ int expr_tape_eval(const expr_tape *t, const double *params, expr_leaf_fn leaf, 
       }
       break;
     }
-    case E_LIST: v = NAN; break;
+    case E_LIST: case E_LAZY_SUM: case E_LAZY_PROD: v = NAN; break;
     }
     w[k] = v;
   }

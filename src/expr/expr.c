@@ -3,6 +3,7 @@
  * estimates and printing. Tapes, code generation and forms are in codegen.c / form.c. */
 #include "expr.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdlib.h>
@@ -85,6 +86,7 @@ struct expr_ctx {
   expr_func_info *funcs;
   int dim;
   int oom;
+  size_t used, budget; /* node slots made (a node costs 8 + its children) and the limit */
   char err[EXPR_ERRLEN];
 };
 
@@ -92,6 +94,7 @@ expr_ctx *expr_ctx_new(void) {
   expr_ctx *c = calloc(1, sizeof *c);
   if (!c) return NULL;
   c->dim = 2;
+  c->budget = EXPR_DEFAULT_BUDGET;
   c->tcap = 1024;
   c->table = calloc(c->tcap, sizeof(expr *));
   if (!c->table) { free(c); return NULL; }
@@ -120,6 +123,7 @@ void expr_set_error(expr_ctx *c, const char *fmt, ...) {
 void expr_set_dim(expr_ctx *c, int dim) { c->dim = dim; }
 int expr_dim(const expr_ctx *c) { return c->dim; }
 size_t expr_node_count(const expr_ctx *c) { return c->nnodes; }
+void expr_set_budget(expr_ctx *c, size_t slots) { c->budget = slots; }
 
 int expr_param_new(expr_ctx *c, const char *name, double value) {
   if (c->nparam == c->capparam) {
@@ -216,6 +220,13 @@ static expr *intern(expr_ctx *c, expr_kind k, double v, int i0, int i1, const un
     if (e->hash == h && node_eq(e, k, v, i0, i1, alpha, n, ch)) return e;
     pos = (pos + 1) & (c->tcap - 1);
   }
+  if (c->used + 8 + (size_t)n > c->budget) {
+    expr_set_error(c, "the expressions grew past %zu node slots (about %zu MB): an expansion that grows without "
+                      "bound (a high derivative of a deep chain, a huge product)? Split or simplify it",
+                   c->budget, c->budget * 8 >> 20);
+    return NULL;
+  }
+  c->used += 8 + (size_t)n;
   expr *e = calloc(1, sizeof(expr) + sizeof(expr *) * (size_t)n);
   if (!e) { c->oom = 1; expr_set_error(c, "out of memory"); return NULL; }
   e->kind = k;
@@ -293,6 +304,7 @@ void expr_describe_shape(const expr *e, char *buf, size_t len) {
 }
 
 static int same_shape(const expr *a, const expr *b) {
+  if (a == b) return 1; /* shared entries: O(rank), not O(entries) */
   if ((a->kind == E_LIST) != (b->kind == E_LIST)) return 0;
   if (a->kind != E_LIST) return 1;
   if (a->n != b->n) return 0;
@@ -309,10 +321,30 @@ static expr *shape_error(expr_ctx *c, const char *verb, const expr *a, const exp
   return NULL;
 }
 
+/* scalar entries of a (rectangular) list */
+static double list_entries(const expr *e) {
+  double n = 1;
+  for (; e && e->kind == E_LIST; e = e->n ? e->ch[0] : NULL) n *= e->n;
+  return n;
+}
+
 expr *expr_list(expr_ctx *c, int n, expr **items) {
   if (n <= 0) { expr_set_error(c, "a list needs at least one entry"); return NULL; }
   for (int i = 0; i < n; i++) {
     if (!items[i]) return NULL;
+    items[i] = expr_canon(c, items[i]);
+  }
+  int rank;
+  expr_shape(items[0], &rank);
+  if (rank + 1 > EXPR_MAXRANK) {
+    expr_set_error(c, "lists nest at most %d deep (this one would be rank %d)", EXPR_MAXRANK, rank + 1);
+    return NULL;
+  }
+  if (n * list_entries(items[0]) > EXPR_MAXENTRIES) {
+    expr_set_error(c, "a list of %.0f scalar entries is too large (at most %d)", n * list_entries(items[0]), EXPR_MAXENTRIES);
+    return NULL;
+  }
+  for (int i = 0; i < n; i++) {
     if (!same_shape(items[0], items[i])) {
       expr_set_error(c, "list entries must have the same shape (entry 1 and entry %d differ)", i + 1);
       return NULL;
@@ -376,8 +408,11 @@ static void split_coef(expr *t, double *coef, expr **rest, expr_ctx *c) {
 static expr *scale(expr_ctx *c, double s, expr *e);
 
 expr *expr_sum_n(expr_ctx *c, int n, expr **in) {
-  for (int i = 0; i < n; i++)
+  for (int i = 0; i < n; i++) {
     if (!in[i]) return NULL;
+    in[i] = expr_canon(c, in[i]);
+    if (!in[i]) return NULL;
+  }
   if (n == 0) return expr_num(c, 0);
   if (n == 1) return in[0];
   /* lists: elementwise */
@@ -442,6 +477,8 @@ expr *expr_sum_n(expr_ctx *c, int n, expr **in) {
 }
 
 expr *expr_add(expr_ctx *c, expr *a, expr *b) {
+  a = expr_canon(c, a);
+  b = expr_canon(c, b);
   expr *v[2] = {a, b};
   if (a && b && a->kind == E_LIST && b->kind == E_LIST && !same_shape(a, b))
     return shape_error(c, "add", a, b);
@@ -450,11 +487,14 @@ expr *expr_add(expr_ctx *c, expr *a, expr *b) {
 }
 
 expr *expr_neg(expr_ctx *c, expr *a) {
+  a = expr_canon(c, a);
   if (!a) return NULL;
   return expr_mul(c, expr_num(c, -1), a);
 }
 
 expr *expr_sub(expr_ctx *c, expr *a, expr *b) {
+  a = expr_canon(c, a);
+  b = expr_canon(c, b);
   if (a && b && ((a->kind == E_LIST) != (b->kind == E_LIST) || !same_shape(a, b)))
     return shape_error(c, "subtract", b, a);
   return expr_add(c, a, expr_neg(c, b));
@@ -504,8 +544,11 @@ static expr *scale(expr_ctx *c, double s, expr *e) {
 }
 
 expr *expr_prod_n(expr_ctx *c, int n, expr **in) {
-  for (int i = 0; i < n; i++)
+  for (int i = 0; i < n; i++) {
     if (!in[i]) return NULL;
+    in[i] = expr_canon(c, in[i]);
+    if (!in[i]) return NULL;
+  }
   if (n == 0) return expr_num(c, 1);
   if (n == 1) return in[0];
   int nlist = 0, li = -1;
@@ -607,11 +650,83 @@ expr *expr_prod_n(expr_ctx *c, int n, expr **in) {
 }
 
 expr *expr_mul(expr_ctx *c, expr *a, expr *b) {
-  expr *v[2] = {a, b};
+  expr *v[2] = {a, b}; /* expr_prod_n resolves them */
   return expr_prod_n(c, 2, v);
 }
 
+/* ---------------------------------------------------------------- pending sums and products */
+
+#define LAZY_MIN 32 /* a sum or product of this many terms grows by pending nodes */
+
+static int big(const expr *e, expr_kind flat, expr_kind lazy) {
+  return e && (e->kind == lazy || (e->kind == flat && e->n >= LAZY_MIN));
+}
+
+static expr *pending(expr_ctx *c, expr_kind k, expr *base, expr *extra) {
+  extra = expr_canon(c, extra);
+  if (!extra) return NULL;
+  if (k == E_LAZY_SUM && is_const(extra, 0)) return base;
+  if (k == E_LAZY_PROD && is_const(extra, 1)) return base;
+  if (k == E_LAZY_PROD && is_const(extra, 0)) return extra;
+  expr *ch[2] = {base, extra};
+  return intern(c, k, 0, 0, 0, NULL, 2, ch);
+}
+
+expr *expr_add_lazy(expr_ctx *c, expr *a, expr *b) {
+  if (!a || !b) return NULL;
+  int ba = big(a, E_SUM, E_LAZY_SUM), bb = big(b, E_SUM, E_LAZY_SUM);
+  if (ba && !bb && b->kind != E_LIST) return pending(c, E_LAZY_SUM, a, b);
+  if (bb && !ba && a->kind != E_LIST) return pending(c, E_LAZY_SUM, b, a);
+  return expr_add(c, a, b);
+}
+
+expr *expr_sub_lazy(expr_ctx *c, expr *a, expr *b) {
+  if (!a || !b) return NULL;
+  if (big(a, E_SUM, E_LAZY_SUM) && b->kind != E_LIST) return pending(c, E_LAZY_SUM, a, expr_neg(c, b));
+  return expr_sub(c, a, b);
+}
+
+expr *expr_mul_lazy(expr_ctx *c, expr *a, expr *b) {
+  if (!a || !b) return NULL;
+  int ba = big(a, E_PROD, E_LAZY_PROD), bb = big(b, E_PROD, E_LAZY_PROD);
+  if (ba && !bb && b->kind != E_LIST) return pending(c, E_LAZY_PROD, a, b);
+  if (bb && !ba && a->kind != E_LIST) return pending(c, E_LAZY_PROD, b, a);
+  return expr_mul(c, a, b);
+}
+
+expr *expr_canon(expr_ctx *c, expr *e) {
+  if (!e || (e->kind != E_LAZY_SUM && e->kind != E_LAZY_PROD)) return e;
+  if (e->canon) return e->canon;
+  /* the chain of pending nodes down to its resolved base, without recursion */
+  expr_kind k = e->kind;
+  size_t n = 0, cap = 64;
+  expr **ops = malloc(sizeof(expr *) * cap);
+  if (!ops) { expr_set_error(c, "out of memory"); return NULL; }
+  expr *p = e;
+  for (;;) {
+    if (n + 2 > cap) {
+      expr **no = realloc(ops, sizeof(expr *) * (cap *= 2));
+      if (!no) { free(ops); expr_set_error(c, "out of memory"); return NULL; }
+      ops = no;
+    }
+    if (p->kind == k && !p->canon) {
+      ops[n++] = p->ch[1];
+      p = p->ch[0];
+      continue;
+    }
+    ops[n++] = p->kind == k ? p->canon : expr_canon(c, p);
+    break;
+  }
+  if (n > (size_t)INT_MAX) { free(ops); expr_set_error(c, "a sum of more than %d terms", INT_MAX); return NULL; }
+  expr *r = k == E_LAZY_SUM ? expr_sum_n(c, (int)n, ops) : expr_prod_n(c, (int)n, ops);
+  free(ops);
+  e->canon = r;
+  return r;
+}
+
 expr *expr_pow(expr_ctx *c, expr *a, expr *b) {
+  a = expr_canon(c, a);
+  b = expr_canon(c, b);
   if (!a || !b) return NULL;
   if (a->kind == E_LIST || b->kind == E_LIST) return shape_error(c, "raise to a power", a, b);
   if (b->kind == E_CONST) {
@@ -645,6 +760,8 @@ expr *expr_pow(expr_ctx *c, expr *a, expr *b) {
 }
 
 expr *expr_div(expr_ctx *c, expr *a, expr *b) {
+  a = expr_canon(c, a);
+  b = expr_canon(c, b);
   if (!a || !b) return NULL;
   if (b->kind == E_LIST) return shape_error(c, "divide", a, b);
   if (is_const(b, 0)) { expr_set_error(c, "division by zero"); return NULL; }
@@ -675,6 +792,7 @@ static const char *fn_names[FN_COUNT] = {"sin", "cos", "tan", "exp", "log", "sqr
                                          "tanh", "sinh", "cosh", "atan", "asin", "acos", "sign"};
 
 expr *expr_apply(expr_ctx *c, expr_fn fn, expr *a) {
+  a = expr_canon(c, a);
   if (!a) return NULL;
   if (a->kind == E_LIST) {
     char s[64];
@@ -696,6 +814,7 @@ expr *expr_apply(expr_ctx *c, expr_fn fn, expr *a) {
 /* ---------------------------------------------------------------- vector calculus */
 
 expr *expr_index(expr_ctx *c, expr *l, int i) {
+  l = expr_canon(c, l);
   if (!l) return NULL;
   if (l->kind != E_LIST) { expr_set_error(c, "cannot index a scalar"); return NULL; }
   if (i < 0 || i >= l->n) {
@@ -706,6 +825,8 @@ expr *expr_index(expr_ctx *c, expr *l, int i) {
 }
 
 expr *expr_dot(expr_ctx *c, expr *a, expr *b) {
+  a = expr_canon(c, a);
+  b = expr_canon(c, b);
   if (!a || !b) return NULL;
   if (a->kind != E_LIST && b->kind != E_LIST) return expr_mul(c, a, b);
   if (a->kind != E_LIST || b->kind != E_LIST) return shape_error(c, "take the dot product of", a, b);
@@ -731,6 +852,8 @@ expr *expr_dot(expr_ctx *c, expr *a, expr *b) {
 }
 
 expr *expr_inner(expr_ctx *c, expr *a, expr *b) {
+  a = expr_canon(c, a);
+  b = expr_canon(c, b);
   if (!a || !b) return NULL;
   if (!same_shape(a, b)) return shape_error(c, "take the inner product of", a, b);
   if (a->kind != E_LIST) return expr_mul(c, a, b);
@@ -743,6 +866,7 @@ expr *expr_inner(expr_ctx *c, expr *a, expr *b) {
 }
 
 expr *expr_grad(expr_ctx *c, expr *a) {
+  a = expr_canon(c, a);
   if (!a) return NULL;
   expr *t[EXPR_MAXDIM];
   if (a->kind == E_LIST) {
@@ -758,6 +882,7 @@ expr *expr_grad(expr_ctx *c, expr *a) {
 }
 
 expr *expr_div_op(expr_ctx *c, expr *a) {
+  a = expr_canon(c, a);
   if (!a) return NULL;
   int rank;
   int n = expr_shape(a, &rank);
@@ -796,6 +921,11 @@ static expr *deriv_fn(expr_ctx *c, expr_fn fn, expr *a) {
   }
 }
 
+/* the product rule on a flat product of n factors that all depend on the variable makes n
+ * terms of n - 1 factors: past this many, an error instead of gigabytes */
+#define PROD_RULE_MAX 4096
+static int deriv_zero(const expr *e, const expr *leaf);
+
 static expr *deriv_uncached(expr_ctx *c, expr *e, expr *leaf, int dir) {
   switch (e->kind) {
   case E_CONST: case E_PARAM: case E_NORMAL:
@@ -820,6 +950,8 @@ static expr *deriv_uncached(expr_ctx *c, expr *e, expr *leaf, int dir) {
     free(t);
     return r;
   }
+  case E_LAZY_SUM: case E_LAZY_PROD: /* never memoized unresolved: deriv resolves first */
+    return deriv(c, expr_canon(c, e), leaf, dir);
   case E_SUM: {
     expr **t = malloc(sizeof(expr *) * (size_t)e->n);
     if (!t) return NULL;
@@ -829,6 +961,15 @@ static expr *deriv_uncached(expr_ctx *c, expr *e, expr *leaf, int dir) {
     return r;
   }
   case E_PROD: {
+    /* product rule: (the other factors) * d(factor i), the derivative kept pending so that
+     * a chain of products does not flatten into quadratically many factors */
+    int ndep = 0;
+    for (int i = 0; i < e->n; i++) ndep += !deriv_zero(e->ch[i], leaf);
+    if (ndep > PROD_RULE_MAX) { /* the result would hold ndep^2 factors */
+      expr_set_error(c, "differentiating a product of %d factors that all depend on the variable would make %d terms "
+                        "of %d factors each (at most %d such factors)", ndep, ndep, ndep - 1, PROD_RULE_MAX);
+      return NULL;
+    }
     expr **t = malloc(sizeof(expr *) * (size_t)e->n);
     expr **f = malloc(sizeof(expr *) * (size_t)e->n);
     if (!t || !f) { free(t); free(f); return NULL; }
@@ -837,11 +978,13 @@ static expr *deriv_uncached(expr_ctx *c, expr *e, expr *leaf, int dir) {
       expr *d = deriv(c, e->ch[i], leaf, dir);
       if (!d) { free(t); free(f); return NULL; }
       if (is_const(d, 0)) continue;
-      memcpy(f, e->ch, sizeof(expr *) * (size_t)e->n);
-      f[i] = d;
-      t[k++] = expr_prod_n(c, e->n, f);
+      int m = 0;
+      for (int j = 0; j < e->n; j++)
+        if (j != i) f[m++] = e->ch[j];
+      t[k] = expr_mul_lazy(c, m == 1 ? f[0] : expr_prod_n(c, m, f), d);
+      if (!t[k++]) { free(t); free(f); return NULL; }
     }
-    expr *r = expr_sum_n(c, k, t);
+    expr *r = k == 1 ? t[0] : expr_sum_n(c, k, t);
     free(t);
     free(f);
     return r;
@@ -850,53 +993,95 @@ static expr *deriv_uncached(expr_ctx *c, expr *e, expr *leaf, int dir) {
     expr *a = e->ch[0], *b = e->ch[1];
     expr *da = deriv(c, a, leaf, dir), *db = deriv(c, b, leaf, dir);
     if (!da || !db) return NULL;
-    expr *r = expr_num(c, 0);
+    expr *r1 = NULL, *r2 = NULL;
     if (!is_const(da, 0)) /* b a^(b-1) a' */
-      r = expr_add(c, r, expr_prod_n(c, 3, (expr *[]){b, expr_pow(c, a, expr_sub(c, b, expr_num(c, 1))), da}));
+      r1 = expr_mul_lazy(c, expr_mul(c, b, expr_pow(c, a, expr_sub(c, b, expr_num(c, 1)))), da);
     if (!is_const(db, 0)) /* a^b log(a) b' */
-      r = expr_add(c, r, expr_prod_n(c, 3, (expr *[]){e, expr_apply(c, FN_LOG, a), db}));
-    return r;
+      r2 = expr_mul_lazy(c, expr_mul(c, e, expr_apply(c, FN_LOG, a)), db);
+    if (r1 && r2) return expr_add(c, r1, r2);
+    if (r1 || r2) return r1 ? r1 : r2;
+    return is_const(da, 0) && is_const(db, 0) ? expr_num(c, 0) : NULL;
   }
   case E_FUNC: {
     expr *a = e->ch[0];
     expr *da = deriv(c, a, leaf, dir);
     if (!da) return NULL;
     if (is_const(da, 0)) return da;
-    return expr_mul(c, deriv_fn(c, (expr_fn)e->i0, a), da);
+    return expr_mul_lazy(c, deriv_fn(c, (expr_fn)e->i0, a), da);
   }
   }
   return NULL;
 }
 
+/* d e / d leaf (leaf != NULL) or d e / d x_dir: zero when e cannot depend on it */
+static int deriv_zero(const expr *e, const expr *leaf) {
+  if (leaf) return !(e->dep & leaf->dep) && e != leaf;
+  return !(e->dep & DEP_POINT);
+}
+
+static int64_t deriv_key(const expr *e, const expr *leaf, int dir) {
+  return ((int64_t)e->id << 32) | (leaf ? (int64_t)leaf->id : (int64_t)0x80000000 + dir);
+}
+
+/* the derivatives of the nodes under e, children before parents, with an explicit stack:
+ * then deriv_uncached(e) finds every child's derivative memoized, and no depth of
+ * expression (a chain of 100 000 functions) recurses on the C stack */
+static int deriv_below(expr_ctx *c, expr *e, expr *leaf, int dir) {
+  typedef struct { expr *e; int next; } frame;
+  int cap = 64, sp = 0;
+  frame *st = malloc(sizeof(frame) * (size_t)cap);
+  if (!st) { expr_set_error(c, "out of memory"); return 1; }
+  st[sp++] = (frame){e, 0};
+  while (sp) {
+    frame *f = &st[sp - 1];
+    if (f->next < f->e->n) {
+      expr *ch = f->e->ch[f->next++];
+      if (ch->n == 0 || deriv_zero(ch, leaf) || memo_get(&c->dmemo, deriv_key(ch, leaf, dir))) continue;
+      if (sp == cap) {
+        frame *ns = realloc(st, sizeof(frame) * (size_t)(cap *= 2));
+        if (!ns) { free(st); expr_set_error(c, "out of memory"); return 1; }
+        st = ns;
+      }
+      st[sp++] = (frame){ch, 0};
+      continue;
+    }
+    expr *done = f->e;
+    sp--;
+    if (done == e) break;
+    expr *r = deriv_uncached(c, done, leaf, dir);
+    if (!r || memo_put(&c->dmemo, deriv_key(done, leaf, dir), r)) { free(st); return 1; }
+  }
+  free(st);
+  return 0;
+}
+
 static expr *deriv(expr_ctx *c, expr *e, expr *leaf, int dir) {
   if (!e) return NULL;
-  if (leaf && !(e->dep & leaf->dep) && e != leaf) return expr_num(c, 0);
-  if (!leaf && !(e->dep & DEP_POINT)) return expr_num(c, 0);
-  int64_t key = ((int64_t)e->id << 24) | (leaf ? (int64_t)(leaf->id & 0x7fffff) : (int64_t)(0x800000 | dir));
-  /* the memo key packs the variable into 23 bits; contexts beyond 8M nodes skip the memo */
-  int use_memo = !leaf || leaf->id < 0x7fffff;
-  if (use_memo) {
-    expr *m = memo_get(&c->dmemo, key);
-    if (m) return m;
-  }
+  if (deriv_zero(e, leaf)) return expr_num(c, 0);
+  if (e->n == 0) return deriv_uncached(c, e, leaf, dir);
+  int64_t key = deriv_key(e, leaf, dir);
+  expr *m = memo_get(&c->dmemo, key);
+  if (m) return m;
+  if (deriv_below(c, e, leaf, dir)) return NULL;
   expr *r = deriv_uncached(c, e, leaf, dir);
-  if (r && use_memo) memo_put(&c->dmemo, key, r);
+  if (r && memo_put(&c->dmemo, key, r)) return NULL;
   return r;
 }
 
 expr *expr_diff(expr_ctx *c, expr *e, expr *leaf) {
+  e = expr_canon(c, e);
   if (!e || !leaf) return NULL;
   if (leaf->kind != E_FIELD && leaf->kind != E_PARAM && leaf->kind != E_COORD && leaf->kind != E_NORMAL) {
     expr_set_error(c, "can only differentiate with respect to a field, parameter or coordinate");
     return NULL;
   }
-  return deriv(c, e, leaf, -1);
+  return expr_canon(c, deriv(c, expr_canon(c, e), leaf, -1));
 }
 
 expr *expr_dx(expr_ctx *c, expr *e, int dir) {
   if (!e) return NULL;
   if (dir < 0 || dir >= EXPR_MAXDIM) { expr_set_error(c, "direction %d out of range 1..3", dir + 1); return NULL; }
-  return deriv(c, e, NULL, dir);
+  return expr_canon(c, deriv(c, expr_canon(c, e), NULL, dir));
 }
 
 /* ---------------------------------------------------------------- rebuild / subs */
@@ -912,55 +1097,107 @@ static expr *rebuild(expr_ctx *c, const expr *e, expr **ch) {
   }
 }
 
-static expr *subs_rec(expr_ctx *c, expr *e, int n, expr **from, expr **to, memo_map *m) {
-  for (int i = 0; i < n; i++)
-    if (e == from[i]) return to[i];
-  if (e->n == 0) return e;
-  expr *r = memo_get(m, e->id);
-  if (r) return r;
+/* post-order over the DAG under root with an explicit stack (no depth recursion): visit(n)
+ * runs once per node after all its children, in the order a recursive walk would */
+typedef int (*post_visit)(void *ud, expr *e);
+static int post_order(expr_ctx *c, expr *root, memo_map *seen, post_visit visit, void *ud) {
+  typedef struct { expr *e; int next; } frame;
+  if (memo_get(seen, root->id)) return 0;
+  int cap = 64, sp = 0;
+  frame *st = malloc(sizeof(frame) * (size_t)cap);
+  if (!st) { expr_set_error(c, "out of memory"); return 1; }
+  st[sp++] = (frame){root, 0};
+  if (memo_put(seen, root->id, root)) { free(st); expr_set_error(c, "out of memory"); return 1; }
+  while (sp) {
+    frame *f = &st[sp - 1];
+    if (f->next < f->e->n) {
+      expr *ch = f->e->ch[f->next++];
+      if (memo_get(seen, ch->id)) continue;
+      if (memo_put(seen, ch->id, ch)) { free(st); expr_set_error(c, "out of memory"); return 1; }
+      if (sp == cap) {
+        frame *ns = realloc(st, sizeof(frame) * (size_t)(cap *= 2));
+        if (!ns) { free(st); expr_set_error(c, "out of memory"); return 1; }
+        st = ns;
+      }
+      st[sp++] = (frame){ch, 0};
+      continue;
+    }
+    expr *done = f->e;
+    sp--;
+    if (visit(ud, done)) { free(st); return 1; }
+  }
+  free(st);
+  return 0;
+}
+
+typedef struct {
+  expr_ctx *c;
+  int n;
+  expr **from, **to;
+  memo_map out; /* node id -> its image */
+} subs_ctx;
+
+static int subs_visit(void *ud, expr *e) {
+  subs_ctx *S = ud;
+  for (int i = 0; i < S->n; i++)
+    if (e == S->from[i]) return memo_put(&S->out, e->id, S->to[i]);
+  if (e->n == 0) return memo_put(&S->out, e->id, e);
   expr *tmp[8];
   expr **ch = e->n <= 8 ? tmp : malloc(sizeof(expr *) * (size_t)e->n);
-  if (!ch) return NULL;
+  if (!ch) return 1;
   int changed = 0;
   for (int i = 0; i < e->n; i++) {
-    ch[i] = subs_rec(c, e->ch[i], n, from, to, m);
-    if (!ch[i]) { if (ch != tmp) free(ch); return NULL; }
+    ch[i] = memo_get(&S->out, e->ch[i]->id);
     changed |= ch[i] != e->ch[i];
   }
-  r = changed ? rebuild(c, e, ch) : e;
+  expr *r = changed ? rebuild(S->c, e, ch) : e;
   if (ch != tmp) free(ch);
-  if (r) memo_put(m, e->id, r);
-  return r;
+  return !r || memo_put(&S->out, e->id, r);
 }
 
 expr *expr_subs(expr_ctx *c, expr *e, int n, expr **from, expr **to) {
+  e = expr_canon(c, e);
   if (!e) return NULL;
-  memo_map m = {0, 0, NULL};
-  expr *r = subs_rec(c, e, n, from, to, &m);
-  memo_free(&m);
+  for (int i = 0; i < n; i++) {
+    to[i] = expr_canon(c, to[i]);
+    if (!to[i]) return NULL;
+  }
+  memo_map seen = {0, 0, NULL};
+  subs_ctx S = {c, n, from, to, {0, 0, NULL}};
+  expr *r = NULL;
+  if (!post_order(c, e, &seen, subs_visit, &S)) r = memo_get(&S.out, e->id);
+  memo_free(&seen);
+  memo_free(&S.out);
   return r;
 }
 
 /* ---------------------------------------------------------------- queries */
 
-static void collect_rec(expr *e, int func, int max, expr **out, int *n, memo_map *seen, expr *mark) {
-  if (memo_get(seen, e->id)) return;
-  memo_put(seen, e->id, mark);
-  if (e->kind == E_FIELD && (func < 0 || e->i0 == func)) {
-    if (*n < max) out[*n] = e;
-    (*n)++;
-    return;
+typedef struct {
+  int func, max, n;
+  expr **out;
+  expr_kind kind;
+  int found, *maxcomp;
+} query_ctx;
+
+static int collect_visit(void *ud, expr *e) {
+  query_ctx *Q = ud;
+  if (e->kind == E_FIELD && (Q->func < 0 || e->i0 == Q->func)) {
+    if (Q->n < Q->max) Q->out[Q->n] = e;
+    Q->n++;
   }
-  for (int i = 0; i < e->n; i++) collect_rec(e->ch[i], func, max, out, n, seen, mark);
+  return 0;
 }
 
 int expr_collect_fields(expr_ctx *c, int nroot, expr **roots, int func, int max, expr **out) {
   memo_map seen = {0, 0, NULL};
-  int n = 0;
-  expr *mark = expr_num(c, 0);
-  for (int i = 0; i < nroot; i++)
-    if (roots[i]) collect_rec(roots[i], func, max, out, &n, &seen, mark);
+  query_ctx Q = {func, max, 0, out, E_FIELD, 0, NULL};
+  for (int i = 0; i < nroot; i++) {
+    expr *r = expr_canon(c, roots[i]);
+    if (r && post_order(c, r, &seen, collect_visit, &Q)) break;
+  }
   memo_free(&seen);
+  int n = Q.n;
   /* sort by function, component, derivative: a deterministic order for kernels */
   int m = n < max ? n : max;
   for (int i = 1; i < m; i++) {
@@ -976,60 +1213,81 @@ int expr_collect_fields(expr_ctx *c, int nroot, expr **roots, int func, int max,
   return n;
 }
 
-static int uses_rec(expr *e, expr_kind kind, int *maxcomp, memo_map *seen, expr *mark) {
-  if (memo_get(seen, e->id)) return 0;
-  memo_put(seen, e->id, mark);
-  int found = 0;
-  if (e->kind == kind) {
-    found = 1;
-    if (maxcomp && e->i0 > *maxcomp) *maxcomp = e->i0;
+static int uses_visit(void *ud, expr *e) {
+  query_ctx *Q = ud;
+  if (e->kind == Q->kind) {
+    Q->found = 1;
+    if (Q->maxcomp && e->i0 > *Q->maxcomp) *Q->maxcomp = e->i0;
   }
-  for (int i = 0; i < e->n; i++) found |= uses_rec(e->ch[i], kind, maxcomp, seen, mark);
-  return found;
+  return 0;
 }
 
-int expr_uses(expr *e, expr_kind kind, int *maxcomp) {
+int expr_uses(expr_ctx *c, expr *e, expr_kind kind, int *maxcomp) {
   memo_map seen = {0, 0, NULL};
-  int r = uses_rec(e, kind, maxcomp, &seen, e);
+  query_ctx Q = {-1, 0, 0, NULL, kind, 0, maxcomp};
+  e = expr_canon(c, e);
+  if (e) post_order(c, e, &seen, uses_visit, &Q);
   memo_free(&seen);
-  return r;
+  return Q.found;
+}
+
+/* degrees memoized per node (a DAG shared many times is visited once) */
+typedef struct {
+  expr_ctx *c;
+  int cd;
+  memo_map deg; /* node id -> (expr *)(degree + 1) */
+} degree_ctx;
+
+static int deg_of(degree_ctx *D, const expr *e) { return (int)(intptr_t)memo_get(&D->deg, e->id) - 1; }
+
+static int degree_visit(void *ud, expr *e) {
+  degree_ctx *D = ud;
+  int d = 0;
+  switch (e->kind) {
+  case E_CONST: case E_PARAM: case E_NORMAL: d = 0; break;
+  case E_COORD: d = D->cd; break;
+  case E_FIELD: {
+    expr_func_info *f = expr_func_get(D->c, e->i0);
+    d = f ? f->degree - e->order : 0;
+    if (d < 0) d = 0;
+    break;
+  }
+  case E_SUM: case E_LIST: case E_LAZY_SUM:
+    for (int i = 0; i < e->n; i++) {
+      int k = deg_of(D, e->ch[i]);
+      if (k > d) d = k;
+    }
+    break;
+  case E_PROD: case E_LAZY_PROD:
+    for (int i = 0; i < e->n && d < 1000; i++) d += deg_of(D, e->ch[i]);
+    break;
+  case E_POW: {
+    int b = deg_of(D, e->ch[0]);
+    expr *p = e->ch[1];
+    if (p->kind == E_CONST && p->value >= 0 && p->value == floor(p->value) && p->value < 100) d = b * (int)p->value;
+    else d = b ? b + 2 : 0;
+    break;
+  }
+  case E_FUNC: {
+    int b = deg_of(D, e->ch[0]);
+    d = b ? b + 2 : 0;
+    break;
+  }
+  }
+  if (d > 1000) d = 1000; /* far above any quadrature the caller will take */
+  return memo_put(&D->deg, e->id, (expr *)(intptr_t)(d + 1));
 }
 
 int expr_degree(expr_ctx *c, expr *e, int cd) {
-  switch (e->kind) {
-  case E_CONST: case E_PARAM: case E_NORMAL: return 0;
-  case E_COORD: return cd;
-  case E_FIELD: {
-    expr_func_info *f = expr_func_get(c, e->i0);
-    int d = f ? f->degree - e->order : 0;
-    return d < 0 ? 0 : d;
-  }
-  case E_SUM: case E_LIST: {
-    int d = 0;
-    for (int i = 0; i < e->n; i++) {
-      int k = expr_degree(c, e->ch[i], cd);
-      if (k > d) d = k;
-    }
-    return d;
-  }
-  case E_PROD: {
-    int d = 0;
-    for (int i = 0; i < e->n; i++) d += expr_degree(c, e->ch[i], cd);
-    return d;
-  }
-  case E_POW: {
-    int d = expr_degree(c, e->ch[0], cd);
-    expr *b = e->ch[1];
-    if (b->kind == E_CONST && b->value >= 0 && b->value == floor(b->value) && b->value < 100)
-      return d * (int)b->value;
-    return d ? d + 2 : 0;
-  }
-  case E_FUNC: {
-    int d = expr_degree(c, e->ch[0], cd);
-    return d ? d + 2 : 0;
-  }
-  }
-  return 0;
+  e = expr_canon(c, e);
+  if (!e) return 0;
+  memo_map seen = {0, 0, NULL};
+  degree_ctx D = {c, cd, {0, 0, NULL}};
+  int d = 0;
+  if (!post_order(c, e, &seen, degree_visit, &D)) d = deg_of(&D, e);
+  memo_free(&seen);
+  memo_free(&D.deg);
+  return d < 0 ? 0 : d;
 }
 
 /* ---------------------------------------------------------------- printing */
@@ -1052,8 +1310,13 @@ static void pput(pbuf *p, const char *fmt, ...) {
   }
 }
 
-static void print_rec(expr_ctx *c, const expr *e, pbuf *p, int prec) {
+/* a text form for people: it stops when the buffer is full (a shared DAG printed as a tree
+ * can be exponentially long) and prints deep nesting as "..." */
+#define PRINT_DEPTH 64
+static void print_rec(expr_ctx *c, const expr *e, pbuf *p, int prec, int depth) {
   static const char *xyz = "xyz";
+  if (p->pos >= p->len) return;
+  if (depth > PRINT_DEPTH) { pput(p, "..."); return; }
   switch (e->kind) {
   case E_CONST:
     if (e->value < 0 && prec > 0) pput(p, "(%.15g)", e->value);
@@ -1076,7 +1339,7 @@ static void print_rec(expr_ctx *c, const expr *e, pbuf *p, int prec) {
   }
   case E_SUM:
     if (prec > 1) pput(p, "(");
-    for (int i = 0; i < e->n; i++) {
+    for (int i = 0; i < e->n && p->pos < p->len; i++) {
       const expr *t = e->ch[i];
       if (i > 0) {
         if (t->kind == E_PROD && t->ch[0]->kind == E_CONST && t->ch[0]->value < 0) {
@@ -1084,41 +1347,44 @@ static void print_rec(expr_ctx *c, const expr *e, pbuf *p, int prec) {
           if (t->ch[0]->value != -1) pput(p, "%.15g*", -t->ch[0]->value);
           for (int j = 1; j < t->n; j++) {
             if (j > 1) pput(p, "*");
-            print_rec(c, t->ch[j], p, 2);
+            print_rec(c, t->ch[j], p, 2, depth + 1);
           }
           continue;
         }
         if (t->kind == E_CONST && t->value < 0) { pput(p, " - %.15g", -t->value); continue; }
         pput(p, " + ");
       }
-      print_rec(c, t, p, 1);
+      print_rec(c, t, p, 1, depth + 1);
     }
     if (prec > 1) pput(p, ")");
     return;
   case E_PROD:
     if (prec > 2) pput(p, "(");
-    for (int i = 0; i < e->n; i++) {
+    for (int i = 0; i < e->n && p->pos < p->len; i++) {
       if (i == 0 && e->ch[0]->kind == E_CONST && e->ch[0]->value == -1) { pput(p, "-"); continue; }
       if (i > 0 && !(i == 1 && e->ch[0]->kind == E_CONST && e->ch[0]->value == -1)) pput(p, "*");
-      print_rec(c, e->ch[i], p, 2);
+      print_rec(c, e->ch[i], p, 2, depth + 1);
     }
     if (prec > 2) pput(p, ")");
     return;
   case E_POW:
-    print_rec(c, e->ch[0], p, 3);
+    print_rec(c, e->ch[0], p, 3, depth + 1);
     pput(p, "^");
-    print_rec(c, e->ch[1], p, 3);
+    print_rec(c, e->ch[1], p, 3, depth + 1);
     return;
   case E_FUNC:
     pput(p, "%s(", fn_names[e->i0]);
-    print_rec(c, e->ch[0], p, 0);
+    print_rec(c, e->ch[0], p, 0, depth + 1);
     pput(p, ")");
+    return;
+  case E_LAZY_SUM: case E_LAZY_PROD: /* resolved by expr_print before */
+    pput(p, "?");
     return;
   case E_LIST:
     pput(p, "{");
-    for (int i = 0; i < e->n; i++) {
+    for (int i = 0; i < e->n && p->pos < p->len; i++) {
       if (i) pput(p, ", ");
-      print_rec(c, e->ch[i], p, 0);
+      print_rec(c, e->ch[i], p, 0, depth + 1);
     }
     pput(p, "}");
     return;
@@ -1129,7 +1395,9 @@ void expr_print(expr_ctx *c, const expr *e, char *buf, size_t len) {
   pbuf p = {buf, len, 0};
   buf[0] = 0;
   if (!e) { pput(&p, "(null)"); return; }
-  print_rec(c, e, &p, 0);
+  e = expr_canon(c, (expr *)e);
+  if (!e) { pput(&p, "(out of memory)"); return; }
+  print_rec(c, e, &p, 0, 0);
 }
 
 const char *expr_fn_name(expr_fn fn);

@@ -23,7 +23,13 @@ typedef enum {
   E_PROD,   /* n-ary product */
   E_POW,    /* ch[0]^ch[1] */
   E_FUNC,   /* fn(ch[0]) */
-  E_LIST    /* vector / nested list */
+  E_LIST,   /* vector / nested list */
+  /* pending sums and products (expr_add_lazy, expr_mul_lazy): ch[0] + ch[1] or ch[0]*ch[1]
+   * where ch[0] is a large sum or product; they make term-by-term building O(n log n)
+   * instead of O(n^2). Only expr_canon and the lazy constructors see them: every other
+   * function of this header resolves its arguments first. */
+  E_LAZY_SUM,
+  E_LAZY_PROD
 } expr_kind;
 
 typedef enum {
@@ -33,6 +39,8 @@ typedef enum {
 
 #define EXPR_MAXDIM 3
 #define EXPR_ERRLEN 512
+#define EXPR_MAXRANK 8        /* lists nest at most this deep */
+#define EXPR_MAXENTRIES 65536 /* and hold at most this many scalar entries */
 
 /* what a node depends on */
 #define DEP_POINT 1 /* coordinates, normals or fields: varies within a cell */
@@ -50,6 +58,7 @@ typedef struct expr {
   unsigned char alpha[EXPR_MAXDIM]; /* FIELD: derivative orders per direction */
   int dep;        /* DEP_* */
   int order;      /* FIELD: |alpha| */
+  struct expr *canon; /* E_LAZY_*: the resolved expression, once computed */
 } expr;
 
 /* kinds of functions a FIELD leaf can refer to */
@@ -72,6 +81,11 @@ void expr_set_error(expr_ctx *c, const char *fmt, ...);
 void expr_set_dim(expr_ctx *c, int dim);
 int expr_dim(const expr_ctx *c);
 size_t expr_node_count(const expr_ctx *c);
+/* a bound on the memory a context's nodes take, in slots of 8 bytes (a node costs 8 + its
+ * number of children): past it constructors fail with a message instead of exhausting
+ * memory on an expansion that grows without bound */
+#define EXPR_DEFAULT_BUDGET ((size_t)1 << 27)
+void expr_set_budget(expr_ctx *c, size_t slots);
 
 /* parameters */
 int expr_param_new(expr_ctx *c, const char *name, double value);
@@ -91,7 +105,8 @@ expr *expr_coord(expr_ctx *c, int comp);
 expr *expr_normal(expr_ctx *c, int comp);
 expr *expr_field(expr_ctx *c, int func, int comp, const unsigned char *alpha);
 
-/* operations (NULL propagates: any NULL argument gives NULL) */
+/* operations (NULL propagates: any NULL argument gives NULL). Every function of this
+ * header returns a resolved (canonical) expression, except the _lazy constructors. */
 expr *expr_add(expr_ctx *c, expr *a, expr *b);
 expr *expr_sub(expr_ctx *c, expr *a, expr *b);
 expr *expr_mul(expr_ctx *c, expr *a, expr *b);
@@ -102,6 +117,13 @@ expr *expr_apply(expr_ctx *c, expr_fn fn, expr *a);
 expr *expr_list(expr_ctx *c, int n, expr **items);
 expr *expr_sum_n(expr_ctx *c, int n, expr **terms);
 expr *expr_prod_n(expr_ctx *c, int n, expr **factors);
+/* a + b, a - b and a*b that may leave a pending node when one side is a large sum or product
+ * (what a script's `s = s + t` in a loop builds): O(1) each, resolved once by expr_canon */
+expr *expr_add_lazy(expr_ctx *c, expr *a, expr *b);
+expr *expr_sub_lazy(expr_ctx *c, expr *a, expr *b);
+expr *expr_mul_lazy(expr_ctx *c, expr *a, expr *b);
+/* the canonical expression of e (e itself unless it is pending): O(n log n) for n terms */
+expr *expr_canon(expr_ctx *c, expr *e);
 
 /* vector calculus on lists */
 expr *expr_index(expr_ctx *c, expr *list, int i); /* 0-based */
@@ -121,7 +143,7 @@ expr *expr_diff(expr_ctx *c, expr *e, expr *leaf);
 expr *expr_subs(expr_ctx *c, expr *e, int n, expr **from, expr **to);
 /* every FIELD leaf of function func (or any function when func < 0) in e, deduplicated */
 int expr_collect_fields(expr_ctx *c, int nroot, expr **roots, int func, int max, expr **out);
-int expr_uses(expr *e, expr_kind kind, int *maxcomp);
+int expr_uses(expr_ctx *c, expr *e, expr_kind kind, int *maxcomp);
 /* a polynomial-degree estimate used to choose quadrature orders */
 int expr_degree(expr_ctx *c, expr *e, int cell_degree_of_coords);
 
@@ -187,6 +209,7 @@ typedef struct {
 form *form_new(void);
 void form_free(form *f);
 form *form_copy(const form *f);
+/* the integrand must be resolved (expr_canon) */
 int form_add_term(form *f, const region *r, expr *integrand, int order);
 /* f + s*g (s = ±1 or any scalar): scales integrands */
 form *form_combine(expr_ctx *c, const form *f, double s, const form *g);

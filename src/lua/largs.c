@@ -77,24 +77,27 @@ void push_expr(lua_State *L, expr *e, int ndeps, const int *deps, const char *fn
   u->e = e;
 }
 
-expr *to_expr_opt(lua_State *L, int idx, int *ok);
+static expr *to_expr_depth(lua_State *L, int idx, int *ok, int depth);
 
-static expr *table_to_list(lua_State *L, int idx, int *ok) {
+static expr *table_to_list(lua_State *L, int idx, int *ok, int depth) {
   lg_env *env = get_env(L);
-  int n = (int)luaL_len(L, idx);
+  if (depth >= EXPR_MAXRANK) {
+    expr_set_error(env->c, "tables of expressions nest at most %d deep", EXPR_MAXRANK);
+    return NULL;
+  }
+  lua_Integer n = luaL_len(L, idx);
   if (n < 1 || n > 64) { *ok = 0; return NULL; }
   expr *items[64];
   for (int i = 1; i <= n; i++) {
     lua_geti(L, idx, i);
-    items[i - 1] = to_expr_opt(L, -1, ok);
+    items[i - 1] = to_expr_depth(L, -1, ok, depth + 1);
     lua_pop(L, 1);
-    if (!*ok) return NULL;
+    if (!*ok || !items[i - 1]) return NULL;
   }
-  return expr_list(env->c, n, items);
+  return expr_list(env->c, (int)n, items);
 }
 
-/* number, Expr, Function or table of those; *ok = 0 when the type does not fit */
-expr *to_expr_opt(lua_State *L, int idx, int *ok) {
+static expr *to_expr_depth(lua_State *L, int idx, int *ok, int depth) {
   lg_env *env = get_env(L);
   *ok = 1;
   if (lua_type(L, idx) == LUA_TNUMBER) return expr_num(env->c, lua_tonumber(L, idx));
@@ -105,15 +108,35 @@ expr *to_expr_opt(lua_State *L, int idx, int *ok) {
     unsigned char z[3] = {0, 0, 0};
     return expr_field(env->c, uf->f->fid, 0, z);
   }
-  if (lua_type(L, idx) == LUA_TTABLE) return table_to_list(L, lua_absindex(L, idx), ok);
+  if (lua_type(L, idx) == LUA_TTABLE) return table_to_list(L, lua_absindex(L, idx), ok, depth);
   *ok = 0;
   return NULL;
 }
 
-expr *check_expr(lua_State *L, int idx, const char *fn) {
+/* number, Expr, Function or table of those; *ok = 0 when the type does not fit. The result
+ * may be a pending sum or product (only + - * build those) */
+expr *to_expr_opt(lua_State *L, int idx, int *ok) { return to_expr_depth(L, idx, ok, 0); }
+
+expr *expr_of(lua_State *L, ud_expr *u) {
+  expr *e = expr_canon(get_env(L)->c, u->e);
+  if (!e) luaL_error(L, "%s", expr_error(get_env(L)->c));
+  u->e = e; /* resolved once */
+  return e;
+}
+
+expr *check_expr_raw(lua_State *L, int idx, const char *fn) {
   int ok;
   expr *e = to_expr_opt(L, idx, &ok);
   if (!ok) typeerror(L, fn, idx, "an expression, a number or a discrete function");
+  if (!e) exprerror(L, fn);
+  return e;
+}
+
+expr *check_expr(lua_State *L, int idx, const char *fn) {
+  expr *e = check_expr_raw(L, idx, fn);
+  ud_expr *ue = luaL_testudata(L, idx, MT_EXPR);
+  if (ue) return expr_of(L, ue);
+  e = expr_canon(get_env(L)->c, e);
   if (!e) exprerror(L, fn);
   return e;
 }

@@ -42,7 +42,12 @@ int exprerror(lua_State *L, const char *fn);
 void *new_ud(lua_State *L, size_t size, const char *mt, int ndeps, const int *deps);
 void push_expr(lua_State *L, expr *e, int ndeps, const int *deps, const char *fn);
 expr *to_expr_opt(lua_State *L, int idx, int *ok);
+/* an expression argument, resolved (check_expr) or possibly pending (check_expr_raw, for
+ * the + - * that build sums term by term) */
 expr *check_expr(lua_State *L, int idx, const char *fn);
+expr *check_expr_raw(lua_State *L, int idx, const char *fn);
+/* the resolved expression of a userdata */
+expr *expr_of(lua_State *L, ud_expr *u);
 ud_mesh *check_mesh(lua_State *L, int idx, const char *fn);
 void push_mesh(lua_State *L, mesh *m);
 double opt_num(lua_State *L, int t, const char *key, double def, const char *fn);

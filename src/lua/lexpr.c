@@ -18,7 +18,9 @@ static int m_mul(lua_State *L);
 
 static int arith(lua_State *L, binop_fn op, const char *name) {
   lg_env *env = get_env(L);
-  expr *a = check_expr(L, 1, name), *b = check_expr(L, 2, name);
+  int lazy = op == expr_add_lazy || op == expr_sub_lazy || op == expr_mul_lazy;
+  expr *a = lazy ? check_expr_raw(L, 1, name) : check_expr(L, 1, name);
+  expr *b = lazy ? check_expr_raw(L, 2, name) : check_expr(L, 2, name);
   int deps[2] = {1, 2};
   push_expr(L, op(env->c, a, b), 2, deps, name);
   return 1;
@@ -28,12 +30,12 @@ static int m_add(lua_State *L) {
   if (luaL_testudata(L, 1, MT_FORM) || luaL_testudata(L, 2, MT_FORM) || luaL_testudata(L, 1, MT_BC) ||
       luaL_testudata(L, 2, MT_BC))
     return form_arith(L, 1, "+");
-  return arith(L, expr_add, "operator +");
+  return arith(L, expr_add_lazy, "operator +");
 }
 
 static int m_sub(lua_State *L) {
   if (luaL_testudata(L, 1, MT_FORM) || luaL_testudata(L, 2, MT_FORM)) return form_arith(L, -1, "-");
-  return arith(L, expr_sub, "operator -");
+  return arith(L, expr_sub_lazy, "operator -");
 }
 
 static int m_div(lua_State *L) { return arith(L, expr_div, "operator /"); }
@@ -60,13 +62,13 @@ static int expr_tostring(lua_State *L) {
 
 static int expr_len(lua_State *L) {
   ud_expr *u = luaL_checkudata(L, 1, MT_EXPR);
-  lua_pushinteger(L, expr_shape(u->e, NULL));
+  lua_pushinteger(L, expr_shape(expr_of(L, u), NULL));
   return 1;
 }
 
 static int param_set(lua_State *L) {
   ud_expr *u = luaL_checkudata(L, 1, MT_EXPR);
-  if (u->e->kind != E_PARAM) return luaL_error(L, "set: only parameters (lg.parameter) can be set");
+  if (expr_of(L, u)->kind != E_PARAM) return luaL_error(L, "set: only parameters (lg.parameter) can be set");
   double v = luaL_checknumber(L, 2);
   expr_param_values(get_env(L)->c)[u->e->i0] = v;
   return 0;
@@ -74,7 +76,7 @@ static int param_set(lua_State *L) {
 
 static int param_value(lua_State *L) {
   ud_expr *u = luaL_checkudata(L, 1, MT_EXPR);
-  if (u->e->kind == E_CONST) { lua_pushnumber(L, u->e->value); return 1; }
+  if (expr_of(L, u)->kind == E_CONST) { lua_pushnumber(L, u->e->value); return 1; }
   if (u->e->kind != E_PARAM) return luaL_error(L, "value: only parameters and constants have a value");
   lua_pushnumber(L, expr_param_values(get_env(L)->c)[u->e->i0]);
   return 1;
@@ -89,7 +91,7 @@ static int expr_index_mm(lua_State *L) {
     return luaL_error(L, "expressions have no field '%s'", k);
   }
   lua_Integer i = luaL_checkinteger(L, 2);
-  if (u->e->kind != E_LIST) return luaL_error(L, "cannot index a scalar expression");
+  if (expr_of(L, u)->kind != E_LIST) return luaL_error(L, "cannot index a scalar expression");
   if (i < 1 || i > u->e->n) return luaL_error(L, "index %d out of range 1..%d", (int)i, u->e->n);
   int deps[1] = {1};
   push_expr(L, u->e->ch[i - 1], 1, deps, "index");
@@ -135,7 +137,7 @@ static int form_scale(lua_State *L, int fidx, int nidx) {
 static int m_mul(lua_State *L) {
   if (luaL_testudata(L, 1, MT_FORM)) return form_scale(L, 1, 2);
   if (luaL_testudata(L, 2, MT_FORM)) return form_scale(L, 2, 1);
-  return arith(L, expr_mul, "operator *");
+  return arith(L, expr_mul_lazy, "operator *");
 }
 
 static int form_unm(lua_State *L) {

@@ -117,14 +117,14 @@ static int symbol_list(lua_State *L, int t, const char *key, func_kind kind, int
     for (int i = 1; i <= n; i++) {
       lua_geti(L, -1, i);
       ud_expr *u = luaL_testudata(L, -1, MT_EXPR);
-      if (!u || u->e->kind != E_FIELD || u->e->order || expr_func_get(get_env(L)->c, u->e->i0)->kind != kind)
+      if (!u || expr_of(L, u)->kind != E_FIELD || u->e->order || expr_func_get(get_env(L)->c, u->e->i0)->kind != kind)
         luaL_error(L, "%s: option '%s' entry %d must be %s", fn, key, i, what);
       ids[i - 1] = u->e->i0;
       lua_pop(L, 1);
     }
   } else {
     ud_expr *u = luaL_testudata(L, -1, MT_EXPR);
-    if (!u || u->e->kind != E_FIELD || u->e->order || expr_func_get(get_env(L)->c, u->e->i0)->kind != kind)
+    if (!u || expr_of(L, u)->kind != E_FIELD || u->e->order || expr_func_get(get_env(L)->c, u->e->i0)->kind != kind)
       luaL_error(L, "%s: option '%s' must be %s, got %s", fn, key, what, ty == LUA_TNIL ? "nothing" : luaL_typename(L, -1));
     ids[0] = u->e->i0;
     n = 1;

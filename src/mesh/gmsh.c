@@ -51,7 +51,8 @@ static size_t tokens_left(const lex *l) { return (l->len - l->pos) / 2 + 1; }
 
 /* next whitespace-delimited token, NUL-terminated in place; NULL at the end of the file
  * or after an error. A token starting with " is a quoted name that ends at the next
- * unescaped " on the same line; \" \\ and \n inside it stand for ", \ and a newline. */
+ * unescaped " on the same line; \" \\ \n and \r inside it stand for ", \, a newline and a
+ * carriage return (what mesh_write_gmsh writes for them). */
 static char *tok(lex *l) {
   if (l->failed) return NULL;
   while (l->pos < l->len && isspace((unsigned char)l->buf[l->pos])) {
@@ -71,9 +72,10 @@ static char *tok(lex *l) {
       }
       char c = l->buf[l->pos++];
       if (c == '"') break;
-      if (c == '\\' && l->pos < l->len && (l->buf[l->pos] == '"' || l->buf[l->pos] == '\\' || l->buf[l->pos] == 'n')) {
+      if (c == '\\' && l->pos < l->len && strchr("\"\\nr", l->buf[l->pos]) && l->buf[l->pos]) {
         c = l->buf[l->pos++];
         if (c == 'n') c = '\n';
+        else if (c == 'r') c = '\r';
       }
       *w++ = c;
     }
@@ -520,8 +522,9 @@ static int nodemap_build(nodemap *m, const gfile *g, char *err, const char *path
   for (size_t i = 0; i < g->nn; i++) {
     if (k && t[i].tag == m->stag[k - 1]) {
       if (same_node(g, (size_t)m->sidx[k - 1], (size_t)t[i].idx)) continue;
+      size_t bad = (size_t)t[i].idx;
       free(t);
-      return twice(g, (size_t)t[i].idx, err, path);
+      return twice(g, bad, err, path);
     }
     m->stag[k] = t[i].tag;
     m->sidx[k] = t[i].idx;
@@ -557,7 +560,7 @@ static int ent_cmp(const void *pa, const void *pb) {
 }
 static const gentity *ent_find(const gfile *g, int partitioned, int dim, int64_t tag) {
   gentity key = {dim, partitioned, tag, 0, 0, 0};
-  return bsearch(&key, g->ent, g->nent, sizeof(gentity), ent_cmp);
+  return g->nent ? bsearch(&key, g->ent, g->nent, sizeof(gentity), ent_cmp) : NULL;
 }
 
 /* the physical tags of element e: *n of them at the returned pointer (or the one in *one) */
@@ -619,7 +622,7 @@ static mesh *build_mesh(gfile *g, const char *path, char *err) {
              g->have_nodes ? "$Elements" : "$Nodes");
     return NULL;
   }
-  qsort(g->ent, g->nent, sizeof(gentity), ent_cmp);
+  if (g->nent) qsort(g->ent, g->nent, sizeof(gentity), ent_cmp);
   for (size_t i = 1; i < g->nent; i++)
     if (!ent_cmp(&g->ent[i], &g->ent[i - 1])) {
       snprintf(err, MESH_ERRLEN, "%.200s:%ld: entity %lld of dimension %d is defined twice", path, g->ent[i].line,
@@ -949,7 +952,7 @@ static void write_name(FILE *f, const char *s) {
   for (; *s; s++) {
     if (*s == '"' || *s == '\\') { fputc('\\', f); fputc(*s, f); }
     else if (*s == '\n') fputs("\\n", f);
-    else if (*s == '\r') fputc(' ', f);
+    else if (*s == '\r') fputs("\\r", f);
     else fputc(*s, f);
   }
   fputc('"', f);

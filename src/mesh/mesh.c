@@ -234,7 +234,7 @@ int mesh_add_boundary_facets(mesh *m, int n, const int *verts, int tag, const ch
   int *bt = realloc(m->bf_tag, sizeof(int) * (size_t)(m->nbf + n) + 1);
   if (!bt) { seterr(m->err, "out of memory"); return 1; }
   m->bf_tag = bt;
-  memcpy(m->bf_verts + (size_t)m->nbf * (size_t)m->nvf, verts,
+  if (n) memcpy(m->bf_verts + (size_t)m->nbf * (size_t)m->nvf, verts,
          sizeof(int) * (size_t)n * (size_t)m->nvf);
   for (int i = 0; i < n; i++) m->bf_tag[m->nbf + i] = tag;
   m->nbf += n;

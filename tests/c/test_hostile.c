@@ -2,8 +2,12 @@
  * tests/fuzz/fuzz_mesh.c: every file that ever crashed, hung or was answered wrongly, with
  * the answer it must get now (EXPECT: "FILE error TEXT" for a message that must contain
  * TEXT, "FILE ok key=value ..." for a mesh that must be read with those properties); files
- * without an EXPECT line (fuzzer reproducers) must simply run through. */
+ * without an EXPECT line (fuzzer reproducers) must simply run through), and every input
+ * of tests/data/hostile/expr and tests/data/hostile/untangle through the expression and
+ * untangler targets (the targets check their own invariants and abort on a broken one). */
+#include "../fuzz/fuzz_expr.c"
 #include "../fuzz/fuzz_mesh.c"
+#include "../fuzz/fuzz_untangle.c"
 
 #include "check.h"
 
@@ -110,5 +114,24 @@ int main(int argc, char **argv) {
   }
   if (d) closedir(d);
   printf("%d hostile meshes with expectations, %d reproducers\n", nexp, nrepro);
+  static const char *other[] = {"expr", "untangle"};
+  for (int k = 0; k < 2; k++) {
+    snprintf(dir, sizeof dir, "%s/hostile/%s", argc > 1 ? argv[1] : "tests/data", other[k]);
+    DIR *od = opendir(dir);
+    int cnt = 0;
+    for (struct dirent *de; od && (de = readdir(od));) {
+      if (de->d_name[0] == '.') continue;
+      snprintf(path, sizeof path, "%s/%s", dir, de->d_name);
+      size_t len;
+      char *data = slurp(path, &len);
+      if (!data) continue;
+      if (k == 0) fuzz_expr_run((const uint8_t *)data, len);
+      else fuzz_untangle_run((const uint8_t *)data, len);
+      free(data);
+      cnt++;
+    }
+    if (od) closedir(od);
+    printf("%d %s inputs\n", cnt, other[k]);
+  }
   return CHECK_DONE();
 }

@@ -171,6 +171,33 @@ int lg_region_items(lg_env *env, lg_mesh *lm, const region *r, int *n, int **cel
   return 0;
 }
 
+/* ---------------------------------------------------------------- non-finite data */
+
+/* "(x, y)" of dof k of dm: the first cell that has it */
+static void dof_where(const dofmap *dm, int k, char *buf, size_t len) {
+  double x[3] = {0, 0, 0};
+  for (int c = 0; c < dm->m->ncell; c++)
+    for (int i = 0; i < dm->nloc; i++)
+      if (dm->cell_dofs[(size_t)c * dm->nloc + i] == k) {
+        dofmap_node_coords(dm, c, i, x);
+        if (dm->m->dim == 2) snprintf(buf, len, "(%g, %g)", x[0], x[1]);
+        else snprintf(buf, len, "(%g, %g, %g)", x[0], x[1], x[2]);
+        return;
+      }
+  snprintf(buf, len, "(unknown place)");
+}
+
+int lg_check_finite(lg_env *env, const dofmap *dm, const double *v, const char *what) {
+  for (int k = 0; k < dm->ndof; k++)
+    if (!isfinite(v[k])) {
+      char at[96];
+      dof_where(dm, k, at, sizeof at);
+      lg_seterr(env, "%s is not finite (%g) at dof %d %s", what, v[k], k + 1, at);
+      return 1;
+    }
+  return 0;
+}
+
 /* ---------------------------------------------------------------- element loop */
 
 int lg_bind_discrete(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nextra,
@@ -193,6 +220,9 @@ int lg_bind_discrete(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nextra,
       lg_seterr(env, "the discrete function %s lives on a different mesh", fi->name);
       return 1;
     }
+    char what[96];
+    snprintf(what, sizeof what, "the discrete function %.60s", fi->name);
+    if (lg_check_finite(env, fn->dm, fn->x, what)) return 1;
     out[i].dm = fn->dm;
     out[i].vals = fn->x;
   }
@@ -333,6 +363,13 @@ int lg_interpolate(lg_env *env, lg_function *f, expr *e) {
       dofmap_node_coords(f->dm, c, k, p.x);
       double v;
       rc = expr_tape_eval(&t, expr_param_values(env->c), pt_leaf, &p, w, &v);
+      if (!rc && !isfinite(v)) {
+        char buf[200];
+        expr_print(env->c, e, buf, sizeof buf);
+        if (m->dim == 2) lg_seterr(env, "the expression %s is not finite (%g) at (%g, %g)", buf, v, p.x[0], p.x[1]);
+        else lg_seterr(env, "the expression %s is not finite (%g) at (%g, %g, %g)", buf, v, p.x[0], p.x[1], p.x[2]);
+        rc = 1;
+      }
       if (!rc) tmp[f->dm->cell_dofs[(size_t)c * f->dm->nloc + k]] = v;
     }
   }
@@ -380,5 +417,10 @@ int lg_integrate(lg_env *env, lg_mesh *lm, const region *r, expr *e, int order, 
   int rc = lg_assemble_items(env, lm, &k, n, cells, facets, k.ncoef, bind, result);
   free(cells);
   free(facets);
+  if (!rc && !isfinite(*result)) {
+    lg_seterr(env, "the integral is not finite (%g): the integrand is not finite somewhere (a division by zero, the "
+                   "log or square root of a negative value?)", *result);
+    return 1;
+  }
   return rc;
 }

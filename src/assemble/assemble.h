@@ -68,6 +68,8 @@ int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, 
 int lg_bind_discrete(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nextra,
                      const coef_binding *extra, coef_binding *out);
 
+/* every value of v (dm->ndof) finite, or a message "<what> is not finite (nan) at dof 7 (x, y)" */
+int lg_check_finite(lg_env *env, const dofmap *dm, const double *v, const char *what);
 int lg_interpolate(lg_env *env, lg_function *f, expr *e);
 /* integrate a scalar expression over a region (cells or boundary) */
 int lg_integrate(lg_env *env, lg_mesh *lm, const region *r, expr *e, int order, double *result);

@@ -21,9 +21,14 @@ static void tcc_delete(TCCState *s) { (void)s; }
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <pwd.h>
+#include <spawn.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
+
+#include "../mesh/outfile.h"
 
 /* ---------------------------------------------------------------- JIT */
 
@@ -132,47 +137,171 @@ static kernel_fn compile_tcc(lg_jit *j, const char *src, jit_entry *ent, char *e
 
 #endif
 
+/* ---------------------------------------------------------------- the system compiler */
+
+/* The disk cache of compiled kernels. A cached shared object is code this process will run,
+ * so: the folder is private (created 0700; one that others can write to, or that another
+ * user owns, is refused), every object is checked the same way before it is loaded, the key
+ * covers the compiler, its flags and the CPU (a cache shared between machines must not run
+ * AVX-512 code on a CPU without it), and the compiler is run from an argument vector, never
+ * through a shell (a path with a quote in it is just a path). Without a home folder there is
+ * no disk cache: objects go to a private temporary folder that is removed after loading. */
+#define CC_FLAGS "-O3 -march=native -fPIC -shared"
+#define CC_HUGE (512 << 10) /* bytes of source past which kernels are compiled at -O0 */
+
+static uint64_t fnv(uint64_t h, const void *p, size_t n) {
+  const unsigned char *c = p;
+  for (size_t i = 0; i < n; i++) h = (h ^ c[i]) * 1099511628211ull;
+  return h;
+}
+
+/* what a compiled object depends on besides its source: the compiler (path, size, time),
+ * its flags and this CPU's model and feature flags */
+static uint64_t machine_key(void) {
+  static uint64_t key;
+  if (key) return key;
+  uint64_t h = fnv(1469598103934665603ull, LUGAL_CC, strlen(LUGAL_CC));
+  h = fnv(h, CC_FLAGS, strlen(CC_FLAGS));
+  struct stat st;
+  if (!stat(LUGAL_CC, &st)) {
+    h = fnv(h, &st.st_size, sizeof st.st_size);
+    h = fnv(h, &st.st_mtime, sizeof st.st_mtime);
+  }
+  FILE *f = fopen("/proc/cpuinfo", "r");
+  char line[8192];
+  int got = 0;
+  while (f && got < 2 && fgets(line, sizeof line, f))
+    if (!strncmp(line, "flags", 5) || !strncmp(line, "model name", 10)) { h = fnv(h, line, strlen(line)); got++; }
+  if (f) fclose(f);
+  key = h | 1;
+  return key;
+}
+
+/* a folder only this user can write to, or a message */
+static int private_dir(const char *dir, char *err, size_t errlen) {
+  if (mkdir(dir, 0700) && errno != EEXIST) {
+    snprintf(err, errlen, "cannot create the kernel cache %s: %s", dir, strerror(errno));
+    return 1;
+  }
+  struct stat st;
+  if (lstat(dir, &st)) { snprintf(err, errlen, "cannot use the kernel cache %s: %s", dir, strerror(errno)); return 1; }
+  if (!S_ISDIR(st.st_mode) || st.st_uid != geteuid() || (st.st_mode & 022)) {
+    snprintf(err, errlen, "the kernel cache %s is not a private folder of this user (a link, another owner, or "
+                          "writable by others): lugal will not load code from it (chmod 700 it, or set XDG_CACHE_HOME)", dir);
+    return 1;
+  }
+  return 0;
+}
+
+/* the cache folder: $XDG_CACHE_HOME/lugal, else ~/.cache/lugal (home from $HOME or the
+ * password database); 0 and an empty dir when there is no home */
+static int cache_dir(char *dir, size_t len, char *err, size_t errlen) {
+  const char *xdg = getenv("XDG_CACHE_HOME"), *home = getenv("HOME");
+  char parent[512];
+  dir[0] = 0;
+  if (xdg && xdg[0] == '/') {
+    snprintf(parent, sizeof parent, "%s", xdg);
+    mkdir(parent, 0700); /* the XDG base folder may not exist yet */
+  } else {
+    if (!home || home[0] != '/') {
+      struct passwd *pw = getpwuid(geteuid());
+      home = pw && pw->pw_dir && pw->pw_dir[0] == '/' ? pw->pw_dir : NULL;
+    }
+    if (!home) return 0;
+    snprintf(parent, sizeof parent, "%s/.cache", home);
+    if (mkdir(parent, 0700) && errno != EEXIST) return 0;
+  }
+  if (strlen(parent) + 8 >= len) { snprintf(err, errlen, "the cache path %.100s is too long", parent); return 1; }
+  snprintf(dir, len, "%s/lugal", parent);
+  return private_dir(dir, err, errlen);
+}
+
+/* run the compiler on cpath into sopath; its messages into out */
+static int run_cc(const char *cpath, const char *sopath, int huge, char *out, size_t outlen) {
+  char *opt[] = {(char *)LUGAL_CC, "-O3", "-march=native", "-fPIC", "-shared", "-o", (char *)sopath, (char *)cpath, "-lm", NULL};
+  char *noopt[] = {(char *)LUGAL_CC, "-O0", "-fPIC", "-shared", "-o", (char *)sopath, (char *)cpath, "-lm", NULL};
+  char **argv = huge ? noopt : opt;
+  int pfd[2];
+  if (pipe(pfd)) { snprintf(out, outlen, "cannot make a pipe: %s", strerror(errno)); return -1; }
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  posix_spawn_file_actions_adddup2(&fa, pfd[1], 1);
+  posix_spawn_file_actions_adddup2(&fa, pfd[1], 2);
+  posix_spawn_file_actions_addclose(&fa, pfd[0]);
+  pid_t pid;
+  extern char **environ;
+  int rc = posix_spawnp(&pid, LUGAL_CC, &fa, NULL, argv, environ);
+  posix_spawn_file_actions_destroy(&fa);
+  close(pfd[1]);
+  if (rc) {
+    close(pfd[0]);
+    snprintf(out, outlen, "cannot run the C compiler %s: %s", LUGAL_CC, strerror(rc));
+    return -1;
+  }
+  size_t n = 0;
+  for (ssize_t got; (got = read(pfd[0], out + n, outlen - 1 - n)) != 0;) {
+    if (got < 0) { if (errno == EINTR) continue; break; }
+    n += (size_t)got;
+    if (n + 1 >= outlen) { /* drain the rest */
+      char sink[512];
+      while (read(pfd[0], sink, sizeof sink) > 0) {}
+      break;
+    }
+  }
+  out[n] = 0;
+  close(pfd[0]);
+  int status;
+  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {}
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
 static kernel_fn compile_cc(const char *src, uint64_t h1, uint64_t h2, jit_entry *ent, char *err,
                             size_t errlen) {
-  char dir[512], base[700], cpath[800], sopath[800], cmd[2400];
-  const char *xdg = getenv("XDG_CACHE_HOME"), *home = getenv("HOME");
-  if (xdg && *xdg) snprintf(dir, sizeof dir, "%s/lugal", xdg);
-  else snprintf(dir, sizeof dir, "%s/.cache/lugal", home && *home ? home : "/tmp");
-  char parent[512];
-  snprintf(parent, sizeof parent, "%s", dir);
-  char *sl = strrchr(parent, '/');
-  if (sl) { *sl = 0; mkdir(parent, 0755); }
-  if (mkdir(dir, 0755) && errno != EEXIST) {
-    snprintf(err, errlen, "cannot create the kernel cache %s: %s", dir, strerror(errno));
-    return NULL;
+  char dir[600], base[700], cpath[800], sopath[800];
+  if (cache_dir(dir, sizeof dir, err, errlen)) return NULL;
+  int temp = !dir[0];
+  if (temp) { /* no home: a private folder for this one object */
+    const char *t = getenv("TMPDIR");
+    snprintf(dir, sizeof dir, "%s/lugal-kernel-XXXXXX", t && t[0] == '/' ? t : "/tmp");
+    if (!mkdtemp(dir)) { snprintf(err, errlen, "cannot create a temporary folder for a kernel: %s", strerror(errno)); return NULL; }
   }
-  snprintf(base, sizeof base, "%s/k%016llx%016llx", dir, (unsigned long long)h1, (unsigned long long)h2);
+  /* a huge kernel (a very deep expression) takes gcc minutes at -O1 and up, and seconds
+   * at -O0 (an 8 MB kernel: > 5 min and 12 s here) */
+  int huge = strlen(src) > CC_HUGE;
+  uint64_t mk = machine_key() ^ (huge ? 0x9e3779b97f4a7c15ull : 0);
+  snprintf(base, sizeof base, "%s/k%016llx%016llx", dir, (unsigned long long)(h1 ^ mk), (unsigned long long)h2);
   snprintf(cpath, sizeof cpath, "%s.c", base);
   snprintf(sopath, sizeof sopath, "%s.so", base);
   struct stat st;
-  if (stat(sopath, &st)) {
-    FILE *f = fopen(cpath, "w");
-    if (!f) { snprintf(err, errlen, "cannot write %s: %s", cpath, strerror(errno)); return NULL; }
-    fputs("double lugal_sign(double x) { return (x > 0) - (x < 0); }\n", f);
-    fputs(src, f);
-    fclose(f);
-    char tmpso[820];
-    snprintf(tmpso, sizeof tmpso, "%s.%d.tmp", sopath, (int)getpid());
-    snprintf(cmd, sizeof cmd, "%s -O3 -march=native -fPIC -shared -o '%s' '%s' -lm 2>&1",
-             LUGAL_CC, tmpso, cpath);
-    FILE *p = popen(cmd, "r");
-    if (!p) { snprintf(err, errlen, "cannot run the C compiler"); return NULL; }
-    char out[512] = "";
-    size_t got = fread(out, 1, sizeof out - 1, p);
-    out[got] = 0;
-    int rc = pclose(p);
+  int have = !lstat(sopath, &st);
+  if (have && (!S_ISREG(st.st_mode) || st.st_uid != geteuid() || (st.st_mode & 022))) {
+    snprintf(err, errlen, "the cached kernel %s is not a private file of this user: lugal will not load it (remove it)", sopath);
+    return NULL;
+  }
+  if (!have) {
+    outfile o;
+    if (outfile_open(&o, cpath, err, errlen)) return NULL;
+    fputs("double lugal_sign(double x) { return (x > 0) - (x < 0); }\n", o.f);
+    fputs(src, o.f);
+    if (outfile_commit(&o, err, errlen)) return NULL;
+    char tmpso[820], out[512];
+    static unsigned seq;
+    snprintf(tmpso, sizeof tmpso, "%s.%ld.%u.tmp", sopath, (long)getpid(), seq++);
+    int rc = run_cc(cpath, tmpso, huge, out, sizeof out);
     if (rc != 0) {
+      unlink(tmpso);
       snprintf(err, errlen, "the C compiler failed on a generated kernel (%s): %s", cpath, out);
       return NULL;
     }
-    if (rename(tmpso, sopath)) { snprintf(err, errlen, "cannot rename %s", tmpso); return NULL; }
+    chmod(tmpso, 0700);
+    if (rename(tmpso, sopath)) {
+      snprintf(err, errlen, "cannot rename %s: %s", tmpso, strerror(errno));
+      unlink(tmpso);
+      return NULL;
+    }
   }
   void *dl = dlopen(sopath, RTLD_NOW | RTLD_LOCAL);
+  if (temp) { unlink(sopath); unlink(cpath); rmdir(dir); }
   if (!dl) { snprintf(err, errlen, "cannot load %s: %s", sopath, dlerror()); return NULL; }
   kernel_fn fn = (kernel_fn)(uintptr_t)dlsym(dl, "lugal_kernel");
   if (!fn) { dlclose(dl); snprintf(err, errlen, "%s has no kernel", sopath); return NULL; }

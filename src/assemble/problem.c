@@ -4,6 +4,7 @@
  * solves with failures reported, never ignored. */
 #include "assemble.h"
 
+#include <ctype.h>
 #include <math.h>
 #include <petscsnes.h>
 #include <stdio.h>
@@ -24,6 +25,7 @@ typedef struct {
 
 typedef struct {
   int field;          /* row/column field */
+  int src;            /* the boundary condition it comes from (form term index) */
   expr_tape tape;     /* roots: a (coefficient of u), r (rest): u = -r/a */
   int nitems;
   int *cells, *facets;
@@ -42,6 +44,7 @@ struct lg_problem {
   int nbct;
   bc_term *bct;
   int nbc;
+  long bc_cap;
   PetscInt *bc_rows;
   PetscScalar *bc_vals;
   PetscCount ncoo;
@@ -215,6 +218,11 @@ static int setup_bcs(lg_env *env, lg_problem *p, const form *bc, const int *test
       lg_seterr(env, "essential_bc: %s", expr_error(env->c));
       return 1;
     }
+    if (tab.nres == 0) {
+      coef_table_free(&tab);
+      lg_seterr(env, "essential_bc: boundary condition %d is zero: it constrains nothing (write it as v*(u - g))", i + 1);
+      return 1;
+    }
     for (int j = 0; j < tab.nres; j++) {
       expr *tl = tab.res_leaf[j];
       if (tl->order) {
@@ -251,6 +259,7 @@ static int setup_bcs(lg_env *env, lg_problem *p, const form *bc, const int *test
       }
       bc_term *bt = &p->bct[p->nbct++];
       bt->field = a;
+      bt->src = i;
       expr *roots[2] = {ca, rest};
       if (expr_tape_build(env->c, 2, roots, &bt->tape)) { coef_table_free(&tab); lg_seterr(env, "%s", expr_error(env->c)); return 1; }
       if (lg_region_items(env, p->lm, &ft->reg, &bt->nitems, &bt->cells, &bt->facets)) { coef_table_free(&tab); return 1; }
@@ -258,6 +267,7 @@ static int setup_bcs(lg_env *env, lg_problem *p, const form *bc, const int *test
     }
     coef_table_free(&tab);
   }
+  p->bc_cap = cap;
   p->bc_rows = malloc(sizeof(PetscInt) * (size_t)(cap + 1));
   p->bc_vals = malloc(sizeof(PetscScalar) * (size_t)(cap + 1));
   if (!p->bc_rows || !p->bc_vals) { lg_seterr(env, "out of memory"); return 1; }
@@ -299,19 +309,23 @@ static int bc_leaf(void *ud, const expr *e, double *val) {
   return 0;
 }
 
+/* (row, position): by row, then by position, so that within a row the later condition comes last */
 static int cmp_row(const void *a, const void *b) {
   const PetscInt *x = a, *y = b;
-  return (x[0] > y[0]) - (x[0] < y[0]);
+  if (x[0] != y[0]) return (x[0] > y[0]) - (x[0] < y[0]);
+  return (x[1] > y[1]) - (x[1] < y[1]);
 }
 
 static int compute_bcs(lg_env *env, lg_problem *p) {
   p->nbc = 0;
   mesh *m = p->lm->m;
+  int *src = malloc(sizeof(int) * (size_t)(p->bc_cap + 1));
+  if (!src) { lg_seterr(env, "out of memory"); return 1; }
   for (int i = 0; i < p->nbct; i++) {
     bc_term *bt = &p->bct[i];
     dofmap *dm = p->rdm[bt->field];
     double *w = malloc(sizeof(double) * (size_t)(bt->tape.n + 1));
-    if (!w) { lg_seterr(env, "out of memory"); return 1; }
+    if (!w) { free(src); lg_seterr(env, "out of memory"); return 1; }
     bc_pt pt = {env, p, 0, {0, 0, 0}, {0, 0, 0}, {{0}}};
     for (int it = 0; it < bt->nitems; it++) {
       int c = bt->cells[it], f = bt->facets[it];
@@ -323,40 +337,82 @@ static int compute_bcs(lg_env *env, lg_problem *p) {
         memcpy(pt.xi, dm->el.node + 3 * k, sizeof pt.xi);
         dofmap_node_coords(dm, c, k, pt.x);
         double out[2];
-        if (expr_tape_eval(&bt->tape, expr_param_values(env->c), bc_leaf, &pt, w, out)) { free(w); return 1; }
-        if (out[0] == 0 || !isfinite(out[0]) || !isfinite(out[1])) {
+        if (expr_tape_eval(&bt->tape, expr_param_values(env->c), bc_leaf, &pt, w, out)) { free(w); free(src); return 1; }
+        if (out[0] == 0 || !isfinite(out[0]) || !isfinite(out[1]) || !isfinite(out[1] / out[0])) {
           free(w);
-          lg_seterr(env, "essential_bc: the boundary value is not defined at (%g, %g%s) (division by zero?)",
-                    pt.x[0], pt.x[1], m->dim == 3 ? ", ..." : "");
+          free(src);
+          lg_seterr(env, "essential_bc: the value of boundary condition %d is not defined or not finite at (%g, %g%s) "
+                         "(a division by zero, a non-finite parameter?)", bt->src + 1, pt.x[0], pt.x[1], m->dim == 3 ? ", ..." : "");
           return 1;
         }
         p->bc_rows[p->nbc] = p->rglob[bt->field] + dm->cell_dofs[(size_t)c * dm->nloc + k];
         p->bc_vals[p->nbc] = -out[1] / out[0];
+        src[p->nbc] = bt->src;
         p->nbc++;
       }
     }
     free(w);
   }
-  /* sort by row and drop duplicates (a node shared by facets: same value) */
+  /* one value per row: a node shared by facets of one condition has one value; where two
+   * conditions meet (a corner) the later one in the list wins; a condition that another
+   * one overrides with different values on every one of its dofs is an error */
   if (p->nbc > 1) {
     PetscInt *pairs = malloc(sizeof(PetscInt) * 2 * (size_t)p->nbc);
-    if (!pairs) { lg_seterr(env, "out of memory"); return 1; }
+    PetscScalar *v = malloc(sizeof(PetscScalar) * (size_t)p->nbc);
+    int nsrc = 0;
+    for (int i = 0; i < p->nbct; i++) nsrc = p->bct[i].src + 1 > nsrc ? p->bct[i].src + 1 : nsrc;
+    int *ndof = calloc((size_t)nsrc + 1, sizeof(int)), *nover = calloc((size_t)nsrc + 1, sizeof(int)),
+        *by = calloc((size_t)nsrc + 1, sizeof(int));
+    double *mine = calloc((size_t)nsrc + 1, sizeof(double)), *theirs = calloc((size_t)nsrc + 1, sizeof(double));
+    if (!pairs || !v || !ndof || !nover || !by || !mine || !theirs) {
+      free(pairs); free(v); free(ndof); free(nover); free(by); free(mine); free(theirs); free(src);
+      lg_seterr(env, "out of memory");
+      return 1;
+    }
     for (int i = 0; i < p->nbc; i++) { pairs[2 * i] = p->bc_rows[i]; pairs[2 * i + 1] = i; }
     qsort(pairs, (size_t)p->nbc, 2 * sizeof(PetscInt), cmp_row);
-    PetscScalar *v = malloc(sizeof(PetscScalar) * (size_t)p->nbc);
-    if (!v) { free(pairs); lg_seterr(env, "out of memory"); return 1; }
     int k = 0;
-    for (int i = 0; i < p->nbc; i++) {
-      if (k && p->bc_rows[k - 1] == pairs[2 * i]) continue;
-      v[k] = p->bc_vals[pairs[2 * i + 1]];
+    for (int i = 0; i < p->nbc;) {
+      int j = i;
+      while (j < p->nbc && pairs[2 * j] == pairs[2 * i]) j++;
+      int last = (int)pairs[2 * (j - 1) + 1];
+      double val = p->bc_vals[last];
+      /* each condition's view of this row (counted once per condition) */
+      for (int q = i; q < j; q++) {
+        int e = (int)pairs[2 * q + 1], sc = src[e];
+        if (q > i && src[(int)pairs[2 * (q - 1) + 1]] == sc) continue;
+        ndof[sc]++;
+        double mv = p->bc_vals[e];
+        if (sc != src[last] && fabs(mv - val) > 1e-12 * (1 + fabs(mv) + fabs(val))) {
+          if (!nover[sc]) { by[sc] = src[last]; mine[sc] = mv; theirs[sc] = val; }
+          nover[sc]++;
+        }
+      }
+      v[k] = val;
       p->bc_rows[k] = pairs[2 * i];
       k++;
+      i = j;
     }
-    memcpy(p->bc_vals, v, sizeof(PetscScalar) * (size_t)k);
-    p->nbc = k;
-    free(v);
-    free(pairs);
+    int bad = -1;
+    for (int sc = 0; sc < nsrc && bad < 0; sc++)
+      if (ndof[sc] && nover[sc] == ndof[sc]) bad = sc;
+    if (bad >= 0)
+      lg_seterr(env, "essential_bc: boundary conditions %d and %d give different values on the same dofs (condition "
+                     "%d is overridden on every one of its %d dofs, e.g. %g by %g): drop one of them", bad + 1, by[bad] + 1,
+                bad + 1, ndof[bad], mine[bad], theirs[bad]);
+    else {
+      memcpy(p->bc_vals, v, sizeof(PetscScalar) * (size_t)k);
+      p->nbc = k;
+      if (env->verbose)
+        for (int sc = 0; sc < nsrc; sc++)
+          if (nover[sc])
+            fprintf(stderr, "[lugal] essential_bc: condition %d is overridden by condition %d on %d of its %d dofs "
+                            "(where they meet; the later one wins)\n", sc + 1, by[sc] + 1, nover[sc], ndof[sc]);
+    }
+    free(pairs); free(v); free(ndof); free(nover); free(by); free(mine); free(theirs);
+    if (bad >= 0) { free(src); return 1; }
   }
+  free(src);
   return 0;
 }
 
@@ -423,7 +479,19 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
   p->lm = s->mesh;
   p->nonlinear = s->nonlinear;
   p->bc_symmetric = s->bc_symmetric;
-  if (s->prefix) snprintf(p->prefix, sizeof p->prefix, "%s", s->prefix);
+  if (s->prefix) {
+    /* PETSc option names: letters, digits and underscores, the prefix ends where the option
+     * name starts (-<prefix>ksp_type) */
+    size_t n = strlen(s->prefix);
+    int ok = n > 0 && n < sizeof p->prefix && (isalpha((unsigned char)s->prefix[0]));
+    for (size_t i = 0; ok && i < n; i++) ok = isalnum((unsigned char)s->prefix[i]) || s->prefix[i] == '_';
+    if (!ok) {
+      lg_seterr(env, "the options prefix \"%.80s\" must be 1 to %d letters, digits and underscores starting with a "
+                     "letter (e.g. \"state_\", giving -state_ksp_type)", s->prefix, (int)sizeof p->prefix - 1);
+      goto fail;
+    }
+    snprintf(p->prefix, sizeof p->prefix, "%s", s->prefix);
+  }
   for (int i = 0; i < s->nfield; i++) {
     expr_func_info *ft = expr_func_get(env->c, s->test[i]), *fu = expr_func_get(env->c, s->unknown[i]);
     if (!ft || ft->kind != FK_TEST) { lg_seterr(env, "test %d is not a test function", i + 1); goto fail; }
@@ -497,6 +565,31 @@ static int bind_unknowns(lg_problem *p, const double *state, coef_binding *extra
   return p->cols.n;
 }
 
+/* the centre of cell c, for messages */
+static void cell_centre(const mesh *m, int c, char *buf, size_t len) {
+  double x[3] = {0, 0, 0};
+  for (int i = 0; i < m->nvc; i++)
+    for (int d = 0; d < m->dim; d++) x[d] += m->x[(size_t)m->cells[(size_t)c * m->nvc + i] * m->dim + d] / m->nvc;
+  if (m->dim == 2) snprintf(buf, len, "cell %d, near (%g, %g)", c + 1, x[0], x[1]);
+  else snprintf(buf, len, "cell %d, near (%g, %g, %g)", c + 1, x[0], x[1], x[2]);
+}
+
+/* element tensors of term t (size values per item) all finite, or a message saying where */
+static int check_element_tensors(lg_env *env, lg_problem *p, int term, const double *v, int size, const char *what) {
+  const prob_term *t = &p->t[term];
+  for (int it = 0; it < t->nitems; it++)
+    for (int k = 0; k < size; k++)
+      if (!isfinite(v[(size_t)it * size + k])) {
+        char at[128];
+        cell_centre(p->lm->m, t->cells[it], at, sizeof at);
+        lg_seterr(env, "the %s is not finite (%g) in %s, from term %d of the equation: the integrand is not finite "
+                       "there (a division by zero, the log or square root of a negative value, an overflow?)",
+                  what, v[(size_t)it * size + k], at, term + 1);
+        return 1;
+      }
+  return 0;
+}
+
 static int assemble_matrix(lg_env *env, lg_problem *p, const double *state, Mat A) {
   coef_binding extra[KER_MAXFIELD], bind[KER_MAXCOEF];
   int ne = bind_unknowns(p, state, extra);
@@ -507,6 +600,9 @@ static int assemble_matrix(lg_env *env, lg_problem *p, const double *state, Mat 
     if (lg_bind_discrete(env, p->lm, &t->kmat, ne, extra, bind)) return 1;
     if (lg_assemble_items(env, p->lm, &t->kmat, t->nitems, t->cells, t->facets, t->kmat.ncoef, bind,
                           p->coo_vals + t->coo_off))
+      return 1;
+    if (check_element_tensors(env, p, i, p->coo_vals + t->coo_off, p->rows.size * p->cols.size,
+                              p->nonlinear ? "Jacobian" : "matrix"))
       return 1;
   }
   PCHK(MatSetValuesCOO(A, p->coo_vals, INSERT_VALUES), "matrix assembly");
@@ -531,6 +627,7 @@ static int assemble_residual(lg_env *env, lg_problem *p, const double *state, do
     if (lg_bind_discrete(env, p->lm, &t->kres, ne, extra, bind)) return 1;
     if (lg_assemble_items(env, p->lm, &t->kres, t->nitems, t->cells, t->facets, t->kres.ncoef, bind, p->elem))
       return 1;
+    if (check_element_tensors(env, p, i, p->elem, p->rows.size, p->nonlinear ? "residual" : "right-hand side")) return 1;
     for (int it = 0; it < t->nitems; it++) {
       int c = t->cells[it];
       const double *ev = p->elem + (size_t)it * p->rows.size;
@@ -734,6 +831,10 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
       lg_seterr(env, "the initial guess for unknown %d must be a discrete function of degree %d on the problem's mesh", a + 1, p->cols.degree[a]);
       return 1;
     }
+    expr_func_info *fi = expr_func_get(env->c, p->cols.func[a]);
+    char what[96];
+    snprintf(what, sizeof what, "the initial guess for %.60s", fi ? fi->name : "the unknown");
+    if (lg_check_finite(env, p->cdm[a], g->x, what)) { VecRestoreArray(p->x, &x); return 1; }
     memcpy(x + p->cglob[a], g->x, sizeof(double) * (size_t)p->cdm[a]->ndof);
   }
   for (int i = 0; i < p->nbc; i++) x[p->bc_rows[i]] = p->bc_vals[i];
@@ -759,7 +860,16 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
   t0 = now_ms();
   PetscErrorCode ierr = SNESSolve(p->snes, NULL, p->x);
   info->solve_ms = now_ms() - t0;
-  if (p->failed) return 1;
+  if (p->failed) {
+    /* a callback failed: at the initial guess that is the data's fault; later, Newton diverged */
+    PetscInt its = 0;
+    SNESGetIterationNumber(p->snes, &its);
+    char why[LG_ERRLEN];
+    snprintf(why, sizeof why, "%s", env->err);
+    if (its == 0) lg_seterr(env, "at the initial guess: %s", why);
+    else lg_seterr(env, "the nonlinear solve did not converge: after %d Newton iterations %s", (int)its, why);
+    return 1;
+  }
   if (ierr) return petsc_fail(env, ierr, "the nonlinear solve");
   SNESConvergedReason reason;
   PetscInt its, lits, nh;
@@ -811,7 +921,10 @@ int lg_petsc_init(int *argc, char ***argv) {
   return 0;
 }
 
-void lg_petsc_finalize(void) { PetscFinalize(); }
+void lg_petsc_finalize(void) {
+  PetscPopErrorHandler();
+  PetscFinalize();
+}
 
 int lg_petsc_report_unused_options(void) {
   PetscInt n = 0;

@@ -639,7 +639,16 @@ expr *expr_prod_n(expr_ctx *c, int n, expr **in) {
     for (int i = 0; i < nf; i++) out[i + 1] = g[i].base;
     free(g);
     if (nf == 1 && coef == 1) r = out[1];
-    else if (coef == 1) r = intern(c, E_PROD, 0, 0, 0, NULL, nf, out + 1);
+    else if (nf == 1 && out[1]->kind == E_SUM) {
+      /* a number times a sum is distributed (2(a + b) = 2a + 2b), so that a sum minus
+       * itself cancels to 0 term by term */
+      expr *S = out[1];
+      expr **t = malloc(sizeof(expr *) * (size_t)S->n);
+      if (!t) { free(out); expr_set_error(c, "out of memory"); return NULL; }
+      for (int i = 0; i < S->n; i++) t[i] = scale(c, coef, S->ch[i]);
+      r = expr_sum_n(c, S->n, t);
+      free(t);
+    } else if (coef == 1) r = intern(c, E_PROD, 0, 0, 0, NULL, nf, out + 1);
     else {
       out[0] = expr_num(c, coef);
       r = intern(c, E_PROD, 0, 0, 0, NULL, nf + 1, out);
@@ -953,6 +962,13 @@ static expr *deriv_uncached(expr_ctx *c, expr *e, expr *leaf, int dir) {
   case E_LAZY_SUM: case E_LAZY_PROD: /* never memoized unresolved: deriv resolves first */
     return deriv(c, expr_canon(c, e), leaf, dir);
   case E_SUM: {
+    /* one term that depends on the variable (g + 0.001): its derivative as it is, still
+     * pending, so that a chain through such sums stays linear in size */
+    int k = 0, last = -1;
+    for (int i = 0; i < e->n; i++)
+      if (!deriv_zero(e->ch[i], leaf)) { k++; last = i; }
+    if (k == 0) return expr_num(c, 0);
+    if (k == 1) return deriv(c, e->ch[last], leaf, dir);
     expr **t = malloc(sizeof(expr *) * (size_t)e->n);
     if (!t) return NULL;
     for (int i = 0; i < e->n; i++) t[i] = deriv(c, e->ch[i], leaf, dir);

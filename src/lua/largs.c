@@ -165,13 +165,39 @@ double opt_num(lua_State *L, int t, const char *key, double def, const char *fn)
   return v;
 }
 
+lua_Integer check_int_value(lua_State *L, int idx, lua_Integer lo, lua_Integer hi, const char *fn, const char *what) {
+  int isint;
+  lua_Integer v = lua_tointegerx(L, idx, &isint); /* also a float with an integral value */
+  if (!isint) {
+    if (lua_type(L, idx) != LUA_TNUMBER)
+      luaL_error(L, "%s: %s must be an integer, got %s", fn, what, luaL_typename(L, idx));
+    double x = lua_tonumber(L, idx);
+    if (x != x) luaL_error(L, "%s: %s must be an integer, got nan", fn, what);
+    if (x == floor(x)) /* infinite, or integral but beyond 64 bits */
+      luaL_error(L, "%s: %s is too large (%f; at most %I)", fn, what, x, hi);
+    luaL_error(L, "%s: %s must be an integer, got a fraction (%f)", fn, what, x);
+  }
+  if (v > hi) luaL_error(L, "%s: %s is too large (%I; at most %I)", fn, what, v, hi);
+  if (v < lo) luaL_error(L, "%s: %s must be at least %I, got %I", fn, what, lo, v);
+  return v;
+}
+
 int opt_int(lua_State *L, int t, const char *key, int def, const char *fn) {
   int v = def;
-  int ty = lua_getfield(L, t, key);
-  if (ty == LUA_TNUMBER && lua_isinteger(L, -1)) v = (int)lua_tointeger(L, -1);
-  else if (ty != LUA_TNIL) luaL_error(L, "%s: option '%s' must be an integer, got %s", fn, key, ty == LUA_TNUMBER ? "a fraction" : luaL_typename(L, -1));
+  if (lua_getfield(L, t, key) != LUA_TNIL) {
+    char what[96];
+    snprintf(what, sizeof what, "option '%s'", key);
+    v = (int)check_int_value(L, -1, INT_MIN, INT_MAX, fn, what);
+  }
   lua_pop(L, 1);
   return v;
+}
+
+int check_int_arg(lua_State *L, int arg, lua_Integer lo, lua_Integer hi, const char *fn) {
+  char what[32];
+  snprintf(what, sizeof what, "argument %d", arg);
+  if (lua_isnoneornil(L, arg)) luaL_error(L, "%s: %s must be an integer, got %s", fn, what, luaL_typename(L, arg));
+  return (int)check_int_value(L, arg, lo, hi, fn, what);
 }
 
 const char *opt_str(lua_State *L, int t, const char *key, const char *def, const char *fn) {

@@ -51,6 +51,10 @@ expr *expr_of(lua_State *L, ud_expr *u);
 ud_mesh *check_mesh(lua_State *L, int idx, const char *fn);
 void push_mesh(lua_State *L, mesh *m);
 double opt_num(lua_State *L, int t, const char *key, double def, const char *fn);
+/* integers checked as the C int they become (lo..hi within the int range): a float with an
+ * integral value is accepted, 2.5 is "a fraction", 2^32 + 2 "too large" */
+lua_Integer check_int_value(lua_State *L, int idx, lua_Integer lo, lua_Integer hi, const char *fn, const char *what);
+int check_int_arg(lua_State *L, int arg, lua_Integer lo, lua_Integer hi, const char *fn);
 int opt_int(lua_State *L, int t, const char *key, int def, const char *fn);
 const char *opt_str(lua_State *L, int t, const char *key, const char *def, const char *fn);
 void check_keys(lua_State *L, int t, const char *fn, const char *const *allowed);

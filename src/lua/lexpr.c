@@ -70,6 +70,8 @@ static int param_set(lua_State *L) {
   ud_expr *u = luaL_checkudata(L, 1, MT_EXPR);
   if (expr_of(L, u)->kind != E_PARAM) return luaL_error(L, "set: only parameters (lg.parameter) can be set");
   double v = luaL_checknumber(L, 2);
+  if (!isfinite(v))
+    return luaL_error(L, "set: parameter %s must be set to a finite number, got %f", expr_param_name(get_env(L)->c, u->e->i0), v);
   expr_param_values(get_env(L)->c)[u->e->i0] = v;
   return 0;
 }
@@ -92,7 +94,7 @@ static int expr_index_mm(lua_State *L) {
   }
   lua_Integer i = luaL_checkinteger(L, 2);
   if (expr_of(L, u)->kind != E_LIST) return luaL_error(L, "cannot index a scalar expression");
-  if (i < 1 || i > u->e->n) return luaL_error(L, "index %d out of range 1..%d", (int)i, u->e->n);
+  if (i < 1 || i > u->e->n) return luaL_error(L, "index %I out of range 1..%d", i, u->e->n);
   int deps[1] = {1};
   push_expr(L, u->e->ch[i - 1], 1, deps, "index");
   return 1;
@@ -170,7 +172,7 @@ static int form_tostring(lua_State *L) {
 
 static int l_lagrange(lua_State *L) {
   lua_Integer p = luaL_checkinteger(L, 1);
-  if (p < 1 || p > 3) return luaL_error(L, "lg.lagrange: argument 1 must be a degree 1, 2 or 3, got %d", (int)p);
+  if (p < 1 || p > 3) return luaL_error(L, "lg.lagrange: argument 1 must be a degree 1, 2 or 3, got %I", p);
   ud_basis *u = new_ud(L, sizeof *u, MT_BASIS, 0, NULL);
   u->degree = (int)p;
   return 1;
@@ -200,7 +202,7 @@ static int l_test(lua_State *L) { return new_symbol(L, FK_TEST, "lg.test"); }
 
 static int l_coord(lua_State *L) {
   lua_Integer i = luaL_checkinteger(L, 1);
-  if (i < 1 || i > 3) return luaL_error(L, "lg.coord: argument 1 must be 1, 2 or 3, got %d", (int)i);
+  if (i < 1 || i > 3) return luaL_error(L, "lg.coord: argument 1 must be 1, 2 or 3, got %I", i);
   push_expr(L, expr_coord(get_env(L)->c, (int)i - 1), 0, NULL, "lg.coord");
   return 1;
 }
@@ -217,6 +219,7 @@ static int l_normal(lua_State *L) {
 static int l_parameter(lua_State *L) {
   const char *name = luaL_checkstring(L, 1);
   double v = luaL_optnumber(L, 2, 0);
+  if (!isfinite(v)) return luaL_error(L, "lg.parameter: argument 2 (the value of %s) must be a finite number, got %f", name, v);
   lg_env *env = get_env(L);
   int id = expr_param_new(env->c, name, v);
   if (id < 0) return luaL_error(L, "lg.parameter: out of memory");
@@ -275,7 +278,7 @@ static int l_div(lua_State *L) {
 static int l_dx(lua_State *L) {
   expr *a = check_expr(L, 1, "lg.dx");
   lua_Integer i = luaL_checkinteger(L, 2);
-  if (i < 1 || i > 3) return luaL_error(L, "lg.dx: argument 2 must be a direction 1, 2 or 3, got %d", (int)i);
+  if (i < 1 || i > 3) return luaL_error(L, "lg.dx: argument 2 must be a direction 1, 2 or 3, got %I", i);
   int deps[1] = {1};
   push_expr(L, expr_dx(get_env(L)->c, a, (int)i - 1), 1, deps, "lg.dx");
   return 1;

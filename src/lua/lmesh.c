@@ -88,7 +88,10 @@ static int l_read(lua_State *L) {
   return 1;
 }
 
-/* lg.mesh.new{cell=, vertices={{x,y},...}, cells={{1,2,3},...}, boundary={name={{a,b},...}}} */
+static int cmp_str(const void *a, const void *b) { return strcmp(*(const char *const *)a, *(const char *const *)b); }
+
+/* lg.mesh.new{cell=, vertices={{x,y},...}, cells={{1,2,3},...}, boundary={name={{a,b},...}}};
+ * buffers are userdata, so that an error anywhere leaks nothing */
 static int l_mesh_new(lua_State *L) {
   const char *fn = "lg.mesh.new";
   if (!lua_istable(L, 1)) typeerror(L, fn, 1, "a table {cell=, vertices=, cells=, boundary=}");
@@ -103,77 +106,91 @@ static int l_mesh_new(lua_State *L) {
   else return luaL_error(L, "%s: 'cell' must be triangle, quadrilateral, tetrahedron or hexahedron, got \"%s\"", fn, cell);
   int dim = cell_dim(t), nvc = cell_nverts(t);
   if (lua_getfield(L, 1, "vertices") != LUA_TTABLE) return luaL_error(L, "%s: 'vertices' must be a table of coordinate tables", fn);
-  int nv = (int)luaL_len(L, -1);
+  int vt = lua_gettop(L);
   if (lua_getfield(L, 1, "cells") != LUA_TTABLE) return luaL_error(L, "%s: 'cells' must be a table of vertex-index tables", fn);
-  int nc = (int)luaL_len(L, -1);
+  int ct = lua_gettop(L);
+  lua_Integer nv = luaL_len(L, vt), nc = luaL_len(L, ct);
   if (nv < 1 || nc < 1) return luaL_error(L, "%s: need at least one vertex and one cell", fn);
-  double *x = malloc(sizeof(double) * (size_t)nv * dim);
-  int *c = malloc(sizeof(int) * (size_t)nc * nvc);
-  if (!x || !c) { free(x); free(c); return luaL_error(L, "%s: out of memory", fn); }
-  for (int i = 1; i <= nv; i++) {
-    if (lua_geti(L, -2, i) != LUA_TTABLE || luaL_len(L, -1) != dim) {
-      free(x); free(c);
-      return luaL_error(L, "%s: vertex %d must be a table of %d numbers", fn, i, dim);
-    }
+  if (nv > INT_MAX / 3 || nc > INT_MAX / 8) return luaL_error(L, "%s: too many vertices or cells", fn);
+  double *x = lua_newuserdatauv(L, sizeof(double) * (size_t)nv * dim, 0);
+  int *c = lua_newuserdatauv(L, sizeof(int) * (size_t)nc * nvc, 0);
+  unsigned char *used = lua_newuserdatauv(L, (size_t)nv, 0);
+  memset(used, 0, (size_t)nv);
+  for (lua_Integer i = 1; i <= nv; i++) {
+    if (lua_geti(L, vt, i) != LUA_TTABLE || luaL_len(L, -1) != dim)
+      return luaL_error(L, "%s: vertex %I must be a table of %d numbers", fn, i, dim);
     for (int d = 1; d <= dim; d++) {
       lua_geti(L, -1, d);
-      if (!lua_isnumber(L, -1)) { free(x); free(c); return luaL_error(L, "%s: vertex %d coordinate %d is not a number", fn, i, d); }
-      x[(size_t)(i - 1) * dim + d - 1] = lua_tonumber(L, -1);
+      int isnum;
+      double v = lua_tonumberx(L, -1, &isnum);
+      if (!isnum) return luaL_error(L, "%s: vertex %I coordinate %d must be a number, got %s", fn, i, d, luaL_typename(L, -1));
+      if (!isfinite(v)) return luaL_error(L, "%s: vertex %I coordinate %d is not finite (%f)", fn, i, d, v);
+      x[(size_t)(i - 1) * dim + d - 1] = v;
       lua_pop(L, 1);
     }
     lua_pop(L, 1);
   }
-  for (int i = 1; i <= nc; i++) {
-    if (lua_geti(L, -1, i) != LUA_TTABLE || luaL_len(L, -1) != nvc) {
-      free(x); free(c);
-      return luaL_error(L, "%s: cell %d must be a table of %d vertex indices", fn, i, nvc);
-    }
+  char what[128];
+  for (lua_Integer i = 1; i <= nc; i++) {
+    if (lua_geti(L, ct, i) != LUA_TTABLE || luaL_len(L, -1) != nvc)
+      return luaL_error(L, "%s: cell %I must be a table of %d vertex indices", fn, i, nvc);
     for (int k = 1; k <= nvc; k++) {
       lua_geti(L, -1, k);
-      if (!lua_isinteger(L, -1)) { free(x); free(c); return luaL_error(L, "%s: cell %d entry %d is not an integer", fn, i, k); }
-      c[(size_t)(i - 1) * nvc + k - 1] = (int)lua_tointeger(L, -1) - 1;
+      snprintf(what, sizeof what, "cell %lld entry %d", (long long)i, k);
+      int v = (int)check_int_value(L, -1, 1, nv, fn, what) - 1;
+      c[(size_t)(i - 1) * nvc + k - 1] = v;
+      used[v] = 1;
       lua_pop(L, 1);
     }
     lua_pop(L, 1);
   }
-  lua_pop(L, 2);
+  for (lua_Integer i = 0; i < nv; i++)
+    if (!used[i])
+      return luaL_error(L, "%s: vertex %I is not in any cell (every vertex of a mesh must be: it would be a dof "
+                           "that no equation constrains)", fn, i + 1);
   char err[MESH_ERRLEN];
-  mesh *m = mesh_create(t, nv, x, nc, c, err);
-  free(x);
-  free(c);
+  mesh *m = mesh_create(t, (int)nv, x, (int)nc, c, err);
   if (!m) return luaL_error(L, "%s: %s", fn, err);
   push_mesh(L, m);
   int midx = lua_gettop(L);
   if (lua_getfield(L, 1, "boundary") == LUA_TTABLE) {
-    int tag = 1;
+    /* names in sorted order get tags 1, 2, ...: the same script numbers them the same way */
+    int bt = lua_gettop(L), nnames = 0;
     lua_pushnil(L);
-    while (lua_next(L, -2)) {
+    while (lua_next(L, bt)) {
       if (lua_type(L, -2) != LUA_TSTRING || lua_type(L, -1) != LUA_TTABLE)
         return luaL_error(L, "%s: 'boundary' maps names to tables of facets", fn);
-      const char *name = lua_tostring(L, -2);
-      int n = (int)luaL_len(L, -1), nvf = m->nvf;
-      int *fv = malloc(sizeof(int) * (size_t)(n + 1) * nvf);
-      if (!fv) return luaL_error(L, "%s: out of memory", fn);
-      for (int i = 1; i <= n; i++) {
-        if (lua_geti(L, -1, i) != LUA_TTABLE || luaL_len(L, -1) != nvf) {
-          free(fv);
-          return luaL_error(L, "%s: boundary '%s' facet %d must list %d vertices", fn, name, i, nvf);
-        }
+      lua_pop(L, 1);
+      nnames++;
+    }
+    const char **names = lua_newuserdatauv(L, sizeof(char *) * (size_t)(nnames + 1), 0);
+    nnames = 0;
+    lua_pushnil(L);
+    while (lua_next(L, bt)) { lua_pop(L, 1); names[nnames++] = lua_tostring(L, -1); }
+    qsort(names, (size_t)nnames, sizeof(char *), cmp_str);
+    int nvf = m->nvf;
+    for (int tag = 1; tag <= nnames; tag++) {
+      const char *name = names[tag - 1];
+      lua_getfield(L, bt, name);
+      lua_Integer n = luaL_len(L, -1);
+      if (n > INT_MAX / 4) return luaL_error(L, "%s: boundary '%s' has too many facets", fn, name);
+      int *fv = lua_newuserdatauv(L, sizeof(int) * (size_t)(n + 1) * nvf, 0);
+      for (lua_Integer i = 1; i <= n; i++) {
+        if (lua_geti(L, -2, i) != LUA_TTABLE || luaL_len(L, -1) != nvf)
+          return luaL_error(L, "%s: boundary '%s' facet %I must list %d vertices", fn, name, i, nvf);
         for (int k = 1; k <= nvf; k++) {
           lua_geti(L, -1, k);
-          fv[(i - 1) * nvf + k - 1] = (int)lua_tointeger(L, -1) - 1;
+          snprintf(what, sizeof what, "boundary '%.20s' facet %lld vertex %d", name, (long long)i, k);
+          fv[(i - 1) * nvf + k - 1] = (int)check_int_value(L, -1, 1, nv, fn, what) - 1;
           lua_pop(L, 1);
         }
         lua_pop(L, 1);
       }
-      int rc = mesh_add_boundary_facets(m, n, fv, tag++, name);
-      free(fv);
-      if (rc) return luaL_error(L, "%s: %s", fn, m->err);
-      lua_pop(L, 1);
+      if (mesh_add_boundary_facets(m, (int)n, fv, tag, name)) return luaL_error(L, "%s: %s", fn, m->err);
+      lua_pop(L, 2);
     }
     if (mesh_build_boundary_cells(m)) return luaL_error(L, "%s: %s", fn, m->err);
   }
-  lua_pop(L, 1);
   lua_pushvalue(L, midx);
   return 1;
 }
@@ -211,8 +228,9 @@ static int region_new(lua_State *L, region_kind kind, const char *fn) {
                          "{name = {facets}}; Gmsh files as physical groups)", fn);
   for (int i = 0; i < n; i++) {
     int arg = i + 2;
-    if (lua_isinteger(L, arg)) {
-      lua_Integer t = lua_tointeger(L, arg);
+    int isint = 0;
+    lua_Integer t = lua_type(L, arg) == LUA_TNUMBER ? lua_tointegerx(L, arg, &isint) : 0;
+    if (isint) {
       int known = t >= INT_MIN && t <= INT_MAX &&
                   (kind == REGION_BOUNDARY ? mesh_has_boundary_tag(m, (int)t) : mesh_has_region_tag(m, (int)t));
       if (!known) {
@@ -540,7 +558,7 @@ static int mesh_coordinates(lua_State *L) {
   ud_mesh *u = check_mesh(L, 1, "mesh:coordinates");
   mesh *m = u->lm->m;
   lua_Integer i = luaL_checkinteger(L, 2);
-  if (i < 1 || i > m->nvert) return luaL_error(L, "mesh:coordinates: vertex %d out of range 1..%d", (int)i, m->nvert);
+  if (i < 1 || i > m->nvert) return luaL_error(L, "mesh:coordinates: vertex %I out of range 1..%d", i, m->nvert);
   for (int d = 0; d < m->dim; d++) lua_pushnumber(L, m->x[(size_t)(i - 1) * m->dim + d]);
   return m->dim;
 }
@@ -549,62 +567,65 @@ static int mesh_set_coordinates(lua_State *L) {
   ud_mesh *u = check_mesh(L, 1, "mesh:set_coordinates");
   mesh *m = u->lm->m;
   lua_Integer i = luaL_checkinteger(L, 2);
-  if (i < 1 || i > m->nvert) return luaL_error(L, "mesh:set_coordinates: vertex %d out of range 1..%d", (int)i, m->nvert);
-  for (int d = 0; d < m->dim; d++) m->x[(size_t)(i - 1) * m->dim + d] = luaL_checknumber(L, 3 + d);
+  if (i < 1 || i > m->nvert) return luaL_error(L, "mesh:set_coordinates: vertex %I out of range 1..%d", i, m->nvert);
+  double v[3];
+  for (int d = 0; d < m->dim; d++) {
+    v[d] = luaL_checknumber(L, 3 + d);
+    if (!isfinite(v[d])) return luaL_error(L, "mesh:set_coordinates: argument %d is not finite (%f)", 3 + d, v[d]);
+  }
+  for (int d = 0; d < m->dim; d++) m->x[(size_t)(i - 1) * m->dim + d] = v[d];
   lg_mesh_changed(u->lm);
   return 0;
 }
 
+/* the VTU of a mesh with the fields of the table at tidx; every buffer lives in a table on
+ * the stack until the file is written (never under user-named keys in the registry) */
 static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, int tidx, const char *fn) {
-  mesh_field fl[64];
   int nf = 0;
   if (!lua_isnoneornil(L, tidx)) {
     if (!lua_istable(L, tidx)) return typeerror(L, fn, tidx, "a table {name = function or array}");
     lua_pushnil(L);
+    while (lua_next(L, tidx)) { lua_pop(L, 1); nf++; }
+  }
+  mesh_field *fl = lua_newuserdatauv(L, sizeof(mesh_field) * (size_t)(nf + 1), 0);
+  lua_newtable(L); /* anchors the arrays */
+  int anchor = lua_gettop(L);
+  nf = 0;
+  if (!lua_isnoneornil(L, tidx)) {
+    lua_pushnil(L);
     while (lua_next(L, tidx)) {
-      if (nf >= 64) return luaL_error(L, "%s: at most 64 fields", fn);
-      if (lua_type(L, -2) != LUA_TSTRING) return luaL_error(L, "%s: field names must be strings", fn);
+      if (lua_type(L, -2) != LUA_TSTRING) return luaL_error(L, "%s: field names must be strings, got %s", fn, luaL_typename(L, -2));
+      const char *name = lua_tostring(L, -2);
       ud_func *uf = luaL_testudata(L, -1, MT_FUNC);
       ud_qarray *qa = luaL_testudata(L, -1, MT_QARRAY);
       if (qa) {
-        if (qa->n != m->ncell) return luaL_error(L, "%s: quality array '%s' belongs to a mesh of %d cells", fn, lua_tostring(L, -2), qa->n);
-        fl[nf].name = lua_tostring(L, -2);
-        fl[nf].ncomp = 1;
-        fl[nf].on_cells = 1;
-        fl[nf].val = qa->v;
-        nf++;
+        if (qa->n != m->ncell) return luaL_error(L, "%s: quality array '%s' belongs to a mesh of %d cells", fn, name, qa->n);
+        fl[nf] = (mesh_field){name, 1, 1, qa->v};
       } else if (uf) {
-        if (uf->f->mesh != lm) return luaL_error(L, "%s: field '%s' lives on a different mesh", fn, lua_tostring(L, -2));
-        fl[nf].name = lua_tostring(L, -2);
-        fl[nf].ncomp = 1;
-        fl[nf].on_cells = 0;
-        fl[nf].val = uf->f->x; /* vertex dofs come first in every Lagrange numbering */
-        nf++;
+        if (uf->f->mesh != lm) return luaL_error(L, "%s: field '%s' lives on a different mesh", fn, name);
+        fl[nf] = (mesh_field){name, 1, 0, uf->f->x}; /* vertex dofs come first in every Lagrange numbering */
       } else if (lua_istable(L, -1)) {
-        int n = (int)luaL_len(L, -1);
+        lua_Integer n = luaL_len(L, -1);
         if (n != m->ncell && n != m->nvert)
-          return luaL_error(L, "%s: array '%s' has %d entries; need one per cell (%d) or vertex (%d)", fn, lua_tostring(L, -2), n, m->ncell, m->nvert);
+          return luaL_error(L, "%s: array '%s' has %I entries; need one per cell (%d) or vertex (%d)", fn, name, n, m->ncell, m->nvert);
         double *v = lua_newuserdatauv(L, sizeof(double) * (size_t)n, 0);
-        lua_setfield(L, LUA_REGISTRYINDEX, lua_tostring(L, -3)); /* keep alive until written */
-        for (int i = 1; i <= n; i++) {
+        lua_rawseti(L, anchor, nf + 1);
+        for (lua_Integer i = 1; i <= n; i++) {
           lua_geti(L, -1, i);
-          v[i - 1] = lua_tonumber(L, -1);
+          int isnum;
+          v[i - 1] = lua_tonumberx(L, -1, &isnum);
+          if (!isnum) return luaL_error(L, "%s: array '%s' entry %I must be a number, got %s", fn, name, i, luaL_typename(L, -1));
           lua_pop(L, 1);
         }
-        fl[nf].name = lua_tostring(L, -2);
-        fl[nf].ncomp = 1;
-        fl[nf].on_cells = n == m->ncell && n != m->nvert;
-        fl[nf].val = v;
-        nf++;
-      } else return luaL_error(L, "%s: field '%s' must be a discrete function or an array", fn, lua_tostring(L, -2));
+        fl[nf] = (mesh_field){name, 1, n == m->ncell && n != m->nvert, v};
+      } else return luaL_error(L, "%s: field '%s' must be a discrete function, a quality array or an array of numbers, got %s",
+                               fn, name, luaL_typename(L, -1));
+      nf++;
       lua_pop(L, 1);
     }
   }
   int rc = mesh_write_vtu(m, path, nf, fl);
-  for (int i = 0; i < nf; i++) {
-    lua_pushnil(L);
-    lua_setfield(L, LUA_REGISTRYINDEX, fl[i].name);
-  }
+  lua_pop(L, 2);
   if (rc) return luaL_error(L, "%s: %s", fn, m->err);
   return 0;
 }
@@ -741,7 +762,7 @@ static int qa_index(lua_State *L) {
     return luaL_error(L, "quality arrays have no field '%s'", lua_tostring(L, 2));
   }
   lua_Integer i = luaL_checkinteger(L, 2);
-  if (i < 1 || i > a->n) return luaL_error(L, "quality index %d out of range 1..%d", (int)i, a->n);
+  if (i < 1 || i > a->n) return luaL_error(L, "quality index %I out of range 1..%d", i, a->n);
   lua_pushnumber(L, a->v[i - 1]);
   return 1;
 }
@@ -781,11 +802,13 @@ static int qa_mean(lua_State *L) { return qa_stat(L, 2); }
 
 static int qa_histogram(lua_State *L) {
   ud_qarray *a = check_qarray(L, 1);
-  lua_Integer nb = luaL_optinteger(L, 2, 10);
-  if (nb < 1 || nb > 10000) return luaL_error(L, "q:histogram: argument 1 must be a bin count 1..10000, got %d", (int)nb);
+  int nb = lua_isnoneornil(L, 2) ? 10 : check_int_arg(L, 2, 1, 10000, "q:histogram");
   quality_stats st;
   quality_stats_compute(a->v, a->n, &st);
   double lo = luaL_optnumber(L, 3, st.min), hi = luaL_optnumber(L, 4, st.max);
+  if (!isfinite(lo) || !isfinite(hi) || !(lo <= hi))
+    return luaL_error(L, "q:histogram: the range [lo, hi] must be finite with lo <= hi, got [%f, %f]%s", lo, hi,
+                      lua_isnoneornil(L, 3) ? " (the values are not all finite: pass lo and hi)" : "");
   int *c = lua_newuserdatauv(L, sizeof(int) * (size_t)nb, 0);
   quality_histogram(a->v, a->n, (int)nb, lo, hi, c);
   lua_createtable(L, 0, 3);
@@ -799,8 +822,7 @@ static int qa_histogram(lua_State *L) {
 
 static int qa_worst(lua_State *L) {
   ud_qarray *a = check_qarray(L, 1);
-  lua_Integer k = luaL_optinteger(L, 2, 10);
-  if (k < 1) return luaL_error(L, "q:worst: argument 1 must be a positive count, got %d", (int)k);
+  lua_Integer k = lua_isnoneornil(L, 2) ? 10 : check_int_arg(L, 2, 1, INT_MAX, "q:worst");
   if (k > a->n) k = a->n;
   int *ids = lua_newuserdatauv(L, sizeof(int) * (size_t)(k + 1), 0);
   quality_worst(a->v, a->n, (int)k, quality_larger_is_better(a->measure), ids);

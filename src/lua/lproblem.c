@@ -47,7 +47,11 @@ static int func_assign(lua_State *L) {
     if (n != u->f->dm->ndof) return luaL_error(L, "f:assign: the table has %d values, the function %d dofs", n, u->f->dm->ndof);
     for (int i = 1; i <= n; i++) {
       lua_geti(L, 2, i);
-      u->f->x[i - 1] = luaL_checknumber(L, -1);
+      int isnum;
+      double v = lua_tonumberx(L, -1, &isnum);
+      if (!isnum) return luaL_error(L, "f:assign: entry %d of the table must be a number, got %s", i, luaL_typename(L, -1));
+      if (!isfinite(v)) return luaL_error(L, "f:assign: entry %d of the table is not finite (%f)", i, v);
+      u->f->x[i - 1] = v;
       lua_pop(L, 1);
     }
     return 0;
@@ -130,6 +134,11 @@ static int symbol_list(lua_State *L, int t, const char *key, func_kind kind, int
     n = 1;
   }
   lua_pop(L, 1);
+  for (int i = 0; i < n; i++)
+    for (int j = 0; j < i; j++)
+      if (ids[i] == ids[j])
+        luaL_error(L, "%s: option '%s' lists %s twice (entries %d and %d): each %s appears once", fn, key,
+                   expr_func_get(get_env(L)->c, ids[i])->name, j + 1, i + 1, kind == FK_TEST ? "test function" : "unknown");
   return n;
 }
 

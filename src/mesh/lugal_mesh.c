@@ -6,6 +6,8 @@
 #include "svg.h"
 #include "untangle.h"
 
+#include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -34,6 +36,18 @@ static void usage(FILE *f) {
              "          vertices together by L-BFGS on the sum of 1/quality.\n");
 }
 
+/* an integer option in lo..hi, or -1 with a message */
+static int int_option(const char *cmd, const char *opt, const char *v, long lo, long hi) {
+  char *end;
+  errno = 0;
+  long x = strtol(v, &end, 10);
+  if (end == v || *end || errno || x < lo || x > hi) {
+    fprintf(stderr, "lugal-mesh %s: %s must be an integer from %ld to %ld, got %s\n", cmd, opt, lo, hi, v);
+    return -1;
+  }
+  return (int)x;
+}
+
 static int quality_cmd(int argc, char **argv) {
   const char *file = NULL, *measure = NULL, *svg = NULL, *pic = NULL, *vtu = NULL;
   int bins = 20;
@@ -44,7 +58,9 @@ static int quality_cmd(int argc, char **argv) {
     else if (!strcmp(a, "--svg") && has) svg = argv[++i];
     else if (!strcmp(a, "--picture") && has) pic = argv[++i];
     else if (!strcmp(a, "--vtu") && has) vtu = argv[++i];
-    else if (!strcmp(a, "--bins") && has) bins = atoi(argv[++i]);
+    else if (!strcmp(a, "--bins") && has) {
+      if ((bins = int_option("quality", "--bins", argv[++i], 1, 1000)) < 0) return 2;
+    }
     else if (a[0] == '-') { fprintf(stderr, "lugal-mesh quality: unknown or incomplete option %s\n", a); return 2; }
     else if (!file) file = a;
     else { fprintf(stderr, "lugal-mesh quality: one mesh file at a time (got %s and %s)\n", file, a); return 2; }
@@ -145,7 +161,10 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
     char *end = NULL;
     if (!strcmp(a, "--beta") && has) {
       uo.beta = strtod(argv[++i], &end);
-      if (*end || !(uo.beta >= 0)) { fprintf(stderr, "lugal-mesh %s: --beta must be a number >= 0\n", cmd); return 2; }
+      if (end == argv[i] || *end || !(uo.beta >= 0) || !isfinite(uo.beta)) {
+        fprintf(stderr, "lugal-mesh %s: --beta must be a finite number >= 0, got %s\n", cmd, argv[i]);
+        return 2;
+      }
     } else if (!strcmp(a, "--boundary") && has) {
       if ((slide = parse_boundary(cmd, argv[++i])) < 0) return 2;
     } else if (!strcmp(a, "--placement") && has && !strcmp(cmd, "untangle")) {
@@ -159,11 +178,9 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
       else if (!strcmp(v, "global")) global = 1;
       else { fprintf(stderr, "lugal-mesh smooth: --method must be local or global\n"); return 2; }
     } else if (!strcmp(a, "--max-iterations") && has) {
-      uo.max_iterations = (int)strtol(argv[++i], &end, 10);
-      if (*end || uo.max_iterations < 1) { fprintf(stderr, "lugal-mesh %s: --max-iterations must be >= 1\n", cmd); return 2; }
+      if ((uo.max_iterations = int_option(cmd, "--max-iterations", argv[++i], 1, 1000000)) < 0) return 2;
     } else if (!strcmp(a, "--iterations") && has) {
-      iterations = (int)strtol(argv[++i], &end, 10);
-      if (*end || iterations < 1) { fprintf(stderr, "lugal-mesh %s: --iterations must be >= 1\n", cmd); return 2; }
+      if ((iterations = int_option(cmd, "--iterations", argv[++i], 1, 1000000)) < 0) return 2;
     } else if (!strcmp(a, "--measure") && has) measure = argv[++i];
     else if (!strcmp(a, "--report")) report = 1;
     else if (a[0] == '-') { fprintf(stderr, "lugal-mesh %s: unknown or incomplete option %s\n", cmd, a); return 2; }

@@ -708,9 +708,13 @@ mesh *mesh_rectangle(const mesh_box_opts *o, char *err) {
     return NULL;
   }
   int crossed = o->type == CELL_TRIANGLE && o->diagonal == 2;
-  long nv = (long)(nx + 1) * (ny + 1) + (crossed ? (long)nx * ny : 0);
-  long nc = (long)nx * ny * (o->type == CELL_QUADRILATERAL ? 1 : crossed ? 4 : 2);
-  if (nv > 2000000000L || nc * 4 > 2000000000L) { seterr(err, "mesh too large"); return NULL; }
+  double dv = ((double)nx + 1) * ((double)ny + 1) + (double)nx * ny, dc = 4.0 * nx * ny; /* no overflow */
+  long nv = dv > 4e9 ? 4000000000L : ((long)nx + 1) * ((long)ny + 1) + (crossed ? (long)nx * ny : 0);
+  long nc = dc > 4e9 ? 4000000000L : (long)nx * ny * (o->type == CELL_QUADRILATERAL ? 1 : crossed ? 4 : 2);
+  if (nv > 2000000000L || nc * 4 > 2000000000L) {
+    seterr(err, "a %d x %d mesh is too large (%ld vertices and %ld cells; at most 2e9 vertices and 5e8 cells)", nx, ny, nv, nc);
+    return NULL;
+  }
   mesh *m = mesh_create(o->type, (int)nv, NULL, (int)nc, NULL, err);
   if (!m) return NULL;
   for (int j = 0; j <= ny; j++)
@@ -779,9 +783,14 @@ mesh *mesh_box(const mesh_box_opts *o, char *err) {
     seterr(err, "a box has tetrahedra or hexahedra");
     return NULL;
   }
-  long nv = (long)(nx + 1) * (ny + 1) * (nz + 1);
-  long nc = (long)nx * ny * nz * (o->type == CELL_TETRAHEDRON ? 6 : 1);
-  if (nv > 2000000000L || nc * 8 > 2000000000L) { seterr(err, "mesh too large"); return NULL; }
+  double dv = ((double)nx + 1) * ((double)ny + 1) * ((double)nz + 1), dc = 6.0 * nx * ny * nz; /* no overflow */
+  long nv = dv > 4e9 ? 4000000000L : ((long)nx + 1) * ((long)ny + 1) * ((long)nz + 1);
+  long nc = dc > 4e9 ? 4000000000L : (long)nx * ny * nz * (o->type == CELL_TETRAHEDRON ? 6 : 1);
+  if (nv > 2000000000L || nc * 8 > 2000000000L) {
+    seterr(err, "a %d x %d x %d mesh is too large (%ld vertices and %ld cells; at most 2e9 vertices and 2.5e8 cells)", nx, ny,
+           nz, nv, nc);
+    return NULL;
+  }
   mesh *m = mesh_create(o->type, (int)nv, NULL, (int)nc, NULL, err);
   if (!m) return NULL;
 #define VID(i, j, k) (((k) * (ny + 1) + (j)) * (nx + 1) + (i))

@@ -430,5 +430,44 @@ int main(int argc, char **argv) {
   int counts[2];
   quality_histogram(q, 6, 2, 0, 1, counts);
   CHECK(counts[0] == 3 && counts[1] == 3, "histogram %d %d", counts[0], counts[1]);
+  /* statistics of values with infinities and NaN, histograms of them (no NaN cast to int) */
+  {
+    double v[5] = {1, INFINITY, 3, NAN, 2};
+    quality_stats st;
+    quality_stats_compute(v, 3, &st);
+    CHECK(isinf(st.mean) && st.mean > 0 && st.max == INFINITY && st.min == 1, "mean with +Inf is +Inf (%g)", st.mean);
+    quality_stats_compute(v, 5, &st);
+    CHECK(isnan(st.mean) && st.min == 1 && st.argmax == 1, "NaN values: mean NaN, min/max skip them");
+    double w[3] = {-INFINITY, 1, INFINITY};
+    quality_stats_compute(w, 3, &st);
+    CHECK(isnan(st.mean), "+Inf and -Inf have no mean");
+    int cnt[4];
+    quality_histogram(v, 5, 4, 0, 4, cnt);
+    CHECK(cnt[0] == 0 && cnt[1] == 1 && cnt[2] == 1 && cnt[3] == 2, "histogram with Inf and NaN: %d %d %d %d", cnt[0], cnt[1],
+          cnt[2], cnt[3]);
+    quality_histogram(v, 5, 4, 0, INFINITY, cnt);
+    CHECK(cnt[0] == 4, "an infinite range puts every finite value in the first bin");
+  }
+  /* scale: the same cells at 1e-200 and 1e300 have the same shape and validity */
+  {
+    double base[6] = {0, 0, 1, 0.1, 0.3, 0.8};
+    for (int k = 0; k < 3; k++) {
+      double s = k == 0 ? 1 : k == 1 ? 1e-200 : 1e300, xs[6];
+      for (int i = 0; i < 6; i++) xs[i] = base[i] * s + (k == 2 ? -5e299 : 0);
+      int cell[3] = {0, 1, 2};
+      char err[MESH_ERRLEN];
+      mesh *m = mesh_create(CELL_TRIANGLE, 3, xs, 1, cell, err);
+      double q[1], a[1];
+      mesh_quality(m, QM_MEAN_RATIO, NULL, q, err);
+      mesh_quality(m, QM_SIGNED_MEASURE, NULL, a, err);
+      int ninv;
+      mesh_count_invalid(m, 0, NULL, &ninv);
+      CHECK(ninv == 0, "scale %g: valid", s);
+      CHECK_CLOSE(q[0], 4 * sqrt(3.0) * 0.5 * (1 * 0.8 - 0.1 * 0.3) / (1.01 + 0.73 + (0.7 * 0.7 + 0.7 * 0.7)), 1e-14);
+      double area = 0.5 * (1 * 0.8 - 0.1 * 0.3) * s * s;
+      CHECK(k == 0 ? fabs(a[0] - area) < 1e-15 : k == 1 ? a[0] == 0 : isinf(a[0]), "scale %g: area %g (dimensional)", s, a[0]);
+      mesh_free(m);
+    }
+  }
   return CHECK_DONE();
 }

@@ -53,7 +53,16 @@ grep -q "method must be local or global" "$T/err"
 if "$BUILD/lugal-mesh" smooth "$T/tangled.msh" "$T/x.msh" 2> "$T/err"; then exit 1; fi
 grep -q "untangle it first" "$T/err"
 if "$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/x.msh" --beta -1 2> "$T/err"; then exit 1; fi
-grep -q "beta must be a number >= 0" "$T/err"
+grep -q "beta must be a finite number >= 0" "$T/err"
+# options are range-checked as the integers and numbers they become
+if "$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/x.msh" --beta inf 2> "$T/err"; then exit 1; fi
+grep -q "beta must be a finite number >= 0, got inf" "$T/err"
+if "$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/x.msh" --max-iterations 99999999999 2> "$T/err"; then exit 1; fi
+grep -q "max-iterations must be an integer from 1 to 1000000, got 99999999999" "$T/err"
+if "$BUILD/lugal-mesh" quality "$T/tangled.msh" --bins 1e3 2> "$T/err"; then exit 1; fi
+grep -q "bins must be an integer from 1 to 1000, got 1e3" "$T/err"
+if "$BUILD/lugal-mesh" quality /tmp 2> "$T/err"; then exit 1; fi
+grep -q "cannot read /tmp: Is a directory" "$T/err"
 # a tangle that cannot be undone with the boundary fixed: exit status 3, file still written
 cat > "$T/edge.lua" <<'LUA'
 local lg = require "lugal"

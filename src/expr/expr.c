@@ -906,6 +906,42 @@ expr *expr_div_op(expr_ctx *c, expr *a) {
   return expr_sum_n(c, n, t);
 }
 
+/* ---------------------------------------------------------------- traversal */
+
+/* post-order over the DAG under root with an explicit stack (no depth recursion): visit(e)
+ * runs once per node after all its children, in the order a recursive walk would; a child
+ * for which skip(ud, child) is true is neither entered nor visited */
+typedef int (*post_visit)(void *ud, expr *e);
+static int post_order(expr_ctx *c, expr *root, memo_map *seen, post_visit visit, post_visit skip, void *ud) {
+  typedef struct { expr *e; int next; } frame;
+  if (memo_get(seen, root->id)) return 0;
+  int cap = 64, sp = 0;
+  frame *st = malloc(sizeof(frame) * (size_t)cap);
+  if (!st) { expr_set_error(c, "out of memory"); return 1; }
+  st[sp++] = (frame){root, 0};
+  if (memo_put(seen, root->id, root)) { free(st); expr_set_error(c, "out of memory"); return 1; }
+  while (sp) {
+    frame *f = &st[sp - 1];
+    if (f->next < f->e->n) {
+      expr *ch = f->e->ch[f->next++];
+      if (memo_get(seen, ch->id) || (skip && skip(ud, ch))) continue;
+      if (memo_put(seen, ch->id, ch)) { free(st); expr_set_error(c, "out of memory"); return 1; }
+      if (sp == cap) {
+        frame *ns = realloc(st, sizeof(frame) * (size_t)(cap *= 2));
+        if (!ns) { free(st); expr_set_error(c, "out of memory"); return 1; }
+        st = ns;
+      }
+      st[sp++] = (frame){ch, 0};
+      continue;
+    }
+    expr *done = f->e;
+    sp--;
+    if (visit(ud, done)) { free(st); return 1; }
+  }
+  free(st);
+  return 0;
+}
+
 /* ---------------------------------------------------------------- differentiation */
 
 /* mode: leaf != NULL: d/d(leaf); else spatial derivative in direction dir */
@@ -1039,36 +1075,33 @@ static int64_t deriv_key(const expr *e, const expr *leaf, int dir) {
   return ((int64_t)e->id << 32) | (leaf ? (int64_t)leaf->id : (int64_t)0x80000000 + dir);
 }
 
-/* the derivatives of the nodes under e, children before parents, with an explicit stack:
- * then deriv_uncached(e) finds every child's derivative memoized, and no depth of
- * expression (a chain of 100 000 functions) recurses on the C stack */
+/* the derivatives of the nodes under e, children before parents (post_order): then
+ * deriv_uncached(e) finds every child's derivative memoized, and no depth of expression (a
+ * chain of 100 000 functions) recurses on the C stack */
+typedef struct {
+  expr_ctx *c;
+  expr *root, *leaf;
+  int dir;
+} deriv_walk;
+
+static int deriv_skip(void *ud, expr *ch) {
+  deriv_walk *D = ud;
+  return ch->n == 0 || deriv_zero(ch, D->leaf) || memo_get(&D->c->dmemo, deriv_key(ch, D->leaf, D->dir));
+}
+
+static int deriv_visit(void *ud, expr *e) {
+  deriv_walk *D = ud;
+  if (e == D->root) return 0; /* the caller's */
+  expr *r = deriv_uncached(D->c, e, D->leaf, D->dir);
+  return !r || memo_put(&D->c->dmemo, deriv_key(e, D->leaf, D->dir), r);
+}
+
 static int deriv_below(expr_ctx *c, expr *e, expr *leaf, int dir) {
-  typedef struct { expr *e; int next; } frame;
-  int cap = 64, sp = 0;
-  frame *st = malloc(sizeof(frame) * (size_t)cap);
-  if (!st) { expr_set_error(c, "out of memory"); return 1; }
-  st[sp++] = (frame){e, 0};
-  while (sp) {
-    frame *f = &st[sp - 1];
-    if (f->next < f->e->n) {
-      expr *ch = f->e->ch[f->next++];
-      if (ch->n == 0 || deriv_zero(ch, leaf) || memo_get(&c->dmemo, deriv_key(ch, leaf, dir))) continue;
-      if (sp == cap) {
-        frame *ns = realloc(st, sizeof(frame) * (size_t)(cap *= 2));
-        if (!ns) { free(st); expr_set_error(c, "out of memory"); return 1; }
-        st = ns;
-      }
-      st[sp++] = (frame){ch, 0};
-      continue;
-    }
-    expr *done = f->e;
-    sp--;
-    if (done == e) break;
-    expr *r = deriv_uncached(c, done, leaf, dir);
-    if (!r || memo_put(&c->dmemo, deriv_key(done, leaf, dir), r)) { free(st); return 1; }
-  }
-  free(st);
-  return 0;
+  deriv_walk D = {c, e, leaf, dir};
+  memo_map seen = {0, 0, NULL};
+  int rc = post_order(c, e, &seen, deriv_visit, deriv_skip, &D);
+  memo_free(&seen);
+  return rc;
 }
 
 static expr *deriv(expr_ctx *c, expr *e, expr *leaf, int dir) {
@@ -1113,39 +1146,6 @@ static expr *rebuild(expr_ctx *c, const expr *e, expr **ch) {
   }
 }
 
-/* post-order over the DAG under root with an explicit stack (no depth recursion): visit(n)
- * runs once per node after all its children, in the order a recursive walk would */
-typedef int (*post_visit)(void *ud, expr *e);
-static int post_order(expr_ctx *c, expr *root, memo_map *seen, post_visit visit, void *ud) {
-  typedef struct { expr *e; int next; } frame;
-  if (memo_get(seen, root->id)) return 0;
-  int cap = 64, sp = 0;
-  frame *st = malloc(sizeof(frame) * (size_t)cap);
-  if (!st) { expr_set_error(c, "out of memory"); return 1; }
-  st[sp++] = (frame){root, 0};
-  if (memo_put(seen, root->id, root)) { free(st); expr_set_error(c, "out of memory"); return 1; }
-  while (sp) {
-    frame *f = &st[sp - 1];
-    if (f->next < f->e->n) {
-      expr *ch = f->e->ch[f->next++];
-      if (memo_get(seen, ch->id)) continue;
-      if (memo_put(seen, ch->id, ch)) { free(st); expr_set_error(c, "out of memory"); return 1; }
-      if (sp == cap) {
-        frame *ns = realloc(st, sizeof(frame) * (size_t)(cap *= 2));
-        if (!ns) { free(st); expr_set_error(c, "out of memory"); return 1; }
-        st = ns;
-      }
-      st[sp++] = (frame){ch, 0};
-      continue;
-    }
-    expr *done = f->e;
-    sp--;
-    if (visit(ud, done)) { free(st); return 1; }
-  }
-  free(st);
-  return 0;
-}
-
 typedef struct {
   expr_ctx *c;
   int n;
@@ -1181,7 +1181,7 @@ expr *expr_subs(expr_ctx *c, expr *e, int n, expr **from, expr **to) {
   memo_map seen = {0, 0, NULL};
   subs_ctx S = {c, n, from, to, {0, 0, NULL}};
   expr *r = NULL;
-  if (!post_order(c, e, &seen, subs_visit, &S)) r = memo_get(&S.out, e->id);
+  if (!post_order(c, e, &seen, subs_visit, NULL, &S)) r = memo_get(&S.out, e->id);
   memo_free(&seen);
   memo_free(&S.out);
   return r;
@@ -1210,7 +1210,7 @@ int expr_collect_fields(expr_ctx *c, int nroot, expr **roots, int func, int max,
   query_ctx Q = {func, max, 0, out, E_FIELD, 0, NULL};
   for (int i = 0; i < nroot; i++) {
     expr *r = expr_canon(c, roots[i]);
-    if (r && post_order(c, r, &seen, collect_visit, &Q)) break;
+    if (r && post_order(c, r, &seen, collect_visit, NULL, &Q)) break;
   }
   memo_free(&seen);
   int n = Q.n;
@@ -1242,7 +1242,7 @@ int expr_uses(expr_ctx *c, expr *e, expr_kind kind, int *maxcomp) {
   memo_map seen = {0, 0, NULL};
   query_ctx Q = {-1, 0, 0, NULL, kind, 0, maxcomp};
   e = expr_canon(c, e);
-  if (e) post_order(c, e, &seen, uses_visit, &Q);
+  if (e) post_order(c, e, &seen, uses_visit, NULL, &Q);
   memo_free(&seen);
   return Q.found;
 }
@@ -1300,7 +1300,7 @@ int expr_degree(expr_ctx *c, expr *e, int cd) {
   memo_map seen = {0, 0, NULL};
   degree_ctx D = {c, cd, {0, 0, NULL}};
   int d = 0;
-  if (!post_order(c, e, &seen, degree_visit, &D)) d = deg_of(&D, e);
+  if (!post_order(c, e, &seen, degree_visit, NULL, &D)) d = deg_of(&D, e);
   memo_free(&seen);
   memo_free(&D.deg);
   return d < 0 ? 0 : d;

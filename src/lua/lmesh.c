@@ -536,6 +536,10 @@ static int lmesh_displace(lua_State *L) {
   if (lua_isnoneornil(L, 2)) return typeerror(L, fn, 2, "a function (x, y[, z]) -> displacement or a table of discrete functions");
   double *disp = lua_newuserdatauv(L, sizeof(double) * ((size_t)m->nvert * m->dim + 1), 0);
   displacement_field(L, 2, u, NULL, disp, fn);
+  for (size_t i = 0; i < (size_t)m->nvert * m->dim; i++)
+    if (!isfinite(m->x[i] + disp[i]))
+      return luaL_error(L, "%s: the displacement of vertex %d is not finite (%c = %f, or the moved coordinate overflows); the "
+                           "mesh is unchanged", fn, (int)(i / m->dim) + 1, "xyz"[i % m->dim], disp[i]);
   for (size_t i = 0; i < (size_t)m->nvert * m->dim; i++) m->x[i] += disp[i];
   lg_mesh_changed(u->lm);
   int ninv;

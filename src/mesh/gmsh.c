@@ -351,6 +351,19 @@ static void read_coords(lex *l, int64_t tag, double *x) {
   }
 }
 
+/* the header of an MSH 4 $Nodes or $Elements section: blocks, total, min and max tag */
+static void block_header(lex *l, const char *what, int ntok, long *nb, long *total) {
+  char a[64], b[64], c[64], d[64];
+  snprintf(a, sizeof a, "number of %s blocks", what);
+  snprintf(b, sizeof b, "number of %ss", what);
+  snprintf(c, sizeof c, "min %s tag", what);
+  snprintf(d, sizeof d, "max %s tag", what);
+  *nb = tok_count(l, a, 4);
+  *total = tok_count(l, b, ntok);
+  tok_int(l, c, 0, INT64_MAX);
+  tok_int(l, d, 0, INT64_MAX);
+}
+
 static void read_nodes(lex *l, gfile *g) {
   g->have_nodes = 1;
   if (g->version == 2) {
@@ -365,11 +378,8 @@ static void read_nodes(lex *l, gfile *g) {
       g->nn++;
     }
   } else {
-    long nb = tok_count(l, "number of node blocks", 4);
-    long total = tok_count(l, "number of nodes", 4);
-    tok_int(l, "min node tag", 0, INT64_MAX);
-    tok_int(l, "max node tag", 0, INT64_MAX);
-    long k = 0;
+    long nb, total, k = 0;
+    block_header(l, "node", 4, &nb, &total);
     for (long b = 0; b < nb && !l->failed; b++) {
       int edim = (int)tok_int(l, "entity dimension", 0, 3);
       tok_int(l, "entity tag", INT_MIN, INT_MAX);
@@ -426,11 +436,8 @@ static void read_elements(lex *l, gfile *g) {
       g->e[g->ne++] = e;
     }
   } else {
-    long nb = tok_count(l, "number of element blocks", 4);
-    long total = tok_count(l, "number of elements", 2);
-    tok_int(l, "min element tag", 0, INT64_MAX);
-    tok_int(l, "max element tag", 0, INT64_MAX);
-    long k = 0;
+    long nb, total, k = 0;
+    block_header(l, "element", 2, &nb, &total);
     for (long b = 0; b < nb && !l->failed; b++) {
       gelem e;
       memset(&e, 0, sizeof e);

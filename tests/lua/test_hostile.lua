@@ -99,6 +99,18 @@ fails(function() coef:assign(lg.exp(1000 * (1 + lg.x))) end, "f:assign", "is not
 fails(function() return lg.integrate(mesh, 1 / (lg.x - lg.x)) end, "division by zero")
 fails(function() return lg.integrate(mesh, lg.sqrt(lg.x - 2)) end, "lg.integrate: the integral is not finite")
 
+-- the untangler and mesh motion refuse non-finite coordinates and displacements
+local mm = lg.mesh.rectangle{nx = 3}
+fails(function() mm:displace(function(x, y) return x < 0.5 and 0/0 or 0, 0 end) end,
+      "mesh:displace: the displacement of vertex 1 is not finite", "unchanged")
+T.check(mm:check() == 0, "the mesh is unchanged")
+fails(function() mm:move{displacement = function(x, y) return math.huge, 0 end, quiet = true} end,
+      "mesh:move: the displacement of vertex 1 is not finite")
+mm:set_coordinates(5, 0.5, 0.5)
+fails(function() mm:set_coordinates(5, 0/0, 0.5) end, "mesh:set_coordinates: argument 3 is not finite")
+fails(function() mm:untangle{beta = math.huge, quiet = true} end, "beta must be a finite number")
+fails(function() mm:untangle{max_iterations = 2^31, quiet = true} end, "option 'max_iterations' is too large")
+
 -- essential conditions that do nothing or contradict each other, repeated unknowns
 fails(function() return poisson(mesh, lg.essential_bc(mesh:boundary(), 0*v*u)):solve() end,
       "boundary condition 1 is zero: it constrains nothing")

@@ -43,6 +43,7 @@ lg_mesh *lg_mesh_wrap(mesh *m) {
 void lg_mesh_changed(lg_mesh *lm) {
   /* dof maps depend on topology only; geometry changes need a new validity check */
   lm->validated = 0;
+  lm->geometry++;
 }
 
 void lg_mesh_free(lg_mesh *lm) {

@@ -25,6 +25,7 @@ typedef struct {
   mesh *m;
   dofmap *dm[4];        /* by degree, built on demand */
   int validated;        /* the validity check passed for the current geometry */
+  unsigned long geometry; /* counts geometry changes (lg_mesh_changed) */
 } lg_mesh;
 
 typedef struct {
@@ -106,6 +107,35 @@ typedef struct {
 int lg_problem_solve(lg_env *env, lg_problem *p, lg_function **initial, lg_function **out,
                      lg_solve_info *info);
 int lg_problem_size(const lg_problem *p);
+/* out[i] may be NULL: the solution is kept in the problem (lg_problem_solution) either way */
+
+/* ---- what derived operators (adjoints, sensitivities) need of a problem */
+typedef struct {
+  int test, unknown;   /* expr function ids */
+  const dofmap *dm;
+  int offset;          /* of the field in the problem's vector */
+} lg_field_info;
+int lg_problem_fields(const lg_problem *p, lg_field_info *f); /* returns the number of fields */
+const form *lg_problem_equation(const lg_problem *p);
+const form *lg_problem_bcs(const lg_problem *p);   /* the essential conditions (maybe empty) */
+/* solve again (after a control changed), a nonlinear problem from its last solution */
+int lg_problem_resolve(lg_env *env, lg_problem *p, lg_solve_info *info);
+lg_mesh *lg_problem_mesh(const lg_problem *p);
+int lg_problem_is_nonlinear(const lg_problem *p);
+/* the last solution (N values), NULL before the first solve */
+const double *lg_problem_solution(const lg_problem *p);
+/* the rows of the essential conditions at the last solve (in the problem's numbering) */
+int lg_problem_essential_rows(const lg_problem *p, int *rows, int max); /* returns how many; writes up to max */
+/* bindings of the unknowns to the last solution; returns how many */
+int lg_problem_bind_state(const lg_problem *p, coef_binding *b);
+/* the adjoint: (dR/du)^T lam = rhs at the last solution (N values each), R the discrete
+ * residual whose essential rows are u_i - g_i */
+int lg_problem_adjoint(lg_env *env, lg_problem *p, const double *rhs, double *lam);
+/* x = A^-1 rhs for the problem's matrix at u = 0 with homogeneous essential rows (Riesz
+ * maps); the factorization is kept */
+int lg_problem_solve_vector(lg_env *env, lg_problem *p, const double *rhs, double *x);
+/* that matrix (a PETSc Mat, assembled), NULL with a message on failure */
+void *lg_problem_matrix(lg_env *env, lg_problem *p);
 
 /* assembled operators for tests and benchmarks: the matrix (values into a dense n*n array
  * when n is small) */
@@ -113,6 +143,68 @@ int lg_problem_dense_matrix(lg_env *env, lg_problem *p, double *dense, int n);
 /* reassemble the matrix only (benchmarks); returns milliseconds */
 int lg_problem_assemble_matrix(lg_env *env, lg_problem *p, double *ms);
 long lg_problem_nnz(const lg_problem *p);
+
+/* ---- functionals, adjoints, reduced functionals (functional.c) */
+
+/* the compiled kernels of a form, for a number (func < 0) or the vector of its gradient
+ * with respect to function func in the space dm (func need not enter linearly) */
+typedef struct lg_form_kernels lg_form_kernels;
+lg_form_kernels *lg_form_kernels_new(lg_env *env, lg_mesh *lm, const form *F, int func, const dofmap *dm);
+void lg_form_kernels_free(lg_form_kernels *K);
+int lg_form_kernels_empty(const lg_form_kernels *K);
+/* evaluate with the given extra bindings (unknowns bound to values): out[0], or out[dm->ndof] */
+int lg_form_kernels_eval(lg_env *env, lg_mesh *lm, lg_form_kernels *K, int nextra, const coef_binding *extra, double *out);
+
+#define LG_MAXCONTROL 8
+enum { LG_CONTROL_FIELD, LG_CONTROL_PARAM };
+enum { LG_RIESZ_NONE, LG_RIESZ_L2, LG_RIESZ_H1 };
+typedef struct {
+  int kind;
+  lg_function *f;   /* a field control: a discrete function the problem's forms use */
+  int param;        /* a parameter control: its index */
+} lg_control;
+
+/* j(m) = J(u(m), m) for a state problem and a functional (a form without test functions);
+ * the controls must appear in the problem or the functional, not (yet) in its essential
+ * conditions */
+typedef struct lg_reduced lg_reduced;
+lg_reduced *lg_reduced_new(lg_env *env, lg_problem *p, const form *J, int nc, const lg_control *c);
+void lg_reduced_free(lg_reduced *rf);
+int lg_reduced_ncontrols(const lg_reduced *rf);
+const lg_control *lg_reduced_control(const lg_reduced *rf, int i);
+int lg_reduced_control_size(const lg_reduced *rf, int i); /* dofs of a field, 1 for a parameter */
+lg_problem *lg_reduced_problem(const lg_reduced *rf);
+/* a control's values changed: the next value or gradient solves the state again */
+void lg_reduced_changed(lg_reduced *rf);
+int lg_reduced_value(lg_env *env, lg_reduced *rf, double *J);
+/* the gradient dj/dm_i as dual vectors (g[i] has lg_reduced_control_size values): one
+ * adjoint solve with the state's factorization */
+int lg_reduced_gradient(lg_env *env, lg_reduced *rf, double **g);
+/* the Riesz representative of a dual vector of control i: none, L2 (mass) or H1 */
+int lg_reduced_riesz(lg_env *env, lg_reduced *rf, int i, int kind, const double *dual, double *out);
+/* the Gram matrix problem of field control i (L2: mass; H1: mass + stiffness) */
+lg_problem *lg_reduced_gram(lg_env *env, lg_reduced *rf, int i, int h1);
+
+/* ---- minimization through TAO (optimize.c) */
+typedef struct {
+  const char *method;          /* "lmvm" (unbounded) or "blmvm" (bounds) */
+  int maxit;                   /* 0: TAO's default */
+  double gatol, grtol, gttol;  /* TAO's: |g| < gatol, |g|/|J| < grtol, |g|/|g0| < gttol; < 0: TAO's defaults */
+  int monitor;                 /* a line per iteration on stdout */
+  int riesz;                   /* the inner product of field controls: LG_RIESZ_L2 (default) or NONE */
+  const double *lower[LG_MAXCONTROL], *upper[LG_MAXCONTROL]; /* per control, NULL: none */
+  const char *series;          /* a .pvd of the field controls per iteration, or NULL */
+} lg_minimize_opts;
+typedef struct {
+  int iterations, evaluations;
+  double J, gnorm;
+  char reason[64];
+  int converged;
+} lg_minimize_info;
+/* minimize the reduced functional over its controls, from their current values; they hold
+ * the minimizer on return. Fails (with a message) on a state solve that fails, a non-finite
+ * functional, or TAO not converging. */
+int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minimize_info *info);
 
 /* PETSc start-up and shutdown with lugal's defaults (see the runner) */
 int lg_petsc_init(int *argc, char ***argv);

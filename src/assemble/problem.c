@@ -6,6 +6,7 @@
 
 #include <ctype.h>
 #include <math.h>
+#include <stdint.h>
 #include <petscsnes.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -54,6 +55,14 @@ struct lg_problem {
   KSP ksp;
   SNES snes;
   double *state;      /* current iterate (N) */
+  double *solution;   /* the last solution (N), for adjoints */
+  int have_solution;
+  form *eqn, *bcf;    /* copies of the forms, for derived operators */
+  int test[KER_MAXFIELD], unk[KER_MAXFIELD];
+  KSP adj_ksp;        /* nonlinear problems: the transposed Jacobian at the solution */
+  int matrix_ready;   /* lg_problem_solve_vector: the matrix is assembled and factored */
+  int adj_stale;      /* the adjoint Jacobian is not the one at the last solution */
+  uint64_t matrix_fp; /* linear problems: what the assembled, factored matrix was made from */
   double *elem;       /* element tensor scratch */
   size_t elem_cap;
   int failed;         /* a callback failed: env->err holds why */
@@ -510,7 +519,12 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
   if (setup_bcs(env, p, s->bc, s->test, s->unknown, s->nfield)) goto fail;
   if (setup_matrix(env, p)) goto fail;
   p->state = calloc((size_t)p->N + 1, sizeof(double));
-  if (!p->state) { lg_seterr(env, "out of memory"); goto fail; }
+  p->solution = calloc((size_t)p->N + 1, sizeof(double));
+  p->eqn = form_copy(s->eqn);
+  p->bcf = s->bc ? form_copy(s->bc) : form_new();
+  if (!p->state || !p->solution || !p->eqn || !p->bcf) { lg_seterr(env, "out of memory"); goto fail; }
+  memcpy(p->test, s->test, sizeof(int) * (size_t)s->nfield);
+  memcpy(p->unk, s->unknown, sizeof(int) * (size_t)s->nfield);
   if (env->verbose)
     fprintf(stderr, "[lugal] problem: %d dofs, %ld matrix entries before summation, %d kernels compiled in %.2f ms, setup %.2f ms\n",
             p->N, (long)p->ncoo, env->nkernels, env->kernel_ms, now_ms() - t0);
@@ -538,6 +552,10 @@ void lg_problem_free(lg_problem *p) {
   free(p->bc_vals);
   free(p->coo_vals);
   free(p->state);
+  free(p->solution);
+  form_free(p->eqn);
+  form_free(p->bcf);
+  if (p->adj_ksp) KSPDestroy(&p->adj_ksp);
   free(p->elem);
   if (p->A) MatDestroy(&p->A);
   if (p->b) VecDestroy(&p->b);
@@ -548,6 +566,7 @@ void lg_problem_free(lg_problem *p) {
 }
 
 int lg_problem_size(const lg_problem *p) { return p->N; }
+
 long lg_problem_nnz(const lg_problem *p) {
   MatInfo info;
   if (!p->A || MatGetInfo(p->A, MAT_LOCAL, &info)) return -1;
@@ -694,10 +713,52 @@ static int default_lu(lg_env *env, lg_problem *p, PC pc) {
   return 0;
 }
 
+/* what a linear problem's matrix depends on: the values of the discrete functions and the
+ * parameters its kernels read, and the mesh's geometry. Equal fingerprints: the matrix, its
+ * essential rows and its factorization are still valid (a control that enters only the
+ * right-hand side costs no reassembly and no refactorization). 0 when it cannot tell. */
+static uint64_t matrix_fingerprint(lg_env *env, lg_problem *p) {
+  uint64_t h = 1469598103934665603ull;
+#define MIX(ptr, bytes)                                                          \
+  do {                                                                           \
+    const unsigned char *b_ = (const unsigned char *)(ptr);                      \
+    for (size_t i_ = 0; i_ < (bytes); i_++) h = (h ^ b_[i_]) * 1099511628211ull; \
+  } while (0)
+  MIX(&p->lm->geometry, sizeof p->lm->geometry);
+  const double *pv = expr_param_values(env->c);
+  MIX(pv, sizeof(double) * (size_t)expr_param_count(env->c));
+  coef_binding extra[KER_MAXFIELD], bind[KER_MAXCOEF];
+  int ne = bind_unknowns(p, p->state, extra);
+  for (int i = 0; i < p->nterm; i++) {
+    prob_term *t = &p->t[i];
+    if (!t->have_mat) continue;
+    char keep[LG_ERRLEN];
+    memcpy(keep, env->err, sizeof keep);
+    int rc = lg_bind_discrete(env, p->lm, &t->kmat, ne, extra, bind);
+    memcpy(env->err, keep, sizeof keep);
+    if (rc) return 0;
+    for (int k = 0; k < t->kmat.ncoef; k++) {
+      int unknown = 0;
+      for (int a = 0; a < ne; a++) unknown |= bind[k].func == extra[a].func;
+      if (unknown) continue; /* zero in a linear problem */
+      MIX(&bind[k].vals, sizeof bind[k].vals);
+      MIX(bind[k].vals, sizeof(double) * (size_t)bind[k].dm->ndof);
+    }
+  }
+#undef MIX
+  return h | 1;
+}
+
 static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_info *info) {
   double t0 = now_ms();
   memset(p->state, 0, sizeof(double) * (size_t)p->N);
-  if (assemble_matrix(env, p, p->state, p->A)) return 1;
+  uint64_t fp = p->bc_symmetric ? 0 : matrix_fingerprint(env, p);
+  int reuse = fp && fp == p->matrix_fp && p->ksp;
+  p->matrix_fp = 0;
+  if (!reuse) {
+    p->matrix_ready = 0;
+    if (assemble_matrix(env, p, p->state, p->A)) return 1;
+  }
   PetscScalar *b;
   PCHK(VecGetArray(p->b, &b), "VecGetArray");
   int rc = assemble_residual(env, p, p->state, b);
@@ -709,7 +770,11 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
   PCHK(VecSetValues(p->x, p->nbc, p->bc_rows, p->bc_vals, INSERT_VALUES), "VecSetValues");
   PCHK(VecAssemblyBegin(p->x), "VecAssembly");
   PCHK(VecAssemblyEnd(p->x), "VecAssembly");
-  if (p->bc_symmetric) PCHK(MatZeroRowsColumns(p->A, p->nbc, p->bc_rows, 1.0, p->x, p->b), "MatZeroRowsColumns");
+  if (reuse) { /* the rows are identity rows already: only the right-hand side's */
+    PCHK(VecGetArray(p->b, &b), "VecGetArray");
+    for (int i = 0; i < p->nbc; i++) b[p->bc_rows[i]] = p->bc_vals[i];
+    PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
+  } else if (p->bc_symmetric) PCHK(MatZeroRowsColumns(p->A, p->nbc, p->bc_rows, 1.0, p->x, p->b), "MatZeroRowsColumns");
   else PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, p->x, p->b), "MatZeroRows");
   info->assemble_ms = now_ms() - t0;
   t0 = now_ms();
@@ -774,7 +839,10 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
       lg_seterr(env, "the linear solve produced non-finite values (the system is singular or the data is not finite)");
       return 1;
     }
-  rc = make_outputs(env, p, x, out);
+  memcpy(p->solution, x, sizeof(double) * (size_t)p->N);
+  p->have_solution = 1;
+  p->matrix_fp = fp;
+  rc = out ? make_outputs(env, p, x, out) : 0;
   VecRestoreArrayRead(p->x, &x);
   return rc;
 }
@@ -817,12 +885,12 @@ static PetscErrorCode snes_jacobian(SNES snes, Vec X, Mat J, Mat P, void *ctx) {
 }
 
 static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg_function **out,
-                           lg_solve_info *info) {
+                           lg_solve_info *info, int warm) {
   double t0 = now_ms();
   if (compute_bcs(env, p)) return 1;
   PetscScalar *x;
   PCHK(VecGetArray(p->x, &x), "VecGetArray");
-  for (int i = 0; i < p->N; i++) x[i] = 0;
+  for (int i = 0; i < p->N; i++) x[i] = warm && p->have_solution ? p->solution[i] : 0;
   for (int a = 0; a < p->cols.n; a++) {
     lg_function *g = initial ? initial[a] : NULL;
     if (!g) continue;
@@ -891,7 +959,10 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
   }
   const PetscScalar *xr;
   PCHK(VecGetArrayRead(p->x, &xr), "VecGetArrayRead");
-  int rc = make_outputs(env, p, xr, out);
+  memcpy(p->solution, xr, sizeof(double) * (size_t)p->N);
+  p->have_solution = 1;
+  p->adj_stale = 1;
+  int rc = out ? make_outputs(env, p, xr, out) : 0;
   VecRestoreArrayRead(p->x, &xr);
   return rc;
 }
@@ -900,9 +971,144 @@ int lg_problem_solve(lg_env *env, lg_problem *p, lg_function **initial, lg_funct
                      lg_solve_info *info) {
   memset(info, 0, sizeof *info);
   if (lg_mesh_check(env, p->lm)) return 1;
-  return p->nonlinear ? solve_nonlinear(env, p, initial, out, info) : solve_linear(env, p, out, info);
+  return p->nonlinear ? solve_nonlinear(env, p, initial, out, info, 0) : solve_linear(env, p, out, info);
 }
 
+int lg_problem_resolve(lg_env *env, lg_problem *p, lg_solve_info *info) {
+  memset(info, 0, sizeof *info);
+  if (lg_mesh_check(env, p->lm)) return 1;
+  return p->nonlinear ? solve_nonlinear(env, p, NULL, NULL, info, 1) : solve_linear(env, p, NULL, info);
+}
+
+/* ---------------------------------------------------------------- derived operators */
+
+int lg_problem_fields(const lg_problem *p, lg_field_info *f) {
+  for (int a = 0; a < p->cols.n; a++) {
+    f[a].test = p->test[a];
+    f[a].unknown = p->unk[a];
+    f[a].dm = p->cdm[a];
+    f[a].offset = p->cglob[a];
+  }
+  return p->cols.n;
+}
+
+const form *lg_problem_equation(const lg_problem *p) { return p->eqn; }
+const form *lg_problem_bcs(const lg_problem *p) { return p->bcf; }
+lg_mesh *lg_problem_mesh(const lg_problem *p) { return p->lm; }
+int lg_problem_is_nonlinear(const lg_problem *p) { return p->nonlinear; }
+
+const double *lg_problem_solution(const lg_problem *p) { return p->have_solution ? p->solution : NULL; }
+
+int lg_problem_essential_rows(const lg_problem *p, int *rows, int max) {
+  for (int i = 0; i < p->nbc && i < max; i++) rows[i] = (int)p->bc_rows[i];
+  return p->nbc;
+}
+
+int lg_problem_bind_state(const lg_problem *p, coef_binding *b) {
+  for (int a = 0; a < p->cols.n; a++) {
+    b[a].func = p->cols.func[a];
+    b[a].dm = p->cdm[a];
+    b[a].vals = p->solution + p->cglob[a];
+  }
+  return p->cols.n;
+}
+
+/* the transposed Jacobian solve of the adjoint: (dR/du)^T lam = rhs at the last solution,
+ * where R is the discrete residual with the essential rows u_i - g_i. A linear problem
+ * reuses its factorization (KSPSolveTranspose); a nonlinear one assembles its Jacobian at
+ * the solution and factors it once per solution. */
+int lg_problem_adjoint(lg_env *env, lg_problem *p, const double *rhs, double *lam) {
+  if (!p->have_solution) { lg_seterr(env, "the adjoint needs a solved state: solve the problem first"); return 1; }
+  KSP ksp = p->ksp;
+  if (p->nonlinear) {
+    if (!p->adj_ksp) {
+      PCHK(KSPCreate(PETSC_COMM_SELF, &p->adj_ksp), "KSPCreate");
+      if (p->prefix[0]) PCHK(KSPSetOptionsPrefix(p->adj_ksp, p->prefix), "KSPSetOptionsPrefix");
+      PC pc;
+      PCHK(KSPSetType(p->adj_ksp, KSPPREONLY), "KSPSetType");
+      PCHK(KSPGetPC(p->adj_ksp, &pc), "KSPGetPC");
+      if (default_lu(env, p, pc)) return 1;
+      PCHK(KSPSetFromOptions(p->adj_ksp), "KSPSetFromOptions");
+    }
+    if (p->adj_stale) {
+      memcpy(p->state, p->solution, sizeof(double) * (size_t)p->N);
+      if (assemble_matrix(env, p, p->state, p->A)) return 1;
+      PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, NULL, NULL), "MatZeroRows");
+      PCHK(KSPSetOperators(p->adj_ksp, p->A, p->A), "KSPSetOperators");
+      p->adj_stale = 0;
+    }
+    ksp = p->adj_ksp;
+  }
+  if (!ksp) { lg_seterr(env, "internal error: no factorization for the adjoint"); return 1; }
+  Vec r, l;
+  PCHK(VecDuplicate(p->b, &r), "VecDuplicate");
+  PCHK(VecDuplicate(p->b, &l), "VecDuplicate");
+  PetscScalar *a;
+  VecGetArray(r, &a);
+  memcpy(a, rhs, sizeof(double) * (size_t)p->N);
+  VecRestoreArray(r, &a);
+  PetscErrorCode ierr = KSPSolveTranspose(ksp, r, l);
+  KSPConvergedReason reason = KSP_CONVERGED_ITS;
+  if (!ierr) KSPGetConvergedReason(ksp, &reason);
+  if (!ierr && reason >= 0) {
+    const PetscScalar *lv;
+    VecGetArrayRead(l, &lv);
+    memcpy(lam, lv, sizeof(double) * (size_t)p->N);
+    VecRestoreArrayRead(l, &lv);
+  }
+  VecDestroy(&r);
+  VecDestroy(&l);
+  if (ierr) return petsc_fail(env, ierr, "the adjoint solve");
+  if (reason < 0) { lg_seterr(env, "the adjoint solve failed: %s", ksp_reason_name(reason)); return 1; }
+  for (int i = 0; i < p->N; i++)
+    if (!isfinite(lam[i])) { lg_seterr(env, "the adjoint solve produced non-finite values"); return 1; }
+  return 0;
+}
+
+static int prepare_matrix(lg_env *env, lg_problem *p) {
+  if (!p->matrix_ready) {
+    if (lg_mesh_check(env, p->lm)) return 1;
+    memset(p->state, 0, sizeof(double) * (size_t)p->N);
+    if (assemble_matrix(env, p, p->state, p->A)) return 1;
+    if (compute_bcs(env, p)) return 1;
+    PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, NULL, NULL), "MatZeroRows");
+    if (!p->ksp) {
+      PCHK(KSPCreate(PETSC_COMM_SELF, &p->ksp), "KSPCreate");
+      if (p->prefix[0]) PCHK(KSPSetOptionsPrefix(p->ksp, p->prefix), "KSPSetOptionsPrefix");
+      PC pc;
+      PCHK(KSPSetType(p->ksp, KSPPREONLY), "KSPSetType");
+      PCHK(KSPGetPC(p->ksp, &pc), "KSPGetPC");
+      if (default_lu(env, p, pc)) return 1;
+      PCHK(KSPSetFromOptions(p->ksp), "KSPSetFromOptions");
+    }
+    PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
+    p->matrix_ready = 1;
+  }
+  return 0;
+}
+
+void *lg_problem_matrix(lg_env *env, lg_problem *p) { return prepare_matrix(env, p) ? NULL : (void *)p->A; }
+
+/* solve the problem's matrix (assembled at u = 0, essential rows homogeneous) with a given
+ * right-hand side: the Riesz maps of gradients (a mass or H1 matrix) */
+int lg_problem_solve_vector(lg_env *env, lg_problem *p, const double *rhs, double *x) {
+  if (prepare_matrix(env, p)) return 1;
+  PetscScalar *b;
+  PCHK(VecGetArray(p->b, &b), "VecGetArray");
+  memcpy(b, rhs, sizeof(double) * (size_t)p->N);
+  for (int i = 0; i < p->nbc; i++) b[p->bc_rows[i]] = 0;
+  PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
+  PetscErrorCode ierr = KSPSolve(p->ksp, p->b, p->x);
+  if (ierr) return petsc_fail(env, ierr, "a solve with the problem's matrix");
+  KSPConvergedReason reason;
+  KSPGetConvergedReason(p->ksp, &reason);
+  if (reason < 0) { lg_seterr(env, "a solve with the problem's matrix failed: %s", ksp_reason_name(reason)); return 1; }
+  const PetscScalar *xv;
+  PCHK(VecGetArrayRead(p->x, &xv), "VecGetArrayRead");
+  memcpy(x, xv, sizeof(double) * (size_t)p->N);
+  VecRestoreArrayRead(p->x, &xv);
+  return 0;
+}
 /* ---------------------------------------------------------------- PETSc start-up */
 
 int lg_petsc_init(int *argc, char ***argv) {

@@ -843,6 +843,18 @@ expr *expr_dot(expr_ctx *c, expr *a, expr *b) {
   int ra, rb;
   expr_shape(a, &ra);
   expr_shape(b, &rb);
+  /* the result has entries(a) entries(b) / n^2 entries, each a sum of n products: bound the
+   * work before doing it (a rank-8 list dotted with another would be billions of nodes) */
+  const expr *last = a;
+  while (last->kind == E_LIST && last->n && last->ch[0]->kind == E_LIST) last = last->ch[0];
+  double n = last->n, work = list_entries(a) * list_entries(b) / n;
+  if (ra + rb - 2 > EXPR_MAXRANK || work > 4.0 * EXPR_MAXENTRIES) {
+    char sa[64], sb[64];
+    expr_describe_shape(a, sa, sizeof sa);
+    expr_describe_shape(b, sb, sizeof sb);
+    expr_set_error(c, "the dot product of %s and %s is too large (%.0f products; at most %d)", sa, sb, work, 4 * EXPR_MAXENTRIES);
+    return NULL;
+  }
   if (ra == 1) {
     if (a->n != b->n) return shape_error(c, "take the dot product of", a, b);
     expr **t = malloc(sizeof(expr *) * (size_t)a->n);

@@ -229,5 +229,12 @@ typedef struct {
 int form_linearize(expr_ctx *c, expr *integrand, int ntest, const int *test_funcs,
                    int ntrial, const int *trial_funcs, int want_jacobian, coef_table *out);
 void coef_table_free(coef_table *t);
+/* the gradient table of an integrand with respect to a function that need not enter it
+ * linearly: res_leaf = the leaves D^a w of function func in f, res = df/d(D^a w) (the
+ * coefficients of a linear form in w's space: derivatives of functionals, adjoint
+ * right-hand sides, design derivatives) */
+int form_gradient_table(expr_ctx *c, expr *f, int func, coef_table *out);
+/* f with every leaf D^a from_c replaced by D^a to_c (a test function by an adjoint) */
+expr *form_replace_function(expr_ctx *c, expr *f, int from, int to);
 
 #endif

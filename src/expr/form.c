@@ -137,3 +137,38 @@ int form_linearize(expr_ctx *c, expr *f, int ntest, const int *test_funcs, int n
   }
   return 0;
 }
+
+int form_gradient_table(expr_ctx *c, expr *f, int func, coef_table *out) {
+  memset(out, 0, sizeof *out);
+  f = expr_canon(c, f);
+  if (!f) return 1;
+  expr *leaf[MAXLEAF];
+  int n = expr_collect_fields(c, 1, &f, func, MAXLEAF, leaf);
+  if (n > MAXLEAF) { expr_set_error(c, "too many leaves of one function in an integrand"); return 1; }
+  out->res_leaf = malloc(sizeof(expr *) * (size_t)(n + 1));
+  out->res = malloc(sizeof(expr *) * (size_t)(n + 1));
+  if (!out->res_leaf || !out->res) { coef_table_free(out); expr_set_error(c, "out of memory"); return 1; }
+  for (int i = 0; i < n; i++) {
+    expr *r = expr_diff(c, f, leaf[i]);
+    if (!r) { coef_table_free(out); return 1; }
+    if (r->kind == E_CONST && r->value == 0) continue;
+    out->res_leaf[out->nres] = leaf[i];
+    out->res[out->nres] = r;
+    out->nres++;
+  }
+  return 0;
+}
+
+expr *form_replace_function(expr_ctx *c, expr *f, int from, int to) {
+  f = expr_canon(c, f);
+  if (!f) return NULL;
+  expr *leaf[MAXLEAF];
+  int n = expr_collect_fields(c, 1, &f, from, MAXLEAF, leaf);
+  if (n > MAXLEAF) { expr_set_error(c, "too many leaves of one function in an integrand"); return NULL; }
+  expr *img[MAXLEAF];
+  for (int i = 0; i < n; i++) {
+    img[i] = expr_field(c, to, leaf[i]->i1, leaf[i]->alpha);
+    if (!img[i]) return NULL;
+  }
+  return n ? expr_subs(c, f, n, leaf, img) : f;
+}

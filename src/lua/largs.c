@@ -282,3 +282,28 @@ void new_mt(lua_State *L, const char *name, const luaL_Reg *mm, const luaL_Reg *
   }
   lua_pop(L, 1);
 }
+
+void push_functions_of(lua_State *L, int owner, lg_function **f, int n) {
+  owner = lua_absindex(L, owner);
+  int top = lua_gettop(L), mesh_idx = 0;
+  /* the mesh among the owner's dependencies anchors the new functions */
+  if (lua_getiuservalue(L, owner, 1) == LUA_TTABLE) {
+    lua_pushnil(L);
+    while (lua_next(L, -2)) {
+      lua_pop(L, 1);
+      ud_mesh *um = luaL_testudata(L, -1, MT_MESH);
+      if (um && n > 0 && um->lm == f[0]->mesh) { mesh_idx = lua_gettop(L); break; }
+    }
+  }
+  for (int a = 0; a < n; a++) {
+    if (mesh_idx) push_function(L, f[a], mesh_idx);
+    else {
+      ud_func *uf = new_ud(L, sizeof *uf, MT_FUNC, 0, NULL);
+      uf->f = f[a];
+    }
+  }
+  /* keep the n functions, drop the helpers below them */
+  int extra = lua_gettop(L) - top - n;
+  for (int a = 0; a < n; a++) lua_copy(L, top + extra + 1 + a, top + 1 + a);
+  lua_settop(L, top + n);
+}

@@ -22,6 +22,8 @@
 #define MT_SERIES "lugal.Series"
 #define MT_ENV "lugal.Env"
 #define MT_QARRAY "lugal.QualityArray"
+#define MT_FUNCTIONAL "lugal.Functional"
+#define MT_REDUCED "lugal.ReducedFunctional"
 
 typedef struct { lg_mesh *lm; } ud_mesh;
 typedef struct { region r; } ud_region;
@@ -63,6 +65,9 @@ void set_num(lua_State *L, const char *k, double v);
 void set_int(lua_State *L, const char *k, lua_Integer v);
 ud_func *check_func(lua_State *L, int idx, const char *fn);
 void push_function(lua_State *L, lg_function *f, int mesh_idx);
+/* push n new functions (the caller's to own) anchored to the mesh among the dependencies of
+ * the userdata at owner */
+void push_functions_of(lua_State *L, int owner, lg_function **f, int n);
 void new_mt(lua_State *L, const char *name, const luaL_Reg *mm, const luaL_Reg *methods);
 
 /* the bindings of each layer: metatables (register) and library functions */
@@ -74,5 +79,7 @@ extern const luaL_Reg lg_mesh_lib[];     /* lg.mesh.* */
 extern const luaL_Reg lg_output_lib[];   /* lg.series */
 void lg_lua_problem_register(lua_State *L);
 extern const luaL_Reg lg_problem_lib[];
+void lg_lua_opt_register(lua_State *L);
+extern const luaL_Reg lg_opt_lib[];     /* lg.control, lg.functional, lg.reduced_functional, lg.taylor_test */
 
 #endif

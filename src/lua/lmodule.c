@@ -1,6 +1,6 @@
 /* lmodule.c — the `lugal` Lua module's entry point: the environment (one per Lua state,
  * finalized after every other lugal object) and the registration of the bindings of each
- * layer (lexpr.c, lmesh.c, lproblem.c; shared helpers in largs.c). The bindings are thin by
+ * layer (lexpr.c, lmesh.c, lproblem.c, lopt.c; shared helpers in largs.c). The bindings are thin by
  * design (DESIGN.md): argument checking, conversion and error messages that name the
  * function, the argument and what was expected; no numerical logic lives here.
  *
@@ -63,10 +63,12 @@ int luaopen_lugal(lua_State *L) {
   lg_lua_expr_register(L);
   lg_lua_mesh_register(L);
   lg_lua_problem_register(L);
+  lg_lua_opt_register(L);
   lua_newtable(L);
   luaL_setfuncs(L, lg_expr_lib, 0);
   luaL_setfuncs(L, lg_problem_lib, 0);
   luaL_setfuncs(L, lg_output_lib, 0);
+  luaL_setfuncs(L, lg_opt_lib, 0);
   lua_newtable(L);
   luaL_setfuncs(L, lg_mesh_lib, 0);
   lua_setfield(L, -2, "mesh");

@@ -247,23 +247,8 @@ static int prob_solve(lua_State *L) {
   lg_function *out[KER_MAXFIELD];
   lg_solve_info info;
   if (lg_problem_solve(env, u->p, init, out, &info)) return lgerror(L, fn, env);
-  /* find the mesh userdata among the dependencies to anchor the outputs */
-  lua_getiuservalue(L, 1, 1);
-  int mesh_idx = 0;
-  lua_pushnil(L);
-  while (lua_next(L, -2)) {
-    lua_pop(L, 1);
-    ud_mesh *um = luaL_testudata(L, -1, MT_MESH);
-    if (um && um->lm == out[0]->mesh) { mesh_idx = lua_gettop(L); break; }
-  }
   int base = lua_gettop(L);
-  for (int a = 0; a < u->nfield; a++) {
-    if (mesh_idx) push_function(L, out[a], mesh_idx);
-    else {
-      ud_func *uf = new_ud(L, sizeof *uf, MT_FUNC, 0, NULL);
-      uf->f = out[a];
-    }
-  }
+  push_functions_of(L, 1, out, u->nfield);
   /* info table */
   lua_createtable(L, 0, 8);
   lua_pushinteger(L, info.iterations); lua_setfield(L, -2, "iterations");

@@ -1217,6 +1217,8 @@ typedef struct {
 
 static void best_offer(const ctx *C, const double *x, best_state *b, size_t nx, int stage) {
   if (!b->x) return;
+  for (size_t i = 0; i < nx; i++)
+    if (!isfinite(x[i])) return; /* a state with a non-finite coordinate is never the best */
   int ninv = 0;
   double jmin = INFINITY;
   for (int c = 0; c < C->m->ncell; c++) {
@@ -1732,7 +1734,7 @@ typedef struct {
   double *orig;   /* NULL: not active */
 } unit_frame;
 
-static int frame_enter(mesh *m, unit_frame *f, char *err) {
+static int frame_enter(mesh *m, unit_frame *f, double extra, char *err) {
   memset(f, 0, sizeof *f);
   int d = m->dim;
   double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
@@ -1741,7 +1743,7 @@ static int frame_enter(mesh *m, unit_frame *f, char *err) {
       lo[j] = fmin(lo[j], m->x[(size_t)v * d + j]);
       hi[j] = fmax(hi[j], m->x[(size_t)v * d + j]);
     }
-  double size = 0;
+  double size = extra; /* a displacement to apply counts as a size too */
   for (int j = 0; j < d; j++) size = fmax(size, 0.5 * hi[j] - 0.5 * lo[j]);
   if (size == 0 || (size > 1e-100 && size < 1e100)) return 0;
   f->orig = malloc(sizeof(double) * ((size_t)m->nvert * d + 1));
@@ -1780,11 +1782,27 @@ static int check_opts(const untangle_opts *o, char *err) {
   return 0;
 }
 
+/* a result with a non-finite coordinate (a mesh spanning 1e300 and 1: the way back from the
+ * unit frame overflows) is never returned: the input is, unchanged */
+static int finite_or_restore(mesh *m, const double *keep) {
+  size_t nx = (size_t)m->nvert * m->dim;
+  for (size_t i = 0; i < nx; i++)
+    if (!isfinite(m->x[i])) {
+      memcpy(m->x, keep, sizeof(double) * nx);
+      return 0;
+    }
+  return 1;
+}
+
 int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err) {
   memset(r, 0, sizeof *r);
   if (check_opts(o, err) || check_finite(m, "untangling", err)) return 1;
+  size_t nx = (size_t)m->nvert * m->dim;
+  double *keep = malloc(sizeof(double) * (nx + 1));
+  if (!keep) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  memcpy(keep, m->x, sizeof(double) * nx);
   unit_frame f;
-  if (frame_enter(m, &f, err)) return 1;
+  if (frame_enter(m, &f, 0, err)) { free(keep); return 1; }
   untangle_opts oo = *o;
   if (f.orig && oo.beta > 0) oo.beta = ldexp(oo.beta, -m->dim * f.e); /* beta is a length^d */
   int rc = untangle_run(m, &oo, r, err);
@@ -1794,6 +1812,13 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
     r->max_displacement = ldexp(r->max_displacement, f.e);
   }
   frame_leave(m, &f);
+  if (!rc && !finite_or_restore(m, keep)) {
+    r->invalid_after = r->invalid_before;
+    r->moved = 0;
+    r->mean_displacement = r->max_displacement = 0;
+    r->kept_stage = 0;
+  }
+  free(keep);
   return rc;
 }
 
@@ -1807,17 +1832,32 @@ int mesh_move(mesh *m, const double *disp, const unsigned char *fixed, move_repo
                  disp[(size_t)v * m->dim + j]);
         return 1;
       }
+  double dmax = 0;
+  for (int v = 0; v < m->nvert; v++)
+    for (int j = 0; fixed[v] && j < m->dim; j++) dmax = fmax(dmax, fabs(disp[(size_t)v * m->dim + j]));
+  size_t nx = (size_t)m->nvert * m->dim;
+  double *keep = malloc(sizeof(double) * (nx + 1)); /* the true coordinates, to restore on failure */
+  if (!keep) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  memcpy(keep, m->x, sizeof(double) * nx);
   unit_frame f;
-  if (frame_enter(m, &f, err)) return 1;
+  if (frame_enter(m, &f, dmax, err)) { free(keep); return 1; }
   double *ds = NULL;
   if (f.orig) {
-    ds = malloc(sizeof(double) * ((size_t)m->nvert * m->dim + 1));
-    if (!ds) { frame_leave(m, &f); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
-    for (size_t i = 0; i < (size_t)m->nvert * m->dim; i++) ds[i] = ldexp(disp[i], -f.e);
+    ds = malloc(sizeof(double) * (nx + 1));
+    if (!ds) { frame_leave(m, &f); free(keep); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+    for (size_t i = 0; i < nx; i++) ds[i] = ldexp(disp[i], -f.e);
   }
   int rc = move_run(m, ds ? ds : disp, fixed, r, err);
   free(ds);
   frame_leave(m, &f);
+  for (size_t i = 0; !rc && i < nx; i++)
+    if (!isfinite(m->x[i])) {
+      snprintf(err, MESH_ERRLEN, "the motion makes vertex %zu's coordinates non-finite (the displacement is too large for "
+                                 "floating point); the mesh is unchanged", i / m->dim + 1);
+      rc = 1;
+    }
+  if (rc) memcpy(m->x, keep, sizeof(double) * nx);
+  free(keep);
   if (!rc) {
     /* what the motion left, counted on the true coordinates */
     int n;
@@ -1834,9 +1874,19 @@ int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
     return 1;
   }
   if (check_finite(m, "smoothing", err)) return 1;
+  size_t nx = (size_t)m->nvert * m->dim;
+  double *keep = malloc(sizeof(double) * (nx + 1));
+  if (!keep) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  memcpy(keep, m->x, sizeof(double) * nx);
   unit_frame f;
-  if (frame_enter(m, &f, err)) return 1;
+  if (frame_enter(m, &f, 0, err)) { free(keep); return 1; }
   int rc = smooth_run(m, o, r, err);
   frame_leave(m, &f);
+  if (!rc && !finite_or_restore(m, keep)) {
+    r->moved = 0;
+    r->min_after = r->min_before;
+    r->mean_after = r->mean_before;
+  }
+  free(keep);
   return rc;
 }

@@ -119,7 +119,7 @@ int fuzz_expr_run(const uint8_t *data, size_t size) {
       if (!a) continue;
       pops = 1;
       r = a;
-      for (int j = 0; j < 50 * (1 + (int)(arg % 4)) && r; j++) r = expr_apply(c, j % 3 ? FN_SIN : FN_EXP, r);
+      for (int j = 0; j < 20 * (1 + (int)(arg % 4)) && r; j++) r = expr_apply(c, j % 3 ? FN_SIN : FN_EXP, r);
       i++;
       break;
     }

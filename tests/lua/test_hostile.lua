@@ -111,6 +111,15 @@ fails(function() mm:set_coordinates(5, 0/0, 0.5) end, "mesh:set_coordinates: arg
 fails(function() mm:untangle{beta = math.huge, quiet = true} end, "beta must be a finite number")
 fails(function() mm:untangle{max_iterations = 2^31, quiet = true} end, "option 'max_iterations' is too large")
 
+-- a fold at 1e-200 scale is repaired like one at unit scale (the untangler works at unit size)
+local tiny = lg.mesh.rectangle{nx = 4, x1 = 1e-200, y1 = 1e-200}
+local tx, ty = tiny:coordinates(7)
+tiny:set_coordinates(7, tx + 0.35e-200, ty)
+T.check(tiny:check() > 0, "the fold inverts cells")
+local rep = tiny:untangle{quiet = true}
+T.check(rep.success and tiny:check() == 0, "untangled at 1e-200: %s", tostring(rep))
+T.check(rep.max_displacement > 1e-203 and rep.max_displacement < 1e-199, "displacements in the mesh's units (%g)", rep.max_displacement)
+
 -- essential conditions that do nothing or contradict each other, repeated unknowns
 fails(function() return poisson(mesh, lg.essential_bc(mesh:boundary(), 0*v*u)):solve() end,
       "boundary condition 1 is zero: it constrains nothing")

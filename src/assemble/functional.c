@@ -1,0 +1,428 @@
+/* functional.c — functionals of the state and the controls, and what is derived from them
+ * without a tape (DESIGN.md, "everything is a derivative"): compiled values and gradients of
+ * forms with respect to any function, the adjoint solve, reduced functionals with value,
+ * gradient and directional derivative, Riesz maps (L2, H1) of gradients, and the Taylor
+ * test.
+ *
+ * For a state problem R(u, m) = 0 (essential rows u_i - g_i) and a functional J(u, m), the
+ * reduced functional is j(m) = J(u(m), m). Its gradient comes from one adjoint solve,
+ *   (dR/du)^T lam = -dJ/du,      dj/dm = dJ/dm + lam^T dR/dm,
+ * where every vector is a generated kernel: dJ/du and dJ/dm are the gradient tables of J's
+ * integrands (form_gradient_table), and lam^T dR/dm is the gradient with respect to m of the
+ * equation with its test functions replaced by the adjoint (form_replace_function). */
+#include "assemble.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ---------------------------------------------------------------- compiled forms */
+
+typedef struct {
+  region reg;
+  int nitems, *cells, *facets;
+  lg_kernel k;
+  coef_table tab;
+} fk_term;
+
+struct lg_form_kernels {
+  int arity;          /* 0: a number; 1: a vector in the space of func */
+  int func;
+  const dofmap *dm;
+  int n;
+  fk_term *t;
+  double *elem;
+  size_t elem_cap;
+};
+
+void lg_form_kernels_free(lg_form_kernels *K) {
+  if (!K) return;
+  for (int i = 0; i < K->n; i++) {
+    coef_table_free(&K->t[i].tab);
+    free(K->t[i].cells);
+    free(K->t[i].facets);
+  }
+  free(K->t);
+  free(K->elem);
+  free(K);
+}
+
+lg_form_kernels *lg_form_kernels_new(lg_env *env, lg_mesh *lm, const form *F, int func, const dofmap *dm) {
+  lg_form_kernels *K = calloc(1, sizeof *K);
+  if (!K) { lg_seterr(env, "out of memory"); return NULL; }
+  K->arity = func >= 0 ? 1 : 0;
+  K->func = func;
+  K->dm = dm;
+  K->t = calloc((size_t)F->n + 1, sizeof(fk_term));
+  if (!K->t) { free(K); lg_seterr(env, "out of memory"); return NULL; }
+  char err[LG_ERRLEN];
+  for (int i = 0; i < F->n; i++) {
+    fk_term *t = &K->t[K->n];
+    memset(t, 0, sizeof *t);
+    t->reg = F->t[i].reg;
+    if (t->reg.mesh && t->reg.mesh != (void *)lm) {
+      lg_seterr(env, "term %d integrates over a region of a different mesh", i + 1);
+      lg_form_kernels_free(K);
+      return NULL;
+    }
+    expr *f = expr_canon(env->c, F->t[i].integrand);
+    int qd = lg_quad_degree(env, f, F->t[i].order, lm->m->dim);
+    kernel_spec s = {0, NULL, f};
+    field_layout rows = {0};
+    if (K->arity == 1) {
+      if (form_gradient_table(env->c, f, func, &t->tab)) {
+        lg_seterr(env, "%s", expr_error(env->c));
+        lg_form_kernels_free(K);
+        return NULL;
+      }
+      if (t->tab.nres == 0) { coef_table_free(&t->tab); continue; } /* the term does not depend on it */
+      s.arity = 1;
+      s.tab = &t->tab;
+      expr_func_info *fi = expr_func_get(env->c, func);
+      rows.n = 1;
+      rows.func[0] = func;
+      rows.degree[0] = fi ? fi->degree : dm->degree;
+      rows.nloc[0] = dm->nloc;
+      rows.off[0] = 0;
+      rows.size = dm->nloc;
+    } else if (f->kind == E_CONST && f->value == 0)
+      continue;
+    if (kernel_build(env->jit, env->c, lm->m->type, t->reg.kind == REGION_BOUNDARY, qd, &s, K->arity ? &rows : NULL, NULL,
+                     &t->k, err, sizeof err)) {
+      lg_seterr(env, "%s", err);
+      coef_table_free(&t->tab);
+      lg_form_kernels_free(K);
+      return NULL;
+    }
+    env->kernel_ms += t->k.compile_ms;
+    env->nkernels += !t->k.cached;
+    if (lg_region_items(env, lm, &t->reg, &t->nitems, &t->cells, &t->facets)) {
+      coef_table_free(&t->tab);
+      lg_form_kernels_free(K);
+      return NULL;
+    }
+    K->n++;
+  }
+  return K;
+}
+
+int lg_form_kernels_empty(const lg_form_kernels *K) { return K->n == 0; }
+
+int lg_form_kernels_eval(lg_env *env, lg_mesh *lm, lg_form_kernels *K, int nextra, const coef_binding *extra, double *out) {
+  coef_binding bind[KER_MAXCOEF];
+  if (K->arity == 0) *out = 0;
+  else memset(out, 0, sizeof(double) * (size_t)K->dm->ndof);
+  for (int i = 0; i < K->n; i++) {
+    fk_term *t = &K->t[i];
+    if (lg_bind_discrete(env, lm, &t->k, nextra, extra, bind)) return 1;
+    if (K->arity == 0) {
+      if (lg_assemble_items(env, lm, &t->k, t->nitems, t->cells, t->facets, t->k.ncoef, bind, out)) return 1;
+      continue;
+    }
+    int nl = K->dm->nloc;
+    size_t need = (size_t)t->nitems * (size_t)nl + 1;
+    if (need > K->elem_cap) {
+      double *e = realloc(K->elem, sizeof(double) * need);
+      if (!e) { lg_seterr(env, "out of memory"); return 1; }
+      K->elem = e;
+      K->elem_cap = need;
+    }
+    if (lg_assemble_items(env, lm, &t->k, t->nitems, t->cells, t->facets, t->k.ncoef, bind, K->elem)) return 1;
+    for (int it = 0; it < t->nitems; it++) {
+      const int *cd = K->dm->cell_dofs + (size_t)t->cells[it] * nl;
+      for (int k = 0; k < nl; k++) out[cd[k]] += K->elem[(size_t)it * nl + k];
+    }
+  }
+  size_t n = K->arity ? (size_t)K->dm->ndof : 1;
+  for (size_t i = 0; i < n; i++)
+    if (!isfinite(out[i])) {
+      lg_seterr(env, "a functional or its derivative is not finite (%g): its integrand is not finite somewhere "
+                     "(a division by zero, the log or square root of a negative value?)", out[i]);
+      return 1;
+    }
+  return 0;
+}
+
+/* ---------------------------------------------------------------- reduced functionals */
+
+struct lg_reduced {
+  lg_env *env;
+  lg_problem *p;
+  lg_mesh *lm;
+  form *J;
+  int nc;
+  lg_control c[LG_MAXCONTROL];
+  int nf;
+  lg_field_info fld[KER_MAXFIELD];
+  lg_function *lam[KER_MAXFIELD];   /* the adjoint, one discrete function per state field */
+  form *L;                          /* the equation with its tests replaced by the adjoint */
+  lg_form_kernels *Jval, *dJdu[KER_MAXFIELD], *dJdm[LG_MAXCONTROL], *dLdm[LG_MAXCONTROL];
+  lg_problem *riesz[LG_MAXCONTROL][2]; /* L2 and H1 Gram matrices of field controls */
+  double *rhs, *lamv;
+  int solved;                       /* the state is the one of the current controls */
+};
+
+static int form_uses(lg_env *env, const form *F, int func) {
+  for (int i = 0; i < F->n; i++) {
+    expr *e = expr_canon(env->c, F->t[i].integrand), *leaf;
+    if (expr_collect_fields(env->c, 1, &e, func, 1, &leaf) > 0) return 1;
+  }
+  return 0;
+}
+
+static int form_uses_param(lg_env *env, const form *F, int param) {
+  for (int i = 0; i < F->n; i++) {
+    expr *e = expr_canon(env->c, F->t[i].integrand);
+    expr *d = expr_diff(env->c, e, expr_param(env->c, param));
+    if (!d) return -1;
+    if (!(d->kind == E_CONST && d->value == 0)) return 1;
+  }
+  return 0;
+}
+
+/* a form with each integrand replaced by its derivative with respect to a parameter */
+static form *form_param_derivative(lg_env *env, const form *F, int param) {
+  form *D = form_new();
+  if (!D) return NULL;
+  expr *pe = expr_param(env->c, param);
+  for (int i = 0; i < F->n; i++) {
+    expr *d = expr_diff(env->c, F->t[i].integrand, pe);
+    if (!d || form_add_term(D, &F->t[i].reg, d, F->t[i].order)) { form_free(D); return NULL; }
+  }
+  return D;
+}
+
+void lg_reduced_free(lg_reduced *rf) {
+  if (!rf) return;
+  lg_form_kernels_free(rf->Jval);
+  for (int a = 0; a < rf->nf; a++) {
+    lg_form_kernels_free(rf->dJdu[a]);
+    if (rf->lam[a]) {
+      expr_func_info *fi = expr_func_get(rf->env->c, rf->lam[a]->fid);
+      if (fi) fi->user = NULL;
+      lg_function_free(rf->lam[a]);
+    }
+  }
+  for (int i = 0; i < rf->nc; i++) {
+    lg_form_kernels_free(rf->dJdm[i]);
+    lg_form_kernels_free(rf->dLdm[i]);
+    lg_problem_free(rf->riesz[i][0]);
+    lg_problem_free(rf->riesz[i][1]);
+  }
+  form_free(rf->J);
+  form_free(rf->L);
+  free(rf->rhs);
+  free(rf->lamv);
+  free(rf);
+}
+
+lg_reduced *lg_reduced_new(lg_env *env, lg_problem *p, const form *J, int nc, const lg_control *c) {
+  if (nc < 1 || nc > LG_MAXCONTROL) { lg_seterr(env, "a reduced functional has 1 to %d controls (got %d)", LG_MAXCONTROL, nc); return NULL; }
+  lg_reduced *rf = calloc(1, sizeof *rf);
+  if (!rf) { lg_seterr(env, "out of memory"); return NULL; }
+  rf->env = env;
+  rf->p = p;
+  rf->lm = lg_problem_mesh(p);
+  rf->nf = lg_problem_fields(p, rf->fld);
+  rf->nc = nc;
+  memcpy(rf->c, c, sizeof(lg_control) * (size_t)nc);
+  rf->J = form_copy(J);
+  int N = lg_problem_size(p);
+  rf->rhs = calloc((size_t)N + 1, sizeof(double));
+  rf->lamv = calloc((size_t)N + 1, sizeof(double));
+  if (!rf->J || !rf->rhs || !rf->lamv) { lg_seterr(env, "out of memory"); goto fail; }
+  const form *F = lg_problem_equation(p), *B = lg_problem_bcs(p);
+  /* the functional: a number of the state and the controls, no test functions */
+  for (int i = 0; i < J->n; i++) {
+    expr *e = expr_canon(env->c, J->t[i].integrand), *leaf[64];
+    int n = expr_collect_fields(env->c, 1, &e, -1, 64, leaf);
+    for (int k = 0; k < n && k < 64; k++) {
+      expr_func_info *fi = expr_func_get(env->c, leaf[k]->i0);
+      if (fi && fi->kind == FK_TEST) {
+        lg_seterr(env, "the functional contains the test function %s: a functional is a number (lg.integral of "
+                       "the state and the controls, without test functions)", fi->name);
+        goto fail;
+      }
+      if (fi && fi->kind == FK_UNKNOWN) {
+        int ours = 0;
+        for (int a = 0; a < rf->nf; a++) ours |= rf->fld[a].unknown == leaf[k]->i0;
+        if (!ours) {
+          lg_seterr(env, "the functional contains the unknown %s, which is not an unknown of the problem", fi->name);
+          goto fail;
+        }
+      }
+    }
+    if (J->t[i].reg.mesh && J->t[i].reg.mesh != (void *)rf->lm) {
+      lg_seterr(env, "the functional integrates over a region of a different mesh than the problem's");
+      goto fail;
+    }
+  }
+  /* the controls: in the equation or the functional, not in essential conditions yet */
+  for (int i = 0; i < nc; i++) {
+    if (c[i].kind == LG_CONTROL_FIELD) {
+      if (c[i].f->mesh != rf->lm) { lg_seterr(env, "control %d lives on a different mesh than the problem", i + 1); goto fail; }
+      if (form_uses(env, B, c[i].f->fid)) {
+        lg_seterr(env, "control %d appears in an essential boundary condition: Dirichlet controls are not supported yet", i + 1);
+        goto fail;
+      }
+      if (!form_uses(env, F, c[i].f->fid) && !form_uses(env, J, c[i].f->fid)) {
+        lg_seterr(env, "control %d appears in neither the problem nor the functional", i + 1);
+        goto fail;
+      }
+    } else {
+      int inB = form_uses_param(env, B, c[i].param), inF = form_uses_param(env, F, c[i].param),
+          inJ = form_uses_param(env, J, c[i].param);
+      if (inB < 0 || inF < 0 || inJ < 0) { lg_seterr(env, "%s", expr_error(env->c)); goto fail; }
+      if (inB) {
+        lg_seterr(env, "control %d (parameter %s) appears in an essential boundary condition: Dirichlet controls are "
+                       "not supported yet", i + 1, expr_param_name(env->c, c[i].param));
+        goto fail;
+      }
+      if (!inF && !inJ) {
+        lg_seterr(env, "control %d (parameter %s) appears in neither the problem nor the functional", i + 1,
+                  expr_param_name(env->c, c[i].param));
+        goto fail;
+      }
+    }
+  }
+  /* the adjoint functions, and the equation with its tests replaced by them */
+  rf->L = form_new();
+  if (!rf->L) { lg_seterr(env, "out of memory"); goto fail; }
+  for (int a = 0; a < rf->nf; a++) {
+    expr_func_info *fu = expr_func_get(env->c, rf->fld[a].unknown);
+    char nm[80];
+    snprintf(nm, sizeof nm, "lambda_%s", fu ? fu->name : "u");
+    rf->lam[a] = lg_function_new(env, rf->lm, rf->fld[a].dm->degree, nm);
+    if (!rf->lam[a]) goto fail;
+  }
+  for (int i = 0; i < F->n; i++) {
+    expr *e = F->t[i].integrand;
+    for (int a = 0; a < rf->nf && e; a++) e = form_replace_function(env->c, e, rf->fld[a].test, rf->lam[a]->fid);
+    if (!e || form_add_term(rf->L, &F->t[i].reg, e, F->t[i].order)) { lg_seterr(env, "%s", expr_error(env->c)); goto fail; }
+  }
+  /* the kernels, compiled once */
+  if (!(rf->Jval = lg_form_kernels_new(env, rf->lm, J, -1, NULL))) goto fail;
+  for (int a = 0; a < rf->nf; a++)
+    if (!(rf->dJdu[a] = lg_form_kernels_new(env, rf->lm, J, rf->fld[a].unknown, rf->fld[a].dm))) goto fail;
+  for (int i = 0; i < nc; i++) {
+    if (c[i].kind == LG_CONTROL_FIELD) {
+      if (!(rf->dJdm[i] = lg_form_kernels_new(env, rf->lm, J, c[i].f->fid, c[i].f->dm))) goto fail;
+      if (!(rf->dLdm[i] = lg_form_kernels_new(env, rf->lm, rf->L, c[i].f->fid, c[i].f->dm))) goto fail;
+    } else {
+      form *dJ = form_param_derivative(env, J, c[i].param), *dL = form_param_derivative(env, rf->L, c[i].param);
+      if (!dJ || !dL) { form_free(dJ); form_free(dL); lg_seterr(env, "%s", expr_error(env->c)); goto fail; }
+      rf->dJdm[i] = lg_form_kernels_new(env, rf->lm, dJ, -1, NULL);
+      rf->dLdm[i] = lg_form_kernels_new(env, rf->lm, dL, -1, NULL);
+      form_free(dJ);
+      form_free(dL);
+      if (!rf->dJdm[i] || !rf->dLdm[i]) goto fail;
+    }
+  }
+  return rf;
+fail:
+  lg_reduced_free(rf);
+  return NULL;
+}
+
+int lg_reduced_ncontrols(const lg_reduced *rf) { return rf->nc; }
+const lg_control *lg_reduced_control(const lg_reduced *rf, int i) { return &rf->c[i]; }
+lg_problem *lg_reduced_problem(const lg_reduced *rf) { return rf->p; }
+void lg_reduced_changed(lg_reduced *rf) { rf->solved = 0; }
+
+int lg_reduced_control_size(const lg_reduced *rf, int i) {
+  return rf->c[i].kind == LG_CONTROL_FIELD ? rf->c[i].f->dm->ndof : 1;
+}
+
+/* solve the state at the current controls (if they changed) */
+static int ensure_state(lg_env *env, lg_reduced *rf) {
+  if (rf->solved) return 0;
+  lg_solve_info info;
+  if (lg_problem_resolve(env, rf->p, &info)) {
+    char why[LG_ERRLEN];
+    snprintf(why, sizeof why, "%s", env->err);
+    lg_seterr(env, "the state solve failed at this control: %s", why);
+    return 1;
+  }
+  rf->solved = 1;
+  return 0;
+}
+
+int lg_reduced_value(lg_env *env, lg_reduced *rf, double *J) {
+  if (ensure_state(env, rf)) return 1;
+  coef_binding st[KER_MAXFIELD];
+  int ns = lg_problem_bind_state(rf->p, st);
+  return lg_form_kernels_eval(env, rf->lm, rf->Jval, ns, st, J);
+}
+
+int lg_reduced_gradient(lg_env *env, lg_reduced *rf, double **g) {
+  if (ensure_state(env, rf)) return 1;
+  coef_binding b[KER_MAXFIELD + KER_MAXFIELD];
+  int ns = lg_problem_bind_state(rf->p, b);
+  /* the adjoint: (dR/du)^T lam = -dJ/du */
+  int N = lg_problem_size(rf->p);
+  memset(rf->rhs, 0, sizeof(double) * (size_t)N);
+  for (int a = 0; a < rf->nf; a++) {
+    double *part = rf->rhs + rf->fld[a].offset;
+    if (lg_form_kernels_eval(env, rf->lm, rf->dJdu[a], ns, b, part)) return 1;
+  }
+  for (int i = 0; i < N; i++) rf->rhs[i] = -rf->rhs[i];
+  if (lg_problem_adjoint(env, rf->p, rf->rhs, rf->lamv)) return 1;
+  /* lam^T dR/dm: the essential rows (u_i - g_i) do not depend on a control in the equation,
+   * so the adjoint enters the equation with those values zero (the test space) */
+  int nbc = lg_problem_essential_rows(rf->p, NULL, 0);
+  int *rows = malloc(sizeof(int) * (size_t)(nbc + 1));
+  double *lam0 = malloc(sizeof(double) * (size_t)N + 1);
+  if (!rows || !lam0) { free(rows); free(lam0); lg_seterr(env, "out of memory"); return 1; }
+  lg_problem_essential_rows(rf->p, rows, nbc);
+  memcpy(lam0, rf->lamv, sizeof(double) * (size_t)N);
+  for (int i = 0; i < nbc; i++) lam0[rows[i]] = 0;
+  for (int a = 0; a < rf->nf; a++)
+    memcpy(rf->lam[a]->x, lam0 + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
+  free(rows);
+  free(lam0);
+  /* dj/dm = dJ/dm + lam^T dR/dm */
+  for (int i = 0; i < rf->nc; i++) {
+    int n = lg_reduced_control_size(rf, i);
+    double *tmp = malloc(sizeof(double) * (size_t)n + 8);
+    if (!tmp) { lg_seterr(env, "out of memory"); return 1; }
+    if (lg_form_kernels_eval(env, rf->lm, rf->dJdm[i], ns, b, g[i]) ||
+        lg_form_kernels_eval(env, rf->lm, rf->dLdm[i], ns, b, tmp)) {
+      free(tmp);
+      return 1;
+    }
+    for (int k = 0; k < n; k++) g[i][k] += tmp[k];
+    free(tmp);
+  }
+  return 0;
+}
+
+/* the Gram matrix of a field control's space: L2 (mass) or H1 (mass + stiffness) */
+lg_problem *lg_reduced_gram(lg_env *env, lg_reduced *rf, int i, int h1) {
+  if (rf->riesz[i][h1]) return rf->riesz[i][h1];
+  int deg = rf->c[i].f->degree;
+  int ft = expr_func_new(env->c, FK_TEST, "psi", deg, 1, NULL), fu = expr_func_new(env->c, FK_UNKNOWN, "phi", deg, 1, NULL);
+  if (ft < 0 || fu < 0) { lg_seterr(env, "out of memory"); return NULL; }
+  unsigned char z[3] = {0, 0, 0};
+  expr *v = expr_field(env->c, ft, 0, z), *u = expr_field(env->c, fu, 0, z);
+  expr *e = expr_mul(env->c, u, v);
+  if (h1) e = expr_add(env->c, e, expr_inner(env->c, expr_grad(env->c, u), expr_grad(env->c, v)));
+  if (!e) { lg_seterr(env, "%s", expr_error(env->c)); return NULL; }
+  form *F = form_new();
+  region all = {REGION_CELLS, 0, {0}, rf->lm};
+  if (!F || form_add_term(F, &all, e, -1)) { form_free(F); lg_seterr(env, "out of memory"); return NULL; }
+  lg_problem_spec s = {rf->lm, F, NULL, 1, &ft, &fu, 0, 0, NULL};
+  rf->riesz[i][h1] = lg_problem_new(env, &s);
+  form_free(F);
+  return rf->riesz[i][h1];
+}
+
+int lg_reduced_riesz(lg_env *env, lg_reduced *rf, int i, int kind, const double *dual, double *out) {
+  int n = lg_reduced_control_size(rf, i);
+  if (kind == LG_RIESZ_NONE || rf->c[i].kind != LG_CONTROL_FIELD) {
+    memcpy(out, dual, sizeof(double) * (size_t)n);
+    return 0;
+  }
+  lg_problem *G = lg_reduced_gram(env, rf, i, kind == LG_RIESZ_H1);
+  return G ? lg_problem_solve_vector(env, G, dual, out) : 1;
+}

@@ -1,0 +1,611 @@
+/* lopt.c — Lua bindings of PDE-constrained optimization (functional.c): controls,
+ * functionals, reduced functionals (value, derivative, gradient with Riesz maps, state) and
+ * the Taylor test. */
+#include "largs.h"
+
+#include <lauxlib.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct { form *f; } ud_functional;
+typedef struct { lg_reduced *rf; } ud_reduced;
+
+/* ---------------------------------------------------------------- controls, functionals */
+
+/* lg.control(basis, mesh, name[, initial]): a discrete function to optimize over */
+static int l_control(lua_State *L) {
+  const char *fn = "lg.control";
+  ud_basis *b = luaL_testudata(L, 1, MT_BASIS);
+  if (!b) return typeerror(L, fn, 1, "a basis (lg.lagrange(p))");
+  ud_mesh *um = check_mesh(L, 2, fn);
+  const char *name = luaL_optstring(L, 3, "m");
+  lg_env *env = get_env(L);
+  lg_function *f = lg_function_new(env, um->lm, b->degree, name);
+  if (!f) return lgerror(L, fn, env);
+  push_function(L, f, 2);
+  if (!lua_isnoneornil(L, 4)) {
+    ud_func *g = luaL_testudata(L, 4, MT_FUNC);
+    if (g) {
+      if (g->f->mesh != f->mesh || g->f->degree != f->degree)
+        return luaL_error(L, "%s: argument 4 must be a discrete function of the same basis and mesh", fn);
+      memcpy(f->x, g->f->x, sizeof(double) * (size_t)f->dm->ndof);
+    } else {
+      expr *e = check_expr(L, 4, fn);
+      if (lg_interpolate(env, f, e)) return lgerror(L, fn, env);
+    }
+  }
+  return 1;
+}
+
+static int l_functional(lua_State *L) {
+  const char *fn = "lg.functional";
+  ud_form *u = luaL_testudata(L, 1, MT_FORM);
+  if (!u) return typeerror(L, fn, 1, luaL_testudata(L, 1, MT_BC) ? "a form (lg.integral), not a boundary condition"
+                                                                  : "a form (lg.integral(...) + ...)");
+  lg_env *env = get_env(L);
+  for (int i = 0; i < u->f->n; i++) {
+    expr *e = u->f->t[i].integrand, *leaf[64];
+    int n = expr_collect_fields(env->c, 1, &e, -1, 64, leaf);
+    for (int k = 0; k < n && k < 64; k++) {
+      expr_func_info *fi = expr_func_get(env->c, leaf[k]->i0);
+      if (fi && fi->kind == FK_TEST)
+        return luaL_error(L, "%s: the form contains the test function %s: a functional is a number (integrals of the "
+                             "state and the controls, without test functions)", fn, fi->name);
+    }
+  }
+  int deps[1] = {1};
+  ud_functional *f = new_ud(L, sizeof *f, MT_FUNCTIONAL, 1, deps);
+  f->f = form_copy(u->f);
+  if (!f->f) return luaL_error(L, "%s: out of memory", fn);
+  return 1;
+}
+
+static int functional_gc(lua_State *L) {
+  ud_functional *f = lua_touserdata(L, 1);
+  form_free(f->f);
+  f->f = NULL;
+  return 0;
+}
+
+/* ---------------------------------------------------------------- reduced functionals */
+
+static ud_reduced *check_reduced(lua_State *L, int idx, const char *fn) {
+  ud_reduced *u = luaL_testudata(L, idx, MT_REDUCED);
+  if (!u) typeerror(L, fn, idx, "a reduced functional (lg.reduced_functional)");
+  return u;
+}
+
+/* one control from the value at idx: a discrete function or a parameter */
+static int to_control(lua_State *L, int idx, lg_control *c, const char *fn, int k) {
+  ud_func *uf = luaL_testudata(L, idx, MT_FUNC);
+  if (uf) { c->kind = LG_CONTROL_FIELD; c->f = uf->f; c->param = -1; return 1; }
+  ud_expr *ue = luaL_testudata(L, idx, MT_EXPR);
+  if (ue && expr_of(L, ue)->kind == E_PARAM) { c->kind = LG_CONTROL_PARAM; c->f = NULL; c->param = ue->e->i0; return 1; }
+  return luaL_error(L, "%s: control %d must be a discrete function (lg.control) or a parameter (lg.parameter), got %s", fn, k,
+                    ue ? "an expression" : luaL_typename(L, idx));
+}
+
+static int l_reduced_functional(lua_State *L) {
+  const char *fn = "lg.reduced_functional";
+  if (!lua_istable(L, 1)) return typeerror(L, fn, 1, "a table {problem=, functional=, control=}");
+  static const char *const keys[] = {"problem", "functional", "control", NULL};
+  check_keys(L, 1, fn, keys);
+  lua_getfield(L, 1, "problem");
+  ud_prob *up = luaL_testudata(L, -1, MT_PROB);
+  if (!up) return luaL_error(L, "%s: option 'problem' must be a problem (lg.linear_problem or lg.nonlinear_problem), got %s", fn,
+                             luaL_typename(L, -1));
+  int pidx = lua_gettop(L);
+  lua_getfield(L, 1, "functional");
+  ud_functional *uf = luaL_testudata(L, -1, MT_FUNCTIONAL);
+  if (!uf) return luaL_error(L, "%s: option 'functional' must be lg.functional(...), got %s", fn,
+                             luaL_testudata(L, -1, MT_FORM) ? "a form (wrap it in lg.functional)" : luaL_typename(L, -1));
+  int fidx = lua_gettop(L);
+  lua_getfield(L, 1, "control");
+  int cidx = lua_gettop(L);
+  lg_control c[LG_MAXCONTROL];
+  int nc = 0;
+  if (lua_istable(L, cidx)) {
+    lua_Integer n = luaL_len(L, cidx);
+    if (n < 1 || n > LG_MAXCONTROL) return luaL_error(L, "%s: option 'control' must list 1 to %d controls", fn, LG_MAXCONTROL);
+    for (int i = 1; i <= n; i++) {
+      lua_geti(L, cidx, i);
+      to_control(L, -1, &c[nc], fn, i);
+      for (int j = 0; j < nc; j++)
+        if (c[j].kind == c[nc].kind && c[j].f == c[nc].f && c[j].param == c[nc].param)
+          return luaL_error(L, "%s: option 'control' lists control %d twice (entries %d and %d)", fn, i, j + 1, i);
+      nc++;
+      lua_pop(L, 1);
+    }
+  } else if (lua_isnil(L, cidx)) return luaL_error(L, "%s: option 'control' is required (a discrete function, a parameter or a table of them)", fn);
+  else to_control(L, cidx, &c[nc++], fn, 1);
+  lg_env *env = get_env(L);
+  lg_reduced *rf = lg_reduced_new(env, up->p, uf->f, nc, c);
+  if (!rf) return lgerror(L, fn, env);
+  int deps[3] = {pidx, fidx, cidx};
+  ud_reduced *u = new_ud(L, sizeof *u, MT_REDUCED, 3, deps);
+  u->rf = rf;
+  /* the controls themselves are kept alive too */
+  lua_getiuservalue(L, -1, 1);
+  lua_pushvalue(L, cidx);
+  lua_pushboolean(L, 1);
+  lua_rawset(L, -3);
+  lua_pop(L, 1);
+  return 1;
+}
+
+static int reduced_gc(lua_State *L) {
+  ud_reduced *u = lua_touserdata(L, 1);
+  lg_reduced_free(u->rf);
+  u->rf = NULL;
+  return 0;
+}
+
+/* set control i from the value at idx (a discrete function of its space, an expression to
+ * interpolate, or a number) */
+static void set_control(lua_State *L, lg_reduced *rf, int i, int idx, const char *fn) {
+  lg_env *env = get_env(L);
+  const lg_control *c = lg_reduced_control(rf, i);
+  if (c->kind == LG_CONTROL_PARAM) {
+    int isnum;
+    double v = lua_tonumberx(L, idx, &isnum);
+    if (!isnum) luaL_error(L, "%s: the value of control %d (parameter %s) must be a number, got %s", fn, i + 1,
+                           expr_param_name(env->c, c->param), luaL_typename(L, idx));
+    if (!isfinite(v)) luaL_error(L, "%s: the value of control %d is not finite (%f)", fn, i + 1, v);
+    expr_param_values(env->c)[c->param] = v;
+    lg_reduced_changed(rf);
+    return;
+  }
+  ud_func *g = luaL_testudata(L, idx, MT_FUNC);
+  if (g) {
+    if (g->f == c->f) { lg_reduced_changed(rf); return; }
+    if (g->f->mesh != c->f->mesh || g->f->degree != c->f->degree)
+      luaL_error(L, "%s: control %d must be given as a discrete function of its own basis and mesh (P%d)", fn, i + 1, c->f->degree);
+    if (lg_check_finite(env, g->f->dm, g->f->x, "the control")) lgerror(L, fn, env);
+    memcpy(c->f->x, g->f->x, sizeof(double) * (size_t)c->f->dm->ndof);
+  } else {
+    int ok;
+    expr *e = to_expr_opt(L, idx, &ok);
+    if (!ok) typeerror(L, fn, idx, "a control value: a discrete function, an expression or a number");
+    e = expr_canon(env->c, e);
+    if (!e) exprerror(L, fn);
+    if (lg_interpolate(env, c->f, e)) lgerror(L, fn, env);
+  }
+  lg_reduced_changed(rf);
+}
+
+/* the controls from the argument at idx (one value, or a table of one per control when there
+ * are several); nothing when it is none or nil */
+static void set_controls(lua_State *L, lg_reduced *rf, int idx, const char *fn) {
+  if (lua_isnoneornil(L, idx)) return;
+  int nc = lg_reduced_ncontrols(rf);
+  if (nc == 1) { set_control(L, rf, 0, idx, fn); return; }
+  if (!lua_istable(L, idx) || luaL_testudata(L, idx, MT_EXPR))
+    typeerror(L, fn, idx, "a table with one value per control");
+  if (luaL_len(L, idx) != nc) luaL_error(L, "%s: give %d control values, got %d", fn, nc, (int)luaL_len(L, idx));
+  for (int i = 0; i < nc; i++) {
+    lua_geti(L, idx, i + 1);
+    set_control(L, rf, i, lua_gettop(L), fn);
+    lua_pop(L, 1);
+  }
+}
+
+static int reduced_value(lua_State *L) {
+  const char *fn = "rf:value";
+  ud_reduced *u = check_reduced(L, 1, fn);
+  set_controls(L, u->rf, 2, fn);
+  lg_env *env = get_env(L);
+  double J;
+  if (lg_reduced_value(env, u->rf, &J)) return lgerror(L, fn, env);
+  lua_pushnumber(L, J);
+  return 1;
+}
+
+/* the raw gradient (dual vectors) into userdata buffers on the stack; returns their pointers */
+static void raw_gradient(lua_State *L, lg_reduced *rf, double **g, const char *fn) {
+  int nc = lg_reduced_ncontrols(rf);
+  for (int i = 0; i < nc; i++) g[i] = lua_newuserdatauv(L, sizeof(double) * ((size_t)lg_reduced_control_size(rf, i) + 1), 0);
+  lg_env *env = get_env(L);
+  if (lg_reduced_gradient(env, rf, g)) lgerror(L, fn, env);
+}
+
+/* dj(m; dm): the gradient paired with a direction given like the controls */
+static double pair(lua_State *L, lg_reduced *rf, double **g, int idx, const char *fn) {
+  int nc = lg_reduced_ncontrols(rf);
+  double s = 0;
+  for (int i = 0; i < nc; i++) {
+    int k = nc == 1 ? idx : (lua_geti(L, idx, i + 1), lua_gettop(L));
+    const lg_control *c = lg_reduced_control(rf, i);
+    if (c->kind == LG_CONTROL_PARAM) {
+      int isnum;
+      double d = lua_tonumberx(L, k, &isnum);
+      if (!isnum) luaL_error(L, "%s: the direction of control %d (a parameter) must be a number", fn, i + 1);
+      s += g[i][0] * d;
+    } else {
+      ud_func *df = luaL_testudata(L, k, MT_FUNC);
+      const double *dv;
+      double *tmp = NULL;
+      if (df) {
+        if (df->f->mesh != c->f->mesh || df->f->degree != c->f->degree)
+          luaL_error(L, "%s: the direction of control %d must be a discrete function of its basis and mesh", fn, i + 1);
+        dv = df->f->x;
+      } else { /* an expression: interpolate into a scratch function of the control's space */
+        lg_env *env = get_env(L);
+        expr *e = check_expr(L, k, fn);
+        lg_function *t = lg_function_new(env, c->f->mesh, c->f->degree, "dm");
+        if (!t) lgerror(L, fn, env);
+        if (lg_interpolate(env, t, e)) { lg_function_free(t); lgerror(L, fn, env); }
+        tmp = t->x;
+        t->x = NULL;
+        expr_func_info *fi = expr_func_get(env->c, t->fid);
+        if (fi) fi->user = NULL;
+        lg_function_free(t);
+        dv = tmp;
+      }
+      for (int j = 0; j < lg_reduced_control_size(rf, i); j++) s += g[i][j] * dv[j];
+      free(tmp);
+    }
+    if (nc > 1) lua_pop(L, 1);
+  }
+  return s;
+}
+
+static int reduced_derivative(lua_State *L) {
+  const char *fn = "rf:derivative";
+  ud_reduced *u = check_reduced(L, 1, fn);
+  if (lua_isnoneornil(L, 2)) return typeerror(L, fn, 2, "a direction (like the controls)");
+  set_controls(L, u->rf, 3, fn);
+  lua_settop(L, 3);
+  double *g[LG_MAXCONTROL];
+  raw_gradient(L, u->rf, g, fn);
+  lua_pushnumber(L, pair(L, u->rf, g, 2, fn));
+  return 1;
+}
+
+static int reduced_gradient(lua_State *L) {
+  const char *fn = "rf:gradient";
+  ud_reduced *u = check_reduced(L, 1, fn);
+  int oidx = 0, midx = 2;
+  if (lua_istable(L, 2) && !luaL_testudata(L, 2, MT_EXPR) && lua_getfield(L, 2, "riesz") != LUA_TNIL) { oidx = 2; midx = 0; }
+  else if (lua_istable(L, 2)) lua_pop(L, 1);
+  if (!oidx && lua_istable(L, 3)) oidx = 3;
+  int riesz = LG_RIESZ_L2;
+  if (oidx) {
+    static const char *const keys[] = {"riesz", NULL};
+    check_keys(L, oidx, fn, keys);
+    const char *r = opt_str(L, oidx, "riesz", "l2", fn);
+    if (!strcmp(r, "l2")) riesz = LG_RIESZ_L2;
+    else if (!strcmp(r, "h1")) riesz = LG_RIESZ_H1;
+    else if (!strcmp(r, "none")) riesz = LG_RIESZ_NONE;
+    else return luaL_error(L, "%s: option 'riesz' must be \"l2\", \"h1\" or \"none\", got \"%s\"", fn, r);
+  }
+  if (midx) set_controls(L, u->rf, midx, fn);
+  lua_settop(L, 3);
+  double *g[LG_MAXCONTROL];
+  raw_gradient(L, u->rf, g, fn);
+  lg_env *env = get_env(L);
+  int nc = lg_reduced_ncontrols(u->rf), base = lua_gettop(L);
+  for (int i = 0; i < nc; i++) {
+    const lg_control *c = lg_reduced_control(u->rf, i);
+    if (c->kind == LG_CONTROL_PARAM) { lua_pushnumber(L, g[i][0]); continue; }
+    expr_func_info *fi = expr_func_get(env->c, c->f->fid);
+    char nm[80];
+    snprintf(nm, sizeof nm, "grad_%s", fi ? fi->name : "m");
+    lg_function *gf = lg_function_new(env, c->f->mesh, c->f->degree, nm);
+    if (!gf) return lgerror(L, fn, env);
+    push_functions_of(L, 1, &gf, 1);
+    if (lg_reduced_riesz(env, u->rf, i, riesz, g[i], gf->x)) return lgerror(L, fn, env);
+  }
+  return lua_gettop(L) - base;
+}
+
+static int reduced_state(lua_State *L) {
+  const char *fn = "rf:state";
+  ud_reduced *u = check_reduced(L, 1, fn);
+  lg_env *env = get_env(L);
+  double J;
+  if (lg_reduced_value(env, u->rf, &J)) return lgerror(L, fn, env);
+  lg_problem *p = lg_reduced_problem(u->rf);
+  lg_field_info fi[KER_MAXFIELD];
+  int nf = lg_problem_fields(p, fi);
+  const double *x = lg_problem_solution(p);
+  lg_function *out[KER_MAXFIELD];
+  for (int a = 0; a < nf; a++) {
+    expr_func_info *info = expr_func_get(env->c, fi[a].unknown);
+    char nm[80];
+    snprintf(nm, sizeof nm, "%sh", info ? info->name : "u");
+    out[a] = lg_function_new(env, lg_problem_mesh(p), fi[a].dm->degree, nm);
+    if (!out[a]) return lgerror(L, fn, env);
+    memcpy(out[a]->x, x + fi[a].offset, sizeof(double) * (size_t)fi[a].dm->ndof);
+  }
+  push_functions_of(L, 1, out, nf);
+  return nf;
+}
+
+/* ---------------------------------------------------------------- Taylor test */
+
+static int taylor_tostring(lua_State *L) {
+  lua_getfield(L, 1, "text");
+  return 1;
+}
+
+/* lg.taylor_test(rf, m, dm[, {steps=4, h=}]): the remainders |j(m + h dm) - j(m)| and
+ * |j(m + h dm) - j(m) - h dj(m; dm)| for h, h/2, ...: rates 1 and 2 when the gradient is right */
+static int l_taylor_test(lua_State *L) {
+  const char *fn = "lg.taylor_test";
+  ud_reduced *u = check_reduced(L, 1, fn);
+  if (lua_isnoneornil(L, 2)) return typeerror(L, fn, 2, "the control values to test at (like rf:value's)");
+  if (lua_isnoneornil(L, 3)) return typeerror(L, fn, 3, "a direction (like the controls)");
+  int steps = 4;
+  double h0 = 1e-2;
+  if (!lua_isnoneornil(L, 4)) {
+    if (!lua_istable(L, 4)) return typeerror(L, fn, 4, "an options table {steps=, h=}");
+    static const char *const keys[] = {"steps", "h", "hessian", NULL};
+    check_keys(L, 4, fn, keys);
+    steps = opt_int(L, 4, "steps", 4, fn);
+    if (steps < 2 || steps > 30) return luaL_error(L, "%s: option 'steps' must be 2 to 30, got %d", fn, steps);
+    h0 = opt_num(L, 4, "h", 1e-2, fn);
+    if (!(h0 > 0) || !isfinite(h0)) return luaL_error(L, "%s: option 'h' must be a positive number, got %f", fn, h0);
+    lua_getfield(L, 4, "hessian");
+    if (lua_toboolean(L, -1)) return luaL_error(L, "%s: Hessian actions (option 'hessian') are not available yet", fn);
+    lua_pop(L, 1);
+  }
+  lg_reduced *rf = u->rf;
+  lg_env *env = get_env(L);
+  int nc = lg_reduced_ncontrols(rf);
+  /* j(m) and dj(m; dm) */
+  set_controls(L, rf, 2, fn);
+  double J0;
+  if (lg_reduced_value(env, rf, &J0)) return lgerror(L, fn, env);
+  lua_settop(L, 4);
+  double *g[LG_MAXCONTROL];
+  raw_gradient(L, rf, g, fn);
+  double dJ = pair(L, rf, g, 3, fn);
+  /* m and dm as vectors, to move along m + h dm */
+  double *m0[LG_MAXCONTROL], *dm[LG_MAXCONTROL];
+  for (int i = 0; i < nc; i++) {
+    int n = lg_reduced_control_size(rf, i);
+    const lg_control *c = lg_reduced_control(rf, i);
+    m0[i] = lua_newuserdatauv(L, sizeof(double) * ((size_t)n + 1), 0);
+    dm[i] = lua_newuserdatauv(L, sizeof(double) * ((size_t)n + 1), 0);
+    if (c->kind == LG_CONTROL_PARAM) m0[i][0] = expr_param_values(env->c)[c->param];
+    else memcpy(m0[i], c->f->x, sizeof(double) * (size_t)n);
+    /* the direction: the pairing with unit vectors would be costly; read it directly */
+    int k = nc == 1 ? 3 : (lua_geti(L, 3, i + 1), lua_gettop(L));
+    if (c->kind == LG_CONTROL_PARAM) dm[i][0] = lua_tonumber(L, k);
+    else {
+      ud_func *df = luaL_testudata(L, k, MT_FUNC);
+      if (df) memcpy(dm[i], df->f->x, sizeof(double) * (size_t)n);
+      else {
+        memcpy(dm[i], c->f->x, sizeof(double) * (size_t)n);
+        if (lg_interpolate(env, c->f, check_expr(L, k, fn))) return lgerror(L, fn, env);
+        double *t = dm[i];
+        for (int j = 0; j < n; j++) { double v = c->f->x[j]; c->f->x[j] = t[j]; t[j] = v; }
+      }
+    }
+    if (nc > 1) lua_pop(L, 1);
+  }
+  lua_createtable(L, 0, 6);
+  int res = lua_gettop(L);
+  lua_createtable(L, steps, 0);
+  lua_createtable(L, steps, 0);
+  lua_createtable(L, steps, 0);
+  int th = res + 1, tr0 = res + 2, tr1 = res + 3;
+  double r0[32], r1[32], hs[32];
+  for (int s = 0; s < steps; s++) {
+    double h = h0 / pow(2, s);
+    for (int i = 0; i < nc; i++) {
+      const lg_control *c = lg_reduced_control(rf, i);
+      int n = lg_reduced_control_size(rf, i);
+      if (c->kind == LG_CONTROL_PARAM) expr_param_values(env->c)[c->param] = m0[i][0] + h * dm[i][0];
+      else for (int j = 0; j < n; j++) c->f->x[j] = m0[i][j] + h * dm[i][j];
+    }
+    lg_reduced_changed(rf);
+    double Jh;
+    int rc = lg_reduced_value(env, rf, &Jh);
+    if (rc) {
+      /* restore m before reporting */
+      for (int i = 0; i < nc; i++) {
+        const lg_control *c = lg_reduced_control(rf, i);
+        if (c->kind == LG_CONTROL_PARAM) expr_param_values(env->c)[c->param] = m0[i][0];
+        else memcpy(c->f->x, m0[i], sizeof(double) * (size_t)lg_reduced_control_size(rf, i));
+      }
+      lg_reduced_changed(rf);
+      return lgerror(L, fn, env);
+    }
+    hs[s] = h;
+    r0[s] = fabs(Jh - J0);
+    r1[s] = fabs(Jh - J0 - h * dJ);
+    lua_pushnumber(L, h); lua_rawseti(L, th, s + 1);
+    lua_pushnumber(L, r0[s]); lua_rawseti(L, tr0, s + 1);
+    lua_pushnumber(L, r1[s]); lua_rawseti(L, tr1, s + 1);
+  }
+  for (int i = 0; i < nc; i++) { /* back to m */
+    const lg_control *c = lg_reduced_control(rf, i);
+    if (c->kind == LG_CONTROL_PARAM) expr_param_values(env->c)[c->param] = m0[i][0];
+    else memcpy(c->f->x, m0[i], sizeof(double) * (size_t)lg_reduced_control_size(rf, i));
+  }
+  lg_reduced_changed(rf);
+  lua_setfield(L, res, "remainders1");
+  lua_setfield(L, res, "remainders0");
+  lua_setfield(L, res, "h");
+  luaL_Buffer b;
+  luaL_buffinit(L, &b);
+  char line[200];
+  snprintf(line, sizeof line, "Taylor test: j = %.10g, dj(m; dm) = %.10g\n  %-10s %-14s %-6s %-14s %-6s", J0, dJ, "h",
+           "|R0|", "rate", "|R1|", "rate");
+  luaL_addstring(&b, line);
+  lua_createtable(L, steps - 1, 0);
+  lua_createtable(L, steps - 1, 0);
+  for (int s = 0; s < steps; s++) {
+    double q0 = s ? log(r0[s - 1] / r0[s]) / log(hs[s - 1] / hs[s]) : NAN;
+    double q1 = s ? log(r1[s - 1] / r1[s]) / log(hs[s - 1] / hs[s]) : NAN;
+    if (s) {
+      lua_pushnumber(L, q0); lua_rawseti(L, -3, s);
+      lua_pushnumber(L, q1); lua_rawseti(L, -2, s);
+    }
+    if (s) snprintf(line, sizeof line, "\n  %-10.3g %-14.6e %-6.2f %-14.6e %-6.2f", hs[s], r0[s], q0, r1[s], q1);
+    else snprintf(line, sizeof line, "\n  %-10.3g %-14.6e %-6s %-14.6e %-6s", hs[s], r0[s], "", r1[s], "");
+    luaL_addstring(&b, line);
+  }
+  lua_setfield(L, res, "rates1");
+  lua_setfield(L, res, "rates0");
+  luaL_pushresult(&b);
+  lua_setfield(L, res, "text");
+  if (luaL_newmetatable(L, "lugal.TaylorTest")) {
+    lua_pushcfunction(L, taylor_tostring);
+    lua_setfield(L, -2, "__tostring");
+  }
+  lua_setmetatable(L, res);
+  lua_settop(L, res);
+  return 1;
+}
+
+/* ---------------------------------------------------------------- minimization */
+
+/* a bound for control i from the value at idx: a number or a discrete function of its space;
+ * the values go into a userdata buffer left on the stack */
+static const double *bound_values(lua_State *L, lg_reduced *rf, int i, int idx, const char *fn, const char *which) {
+  if (lua_isnoneornil(L, idx)) return NULL;
+  const lg_control *c = lg_reduced_control(rf, i);
+  int n = lg_reduced_control_size(rf, i);
+  double *v = lua_newuserdatauv(L, sizeof(double) * ((size_t)n + 1), 0);
+  ud_func *uf = luaL_testudata(L, idx, MT_FUNC);
+  if (uf) {
+    if (c->kind != LG_CONTROL_FIELD || uf->f->mesh != c->f->mesh || uf->f->degree != c->f->degree)
+      luaL_error(L, "%s: the %s bound of control %d must be a number or a discrete function of the control's basis and mesh", fn,
+                 which, i + 1);
+    memcpy(v, uf->f->x, sizeof(double) * (size_t)n);
+    return v;
+  }
+  int isnum;
+  double b = lua_tonumberx(L, idx, &isnum);
+  if (!isnum) luaL_error(L, "%s: the %s bound of control %d must be a number or a discrete function, got %s", fn, which, i + 1,
+                         luaL_typename(L, idx));
+  for (int k = 0; k < n; k++) v[k] = b;
+  return v;
+}
+
+/* lg.minimize(rf, {method=, bounds={lower, upper}, gatol=, grtol=, gttol=, maxit=, monitor=, series=,
+ * inner_product=}) */
+static int l_minimize(lua_State *L) {
+  const char *fn = "lg.minimize";
+  ud_reduced *u = check_reduced(L, 1, fn);
+  lg_minimize_opts o;
+  memset(&o, 0, sizeof o);
+  o.method = "lmvm";
+  o.gatol = o.grtol = o.gttol = -1;
+  o.monitor = 1;
+  o.riesz = LG_RIESZ_L2;
+  int nc = lg_reduced_ncontrols(u->rf);
+  if (!lua_isnoneornil(L, 2)) {
+    if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {method=, bounds=, gatol=, grtol=, maxit=, monitor=, series=}");
+    static const char *const keys[] = {"method", "bounds", "gatol", "grtol", "gttol", "maxit", "monitor", "series", "inner_product",
+                                       "constraints", NULL};
+    check_keys(L, 2, fn, keys);
+    o.method = opt_str(L, 2, "method", "lmvm", fn);
+    static const char *const later[] = {"nls", "ntr", "almm", NULL};
+    for (int i = 0; later[i]; i++)
+      if (!strcmp(o.method, later[i]))
+        return luaL_error(L, "%s: method \"%s\" needs Hessian actions or constraints, which are not available yet (use "
+                             "\"lmvm\" or \"blmvm\")", fn, o.method);
+    if (strcmp(o.method, "lmvm") && strcmp(o.method, "blmvm"))
+      return luaL_error(L, "%s: option 'method' must be \"lmvm\" or \"blmvm\", got \"%s\"", fn, o.method);
+    o.gatol = opt_num(L, 2, "gatol", -1, fn);
+    o.grtol = opt_num(L, 2, "grtol", -1, fn);
+    o.gttol = opt_num(L, 2, "gttol", -1, fn);
+    o.maxit = opt_int(L, 2, "maxit", 0, fn);
+    if (o.maxit < 0) return luaL_error(L, "%s: option 'maxit' must be >= 0", fn);
+    lua_getfield(L, 2, "monitor");
+    if (!lua_isnil(L, -1)) o.monitor = lua_toboolean(L, -1);
+    lua_pop(L, 1);
+    o.series = opt_str(L, 2, "series", NULL, fn);
+    if (o.series && (strlen(o.series) < 5 || strcmp(o.series + strlen(o.series) - 4, ".pvd")))
+      return luaL_error(L, "%s: option 'series' must be a path ending in .pvd, got \"%s\"", fn, o.series);
+    const char *ip = opt_str(L, 2, "inner_product", "l2", fn);
+    if (!strcmp(ip, "l2")) o.riesz = LG_RIESZ_L2;
+    else if (!strcmp(ip, "dofs")) o.riesz = LG_RIESZ_NONE;
+    else return luaL_error(L, "%s: option 'inner_product' must be \"l2\" or \"dofs\", got \"%s\"", fn, ip);
+    if (lua_getfield(L, 2, "constraints") != LUA_TNIL)
+      return luaL_error(L, "%s: constraints (almm) are not available yet", fn);
+    lua_pop(L, 1);
+    lua_newtable(L); /* anchors the bound buffers */
+    int anchor = lua_gettop(L), nanch = 0;
+    if (lua_getfield(L, 2, "bounds") != LUA_TNIL) {
+      if (!lua_istable(L, -1)) return luaL_error(L, "%s: option 'bounds' must be a table {lower, upper}", fn);
+      int bt = lua_gettop(L);
+      if (!strcmp(o.method, "lmvm")) o.method = "blmvm"; /* bounds need the bounded variant */
+      for (int side = 0; side < 2; side++) {
+        lua_geti(L, bt, side + 1);
+        int vidx = lua_gettop(L);
+        for (int i = 0; i < nc; i++) {
+          int k = vidx;
+          if (nc > 1 && !lua_isnil(L, vidx)) {
+            if (!lua_istable(L, vidx) || luaL_testudata(L, vidx, MT_FUNC))
+              return luaL_error(L, "%s: with %d controls, each bound is a table of one per control", fn, nc);
+            lua_geti(L, vidx, i + 1);
+            k = lua_gettop(L);
+          }
+          const double *b = bound_values(L, u->rf, i, k, fn, side ? "upper" : "lower");
+          if (side) o.upper[i] = b; else o.lower[i] = b;
+          if (b) lua_rawseti(L, anchor, ++nanch); /* the buffer lives in the anchor table */
+          if (k != vidx) lua_pop(L, 1);
+        }
+        lua_pop(L, 1);
+      }
+    }
+  }
+  lg_env *env = get_env(L);
+  lg_minimize_info info;
+  int rc = lg_minimize(env, u->rf, &o, &info);
+  if (rc) return lgerror(L, fn, env);
+  /* the controls (which hold the minimizer) and the info table */
+  lua_getiuservalue(L, 1, 1);
+  int base = lua_gettop(L);
+  for (int i = 0; i < nc; i++) {
+    const lg_control *c = lg_reduced_control(u->rf, i);
+    if (c->kind == LG_CONTROL_PARAM) { lua_pushnumber(L, expr_param_values(env->c)[c->param]); continue; }
+    /* the control userdata: among the dependencies */
+    int found = 0;
+    lua_pushnil(L);
+    while (lua_next(L, base)) {
+      lua_pop(L, 1);
+      ud_func *uf = luaL_testudata(L, -1, MT_FUNC);
+      if (uf && uf->f == c->f) { found = 1; break; }
+      if (lua_istable(L, -1)) { /* the control table */
+        for (lua_Integer k = 1; k <= luaL_len(L, -1) && !found; k++) {
+          lua_geti(L, -1, k);
+          ud_func *vf = luaL_testudata(L, -1, MT_FUNC);
+          if (vf && vf->f == c->f) { found = 1; lua_remove(L, -2); }
+          else lua_pop(L, 1);
+        }
+        if (found) break;
+      }
+    }
+    if (!found) lua_pushnil(L);
+  }
+  lua_createtable(L, 0, 6);
+  lua_pushinteger(L, info.iterations); lua_setfield(L, -2, "iterations");
+  lua_pushinteger(L, info.evaluations); lua_setfield(L, -2, "evaluations");
+  lua_pushnumber(L, info.J); lua_setfield(L, -2, "J");
+  lua_pushnumber(L, info.gnorm); lua_setfield(L, -2, "gnorm");
+  lua_pushstring(L, info.reason); lua_setfield(L, -2, "reason");
+  lua_pushboolean(L, info.converged); lua_setfield(L, -2, "converged");
+  return lua_gettop(L) - base;
+}
+
+/* ---------------------------------------------------------------- registration */
+
+void lg_lua_opt_register(lua_State *L) {
+  static const luaL_Reg functional_mm[] = {{"__gc", functional_gc}, {NULL, NULL}};
+  new_mt(L, MT_FUNCTIONAL, functional_mm, NULL);
+  static const luaL_Reg reduced_mm[] = {{"__gc", reduced_gc}, {NULL, NULL}};
+  static const luaL_Reg reduced_methods[] = {{"value", reduced_value}, {"derivative", reduced_derivative},
+                                             {"gradient", reduced_gradient}, {"state", reduced_state}, {NULL, NULL}};
+  new_mt(L, MT_REDUCED, reduced_mm, reduced_methods);
+}
+
+const luaL_Reg lg_opt_lib[] = {{"control", l_control}, {"functional", l_functional},
+                               {"reduced_functional", l_reduced_functional}, {"taylor_test", l_taylor_test},
+                               {"minimize", l_minimize}, {NULL, NULL}};

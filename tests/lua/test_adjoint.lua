@@ -1,0 +1,154 @@
+-- Reduced functionals: gradients by one adjoint solve must pass Taylor tests (first-order
+-- remainder rate 2) for linear and nonlinear states, P1 and P2 states, field and parameter
+-- controls, a Neumann control, a boundary term, two controls, a coupled system, a Gmsh mesh
+-- and a tetrahedral mesh; the directional derivative must match central differences and the
+-- raw gradient; bad input must be refused with a message.
+package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
+local T = require "testlib"
+local lg = require "lugal"
+local data = arg[0]:match("(.*/)") .. "../../examples/"
+
+local pi = math.pi
+local function rate_ok(t, what)
+  local r = t.rates1[#t.rates1]
+  T.check(math.abs(r - 2) < 0.05, "%s: Taylor rate %.3f (want 2.00 +- 0.05)\n%s", what, r, tostring(t))
+  T.check(t.rates0[#t.rates0] > 0.95 and t.rates0[#t.rates0] < 1.05, "%s: zeroth-order rate", what)
+  return r
+end
+
+local function poisson(mesh, P, Pc, nonlinear, extra)
+  local u, v = lg.unknown(P, "u"), lg.test(P, "v")
+  local f = lg.control(Pc, mesh, "f")
+  local k = nonlinear and (1 + u^2) or 1
+  local eqn = lg.integral(mesh:cells(), k*lg.dot(lg.grad(v), lg.grad(u)) - f*v)
+  if extra then eqn = eqn + extra(v, u, f) end
+  local mk = nonlinear and lg.nonlinear_problem or lg.linear_problem
+  local state = mk{mesh = mesh, eqn = eqn, bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}
+  return state, u, v, f
+end
+
+-- the Poisson mother problem: J = 1/2 |u - d|^2 + alpha/2 |f|^2
+local mesh = lg.mesh.rectangle{nx = 12}
+local P1, P2 = lg.lagrange(1), lg.lagrange(2)
+local d = lg.sin(pi*lg.x)*lg.sin(pi*lg.y)/(2*pi^2)
+local state, u, v, f = poisson(mesh, P1, P1)
+local J = lg.functional(lg.integral(mesh:cells(), 0.5*(u - d)^2 + 1e-6/2*f^2))
+local rf = lg.reduced_functional{problem = state, functional = J, control = f}
+T.check(rf:value() > 0, "J(0) > 0")
+rate_ok(lg.taylor_test(rf, 1 + lg.x, lg.sin(3*lg.x)*lg.y), "linear P1/P1")
+-- derivative: central differences, and the raw gradient paired with the direction
+local m = lg.interpolate(P1, mesh, lg.x*lg.y, "m")
+local dm = lg.interpolate(P1, mesh, lg.cos(lg.x), "dm")
+local der = rf:derivative(dm, m)
+local h = 1e-4
+local fd = (rf:value(lg.x*lg.y + h*lg.cos(lg.x)) - rf:value(lg.x*lg.y - h*lg.cos(lg.x))) / (2*h)
+T.close(der, fd, 1e-6, "derivative vs central difference")
+local g = rf:gradient(m, {riesz = "none"})
+local s, gv, dv = 0, g:values(), dm:values()
+for i = 1, #gv do s = s + gv[i]*dv[i] end
+T.close(s, rf:derivative(dm, m), 1e-12, "raw gradient . dm")
+-- the L2 Riesz representative: M g2 = g, so (g2, dm)_L2 = dj(dm)
+local g2 = rf:gradient(m)
+T.close(lg.integrate(mesh, g2*dm), der, 1e-10, "L2 gradient (g, dm) = dj(dm)")
+local g3 = rf:gradient(m, {riesz = "h1"})
+T.close(lg.integrate(mesh, g3*dm + lg.dot(lg.grad(g3), lg.grad(dm))), der, 1e-10, "H1 gradient")
+local uh = rf:state()
+T.check(lg.integrate(mesh, uh) ~= 0, "the state at m")
+
+-- P2 state, P1 control; nonlinear state; a boundary term; a Neumann control; a parameter
+local s2, u2, v2, f2 = poisson(mesh, P2, P1)
+local rf2 = lg.reduced_functional{problem = s2, functional = lg.functional(lg.integral(mesh:cells(), 0.5*(u2 - d)^2)),
+                                  control = f2}
+rate_ok(lg.taylor_test(rf2, lg.x, lg.y), "P2 state")
+local s3, u3, v3, f3 = poisson(mesh, P1, P1, true)
+local J3 = lg.functional(lg.integral(mesh:cells(), 0.5*(u3 - d)^2) + lg.integral(mesh:boundary("top"), lg.dot(lg.grad(u3), lg.normal())^2))
+local rf3 = lg.reduced_functional{problem = s3, functional = J3, control = f3}
+rate_ok(lg.taylor_test(rf3, 2 + lg.x, lg.sin(lg.y)), "nonlinear state, boundary term")
+local gN = lg.control(P1, mesh, "g")
+local a = lg.parameter("a", 1.5)
+local s4, u4, v4, f4 = poisson(mesh, P1, P1, true, function(v_, u_, f_) return lg.integral(mesh:boundary("right"), -gN*v_) end)
+local rf4 = lg.reduced_functional{problem = s4, functional = lg.functional(lg.integral(mesh:cells(), a*(u4 - d)^2 + u4*f4)),
+                                  control = {gN, a, f4}}
+rate_ok(lg.taylor_test(rf4, {lg.y, 1.5, 1}, {lg.x*lg.y, 0.3, lg.x}), "Neumann, parameter and field controls at once")
+local s5 = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) - a^2*v),
+                             bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}
+local rf5 = lg.reduced_functional{problem = s5, functional = lg.functional(lg.integral(mesh:cells(), u^2)), control = a}
+rate_ok(lg.taylor_test(rf5, 1.2, 1), "a parameter control alone")
+local ga = rf5:gradient(2.0)
+-- j(a) = c a^4 (u is linear in a^2): dj/da = 4 j / a
+T.close(ga, 4 * rf5:value(2.0) / 2.0, 1e-10, "dj/da for j = c a^4")
+
+-- a coupled system: -lap u + w = f, -lap w - u = 0
+local w, q = lg.unknown(P1, "w"), lg.test(P1, "q")
+local fc = lg.control(P1, mesh, "fc")
+local sys = lg.nonlinear_problem{mesh = mesh,
+  eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) + w*v - fc*v + lg.dot(lg.grad(q), lg.grad(w)) - u*q + 0.1*w^3*q),
+  bc = {lg.essential_bc(mesh:boundary(), v*u), lg.essential_bc(mesh:boundary(), q*w)}, test = {v, q}, unknown = {u, w}}
+local rfc = lg.reduced_functional{problem = sys, functional = lg.functional(lg.integral(mesh:cells(), (u - d)^2 + w^2)), control = fc}
+rate_ok(lg.taylor_test(rfc, 1 + lg.x, lg.y), "coupled nonlinear system")
+local su, sw = rfc:state()
+T.check(sw ~= nil and lg.integrate(mesh, su*su) > 0, "a coupled state has two fields")
+
+-- a Gmsh mesh, a tetrahedral mesh
+local gm = lg.mesh.read(data .. "domain.msh")
+local sg, ug, vg, fg = poisson(gm, P1, P1)
+rate_ok(lg.taylor_test(lg.reduced_functional{problem = sg, functional = lg.functional(lg.integral(gm:cells(), ug^2)), control = fg},
+                       lg.x, lg.y), "Gmsh mesh")
+local tm = lg.mesh.box{nx = 3}
+local st, ut, vt, ft = poisson(tm, P1, P1)
+rate_ok(lg.taylor_test(lg.reduced_functional{problem = st, functional = lg.functional(lg.integral(tm:cells(), (ut - lg.z)^2)), control = ft},
+                       lg.x, lg.y*lg.z), "tetrahedra")
+
+-- minimization (TAO L-BFGS in the L2 inner product): the Poisson mother problem at 32^2
+local mesh32 = lg.mesh.rectangle{nx = 32}
+local sm, um, vm, fm = poisson(mesh32, P1, P1)
+local Jm = lg.functional(lg.integral(mesh32:cells(), 0.5*(um - d)^2 + 1e-6/2*fm^2))
+local rfm = lg.reduced_functional{problem = sm, functional = Jm, control = fm}
+local J0 = rfm:value()
+local g0 = rfm:gradient()
+local n0 = math.sqrt(lg.integrate(mesh32, g0*g0))
+local fopt, info = lg.minimize(rfm, {gttol = 1e-8, gatol = 0, grtol = 0, monitor = false})
+T.check(fopt == fm and info.converged, "the control holds the minimizer (%s)", info.reason)
+T.check(info.J < 1e-3 * J0, "J fell from %g to %g", J0, info.J)
+T.close(rfm:value(), info.J, 1e-12, "J at the minimizer")
+local g1 = rfm:gradient()
+T.check(math.sqrt(lg.integrate(mesh32, g1*g1)) < 1e-6 * n0, "the L2 gradient at the minimizer is 1e-6 of the first")
+T.check(info.iterations < 200, "L-BFGS in the L2 inner product: %d iterations (pyadjoint: 171)", info.iterations)
+-- bounds (blmvm): 0 <= f <= 2; at the optimum the gradient pushes against active bounds
+fm:assign(0*lg.x)
+local fb, ib = lg.minimize(rfm, {bounds = {0, 2}, gttol = 1e-6, monitor = false})
+local lo, hi, bad = math.huge, -math.huge, 0
+local gb = rfm:gradient(fb, {riesz = "none"}):values()
+for i, x in ipairs(fb:values()) do
+  lo, hi = math.min(lo, x), math.max(hi, x)
+  if x < 1e-10 and gb[i] < -1e-12 then bad = bad + 1 end
+end
+T.check(lo >= 0 and hi <= 2 + 1e-12 and hi > 1, "the bounds hold: [%g, %g]", lo, hi)
+T.check(bad == 0, "no descent direction left at the lower bound (%d dofs)", bad)
+T.check(ib.J >= info.J - 1e-12, "the bounded optimum is not below the unbounded one")
+
+-- bad input
+T.fails(function() return lg.functional(lg.integral(mesh:cells(), u*v)) end, "lg.functional: the form contains the test function v")
+T.fails(function() return lg.functional(lg.essential_bc(mesh:boundary(), v*u)) end, "not a boundary condition")
+local stray = lg.control(P1, mesh, "stray")
+T.fails(function() return lg.reduced_functional{problem = state, functional = J, control = stray} end,
+        "control 1 appears in neither the problem nor the functional")
+local other = lg.mesh.rectangle{nx = 3}
+T.fails(function() return lg.reduced_functional{problem = state, functional = J, control = lg.control(P1, other, "o")} end,
+        "control 1 lives on a different mesh")
+local gd = lg.control(P1, mesh, "gd")
+local sd = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u))),
+                             bc = lg.essential_bc(mesh:boundary(), v*(u - gd)), test = v, unknown = u}
+T.fails(function() return lg.reduced_functional{problem = sd, functional = lg.functional(lg.integral(mesh:cells(), u^2)), control = gd} end,
+        "Dirichlet controls are not supported yet")
+T.fails(function() return lg.reduced_functional{problem = state, functional = lg.integral(mesh:cells(), u^2), control = f} end,
+        "wrap it in lg.functional")
+T.fails(function() return lg.reduced_functional{problem = state, functional = J, control = {f, f}} end, "lists control 2 twice")
+T.fails(function() return rf:gradient(m, {riesz = "l3"}) end, "option 'riesz' must be")
+T.fails(function() return rf:value(lg.interpolate(P2, mesh, lg.x)) end, "must be given as a discrete function of its own basis")
+T.fails(function() return lg.taylor_test(rf, 0, 1, {hessian = true}) end, "not available yet")
+T.fails(function() return lg.minimize(rf, {method = "nls"}) end, "needs Hessian actions or constraints")
+T.fails(function() return lg.minimize(rf, {bounds = {lg.interpolate(P2, mesh, lg.x), 1}}) end,
+        "the lower bound of control 1 must be a number or a discrete function of the control's basis")
+T.fails(function() return lg.minimize(rf, {series = "x.vtu"}) end, "option 'series' must be a path ending in .pvd")
+print("adjoint gradients: all Taylor rates 2")

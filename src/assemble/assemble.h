@@ -131,6 +131,8 @@ int lg_problem_bind_state(const lg_problem *p, coef_binding *b);
 /* the adjoint: (dR/du)^T lam = rhs at the last solution (N values each), R the discrete
  * residual whose essential rows are u_i - g_i */
 int lg_problem_adjoint(lg_env *env, lg_problem *p, const double *rhs, double *lam);
+/* the tangent-linear solve: (dR/du) du = rhs at the last solution */
+int lg_problem_tangent(lg_env *env, lg_problem *p, const double *rhs, double *du);
 /* x = A^-1 rhs for the problem's matrix at u = 0 with homogeneous essential rows (Riesz
  * maps); the factorization is kept */
 int lg_problem_solve_vector(lg_env *env, lg_problem *p, const double *rhs, double *x);
@@ -184,6 +186,10 @@ int lg_reduced_gradient(lg_env *env, lg_reduced *rf, double **g);
 int lg_reduced_riesz(lg_env *env, lg_reduced *rf, int i, int kind, const double *dual, double *out);
 /* the Gram matrix problem of field control i (L2: mass; H1: mass + stiffness) */
 lg_problem *lg_reduced_gram(lg_env *env, lg_reduced *rf, int i, int h1);
+
+/* du/da at the last solution of p, for a parameter a of its equation (not of its essential
+ * conditions): one tangent-linear solve with the state's factorization; du has N values */
+int lg_sensitivity(lg_env *env, lg_problem *p, int param, double *du);
 
 /* ---- minimization through TAO (optimize.c) */
 typedef struct {

@@ -426,3 +426,47 @@ int lg_reduced_riesz(lg_env *env, lg_reduced *rf, int i, int kind, const double 
   lg_problem *G = lg_reduced_gram(env, rf, i, kind == LG_RIESZ_H1);
   return G ? lg_problem_solve_vector(env, G, dual, out) : 1;
 }
+
+/* ---------------------------------------------------------------- sensitivities */
+
+int lg_sensitivity(lg_env *env, lg_problem *p, int param, double *du) {
+  const form *F = lg_problem_equation(p), *B = lg_problem_bcs(p);
+  int inB = form_uses_param(env, B, param);
+  if (inB < 0) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
+  if (inB) {
+    lg_seterr(env, "the parameter %s appears in an essential boundary condition: sensitivities with respect to "
+                   "boundary values are not supported yet", expr_param_name(env->c, param));
+    return 1;
+  }
+  if (!lg_problem_solution(p)) { lg_seterr(env, "the sensitivity needs a solved state: solve the problem first"); return 1; }
+  lg_mesh *lm = lg_problem_mesh(p);
+  lg_field_info fld[KER_MAXFIELD];
+  int nf = lg_problem_fields(p, fld), N = lg_problem_size(p);
+  form *dF = form_param_derivative(env, F, param);
+  double *rhs = calloc((size_t)N + 1, sizeof(double));
+  if (!dF || !rhs) { form_free(dF); free(rhs); lg_seterr(env, "%s", dF ? "out of memory" : expr_error(env->c)); return 1; }
+  coef_binding st[KER_MAXFIELD];
+  int ns = lg_problem_bind_state(p, st), rc = 0;
+  /* dR/da: the equation differentiated with respect to a, as a linear form in each test space */
+  for (int a = 0; a < nf && !rc; a++) {
+    lg_form_kernels *K = lg_form_kernels_new(env, lm, dF, fld[a].test, fld[a].dm);
+    if (!K || lg_form_kernels_eval(env, lm, K, ns, st, rhs + fld[a].offset)) rc = 1;
+    lg_form_kernels_free(K);
+  }
+  form_free(dF);
+  if (!rc) {
+    /* the essential rows u_i - g_i do not depend on a */
+    int nbc = lg_problem_essential_rows(p, NULL, 0);
+    int *rows = malloc(sizeof(int) * (size_t)(nbc + 1));
+    if (!rows) { lg_seterr(env, "out of memory"); rc = 1; }
+    else {
+      lg_problem_essential_rows(p, rows, nbc);
+      for (int i = 0; i < N; i++) rhs[i] = -rhs[i];
+      for (int i = 0; i < nbc; i++) rhs[rows[i]] = 0;
+      free(rows);
+      rc = lg_problem_tangent(env, p, rhs, du);
+    }
+  }
+  free(rhs);
+  return rc;
+}

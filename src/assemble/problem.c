@@ -661,6 +661,8 @@ static int assemble_residual(lg_env *env, lg_problem *p, const double *state, do
 
 int lg_problem_assemble_matrix(lg_env *env, lg_problem *p, double *ms) {
   double t0 = now_ms();
+  p->matrix_fp = 0;
+  p->adj_stale = 1;
   if (assemble_matrix(env, p, p->state, p->A)) return 1;
   if (ms) *ms = now_ms() - t0;
   return 0;
@@ -668,6 +670,8 @@ int lg_problem_assemble_matrix(lg_env *env, lg_problem *p, double *ms) {
 
 int lg_problem_dense_matrix(lg_env *env, lg_problem *p, double *dense, int n) {
   if (n != p->N) { lg_seterr(env, "dense matrix size %d != %d", n, p->N); return 1; }
+  p->matrix_fp = 0;
+  p->adj_stale = 1;
   if (assemble_matrix(env, p, p->state, p->A)) return 1;
   for (PetscInt i = 0; i < n; i++) {
     PetscInt nc;
@@ -1017,8 +1021,10 @@ int lg_problem_bind_state(const lg_problem *p, coef_binding *b) {
  * where R is the discrete residual with the essential rows u_i - g_i. A linear problem
  * reuses its factorization (KSPSolveTranspose); a nonlinear one assembles its Jacobian at
  * the solution and factors it once per solution. */
-int lg_problem_adjoint(lg_env *env, lg_problem *p, const double *rhs, double *lam) {
-  if (!p->have_solution) { lg_seterr(env, "the adjoint needs a solved state: solve the problem first"); return 1; }
+/* a solver of dR/du at the last solution: a linear problem's own (its factorization), a
+ * nonlinear problem's Jacobian assembled at the solution and factored once per solution */
+static int jacobian_solver(lg_env *env, lg_problem *p, KSP *out) {
+  if (!p->have_solution) { lg_seterr(env, "the adjoint or sensitivity needs a solved state: solve the problem first"); return 1; }
   KSP ksp = p->ksp;
   if (p->nonlinear) {
     if (!p->adj_ksp) {
@@ -1039,7 +1045,19 @@ int lg_problem_adjoint(lg_env *env, lg_problem *p, const double *rhs, double *la
     }
     ksp = p->adj_ksp;
   }
-  if (!ksp) { lg_seterr(env, "internal error: no factorization for the adjoint"); return 1; }
+  if (!ksp || (!p->nonlinear && !p->matrix_fp && !p->bc_symmetric)) {
+    /* a linear problem's matrix was reassembled since its solve (problem:assemble) */
+    lg_seterr(env, "the problem's matrix changed since its last solve: solve it again first");
+    return 1;
+  }
+  *out = ksp;
+  return 0;
+}
+
+static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, double *sol, int transpose) {
+  KSP ksp;
+  if (jacobian_solver(env, p, &ksp)) return 1;
+  double *lam = sol;
   Vec r, l;
   PCHK(VecDuplicate(p->b, &r), "VecDuplicate");
   PCHK(VecDuplicate(p->b, &l), "VecDuplicate");
@@ -1047,7 +1065,7 @@ int lg_problem_adjoint(lg_env *env, lg_problem *p, const double *rhs, double *la
   VecGetArray(r, &a);
   memcpy(a, rhs, sizeof(double) * (size_t)p->N);
   VecRestoreArray(r, &a);
-  PetscErrorCode ierr = KSPSolveTranspose(ksp, r, l);
+  PetscErrorCode ierr = transpose ? KSPSolveTranspose(ksp, r, l) : KSPSolve(ksp, r, l);
   KSPConvergedReason reason = KSP_CONVERGED_ITS;
   if (!ierr) KSPGetConvergedReason(ksp, &reason);
   if (!ierr && reason >= 0) {
@@ -1058,11 +1076,20 @@ int lg_problem_adjoint(lg_env *env, lg_problem *p, const double *rhs, double *la
   }
   VecDestroy(&r);
   VecDestroy(&l);
-  if (ierr) return petsc_fail(env, ierr, "the adjoint solve");
-  if (reason < 0) { lg_seterr(env, "the adjoint solve failed: %s", ksp_reason_name(reason)); return 1; }
+  const char *what = transpose ? "the adjoint solve" : "the sensitivity solve";
+  if (ierr) return petsc_fail(env, ierr, what);
+  if (reason < 0) { lg_seterr(env, "%s failed: %s", what, ksp_reason_name(reason)); return 1; }
   for (int i = 0; i < p->N; i++)
-    if (!isfinite(lam[i])) { lg_seterr(env, "the adjoint solve produced non-finite values"); return 1; }
+    if (!isfinite(lam[i])) { lg_seterr(env, "%s produced non-finite values", what); return 1; }
   return 0;
+}
+
+int lg_problem_adjoint(lg_env *env, lg_problem *p, const double *rhs, double *lam) {
+  return solve_with_jacobian(env, p, rhs, lam, 1);
+}
+
+int lg_problem_tangent(lg_env *env, lg_problem *p, const double *rhs, double *du) {
+  return solve_with_jacobian(env, p, rhs, du, 0);
 }
 
 static int prepare_matrix(lg_env *env, lg_problem *p) {

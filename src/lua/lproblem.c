@@ -263,6 +263,31 @@ static int prob_solve(lua_State *L) {
   return lua_gettop(L) - base;
 }
 
+/* problem:sensitivity(a): du/da at the last solution, a discrete function per unknown */
+static int prob_sensitivity(lua_State *L) {
+  const char *fn = "problem:sensitivity";
+  ud_prob *u = luaL_checkudata(L, 1, MT_PROB);
+  ud_expr *ue = luaL_testudata(L, 2, MT_EXPR);
+  if (!ue || expr_of(L, ue)->kind != E_PARAM) return typeerror(L, fn, 2, "a parameter (lg.parameter)");
+  lg_env *env = get_env(L);
+  int N = lg_problem_size(u->p);
+  double *du = lua_newuserdatauv(L, sizeof(double) * ((size_t)N + 1), 0);
+  if (lg_sensitivity(env, u->p, ue->e->i0, du)) return lgerror(L, fn, env);
+  lg_field_info fi[KER_MAXFIELD];
+  int nf = lg_problem_fields(u->p, fi);
+  lg_function *out[KER_MAXFIELD];
+  for (int a = 0; a < nf; a++) {
+    expr_func_info *info = expr_func_get(env->c, fi[a].unknown);
+    char nm[80];
+    snprintf(nm, sizeof nm, "d%s_d%s", info ? info->name : "u", expr_param_name(env->c, ue->e->i0));
+    out[a] = lg_function_new(env, lg_problem_mesh(u->p), fi[a].dm->degree, nm);
+    if (!out[a]) return lgerror(L, fn, env);
+    memcpy(out[a]->x, du + fi[a].offset, sizeof(double) * (size_t)fi[a].dm->ndof);
+  }
+  push_functions_of(L, 1, out, nf);
+  return nf;
+}
+
 static int prob_matrix(lua_State *L) {
   const char *fn = "problem:matrix";
   ud_prob *u = luaL_checkudata(L, 1, MT_PROB);
@@ -346,7 +371,7 @@ void lg_lua_problem_register(lua_State *L) {
   lua_pop(L, 1);
   static const luaL_Reg prob_mm[] = {{"__gc", prob_gc}, {NULL, NULL}};
   static const luaL_Reg prob_methods[] = {{"solve", prob_solve}, {"matrix", prob_matrix}, {"assemble", prob_assemble},
-                                          {"size", prob_size}, {NULL, NULL}};
+                                          {"size", prob_size}, {"sensitivity", prob_sensitivity}, {NULL, NULL}};
   new_mt(L, MT_PROB, prob_mm, prob_methods);
 }
 

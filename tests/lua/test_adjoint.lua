@@ -99,6 +99,34 @@ local st, ut, vt, ft = poisson(tm, P1, P1)
 rate_ok(lg.taylor_test(lg.reduced_functional{problem = st, functional = lg.functional(lg.integral(tm:cells(), (ut - lg.z)^2)), control = ft},
                        lg.x, lg.y*lg.z), "tetrahedra")
 
+-- sensitivities: du/da by one tangent-linear solve, against a central difference of the state
+-- (a new 2D mesh: lg.grad takes the dimension of the last mesh made, the box above)
+local smesh = lg.mesh.rectangle{nx = 12}
+local b = lg.parameter("b", 0.7)
+for _, mk in ipairs{lg.linear_problem, lg.nonlinear_problem} do
+  local nl = mk == lg.nonlinear_problem
+  local k = nl and (1 + b*u^2) or (1 + b^2)
+  local sp = mk{mesh = smesh, eqn = lg.integral(smesh:cells(), k*lg.dot(lg.grad(v), lg.grad(u)) - lg.exp(b*lg.x)*v)
+                                 + lg.integral(smesh:boundary("top"), -b*v),
+                bc = lg.essential_bc(smesh:boundary("left", "right", "bottom"), v*u), test = v, unknown = u}
+  b:set(0.7)
+  sp:solve()
+  local du = sp:sensitivity(b)
+  local hb = 1e-5
+  b:set(0.7 + hb); local up = sp:solve()
+  b:set(0.7 - hb); local um_ = sp:solve()
+  b:set(0.7)
+  local fdu = lg.interpolate(P1, smesh, (up - um_) / (2*hb))
+  local err = math.sqrt(lg.integrate(smesh, (du - fdu)^2)) / math.sqrt(lg.integrate(smesh, fdu^2))
+  T.check(err < 1e-6, "%s sensitivity du/db vs central difference: relative L2 %g", nl and "nonlinear" or "linear", err)
+end
+T.fails(function() return state:sensitivity(3) end, "problem:sensitivity: argument 2 must be a parameter")
+local bd = lg.parameter("bd", 1)
+local sbd = lg.linear_problem{mesh = smesh, eqn = lg.integral(smesh:cells(), lg.dot(lg.grad(v), lg.grad(u))),
+                              bc = lg.essential_bc(smesh:boundary(), v*(u - bd)), test = v, unknown = u}
+sbd:solve()
+T.fails(function() return sbd:sensitivity(bd) end, "appears in an essential boundary condition")
+
 -- minimization (TAO L-BFGS in the L2 inner product): the Poisson mother problem at 32^2
 local mesh32 = lg.mesh.rectangle{nx = 32}
 local sm, um, vm, fm = poisson(mesh32, P1, P1)

@@ -182,6 +182,9 @@ int lg_reduced_value(lg_env *env, lg_reduced *rf, double *J);
 /* the gradient dj/dm_i as dual vectors (g[i] has lg_reduced_control_size values): one
  * adjoint solve with the state's factorization */
 int lg_reduced_gradient(lg_env *env, lg_reduced *rf, double **g);
+/* the Hessian action H dm (dual vectors, like the gradient) at the current controls: a
+ * tangent-linear and a second-order adjoint solve with the state's factorization */
+int lg_reduced_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out);
 /* the Riesz representative of a dual vector of control i: none, L2 (mass) or H1 */
 int lg_reduced_riesz(lg_env *env, lg_reduced *rf, int i, int kind, const double *dual, double *out);
 /* the Gram matrix problem of field control i (L2: mass; H1: mass + stiffness) */
@@ -193,7 +196,8 @@ int lg_sensitivity(lg_env *env, lg_problem *p, int param, double *du);
 
 /* ---- minimization through TAO (optimize.c) */
 typedef struct {
-  const char *method;          /* "lmvm" (unbounded) or "blmvm" (bounds) */
+  const char *method;          /* quasi-Newton "lmvm", "blmvm" (bounds); Newton-Krylov with Hessian
+                                * actions "nls", "ntr", "bnls", "bntr" (bounds) */
   int maxit;                   /* 0: TAO's default */
   double gatol, grtol, gttol;  /* TAO's: |g| < gatol, |g|/|J| < grtol, |g|/|g0| < gttol; < 0: TAO's defaults */
   int monitor;                 /* a line per iteration on stdout */
@@ -202,7 +206,7 @@ typedef struct {
   const char *series;          /* a .pvd of the field controls per iteration, or NULL */
 } lg_minimize_opts;
 typedef struct {
-  int iterations, evaluations;
+  int iterations, evaluations, hessian_products;
   double J, gnorm;
   char reason[64];
   int converged;

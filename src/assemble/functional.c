@@ -161,6 +161,13 @@ struct lg_reduced {
   lg_problem *riesz[LG_MAXCONTROL][2]; /* L2 and H1 Gram matrices of field controls */
   double *rhs, *lamv;
   int solved;                       /* the state is the one of the current controls */
+  int grad_fresh;                   /* the adjoint is the one of the current state */
+  /* Hessian actions (built on first use): directions, tangent, second-order adjoint */
+  int hess_ready;
+  lg_function *dmf[LG_MAXCONTROL];  /* the direction of a field control */
+  int dpar[LG_MAXCONTROL];          /* the direction of a parameter control: a scratch parameter */
+  lg_function *du[KER_MAXFIELD], *dlam[KER_MAXFIELD];
+  lg_form_kernels *tan_rhs[KER_MAXFIELD], *soa_rhs[KER_MAXFIELD], *hD[LG_MAXCONTROL], *hG[LG_MAXCONTROL];
 };
 
 static int form_uses(lg_env *env, const form *F, int func) {
@@ -193,8 +200,26 @@ static form *form_param_derivative(lg_env *env, const form *F, int param) {
   return D;
 }
 
+static void free_scratch(lg_env *env, lg_function *f) {
+  if (!f) return;
+  expr_func_info *fi = expr_func_get(env->c, f->fid);
+  if (fi) fi->user = NULL;
+  lg_function_free(f);
+}
+
 void lg_reduced_free(lg_reduced *rf) {
   if (!rf) return;
+  for (int a = 0; a < rf->nf; a++) {
+    lg_form_kernels_free(rf->tan_rhs[a]);
+    lg_form_kernels_free(rf->soa_rhs[a]);
+    free_scratch(rf->env, rf->du[a]);
+    free_scratch(rf->env, rf->dlam[a]);
+  }
+  for (int i = 0; i < rf->nc; i++) {
+    lg_form_kernels_free(rf->hD[i]);
+    lg_form_kernels_free(rf->hG[i]);
+    free_scratch(rf->env, rf->dmf[i]);
+  }
   lg_form_kernels_free(rf->Jval);
   for (int a = 0; a < rf->nf; a++) {
     lg_form_kernels_free(rf->dJdu[a]);
@@ -328,7 +353,7 @@ fail:
 int lg_reduced_ncontrols(const lg_reduced *rf) { return rf->nc; }
 const lg_control *lg_reduced_control(const lg_reduced *rf, int i) { return &rf->c[i]; }
 lg_problem *lg_reduced_problem(const lg_reduced *rf) { return rf->p; }
-void lg_reduced_changed(lg_reduced *rf) { rf->solved = 0; }
+void lg_reduced_changed(lg_reduced *rf) { rf->solved = 0; rf->grad_fresh = 0; }
 
 int lg_reduced_control_size(const lg_reduced *rf, int i) {
   return rf->c[i].kind == LG_CONTROL_FIELD ? rf->c[i].f->dm->ndof : 1;
@@ -381,6 +406,7 @@ int lg_reduced_gradient(lg_env *env, lg_reduced *rf, double **g) {
     memcpy(rf->lam[a]->x, lam0 + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
   free(rows);
   free(lam0);
+  rf->grad_fresh = 1;
   /* dj/dm = dJ/dm + lam^T dR/dm */
   for (int i = 0; i < rf->nc; i++) {
     int n = lg_reduced_control_size(rf, i);
@@ -468,5 +494,136 @@ int lg_sensitivity(lg_env *env, lg_problem *p, int param, double *du) {
     }
   }
   free(rhs);
+  return rc;
+}
+
+/* ---------------------------------------------------------------- Hessian actions */
+
+/* the directional derivative of an integrand in the control directions dm */
+static expr *control_direction(lg_env *env, lg_reduced *rf, expr *f) {
+  expr *sum = expr_num(env->c, 0);
+  for (int i = 0; i < rf->nc && sum; i++) {
+    const lg_control *c = &rf->c[i];
+    expr *d = c->kind == LG_CONTROL_FIELD
+                  ? form_directional(env->c, f, c->f->fid, rf->dmf[i]->fid)
+                  : expr_mul(env->c, expr_diff(env->c, f, expr_param(env->c, c->param)), expr_param(env->c, rf->dpar[i]));
+    sum = expr_add(env->c, sum, d);
+  }
+  return sum;
+}
+
+/* the kernels of a Hessian action, once */
+static int hessian_setup(lg_env *env, lg_reduced *rf) {
+  if (rf->hess_ready) return 0;
+  const form *F = lg_problem_equation(rf->p);
+  for (int i = 0; i < rf->nc; i++) {
+    if (rf->c[i].kind == LG_CONTROL_FIELD) {
+      if (!(rf->dmf[i] = lg_function_new(env, rf->lm, rf->c[i].f->degree, "dm"))) return 1;
+    } else if ((rf->dpar[i] = expr_param_new(env->c, "dm", 0)) < 0) {
+      lg_seterr(env, "out of memory");
+      return 1;
+    }
+  }
+  for (int a = 0; a < rf->nf; a++)
+    if (!(rf->du[a] = lg_function_new(env, rf->lm, rf->fld[a].dm->degree, "du")) ||
+        !(rf->dlam[a] = lg_function_new(env, rf->lm, rf->fld[a].dm->degree, "dlambda")))
+      return 1;
+  /* Fdm: the equation differentiated in the control directions (the tangent's source);
+   * D: the Lagrangian J + lam^T R differentiated in the directions (du, dm);
+   * G: the equation with its tests replaced by the second-order adjoint */
+  form *Fdm = form_new(), *D = form_new(), *G = form_new();
+  int rc = !Fdm || !D || !G;
+  for (int i = 0; !rc && i < F->n; i++) {
+    expr *e = control_direction(env, rf, F->t[i].integrand);
+    expr *g = F->t[i].integrand;
+    for (int a = 0; a < rf->nf && g; a++) g = form_replace_function(env->c, g, rf->fld[a].test, rf->dlam[a]->fid);
+    rc = !e || !g || form_add_term(Fdm, &F->t[i].reg, e, F->t[i].order) || form_add_term(G, &F->t[i].reg, g, F->t[i].order);
+  }
+  const form *parts[2] = {rf->J, rf->L};
+  for (int k = 0; k < 2 && !rc; k++)
+    for (int i = 0; !rc && i < parts[k]->n; i++) {
+      expr *l = parts[k]->t[i].integrand;
+      expr *e = control_direction(env, rf, l);
+      for (int a = 0; a < rf->nf && e; a++) e = expr_add(env->c, e, form_directional(env->c, l, rf->fld[a].unknown, rf->du[a]->fid));
+      rc = !e || form_add_term(D, &parts[k]->t[i].reg, e, parts[k]->t[i].order);
+    }
+  if (rc) lg_seterr(env, "%s", expr_error(env->c)[0] ? expr_error(env->c) : "out of memory");
+  for (int a = 0; a < rf->nf && !rc; a++) {
+    if (!(rf->tan_rhs[a] = lg_form_kernels_new(env, rf->lm, Fdm, rf->fld[a].test, rf->fld[a].dm))) rc = 1;
+    else if (!(rf->soa_rhs[a] = lg_form_kernels_new(env, rf->lm, D, rf->fld[a].unknown, rf->fld[a].dm))) rc = 1;
+  }
+  for (int i = 0; i < rf->nc && !rc; i++) {
+    if (rf->c[i].kind == LG_CONTROL_FIELD) {
+      rf->hD[i] = lg_form_kernels_new(env, rf->lm, D, rf->c[i].f->fid, rf->c[i].f->dm);
+      rf->hG[i] = rf->hD[i] ? lg_form_kernels_new(env, rf->lm, G, rf->c[i].f->fid, rf->c[i].f->dm) : NULL;
+    } else {
+      form *dD = form_param_derivative(env, D, rf->c[i].param), *dG = form_param_derivative(env, G, rf->c[i].param);
+      rf->hD[i] = dD ? lg_form_kernels_new(env, rf->lm, dD, -1, NULL) : NULL;
+      rf->hG[i] = dG && rf->hD[i] ? lg_form_kernels_new(env, rf->lm, dG, -1, NULL) : NULL;
+      if (!dD || !dG) lg_seterr(env, "%s", expr_error(env->c));
+      form_free(dD);
+      form_free(dG);
+    }
+    if (!rf->hD[i] || !rf->hG[i]) rc = 1;
+  }
+  form_free(Fdm);
+  form_free(D);
+  form_free(G);
+  if (!rc) rf->hess_ready = 1;
+  return rc;
+}
+
+int lg_reduced_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
+  if (hessian_setup(env, rf)) return 1;
+  if (!rf->grad_fresh || !rf->solved) { /* the first-order adjoint at the current controls */
+    double *g[LG_MAXCONTROL];
+    int ok = 1;
+    for (int i = 0; i < rf->nc; i++) ok &= (g[i] = malloc(sizeof(double) * ((size_t)lg_reduced_control_size(rf, i) + 1))) != NULL;
+    int rc = !ok || lg_reduced_gradient(env, rf, g);
+    if (!ok) lg_seterr(env, "out of memory");
+    for (int i = 0; i < rf->nc; i++) free(g[i]);
+    if (rc) return 1;
+  }
+  for (int i = 0; i < rf->nc; i++) {
+    if (rf->c[i].kind == LG_CONTROL_FIELD) memcpy(rf->dmf[i]->x, dm[i], sizeof(double) * (size_t)rf->c[i].f->dm->ndof);
+    else expr_param_values(env->c)[rf->dpar[i]] = dm[i][0];
+  }
+  coef_binding st[KER_MAXFIELD];
+  int ns = lg_problem_bind_state(rf->p, st), N = lg_problem_size(rf->p);
+  int nbc = lg_problem_essential_rows(rf->p, NULL, 0);
+  int *rows = malloc(sizeof(int) * (size_t)(nbc + 1));
+  double *v = malloc(sizeof(double) * ((size_t)N + 1));
+  int rc = !rows || !v;
+  if (rc) lg_seterr(env, "out of memory");
+  else lg_problem_essential_rows(rf->p, rows, nbc);
+  /* the tangent: (dR/du) du = -(dR/dm) dm, zero on the essential rows */
+  for (int a = 0; a < rf->nf && !rc; a++) rc = lg_form_kernels_eval(env, rf->lm, rf->tan_rhs[a], ns, st, rf->rhs + rf->fld[a].offset);
+  if (!rc) {
+    for (int i = 0; i < N; i++) rf->rhs[i] = -rf->rhs[i];
+    for (int i = 0; i < nbc; i++) rf->rhs[rows[i]] = 0;
+    rc = lg_problem_tangent(env, rf->p, rf->rhs, v);
+  }
+  for (int a = 0; a < rf->nf && !rc; a++) memcpy(rf->du[a]->x, v + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
+  /* the second-order adjoint: (dR/du)^T dlam = -(L_uu du + L_um dm) */
+  for (int a = 0; a < rf->nf && !rc; a++) rc = lg_form_kernels_eval(env, rf->lm, rf->soa_rhs[a], ns, st, rf->rhs + rf->fld[a].offset);
+  if (!rc) {
+    for (int i = 0; i < N; i++) rf->rhs[i] = -rf->rhs[i];
+    rc = lg_problem_adjoint(env, rf->p, rf->rhs, v);
+  }
+  if (!rc) {
+    for (int i = 0; i < nbc; i++) v[rows[i]] = 0; /* it enters the equation as a test function */
+    for (int a = 0; a < rf->nf; a++) memcpy(rf->dlam[a]->x, v + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
+  }
+  /* H dm = L_mu du + L_mm dm + (dR/dm)^T dlam */
+  for (int i = 0; i < rf->nc && !rc; i++) {
+    int n = lg_reduced_control_size(rf, i);
+    double *tmp = malloc(sizeof(double) * ((size_t)n + 1));
+    rc = !tmp || lg_form_kernels_eval(env, rf->lm, rf->hD[i], ns, st, out[i]) || lg_form_kernels_eval(env, rf->lm, rf->hG[i], ns, st, tmp);
+    if (!rc)
+      for (int k = 0; k < n; k++) out[i][k] += tmp[k];
+    free(tmp);
+  }
+  free(rows);
+  free(v);
   return rc;
 }

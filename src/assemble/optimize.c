@@ -10,7 +10,12 @@
  * TAO gets, g_i / sqrt(d_i), measures in the dual norm. TAO's own L-BFGS scaling then works
  * as designed (a fixed mass-matrix initial Hessian, TaoLMVMSetH0, is not rescaled by PETSc and
  * needed over 2000 iterations on the Poisson mother problem at alpha = 1e-6, against 150 to
- * 300 here). Bounds scale the same way. Every -tao_* option applies (TaoSetFromOptions). */
+ * 300 here). Bounds scale the same way. Every -tao_* option applies (TaoSetFromOptions).
+ *
+ * The Newton methods (nls: line search, ntr: trust region; bnls/bntr with bounds) get the
+ * Hessian as a matrix-free operator in the same variables, S^-1 H S^-1 with S = diag(sqrt(d)):
+ * each product is one tangent-linear and one second-order adjoint solve at the point where
+ * TAO last asked for the Hessian (lg_reduced_hessian). */
 #include "assemble.h"
 
 #include <math.h>
@@ -26,7 +31,9 @@ typedef struct {
   int nc, off[LG_MAXCONTROL + 1];
   double *g[LG_MAXCONTROL];
   double *sq;       /* sqrt(d): x = sq m */
-  int failed, evals;
+  int failed, evals, hess_failed, hmults;
+  double *xh;       /* the point of the Hessian (TAO's variables) */
+  double *dm[LG_MAXCONTROL], *hd[LG_MAXCONTROL];
   int nstep;
   double *times;
   char **files;
@@ -82,6 +89,44 @@ static PetscErrorCode objective_gradient(Tao tao, Vec X, PetscReal *f, Vec G, vo
   for (int i = 0; i < C->nc; i++)
     for (int k = 0; k < lg_reduced_control_size(C->rf, i); k++) g[C->off[i] + k] = C->g[i][k] / C->sq[C->off[i] + k];
   PetscCall(VecRestoreArray(G, &g));
+  return 0;
+}
+
+/* TAO asks for the Hessian at X: remember the point; the products come later */
+static PetscErrorCode hessian_at(Tao tao, Vec X, Mat H, Mat Hpre, void *ud) {
+  opt_ctx *C = ud;
+  (void)tao; (void)H; (void)Hpre;
+  const PetscScalar *x;
+  PetscCall(VecGetArrayRead(X, &x));
+  memcpy(C->xh, x, sizeof(double) * (size_t)C->off[C->nc]);
+  PetscCall(VecRestoreArrayRead(X, &x));
+  return 0;
+}
+
+/* y = S^-1 H(m) S^-1 v at the point of the Hessian */
+static PetscErrorCode hessian_mult(Mat H, Vec V, Vec Y) {
+  opt_ctx *C;
+  PetscCall(MatShellGetContext(H, &C));
+  int n = C->off[C->nc];
+  /* the controls may have moved since (a line search): back to the Hessian's point */
+  double *cur = C->hd[0]; /* scratch, overwritten below */
+  from_controls(C, cur);
+  if (memcmp(cur, C->xh, sizeof(double) * (size_t)n)) to_controls(C, C->xh);
+  const PetscScalar *v;
+  PetscCall(VecGetArrayRead(V, &v));
+  for (int i = 0; i < C->nc; i++)
+    for (int k = 0; k < lg_reduced_control_size(C->rf, i); k++) C->dm[i][k] = v[C->off[i] + k] / C->sq[C->off[i] + k];
+  PetscCall(VecRestoreArrayRead(V, &v));
+  C->hmults++;
+  if (lg_reduced_hessian(C->env, C->rf, C->dm, C->hd)) {
+    C->failed = C->hess_failed = 1;
+    return PETSC_ERR_LIB; /* stops TAO: the message is in env */
+  }
+  PetscScalar *y;
+  PetscCall(VecGetArray(Y, &y));
+  for (int i = 0; i < C->nc; i++)
+    for (int k = 0; k < lg_reduced_control_size(C->rf, i); k++) y[C->off[i] + k] = C->hd[i][k] / C->sq[C->off[i] + k];
+  PetscCall(VecRestoreArray(Y, &y));
   return 0;
 }
 
@@ -145,20 +190,32 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
     n += lg_reduced_control_size(rf, i);
   }
   C.off[C.nc] = n;
-  int bounded = !strcmp(o->method, "blmvm");
-  if (strcmp(o->method, "lmvm") && !bounded) {
-    lg_seterr(env, "method \"%s\" is not available yet (lmvm, blmvm)", o->method);
+  static const struct { const char *name; TaoType type; int bounded, newton; } methods[] = {
+      {"lmvm", TAOLMVM, 0, 0}, {"blmvm", TAOBLMVM, 1, 0}, {"nls", TAONLS, 0, 1},
+      {"ntr", TAONTR, 0, 1},   {"bnls", TAOBNLS, 1, 1},   {"bntr", TAOBNTR, 1, 1}};
+  int mi = -1;
+  for (int i = 0; i < (int)(sizeof methods / sizeof methods[0]); i++)
+    if (!strcmp(o->method, methods[i].name)) mi = i;
+  if (mi < 0) {
+    lg_seterr(env, "unknown method \"%s\" (lmvm, blmvm, nls, ntr, bnls, bntr)", o->method);
     return 1;
   }
+  int bounded = methods[mi].bounded, newton = methods[mi].newton;
   int any_bounds = 0;
   for (int i = 0; i < C.nc; i++) any_bounds |= o->lower[i] || o->upper[i];
-  if (any_bounds && !bounded) { lg_seterr(env, "bounds need method = \"blmvm\""); return 1; }
+  if (any_bounds && !bounded) { lg_seterr(env, "bounds need a bounded method (blmvm, bnls, bntr)"); return 1; }
   for (int i = 0; i < C.nc; i++) {
-    C.g[i] = malloc(sizeof(double) * ((size_t)lg_reduced_control_size(rf, i) + 1));
-    if (!C.g[i]) { lg_seterr(env, "out of memory"); rc = 1; goto done_early; }
+    size_t sz = sizeof(double) * ((size_t)lg_reduced_control_size(rf, i) + 1);
+    C.g[i] = malloc(sz);
+    C.dm[i] = newton ? malloc(sz) : NULL;
+    /* hd[0] doubles as a scratch of all n values in hessian_mult */
+    C.hd[i] = newton ? malloc(i ? sz : sizeof(double) * ((size_t)n + 1)) : NULL;
+    if (!C.g[i] || (newton && (!C.dm[i] || !C.hd[i]))) { lg_seterr(env, "out of memory"); rc = 1; goto done_early; }
   }
+  if (newton && !(C.xh = malloc(sizeof(double) * ((size_t)n + 1)))) { lg_seterr(env, "out of memory"); rc = 1; goto done_early; }
   Tao tao = NULL;
   Vec X = NULL, XL = NULL, XU = NULL;
+  Mat H = NULL;
   /* the scaling: sqrt of the HRZ-lumped mass of each field control, 1 for parameters */
   C.sq = malloc(sizeof(double) * ((size_t)n + 1));
   if (!C.sq) { lg_seterr(env, "out of memory"); rc = 1; goto done; }
@@ -198,9 +255,29 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
   from_controls(&C, x);
   TCHK(VecRestoreArray(X, &x), "VecRestoreArray");
   TCHK(TaoCreate(PETSC_COMM_SELF, &tao), "TaoCreate");
-  TCHK(TaoSetType(tao, bounded ? TAOBLMVM : TAOLMVM), "TaoSetType");
+  TCHK(TaoSetType(tao, methods[mi].type), "TaoSetType");
   TCHK(TaoSetSolution(tao, X), "TaoSetSolution");
   TCHK(TaoSetObjectiveAndGradient(tao, NULL, objective_gradient, &C), "TaoSetObjectiveAndGradient");
+  if (newton) {
+    TCHK(MatCreateShell(PETSC_COMM_SELF, n, n, n, n, &C, &H), "MatCreateShell");
+    TCHK(MatShellSetOperation(H, MATOP_MULT, (void (*)(void))hessian_mult), "MatShellSetOperation");
+    TCHK(MatSetOption(H, MAT_SYMMETRIC, PETSC_TRUE), "MatSetOption");
+    TCHK(TaoSetHessian(tao, H, H, hessian_at, &C), "TaoSetHessian");
+    /* the Newton systems' Krylov solver answers to -tao_ksp_* and -tao_pc_* (not the state's
+     * -ksp_* and -pc_*); no preconditioner by default (the operator is matrix-free; in the
+     * scaled variables CG needs about 70 products on the Poisson mother problem at every
+     * resolution from 16^2 to 64^2, and -tao_pc_type lmvm did not lower that) */
+    KSP ksp;
+    TCHK(TaoGetKSP(tao, &ksp), "TaoGetKSP");
+    if (ksp) {
+      TCHK(KSPSetOptionsPrefix(ksp, "tao_"), "KSPSetOptionsPrefix");
+      PetscBool set = PETSC_FALSE;
+      PetscOptionsHasName(NULL, NULL, "-tao_pc_type", &set);
+      PC pc;
+      TCHK(KSPGetPC(ksp, &pc), "KSPGetPC");
+      if (!set) TCHK(PCSetType(pc, PCNONE), "PCSetType");
+    }
+  }
   if (bounded) {
     TCHK(VecDuplicate(X, &XL), "VecDuplicate");
     TCHK(VecDuplicate(X, &XU), "VecDuplicate");
@@ -220,7 +297,7 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
                         o->gttol >= 0 ? o->gttol : PETSC_DEFAULT), "TaoSetTolerances");
   if (o->maxit > 0) TCHK(TaoSetMaximumIterations(tao, o->maxit), "TaoSetMaximumIterations");
   TCHK(TaoSetMonitor(tao, monitor, &C, NULL), "TaoSetMonitor");
-  {
+  if (!newton) {
     /* lugal's defaults for the quasi-Newton matrix, unless the user chose: a scalar
      * (Shanno-Phua) initial scaling and 10 updates. PETSc 3.18's diagonal scaling stalled on
      * the Poisson mother problem (alpha = 1e-6: over 2000 iterations; these: 149 at 32^2,
@@ -246,6 +323,7 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
     info->J = f;
     info->gnorm = gnorm;
     info->evaluations = C.evals;
+    info->hessian_products = C.hmults;
     snprintf(info->reason, sizeof info->reason, "%s", TaoConvergedReasons[reason]);
     info->converged = reason > 0;
     /* the controls hold the solution TAO returns (not its last trial point) */
@@ -255,6 +333,19 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
     VecGetArrayRead(S, &xs);
     to_controls(&C, xs);
     VecRestoreArrayRead(S, &xs);
+    if (ierr && C.hess_failed) {
+      char why[LG_ERRLEN];
+      snprintf(why, sizeof why, "%s", env->err);
+      lg_seterr(env, "the optimization failed at iteration %d (a Hessian product): %s", (int)it, why);
+      rc = 1;
+      goto done;
+    }
+    if (ierr && newton && ierr == PETSC_ERR_SUP) {
+      lg_seterr(env, "the optimization failed: the Hessian is matrix-free (products only), so -tao_pc_type must be none "
+                     "or lmvm, and -tao_ksp_type a Krylov method (stcg, nash, gltr, cg)");
+      rc = 1;
+      goto done;
+    }
     if (ierr) { rc = tao_fail(env, ierr, "the optimization"); goto done; }
     if (C.failed && (it == 0 || !isfinite(f))) {
       char why[LG_ERRLEN];
@@ -274,11 +365,13 @@ done:
   if (X) VecDestroy(&X);
   if (XL) VecDestroy(&XL);
   if (XU) VecDestroy(&XU);
+  if (H) MatDestroy(&H);
   free(C.sq);
   for (int i = 0; i < C.nstep; i++) free(C.files[i]);
   free(C.files);
   free(C.times);
 done_early:
-  for (int i = 0; i < C.nc; i++) free(C.g[i]);
+  for (int i = 0; i < C.nc; i++) { free(C.g[i]); free(C.dm[i]); free(C.hd[i]); }
+  free(C.xh);
   return rc;
 }

@@ -234,6 +234,9 @@ void coef_table_free(coef_table *t);
  * coefficients of a linear form in w's space: derivatives of functionals, adjoint
  * right-hand sides, design derivatives) */
 int form_gradient_table(expr_ctx *c, expr *f, int func, coef_table *out);
+/* the directional derivative d/de f(w + e dw) at e = 0: sum over the leaves D^a w of f of
+ * df/d(D^a w) * D^a dw (dw a function too: a tangent or a direction) */
+expr *form_directional(expr_ctx *c, expr *f, int func, int dir);
 /* f with every leaf D^a from_c replaced by D^a to_c (a test function by an adjoint) */
 expr *form_replace_function(expr_ctx *c, expr *f, int from, int to);
 

@@ -172,3 +172,22 @@ expr *form_replace_function(expr_ctx *c, expr *f, int from, int to) {
   }
   return n ? expr_subs(c, f, n, leaf, img) : f;
 }
+
+expr *form_directional(expr_ctx *c, expr *f, int func, int dir) {
+  f = expr_canon(c, f);
+  if (!f) return NULL;
+  expr *leaf[MAXLEAF];
+  int n = expr_collect_fields(c, 1, &f, func, MAXLEAF, leaf);
+  if (n > MAXLEAF) { expr_set_error(c, "too many leaves of one function in an integrand"); return NULL; }
+  expr **terms = malloc(sizeof(expr *) * (size_t)(n + 1));
+  if (!terms) { expr_set_error(c, "out of memory"); return NULL; }
+  for (int i = 0; i < n; i++) {
+    expr *d = expr_diff(c, f, leaf[i]);
+    expr *l = expr_field(c, dir, leaf[i]->i1, leaf[i]->alpha);
+    terms[i] = d && l ? expr_mul(c, d, l) : NULL;
+    if (!terms[i]) { free(terms); return NULL; }
+  }
+  expr *r = expr_sum_n(c, n, terms);
+  free(terms);
+  return r;
+}

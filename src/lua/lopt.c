@@ -210,45 +210,102 @@ static void raw_gradient(lua_State *L, lg_reduced *rf, double **g, const char *f
   if (lg_reduced_gradient(env, rf, g)) lgerror(L, fn, env);
 }
 
-/* dj(m; dm): the gradient paired with a direction given like the controls */
-static double pair(lua_State *L, lg_reduced *rf, double **g, int idx, const char *fn) {
+/* a direction for the controls from the value at idx (given like the controls: one value, or
+ * a table of one per control): vectors in userdata buffers left on the stack */
+static void read_direction(lua_State *L, lg_reduced *rf, int idx, double **dm, const char *fn) {
   int nc = lg_reduced_ncontrols(rf);
-  double s = 0;
+  if (nc > 1 && (!lua_istable(L, idx) || luaL_testudata(L, idx, MT_EXPR)))
+    typeerror(L, fn, idx, "a direction: a table with one value per control");
+  if (nc > 1 && luaL_len(L, idx) != nc) luaL_error(L, "%s: the direction needs %d values (one per control), got %d", fn, nc, (int)luaL_len(L, idx));
+  lg_env *env = get_env(L);
   for (int i = 0; i < nc; i++) {
-    int k = nc == 1 ? idx : (lua_geti(L, idx, i + 1), lua_gettop(L));
+    int n = lg_reduced_control_size(rf, i);
     const lg_control *c = lg_reduced_control(rf, i);
+    dm[i] = lua_newuserdatauv(L, sizeof(double) * ((size_t)n + 1), 0);
+    int k = nc == 1 ? idx : (lua_geti(L, idx, i + 1), lua_gettop(L));
     if (c->kind == LG_CONTROL_PARAM) {
       int isnum;
-      double d = lua_tonumberx(L, k, &isnum);
-      if (!isnum) luaL_error(L, "%s: the direction of control %d (a parameter) must be a number", fn, i + 1);
-      s += g[i][0] * d;
+      dm[i][0] = lua_tonumberx(L, k, &isnum);
+      if (!isnum) luaL_error(L, "%s: the direction of control %d (a parameter) must be a number, got %s", fn, i + 1, luaL_typename(L, k));
+      if (!isfinite(dm[i][0])) luaL_error(L, "%s: the direction of control %d is not finite", fn, i + 1);
     } else {
       ud_func *df = luaL_testudata(L, k, MT_FUNC);
-      const double *dv;
-      double *tmp = NULL;
       if (df) {
         if (df->f->mesh != c->f->mesh || df->f->degree != c->f->degree)
-          luaL_error(L, "%s: the direction of control %d must be a discrete function of its basis and mesh", fn, i + 1);
-        dv = df->f->x;
+          luaL_error(L, "%s: the direction of control %d must be a discrete function of its basis and mesh (P%d)", fn, i + 1,
+                     c->f->degree);
+        memcpy(dm[i], df->f->x, sizeof(double) * (size_t)n);
       } else { /* an expression: interpolate into a scratch function of the control's space */
-        lg_env *env = get_env(L);
-        expr *e = check_expr(L, k, fn);
+        int ok;
+        expr *e = to_expr_opt(L, k, &ok);
+        if (!ok) typeerror(L, fn, k, "a direction: a discrete function, an expression or a number");
         lg_function *t = lg_function_new(env, c->f->mesh, c->f->degree, "dm");
         if (!t) lgerror(L, fn, env);
-        if (lg_interpolate(env, t, e)) { lg_function_free(t); lgerror(L, fn, env); }
-        tmp = t->x;
-        t->x = NULL;
+        int rc = lg_interpolate(env, t, e);
+        if (!rc) memcpy(dm[i], t->x, sizeof(double) * (size_t)n);
         expr_func_info *fi = expr_func_get(env->c, t->fid);
         if (fi) fi->user = NULL;
         lg_function_free(t);
-        dv = tmp;
+        if (rc) lgerror(L, fn, env);
       }
-      for (int j = 0; j < lg_reduced_control_size(rf, i); j++) s += g[i][j] * dv[j];
-      free(tmp);
     }
-    if (nc > 1) lua_pop(L, 1);
+    if (nc > 1) lua_remove(L, k);
   }
+}
+
+/* sum_i <a_i, b_i> over the controls' vectors */
+static double pair_vectors(lg_reduced *rf, double **a, double **b) {
+  double s = 0;
+  for (int i = 0; i < lg_reduced_ncontrols(rf); i++)
+    for (int j = 0; j < lg_reduced_control_size(rf, i); j++) s += a[i][j] * b[i][j];
   return s;
+}
+
+/* the option 'riesz' of the table at idx (0: none given) */
+static int opt_riesz(lua_State *L, int idx, const char *fn) {
+  if (!idx) return LG_RIESZ_L2;
+  static const char *const keys[] = {"riesz", NULL};
+  check_keys(L, idx, fn, keys);
+  const char *r = opt_str(L, idx, "riesz", "l2", fn);
+  if (!strcmp(r, "l2")) return LG_RIESZ_L2;
+  if (!strcmp(r, "h1")) return LG_RIESZ_H1;
+  if (!strcmp(r, "none")) return LG_RIESZ_NONE;
+  return luaL_error(L, "%s: option 'riesz' must be \"l2\", \"h1\" or \"none\", got \"%s\"", fn, r);
+}
+
+/* is the value at idx an options table (a table with a key 'riesz')? */
+static int is_opts(lua_State *L, int idx) {
+  if (!lua_istable(L, idx) || luaL_testudata(L, idx, MT_EXPR)) return 0;
+  int t = lua_getfield(L, idx, "riesz");
+  lua_pop(L, 1);
+  return t != LUA_TNIL;
+}
+
+/* push dual vectors of the controls as their Riesz representatives: functions named
+ * <prefix>_<control> for field controls, numbers for parameters; returns how many */
+static int push_riesz(lua_State *L, lg_reduced *rf, double **g, int riesz, const char *prefix, const char *fn) {
+  lg_env *env = get_env(L);
+  int nc = lg_reduced_ncontrols(rf);
+  for (int i = 0; i < nc; i++) {
+    const lg_control *c = lg_reduced_control(rf, i);
+    if (c->kind == LG_CONTROL_PARAM) { lua_pushnumber(L, g[i][0]); continue; }
+    expr_func_info *fi = expr_func_get(env->c, c->f->fid);
+    char nm[80];
+    snprintf(nm, sizeof nm, "%s_%s", prefix, fi ? fi->name : "m");
+    lg_function *gf = lg_function_new(env, c->f->mesh, c->f->degree, nm);
+    if (!gf) return lgerror(L, fn, env);
+    push_functions_of(L, 1, &gf, 1);
+    if (lg_reduced_riesz(env, rf, i, riesz, g[i], gf->x)) return lgerror(L, fn, env);
+  }
+  return nc;
+}
+
+/* the Hessian action H dm (dual vectors) into userdata buffers on the stack */
+static void raw_hessian(lua_State *L, lg_reduced *rf, double **dm, double **out, const char *fn) {
+  int nc = lg_reduced_ncontrols(rf);
+  for (int i = 0; i < nc; i++) out[i] = lua_newuserdatauv(L, sizeof(double) * ((size_t)lg_reduced_control_size(rf, i) + 1), 0);
+  lg_env *env = get_env(L);
+  if (lg_reduced_hessian(env, rf, dm, out)) lgerror(L, fn, env);
 }
 
 static int reduced_derivative(lua_State *L) {
@@ -257,47 +314,41 @@ static int reduced_derivative(lua_State *L) {
   if (lua_isnoneornil(L, 2)) return typeerror(L, fn, 2, "a direction (like the controls)");
   set_controls(L, u->rf, 3, fn);
   lua_settop(L, 3);
-  double *g[LG_MAXCONTROL];
+  double *g[LG_MAXCONTROL], *dm[LG_MAXCONTROL];
+  read_direction(L, u->rf, 2, dm, fn);
   raw_gradient(L, u->rf, g, fn);
-  lua_pushnumber(L, pair(L, u->rf, g, 2, fn));
+  lua_pushnumber(L, pair_vectors(u->rf, g, dm));
   return 1;
 }
 
+/* rf:gradient([m][, {riesz=}]) */
 static int reduced_gradient(lua_State *L) {
   const char *fn = "rf:gradient";
   ud_reduced *u = check_reduced(L, 1, fn);
-  int oidx = 0, midx = 2;
-  if (lua_istable(L, 2) && !luaL_testudata(L, 2, MT_EXPR) && lua_getfield(L, 2, "riesz") != LUA_TNIL) { oidx = 2; midx = 0; }
-  else if (lua_istable(L, 2)) lua_pop(L, 1);
+  int oidx = is_opts(L, 2) ? 2 : is_opts(L, 3) ? 3 : 0;
   if (!oidx && lua_istable(L, 3)) oidx = 3;
-  int riesz = LG_RIESZ_L2;
-  if (oidx) {
-    static const char *const keys[] = {"riesz", NULL};
-    check_keys(L, oidx, fn, keys);
-    const char *r = opt_str(L, oidx, "riesz", "l2", fn);
-    if (!strcmp(r, "l2")) riesz = LG_RIESZ_L2;
-    else if (!strcmp(r, "h1")) riesz = LG_RIESZ_H1;
-    else if (!strcmp(r, "none")) riesz = LG_RIESZ_NONE;
-    else return luaL_error(L, "%s: option 'riesz' must be \"l2\", \"h1\" or \"none\", got \"%s\"", fn, r);
-  }
-  if (midx) set_controls(L, u->rf, midx, fn);
+  int riesz = opt_riesz(L, oidx, fn);
+  if (oidx != 2) set_controls(L, u->rf, 2, fn);
   lua_settop(L, 3);
   double *g[LG_MAXCONTROL];
   raw_gradient(L, u->rf, g, fn);
-  lg_env *env = get_env(L);
-  int nc = lg_reduced_ncontrols(u->rf), base = lua_gettop(L);
-  for (int i = 0; i < nc; i++) {
-    const lg_control *c = lg_reduced_control(u->rf, i);
-    if (c->kind == LG_CONTROL_PARAM) { lua_pushnumber(L, g[i][0]); continue; }
-    expr_func_info *fi = expr_func_get(env->c, c->f->fid);
-    char nm[80];
-    snprintf(nm, sizeof nm, "grad_%s", fi ? fi->name : "m");
-    lg_function *gf = lg_function_new(env, c->f->mesh, c->f->degree, nm);
-    if (!gf) return lgerror(L, fn, env);
-    push_functions_of(L, 1, &gf, 1);
-    if (lg_reduced_riesz(env, u->rf, i, riesz, g[i], gf->x)) return lgerror(L, fn, env);
-  }
-  return lua_gettop(L) - base;
+  return push_riesz(L, u->rf, g, riesz, "grad", fn);
+}
+
+/* rf:hessian(dm[, m][, {riesz=}]): the Hessian action H(m) dm, like the gradient */
+static int reduced_hessian(lua_State *L) {
+  const char *fn = "rf:hessian";
+  ud_reduced *u = check_reduced(L, 1, fn);
+  if (lua_isnoneornil(L, 2)) return typeerror(L, fn, 2, "a direction (like the controls)");
+  int oidx = is_opts(L, 3) ? 3 : is_opts(L, 4) ? 4 : 0;
+  if (!oidx && lua_istable(L, 4)) oidx = 4;
+  int riesz = opt_riesz(L, oidx, fn);
+  if (oidx != 3) set_controls(L, u->rf, 3, fn);
+  lua_settop(L, 4);
+  double *dm[LG_MAXCONTROL], *h[LG_MAXCONTROL];
+  read_direction(L, u->rf, 2, dm, fn);
+  raw_hessian(L, u->rf, dm, h, fn);
+  return push_riesz(L, u->rf, h, riesz, "hess", fn);
 }
 
 static int reduced_state(lua_State *L) {
@@ -330,127 +381,119 @@ static int taylor_tostring(lua_State *L) {
   return 1;
 }
 
-/* lg.taylor_test(rf, m, dm[, {steps=4, h=}]): the remainders |j(m + h dm) - j(m)| and
- * |j(m + h dm) - j(m) - h dj(m; dm)| for h, h/2, ...: rates 1 and 2 when the gradient is right */
+/* set the controls to m0 + h dm (h = 0: back to m0) */
+static void move_controls(lg_env *env, lg_reduced *rf, double **m0, double **dm, double h) {
+  for (int i = 0; i < lg_reduced_ncontrols(rf); i++) {
+    const lg_control *c = lg_reduced_control(rf, i);
+    int n = lg_reduced_control_size(rf, i);
+    double *x = c->kind == LG_CONTROL_PARAM ? &expr_param_values(env->c)[c->param] : c->f->x;
+    for (int j = 0; j < n; j++) x[j] = m0[i][j] + h * dm[i][j];
+  }
+  lg_reduced_changed(rf);
+}
+
+/* lg.taylor_test(rf, m, dm[, {steps=4, h=1e-2, hessian=false}]): the remainders
+ * R0 = |j(m + h dm) - j(m)|, R1 = |j(m + h dm) - j(m) - h dj(m; dm)| and, with hessian,
+ * R2 = |... - h^2/2 dm.H(m) dm| for h, h/2, ...: rates 1, 2 and 3 when the derivatives are right */
 static int l_taylor_test(lua_State *L) {
   const char *fn = "lg.taylor_test";
   ud_reduced *u = check_reduced(L, 1, fn);
   if (lua_isnoneornil(L, 2)) return typeerror(L, fn, 2, "the control values to test at (like rf:value's)");
   if (lua_isnoneornil(L, 3)) return typeerror(L, fn, 3, "a direction (like the controls)");
-  int steps = 4;
+  int steps = 4, hess = 0;
   double h0 = 1e-2;
   if (!lua_isnoneornil(L, 4)) {
-    if (!lua_istable(L, 4)) return typeerror(L, fn, 4, "an options table {steps=, h=}");
+    if (!lua_istable(L, 4)) return typeerror(L, fn, 4, "an options table {steps=, h=, hessian=}");
     static const char *const keys[] = {"steps", "h", "hessian", NULL};
     check_keys(L, 4, fn, keys);
     steps = opt_int(L, 4, "steps", 4, fn);
     if (steps < 2 || steps > 30) return luaL_error(L, "%s: option 'steps' must be 2 to 30, got %d", fn, steps);
     h0 = opt_num(L, 4, "h", 1e-2, fn);
     if (!(h0 > 0) || !isfinite(h0)) return luaL_error(L, "%s: option 'h' must be a positive number, got %f", fn, h0);
-    lua_getfield(L, 4, "hessian");
-    if (lua_toboolean(L, -1)) return luaL_error(L, "%s: Hessian actions (option 'hessian') are not available yet", fn);
+    int t = lua_getfield(L, 4, "hessian");
+    if (t != LUA_TNIL && t != LUA_TBOOLEAN) return luaL_error(L, "%s: option 'hessian' must be a boolean, got %s", fn, lua_typename(L, t));
+    hess = lua_toboolean(L, -1);
     lua_pop(L, 1);
   }
   lg_reduced *rf = u->rf;
   lg_env *env = get_env(L);
   int nc = lg_reduced_ncontrols(rf);
-  /* j(m) and dj(m; dm) */
-  set_controls(L, rf, 2, fn);
-  double J0;
-  if (lg_reduced_value(env, rf, &J0)) return lgerror(L, fn, env);
   lua_settop(L, 4);
-  double *g[LG_MAXCONTROL];
-  raw_gradient(L, rf, g, fn);
-  double dJ = pair(L, rf, g, 3, fn);
-  /* m and dm as vectors, to move along m + h dm */
-  double *m0[LG_MAXCONTROL], *dm[LG_MAXCONTROL];
+  double *m0[LG_MAXCONTROL], *dm[LG_MAXCONTROL], *g[LG_MAXCONTROL], *hd[LG_MAXCONTROL];
+  read_direction(L, rf, 3, dm, fn);
+  /* j(m), dj(m; dm) and dm.H(m) dm */
+  set_controls(L, rf, 2, fn);
   for (int i = 0; i < nc; i++) {
     int n = lg_reduced_control_size(rf, i);
     const lg_control *c = lg_reduced_control(rf, i);
     m0[i] = lua_newuserdatauv(L, sizeof(double) * ((size_t)n + 1), 0);
-    dm[i] = lua_newuserdatauv(L, sizeof(double) * ((size_t)n + 1), 0);
-    if (c->kind == LG_CONTROL_PARAM) m0[i][0] = expr_param_values(env->c)[c->param];
-    else memcpy(m0[i], c->f->x, sizeof(double) * (size_t)n);
-    /* the direction: the pairing with unit vectors would be costly; read it directly */
-    int k = nc == 1 ? 3 : (lua_geti(L, 3, i + 1), lua_gettop(L));
-    if (c->kind == LG_CONTROL_PARAM) dm[i][0] = lua_tonumber(L, k);
-    else {
-      ud_func *df = luaL_testudata(L, k, MT_FUNC);
-      if (df) memcpy(dm[i], df->f->x, sizeof(double) * (size_t)n);
-      else {
-        memcpy(dm[i], c->f->x, sizeof(double) * (size_t)n);
-        if (lg_interpolate(env, c->f, check_expr(L, k, fn))) return lgerror(L, fn, env);
-        double *t = dm[i];
-        for (int j = 0; j < n; j++) { double v = c->f->x[j]; c->f->x[j] = t[j]; t[j] = v; }
-      }
-    }
-    if (nc > 1) lua_pop(L, 1);
+    memcpy(m0[i], c->kind == LG_CONTROL_PARAM ? &expr_param_values(env->c)[c->param] : c->f->x, sizeof(double) * (size_t)n);
   }
-  lua_createtable(L, 0, 6);
+  double J0;
+  if (lg_reduced_value(env, rf, &J0)) return lgerror(L, fn, env);
+  raw_gradient(L, rf, g, fn);
+  double dJ = pair_vectors(rf, g, dm), d2J = 0;
+  if (hess) {
+    raw_hessian(L, rf, dm, hd, fn);
+    d2J = pair_vectors(rf, dm, hd);
+  }
+  lua_createtable(L, 0, 9);
   int res = lua_gettop(L);
-  lua_createtable(L, steps, 0);
-  lua_createtable(L, steps, 0);
-  lua_createtable(L, steps, 0);
-  int th = res + 1, tr0 = res + 2, tr1 = res + 3;
-  double r0[32], r1[32], hs[32];
+  double r[3][32], hs[32];
+  int nr = hess ? 3 : 2;
   for (int s = 0; s < steps; s++) {
     double h = h0 / pow(2, s);
-    for (int i = 0; i < nc; i++) {
-      const lg_control *c = lg_reduced_control(rf, i);
-      int n = lg_reduced_control_size(rf, i);
-      if (c->kind == LG_CONTROL_PARAM) expr_param_values(env->c)[c->param] = m0[i][0] + h * dm[i][0];
-      else for (int j = 0; j < n; j++) c->f->x[j] = m0[i][j] + h * dm[i][j];
-    }
-    lg_reduced_changed(rf);
+    move_controls(env, rf, m0, dm, h);
     double Jh;
-    int rc = lg_reduced_value(env, rf, &Jh);
-    if (rc) {
-      /* restore m before reporting */
-      for (int i = 0; i < nc; i++) {
-        const lg_control *c = lg_reduced_control(rf, i);
-        if (c->kind == LG_CONTROL_PARAM) expr_param_values(env->c)[c->param] = m0[i][0];
-        else memcpy(c->f->x, m0[i], sizeof(double) * (size_t)lg_reduced_control_size(rf, i));
-      }
-      lg_reduced_changed(rf);
+    if (lg_reduced_value(env, rf, &Jh)) {
+      move_controls(env, rf, m0, dm, 0); /* restore m before reporting */
       return lgerror(L, fn, env);
     }
     hs[s] = h;
-    r0[s] = fabs(Jh - J0);
-    r1[s] = fabs(Jh - J0 - h * dJ);
-    lua_pushnumber(L, h); lua_rawseti(L, th, s + 1);
-    lua_pushnumber(L, r0[s]); lua_rawseti(L, tr0, s + 1);
-    lua_pushnumber(L, r1[s]); lua_rawseti(L, tr1, s + 1);
+    r[0][s] = fabs(Jh - J0);
+    r[1][s] = fabs(Jh - J0 - h * dJ);
+    r[2][s] = fabs(Jh - J0 - h * dJ - 0.5 * h * h * d2J);
   }
-  for (int i = 0; i < nc; i++) { /* back to m */
-    const lg_control *c = lg_reduced_control(rf, i);
-    if (c->kind == LG_CONTROL_PARAM) expr_param_values(env->c)[c->param] = m0[i][0];
-    else memcpy(c->f->x, m0[i], sizeof(double) * (size_t)lg_reduced_control_size(rf, i));
-  }
-  lg_reduced_changed(rf);
-  lua_setfield(L, res, "remainders1");
-  lua_setfield(L, res, "remainders0");
+  move_controls(env, rf, m0, dm, 0);
+  static const char *const rname[3] = {"remainders0", "remainders1", "remainders2"};
+  static const char *const qname[3] = {"rates0", "rates1", "rates2"};
+  lua_createtable(L, steps, 0);
+  for (int s = 0; s < steps; s++) { lua_pushnumber(L, hs[s]); lua_rawseti(L, -2, s + 1); }
   lua_setfield(L, res, "h");
+  double q[3][32];
+  for (int k = 0; k < nr; k++) {
+    lua_createtable(L, steps, 0);
+    for (int s = 0; s < steps; s++) { lua_pushnumber(L, r[k][s]); lua_rawseti(L, -2, s + 1); }
+    lua_setfield(L, res, rname[k]);
+    lua_createtable(L, steps - 1, 0);
+    for (int s = 1; s < steps; s++) {
+      q[k][s] = log(r[k][s - 1] / r[k][s]) / log(hs[s - 1] / hs[s]);
+      lua_pushnumber(L, q[k][s]);
+      lua_rawseti(L, -2, s);
+    }
+    lua_setfield(L, res, qname[k]);
+  }
+  lua_pushnumber(L, J0); lua_setfield(L, res, "j");
+  lua_pushnumber(L, dJ); lua_setfield(L, res, "dj");
+  if (hess) { lua_pushnumber(L, d2J); lua_setfield(L, res, "d2j"); }
   luaL_Buffer b;
   luaL_buffinit(L, &b);
   char line[200];
-  snprintf(line, sizeof line, "Taylor test: j = %.10g, dj(m; dm) = %.10g\n  %-10s %-14s %-6s %-14s %-6s", J0, dJ, "h",
-           "|R0|", "rate", "|R1|", "rate");
+  snprintf(line, sizeof line, "Taylor test: j = %.10g, dj(m; dm) = %.10g", J0, dJ);
   luaL_addstring(&b, line);
-  lua_createtable(L, steps - 1, 0);
-  lua_createtable(L, steps - 1, 0);
+  if (hess) { snprintf(line, sizeof line, ", dm.H dm = %.10g", d2J); luaL_addstring(&b, line); }
+  snprintf(line, sizeof line, "\n  %-10s", "h");
+  luaL_addstring(&b, line);
+  for (int k = 0; k < nr; k++) { snprintf(line, sizeof line, " |R%d|%-10s rate  ", k, ""); luaL_addstring(&b, line); }
   for (int s = 0; s < steps; s++) {
-    double q0 = s ? log(r0[s - 1] / r0[s]) / log(hs[s - 1] / hs[s]) : NAN;
-    double q1 = s ? log(r1[s - 1] / r1[s]) / log(hs[s - 1] / hs[s]) : NAN;
-    if (s) {
-      lua_pushnumber(L, q0); lua_rawseti(L, -3, s);
-      lua_pushnumber(L, q1); lua_rawseti(L, -2, s);
-    }
-    if (s) snprintf(line, sizeof line, "\n  %-10.3g %-14.6e %-6.2f %-14.6e %-6.2f", hs[s], r0[s], q0, r1[s], q1);
-    else snprintf(line, sizeof line, "\n  %-10.3g %-14.6e %-6s %-14.6e %-6s", hs[s], r0[s], "", r1[s], "");
+    snprintf(line, sizeof line, "\n  %-10.3g", hs[s]);
     luaL_addstring(&b, line);
+    for (int k = 0; k < nr; k++) {
+      if (s) snprintf(line, sizeof line, " %-14.6e %-6.2f", r[k][s], q[k][s]);
+      else snprintf(line, sizeof line, " %-14.6e %-6s", r[k][s], "");
+      luaL_addstring(&b, line);
+    }
   }
-  lua_setfield(L, res, "rates1");
-  lua_setfield(L, res, "rates0");
   luaL_pushresult(&b);
   lua_setfield(L, res, "text");
   if (luaL_newmetatable(L, "lugal.TaylorTest")) {
@@ -505,13 +548,14 @@ static int l_minimize(lua_State *L) {
                                        "constraints", NULL};
     check_keys(L, 2, fn, keys);
     o.method = opt_str(L, 2, "method", "lmvm", fn);
-    static const char *const later[] = {"nls", "ntr", "almm", NULL};
-    for (int i = 0; later[i]; i++)
-      if (!strcmp(o.method, later[i]))
-        return luaL_error(L, "%s: method \"%s\" needs Hessian actions or constraints, which are not available yet (use "
-                             "\"lmvm\" or \"blmvm\")", fn, o.method);
-    if (strcmp(o.method, "lmvm") && strcmp(o.method, "blmvm"))
-      return luaL_error(L, "%s: option 'method' must be \"lmvm\" or \"blmvm\", got \"%s\"", fn, o.method);
+    static const char *const methods[] = {"lmvm", "blmvm", "nls", "ntr", "bnls", "bntr", NULL};
+    int known = 0;
+    for (int i = 0; methods[i]; i++) known |= !strcmp(o.method, methods[i]);
+    if (!strcmp(o.method, "almm"))
+      return luaL_error(L, "%s: method \"almm\" needs constraints, which are not available yet", fn);
+    if (!known)
+      return luaL_error(L, "%s: option 'method' must be \"lmvm\", \"blmvm\", \"nls\", \"ntr\", \"bnls\" or \"bntr\", got \"%s\"", fn,
+                        o.method);
     o.gatol = opt_num(L, 2, "gatol", -1, fn);
     o.grtol = opt_num(L, 2, "grtol", -1, fn);
     o.gttol = opt_num(L, 2, "gttol", -1, fn);
@@ -535,7 +579,10 @@ static int l_minimize(lua_State *L) {
     if (lua_getfield(L, 2, "bounds") != LUA_TNIL) {
       if (!lua_istable(L, -1)) return luaL_error(L, "%s: option 'bounds' must be a table {lower, upper}", fn);
       int bt = lua_gettop(L);
-      if (!strcmp(o.method, "lmvm")) o.method = "blmvm"; /* bounds need the bounded variant */
+      /* bounds need the bounded variant */
+      if (!strcmp(o.method, "lmvm")) o.method = "blmvm";
+      else if (!strcmp(o.method, "nls")) o.method = "bnls";
+      else if (!strcmp(o.method, "ntr")) o.method = "bntr";
       for (int side = 0; side < 2; side++) {
         lua_geti(L, bt, side + 1);
         int vidx = lua_gettop(L);
@@ -588,6 +635,7 @@ static int l_minimize(lua_State *L) {
   lua_createtable(L, 0, 6);
   lua_pushinteger(L, info.iterations); lua_setfield(L, -2, "iterations");
   lua_pushinteger(L, info.evaluations); lua_setfield(L, -2, "evaluations");
+  lua_pushinteger(L, info.hessian_products); lua_setfield(L, -2, "hessian_products");
   lua_pushnumber(L, info.J); lua_setfield(L, -2, "J");
   lua_pushnumber(L, info.gnorm); lua_setfield(L, -2, "gnorm");
   lua_pushstring(L, info.reason); lua_setfield(L, -2, "reason");
@@ -602,7 +650,8 @@ void lg_lua_opt_register(lua_State *L) {
   new_mt(L, MT_FUNCTIONAL, functional_mm, NULL);
   static const luaL_Reg reduced_mm[] = {{"__gc", reduced_gc}, {NULL, NULL}};
   static const luaL_Reg reduced_methods[] = {{"value", reduced_value}, {"derivative", reduced_derivative},
-                                             {"gradient", reduced_gradient}, {"state", reduced_state}, {NULL, NULL}};
+                                             {"gradient", reduced_gradient}, {"hessian", reduced_hessian},
+                                             {"state", reduced_state}, {NULL, NULL}};
   new_mt(L, MT_REDUCED, reduced_mm, reduced_methods);
 }
 

@@ -2,7 +2,8 @@
 -- remainder rate 2) for linear and nonlinear states, P1 and P2 states, field and parameter
 -- controls, a Neumann control, a boundary term, two controls, a coupled system, a Gmsh mesh
 -- and a tetrahedral mesh; the directional derivative must match central differences and the
--- raw gradient; bad input must be refused with a message.
+-- raw gradient; Hessian actions (tangent + second-order adjoint) must pass second-order Taylor
+-- tests (rate 3) and be symmetric; bad input must be refused with a message.
 package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
 local T = require "testlib"
 local lg = require "lugal"
@@ -14,6 +15,17 @@ local function rate_ok(t, what)
   T.check(math.abs(r - 2) < 0.05, "%s: Taylor rate %.3f (want 2.00 +- 0.05)\n%s", what, r, tostring(t))
   T.check(t.rates0[#t.rates0] > 0.95 and t.rates0[#t.rates0] < 1.05, "%s: zeroth-order rate", what)
   return r
+end
+-- second order: R2 = |j(m + h dm) - j - h dj - h^2/2 dm.H dm| falls like h^3
+local function hess_ok(t, what)
+  local r = t.rates2[#t.rates2]
+  T.check(math.abs(r - 3) < 0.1, "%s: second-order Taylor rate %.3f (want 3.0 +- 0.1)\n%s", what, r, tostring(t))
+  T.check(math.abs(t.rates1[#t.rates1] - 2) < 0.05, "%s: first-order rate\n%s", what, tostring(t))
+end
+local function dot_values(a, b)
+  local s, av, bv = 0, a:values(), b:values()
+  for i = 1, #av do s = s + av[i]*bv[i] end
+  return s
 end
 
 local function poisson(mesh, P, Pc, nonlinear, extra)
@@ -52,6 +64,14 @@ local g2 = rf:gradient(m)
 T.close(lg.integrate(mesh, g2*dm), der, 1e-10, "L2 gradient (g, dm) = dj(dm)")
 local g3 = rf:gradient(m, {riesz = "h1"})
 T.close(lg.integrate(mesh, g3*dm + lg.dot(lg.grad(g3), lg.grad(dm))), der, 1e-10, "H1 gradient")
+-- the Hessian of a quadratic j (linear state): the second-order expansion is exact
+local tq = lg.taylor_test(rf, 1 + lg.x, lg.sin(3*lg.x)*lg.y, {hessian = true})
+T.check(tq.remainders2[1] < 1e-9 * tq.remainders1[1], "quadratic j: R2 = %.3g vs R1 = %.3g", tq.remainders2[1], tq.remainders1[1])
+-- H (riesz none) is symmetric, and its L2 representative pairs like it
+local dm2 = lg.interpolate(P1, mesh, lg.x^2 - lg.y, "dm2")
+local h12, h21 = dot_values(rf:hessian(dm, m, {riesz = "none"}), dm2), dot_values(rf:hessian(dm2, m, {riesz = "none"}), dm)
+T.close(h12, h21, 1e-10, "Hessian symmetry dm2.H dm = dm.H dm2")
+T.close(lg.integrate(mesh, rf:hessian(dm, m)*dm2), h12, 1e-10, "L2 Hessian representative")
 local uh = rf:state()
 T.check(lg.integrate(mesh, uh) ~= 0, "the state at m")
 
@@ -64,12 +84,17 @@ local s3, u3, v3, f3 = poisson(mesh, P1, P1, true)
 local J3 = lg.functional(lg.integral(mesh:cells(), 0.5*(u3 - d)^2) + lg.integral(mesh:boundary("top"), lg.dot(lg.grad(u3), lg.normal())^2))
 local rf3 = lg.reduced_functional{problem = s3, functional = J3, control = f3}
 rate_ok(lg.taylor_test(rf3, 2 + lg.x, lg.sin(lg.y)), "nonlinear state, boundary term")
+hess_ok(lg.taylor_test(rf3, 2 + lg.x, lg.sin(lg.y), {hessian = true, h = 0.1}), "Hessian: nonlinear state, boundary term")
+local m3, e1, e2 = lg.interpolate(P1, mesh, 1 + lg.y), lg.interpolate(P1, mesh, lg.x*lg.y), lg.interpolate(P1, mesh, lg.cos(lg.y))
+T.close(dot_values(rf3:hessian(e1, m3, {riesz = "none"}), e2), dot_values(rf3:hessian(e2, m3, {riesz = "none"}), e1), 1e-9,
+        "Hessian symmetry, nonlinear state")
 local gN = lg.control(P1, mesh, "g")
 local a = lg.parameter("a", 1.5)
 local s4, u4, v4, f4 = poisson(mesh, P1, P1, true, function(v_, u_, f_) return lg.integral(mesh:boundary("right"), -gN*v_) end)
 local rf4 = lg.reduced_functional{problem = s4, functional = lg.functional(lg.integral(mesh:cells(), a*(u4 - d)^2 + u4*f4)),
                                   control = {gN, a, f4}}
 rate_ok(lg.taylor_test(rf4, {lg.y, 1.5, 1}, {lg.x*lg.y, 0.3, lg.x}), "Neumann, parameter and field controls at once")
+hess_ok(lg.taylor_test(rf4, {lg.y, 1.5, 1}, {lg.x*lg.y, 0.3, lg.x}, {hessian = true, h = 0.1}), "Hessian: three controls")
 local s5 = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) - a^2*v),
                              bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}
 local rf5 = lg.reduced_functional{problem = s5, functional = lg.functional(lg.integral(mesh:cells(), u^2)), control = a}
@@ -77,6 +102,19 @@ rate_ok(lg.taylor_test(rf5, 1.2, 1), "a parameter control alone")
 local ga = rf5:gradient(2.0)
 -- j(a) = c a^4 (u is linear in a^2): dj/da = 4 j / a
 T.close(ga, 4 * rf5:value(2.0) / 2.0, 1e-10, "dj/da for j = c a^4")
+T.close(rf5:hessian(1, 2.0), 12 * rf5:value(2.0) / 4.0, 1e-10, "d2j/da2 = 12 j / a^2 for j = c a^4")
+
+-- a coefficient control (the control multiplies the unknown: mixed second derivatives),
+-- a P2 state, a gradient regularization, a Dirichlet condition on one side only
+do
+  local uk, vk = lg.unknown(P2, "u"), lg.test(P2, "v")
+  local kc = lg.control(P1, mesh, "k")
+  local sk = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.exp(kc)*lg.dot(lg.grad(vk), lg.grad(uk)) - vk),
+                               bc = lg.essential_bc(mesh:boundary("left"), vk*uk), test = vk, unknown = uk}
+  local rk = lg.reduced_functional{problem = sk, control = kc,
+    functional = lg.functional(lg.integral(mesh:cells(), (uk - lg.x*lg.y)^2 + 1e-3*lg.dot(lg.grad(kc), lg.grad(kc))))}
+  hess_ok(lg.taylor_test(rk, lg.x, lg.sin(2*lg.y), {hessian = true, h = 0.1}), "Hessian: coefficient control exp(k), P2 state")
+end
 
 -- a coupled system: -lap u + w = f, -lap w - u = 0
 local w, q = lg.unknown(P1, "w"), lg.test(P1, "q")
@@ -86,6 +124,8 @@ local sys = lg.nonlinear_problem{mesh = mesh,
   bc = {lg.essential_bc(mesh:boundary(), v*u), lg.essential_bc(mesh:boundary(), q*w)}, test = {v, q}, unknown = {u, w}}
 local rfc = lg.reduced_functional{problem = sys, functional = lg.functional(lg.integral(mesh:cells(), (u - d)^2 + w^2)), control = fc}
 rate_ok(lg.taylor_test(rfc, 1 + lg.x, lg.y), "coupled nonlinear system")
+-- (the cubic term is weak: large steps keep R2 above the Newton tolerance)
+hess_ok(lg.taylor_test(rfc, 1 + lg.x, lg.y, {hessian = true, h = 8, steps = 3}), "Hessian: coupled nonlinear system")
 local su, sw = rfc:state()
 T.check(sw ~= nil and lg.integrate(mesh, su*su) > 0, "a coupled state has two fields")
 
@@ -154,6 +194,21 @@ end
 T.check(lo >= 0 and hi <= 2 + 1e-12 and hi > 1, "the bounds hold: [%g, %g]", lo, hi)
 T.check(bad == 0, "no descent direction left at the lower bound (%d dofs)", bad)
 T.check(ib.J >= info.J - 1e-12, "the bounded optimum is not below the unbounded one")
+-- Newton-CG (nls, ntr) with Hessian actions: the same optimum in a few Newton steps, the
+-- bounded variant (bnls) the same bounded optimum
+for _, method in ipairs{"nls", "ntr"} do
+  fm:assign(0*lg.x)
+  local _, inw = lg.minimize(rfm, {method = method, gttol = 1e-8, gatol = 0, grtol = 0, monitor = false})
+  T.check(inw.converged and inw.iterations <= 4, "%s: %d Newton iterations (%s)", method, inw.iterations, inw.reason)
+  T.check(inw.hessian_products > 10 and inw.hessian_products < 150, "%s: %d Hessian products", method, inw.hessian_products)
+  T.close(inw.J, info.J, 1e-6, method .. " reaches the L-BFGS optimum")
+end
+fm:assign(0*lg.x)
+local fnb, inb = lg.minimize(rfm, {method = "nls", bounds = {0, 2}, gttol = 1e-6, monitor = false})
+local nlo, nhi = math.huge, -math.huge
+for _, x in ipairs(fnb:values()) do nlo, nhi = math.min(nlo, x), math.max(nhi, x) end
+T.check(nlo >= 0 and nhi <= 2 + 1e-12, "bnls: the bounds hold: [%g, %g]", nlo, nhi)
+T.close(inb.J, ib.J, 1e-4, "bnls reaches the blmvm optimum")
 
 -- bad input
 T.fails(function() return lg.functional(lg.integral(mesh:cells(), u*v)) end, "lg.functional: the form contains the test function v")
@@ -174,9 +229,14 @@ T.fails(function() return lg.reduced_functional{problem = state, functional = lg
 T.fails(function() return lg.reduced_functional{problem = state, functional = J, control = {f, f}} end, "lists control 2 twice")
 T.fails(function() return rf:gradient(m, {riesz = "l3"}) end, "option 'riesz' must be")
 T.fails(function() return rf:value(lg.interpolate(P2, mesh, lg.x)) end, "must be given as a discrete function of its own basis")
-T.fails(function() return lg.taylor_test(rf, 0, 1, {hessian = true}) end, "not available yet")
-T.fails(function() return lg.minimize(rf, {method = "nls"}) end, "needs Hessian actions or constraints")
+T.fails(function() return lg.taylor_test(rf, 0, 1, {hessian = 1}) end, "option 'hessian' must be a boolean")
+T.fails(function() return rf:hessian() end, "rf:hessian: argument 2 must be a direction")
+T.fails(function() return rf:hessian(lg.interpolate(P2, mesh, lg.x)) end, "the direction of control 1 must be a discrete function of its basis")
+T.fails(function() return rf4:hessian({1, 2}) end, "the direction needs 3 values")
+T.fails(function() return rf4:hessian({lg.x, "a", 1}) end, "the direction of control 2 (a parameter) must be a number")
+T.fails(function() return lg.minimize(rf, {method = "almm"}) end, "needs constraints, which are not available yet")
+T.fails(function() return lg.minimize(rf, {method = "newton"}) end, "option 'method' must be \"lmvm\"")
 T.fails(function() return lg.minimize(rf, {bounds = {lg.interpolate(P2, mesh, lg.x), 1}}) end,
         "the lower bound of control 1 must be a number or a discrete function of the control's basis")
 T.fails(function() return lg.minimize(rf, {series = "x.vtu"}) end, "option 'series' must be a path ending in .pvd")
-print("adjoint gradients: all Taylor rates 2")
+print("adjoint gradients and Hessians: all Taylor rates 2 and 3")

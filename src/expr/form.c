@@ -191,3 +191,19 @@ expr *form_directional(expr_ctx *c, expr *f, int func, int dir) {
   free(terms);
   return r;
 }
+
+form *form_variation(expr_ctx *c, const form *F, int n, const int *funcs, const int *dirs) {
+  form *G = form_new();
+  if (!G) { expr_set_error(c, "out of memory"); return NULL; }
+  for (int i = 0; i < F->n; i++) {
+    expr *sum = expr_num(c, 0);
+    for (int k = 0; k < n && sum; k++) {
+      expr *d = form_directional(c, F->t[i].integrand, funcs[k], dirs[k]);
+      sum = d ? expr_add(c, sum, d) : NULL;
+    }
+    if (!sum) { form_free(G); return NULL; }
+    if (sum->kind == E_CONST && sum->value == 0) continue; /* the term does not depend on them */
+    if (form_add_term(G, &F->t[i].reg, sum, F->t[i].order)) { expr_set_error(c, "out of memory"); form_free(G); return NULL; }
+  }
+  return G;
+}

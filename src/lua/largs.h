@@ -68,6 +68,12 @@ void push_function(lua_State *L, lg_function *f, int mesh_idx);
 /* push n new functions (the caller's to own) anchored to the mesh among the dependencies of
  * the userdata at owner */
 void push_functions_of(lua_State *L, int owner, lg_function **f, int n);
+/* problems (lproblem.c): the functions of a kind listed under key of the table at t (one or
+ * a table of them; returns how many), the essential conditions at idx (nil, one or a table,
+ * combined into *owned when several), and the problem userdata */
+int check_symbols(lua_State *L, int t, const char *key, func_kind kind, int *ids, const char *fn);
+const form *check_bcs(lua_State *L, int idx, const char *fn, form **owned);
+void push_problem(lua_State *L, lg_problem *p, int nfield, int nonlinear, int ndeps, const int *deps);
 void new_mt(lua_State *L, const char *name, const luaL_Reg *mm, const luaL_Reg *methods);
 
 /* the bindings of each layer: metatables (register) and library functions */

@@ -643,6 +643,132 @@ static int l_minimize(lua_State *L) {
   return lua_gettop(L) - base;
 }
 
+/* ---------------------------------------------------------------- full space (KKT) */
+
+/* which of the n functions ids the integrand e contains (a bit each) */
+static unsigned uses_of(lg_env *env, expr *e, int n, const int *ids) {
+  expr *leaf[64];
+  int m = expr_collect_fields(env->c, 1, &e, -1, 64, leaf);
+  unsigned bits = 0;
+  for (int k = 0; k < m && k < 64; k++)
+    for (int i = 0; i < n; i++)
+      if (leaf[k]->i0 == ids[i]) bits |= 1u << i;
+  return bits;
+}
+
+/* lg.kkt_problem{mesh=, lagrangian=, state=, adjoint=, control=, bc=, prefix=, initial=}:
+ * the stationary point of L(u, lam, m) = J(u, m) + <R(u, m), lam> as one coupled nonlinear
+ * problem in (u, lam, m): its equations are the variations of L in test directions of each
+ * (dL/dlam: the state, dL/du: the adjoint, dL/dm: the optimality condition). The essential
+ * conditions are the state's; the adjoint gets homogeneous ones on the same boundaries. */
+static int l_kkt_problem(lua_State *L) {
+  const char *fn = "lg.kkt_problem";
+  if (!lua_istable(L, 1)) return typeerror(L, fn, 1, "a table {mesh=, lagrangian=, state=, adjoint=, control=, bc=}");
+  static const char *const keys[] = {"mesh", "lagrangian", "state", "adjoint", "control", "bc", "prefix", "initial", NULL};
+  check_keys(L, 1, fn, keys);
+  lua_getfield(L, 1, "mesh");
+  ud_mesh *um = luaL_testudata(L, -1, MT_MESH);
+  if (!um) return luaL_error(L, "%s: option 'mesh' must be a mesh, got %s", fn, luaL_typename(L, -1));
+  int mesh_idx = lua_gettop(L);
+  lua_getfield(L, 1, "lagrangian");
+  ud_form *uL = luaL_testudata(L, -1, MT_FORM);
+  if (!uL) return luaL_error(L, "%s: option 'lagrangian' must be a form (lg.integral(...) + ...): J plus the equation with "
+                                "its test functions replaced by the adjoint, got %s", fn, luaL_typename(L, -1));
+  int lag_idx = lua_gettop(L);
+  lg_env *env = get_env(L);
+  int unk[KER_MAXFIELD], ns, na, nc;
+  ns = check_symbols(L, 1, "state", FK_UNKNOWN, unk, fn);
+  na = check_symbols(L, 1, "adjoint", FK_UNKNOWN, unk + ns, fn);
+  if (na != ns) return luaL_error(L, "%s: %d adjoints for %d states (one per state)", fn, na, ns);
+  if (2 * ns + 1 > KER_MAXFIELD) return luaL_error(L, "%s: at most %d fields in all", fn, KER_MAXFIELD);
+  int ctl[KER_MAXFIELD];
+  nc = check_symbols(L, 1, "control", FK_UNKNOWN, ctl, fn);
+  if (2 * ns + nc > KER_MAXFIELD) return luaL_error(L, "%s: at most %d fields in all (states, adjoints, controls)", fn, KER_MAXFIELD);
+  for (int i = 0; i < nc; i++) unk[2 * ns + i] = ctl[i];
+  int n = 2 * ns + nc;
+  for (int i = 0; i < n; i++)
+    for (int j = 0; j < i; j++)
+      if (unk[i] == unk[j])
+        return luaL_error(L, "%s: %s is listed twice (state, adjoint and control are different unknowns)", fn,
+                          expr_func_get(env->c, unk[i])->name);
+  for (int a = 0; a < ns; a++) {
+    const expr_func_info *s = expr_func_get(env->c, unk[a]), *l = expr_func_get(env->c, unk[ns + a]);
+    if (s->degree != l->degree)
+      return luaL_error(L, "%s: the adjoint %s must use the basis of its state %s (P%d), got P%d", fn, l->name, s->name, s->degree,
+                        l->degree);
+  }
+  const form *Lf = uL->f;
+  unsigned used = 0;
+  for (int i = 0; i < Lf->n; i++) {
+    if (Lf->t[i].reg.mesh != um->lm) return luaL_error(L, "%s: the lagrangian integrates over a different mesh than 'mesh'", fn);
+    expr *e = Lf->t[i].integrand, *leaf[64];
+    int m = expr_collect_fields(env->c, 1, &e, -1, 64, leaf);
+    for (int k = 0; k < m && k < 64; k++) {
+      expr_func_info *fi = expr_func_get(env->c, leaf[k]->i0);
+      if (fi && fi->kind == FK_TEST)
+        return luaL_error(L, "%s: the lagrangian contains the test function %s: write the equation with the adjoint in its place",
+                          fn, fi->name);
+    }
+    used |= uses_of(env, e, n, unk);
+  }
+  for (int i = 0; i < n; i++)
+    if (!(used & (1u << i)))
+      return luaL_error(L, "%s: the lagrangian does not contain the %s %s", fn, i < ns ? "state" : i < 2 * ns ? "adjoint" : "control",
+                        expr_func_get(env->c, unk[i])->name);
+  const char *prefix = opt_str(L, 1, "prefix", NULL, fn);
+  /* a test direction per unknown, and the variations */
+  int test[KER_MAXFIELD];
+  for (int i = 0; i < n; i++) {
+    const expr_func_info *fi = expr_func_get(env->c, unk[i]);
+    char nm[80];
+    snprintf(nm, sizeof nm, "%.60s_test", fi->name);
+    if ((test[i] = expr_func_new(env->c, FK_TEST, nm, fi->degree, 1, NULL)) < 0) return luaL_error(L, "%s: out of memory", fn);
+  }
+  lua_getfield(L, 1, "bc");
+  int bc_idx = lua_gettop(L);
+  form *bc_user = NULL;
+  const form *bcu = check_bcs(L, bc_idx, fn, &bc_user);
+  /* from here on errors free what they own first */
+  form *F = form_variation(env->c, Lf, n, unk, test), *bc = form_new();
+  char err[LG_ERRLEN + 64] = "";
+  if (!F || !bc) snprintf(err, sizeof err, "%s", expr_error(env->c)[0] ? expr_error(env->c) : "out of memory");
+  unsigned char z[3] = {0, 0, 0};
+  for (int i = 0; !err[0] && bcu && i < bcu->n; i++) {
+    const form_term *t = &bcu->t[i];
+    if (t->reg.mesh != um->lm) { snprintf(err, sizeof err, "a boundary condition is on a different mesh than 'mesh'"); break; }
+    unsigned u = uses_of(env, t->integrand, n, unk);
+    int a = -1;
+    for (int k = 0; k < ns; k++)
+      if (u & (1u << k)) a = a < 0 ? k : -2;
+    if (u >> ns) { snprintf(err, sizeof err, "boundary condition %d involves an adjoint or a control: only the state's essential "
+                                             "conditions are given (Dirichlet controls are not supported yet)", i + 1); break; }
+    if (a < 0) { snprintf(err, sizeof err, "boundary condition %d must constrain exactly one state", i + 1); break; }
+    /* its test function becomes the state's test direction */
+    expr *e = t->integrand, *leaf[64];
+    int m = expr_collect_fields(env->c, 1, &e, -1, 64, leaf);
+    for (int k = 0; k < m && k < 64 && e; k++) {
+      expr_func_info *fi = expr_func_get(env->c, leaf[k]->i0);
+      if (fi && fi->kind == FK_TEST && leaf[k]->i0 != test[a]) e = form_replace_function(env->c, e, leaf[k]->i0, test[a]);
+    }
+    expr *hom = expr_mul(env->c, expr_field(env->c, test[ns + a], 0, z), expr_field(env->c, unk[ns + a], 0, z));
+    if (!e || !hom || form_add_term(bc, &t->reg, e, -1) || form_add_term(bc, &t->reg, hom, -1))
+      snprintf(err, sizeof err, "%s", expr_error(env->c)[0] ? expr_error(env->c) : "out of memory");
+  }
+  form_free(bc_user);
+  lg_problem *p = NULL;
+  if (!err[0]) {
+    lg_problem_spec s = {um->lm, F, bc->n ? bc : NULL, n, test, unk, 1, 0, prefix};
+    p = lg_problem_new(env, &s);
+    if (!p) snprintf(err, sizeof err, "%s", env->err);
+  }
+  form_free(F);
+  form_free(bc);
+  if (err[0]) return luaL_error(L, "%s: %s", fn, err);
+  int deps[3] = {mesh_idx, lag_idx, bc_idx};
+  push_problem(L, p, n, 1, lua_isnil(L, bc_idx) ? 2 : 3, deps);
+  return 1;
+}
+
 /* ---------------------------------------------------------------- registration */
 
 void lg_lua_opt_register(lua_State *L) {
@@ -657,4 +783,4 @@ void lg_lua_opt_register(lua_State *L) {
 
 const luaL_Reg lg_opt_lib[] = {{"control", l_control}, {"functional", l_functional},
                                {"reduced_functional", l_reduced_functional}, {"taylor_test", l_taylor_test},
-                               {"minimize", l_minimize}, {NULL, NULL}};
+                               {"minimize", l_minimize}, {"kkt_problem", l_kkt_problem}, {NULL, NULL}};

@@ -111,7 +111,8 @@ static int l_function(lua_State *L) {
   return 1;
 }
 
-static int symbol_list(lua_State *L, int t, const char *key, func_kind kind, int *ids, const char *fn) {
+/* the functions of kind listed under key of the table at t (one or a table); returns how many */
+int check_symbols(lua_State *L, int t, const char *key, func_kind kind, int *ids, const char *fn) {
   int ty = lua_getfield(L, t, key);
   int n = 0;
   const char *what = kind == FK_TEST ? "a test function (lg.test) or a table of them" : "an unknown (lg.unknown) or a table of them";
@@ -142,6 +143,43 @@ static int symbol_list(lua_State *L, int t, const char *key, func_kind kind, int
   return n;
 }
 
+/* the essential conditions at idx (nil, one, or a table of them, combined into *owned) */
+const form *check_bcs(lua_State *L, int idx, const char *fn, form **owned) {
+  *owned = NULL;
+  if (lua_isnil(L, idx)) return NULL;
+  if (lua_istable(L, idx)) {
+    form *f = form_new();
+    if (!f) luaL_error(L, "%s: out of memory", fn);
+    int n = (int)luaL_len(L, idx);
+    for (int i = 1; i <= n; i++) {
+      lua_geti(L, idx, i);
+      ud_form *ub = luaL_testudata(L, -1, MT_BC);
+      if (!ub) { form_free(f); luaL_error(L, "%s: option 'bc' entry %d must be lg.essential_bc(...)", fn, i); }
+      for (int k = 0; k < ub->f->n; k++)
+        if (form_add_term(f, &ub->f->t[k].reg, ub->f->t[k].integrand, -1)) { form_free(f); luaL_error(L, "%s: out of memory", fn); }
+      lua_pop(L, 1);
+    }
+    return *owned = f;
+  }
+  ud_form *ub = luaL_testudata(L, idx, MT_BC);
+  if (!ub) luaL_error(L, "%s: option 'bc' must be lg.essential_bc(...) or a table of them, got %s", fn, luaL_typename(L, idx));
+  return ub->f;
+}
+
+/* the problem userdata for p, keeping the values at deps alive and the option 'initial' of
+ * the table at 1 as its initial guess */
+void push_problem(lua_State *L, lg_problem *p, int nfield, int nonlinear, int ndeps, const int *deps) {
+  ud_prob *u = new_ud(L, sizeof *u, MT_PROB, ndeps, deps);
+  u->p = p;
+  u->nfield = nfield;
+  u->nonlinear = nonlinear;
+  lua_getfield(L, 1, "initial");
+  lua_getiuservalue(L, -2, 1);
+  lua_insert(L, -2);
+  lua_setfield(L, -2, "__initial");
+  lua_pop(L, 1);
+}
+
 static int make_problem(lua_State *L, int nonlinear) {
   const char *fn = nonlinear ? "lg.nonlinear_problem" : "lg.linear_problem";
   if (!lua_istable(L, 1)) return typeerror(L, fn, 1, "a table {mesh=, eqn=, bc=, test=, unknown=}");
@@ -156,35 +194,19 @@ static int make_problem(lua_State *L, int nonlinear) {
   if (!ue) return luaL_error(L, "%s: option 'eqn' must be a form (lg.integral(...) + ...), got %s", fn,
                              luaL_testudata(L, -1, MT_BC) ? "a boundary condition" : luaL_typename(L, -1));
   int eqn_idx = lua_gettop(L);
-  lua_getfield(L, 1, "bc");
-  form *bcf = NULL;
-  int bc_idx = lua_gettop(L);
-  form *bc_owned = NULL;
-  if (lua_istable(L, bc_idx)) {
-    /* a table of boundary conditions: combine */
-    bc_owned = form_new();
-    int n = (int)luaL_len(L, bc_idx);
-    for (int i = 1; i <= n; i++) {
-      lua_geti(L, bc_idx, i);
-      ud_form *ub = luaL_testudata(L, -1, MT_BC);
-      if (!ub) { form_free(bc_owned); return luaL_error(L, "%s: option 'bc' entry %d must be lg.essential_bc(...)", fn, i); }
-      for (int k = 0; k < ub->f->n; k++) form_add_term(bc_owned, &ub->f->t[k].reg, ub->f->t[k].integrand, -1);
-      lua_pop(L, 1);
-    }
-    bcf = bc_owned;
-  } else if (!lua_isnil(L, bc_idx)) {
-    ud_form *ub = luaL_testudata(L, bc_idx, MT_BC);
-    if (!ub) return luaL_error(L, "%s: option 'bc' must be lg.essential_bc(...) or a table of them, got %s", fn, luaL_typename(L, bc_idx));
-    bcf = ub->f;
-  }
   int test[KER_MAXFIELD], unk[KER_MAXFIELD];
-  int nt = symbol_list(L, 1, "test", FK_TEST, test, fn);
-  int nu = symbol_list(L, 1, "unknown", FK_UNKNOWN, unk, fn);
-  if (nt != nu) { form_free(bc_owned); return luaL_error(L, "%s: %d test functions for %d unknowns", fn, nt, nu); }
+  int nt = check_symbols(L, 1, "test", FK_TEST, test, fn);
+  int nu = check_symbols(L, 1, "unknown", FK_UNKNOWN, unk, fn);
+  if (nt != nu) return luaL_error(L, "%s: %d test functions for %d unknowns", fn, nt, nu);
   lua_getfield(L, 1, "symmetric");
   int sym = lua_toboolean(L, -1);
   lua_pop(L, 1);
   const char *prefix = opt_str(L, 1, "prefix", NULL, fn);
+  /* last: what raises an error after this frees bc_owned first */
+  lua_getfield(L, 1, "bc");
+  int bc_idx = lua_gettop(L);
+  form *bc_owned = NULL;
+  const form *bcf = check_bcs(L, bc_idx, fn, &bc_owned);
   for (int i = 0; ue && i < ue->f->n; i++)
     if (ue->f->t[i].reg.mesh != um->lm) { form_free(bc_owned); return luaL_error(L, "%s: the equation integrates over a different mesh than 'mesh'", fn); }
   for (int i = 0; bcf && i < bcf->n; i++)
@@ -195,16 +217,7 @@ static int make_problem(lua_State *L, int nonlinear) {
   form_free(bc_owned);
   if (!p) return lgerror(L, fn, env);
   int deps[3] = {mesh_idx, eqn_idx, bc_idx};
-  ud_prob *u = new_ud(L, sizeof *u, MT_PROB, lua_isnil(L, bc_idx) ? 2 : 3, deps);
-  u->p = p;
-  u->nfield = nt;
-  u->nonlinear = nonlinear;
-  /* the initial guess is kept with the problem */
-  lua_getfield(L, 1, "initial");
-  lua_getiuservalue(L, -2, 1);
-  lua_insert(L, -2);
-  lua_setfield(L, -2, "__initial");
-  lua_pop(L, 1);
+  push_problem(L, p, nt, nonlinear, lua_isnil(L, bc_idx) ? 2 : 3, deps);
   return 1;
 }
 

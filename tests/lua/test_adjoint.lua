@@ -210,6 +210,46 @@ for _, x in ipairs(fnb:values()) do nlo, nhi = math.min(nlo, x), math.max(nhi, x
 T.check(nlo >= 0 and nhi <= 2 + 1e-12, "bnls: the bounds hold: [%g, %g]", nlo, nhi)
 T.close(inb.J, ib.J, 1e-4, "bnls reaches the blmvm optimum")
 
+-- full space: the KKT system of one Lagrangian has the reduced optimum (to 1e-8 in J)
+local function rel(a, b) return math.abs(a - b) / math.abs(b) end
+do
+  local ku, kl, kf = lg.unknown(P1, "u"), lg.unknown(P1, "lambda"), lg.unknown(P1, "f")
+  local Lk = lg.integral(mesh32:cells(), 0.5*(ku - d)^2 + 1e-6/2*kf^2 + lg.dot(lg.grad(kl), lg.grad(ku)) - kf*kl)
+  local kkt = lg.kkt_problem{mesh = mesh32, lagrangian = Lk, state = ku, adjoint = kl, control = kf,
+                             bc = lg.essential_bc(mesh32:boundary(), vm*ku)}
+  local kuh, klh, kfh = kkt:solve()
+  local Jk = lg.integrate(mesh32, 0.5*(kuh - d)^2 + 1e-6/2*kfh^2)
+  T.check(rel(Jk, info.J) < 1e-8, "full-space J %.12e against reduced (L-BFGS) %.12e", Jk, info.J)
+  T.check(math.sqrt(lg.integrate(mesh32, (1e-6*kfh - klh)^2) / lg.integrate(mesh32, klh^2)) < 1e-8, "optimality alpha f = lambda")
+  -- a nonlinear state: Newton on the KKT system against Newton-CG on j
+  local m16 = lg.mesh.rectangle{nx = 16}
+  local dn = lg.sin(pi*lg.x)*lg.sin(pi*lg.y)
+  local kkn = lg.kkt_problem{mesh = m16, state = ku, adjoint = kl, control = kf, bc = lg.essential_bc(m16:boundary(), vm*ku),
+    lagrangian = lg.integral(m16:cells(), 0.5*(ku - dn)^2 + 1e-4/2*kf^2 + (1 + ku^2)*lg.dot(lg.grad(kl), lg.grad(ku)) - kf*kl)}
+  local nuh, _, nfh, ninfo = kkn:solve()
+  local Jn = lg.integrate(m16, 0.5*(nuh - dn)^2 + 1e-4/2*nfh^2)
+  local sn, un, vn, fn_ = poisson(m16, P1, P1, true)
+  local rfn = lg.reduced_functional{problem = sn, control = fn_,
+                                    functional = lg.functional(lg.integral(m16:cells(), 0.5*(un - dn)^2 + 1e-4/2*fn_^2))}
+  local _, rinfo = lg.minimize(rfn, {method = "nls", gttol = 1e-10, gatol = 0, grtol = 0, monitor = false})
+  T.check(rel(Jn, rinfo.J) < 1e-8, "nonlinear state: full-space J %.12e (%d Newton steps) against reduced %.12e", Jn,
+          ninfo.iterations, rinfo.J)
+  -- bad input
+  T.fails(function() return lg.kkt_problem{mesh = mesh32, lagrangian = Lk + lg.integral(mesh32:cells(), vm*ku), state = ku,
+                                           adjoint = kl, control = kf} end, "the lagrangian contains the test function v")
+  T.fails(function() return lg.kkt_problem{mesh = mesh32, lagrangian = lg.integral(mesh32:cells(), (ku - d)^2 + kf^2), state = ku,
+                                           adjoint = kl, control = kf} end, "the lagrangian does not contain the adjoint lambda")
+  T.fails(function() return lg.kkt_problem{mesh = mesh32, lagrangian = Lk, state = ku, adjoint = lg.unknown(P2, "l2"),
+                                           control = kf} end, "the adjoint l2 must use the basis of its state u (P1)")
+  T.fails(function() return lg.kkt_problem{mesh = mesh32, lagrangian = Lk, state = ku, adjoint = kl, control = ku} end,
+          "u is listed twice")
+  T.fails(function() return lg.kkt_problem{mesh = mesh32, lagrangian = Lk, state = ku, adjoint = kl, control = kf,
+                                           bc = lg.essential_bc(mesh32:boundary(), vm*(ku - kf))} end,
+          "boundary condition 1 involves an adjoint or a control")
+  T.fails(function() return lg.kkt_problem{mesh = mesh32, lagrangian = Lk, state = ku, adjoint = kl} end,
+          "option 'control' must be an unknown")
+end
+
 -- bad input
 T.fails(function() return lg.functional(lg.integral(mesh:cells(), u*v)) end, "lg.functional: the form contains the test function v")
 T.fails(function() return lg.functional(lg.essential_bc(mesh:boundary(), v*u)) end, "not a boundary condition")

@@ -207,19 +207,29 @@ static void free_scratch(lg_env *env, lg_function *f) {
   lg_function_free(f);
 }
 
-void lg_reduced_free(lg_reduced *rf) {
-  if (!rf) return;
+/* what Hessian actions built (all of it, or what a failed setup got to) */
+static void hessian_free(lg_reduced *rf) {
   for (int a = 0; a < rf->nf; a++) {
     lg_form_kernels_free(rf->tan_rhs[a]);
     lg_form_kernels_free(rf->soa_rhs[a]);
     free_scratch(rf->env, rf->du[a]);
     free_scratch(rf->env, rf->dlam[a]);
+    rf->tan_rhs[a] = rf->soa_rhs[a] = NULL;
+    rf->du[a] = rf->dlam[a] = NULL;
   }
   for (int i = 0; i < rf->nc; i++) {
     lg_form_kernels_free(rf->hD[i]);
     lg_form_kernels_free(rf->hG[i]);
     free_scratch(rf->env, rf->dmf[i]);
+    rf->hD[i] = rf->hG[i] = NULL;
+    rf->dmf[i] = NULL;
   }
+  rf->hess_ready = 0;
+}
+
+void lg_reduced_free(lg_reduced *rf) {
+  if (!rf) return;
+  hessian_free(rf);
   lg_form_kernels_free(rf->Jval);
   for (int a = 0; a < rf->nf; a++) {
     lg_form_kernels_free(rf->dJdu[a]);
@@ -513,21 +523,49 @@ static expr *control_direction(lg_env *env, lg_reduced *rf, expr *f) {
 }
 
 /* the kernels of a Hessian action, once */
+/* abs and sign of the state or a control have no second derivative at their kinks: the
+ * Hessian would silently drop the delta there, so refuse and say where */
+static int check_kinks(lg_env *env, lg_reduced *rf, const form *F) {
+  int fids[KER_MAXFIELD + LG_MAXCONTROL], pids[LG_MAXCONTROL], nf = 0, np = 0;
+  for (int a = 0; a < rf->nf; a++) fids[nf++] = rf->fld[a].unknown;
+  for (int i = 0; i < rf->nc; i++) {
+    if (rf->c[i].kind == LG_CONTROL_FIELD) fids[nf++] = rf->c[i].f->fid;
+    else pids[np++] = rf->c[i].param;
+  }
+  const form *parts[2] = {rf->J, F};
+  static const char *const what[2] = {"functional", "equation"};
+  for (int k = 0; k < 2; k++)
+    for (int i = 0; i < parts[k]->n; i++) {
+      expr *kink = expr_find_kink(env->c, parts[k]->t[i].integrand, nf, fids, np, pids);
+      if (!kink) continue;
+      char buf[160];
+      expr_print(env->c, kink, buf, sizeof buf);
+      lg_seterr(env, "Hessian actions are not defined: term %d of the %s contains %s, a kink in the state or a control "
+                     "(not twice differentiable there); smooth it, e.g. sqrt(x^2 + eps^2) for abs(x)", i + 1, what[k], buf);
+      return 1;
+    }
+  return 0;
+}
+
 static int hessian_setup(lg_env *env, lg_reduced *rf) {
   if (rf->hess_ready) return 0;
   const form *F = lg_problem_equation(rf->p);
+  if (check_kinks(env, rf, F)) return 1;
   for (int i = 0; i < rf->nc; i++) {
     if (rf->c[i].kind == LG_CONTROL_FIELD) {
-      if (!(rf->dmf[i] = lg_function_new(env, rf->lm, rf->c[i].f->degree, "dm"))) return 1;
+      if (!(rf->dmf[i] = lg_function_new(env, rf->lm, rf->c[i].f->degree, "dm"))) { hessian_free(rf); return 1; }
     } else if ((rf->dpar[i] = expr_param_new(env->c, "dm", 0)) < 0) {
       lg_seterr(env, "out of memory");
+      hessian_free(rf);
       return 1;
     }
   }
   for (int a = 0; a < rf->nf; a++)
     if (!(rf->du[a] = lg_function_new(env, rf->lm, rf->fld[a].dm->degree, "du")) ||
-        !(rf->dlam[a] = lg_function_new(env, rf->lm, rf->fld[a].dm->degree, "dlambda")))
+        !(rf->dlam[a] = lg_function_new(env, rf->lm, rf->fld[a].dm->degree, "dlambda"))) {
+      hessian_free(rf);
       return 1;
+    }
   /* Fdm: the equation differentiated in the control directions (the tangent's source);
    * D: the Lagrangian J + lam^T R differentiated in the directions (du, dm);
    * G: the equation with its tests replaced by the second-order adjoint */
@@ -569,7 +607,8 @@ static int hessian_setup(lg_env *env, lg_reduced *rf) {
   form_free(Fdm);
   form_free(D);
   form_free(G);
-  if (!rc) rf->hess_ready = 1;
+  if (rc) hessian_free(rf);
+  else rf->hess_ready = 1;
   return rc;
 }
 

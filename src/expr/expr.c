@@ -1259,6 +1259,37 @@ int expr_uses(expr_ctx *c, expr *e, expr_kind kind, int *maxcomp) {
   return Q.found;
 }
 
+/* kinks: abs and sign of something that depends on given functions or parameters */
+typedef struct {
+  memo_map dep; /* nodes that depend on them */
+  int nf, np;
+  const int *fids, *pids;
+  expr *found;
+} kink_ctx;
+
+static int kink_visit(void *ud, expr *e) {
+  kink_ctx *K = ud;
+  int d = 0;
+  if (e->kind == E_FIELD)
+    for (int i = 0; i < K->nf && !d; i++) d = e->i0 == K->fids[i];
+  else if (e->kind == E_PARAM)
+    for (int i = 0; i < K->np && !d; i++) d = e->i0 == K->pids[i];
+  for (int i = 0; i < e->n && !d; i++) d = memo_get(&K->dep, e->ch[i]->id) != NULL;
+  if (!d) return 0;
+  if (!K->found && e->kind == E_FUNC && (e->i0 == FN_ABS || e->i0 == FN_SIGN)) K->found = e;
+  return memo_put(&K->dep, e->id, e);
+}
+
+expr *expr_find_kink(expr_ctx *c, expr *e, int nf, const int *fids, int np, const int *pids) {
+  memo_map seen = {0, 0, NULL};
+  kink_ctx K = {{0, 0, NULL}, nf, np, fids, pids, NULL};
+  e = expr_canon(c, e);
+  if (e) post_order(c, e, &seen, kink_visit, NULL, &K);
+  memo_free(&seen);
+  memo_free(&K.dep);
+  return K.found;
+}
+
 /* degrees memoized per node (a DAG shared many times is visited once) */
 typedef struct {
   expr_ctx *c;

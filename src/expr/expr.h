@@ -144,6 +144,9 @@ expr *expr_subs(expr_ctx *c, expr *e, int n, expr **from, expr **to);
 /* every FIELD leaf of function func (or any function when func < 0) in e, deduplicated */
 int expr_collect_fields(expr_ctx *c, int nroot, expr **roots, int func, int max, expr **out);
 int expr_uses(expr_ctx *c, expr *e, expr_kind kind, int *maxcomp);
+/* the first abs or sign node of e whose argument depends on one of the functions fids or the
+ * parameters pids (a kink: not twice differentiable there), NULL when there is none */
+expr *expr_find_kink(expr_ctx *c, expr *e, int nf, const int *fids, int np, const int *pids);
 /* a polynomial-degree estimate used to choose quadrature orders */
 int expr_degree(expr_ctx *c, expr *e, int cell_degree_of_coords);
 

@@ -270,6 +270,14 @@ T.fails(function() return lg.reduced_functional{problem = state, functional = J,
 T.fails(function() return rf:gradient(m, {riesz = "l3"}) end, "option 'riesz' must be")
 T.fails(function() return rf:value(lg.interpolate(P2, mesh, lg.x)) end, "must be given as a discrete function of its own basis")
 T.fails(function() return lg.taylor_test(rf, 0, 1, {hessian = 1}) end, "option 'hessian' must be a boolean")
+-- a kink (abs of the state) has no Hessian: say which term; abs of a coordinate is fine
+local rfk = lg.reduced_functional{problem = state, control = f,
+  functional = lg.functional(lg.integral(mesh:cells(), u^2) + lg.integral(mesh:cells(), lg.abs(u - 0.01)*lg.abs(lg.x - 0.5)))}
+T.check(rfk:gradient(1) ~= nil, "a kink still has a gradient")
+T.fails(function() return rfk:hessian(1) end, "term 2 of the functional contains abs((-0.01) + u)", "smooth it")
+local rfs = lg.reduced_functional{problem = state, control = f,
+  functional = lg.functional(lg.integral(mesh:cells(), u^2*lg.abs(lg.x - 0.5)))}
+T.check(rfs:hessian(1) ~= nil, "abs of a coordinate is no kink of the state")
 T.fails(function() return rf:hessian() end, "rf:hessian: argument 2 must be a direction")
 T.fails(function() return rf:hessian(lg.interpolate(P2, mesh, lg.x)) end, "the direction of control 1 must be a discrete function of its basis")
 T.fails(function() return rf4:hessian({1, 2}) end, "the direction needs 3 values")

@@ -126,6 +126,17 @@ int lg_problem_is_nonlinear(const lg_problem *p);
 const double *lg_problem_solution(const lg_problem *p);
 /* the rows of the essential conditions at the last solve (in the problem's numbering) */
 int lg_problem_essential_rows(const lg_problem *p, int *rows, int max); /* returns how many; writes up to max */
+/* essential values g_r that depend on a control (a discrete function fid, or the parameter
+ * param when fid < 0): 0 not at all, 1 linearly, 2 nonlinearly, -1 error (a derivative of
+ * the control in a condition) */
+int lg_problem_bc_dependence(lg_env *env, const lg_problem *p, int fid, int param);
+int lg_problem_bc_symmetric(const lg_problem *p);
+/* is the second derivative of some essential value with respect to two controls nonzero?
+ * (1 yes, 0 no, -1 error) */
+int lg_problem_bc_mixed(lg_env *env, const lg_problem *p, int fid1, int param1, int fid2, int param2); /* the columns of the essential rows are eliminated too */
+/* their derivatives dg_r/dm_j at the last solve: triplets (problem row, control dof (0 for a
+ * parameter), value), allocated; returns how many, -1 on failure */
+int lg_problem_bc_derivative(lg_env *env, lg_problem *p, int fid, int param, int **rows, int **cols, double **vals);
 /* bindings of the unknowns to the last solution; returns how many */
 int lg_problem_bind_state(const lg_problem *p, coef_binding *b);
 /* the adjoint: (dR/du)^T lam = rhs at the last solution (N values each), R the discrete

@@ -161,6 +161,7 @@ struct lg_reduced {
   lg_problem *riesz[LG_MAXCONTROL][2]; /* L2 and H1 Gram matrices of field controls */
   double *rhs, *lamv;
   int solved;                       /* the state is the one of the current controls */
+  int bcdep[LG_MAXCONTROL];         /* Dirichlet controls: in the essential values (1 affine, 2 not) */
   int grad_fresh;                   /* the adjoint is the one of the current state */
   /* Hessian actions (built on first use): directions, tangent, second-order adjoint */
   int hess_ready;
@@ -267,7 +268,7 @@ lg_reduced *lg_reduced_new(lg_env *env, lg_problem *p, const form *J, int nc, co
   rf->rhs = calloc((size_t)N + 1, sizeof(double));
   rf->lamv = calloc((size_t)N + 1, sizeof(double));
   if (!rf->J || !rf->rhs || !rf->lamv) { lg_seterr(env, "out of memory"); goto fail; }
-  const form *F = lg_problem_equation(p), *B = lg_problem_bcs(p);
+  const form *F = lg_problem_equation(p);
   /* the functional: a number of the state and the controls, no test functions */
   for (int i = 0; i < J->n; i++) {
     expr *e = expr_canon(env->c, J->t[i].integrand), *leaf[64];
@@ -293,32 +294,32 @@ lg_reduced *lg_reduced_new(lg_env *env, lg_problem *p, const form *J, int nc, co
       goto fail;
     }
   }
-  /* the controls: in the equation or the functional, not in essential conditions yet */
+  /* the controls: in the equation, the functional or the essential values (Dirichlet) */
   for (int i = 0; i < nc; i++) {
-    if (c[i].kind == LG_CONTROL_FIELD) {
-      if (c[i].f->mesh != rf->lm) { lg_seterr(env, "control %d lives on a different mesh than the problem", i + 1); goto fail; }
-      if (form_uses(env, B, c[i].f->fid)) {
-        lg_seterr(env, "control %d appears in an essential boundary condition: Dirichlet controls are not supported yet", i + 1);
-        goto fail;
-      }
-      if (!form_uses(env, F, c[i].f->fid) && !form_uses(env, J, c[i].f->fid)) {
-        lg_seterr(env, "control %d appears in neither the problem nor the functional", i + 1);
-        goto fail;
-      }
+    int fid = c[i].kind == LG_CONTROL_FIELD ? c[i].f->fid : -1;
+    if (fid >= 0 && c[i].f->mesh != rf->lm) { lg_seterr(env, "control %d lives on a different mesh than the problem", i + 1); goto fail; }
+    int dep = lg_problem_bc_dependence(env, p, fid, c[i].param);
+    if (dep < 0) goto fail;
+    rf->bcdep[i] = dep;
+    int inF, inJ;
+    if (fid >= 0) {
+      inF = form_uses(env, F, fid);
+      inJ = form_uses(env, J, fid);
     } else {
-      int inB = form_uses_param(env, B, c[i].param), inF = form_uses_param(env, F, c[i].param),
-          inJ = form_uses_param(env, J, c[i].param);
-      if (inB < 0 || inF < 0 || inJ < 0) { lg_seterr(env, "%s", expr_error(env->c)); goto fail; }
-      if (inB) {
-        lg_seterr(env, "control %d (parameter %s) appears in an essential boundary condition: Dirichlet controls are "
-                       "not supported yet", i + 1, expr_param_name(env->c, c[i].param));
-        goto fail;
-      }
-      if (!inF && !inJ) {
-        lg_seterr(env, "control %d (parameter %s) appears in neither the problem nor the functional", i + 1,
-                  expr_param_name(env->c, c[i].param));
-        goto fail;
-      }
+      inF = form_uses_param(env, F, c[i].param);
+      inJ = form_uses_param(env, J, c[i].param);
+      if (inF < 0 || inJ < 0) { lg_seterr(env, "%s", expr_error(env->c)); goto fail; }
+    }
+    if (!inF && !inJ && !dep) {
+      if (fid >= 0) lg_seterr(env, "control %d appears in neither the problem nor the functional", i + 1);
+      else lg_seterr(env, "control %d (parameter %s) appears in neither the problem nor the functional", i + 1,
+                     expr_param_name(env->c, c[i].param));
+      goto fail;
+    }
+    if (dep && lg_problem_bc_symmetric(p)) {
+      lg_seterr(env, "control %d is a Dirichlet control of a problem with symmetric = true: its derivatives need the "
+                     "eliminated columns (use symmetric = false)", i + 1);
+      goto fail;
     }
   }
   /* the adjoint functions, and the equation with its tests replaced by them */
@@ -390,6 +391,28 @@ int lg_reduced_value(lg_env *env, lg_reduced *rf, double *J) {
   return lg_form_kernels_eval(env, rf->lm, rf->Jval, ns, st, J);
 }
 
+/* the derivatives of the essential values for control i: out += s (dg/dm)^T w */
+static int add_bc_transpose(lg_env *env, lg_reduced *rf, int i, const double *w, double s, double *out) {
+  int *r, *c;
+  double *v;
+  int n = lg_problem_bc_derivative(env, rf->p, rf->c[i].kind == LG_CONTROL_FIELD ? rf->c[i].f->fid : -1, rf->c[i].param, &r, &c, &v);
+  if (n < 0) return 1;
+  for (int k = 0; k < n; k++) out[c[k]] += s * v[k] * w[r[k]];
+  free(r); free(c); free(v);
+  return 0;
+}
+
+/* and the forward action: out[r] += (dg/dm dm)_r on the essential rows */
+static int add_bc_action(lg_env *env, lg_reduced *rf, int i, const double *dm, double *out) {
+  int *r, *c;
+  double *v;
+  int n = lg_problem_bc_derivative(env, rf->p, rf->c[i].kind == LG_CONTROL_FIELD ? rf->c[i].f->fid : -1, rf->c[i].param, &r, &c, &v);
+  if (n < 0) return 1;
+  for (int k = 0; k < n; k++) out[r[k]] += v[k] * dm[c[k]];
+  free(r); free(c); free(v);
+  return 0;
+}
+
 int lg_reduced_gradient(lg_env *env, lg_reduced *rf, double **g) {
   if (ensure_state(env, rf)) return 1;
   coef_binding b[KER_MAXFIELD + KER_MAXFIELD];
@@ -428,6 +451,8 @@ int lg_reduced_gradient(lg_env *env, lg_reduced *rf, double **g) {
       return 1;
     }
     for (int k = 0; k < n; k++) g[i][k] += tmp[k];
+    /* a Dirichlet control: the essential rows u_r - g_r(m) add -lam_r dg_r/dm */
+    if (rf->bcdep[i] && add_bc_transpose(env, rf, i, rf->lamv, -1, g[i])) { free(tmp); return 1; }
     free(tmp);
   }
   return 0;
@@ -466,12 +491,12 @@ int lg_reduced_riesz(lg_env *env, lg_reduced *rf, int i, int kind, const double 
 /* ---------------------------------------------------------------- sensitivities */
 
 int lg_sensitivity(lg_env *env, lg_problem *p, int param, double *du) {
-  const form *F = lg_problem_equation(p), *B = lg_problem_bcs(p);
-  int inB = form_uses_param(env, B, param);
-  if (inB < 0) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
-  if (inB) {
-    lg_seterr(env, "the parameter %s appears in an essential boundary condition: sensitivities with respect to "
-                   "boundary values are not supported yet", expr_param_name(env->c, param));
+  const form *F = lg_problem_equation(p);
+  int inB = lg_problem_bc_dependence(env, p, -1, param);
+  if (inB < 0) return 1;
+  if (inB && lg_problem_bc_symmetric(p)) {
+    lg_seterr(env, "the parameter %s appears in an essential condition of a problem with symmetric = true: its "
+                   "sensitivity needs the eliminated columns (use symmetric = false)", expr_param_name(env->c, param));
     return 1;
   }
   if (!lg_problem_solution(p)) { lg_seterr(env, "the sensitivity needs a solved state: solve the problem first"); return 1; }
@@ -491,7 +516,7 @@ int lg_sensitivity(lg_env *env, lg_problem *p, int param, double *du) {
   }
   form_free(dF);
   if (!rc) {
-    /* the essential rows u_i - g_i do not depend on a */
+    /* the essential rows u_r - g_r(a): du_r = dg_r/da */
     int nbc = lg_problem_essential_rows(p, NULL, 0);
     int *rows = malloc(sizeof(int) * (size_t)(nbc + 1));
     if (!rows) { lg_seterr(env, "out of memory"); rc = 1; }
@@ -500,7 +525,15 @@ int lg_sensitivity(lg_env *env, lg_problem *p, int param, double *du) {
       for (int i = 0; i < N; i++) rhs[i] = -rhs[i];
       for (int i = 0; i < nbc; i++) rhs[rows[i]] = 0;
       free(rows);
-      rc = lg_problem_tangent(env, p, rhs, du);
+      if (inB) {
+        int *r, *c;
+        double *v;
+        int n = lg_problem_bc_derivative(env, p, -1, param, &r, &c, &v);
+        if (n < 0) rc = 1;
+        for (int k = 0; k < n; k++) rhs[r[k]] += v[k];
+        if (n >= 0) { free(r); free(c); free(v); }
+      }
+      if (!rc) rc = lg_problem_tangent(env, p, rhs, du);
     }
   }
   free(rhs);
@@ -551,6 +584,23 @@ static int hessian_setup(lg_env *env, lg_reduced *rf) {
   if (rf->hess_ready) return 0;
   const form *F = lg_problem_equation(rf->p);
   if (check_kinks(env, rf, F)) return 1;
+  /* Dirichlet values must be affine in the controls (jointly): their second derivatives
+   * would need the adjoint on the essential rows in the Lagrangian */
+  for (int i = 0; i < rf->nc; i++)
+    for (int j = i; j < rf->nc && rf->bcdep[i]; j++) {
+      if (!rf->bcdep[j]) continue;
+      const lg_control *a = &rf->c[i], *b = &rf->c[j];
+      int mixed = lg_problem_bc_mixed(env, rf->p, a->kind == LG_CONTROL_FIELD ? a->f->fid : -1, a->param,
+                                      b->kind == LG_CONTROL_FIELD ? b->f->fid : -1, b->param);
+      if (mixed < 0) return 1;
+      if (mixed) {
+        if (i == j) lg_seterr(env, "Hessian actions are not available: control %d enters an essential condition nonlinearly "
+                                   "(Dirichlet values affine in the controls are supported)", i + 1);
+        else lg_seterr(env, "Hessian actions are not available: controls %d and %d enter an essential condition as a product "
+                            "(Dirichlet values affine in the controls are supported)", i + 1, j + 1);
+        return 1;
+      }
+    }
   for (int i = 0; i < rf->nc; i++) {
     if (rf->c[i].kind == LG_CONTROL_FIELD) {
       if (!(rf->dmf[i] = lg_function_new(env, rf->lm, rf->c[i].f->degree, "dm"))) { hessian_free(rf); return 1; }
@@ -640,7 +690,9 @@ int lg_reduced_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
   if (!rc) {
     for (int i = 0; i < N; i++) rf->rhs[i] = -rf->rhs[i];
     for (int i = 0; i < nbc; i++) rf->rhs[rows[i]] = 0;
-    rc = lg_problem_tangent(env, rf->p, rf->rhs, v);
+    for (int i = 0; i < rf->nc && !rc; i++)
+      if (rf->bcdep[i]) rc = add_bc_action(env, rf, i, dm[i], rf->rhs); /* du_r = dg_r/dm dm */
+    if (!rc) rc = lg_problem_tangent(env, rf->p, rf->rhs, v);
   }
   for (int a = 0; a < rf->nf && !rc; a++) memcpy(rf->du[a]->x, v + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
   /* the second-order adjoint: (dR/du)^T dlam = -(L_uu du + L_um dm) */
@@ -649,19 +701,25 @@ int lg_reduced_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
     for (int i = 0; i < N; i++) rf->rhs[i] = -rf->rhs[i];
     rc = lg_problem_adjoint(env, rf->p, rf->rhs, v);
   }
+  /* H dm = L_mu du + L_mm dm + (dR/dm)^T dlam; a Dirichlet control's rows u_r - g_r(m), linear
+   * in m, add -dlam_r dg_r/dm */
+  double *dlr = rc ? NULL : malloc(sizeof(double) * ((size_t)N + 1));
+  if (!rc && !dlr) { lg_seterr(env, "out of memory"); rc = 1; }
   if (!rc) {
+    memcpy(dlr, v, sizeof(double) * (size_t)N);
     for (int i = 0; i < nbc; i++) v[rows[i]] = 0; /* it enters the equation as a test function */
     for (int a = 0; a < rf->nf; a++) memcpy(rf->dlam[a]->x, v + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
   }
-  /* H dm = L_mu du + L_mm dm + (dR/dm)^T dlam */
   for (int i = 0; i < rf->nc && !rc; i++) {
     int n = lg_reduced_control_size(rf, i);
     double *tmp = malloc(sizeof(double) * ((size_t)n + 1));
     rc = !tmp || lg_form_kernels_eval(env, rf->lm, rf->hD[i], ns, st, out[i]) || lg_form_kernels_eval(env, rf->lm, rf->hG[i], ns, st, tmp);
     if (!rc)
       for (int k = 0; k < n; k++) out[i][k] += tmp[k];
+    if (!rc && rf->bcdep[i]) rc = add_bc_transpose(env, rf, i, dlr, -1, out[i]);
     free(tmp);
   }
+  free(dlr);
   free(rows);
   free(v);
   return rc;

@@ -28,10 +28,12 @@ typedef struct {
   int field;          /* row/column field */
   int src;            /* the boundary condition it comes from (form term index) */
   expr_tape tape;     /* roots: a (coefficient of u), r (rest): u = -r/a */
+  expr *g;            /* the value -r/a (controls differentiate it) */
   int nitems;
   int *cells, *facets;
 } bc_term;
 
+#define LG_BCD_CACHE 8
 struct lg_problem {
   lg_env *env;
   lg_mesh *lm;
@@ -48,6 +50,9 @@ struct lg_problem {
   long bc_cap;
   PetscInt *bc_rows;
   PetscScalar *bc_vals;
+  int *bc_org;        /* per essential row: the bc term, cell and local node it came from */
+  struct { int fid, param, n; expr_tape *tape; } bcd[LG_BCD_CACHE]; /* d g / d control, per bc term */
+  int nbcd;
   PetscCount ncoo;
   PetscScalar *coo_vals;
   Mat A;
@@ -270,7 +275,8 @@ static int setup_bcs(lg_env *env, lg_problem *p, const form *bc, const int *test
       bt->field = a;
       bt->src = i;
       expr *roots[2] = {ca, rest};
-      if (expr_tape_build(env->c, 2, roots, &bt->tape)) { coef_table_free(&tab); lg_seterr(env, "%s", expr_error(env->c)); return 1; }
+      bt->g = expr_div(env->c, expr_neg(env->c, rest), ca);
+      if (!bt->g || expr_tape_build(env->c, 2, roots, &bt->tape)) { coef_table_free(&tab); lg_seterr(env, "%s", expr_error(env->c)); return 1; }
       if (lg_region_items(env, p->lm, &ft->reg, &bt->nitems, &bt->cells, &bt->facets)) { coef_table_free(&tab); return 1; }
       cap += (long)bt->nitems * p->rdm[a]->el.nfacet_dofs;
     }
@@ -279,7 +285,8 @@ static int setup_bcs(lg_env *env, lg_problem *p, const form *bc, const int *test
   p->bc_cap = cap;
   p->bc_rows = malloc(sizeof(PetscInt) * (size_t)(cap + 1));
   p->bc_vals = malloc(sizeof(PetscScalar) * (size_t)(cap + 1));
-  if (!p->bc_rows || !p->bc_vals) { lg_seterr(env, "out of memory"); return 1; }
+  p->bc_org = malloc(sizeof(int) * 3 * (size_t)(cap + 1));
+  if (!p->bc_rows || !p->bc_vals || !p->bc_org) { lg_seterr(env, "out of memory"); return 1; }
   return 0;
 }
 
@@ -356,6 +363,9 @@ static int compute_bcs(lg_env *env, lg_problem *p) {
         }
         p->bc_rows[p->nbc] = p->rglob[bt->field] + dm->cell_dofs[(size_t)c * dm->nloc + k];
         p->bc_vals[p->nbc] = -out[1] / out[0];
+        p->bc_org[3 * p->nbc] = i;
+        p->bc_org[3 * p->nbc + 1] = c;
+        p->bc_org[3 * p->nbc + 2] = k;
         src[p->nbc] = bt->src;
         p->nbc++;
       }
@@ -373,8 +383,9 @@ static int compute_bcs(lg_env *env, lg_problem *p) {
     int *ndof = calloc((size_t)nsrc + 1, sizeof(int)), *nover = calloc((size_t)nsrc + 1, sizeof(int)),
         *by = calloc((size_t)nsrc + 1, sizeof(int));
     double *mine = calloc((size_t)nsrc + 1, sizeof(double)), *theirs = calloc((size_t)nsrc + 1, sizeof(double));
-    if (!pairs || !v || !ndof || !nover || !by || !mine || !theirs) {
-      free(pairs); free(v); free(ndof); free(nover); free(by); free(mine); free(theirs); free(src);
+    int *org = malloc(sizeof(int) * 3 * (size_t)p->nbc);
+    if (!pairs || !v || !ndof || !nover || !by || !mine || !theirs || !org) {
+      free(pairs); free(v); free(ndof); free(nover); free(by); free(mine); free(theirs); free(org); free(src);
       lg_seterr(env, "out of memory");
       return 1;
     }
@@ -399,6 +410,9 @@ static int compute_bcs(lg_env *env, lg_problem *p) {
       }
       v[k] = val;
       p->bc_rows[k] = pairs[2 * i];
+      org[3 * k] = p->bc_org[3 * last];
+      org[3 * k + 1] = p->bc_org[3 * last + 1];
+      org[3 * k + 2] = p->bc_org[3 * last + 2];
       k++;
       i = j;
     }
@@ -411,6 +425,7 @@ static int compute_bcs(lg_env *env, lg_problem *p) {
                 bad + 1, ndof[bad], mine[bad], theirs[bad]);
     else {
       memcpy(p->bc_vals, v, sizeof(PetscScalar) * (size_t)k);
+      memcpy(p->bc_org, org, sizeof(int) * 3 * (size_t)k);
       p->nbc = k;
       if (env->verbose)
         for (int sc = 0; sc < nsrc; sc++)
@@ -418,7 +433,7 @@ static int compute_bcs(lg_env *env, lg_problem *p) {
             fprintf(stderr, "[lugal] essential_bc: condition %d is overridden by condition %d on %d of its %d dofs "
                             "(where they meet; the later one wins)\n", sc + 1, by[sc] + 1, nover[sc], ndof[sc]);
     }
-    free(pairs); free(v); free(ndof); free(nover); free(by); free(mine); free(theirs);
+    free(pairs); free(v); free(ndof); free(nover); free(by); free(mine); free(theirs); free(org);
     if (bad >= 0) { free(src); return 1; }
   }
   free(src);
@@ -547,9 +562,14 @@ void lg_problem_free(lg_problem *p) {
     free(p->bct[i].cells);
     free(p->bct[i].facets);
   }
+  for (int k = 0; k < p->nbcd; k++) {
+    for (int i = 0; i < p->bcd[k].n; i++) expr_tape_free(&p->bcd[k].tape[i]);
+    free(p->bcd[k].tape);
+  }
   free(p->bct);
   free(p->bc_rows);
   free(p->bc_vals);
+  free(p->bc_org);
   free(p->coo_vals);
   free(p->state);
   free(p->solution);
@@ -1006,6 +1026,132 @@ const double *lg_problem_solution(const lg_problem *p) { return p->have_solution
 int lg_problem_essential_rows(const lg_problem *p, int *rows, int max) {
   for (int i = 0; i < p->nbc && i < max; i++) rows[i] = (int)p->bc_rows[i];
   return p->nbc;
+}
+
+/* ---- essential values that depend on a control (Dirichlet controls) */
+
+static expr *control_leaf(lg_env *env, int fid, int param) {
+  unsigned char z[3] = {0, 0, 0};
+  return fid >= 0 ? expr_field(env->c, fid, 0, z) : expr_param(env->c, param);
+}
+
+int lg_problem_bc_symmetric(const lg_problem *p) { return p->bc_symmetric; }
+
+int lg_problem_bc_dependence(lg_env *env, const lg_problem *p, int fid, int param) {
+  int dep = 0;
+  expr *leaf = control_leaf(env, fid, param);
+  for (int i = 0; i < p->nbct && leaf; i++) {
+    expr *g = p->bct[i].g, *lv[64];
+    if (fid >= 0) {
+      int n = expr_collect_fields(env->c, 1, &g, fid, 64, lv);
+      for (int k = 0; k < n && k < 64; k++)
+        if (lv[k]->order) {
+          expr_func_info *fi = expr_func_get(env->c, fid);
+          lg_seterr(env, "the control %s enters essential condition %d through a derivative: a Dirichlet control gives "
+                         "the value itself", fi ? fi->name : "?", p->bct[i].src + 1);
+          return -1;
+        }
+      if (!n) continue;
+    }
+    expr *d = expr_diff(env->c, g, leaf);
+    if (!d) { lg_seterr(env, "%s", expr_error(env->c)); return -1; }
+    if (d->kind == E_CONST && d->value == 0) continue;
+    expr *dd = expr_diff(env->c, d, leaf);
+    if (!dd) { lg_seterr(env, "%s", expr_error(env->c)); return -1; }
+    int lin = dd->kind == E_CONST && dd->value == 0;
+    if (!lin || !dep) dep = lin ? 1 : 2;
+  }
+  if (!leaf) { lg_seterr(env, "%s", expr_error(env->c)); return -1; }
+  return dep;
+}
+
+int lg_problem_bc_mixed(lg_env *env, const lg_problem *p, int fid1, int param1, int fid2, int param2) {
+  expr *l1 = control_leaf(env, fid1, param1), *l2 = control_leaf(env, fid2, param2);
+  if (!l1 || !l2) { lg_seterr(env, "%s", expr_error(env->c)); return -1; }
+  for (int i = 0; i < p->nbct; i++) {
+    expr *d = expr_diff(env->c, p->bct[i].g, l1);
+    expr *dd = d ? expr_diff(env->c, d, l2) : NULL;
+    if (!dd) { lg_seterr(env, "%s", expr_error(env->c)); return -1; }
+    if (!(dd->kind == E_CONST && dd->value == 0)) return 1;
+  }
+  return 0;
+}
+
+int lg_problem_bc_derivative(lg_env *env, lg_problem *p, int fid, int param, int **rows, int **cols, double **vals) {
+  *rows = *cols = NULL;
+  *vals = NULL;
+  /* the tapes of dg/dcontrol per bc term, once */
+  int slot = -1;
+  for (int k = 0; k < p->nbcd; k++)
+    if (p->bcd[k].fid == fid && p->bcd[k].param == param) slot = k;
+  if (slot < 0) {
+    if (p->nbcd == LG_BCD_CACHE) { lg_seterr(env, "at most %d controls in the essential conditions", LG_BCD_CACHE); return -1; }
+    expr *leaf = control_leaf(env, fid, param);
+    expr_tape *t = calloc((size_t)p->nbct + 1, sizeof(expr_tape));
+    if (!leaf || !t) { free(t); lg_seterr(env, "out of memory"); return -1; }
+    for (int i = 0; i < p->nbct; i++) {
+      expr *d = expr_diff(env->c, p->bct[i].g, leaf);
+      if (!d || expr_tape_build(env->c, 1, &d, &t[i])) {
+        for (int j = 0; j < i; j++) expr_tape_free(&t[j]);
+        free(t);
+        lg_seterr(env, "%s", expr_error(env->c));
+        return -1;
+      }
+    }
+    slot = p->nbcd++;
+    p->bcd[slot].fid = fid;
+    p->bcd[slot].param = param;
+    p->bcd[slot].n = p->nbct;
+    p->bcd[slot].tape = t;
+  }
+  lg_function *fn = NULL;
+  if (fid >= 0) {
+    expr_func_info *fi = expr_func_get(env->c, fid);
+    fn = fi ? fi->user : NULL;
+    if (!fn) { lg_seterr(env, "the control has no values"); return -1; }
+  }
+  int per = fn ? fn->dm->nloc : 1;
+  size_t cap = (size_t)p->nbc * (size_t)per + 1;
+  int *r = malloc(sizeof(int) * cap), *c = malloc(sizeof(int) * cap);
+  double *v = malloc(sizeof(double) * cap);
+  size_t wn = 1;
+  for (int i = 0; i < p->nbct; i++) wn = (size_t)p->bcd[slot].tape[i].n + 1 > wn ? (size_t)p->bcd[slot].tape[i].n + 1 : wn;
+  double *w = malloc(sizeof(double) * wn);
+  if (!r || !c || !v || !w) { free(r); free(c); free(v); free(w); lg_seterr(env, "out of memory"); return -1; }
+  int n = 0;
+  mesh *m = p->lm->m;
+  for (int q = 0; q < p->nbc; q++) {
+    int t = p->bc_org[3 * q], cell = p->bc_org[3 * q + 1], k = p->bc_org[3 * q + 2];
+    bc_term *bt = &p->bct[t];
+    dofmap *dm = p->rdm[bt->field];
+    bc_pt pt = {env, p, cell, {0, 0, 0}, {0, 0, 0}, {{0}}};
+    double J[3][3], d;
+    simplex_jacobian(m, cell, J, pt.K);
+    memcpy(pt.xi, dm->el.node + 3 * k, sizeof pt.xi);
+    dofmap_node_coords(dm, cell, k, pt.x);
+    if (expr_tape_eval(&p->bcd[slot].tape[t], expr_param_values(env->c), bc_leaf, &pt, w, &d)) {
+      free(r); free(c); free(v); free(w);
+      return -1;
+    }
+    if (!isfinite(d)) {
+      free(r); free(c); free(v); free(w);
+      lg_seterr(env, "the derivative of essential condition %d with respect to the control is not finite at (%g, %g)", bt->src + 1,
+                pt.x[0], pt.x[1]);
+      return -1;
+    }
+    if (d == 0) continue;
+    if (!fn) { r[n] = (int)p->bc_rows[q]; c[n] = 0; v[n++] = d; continue; }
+    double phi[FEM_MAXLOC], grad[FEM_MAXLOC * 3];
+    lagrange_eval(&fn->dm->el, pt.xi, phi, grad);
+    const int *cd = fn->dm->cell_dofs + (size_t)cell * fn->dm->nloc;
+    for (int j = 0; j < fn->dm->nloc; j++)
+      if (fabs(phi[j]) > 1e-14) { r[n] = (int)p->bc_rows[q]; c[n] = cd[j]; v[n++] = d * phi[j]; }
+  }
+  free(w);
+  *rows = r;
+  *cols = c;
+  *vals = v;
+  return n;
 }
 
 int lg_problem_bind_state(const lg_problem *p, coef_binding *b) {

@@ -1,6 +1,6 @@
 -- Reduced functionals: gradients by one adjoint solve must pass Taylor tests (first-order
 -- remainder rate 2) for linear and nonlinear states, P1 and P2 states, field and parameter
--- controls, a Neumann control, a boundary term, two controls, a coupled system, a Gmsh mesh
+-- controls, a Neumann control, a boundary term, two controls, a coupled system, Stokes, a Gmsh mesh
 -- and a tetrahedral mesh; the directional derivative must match central differences and the
 -- raw gradient; Hessian actions (tangent + second-order adjoint) must pass second-order Taylor
 -- tests (rate 3) and be symmetric; bad input must be refused with a message.
@@ -128,6 +128,26 @@ rate_ok(lg.taylor_test(rfc, 1 + lg.x, lg.y), "coupled nonlinear system")
 hess_ok(lg.taylor_test(rfc, 1 + lg.x, lg.y, {hessian = true, h = 8, steps = 3}), "Hessian: coupled nonlinear system")
 local su, sw = rfc:state()
 T.check(sw ~= nil and lg.integrate(mesh, su*su) > 0, "a coupled state has two fields")
+
+-- Stokes (Taylor-Hood P2/P1, walls on three sides, do-nothing outflow): a distributed force
+-- (fx, fy) and the viscosity as controls; nu multiplies the unknowns (mixed second derivatives)
+do
+  local ux, uy, p = lg.unknown(P2, "ux"), lg.unknown(P2, "uy"), lg.unknown(P1, "p")
+  local vx, vy, qp = lg.test(P2, "vx"), lg.test(P2, "vy"), lg.test(P1, "qp")
+  local sm = lg.mesh.rectangle{nx = 6}
+  local fx, fy = lg.control(P1, sm, "fx"), lg.control(P1, sm, "fy")
+  local nu = lg.parameter("nu", 1.0)
+  local wall = sm:boundary("left", "top", "bottom")
+  local stokes = lg.linear_problem{mesh = sm, test = {vx, vy, qp}, unknown = {ux, uy, p},
+    eqn = lg.integral(sm:cells(), nu*(lg.dot(lg.grad(vx), lg.grad(ux)) + lg.dot(lg.grad(vy), lg.grad(uy)))
+      - p*(lg.dx(vx, 1) + lg.dx(vy, 2)) - qp*(lg.dx(ux, 1) + lg.dx(uy, 2)) - fx*vx - fy*vy),
+    bc = {lg.essential_bc(wall, vx*ux), lg.essential_bc(wall, vy*uy)}}
+  local Js = lg.functional(lg.integral(sm:cells(), 0.5*((ux - lg.sin(pi*lg.y))^2 + uy^2) + 1e-4/2*(fx^2 + fy^2)))
+  local rs = lg.reduced_functional{problem = stokes, functional = Js, control = {fx, fy, nu}}
+  local ts = lg.taylor_test(rs, {lg.x, lg.y, 1.0}, {lg.y, lg.x*lg.x, 0.2}, {hessian = true})
+  hess_ok(ts, "Stokes: force and viscosity controls")
+  rate_ok(ts, "Stokes: force and viscosity controls")
+end
 
 -- a Gmsh mesh, a tetrahedral mesh
 local gm = lg.mesh.read(data .. "domain.msh")

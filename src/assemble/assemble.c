@@ -230,10 +230,54 @@ int lg_bind_discrete(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nextra,
   return 0;
 }
 
+/* a 64-bit hash of what the point cache depends on: the coordinates and the items */
+static uint64_t mix(uint64_t h, const void *p, size_t n) {
+  const unsigned char *b = p;
+  size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    uint64_t w;
+    memcpy(&w, b + i, 8);
+    h = (h ^ w) * 0x9E3779B97F4A7C15ull;
+    h ^= h >> 29;
+  }
+  for (; i < n; i++) h = (h ^ b[i]) * 0x100000001B3ull;
+  return h;
+}
+
+/* the point cache mode of this assembly (kernel.h, kernel_pcache): 0 compute, 1 compute and
+ * store, 2 read; *C the cache when 1 or 2 */
+static int pcache_mode(lg_env *env, kernel_pcache *pc, const mesh *m, int nq, int ncache, int nitems,
+                       const int *cells, const int *facets, double **C) {
+  *C = NULL;
+  if (!pc || env->no_point_cache) return 0;
+  uint64_t h = 0xcbf29ce484222325ull;
+  h = mix(h, &nitems, sizeof nitems);
+  h = mix(h, m->x, sizeof(double) * (size_t)m->nvert * (size_t)m->dim);
+  h = mix(h, cells, sizeof(int) * (size_t)nitems);
+  if (facets) h = mix(h, facets, sizeof(int) * (size_t)nitems);
+  size_t n = (size_t)nitems * (size_t)nq * (size_t)ncache;
+  if (pc->valid && pc->key == h && pc->n == n) { *C = pc->v; return 2; }
+  if (pc->seen && pc->key == h && n > 0 && n <= KER_PCACHE_MAX) {
+    if (pc->n != n) {
+      free(pc->v);
+      pc->v = malloc(sizeof(double) * n);
+      pc->n = pc->v ? n : 0;
+    }
+    if (pc->v) { *C = pc->v; return 1; }
+  }
+  pc->key = h;
+  pc->seen = 1;
+  pc->valid = 0;
+  return 0;
+}
+
 int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells,
                       const int *facets, int nbind, const coef_binding *bind, double *out) {
   mesh *m = lm->m;
   (void)nbind;
+  double *C = NULL;
+  int cm = pcache_mode(env, k->pc, m, k->nq, k->ncache, nitems, cells, facets, &C);
+  size_t cstride = (size_t)k->nq * (size_t)k->ncache;
   int size = k->arity == 2 ? k->rows.size * k->cols.size : k->arity == 1 ? k->rows.size : 1;
   double X[8 * 3], A[FEM_MAXLOC * KER_MAXFIELD * FEM_MAXLOC * KER_MAXFIELD / 4 + 64];
   double *Ab = NULL;
@@ -259,9 +303,10 @@ int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, 
     }
     double *dst = k->arity == 0 ? (Ab ? Ab : A) : out + (size_t)it * (size_t)size;
     memset(dst, 0, sizeof(double) * (size_t)size);
-    k->fn(X, W, P, facets ? facets[it] : 0, dst);
+    k->fn(X, W, P, facets ? facets[it] : 0, dst, C ? C + (size_t)it * cstride : NULL, cm);
     if (k->arity == 0) sum += dst[0];
   }
+  if (cm == 1) k->pc->valid = 1;
   if (k->arity == 0) out[0] += sum;
   free(W);
   free(Ab);
@@ -416,6 +461,7 @@ int lg_integrate(lg_env *env, lg_mesh *lm, const region *r, expr *e, int order, 
   if (lg_region_items(env, lm, r, &n, &cells, &facets)) return 1;
   *result = 0;
   int rc = lg_assemble_items(env, lm, &k, n, cells, facets, k.ncoef, bind, result);
+  kernel_release(&k);
   free(cells);
   free(facets);
   if (!rc && !isfinite(*result)) {

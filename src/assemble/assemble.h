@@ -18,6 +18,7 @@ typedef struct {
   int verbose;          /* -lugal_verbose: timings and kernel statistics on stderr */
   double kernel_ms;     /* total JIT time */
   int nkernels;
+  int no_point_cache;   /* -lugal_point_cache 0: kernels recompute their cached values */
   char err[LG_ERRLEN];
 } lg_env;
 

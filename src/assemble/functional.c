@@ -40,6 +40,7 @@ void lg_form_kernels_free(lg_form_kernels *K) {
   if (!K) return;
   for (int i = 0; i < K->n; i++) {
     coef_table_free(&K->t[i].tab);
+    kernel_release(&K->t[i].k);
     free(K->t[i].cells);
     free(K->t[i].facets);
   }

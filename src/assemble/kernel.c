@@ -407,7 +407,8 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
                     char *err, size_t errlen) {
   strbuf b = {0};
   expr_tape tape = {0};
-  unsigned char *sel = NULL, *isconst = NULL;
+  unsigned char *sel = NULL, *isconst = NULL, *pcls = NULL;
+  int *pslot = NULL;
   int dim = cell_dim(ct);
   int nf = facet ? cell_nfacets(ct) : 1;
   memset(k, 0, sizeof *k);
@@ -606,8 +607,8 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     }
 
   sb_printf(&b, "void lugal_kernel(const double *restrict X, const double *restrict W, "
-                "const double *restrict P, int facet, double *restrict A)\n{\n");
-  sb_printf(&b, "  (void)W; (void)P; (void)facet;\n");
+                "const double *restrict P, int facet, double *restrict A, double *restrict C, int cm)\n{\n");
+  sb_printf(&b, "  (void)W; (void)P; (void)facet; (void)C; (void)cm;\n");
   /* geometry */
   if (dim == 2) {
     sb_printf(&b, "  const double J00 = X[2] - X[0], J01 = X[4] - X[0], J10 = X[3] - X[1], J11 = X[5] - X[1];\n"
@@ -663,6 +664,11 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   if (!sel) KERR("out of memory");
   for (int i = 0; i < tape.n; i++) sel[i] = !(tape.node[i]->dep & DEP_POINT);
   expr_codegen(&b, &tape, "t", "P", sel, leafname, &lc, "  ");
+  pcls = malloc((size_t)tape.n + 1);
+  pslot = malloc(sizeof(int) * ((size_t)tape.n + 1));
+  if (!pcls || !pslot) KERR("out of memory");
+  k->ncache = expr_tape_point_cache(&tape, pcls, pslot);
+  if (k->ncache < 0) KERR("out of memory");
   char ref[128];
   for (int a = 0; rows && a < rows->n; a++)
     for (int bb = 0; cols && bb < cols->n; bb++) {
@@ -700,9 +706,12 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     }
   if (s->arity == 2 && nvar == 0) {
     /* everything was exact on the reference cell */
+    k->ncache = 0;
     sb_printf(&b, "  (void)K00; (void)scale;\n}\n");
     free(sel);
     free(isconst);
+    free(pcls);
+    free(pslot);
     expr_tape_free(&tape);
     if (b.failed) { sb_free(&b); snprintf(err, errlen, "out of memory generating a kernel"); return NULL; }
     return b.s;
@@ -744,7 +753,30 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     sb_printf(&b, "    double %s = 0.0;\n    for (int i = 0; i < %d; ++i) %s += W[%d + i]*%s[i];\n",
               nm, nl, nm, k->coef_off[ci], bn);
   }
-  for (int i = 0; i < tape.n; i++) sel[i] = !sel[i];
+  if (k->ncache > 0) {
+    /* cached coordinate-only values: read them, or compute (and store) them */
+    int nc = k->ncache;
+    sb_printf(&b, "    double ");
+    for (int i = 0, j = 0; i < tape.n; i++)
+      if (pcls[i] == PC_CACHED) sb_printf(&b, "%st%d", j++ ? ", " : "", i);
+    sb_printf(&b, ";\n");
+    for (int i = 0; i < tape.n; i++) sel[i] = (tape.node[i]->dep & DEP_POINT) && pcls[i] == PC_SHARED;
+    expr_codegen(&b, &tape, "t", "P", sel, leafname, &lc, "    ");
+    sb_printf(&b, "    if (cm == 2) {\n");
+    for (int i = 0; i < tape.n; i++)
+      if (pcls[i] == PC_CACHED) sb_printf(&b, "      t%d = C[q*%d + %d];\n", i, nc, pslot[i]);
+    sb_printf(&b, "    } else {\n");
+    for (int i = 0; i < tape.n; i++)
+      sel[i] = pcls[i] == PC_CACHED ? 2 : (tape.node[i]->dep & DEP_POINT) && pcls[i] == PC_INNER;
+    expr_codegen(&b, &tape, "t", "P", sel, leafname, &lc, "      ");
+    sb_printf(&b, "      if (cm == 1) {\n");
+    for (int i = 0; i < tape.n; i++)
+      if (pcls[i] == PC_CACHED) sb_printf(&b, "        C[q*%d + %d] = t%d;\n", nc, pslot[i], i);
+    sb_printf(&b, "      }\n    }\n");
+    for (int i = 0; i < tape.n; i++) sel[i] = (tape.node[i]->dep & DEP_POINT) && pcls[i] == PC_OTHER;
+  } else {
+    for (int i = 0; i < tape.n; i++) sel[i] = !sel[i];
+  }
   expr_codegen(&b, &tape, "t", "P", sel, leafname, &lc, "    ");
   /* contraction */
   if (s->arity == 0) {
@@ -809,12 +841,16 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   sb_printf(&b, "  }\n}\n");
   free(sel);
   free(isconst);
+  free(pcls);
+  free(pslot);
   expr_tape_free(&tape);
   if (b.failed) { sb_free(&b); snprintf(err, errlen, "out of memory generating a kernel"); return NULL; }
   return b.s;
 fail:
   free(sel);
   free(isconst);
+  free(pcls);
+  free(pslot);
   expr_tape_free(&tape);
   sb_free(&b);
   return NULL;
@@ -828,5 +864,17 @@ int kernel_build(lg_jit *j, expr_ctx *c, cell_type ct, int facet, int qdeg, cons
   if (getenv("LUGAL_SHOW_KERNELS")) fprintf(stderr, "%s\n", src);
   k->fn = jit_compile(j, src, &k->compile_ms, &k->cached, err, errlen);
   free(src);
-  return k->fn ? 0 : 1;
+  if (!k->fn) return 1;
+  if (k->ncache > 0 && !(k->pc = calloc(1, sizeof *k->pc))) {
+    snprintf(err, errlen, "out of memory");
+    return 1;
+  }
+  return 0;
+}
+
+void kernel_release(lg_kernel *k) {
+  if (!k || !k->pc) return;
+  free(k->pc->v);
+  free(k->pc);
+  k->pc = NULL;
 }

@@ -2,12 +2,16 @@
  * compiles them (libtcc in memory, or the system C compiler into a cached shared object).
  *
  * A kernel computes one element tensor:
- *   void k(const double *X, const double *W, const double *P, int facet, double *A)
+ *   void k(const double *X, const double *W, const double *P, int facet, double *A,
+ *          double *C, int cmode)
  * X: the cell's vertex coordinates; W: the local dofs of every coefficient function in
  * kernel order; P: parameter values; facet: local facet for boundary integrals; A: the
- * element tensor (zeroed by the caller), rows × cols, row-major. */
+ * element tensor (zeroed by the caller), rows × cols, row-major; C, cmode: the item's slice
+ * of the point cache (kernel_pcache) and what to do with it. */
 #ifndef LUGAL_KERNEL_H
 #define LUGAL_KERNEL_H
+
+#include <stdint.h>
 
 #include "../expr/expr.h"
 #include "fem.h"
@@ -15,7 +19,20 @@
 #define KER_MAXFIELD 8
 #define KER_MAXCOEF 32
 
-typedef void (*kernel_fn)(const double *X, const double *W, const double *P, int facet, double *A);
+typedef void (*kernel_fn)(const double *X, const double *W, const double *P, int facet, double *A,
+                          double *C, int cmode);
+
+/* the per-point cache of a kernel (see expr_tape_point_cache): the values of its cached
+ * coordinate-only subexpressions at every quadrature point of every item, kept for one
+ * geometry and item list (key); filled on the second assembly with the same key, read from
+ * the third on. The kernel's cmode: 0 compute, 1 compute and store in C, 2 read C. */
+typedef struct {
+  uint64_t key;
+  int seen, valid;
+  size_t n;
+  double *v;
+} kernel_pcache;
+#define KER_PCACHE_MAX ((size_t)1 << 24) /* doubles (128 MB) per kernel at most */
 
 typedef struct {
   int n;
@@ -37,6 +54,8 @@ typedef struct {
   int wsize;
   double compile_ms;
   int cached; /* 1 when the JIT found it compiled already */
+  int ncache;        /* cached values per quadrature point */
+  kernel_pcache *pc; /* NULL when ncache == 0; freed by kernel_release */
 } lg_kernel;
 
 typedef struct lg_jit lg_jit;
@@ -64,5 +83,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
 int kernel_build(lg_jit *j, expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel_spec *s,
                  const field_layout *rows, const field_layout *cols, lg_kernel *k, char *err,
                  size_t errlen);
+/* free what a built kernel owns (its point cache); the code stays with the JIT */
+void kernel_release(lg_kernel *k);
 
 #endif

@@ -553,6 +553,8 @@ void lg_problem_free(lg_problem *p) {
   if (!p) return;
   for (int i = 0; i < p->nterm; i++) {
     coef_table_free(&p->t[i].tab);
+    kernel_release(&p->t[i].kmat);
+    kernel_release(&p->t[i].kres);
     free(p->t[i].cells);
     free(p->t[i].facets);
   }

@@ -190,6 +190,74 @@ int expr_tape_eval(const expr_tape *t, const double *params, expr_leaf_fn leaf, 
   return rc;
 }
 
+/* ---------------------------------------------------------------- point caches */
+
+/* Which nodes of a kernel's tape a per-point cache can hold: the largest subexpressions that
+ * depend on the coordinates only (no field, normal or parameter below them) and call a
+ * transcendental function or pow (a target sin(pi x) sin(pi y), a source exp(-40 r^2)).
+ * Their values at the quadrature points do not change between assemblies on the same
+ * geometry, so an optimization loop that assembles J and its gradient hundreds of times
+ * computes them once. Classes (for the nodes that vary in the cell):
+ *   PC_CACHED: a cached value (slot[k] its index);
+ *   PC_INNER:  needed only to compute cached values (skipped when they are loaded);
+ *   PC_SHARED: coordinate-only, needed elsewhere too, cheap (computed always, first);
+ *   PC_OTHER:  the rest (computed always, after). */
+int expr_tape_point_cache(const expr_tape *t, unsigned char *cls, int *slot) {
+  tape_index_map m;
+  if (tim_build(t, &m)) return -1;
+  int n = t->n;
+  unsigned char *f = calloc((size_t)n + 1, 1);
+  if (!f) { free(m.kv); return -1; }
+  enum { XONLY = 1, HASFN = 2, NONX_PARENT = 4, LIVE = 8, CLOS = 16 };
+  for (int k = 0; k < n; k++) {
+    const expr *e = t->node[k];
+    int x = 1, fn = 0;
+    if (e->kind == E_FIELD || e->kind == E_NORMAL || e->kind == E_PARAM) x = 0;
+    if (!(e->dep & DEP_POINT)) x = 0;
+    if (e->kind == E_FUNC) fn = 1;
+    if (e->kind == E_POW) {
+      const expr *p = e->ch[1];
+      fn = !(p->kind == E_CONST && p->value == floor(p->value) && fabs(p->value) <= 4);
+    }
+    for (int i = 0; i < e->n; i++) {
+      int c = tim_get(&m, e->ch[i]);
+      if (t->node[c]->dep & DEP_POINT) x &= (f[c] & XONLY) != 0;
+      else if (t->node[c]->dep & DEP_PARAM) x = 0;
+      fn |= (f[c] & HASFN) != 0;
+    }
+    f[k] = (unsigned char)((x ? XONLY : 0) | (fn ? HASFN : 0));
+    if (!x)
+      for (int i = 0; i < e->n; i++) f[tim_get(&m, e->ch[i])] |= NONX_PARENT;
+  }
+  int nc = 0;
+  for (int r = 0; r < t->nroot; r++) f[t->root[r]] |= NONX_PARENT | LIVE;
+  for (int k = 0; k < n; k++) {
+    slot[k] = -1;
+    if ((f[k] & (XONLY | HASFN | NONX_PARENT)) == (XONLY | HASFN | NONX_PARENT) && t->node[k]->kind != E_COORD)
+      slot[k] = nc++;
+  }
+  /* parents come after their children on the tape: walk it backwards */
+  for (int k = n - 1; k >= 0; k--) {
+    const expr *e = t->node[k];
+    int live = (f[k] & LIVE) && slot[k] < 0, clos = slot[k] >= 0 || (f[k] & CLOS);
+    for (int i = 0; i < e->n; i++) {
+      int c = tim_get(&m, e->ch[i]);
+      if (live) f[c] |= LIVE;
+      if (clos) f[c] |= CLOS;
+    }
+  }
+  for (int k = 0; k < n; k++) {
+    if (slot[k] >= 0) cls[k] = PC_CACHED;
+    else if ((f[k] & LIVE) && (f[k] & XONLY)) cls[k] = PC_SHARED;
+    else if (f[k] & LIVE) cls[k] = PC_OTHER;
+    else if (f[k] & CLOS) cls[k] = PC_INNER;
+    else cls[k] = PC_OTHER;
+  }
+  free(f);
+  free(m.kv);
+  return nc;
+}
+
 /* ---------------------------------------------------------------- C code */
 
 void expr_codegen_ref(const expr_tape *t, int k, const char *prefix, expr_leaf_name_fn leafname,
@@ -237,7 +305,7 @@ void expr_codegen(strbuf *b, const expr_tape *t, const char *prefix, const char 
       continue;
     }
     int ci[2] = {0, 0};
-    sb_printf(b, "%sconst double %s%d = ", indent, prefix, k);
+    sb_printf(b, select[k] == 2 ? "%s%s%d = " : "%sconst double %s%d = ", indent, prefix, k);
     for (int i = 0; i < e->n; i++) {
       int c = tim_get(&m, e->ch[i]);
       if (i < 2) ci[i] = c;

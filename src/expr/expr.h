@@ -181,9 +181,15 @@ void sb_printf(strbuf *b, const char *fmt, ...);
 void sb_free(strbuf *b);
 /* emit code for nodes with index in [0, t->n) selected by `select` (1 = emit); the caller
  * decides which nodes go before a loop and which inside. Node k is named "<prefix>k". */
+/* select[k]: 0 skip, 1 declare ("const double tN = ..."), 2 assign to a variable declared
+ * before ("tN = ...") */
 void expr_codegen(strbuf *b, const expr_tape *t, const char *prefix, const char *param_array,
                   const unsigned char *select, expr_leaf_name_fn leafname, void *ud,
                   const char *indent);
+/* the classes of tape nodes for a per-point cache of coordinate-only transcendental
+ * subexpressions (see codegen.c); returns the number of cached nodes, -1 out of memory */
+enum { PC_OTHER, PC_CACHED, PC_INNER, PC_SHARED };
+int expr_tape_point_cache(const expr_tape *t, unsigned char *cls /* t->n */, int *slot /* t->n */);
 /* the C expression naming tape node k (a literal for constants) */
 void expr_codegen_ref(const expr_tape *t, int k, const char *prefix, expr_leaf_name_fn leafname,
                       void *ud, char *buf, size_t len);

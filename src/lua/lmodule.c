@@ -58,6 +58,9 @@ int luaopen_lugal(lua_State *L) {
     PetscBool verbose = PETSC_FALSE;
     PetscOptionsHasName(NULL, NULL, "-lugal_verbose", &verbose);
     ue->env->verbose = verbose;
+    PetscBool pcache = PETSC_TRUE;
+    PetscOptionsGetBool(NULL, NULL, "-lugal_point_cache", &pcache, NULL);
+    ue->env->no_point_cache = !pcache;
   } else lua_pop(L, 1);
 
   lg_lua_expr_register(L);

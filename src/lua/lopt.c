@@ -126,11 +126,14 @@ static int l_reduced_functional(lua_State *L) {
   int deps[3] = {pidx, fidx, cidx};
   ud_reduced *u = new_ud(L, sizeof *u, MT_REDUCED, 3, deps);
   u->rf = rf;
-  /* the controls themselves are kept alive too */
+  /* the problem, the functional and the controls themselves are kept alive too (rf points
+   * into the first two; a script may drop its own references to them) */
   lua_getiuservalue(L, -1, 1);
-  lua_pushvalue(L, cidx);
-  lua_pushboolean(L, 1);
-  lua_rawset(L, -3);
+  for (int i = 0; i < 3; i++) {
+    lua_pushvalue(L, deps[i]);
+    lua_pushboolean(L, 1);
+    lua_rawset(L, -3);
+  }
   lua_pop(L, 1);
   return 1;
 }

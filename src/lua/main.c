@@ -23,6 +23,8 @@ static void usage(FILE *f) {
           "  -lugal_jit tcc|cc     kernel compiler: libtcc in memory (default) or the system\n"
           "                        C compiler at -O3 into a cached shared object\n"
           "  -lugal_verbose        timings and kernel statistics on stderr\n"
+          "  -lugal_point_cache 0  recompute coordinate-only transcendental terms (a target\n"
+          "                        sin(pi x)) at every assembly instead of keeping them\n"
           "  -lugal_traceback      print a Lua traceback with errors\n");
 }
 

@@ -233,6 +233,21 @@ for deg, P in ipairs{P1, P2} do
   T.fails(function() return rdp:hessian({1, 1}) end, "controls 1 and 2 enter an essential condition as a product")
 end
 
+-- a reduced functional keeps its problem alive: the script's only references to the state
+-- problem and the functional are gone (they were freed under it: a use-after-free)
+do
+  local function make()
+    local mg = lg.mesh.rectangle{nx = 6}
+    local sp, up_, _, fp = poisson(mg, P1, P1)
+    return lg.reduced_functional{problem = sp, functional = lg.functional(lg.integral(mg:cells(), up_^2)), control = fp}
+  end
+  local rg = make()
+  collectgarbage("collect"); collectgarbage("collect")
+  local tg = lg.taylor_test(rg, 1 + lg.x, lg.y, {hessian = true})
+  T.check(tg.remainders2[1] < 1e-9 * tg.remainders1[1], "a collected problem's reduced functional: exact Hessian")
+  rate_ok(tg, "after garbage collection")
+end
+
 -- minimization (TAO L-BFGS in the L2 inner product): the Poisson mother problem at 32^2
 local mesh32 = lg.mesh.rectangle{nx = 32}
 local sm, um, vm, fm = poisson(mesh32, P1, P1)

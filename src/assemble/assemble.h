@@ -207,21 +207,29 @@ lg_problem *lg_reduced_gram(lg_env *env, lg_reduced *rf, int i, int h1);
 int lg_sensitivity(lg_env *env, lg_problem *p, int param, double *du);
 
 /* ---- minimization through TAO (optimize.c) */
+#define LG_MAXCONS 16
+enum { LG_CON_LE, LG_CON_GE, LG_CON_EQ };
 typedef struct {
   const char *method;          /* quasi-Newton "lmvm", "blmvm" (bounds); Newton-Krylov with Hessian
-                                * actions "nls", "ntr", "bnls", "bntr" (bounds) */
+                                * actions "nls", "ntr", "bnls", "bntr" (bounds); "almm" (constraints) */
   int maxit;                   /* 0: TAO's default */
   double gatol, grtol, gttol;  /* TAO's: |g| < gatol, |g|/|J| < grtol, |g|/|g0| < gttol; < 0: TAO's defaults */
   int monitor;                 /* a line per iteration on stdout */
   int riesz;                   /* the inner product of field controls: LG_RIESZ_L2 (default) or NONE */
   const double *lower[LG_MAXCONTROL], *upper[LG_MAXCONTROL]; /* per control, NULL: none */
   const char *series;          /* a .pvd of the field controls per iteration, or NULL */
+  /* functional constraints g_j(m) <= c_j, >= c_j or == c_j ("almm": TAO's augmented
+   * Lagrangian); each g_j a reduced functional of the same controls */
+  int ncons;
+  struct { lg_reduced *rf; int kind; double c; } cons[LG_MAXCONS];
 } lg_minimize_opts;
 typedef struct {
   int iterations, evaluations, hessian_products;
-  double J, gnorm;
+  double J, gnorm, cnorm;
   char reason[64];
   int converged;
+  double g[LG_MAXCONS];        /* the constraints' values g_j at the minimizer */
+  double lambda[LG_MAXCONS];   /* multipliers: grad J + sum_j lambda_j grad g_j = 0 */
 } lg_minimize_info;
 /* minimize the reduced functional over its controls, from their current values; they hold
  * the minimizer on return. Fails (with a message) on a state solve that fails, a non-finite

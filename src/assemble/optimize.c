@@ -37,6 +37,9 @@ typedef struct {
   int nstep;
   double *times;
   char **files;
+  double *cg[LG_MAXCONTROL]; /* a constraint's gradient */
+  Tao outer;                 /* almm hands its monitors to its subsolver: report the outer one */
+  double fs, cs[LG_MAXCONS];  /* almm: TAO sees J / fs and (g_j - c_j) / cs_j */
 } opt_ctx;
 
 static int tao_fail(lg_env *env, PetscErrorCode ierr, const char *what) {
@@ -57,6 +60,7 @@ static void to_controls(opt_ctx *C, const PetscScalar *x) {
       for (int k = 0; k < c->f->dm->ndof; k++) c->f->x[k] = x[C->off[i] + k] / q[k];
   }
   lg_reduced_changed(C->rf);
+  for (int j = 0; j < C->o->ncons; j++) lg_reduced_changed(C->o->cons[j].rf);
 }
 static void from_controls(opt_ctx *C, PetscScalar *x) {
   for (int i = 0; i < C->nc; i++) {
@@ -83,13 +87,83 @@ static PetscErrorCode objective_gradient(Tao tao, Vec X, PetscReal *f, Vec G, vo
     PetscCall(VecSet(G, 0));
     return 0;
   }
-  *f = J;
+  *f = J / C->fs;
   PetscScalar *g;
   PetscCall(VecGetArray(G, &g));
   for (int i = 0; i < C->nc; i++)
-    for (int k = 0; k < lg_reduced_control_size(C->rf, i); k++) g[C->off[i] + k] = C->g[i][k] / C->sq[C->off[i] + k];
+    for (int k = 0; k < lg_reduced_control_size(C->rf, i); k++)
+      g[C->off[i] + k] = C->g[i][k] / C->sq[C->off[i] + k] / C->fs;
   PetscCall(VecRestoreArray(G, &g));
   return 0;
+}
+
+/* functional constraints for TAO's augmented Lagrangian, in its convention: c_E(x) = 0 and
+ * c_I(x) >= 0, so g <= c is c - g >= 0 and g >= c is g - c >= 0; which = LG_CON_EQ for the
+ * equalities, else the inequalities (in the order given) */
+static int constraint_values(opt_ctx *C, Vec X, Vec V, int eq) {
+  const PetscScalar *x;
+  if (VecGetArrayRead(X, &x)) return 1;
+  to_controls(C, x);
+  VecRestoreArrayRead(X, &x);
+  PetscScalar *v;
+  if (VecGetArray(V, &v)) return 1;
+  int r = 0, bad = 0;
+  for (int j = 0; j < C->o->ncons && !bad; j++) {
+    int kind = C->o->cons[j].kind;
+    if ((kind == LG_CON_EQ) != eq) continue;
+    double g;
+    if (lg_reduced_value(C->env, C->o->cons[j].rf, &g)) { bad = 1; break; }
+    v[r++] = (kind == LG_CON_LE ? C->o->cons[j].c - g : g - C->o->cons[j].c) / C->cs[j];
+  }
+  VecRestoreArray(V, &v);
+  if (bad) C->failed = 1;
+  return bad;
+}
+static PetscErrorCode ineq_constraints(Tao tao, Vec X, Vec V, void *ud) {
+  (void)tao;
+  return constraint_values(ud, X, V, 0) ? PETSC_ERR_LIB : 0;
+}
+static PetscErrorCode eq_constraints(Tao tao, Vec X, Vec V, void *ud) {
+  (void)tao;
+  return constraint_values(ud, X, V, 1) ? PETSC_ERR_LIB : 0;
+}
+/* their Jacobian in TAO's variables: rows d c_j / dx = +-(dg_j/dm) / sqrt(d) */
+static int constraint_jacobian(opt_ctx *C, Vec X, Mat A, int eq) {
+  const PetscScalar *x;
+  if (VecGetArrayRead(X, &x)) return 1;
+  to_controls(C, x);
+  VecRestoreArrayRead(X, &x);
+  int r = 0, n = C->off[C->nc];
+  PetscInt *cols = malloc(sizeof(PetscInt) * ((size_t)n + 1));
+  PetscScalar *row = malloc(sizeof(PetscScalar) * ((size_t)n + 1));
+  if (!cols || !row) { free(cols); free(row); lg_seterr(C->env, "out of memory"); C->failed = 1; return 1; }
+  for (int k = 0; k < n; k++) cols[k] = k;
+  for (int j = 0; j < C->o->ncons; j++) {
+    int kind = C->o->cons[j].kind;
+    if ((kind == LG_CON_EQ) != eq) continue;
+    double g;
+    lg_reduced *rg = C->o->cons[j].rf;
+    if (lg_reduced_value(C->env, rg, &g) || lg_reduced_gradient(C->env, rg, C->cg)) {
+      free(cols); free(row); C->failed = 1; return 1;
+    }
+    double sg = (kind == LG_CON_LE ? -1 : 1) / C->cs[j];
+    for (int i = 0; i < C->nc; i++)
+      for (int k = 0; k < lg_reduced_control_size(C->rf, i); k++)
+        row[C->off[i] + k] = sg * C->cg[i][k] / C->sq[C->off[i] + k];
+    PetscInt rr = r++;
+    if (MatSetValues(A, 1, &rr, n, cols, row, INSERT_VALUES)) { free(cols); free(row); return 1; }
+  }
+  free(cols);
+  free(row);
+  return MatAssemblyBegin(A, MAT_FINAL_ASSEMBLY) || MatAssemblyEnd(A, MAT_FINAL_ASSEMBLY);
+}
+static PetscErrorCode ineq_jacobian(Tao tao, Vec X, Mat A, Mat B, void *ud) {
+  (void)tao; (void)B;
+  return constraint_jacobian(ud, X, A, 0) ? PETSC_ERR_LIB : 0;
+}
+static PetscErrorCode eq_jacobian(Tao tao, Vec X, Mat A, Mat B, void *ud) {
+  (void)tao; (void)B;
+  return constraint_jacobian(ud, X, A, 1) ? PETSC_ERR_LIB : 0;
 }
 
 /* TAO asks for the Hessian at X: remember the point; the products come later */
@@ -167,8 +241,13 @@ static PetscErrorCode monitor(Tao tao, void *ud) {
   PetscInt it;
   PetscReal f, gnorm, cnorm, step;
   TaoConvergedReason reason;
+  if (C->outer && tao != C->outer) return 0;
   PetscCall(TaoGetSolutionStatus(tao, &it, &f, &gnorm, &cnorm, &step, &reason));
-  if (C->o->monitor) {
+  if (C->o->monitor && C->o->ncons) {
+    printf("  iteration %3d: J = %.10e  |g| = %.3e  |c| = %.3e  evaluations %d\n", (int)it, (double)f * C->fs,
+           (double)gnorm, (double)cnorm, C->evals);
+    fflush(stdout);
+  } else if (C->o->monitor) {
     printf("  iteration %3d: J = %.10e  |g| = %.3e  step = %.3e\n", (int)it, (double)f, (double)gnorm, (double)step);
     fflush(stdout);
   }
@@ -184,6 +263,8 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
   C.rf = rf;
   C.o = o;
   C.nc = lg_reduced_ncontrols(rf);
+  C.fs = 1;
+  for (int j = 0; j < LG_MAXCONS; j++) C.cs[j] = 1;
   int n = 0, rc = 0;
   for (int i = 0; i < C.nc; i++) {
     C.off[i] = n;
@@ -192,15 +273,33 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
   C.off[C.nc] = n;
   static const struct { const char *name; TaoType type; int bounded, newton; } methods[] = {
       {"lmvm", TAOLMVM, 0, 0}, {"blmvm", TAOBLMVM, 1, 0}, {"nls", TAONLS, 0, 1},
-      {"ntr", TAONTR, 0, 1},   {"bnls", TAOBNLS, 1, 1},   {"bntr", TAOBNTR, 1, 1}};
+      {"ntr", TAONTR, 0, 1},   {"bnls", TAOBNLS, 1, 1},   {"bntr", TAOBNTR, 1, 1},
+      {"almm", TAOALMM, 1, 0}};
   int mi = -1;
   for (int i = 0; i < (int)(sizeof methods / sizeof methods[0]); i++)
     if (!strcmp(o->method, methods[i].name)) mi = i;
   if (mi < 0) {
-    lg_seterr(env, "unknown method \"%s\" (lmvm, blmvm, nls, ntr, bnls, bntr)", o->method);
+    lg_seterr(env, "unknown method \"%s\" (lmvm, blmvm, nls, ntr, bnls, bntr, almm)", o->method);
     return 1;
   }
-  int bounded = methods[mi].bounded, newton = methods[mi].newton;
+  int bounded = methods[mi].bounded, newton = methods[mi].newton, almm = !strcmp(o->method, "almm");
+  if (almm != (o->ncons > 0)) {
+    lg_seterr(env, almm ? "method almm needs constraints" : "constraints need method almm");
+    return 1;
+  }
+  for (int j = 0; j < o->ncons; j++) {
+    const lg_reduced *rg = o->cons[j].rf;
+    int same = lg_reduced_ncontrols(rg) == C.nc;
+    for (int i = 0; same && i < C.nc; i++) {
+      const lg_control *a = lg_reduced_control(rf, i), *b = lg_reduced_control(rg, i);
+      same = a->kind == b->kind && a->f == b->f && a->param == b->param;
+    }
+    if (!same) {
+      lg_seterr(env, "constraint %d is a reduced functional of other controls than the objective's (the same controls, "
+                     "in the same order, are needed)", j + 1);
+      return 1;
+    }
+  }
   int any_bounds = 0;
   for (int i = 0; i < C.nc; i++) any_bounds |= o->lower[i] || o->upper[i];
   if (any_bounds && !bounded) { lg_seterr(env, "bounds need a bounded method (blmvm, bnls, bntr)"); return 1; }
@@ -210,12 +309,18 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
     C.dm[i] = newton ? malloc(sz) : NULL;
     /* hd[0] doubles as a scratch of all n values in hessian_mult */
     C.hd[i] = newton ? malloc(i ? sz : sizeof(double) * ((size_t)n + 1)) : NULL;
-    if (!C.g[i] || (newton && (!C.dm[i] || !C.hd[i]))) { lg_seterr(env, "out of memory"); rc = 1; goto done_early; }
+    C.cg[i] = almm ? malloc(sz) : NULL;
+    if (!C.g[i] || (newton && (!C.dm[i] || !C.hd[i])) || (almm && !C.cg[i])) { lg_seterr(env, "out of memory"); rc = 1; goto done_early; }
   }
   if (newton && !(C.xh = malloc(sizeof(double) * ((size_t)n + 1)))) { lg_seterr(env, "out of memory"); rc = 1; goto done_early; }
   Tao tao = NULL;
-  Vec X = NULL, XL = NULL, XU = NULL;
-  Mat H = NULL;
+  Vec X = NULL, XL = NULL, XU = NULL, CI = NULL, CE = NULL;
+  Mat H = NULL, AI = NULL, AE = NULL;
+  int nie = 0, nee = 0;
+  for (int j = 0; j < o->ncons; j++) {
+    if (o->cons[j].kind == LG_CON_EQ) nee++;
+    else nie++;
+  }
   /* the scaling: sqrt of the HRZ-lumped mass of each field control, 1 for parameters */
   C.sq = malloc(sizeof(double) * ((size_t)n + 1));
   if (!C.sq) { lg_seterr(env, "out of memory"); rc = 1; goto done; }
@@ -256,6 +361,7 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
   TCHK(VecRestoreArray(X, &x), "VecRestoreArray");
   TCHK(TaoCreate(PETSC_COMM_SELF, &tao), "TaoCreate");
   TCHK(TaoSetType(tao, methods[mi].type), "TaoSetType");
+  C.outer = tao;
   TCHK(TaoSetSolution(tao, X), "TaoSetSolution");
   TCHK(TaoSetObjectiveAndGradient(tao, NULL, objective_gradient, &C), "TaoSetObjectiveAndGradient");
   if (newton) {
@@ -278,6 +384,34 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
       if (!set) TCHK(PCSetType(pc, PCNONE), "PCSetType");
     }
   }
+  if (almm) {
+    /* TAO's augmented Lagrangian starts its penalty at 10 whenever the constraints hold at
+     * the start: with J ~ 1e-5 and g ~ 0.2 (the Poisson mother problem under a bound on int f)
+     * the penalty outweighs J a thousand times and the subproblems take 449 evaluations (the
+     * classic formulation: over 10 000 each). It sees J / |J(m0)| and each (g_j - c_j) /
+     * max(|c_j|, |g_j(m0)|) instead: 150 evaluations, and gatol is relative to J(m0) */
+    double J0, gj;
+    if (lg_reduced_value(env, rf, &J0)) { rc = 1; goto done; }
+    C.fs = fabs(J0) > 0 && isfinite(J0) ? fabs(J0) : 1;
+    for (int j = 0; j < o->ncons; j++) {
+      if (lg_reduced_value(env, o->cons[j].rf, &gj)) { rc = 1; goto done; }
+      double sc = fmax(fabs(o->cons[j].c), fabs(gj));
+      C.cs[j] = sc > 0 && isfinite(sc) ? sc : 1;
+    }
+    /* few dense constraints: their Jacobians are small dense matrices */
+    if (nie) {
+      TCHK(VecCreateSeq(PETSC_COMM_SELF, nie, &CI), "VecCreateSeq");
+      TCHK(MatCreateSeqDense(PETSC_COMM_SELF, nie, n, NULL, &AI), "MatCreateSeqDense");
+      TCHK(TaoSetInequalityConstraintsRoutine(tao, CI, ineq_constraints, &C), "TaoSetInequalityConstraintsRoutine");
+      TCHK(TaoSetJacobianInequalityRoutine(tao, AI, AI, ineq_jacobian, &C), "TaoSetJacobianInequalityRoutine");
+    }
+    if (nee) {
+      TCHK(VecCreateSeq(PETSC_COMM_SELF, nee, &CE), "VecCreateSeq");
+      TCHK(MatCreateSeqDense(PETSC_COMM_SELF, nee, n, NULL, &AE), "MatCreateSeqDense");
+      TCHK(TaoSetEqualityConstraintsRoutine(tao, CE, eq_constraints, &C), "TaoSetEqualityConstraintsRoutine");
+      TCHK(TaoSetJacobianEqualityRoutine(tao, AE, AE, eq_jacobian, &C), "TaoSetJacobianEqualityRoutine");
+    }
+  }
   if (bounded) {
     TCHK(VecDuplicate(X, &XL), "VecDuplicate");
     TCHK(VecDuplicate(X, &XU), "VecDuplicate");
@@ -293,7 +427,7 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
     VecRestoreArray(XU, &u);
     TCHK(TaoSetVariableBounds(tao, XL, XU), "TaoSetVariableBounds");
   }
-  TCHK(TaoSetTolerances(tao, o->gatol >= 0 ? o->gatol : PETSC_DEFAULT, o->grtol >= 0 ? o->grtol : PETSC_DEFAULT,
+  TCHK(TaoSetTolerances(tao, o->gatol >= 0 ? o->gatol : almm ? 1e-6 : PETSC_DEFAULT, o->grtol >= 0 ? o->grtol : PETSC_DEFAULT,
                         o->gttol >= 0 ? o->gttol : PETSC_DEFAULT), "TaoSetTolerances");
   if (o->maxit > 0) TCHK(TaoSetMaximumIterations(tao, o->maxit), "TaoSetMaximumIterations");
   TCHK(TaoSetMonitor(tao, monitor, &C, NULL), "TaoSetMonitor");
@@ -302,7 +436,7 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
      * (Shanno-Phua) initial scaling and 10 updates. PETSc 3.18's diagonal scaling stalled on
      * the Poisson mother problem (alpha = 1e-6: over 2000 iterations; these: 149 at 32^2,
      * 121 at 64^2, to 1e-8 of the first gradient) */
-    const char *pre = bounded ? "-tao_blmvm_mat_lmvm_" : "-tao_lmvm_mat_lmvm_";
+    const char *pre = almm ? "-tao_almm_subsolver_tao_bqnls_mat_lmvm_" : bounded ? "-tao_blmvm_mat_lmvm_" : "-tao_lmvm_mat_lmvm_";
     static const char *const kv[][2] = {{"scale_type", "scalar"}, {"hist_size", "10"}};
     for (int i = 0; i < 2; i++) {
       char name[96];
@@ -320,12 +454,13 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
     TaoConvergedReason reason;
     TaoGetSolutionStatus(tao, &it, &f, &gnorm, &cnorm, &step, &reason);
     info->iterations = (int)it;
-    info->J = f;
+    info->J = f * C.fs;
     info->gnorm = gnorm;
     info->evaluations = C.evals;
     info->hessian_products = C.hmults;
     snprintf(info->reason, sizeof info->reason, "%s", TaoConvergedReasons[reason]);
     info->converged = reason > 0;
+    info->cnorm = cnorm;
     /* the controls hold the solution TAO returns (not its last trial point) */
     const PetscScalar *xs;
     Vec S;
@@ -333,6 +468,36 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
     VecGetArrayRead(S, &xs);
     to_controls(&C, xs);
     VecRestoreArrayRead(S, &xs);
+    if (!ierr && almm) {
+      /* the constraints at the minimizer, and the multipliers in the user's convention:
+       * TAO's Lagrangian is J - y_E c_E - y_I c_I, so lambda = y for g <= c, -y otherwise */
+      Vec Y = NULL;
+      IS ise = NULL, isi = NULL;
+      const PetscScalar *y = NULL;
+      /* (PETSc 3.18 has the index sets only when there are both kinds) */
+      int have = !TaoALMMGetMultipliers(tao, &Y) && Y && (!(nee && nie) || !TaoALMMGetDualIS(tao, &ise, &isi)) &&
+                 !VecGetArrayRead(Y, &y);
+      const PetscInt *ie = NULL, *ii = NULL;
+      if (have && ise) ISGetIndices(ise, &ie);
+      if (have && isi) ISGetIndices(isi, &ii);
+      int ke = 0, ki = 0;
+      for (int j = 0; j < o->ncons; j++) {
+        double g = NAN;
+        lg_reduced_changed(o->cons[j].rf);
+        if (lg_reduced_value(env, o->cons[j].rf, &g)) { rc = 1; break; }
+        info->g[j] = g;
+        int kind = o->cons[j].kind;
+        /* where each constraint's multiplier is in TAO's vector (equalities, inequalities) */
+        int k = kind == LG_CON_EQ ? ke++ : ki++;
+        const PetscInt *at = kind == LG_CON_EQ ? ie : ii;
+        PetscInt pos = at ? at[k] : (kind == LG_CON_EQ ? k : nee + k);
+        info->lambda[j] = have ? (kind == LG_CON_LE ? 1 : -1) * y[pos] * C.fs / C.cs[j] : NAN;
+      }
+      if (ie) ISRestoreIndices(ise, &ie);
+      if (ii) ISRestoreIndices(isi, &ii);
+      if (have) VecRestoreArrayRead(Y, &y);
+      if (rc) goto done;
+    }
     if (ierr && C.hess_failed) {
       char why[LG_ERRLEN];
       snprintf(why, sizeof why, "%s", env->err);
@@ -366,12 +531,16 @@ done:
   if (XL) VecDestroy(&XL);
   if (XU) VecDestroy(&XU);
   if (H) MatDestroy(&H);
+  if (CI) VecDestroy(&CI);
+  if (CE) VecDestroy(&CE);
+  if (AI) MatDestroy(&AI);
+  if (AE) MatDestroy(&AE);
   free(C.sq);
   for (int i = 0; i < C.nstep; i++) free(C.files[i]);
   free(C.files);
   free(C.times);
 done_early:
-  for (int i = 0; i < C.nc; i++) { free(C.g[i]); free(C.dm[i]); free(C.hd[i]); }
+  for (int i = 0; i < C.nc; i++) { free(C.g[i]); free(C.dm[i]); free(C.hd[i]); free(C.cg[i]); }
   free(C.xh);
   return rc;
 }

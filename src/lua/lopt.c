@@ -550,15 +550,19 @@ static int l_minimize(lua_State *L) {
     static const char *const keys[] = {"method", "bounds", "gatol", "grtol", "gttol", "maxit", "monitor", "series", "inner_product",
                                        "constraints", NULL};
     check_keys(L, 2, fn, keys);
-    o.method = opt_str(L, 2, "method", "lmvm", fn);
-    static const char *const methods[] = {"lmvm", "blmvm", "nls", "ntr", "bnls", "bntr", NULL};
+    int has_cons = lua_getfield(L, 2, "constraints") != LUA_TNIL;
+    lua_pop(L, 1);
+    o.method = opt_str(L, 2, "method", has_cons ? "almm" : "lmvm", fn);
+    static const char *const methods[] = {"lmvm", "blmvm", "nls", "ntr", "bnls", "bntr", "almm", NULL};
     int known = 0;
     for (int i = 0; methods[i]; i++) known |= !strcmp(o.method, methods[i]);
-    if (!strcmp(o.method, "almm"))
-      return luaL_error(L, "%s: method \"almm\" needs constraints, which are not available yet", fn);
     if (!known)
-      return luaL_error(L, "%s: option 'method' must be \"lmvm\", \"blmvm\", \"nls\", \"ntr\", \"bnls\" or \"bntr\", got \"%s\"", fn,
-                        o.method);
+      return luaL_error(L, "%s: option 'method' must be \"lmvm\", \"blmvm\", \"nls\", \"ntr\", \"bnls\", \"bntr\" or \"almm\", "
+                           "got \"%s\"", fn, o.method);
+    if (!strcmp(o.method, "almm") && !has_cons)
+      return luaL_error(L, "%s: method \"almm\" needs constraints = {{g, \"<=\", c}, ...}", fn);
+    if (has_cons && strcmp(o.method, "almm"))
+      return luaL_error(L, "%s: constraints need method \"almm\" (the augmented Lagrangian), got \"%s\"", fn, o.method);
     o.gatol = opt_num(L, 2, "gatol", -1, fn);
     o.grtol = opt_num(L, 2, "grtol", -1, fn);
     o.gttol = opt_num(L, 2, "gttol", -1, fn);
@@ -574,8 +578,37 @@ static int l_minimize(lua_State *L) {
     if (!strcmp(ip, "l2")) o.riesz = LG_RIESZ_L2;
     else if (!strcmp(ip, "dofs")) o.riesz = LG_RIESZ_NONE;
     else return luaL_error(L, "%s: option 'inner_product' must be \"l2\" or \"dofs\", got \"%s\"", fn, ip);
-    if (lua_getfield(L, 2, "constraints") != LUA_TNIL)
-      return luaL_error(L, "%s: constraints (almm) are not available yet", fn);
+    if (lua_getfield(L, 2, "constraints") != LUA_TNIL) {
+      int ct = lua_gettop(L);
+      if (!lua_istable(L, ct)) return luaL_error(L, "%s: option 'constraints' must be a table {{g, \"<=\", c}, ...}, got %s", fn,
+                                                luaL_typename(L, ct));
+      lua_Integer ncon = luaL_len(L, ct);
+      if (ncon < 1 || ncon > LG_MAXCONS) return luaL_error(L, "%s: option 'constraints' must list 1 to %d constraints", fn, LG_MAXCONS);
+      for (lua_Integer j = 1; j <= ncon; j++) {
+        lua_geti(L, ct, j);
+        int e = lua_gettop(L);
+        if (!lua_istable(L, e) || luaL_len(L, e) != 3)
+          return luaL_error(L, "%s: constraint %d must be {g, \"<=\" | \">=\" | \"==\", c} with g a reduced functional", fn, (int)j);
+        lua_geti(L, e, 1);
+        ud_reduced *ug = luaL_testudata(L, -1, MT_REDUCED);
+        if (!ug) return luaL_error(L, "%s: constraint %d: g must be a reduced functional (lg.reduced_functional), got %s", fn, (int)j,
+                                   luaL_typename(L, -1));
+        if (ug == u) return luaL_error(L, "%s: constraint %d is the objective itself", fn, (int)j);
+        lua_geti(L, e, 2);
+        const char *op = lua_tostring(L, -1);
+        int kind = !op ? -1 : !strcmp(op, "<=") ? LG_CON_LE : !strcmp(op, ">=") ? LG_CON_GE : !strcmp(op, "==") ? LG_CON_EQ : -1;
+        if (kind < 0) return luaL_error(L, "%s: constraint %d: the relation must be \"<=\", \">=\" or \"==\"", fn, (int)j);
+        lua_geti(L, e, 3);
+        int isnum = 0;
+        double c = lua_tonumberx(L, -1, &isnum);
+        if (!isnum || !isfinite(c)) return luaL_error(L, "%s: constraint %d: the bound must be a finite number", fn, (int)j);
+        o.cons[o.ncons].rf = ug->rf;
+        o.cons[o.ncons].kind = kind;
+        o.cons[o.ncons].c = c;
+        o.ncons++;
+        lua_pop(L, 4);
+      }
+    }
     lua_pop(L, 1);
     lua_newtable(L); /* anchors the bound buffers */
     int anchor = lua_gettop(L), nanch = 0;
@@ -643,6 +676,15 @@ static int l_minimize(lua_State *L) {
   lua_pushnumber(L, info.gnorm); lua_setfield(L, -2, "gnorm");
   lua_pushstring(L, info.reason); lua_setfield(L, -2, "reason");
   lua_pushboolean(L, info.converged); lua_setfield(L, -2, "converged");
+  if (o.ncons) {
+    lua_createtable(L, o.ncons, 0);
+    for (int j = 0; j < o.ncons; j++) { lua_pushnumber(L, info.g[j]); lua_rawseti(L, -2, j + 1); }
+    lua_setfield(L, -2, "constraints");
+    lua_createtable(L, o.ncons, 0);
+    for (int j = 0; j < o.ncons; j++) { lua_pushnumber(L, info.lambda[j]); lua_rawseti(L, -2, j + 1); }
+    lua_setfield(L, -2, "multipliers");
+    lua_pushnumber(L, info.cnorm); lua_setfield(L, -2, "cnorm");
+  }
   return lua_gettop(L) - base;
 }
 

@@ -291,6 +291,55 @@ for _, x in ipairs(fnb:values()) do nlo, nhi = math.min(nlo, x), math.max(nhi, x
 T.check(nlo >= 0 and nhi <= 2 + 1e-12, "bnls: the bounds hold: [%g, %g]", nlo, nhi)
 T.close(inb.J, ib.J, 1e-4, "bnls reaches the blmvm optimum")
 
+-- functional constraints (TAO's augmented Lagrangian, almm): the mother problem (alpha =
+-- 1e-4) with int f <= half its unconstrained value. At the optimum the constraint is active
+-- and grad J + lambda grad g = 0: the L2 gradient of J is the constant -lambda (the L2
+-- representative of grad g is 1), lambda > 0 is the multiplier TAO returns. The same with
+-- the constraint written as -int f >= -c, and as an equality with bounds f >= 0
+do
+  local mc = lg.mesh.rectangle{nx = 16}
+  local sc, uc, _, fc2 = poisson(mc, P1, P1)
+  local rc = lg.reduced_functional{problem = sc, control = fc2,
+                                   functional = lg.functional(lg.integral(mc:cells(), 0.5*(uc - d)^2 + 1e-4/2*fc2^2))}
+  local gi = lg.reduced_functional{problem = sc, control = fc2, functional = lg.functional(lg.integral(mc:cells(), fc2))}
+  local gn = lg.reduced_functional{problem = sc, control = fc2, functional = lg.functional(lg.integral(mc:cells(), -fc2))}
+  local _, iu = lg.minimize(rc, {gttol = 1e-8, gatol = 0, grtol = 0, monitor = false})
+  local F0 = gi:value()
+  local cases = {{{gi, "<=", 0.5*F0}, 1}, {{gn, ">=", -0.5*F0}, -1}}
+  local report = {}
+  for k, case in ipairs(cases) do
+    fc2:assign(0*lg.x)
+    local _, ic = lg.minimize(rc, {constraints = {case[1]}, monitor = false})
+    local g = rc:gradient()
+    local mean = lg.integrate(mc, g)
+    local dev = math.sqrt(lg.integrate(mc, (g - mean)^2))
+    local lam = ic.multipliers[1]
+    T.check(ic.converged and ic.J > iu.J, "constraint %d: converged (%s), J %g above the unconstrained %g", k, ic.reason, ic.J, iu.J)
+    T.check(math.abs(gi:value() - 0.5*F0) < 1e-5 * F0, "constraint %d: active, int f = %.10g against %.10g", k, gi:value(), 0.5*F0)
+    T.check(math.abs(ic.constraints[1] - case[1][3]) < 1e-5 * F0, "constraint %d: info.constraints", k)
+    report[k] = string.format("%s: lambda %.6e, %d evaluations", case[1][2], lam, ic.evaluations)
+    T.check(dev < 1e-5 * math.abs(mean), "constraint %d: grad J is constant at the optimum (deviation %.2e of %.2e)", k, dev, mean)
+    T.check(case[2]*lam > 0 and math.abs(case[2]*lam + mean) < 1e-6 * math.abs(mean),
+            "constraint %d: multiplier %.10g against -mean(grad J) = %.10g", k, lam, -mean)
+  end
+  -- an equality and bounds: int f = 0.1 with f >= 0
+  fc2:assign(0*lg.x)
+  local fe, ie = lg.minimize(rc, {constraints = {{gi, "==", 0.1}}, bounds = {0, nil}, monitor = false})
+  local lo = math.huge
+  for _, val in ipairs(fe:values()) do lo = math.min(lo, val) end
+  T.check(ie.converged and math.abs(gi:value() - 0.1) < 1e-6 and lo >= 0, "equality with bounds: int f = %.10g, min f = %g (%s)",
+          gi:value(), lo, ie.reason)
+  -- bad input
+  T.fails(function() return lg.minimize(rc, {method = "lmvm", constraints = {{gi, "<=", 1}}}) end,
+          "constraints need method \"almm\"")
+  T.fails(function() return lg.minimize(rc, {method = "almm"}) end, "method \"almm\" needs constraints")
+  T.fails(function() return lg.minimize(rc, {constraints = {{gi, "<", 1}}}) end, "constraint 1: the relation must be")
+  T.fails(function() return lg.minimize(rc, {constraints = {{gi, "<=", 0/0}}}) end, "constraint 1: the bound must be a finite number")
+  T.fails(function() return lg.minimize(rc, {constraints = {{rc, "<=", 1}}}) end, "constraint 1 is the objective itself")
+  T.fails(function() return lg.minimize(rc, {constraints = {{rf, "<=", 1}}}) end, "constraint 1 is a reduced functional of other controls")
+  print(string.format("almm: int f <= %.4f active, grad J = -lambda; %s; %s", 0.5*F0, report[1], report[2]))
+end
+
 -- full space: the KKT system of one Lagrangian has the reduced optimum (to 1e-8 in J)
 local function rel(a, b) return math.abs(a - b) / math.abs(b) end
 do
@@ -367,7 +416,6 @@ T.fails(function() return rf:hessian() end, "rf:hessian: argument 2 must be a di
 T.fails(function() return rf:hessian(lg.interpolate(P2, mesh, lg.x)) end, "the direction of control 1 must be a discrete function of its basis")
 T.fails(function() return rf4:hessian({1, 2}) end, "the direction needs 3 values")
 T.fails(function() return rf4:hessian({lg.x, "a", 1}) end, "the direction of control 2 (a parameter) must be a number")
-T.fails(function() return lg.minimize(rf, {method = "almm"}) end, "needs constraints, which are not available yet")
 T.fails(function() return lg.minimize(rf, {method = "newton"}) end, "option 'method' must be \"lmvm\"")
 T.fails(function() return lg.minimize(rf, {bounds = {lg.interpolate(P2, mesh, lg.x), 1}}) end,
         "the lower bound of control 1 must be a number or a discrete function of the control's basis")

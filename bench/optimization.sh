@@ -14,5 +14,5 @@ for cn in "mother 32" "mother 64" "mother 128" "nonlinear 32" "nonlinear 64" "in
   # shellcheck disable=SC2086
   "$ROOT/build/lugal" "$ROOT/bench/optimization.lua" $cn -lugal_jit cc | sed 's/^lugal/lugal-cc/'
   # shellcheck disable=SC2086
-  [ $have_pa = 1 ] && PYTHONPATH="$PYADJOINT:$PYTHONPATH" /usr/bin/python3 "$ROOT/bench/optimization_pyadjoint.py" $cn 2>/dev/null
+  [ $have_pa = 1 ] && PYTHONPATH="$PYADJOINT:$PYTHONPATH" /usr/bin/python3 "$ROOT/bench/optimization_pyadjoint.py" $cn 2>/dev/null | grep -v "^Calling FFC"
 done

@@ -26,7 +26,6 @@ beta, kmin = 1e-8, 1.0
 
 if case == "inversion":
     with stop_annotating():
-        kt = project(1 + exp(-40 * ((X[0] - 0.4) ** 2 + (X[1] - 0.6) ** 2)), V)
         kt = interpolate(Expression("1 + exp(-40*((x[0]-0.4)*(x[0]-0.4) + (x[1]-0.6)*(x[1]-0.6)))", degree=4), V)
         w = TrialFunction(V)
         ut = Function(V)

@@ -21,3 +21,5 @@ done
 # smoothing (issue 4): local against global, two sizes
 "$ROOT/build/lugal" "$ROOT/bench/smooth.lua"
 "$ROOT/build/lugal" "$ROOT/bench/smooth.lua" 100 16
+# PDE-constrained optimization against pyadjoint on legacy FEniCS (issue 10), when installed
+sh "$ROOT/bench/optimization.sh"

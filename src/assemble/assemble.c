@@ -8,6 +8,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 void lg_seterr(lg_env *env, const char *fmt, ...) {
   char tmp[LG_ERRLEN];
@@ -22,7 +23,7 @@ lg_env *lg_env_new(const char *tcc_libdir) {
   lg_env *env = calloc(1, sizeof *env);
   if (!env) return NULL;
   env->c = expr_ctx_new();
-  env->jit = jit_new(JIT_TCC, tcc_libdir);
+  env->jit = jit_new(JIT_AUTO, tcc_libdir);
   if (!env->c || !env->jit) { lg_env_free(env); return NULL; }
   return env;
 }
@@ -290,6 +291,9 @@ int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, 
   double *P = expr_param_values(env->c);
   int nvc = m->nvc, d = m->dim;
   double sum = 0;
+  kernel_fn fn = jit_current(env->jit, k->jid, k->fn);
+  struct timespec t0, t1;
+  clock_gettime(CLOCK_MONOTONIC, &t0);
   for (int it = 0; it < nitems; it++) {
     int c = cells[it];
     const int *v = m->cells + (size_t)c * (size_t)nvc;
@@ -303,9 +307,11 @@ int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, 
     }
     double *dst = k->arity == 0 ? (Ab ? Ab : A) : out + (size_t)it * (size_t)size;
     memset(dst, 0, sizeof(double) * (size_t)size);
-    k->fn(X, W, P, facets ? facets[it] : 0, dst, C ? C + (size_t)it * cstride : NULL, cm);
+    fn(X, W, P, facets ? facets[it] : 0, dst, C ? C + (size_t)it * cstride : NULL, cm);
     if (k->arity == 0) sum += dst[0];
   }
+  clock_gettime(CLOCK_MONOTONIC, &t1);
+  jit_account(env->jit, k->jid, (t1.tv_sec - t0.tv_sec) * 1e3 + (t1.tv_nsec - t0.tv_nsec) * 1e-6);
   if (cm == 1) k->pc->valid = 1;
   if (k->arity == 0) out[0] += sum;
   free(W);

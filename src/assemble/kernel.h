@@ -54,18 +54,33 @@ typedef struct {
   int wsize;
   double compile_ms;
   int cached; /* 1 when the JIT found it compiled already */
+  int jid;           /* the JIT's id of its code (jit_current) */
   int ncache;        /* cached values per quadrature point */
   kernel_pcache *pc; /* NULL when ncache == 0; freed by kernel_release */
 } lg_kernel;
 
+/* ---- the JIT (jit.c) */
 typedef struct lg_jit lg_jit;
-typedef enum { JIT_TCC, JIT_CC } jit_backend;
+/* libtcc only, the system compiler only, or libtcc first and the system compiler in the
+ * background for kernels that have taken JIT_TIER_MS of assembly time (the default) */
+typedef enum { JIT_TCC, JIT_CC, JIT_AUTO } jit_backend;
+#define JIT_TIER_MS 20.0
 
 lg_jit *jit_new(jit_backend b, const char *tcc_libdir);
-void jit_free(lg_jit *j);
+void jit_free(lg_jit *j); /* stops background compilers */
 void jit_set_backend(lg_jit *j, jit_backend b);
-/* compile (or find in the cache) a source defining `lugal_kernel` */
-kernel_fn jit_compile(lg_jit *j, const char *src, double *ms, int *cached, char *err, size_t errlen);
+void jit_set_tier_ms(lg_jit *j, double ms);
+void jit_set_verbose(lg_jit *j, int verbose);
+/* compile (or find compiled) a source defining `lugal_kernel`: its code and its id */
+int jit_compile(lg_jit *j, const char *src, kernel_fn *fn, int *id, double *ms, int *cached, char *err, size_t errlen);
+/* the best code of kernel id now (a finished background build is swapped in here) */
+kernel_fn jit_current(lg_jit *j, int id, kernel_fn fallback);
+/* ms more spent in kernel id (may start its background build) */
+void jit_account(lg_jit *j, int id, double ms);
+/* wait for every background build; returns how many were swapped in */
+int jit_wait(lg_jit *j);
+/* kernels per tier: libtcc, compiling, system compiler, staying in libtcc */
+void jit_tiers(const lg_jit *j, int count[4]);
 size_t jit_count(const lg_jit *j);
 
 /* what the kernel contracts: arity 2 uses jac entries, arity 1 res entries, arity 0 the

@@ -53,11 +53,18 @@ int luaopen_lugal(lua_State *L) {
     char backend[16] = "";
     PetscOptionsGetString(NULL, NULL, "-lugal_jit", backend, sizeof backend, &set);
     if (set && !strcmp(backend, "cc")) jit_set_backend(ue->env->jit, JIT_CC);
-    else if (set && strcmp(backend, "tcc"))
-      return luaL_error(L, "lugal: -lugal_jit must be tcc or cc, got %s", backend);
+    else if (set && !strcmp(backend, "tcc")) jit_set_backend(ue->env->jit, JIT_TCC);
+    else if (set && strcmp(backend, "auto"))
+      return luaL_error(L, "lugal: -lugal_jit must be tcc, cc or auto, got %s", backend);
+    PetscReal tier_ms = JIT_TIER_MS;
+    PetscBool tset = PETSC_FALSE;
+    PetscOptionsGetReal(NULL, NULL, "-lugal_jit_tier_ms", &tier_ms, &tset);
+    if (tset && !(tier_ms >= 0)) return luaL_error(L, "lugal: -lugal_jit_tier_ms must be >= 0");
+    jit_set_tier_ms(ue->env->jit, tier_ms);
     PetscBool verbose = PETSC_FALSE;
     PetscOptionsHasName(NULL, NULL, "-lugal_verbose", &verbose);
     ue->env->verbose = verbose;
+    jit_set_verbose(ue->env->jit, verbose);
     PetscBool pcache = PETSC_TRUE;
     PetscOptionsGetBool(NULL, NULL, "-lugal_point_cache", &pcache, NULL);
     ue->env->no_point_cache = !pcache;

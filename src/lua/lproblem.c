@@ -342,13 +342,41 @@ static int l_options(lua_State *L) {
   return 0;
 }
 
+/* lg.jit("tcc" | "cc" | "auto"[, {tier_ms = }]): the compiler of kernels built from now on */
 static int l_jit(lua_State *L) {
-  const char *b = luaL_checkstring(L, 1);
+  const char *fn = "lg.jit";
+  if (lua_type(L, 1) != LUA_TSTRING) return typeerror(L, fn, 1, "\"tcc\", \"cc\" or \"auto\"");
+  const char *b = lua_tostring(L, 1);
   lg_env *env = get_env(L);
-  if (!strcmp(b, "tcc")) jit_set_backend(env->jit, JIT_TCC);
-  else if (!strcmp(b, "cc")) jit_set_backend(env->jit, JIT_CC);
-  else return luaL_error(L, "lg.jit: argument 1 must be \"tcc\" or \"cc\", got \"%s\"", b);
+  jit_backend kind;
+  if (!strcmp(b, "tcc")) kind = JIT_TCC;
+  else if (!strcmp(b, "cc")) kind = JIT_CC;
+  else if (!strcmp(b, "auto")) kind = JIT_AUTO;
+  else return luaL_error(L, "%s: argument 1 must be \"tcc\", \"cc\" or \"auto\", got \"%s\"", fn, b);
+  if (!lua_isnoneornil(L, 2)) {
+    if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {tier_ms=}");
+    static const char *const keys[] = {"tier_ms", NULL};
+    check_keys(L, 2, fn, keys);
+    double ms = opt_num(L, 2, "tier_ms", JIT_TIER_MS, fn);
+    if (!(ms >= 0) || !isfinite(ms)) return luaL_error(L, "%s: option 'tier_ms' must be a finite number >= 0", fn);
+    jit_set_tier_ms(env->jit, ms);
+  }
+  jit_set_backend(env->jit, kind);
   return 0;
+}
+
+/* lg.jit_status([wait]): kernels per tier {tcc=, compiling=, cc=, stays=}; with wait = true,
+ * first waits for the background builds */
+static int l_jit_status(lua_State *L) {
+  lg_env *env = get_env(L);
+  if (!lua_isnoneornil(L, 1) && !lua_isboolean(L, 1)) return typeerror(L, "lg.jit_status", 1, "a boolean (wait)");
+  if (lua_toboolean(L, 1)) jit_wait(env->jit);
+  int c[4];
+  jit_tiers(env->jit, c);
+  lua_createtable(L, 0, 4);
+  static const char *const names[] = {"tcc", "compiling", "cc", "stays"};
+  for (int t = 0; t < 4; t++) { lua_pushinteger(L, c[t]); lua_setfield(L, -2, names[t]); }
+  return 1;
 }
 
 /* wall-clock seconds from a monotonic clock (os.clock is CPU time of every thread) */
@@ -390,5 +418,5 @@ void lg_lua_problem_register(lua_State *L) {
 
 const luaL_Reg lg_problem_lib[] = {
     {"interpolate", l_interpolate}, {"function", l_function}, {"linear_problem", l_linear_problem},
-    {"nonlinear_problem", l_nonlinear_problem}, {"options", l_options}, {"jit", l_jit},
+    {"nonlinear_problem", l_nonlinear_problem}, {"options", l_options}, {"jit", l_jit}, {"jit_status", l_jit_status},
     {"stats", l_stats}, {"wtime", l_wtime}, {NULL, NULL}};

@@ -1,0 +1,483 @@
+/* jit.c — compiling generated kernels: libtcc in memory (sub-millisecond), the system C
+ * compiler into a private disk cache, or both in tiers (JIT_AUTO, the default): every kernel
+ * starts in libtcc, and one whose assemblies have taken JIT_TIER_MS in all is compiled again
+ * by the system compiler in a background process and swapped in when that is ready (polled at
+ * each assembly: no threads). libtcc's code runs these kernels 4-5 times slower than gcc -O3
+ * (degree-12 quadrature in an optimization loop: bench/RESULTS.md); a short script never
+ * waits for gcc. Both tiers give the same bits (CC_FLAGS). */
+#include "kernel.h"
+
+#include "../config.h"
+
+#include <dlfcn.h>
+#include <errno.h>
+#ifndef LUGAL_NO_TCC
+#include <libtcc.h>
+#else
+/* the standalone Lua module: Debian's libtcc is a non-PIC static archive that cannot be
+ * linked into a shared object, so the module compiles kernels with the C compiler only */
+typedef struct TCCState TCCState;
+static void tcc_delete(TCCState *s) { (void)s; }
+#endif
+#include <fcntl.h>
+#include <math.h>
+#include <pwd.h>
+#include <signal.h>
+#include <spawn.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "../mesh/outfile.h"
+
+/* a system-compiler build: where its files are */
+typedef struct {
+  char dir[600], cpath[800], sopath[800], tmpso[840];
+  int temp; /* no disk cache: a private folder removed after loading */
+  int huge;
+} cc_job;
+
+typedef struct {
+  uint64_t h1, h2;
+  kernel_fn fn;  /* the best code so far */
+  TCCState *tcc;
+  void *dl;
+  /* tiers (JIT_AUTO) */
+  char *src;     /* kept until the system compiler has it */
+  double ms;     /* time spent in assemblies with this kernel */
+  int tier;      /* JIT_TIER_* */
+  pid_t pid;     /* the background compiler */
+  cc_job job;
+} jit_entry;
+
+enum { JIT_TIER_TCC, JIT_TIER_COMPILING, JIT_TIER_CC, JIT_TIER_STAYS };
+
+struct lg_jit {
+  jit_backend backend;
+  char libdir[512];
+  size_t n, cap;
+  jit_entry *e;
+  double tier_ms;
+  int verbose;
+};
+
+lg_jit *jit_new(jit_backend b, const char *libdir) {
+  lg_jit *j = calloc(1, sizeof *j);
+  if (!j) return NULL;
+#ifdef LUGAL_NO_TCC
+  b = JIT_CC;
+#endif
+  j->backend = b;
+  j->tier_ms = JIT_TIER_MS;
+  snprintf(j->libdir, sizeof j->libdir, "%s", libdir ? libdir : "");
+  return j;
+}
+
+static void job_cleanup(cc_job *c) {
+  unlink(c->tmpso);
+  if (c->temp) { unlink(c->sopath); unlink(c->cpath); rmdir(c->dir); }
+}
+
+void jit_free(lg_jit *j) {
+  if (!j) return;
+  for (size_t i = 0; i < j->n; i++) {
+    jit_entry *e = &j->e[i];
+    if (e->tier == JIT_TIER_COMPILING) { /* a background compiler still running */
+      kill(e->pid, SIGTERM);
+      while (waitpid(e->pid, NULL, 0) < 0 && errno == EINTR) {}
+      job_cleanup(&e->job);
+    }
+    if (e->tcc) tcc_delete(e->tcc);
+    if (e->dl) dlclose(e->dl);
+    free(e->src);
+  }
+  free(j->e);
+  free(j);
+}
+
+void jit_set_backend(lg_jit *j, jit_backend b) {
+#ifdef LUGAL_NO_TCC
+  b = JIT_CC;
+#endif
+  j->backend = b;
+}
+void jit_set_tier_ms(lg_jit *j, double ms) { j->tier_ms = ms; }
+void jit_set_verbose(lg_jit *j, int v) { j->verbose = v; }
+size_t jit_count(const lg_jit *j) { return j->n; }
+
+static void hash_src(const char *s, uint64_t *h1, uint64_t *h2) {
+  uint64_t a = 1469598103934665603ull, b = 0x9E3779B97F4A7C15ull;
+  for (; *s; s++) {
+    a = (a ^ (unsigned char)*s) * 1099511628211ull;
+    b = (b ^ (unsigned char)*s) * 0xff51afd7ed558ccdull;
+    b ^= b >> 31;
+  }
+  *h1 = a;
+  *h2 = b;
+}
+
+static double now_ms(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+#ifndef LUGAL_NO_TCC
+typedef struct {
+  char *buf;
+  size_t len;
+} tcc_errbuf;
+
+static void tcc_err(void *ud, const char *msg) {
+  tcc_errbuf *e = ud;
+  size_t l = strlen(e->buf);
+  if (l + 2 < e->len) snprintf(e->buf + l, e->len - l, "%s%s", l ? "; " : "", msg);
+}
+
+static double sign_fn(double x) { return (x > 0) - (x < 0); }
+
+static kernel_fn compile_tcc(lg_jit *j, const char *src, jit_entry *ent, char *err, size_t errlen) {
+  TCCState *s = tcc_new();
+  if (!s) { snprintf(err, errlen, "libtcc: cannot create a compiler state"); return NULL; }
+  err[0] = 0;
+  tcc_errbuf eb = {err, errlen};
+  tcc_set_error_func(s, &eb, tcc_err);
+  if (j->libdir[0]) tcc_set_lib_path(s, j->libdir);
+  tcc_set_options(s, "-nostdlib");
+  tcc_set_output_type(s, TCC_OUTPUT_MEMORY);
+  static const struct { const char *n; const void *f; } syms[] = {
+      {"sin", (const void *)sin},   {"cos", (const void *)cos},   {"tan", (const void *)tan},
+      {"exp", (const void *)exp},   {"log", (const void *)log},   {"sqrt", (const void *)sqrt},
+      {"fabs", (const void *)fabs}, {"tanh", (const void *)tanh}, {"sinh", (const void *)sinh},
+      {"cosh", (const void *)cosh}, {"atan", (const void *)atan}, {"asin", (const void *)asin},
+      {"acos", (const void *)acos}, {"pow", (const void *)pow},   {"lugal_sign", (const void *)sign_fn}};
+  for (size_t i = 0; i < sizeof syms / sizeof syms[0]; i++) tcc_add_symbol(s, syms[i].n, syms[i].f);
+  if (tcc_compile_string(s, src) < 0 || tcc_relocate(s, TCC_RELOCATE_AUTO) < 0) {
+    char tmp[1024];
+    snprintf(tmp, sizeof tmp, "libtcc failed to compile a generated kernel: %s", err);
+    snprintf(err, errlen, "%s", tmp);
+    tcc_delete(s);
+    return NULL;
+  }
+  kernel_fn fn = (kernel_fn)tcc_get_symbol(s, "lugal_kernel");
+  if (!fn) { snprintf(err, errlen, "libtcc: generated kernel has no entry point"); tcc_delete(s); return NULL; }
+  ent->tcc = s;
+  return fn;
+}
+
+#endif
+
+/* ---------------------------------------------------------------- the system compiler */
+
+/* The disk cache of compiled kernels. A cached shared object is code this process will run,
+ * so: the folder is private (created 0700; one that others can write to, or that another
+ * user owns, is refused), every object is checked the same way before it is loaded, the key
+ * covers the compiler, its flags and the CPU (a cache shared between machines must not run
+ * AVX-512 code on a CPU without it), and the compiler is run from an argument vector, never
+ * through a shell (a path with a quote in it is just a path). Without a home folder there is
+ * no disk cache: objects go to a private temporary folder that is removed after loading. */
+/* -ffp-contract=off: no fused multiply-adds, so that code from the system compiler gives the
+ * same bits as libtcc's (which never fuses): a kernel moved to the faster tier (JIT_AUTO)
+ * does not change an answer */
+#define CC_FLAGS "-O3 -march=native -ffp-contract=off -fPIC -shared"
+#define CC_HUGE (512 << 10) /* bytes of source past which kernels are compiled at -O0 */
+
+static uint64_t fnv(uint64_t h, const void *p, size_t n) {
+  const unsigned char *c = p;
+  for (size_t i = 0; i < n; i++) h = (h ^ c[i]) * 1099511628211ull;
+  return h;
+}
+
+/* what a compiled object depends on besides its source: the compiler (path, size, time),
+ * its flags and this CPU's model and feature flags */
+static uint64_t machine_key(void) {
+  static uint64_t key;
+  if (key) return key;
+  uint64_t h = fnv(1469598103934665603ull, LUGAL_CC, strlen(LUGAL_CC));
+  h = fnv(h, CC_FLAGS, strlen(CC_FLAGS));
+  struct stat st;
+  if (!stat(LUGAL_CC, &st)) {
+    h = fnv(h, &st.st_size, sizeof st.st_size);
+    h = fnv(h, &st.st_mtime, sizeof st.st_mtime);
+  }
+  FILE *f = fopen("/proc/cpuinfo", "r");
+  char line[8192];
+  int got = 0;
+  while (f && got < 2 && fgets(line, sizeof line, f))
+    if (!strncmp(line, "flags", 5) || !strncmp(line, "model name", 10)) { h = fnv(h, line, strlen(line)); got++; }
+  if (f) fclose(f);
+  key = h | 1;
+  return key;
+}
+
+/* a folder only this user can write to, or a message */
+static int private_dir(const char *dir, char *err, size_t errlen) {
+  if (mkdir(dir, 0700) && errno != EEXIST) {
+    snprintf(err, errlen, "cannot create the kernel cache %s: %s", dir, strerror(errno));
+    return 1;
+  }
+  struct stat st;
+  if (lstat(dir, &st)) { snprintf(err, errlen, "cannot use the kernel cache %s: %s", dir, strerror(errno)); return 1; }
+  if (!S_ISDIR(st.st_mode) || st.st_uid != geteuid() || (st.st_mode & 022)) {
+    snprintf(err, errlen, "the kernel cache %s is not a private folder of this user (a link, another owner, or "
+                          "writable by others): lugal will not load code from it (chmod 700 it, or set XDG_CACHE_HOME)", dir);
+    return 1;
+  }
+  return 0;
+}
+
+/* the cache folder: $XDG_CACHE_HOME/lugal, else ~/.cache/lugal (home from $HOME or the
+ * password database); 0 and an empty dir when there is no home */
+static int cache_dir(char *dir, size_t len, char *err, size_t errlen) {
+  const char *xdg = getenv("XDG_CACHE_HOME"), *home = getenv("HOME");
+  char parent[512];
+  dir[0] = 0;
+  if (xdg && xdg[0] == '/') {
+    snprintf(parent, sizeof parent, "%s", xdg);
+    mkdir(parent, 0700); /* the XDG base folder may not exist yet */
+  } else {
+    if (!home || home[0] != '/') {
+      struct passwd *pw = getpwuid(geteuid());
+      home = pw && pw->pw_dir && pw->pw_dir[0] == '/' ? pw->pw_dir : NULL;
+    }
+    if (!home) return 0;
+    snprintf(parent, sizeof parent, "%s/.cache", home);
+    if (mkdir(parent, 0700) && errno != EEXIST) return 0;
+  }
+  if (strlen(parent) + 8 >= len) { snprintf(err, errlen, "the cache path %.100s is too long", parent); return 1; }
+  snprintf(dir, len, "%s/lugal", parent);
+  return private_dir(dir, err, errlen);
+}
+
+/* run the compiler on cpath into sopath; its messages into out */
+/* start the compiler on c->cpath into c->tmpso; its messages into outfd (-1: /dev/null) */
+static int cc_spawn(const cc_job *c, int outfd, pid_t *pid, char *err, size_t errlen) {
+  char *opt[] = {(char *)LUGAL_CC, "-O3", "-march=native", "-ffp-contract=off", "-fPIC", "-shared", "-o",
+                 (char *)c->tmpso, (char *)c->cpath, "-lm", NULL};
+  char *noopt[] = {(char *)LUGAL_CC, "-O0", "-fPIC", "-shared", "-o", (char *)c->tmpso, (char *)c->cpath, "-lm", NULL};
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  if (outfd >= 0) {
+    posix_spawn_file_actions_adddup2(&fa, outfd, 1);
+    posix_spawn_file_actions_adddup2(&fa, outfd, 2);
+  } else {
+    posix_spawn_file_actions_addopen(&fa, 1, "/dev/null", O_WRONLY, 0);
+    posix_spawn_file_actions_addopen(&fa, 2, "/dev/null", O_WRONLY, 0);
+  }
+  extern char **environ;
+  int rc = posix_spawnp(pid, LUGAL_CC, &fa, NULL, c->huge ? noopt : opt, environ);
+  posix_spawn_file_actions_destroy(&fa);
+  if (rc) snprintf(err, errlen, "cannot run the C compiler %s: %s", LUGAL_CC, strerror(rc));
+  return rc;
+}
+
+/* run the compiler and wait; its messages into out */
+static int cc_run(const cc_job *c, char *out, size_t outlen) {
+  int pfd[2];
+  if (pipe(pfd)) { snprintf(out, outlen, "cannot make a pipe: %s", strerror(errno)); return -1; }
+  fcntl(pfd[0], F_SETFD, FD_CLOEXEC);
+  pid_t pid;
+  if (cc_spawn(c, pfd[1], &pid, out, outlen)) { close(pfd[0]); close(pfd[1]); return -1; }
+  close(pfd[1]);
+  size_t n = 0;
+  for (ssize_t got; (got = read(pfd[0], out + n, outlen - 1 - n)) != 0;) {
+    if (got < 0) { if (errno == EINTR) continue; break; }
+    n += (size_t)got;
+    if (n + 1 >= outlen) { /* drain the rest */
+      char sink[512];
+      while (read(pfd[0], sink, sizeof sink) > 0) {}
+      break;
+    }
+  }
+  out[n] = 0;
+  close(pfd[0]);
+  int status;
+  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {}
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+/* the files of a build, and the source written unless the object is cached: 1 when the
+ * object is there already, 0 when it must be compiled, -1 on an error */
+static int cc_prepare(const char *src, uint64_t h1, uint64_t h2, cc_job *c, char *err, size_t errlen) {
+  memset(c, 0, sizeof *c);
+  if (cache_dir(c->dir, sizeof c->dir, err, errlen)) return -1;
+  c->temp = !c->dir[0];
+  if (c->temp) {
+    const char *t = getenv("TMPDIR");
+    snprintf(c->dir, sizeof c->dir, "%s/lugal-kernel-XXXXXX", t && t[0] == '/' ? t : "/tmp");
+    if (!mkdtemp(c->dir)) { snprintf(err, errlen, "cannot create a temporary folder for a kernel: %s", strerror(errno)); return -1; }
+  }
+  /* a huge kernel (a very deep expression) takes gcc minutes at -O1 and up, and seconds
+   * at -O0 (an 8 MB kernel: > 5 min and 12 s here) */
+  c->huge = strlen(src) > CC_HUGE;
+  uint64_t mk = machine_key() ^ (c->huge ? 0x9e3779b97f4a7c15ull : 0);
+  char base[700];
+  snprintf(base, sizeof base, "%s/k%016llx%016llx", c->dir, (unsigned long long)(h1 ^ mk), (unsigned long long)h2);
+  snprintf(c->cpath, sizeof c->cpath, "%s.c", base);
+  snprintf(c->sopath, sizeof c->sopath, "%s.so", base);
+  static unsigned seq;
+  snprintf(c->tmpso, sizeof c->tmpso, "%s.%ld.%u.tmp", c->sopath, (long)getpid(), seq++);
+  struct stat st;
+  int have = !lstat(c->sopath, &st);
+  if (have && (!S_ISREG(st.st_mode) || st.st_uid != geteuid() || (st.st_mode & 022))) {
+    snprintf(err, errlen, "the cached kernel %s is not a private file of this user: lugal will not load it (remove it)", c->sopath);
+    return -1;
+  }
+  if (have) return 1;
+  outfile o;
+  if (outfile_open(&o, c->cpath, err, errlen)) return -1;
+  fputs("double lugal_sign(double x) { return (x > 0) - (x < 0); }\n", o.f);
+  fputs(src, o.f);
+  if (outfile_commit(&o, err, errlen)) return -1;
+  return 0;
+}
+
+/* a finished build: the object under its name (others may be loading the same one: rename
+ * is atomic), then loaded */
+static kernel_fn cc_finish(cc_job *c, int built, jit_entry *ent, char *err, size_t errlen) {
+  if (built) {
+    chmod(c->tmpso, 0700);
+    if (rename(c->tmpso, c->sopath)) {
+      snprintf(err, errlen, "cannot rename %s: %s", c->tmpso, strerror(errno));
+      job_cleanup(c);
+      return NULL;
+    }
+  }
+  void *dl = dlopen(c->sopath, RTLD_NOW | RTLD_LOCAL);
+  if (c->temp) { unlink(c->sopath); unlink(c->cpath); rmdir(c->dir); }
+  if (!dl) { snprintf(err, errlen, "cannot load %s: %s", c->sopath, dlerror()); return NULL; }
+  kernel_fn fn = (kernel_fn)(uintptr_t)dlsym(dl, "lugal_kernel");
+  if (!fn) { dlclose(dl); snprintf(err, errlen, "%s has no kernel", c->sopath); return NULL; }
+  ent->dl = dl;
+  return fn;
+}
+
+static kernel_fn compile_cc(const char *src, uint64_t h1, uint64_t h2, jit_entry *ent, char *err, size_t errlen) {
+  cc_job c;
+  int have = cc_prepare(src, h1, h2, &c, err, errlen);
+  if (have < 0) return NULL;
+  if (!have) {
+    char out[512];
+    int rc = cc_run(&c, out, sizeof out);
+    if (rc != 0) {
+      job_cleanup(&c);
+      snprintf(err, errlen, "the C compiler failed on a generated kernel (%s): %s", c.cpath, out);
+      return NULL;
+    }
+  }
+  return cc_finish(&c, !have, ent, err, errlen);
+}
+
+int jit_compile(lg_jit *j, const char *src, kernel_fn *fn, int *id, double *ms, int *cached, char *err, size_t errlen) {
+  uint64_t h1, h2;
+  hash_src(src, &h1, &h2);
+  h2 ^= (uint64_t)j->backend;
+  for (size_t i = 0; i < j->n; i++)
+    if (j->e[i].h1 == h1 && j->e[i].h2 == h2) {
+      if (ms) *ms = 0;
+      if (cached) *cached = 1;
+      *fn = j->e[i].fn;
+      *id = (int)i;
+      return 0;
+    }
+  if (j->n == j->cap) {
+    size_t cap = j->cap ? 2 * j->cap : 16;
+    jit_entry *ne = realloc(j->e, sizeof *ne * cap);
+    if (!ne) { snprintf(err, errlen, "out of memory"); return 1; }
+    j->e = ne;
+    j->cap = cap;
+  }
+  jit_entry ent;
+  memset(&ent, 0, sizeof ent);
+  ent.h1 = h1;
+  ent.h2 = h2;
+  double t0 = now_ms();
+#ifdef LUGAL_NO_TCC
+  kernel_fn f = compile_cc(src, h1, h2, &ent, err, errlen);
+  ent.tier = JIT_TIER_CC;
+#else
+  kernel_fn f = j->backend == JIT_CC ? compile_cc(src, h1, h2, &ent, err, errlen) : compile_tcc(j, src, &ent, err, errlen);
+  ent.tier = j->backend == JIT_CC ? JIT_TIER_CC : j->backend == JIT_AUTO ? JIT_TIER_TCC : JIT_TIER_STAYS;
+  if (f && j->backend == JIT_AUTO && !(ent.src = strdup(src))) ent.tier = JIT_TIER_STAYS;
+#endif
+  if (!f) return 1;
+  ent.fn = f;
+  j->e[j->n] = ent;
+  *id = (int)j->n++;
+  *fn = f;
+  if (ms) *ms = now_ms() - t0;
+  if (cached) *cached = 0;
+  return 0;
+}
+
+/* the background build of entry e: ended (blocking = 1 waits for it) or not yet */
+static int tier_poll(lg_jit *j, jit_entry *e, int blocking) {
+  int status = 0;
+  pid_t r;
+  while ((r = waitpid(e->pid, &status, blocking ? 0 : WNOHANG)) < 0 && errno == EINTR) {}
+  if (r == 0) return 0;
+  char err[512] = "";
+  kernel_fn f = NULL;
+  if (r == e->pid && WIFEXITED(status) && WEXITSTATUS(status) == 0) f = cc_finish(&e->job, 1, e, err, sizeof err);
+  else {
+    job_cleanup(&e->job);
+    snprintf(err, sizeof err, "the C compiler failed (status %d)", status);
+  }
+  if (f) {
+    e->fn = f;
+    e->tier = JIT_TIER_CC;
+  } else e->tier = JIT_TIER_STAYS;
+  if (j->verbose)
+    fprintf(stderr, "lugal: kernel %d %s after %.0f ms in libtcc code%s%s\n", (int)(e - j->e),
+            f ? "now runs the system compiler's code" : "stays in libtcc", e->ms, f ? "" : ": ", f ? "" : err);
+  free(e->src);
+  e->src = NULL;
+  return f != NULL;
+}
+
+kernel_fn jit_current(lg_jit *j, int id, kernel_fn fallback) {
+  if (id < 0 || (size_t)id >= j->n) return fallback;
+  jit_entry *e = &j->e[id];
+  if (e->tier == JIT_TIER_COMPILING) tier_poll(j, e, 0);
+  return e->fn;
+}
+
+void jit_account(lg_jit *j, int id, double ms) {
+  if (id < 0 || (size_t)id >= j->n) return;
+  jit_entry *e = &j->e[id];
+  e->ms += ms;
+  if (e->tier != JIT_TIER_TCC || e->ms < j->tier_ms || !e->src) return;
+  char err[512];
+  /* the name the cc backend gives the same source: both share the disk cache */
+  int have = cc_prepare(e->src, e->h1, e->h2 ^ (uint64_t)JIT_AUTO ^ (uint64_t)JIT_CC, &e->job, err, sizeof err);
+  if (have < 0) { e->tier = JIT_TIER_STAYS; return; }
+  if (have) { /* compiled before (this run or an earlier one): load it now */
+    kernel_fn f = cc_finish(&e->job, 0, e, err, sizeof err);
+    e->tier = f ? JIT_TIER_CC : JIT_TIER_STAYS;
+    if (f) e->fn = f;
+    if (j->verbose && f) fprintf(stderr, "lugal: kernel %d now runs the system compiler's cached code\n", (int)id);
+    free(e->src);
+    e->src = NULL;
+    return;
+  }
+  if (cc_spawn(&e->job, -1, &e->pid, err, sizeof err)) { job_cleanup(&e->job); e->tier = JIT_TIER_STAYS; return; }
+  e->tier = JIT_TIER_COMPILING;
+  if (j->verbose) fprintf(stderr, "lugal: kernel %d: %.0f ms in libtcc code, compiling it in the background\n", (int)id, e->ms);
+}
+
+int jit_wait(lg_jit *j) {
+  int n = 0;
+  for (size_t i = 0; i < j->n; i++)
+    if (j->e[i].tier == JIT_TIER_COMPILING) n += tier_poll(j, &j->e[i], 1);
+  return n;
+}
+
+void jit_tiers(const lg_jit *j, int count[4]) {
+  for (int t = 0; t < 4; t++) count[t] = 0;
+  for (size_t i = 0; i < j->n; i++) count[j->e[i].tier]++;
+}

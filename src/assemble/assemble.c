@@ -30,6 +30,7 @@ lg_env *lg_env_new(const char *tcc_libdir) {
 
 void lg_env_free(lg_env *env) {
   if (!env) return;
+  for (int i = 0; i < LG_INTEGRATE_KEEP; i++) kernel_release(&env->kept[i].k);
   expr_ctx_free(env->c);
   jit_free(env->jit);
   free(env);
@@ -452,22 +453,36 @@ int lg_integrate(lg_env *env, lg_mesh *lm, const region *r, expr *e, int order, 
   }
   if (lg_mesh_check(env, lm)) return 1;
   kernel_spec s = {0, NULL, e};
-  lg_kernel k;
-  int qd = lg_quad_degree(env, e, order, lm->m->dim);
-  char err[LG_ERRLEN];
-  if (kernel_build(env->jit, env->c, lm->m->type, r->kind == REGION_BOUNDARY, qd, &s, NULL, NULL, &k, err, sizeof err)) {
-    lg_seterr(env, "%s", err);
-    return 1;
+  int qd = lg_quad_degree(env, e, order, lm->m->dim), facet = r->kind == REGION_BOUNDARY, ct = (int)lm->m->type;
+  /* the kernel of the same integrand, kept from an earlier call, or a new one in the least
+   * recently used place */
+  lg_kept_kernel *kk = NULL, *old = &env->kept[0];
+  for (int i = 0; i < LG_INTEGRATE_KEEP && !kk; i++) {
+    lg_kept_kernel *c = &env->kept[i];
+    if (c->e == e && c->cell == ct && c->facet == facet && c->qdeg == qd) kk = c;
+    else if (c->used < old->used) old = c;
   }
-  env->kernel_ms += k.compile_ms;
-  env->nkernels += !k.cached;
+  if (!kk) {
+    kernel_release(&old->k);
+    old->e = NULL;
+    char err[LG_ERRLEN];
+    if (kernel_build(env->jit, env->c, lm->m->type, facet, qd, &s, NULL, NULL, &old->k, err, sizeof err)) {
+      lg_seterr(env, "%s", err);
+      return 1;
+    }
+    *old = (lg_kept_kernel){e, ct, facet, qd, 0, old->k};
+    env->kernel_ms += old->k.compile_ms;
+    env->nkernels += !old->k.cached;
+    kk = old;
+  }
+  kk->used = ++env->nuse;
+  const lg_kernel k = kk->k;
   coef_binding bind[KER_MAXCOEF];
   if (lg_bind_discrete(env, lm, &k, 0, NULL, bind)) return 1;
   int n, *cells, *facets;
   if (lg_region_items(env, lm, r, &n, &cells, &facets)) return 1;
   *result = 0;
-  int rc = lg_assemble_items(env, lm, &k, n, cells, facets, k.ncoef, bind, result);
-  kernel_release(&k);
+  int rc = lg_assemble_items(env, lm, &kk->k, n, cells, facets, k.ncoef, bind, result);
   free(cells);
   free(facets);
   if (!rc && !isfinite(*result)) {

@@ -12,9 +12,21 @@
 
 #define LG_ERRLEN 1024
 
+/* the kernels of lg.integrate, kept for the next call with the same integrand (their point
+ * caches with them): an integrand is an interned node, so its address names it */
+#define LG_INTEGRATE_KEEP 16
+typedef struct {
+  const expr *e;
+  int cell, facet, qdeg;
+  unsigned long used;
+  lg_kernel k;
+} lg_kept_kernel;
+
 typedef struct {
   expr_ctx *c;
   lg_jit *jit;
+  lg_kept_kernel kept[LG_INTEGRATE_KEEP];
+  unsigned long nuse;
   int verbose;          /* -lugal_verbose: timings and kernel statistics on stderr */
   double kernel_ms;     /* total JIT time */
   int nkernels;

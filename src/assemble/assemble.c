@@ -275,10 +275,26 @@ static int pcache_mode(lg_env *env, kernel_pcache *pc, const mesh *m, int nq, in
 
 int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells,
                       const int *facets, int nbind, const coef_binding *bind, double *out) {
+  return lg_assemble_range(env, lm, k, nitems, cells, facets, 0, nitems, nbind, bind, out);
+}
+
+int lg_assemble_range(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, const int *cells, const int *facets,
+                      int first, int nitems, int nbind, const coef_binding *bind, double *out) {
   mesh *m = lm->m;
   (void)nbind;
   double *C = NULL;
-  int cm = pcache_mode(env, k->pc, m, k->nq, k->ncache, nitems, cells, facets, &C);
+  /* the point cache belongs to the whole item list: its mode is decided at the first range */
+  int cm = 0;
+  if (first == 0) {
+    cm = pcache_mode(env, k->pc, m, k->nq, k->ncache, total, cells, facets, &C);
+    if (k->pc) k->pc->mode = cm;
+  } else if (k->pc && k->pc->mode) {
+    cm = k->pc->mode;
+    C = k->pc->v;
+  }
+  cells += first;
+  if (facets) facets += first;
+  if (C) C += (size_t)first * (size_t)k->nq * (size_t)k->ncache;
   size_t cstride = (size_t)k->nq * (size_t)k->ncache;
   int size = k->arity == 2 ? k->rows.size * k->cols.size : k->arity == 1 ? k->rows.size : 1;
   double X[8 * 3], A[FEM_MAXLOC * KER_MAXFIELD * FEM_MAXLOC * KER_MAXFIELD / 4 + 64];
@@ -313,7 +329,7 @@ int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, 
   }
   clock_gettime(CLOCK_MONOTONIC, &t1);
   jit_account(env->jit, k->jid, (t1.tv_sec - t0.tv_sec) * 1e3 + (t1.tv_nsec - t0.tv_nsec) * 1e-6);
-  if (cm == 1) k->pc->valid = 1;
+  if (cm == 1 && first + nitems == total) k->pc->valid = 1;
   if (k->arity == 0) out[0] += sum;
   free(W);
   free(Ab);

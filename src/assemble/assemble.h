@@ -78,6 +78,10 @@ typedef struct {
  * and 2, nitems*size values) or summing into out[0] (arity 0) */
 int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells,
                       const int *facets, int nbind, const coef_binding *bind, double *out);
+/* the same for items first .. first + nitems - 1 of a list of total (out: their tensors);
+ * the ranges of one assembly must come in order from first = 0 */
+int lg_assemble_range(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, const int *cells, const int *facets,
+                      int first, int nitems, int nbind, const coef_binding *bind, double *out);
 /* bindings for every discrete function the kernel uses (unknowns need extra bindings) */
 int lg_bind_discrete(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nextra,
                      const coef_binding *extra, coef_binding *out);

@@ -29,6 +29,7 @@ typedef void (*kernel_fn)(const double *X, const double *W, const double *P, int
 typedef struct {
   uint64_t key;
   int seen, valid;
+  int mode;  /* of the assembly in progress (a range after its first keeps it) */
   size_t n;
   double *v;
 } kernel_pcache;

@@ -34,6 +34,7 @@ typedef struct {
 } bc_term;
 
 #define LG_BCD_CACHE 8
+#define LG_CHUNK 4096 /* items per chunk of matrix assembly */
 struct lg_problem {
   lg_env *env;
   lg_mesh *lm;
@@ -53,9 +54,9 @@ struct lg_problem {
   int *bc_org;        /* per essential row: the bc term, cell and local node it came from */
   struct { int fid, param, n; expr_tape *tape; } bcd[LG_BCD_CACHE]; /* d g / d control, per bc term */
   int nbcd;
-  PetscCount ncoo;      /* element matrix entries (the diagonal first), and their values */
-  PetscScalar *coo_vals;
+  PetscCount ncoo;      /* element matrix entries (the diagonal first) */
   int *coo_pos;         /* where each goes in the CSR value array of A */
+  double *mbuf;         /* element matrices of one chunk of items */
   PetscInt nnz;
   Mat A;
   Vec b, x;
@@ -528,8 +529,8 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
   p->nnz = (PetscInt)nnz;
   /* each element entry's place */
   p->coo_pos = malloc(sizeof(int) * ((size_t)n + 1));
-  p->coo_vals = calloc((size_t)n, sizeof(PetscScalar));
-  if (!p->coo_pos || !p->coo_vals) { free(ia); free(ja); lg_seterr(env, "out of memory for %ld matrix entries", (long)n); return 1; }
+  p->mbuf = malloc(sizeof(double) * ((size_t)LG_CHUNK * rs * cs + 1));
+  if (!p->coo_pos || !p->mbuf) { free(ia); free(ja); lg_seterr(env, "out of memory for %ld matrix entries", (long)n); return 1; }
   for (int r = 0; r < N; r++) {
     const PetscInt *row = ja + ia[r], *hit = bsearch(&(PetscInt){r}, row, (size_t)(ia[r + 1] - ia[r]), sizeof(PetscInt), int_cmp);
     p->coo_pos[r] = (int)(hit - ja);
@@ -659,7 +660,7 @@ void lg_problem_free(lg_problem *p) {
   free(p->bc_rows);
   free(p->bc_vals);
   free(p->bc_org);
-  free(p->coo_vals);
+  free(p->mbuf);
   free(p->coo_pos);
   free(p->state);
   free(p->solution);
@@ -704,13 +705,15 @@ static void cell_centre(const mesh *m, int c, char *buf, size_t len) {
 }
 
 /* element tensors of term t (size values per item) all finite, or a message saying where */
-static int check_element_tensors(lg_env *env, lg_problem *p, int term, const double *v, int size, const char *what) {
+/* items first .. first + n - 1 of a term (v: their tensors) */
+static int check_element_tensors(lg_env *env, lg_problem *p, int term, int first, int n, const double *v, int size,
+                                 const char *what) {
   const prob_term *t = &p->t[term];
-  for (int it = 0; it < t->nitems; it++)
+  for (int it = 0; it < n; it++)
     for (int k = 0; k < size; k++)
       if (!isfinite(v[(size_t)it * size + k])) {
         char at[128];
-        cell_centre(p->lm->m, t->cells[it], at, sizeof at);
+        cell_centre(p->lm->m, t->cells[first + it], at, sizeof at);
         lg_seterr(env, "the %s is not finite (%g) in %s, from term %d of the equation: the integrand is not finite "
                        "there (a division by zero, the log or square root of a negative value, an overflow?)",
                   what, v[(size_t)it * size + k], at, term + 1);
@@ -722,26 +725,28 @@ static int check_element_tensors(lg_env *env, lg_problem *p, int term, const dou
 static int assemble_matrix(lg_env *env, lg_problem *p, const double *state, Mat A) {
   coef_binding extra[KER_MAXFIELD], bind[KER_MAXCOEF];
   int ne = bind_unknowns(p, state, extra);
-  memset(p->coo_vals, 0, sizeof(PetscScalar) * (size_t)p->N);
-  for (int i = 0; i < p->nterm; i++) {
-    prob_term *t = &p->t[i];
-    if (!t->have_mat) continue;
-    if (lg_bind_discrete(env, p->lm, &t->kmat, ne, extra, bind)) return 1;
-    if (lg_assemble_items(env, p->lm, &t->kmat, t->nitems, t->cells, t->facets, t->kmat.ncoef, bind,
-                          p->coo_vals + t->coo_off))
-      return 1;
-    if (check_element_tensors(env, p, i, p->coo_vals + t->coo_off, p->rows.size * p->cols.size,
-                              p->nonlinear ? "Jacobian" : "matrix"))
-      return 1;
-  }
+  /* element matrices a chunk of items at a time, added in place into the value array (no
+   * per-entry buffer beyond one chunk) */
   PetscScalar *a;
   PCHK(MatSeqAIJGetArray(A, &a), "matrix assembly");
   memset(a, 0, sizeof(PetscScalar) * (size_t)p->nnz);
-  const int *pos = p->coo_pos;
-  const PetscScalar *v = p->coo_vals;
-  for (PetscCount e = 0; e < p->ncoo; e++) a[pos[e]] += v[e];
+  int size = p->rows.size * p->cols.size, rc = 0;
+  for (int i = 0; i < p->nterm && !rc; i++) {
+    prob_term *t = &p->t[i];
+    if (!t->have_mat) continue;
+    if (lg_bind_discrete(env, p->lm, &t->kmat, ne, extra, bind)) { rc = 1; break; }
+    for (int first = 0; first < t->nitems && !rc; first += LG_CHUNK) {
+      int n = t->nitems - first < LG_CHUNK ? t->nitems - first : LG_CHUNK;
+      rc = lg_assemble_range(env, p->lm, &t->kmat, t->nitems, t->cells, t->facets, first, n, t->kmat.ncoef, bind, p->mbuf) ||
+           check_element_tensors(env, p, i, first, n, p->mbuf, size, p->nonlinear ? "Jacobian" : "matrix");
+      if (rc) break;
+      const int *pos = p->coo_pos + t->coo_off + (size_t)first * size;
+      const double *v = p->mbuf;
+      for (size_t e = 0, ne2 = (size_t)n * size; e < ne2; e++) a[pos[e]] += v[e];
+    }
+  }
   PCHK(MatSeqAIJRestoreArray(A, &a), "matrix assembly");
-  return 0;
+  return rc;
 }
 
 /* R(state) into r (N), before boundary conditions */
@@ -762,7 +767,8 @@ static int assemble_residual(lg_env *env, lg_problem *p, const double *state, do
     if (lg_bind_discrete(env, p->lm, &t->kres, ne, extra, bind)) return 1;
     if (lg_assemble_items(env, p->lm, &t->kres, t->nitems, t->cells, t->facets, t->kres.ncoef, bind, p->elem))
       return 1;
-    if (check_element_tensors(env, p, i, p->elem, p->rows.size, p->nonlinear ? "residual" : "right-hand side")) return 1;
+    if (check_element_tensors(env, p, i, 0, t->nitems, p->elem, p->rows.size, p->nonlinear ? "residual" : "right-hand side"))
+      return 1;
     for (int it = 0; it < t->nitems; it++) {
       int c = t->cells[it];
       const double *ev = p->elem + (size_t)it * p->rows.size;

@@ -453,9 +453,20 @@ static void cell_dofs(const lg_problem *p, int c, PetscInt *rg, PetscInt *cg) {
       cg[p->cols.off[a] + k] = p->cglob[a] + p->cdm[a]->cell_dofs[(size_t)c * p->cdm[a]->nloc + k];
 }
 
-static int int_cmp(const void *a, const void *b) {
-  PetscInt x = *(const PetscInt *)a, y = *(const PetscInt *)b;
-  return (x > y) - (x < y);
+static void col_dofs(const lg_problem *p, int c, PetscInt *cg) {
+  for (int a = 0; a < p->cols.n; a++)
+    for (int k = 0; k < p->cols.nloc[a]; k++)
+      cg[p->cols.off[a] + k] = p->cglob[a] + p->cdm[a]->cell_dofs[(size_t)c * p->cdm[a]->nloc + k];
+}
+
+/* rows are short (tens of entries): insertion sort */
+static void sort_row(PetscInt *v, size_t n) {
+  for (size_t i = 1; i < n; i++) {
+    PetscInt x = v[i];
+    size_t j = i;
+    for (; j > 0 && v[j - 1] > x; j--) v[j] = v[j - 1];
+    v[j] = x;
+  }
 }
 
 /* The sparsity pattern straight from the dof maps: the rows of the cells that matrix terms
@@ -466,91 +477,101 @@ static int int_cmp(const void *a, const void *b) {
  * replaced MatSetPreallocationCOO, which sorted every (row, column) pair: 70% of the setup of
  * a P1 Laplacian on 1.5 M tetrahedra (issue 11). */
 static int setup_matrix(lg_env *env, lg_problem *p) {
-  int N = p->N, rs = p->rows.size, cs = p->cols.size, ncell = p->lm->m->ncell;
+  int N = p->N, rs = p->rows.size, cs = p->cols.size;
   PetscCount n = N;
-  unsigned char *used = calloc((size_t)ncell + 1, 1);
-  if (!used) { lg_seterr(env, "out of memory"); return 1; }
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
     t->coo_off = n;
     n += (PetscCount)t->nitems * rs * cs;
-    for (int it = 0; it < t->nitems; it++) used[t->cells[it]] = 1;
   }
   p->ncoo = n;
-  /* the cells of each row */
+  /* the element rows of each matrix row: (entry of the row's first column, cell) pairs */
   PetscInt rg[KER_MAXFIELD * FEM_MAXLOC], cg[KER_MAXFIELD * FEM_MAXLOC];
   size_t *start = calloc((size_t)N + 2, sizeof(size_t));
   int *mark = malloc(sizeof(int) * ((size_t)N + 1));
-  if (!start || !mark) { free(used); free(start); free(mark); lg_seterr(env, "out of memory"); return 1; }
-  for (int c = 0; c < ncell; c++) {
-    if (!used[c]) continue;
-    cell_dofs(p, c, rg, cg);
-    for (int r = 0; r < rs; r++) start[rg[r] + 2]++;
+  if (!start || !mark) { free(start); free(mark); lg_seterr(env, "out of memory"); return 1; }
+  for (int i = 0; i < p->nterm; i++) {
+    prob_term *t = &p->t[i];
+    if (!t->have_mat) continue;
+    for (int it = 0; it < t->nitems; it++) {
+      cell_dofs(p, t->cells[it], rg, cg);
+      for (int r = 0; r < rs; r++) start[rg[r] + 2]++;
+    }
   }
   for (int r = 0; r < N; r++) start[r + 2] += start[r + 1];
-  int *rc = malloc(sizeof(int) * (start[N + 1] + 1));
-  if (!rc) { free(used); free(start); free(mark); lg_seterr(env, "out of memory"); return 1; }
-  for (int c = 0; c < ncell; c++) {
-    if (!used[c]) continue;
-    cell_dofs(p, c, rg, cg);
-    for (int r = 0; r < rs; r++) rc[start[rg[r] + 1]++] = c;
+  size_t nent = start[N + 1];
+  PetscCount *ebase = malloc(sizeof(PetscCount) * (nent + 1));
+  int *ecell = malloc(sizeof(int) * (nent + 1));
+  if (!ebase || !ecell) { free(start); free(mark); free(ebase); free(ecell); lg_seterr(env, "out of memory"); return 1; }
+  for (int i = 0; i < p->nterm; i++) {
+    prob_term *t = &p->t[i];
+    if (!t->have_mat) continue;
+    for (int it = 0; it < t->nitems; it++) {
+      cell_dofs(p, t->cells[it], rg, cg);
+      for (int r = 0; r < rs; r++) {
+        size_t q = start[rg[r] + 1]++;
+        ebase[q] = t->coo_off + ((PetscCount)it * rs + r) * cs;
+        ecell[q] = t->cells[it];
+      }
+    }
   }
-  free(used);
-  /* the columns of each row */
+  /* each row: the union of its element rows' columns (a marker per column, no global sort),
+   * sorted, the diagonal always; then every element entry's place, read from the marker
+   * (it holds the column's position in the row: no search) */
   PetscInt *ia = malloc(sizeof(PetscInt) * ((size_t)N + 1)), *ja = NULL;
   size_t nnz = 0, cap = (size_t)N * 8 + 16;
   ja = malloc(sizeof(PetscInt) * cap);
-  if (!ia || !ja) { free(rc); free(start); free(mark); free(ia); free(ja); lg_seterr(env, "out of memory"); return 1; }
+  p->coo_pos = malloc(sizeof(int) * ((size_t)n + 1));
+  p->mbuf = malloc(sizeof(double) * ((size_t)LG_CHUNK * rs * cs + 1));
+  if (!ia || !ja || !p->coo_pos || !p->mbuf) {
+    free(start); free(mark); free(ebase); free(ecell); free(ia); free(ja);
+    lg_seterr(env, "out of memory for %ld matrix entries", (long)n);
+    return 1;
+  }
   for (int r = 0; r < N; r++) mark[r] = -1;
-  for (int r = 0; r < N; r++) {
+  int bad = 0;
+  for (int r = 0; r < N && !bad; r++) {
     ia[r] = (PetscInt)nnz;
     size_t need = nnz + 1 + (start[r + 1] - start[r]) * (size_t)cs;
     if (need > cap) {
       while (cap < need) cap *= 2;
       PetscInt *nj = realloc(ja, sizeof(PetscInt) * cap);
-      if (!nj) { free(rc); free(start); free(mark); free(ia); free(ja); lg_seterr(env, "out of memory for the sparsity pattern"); return 1; }
+      if (!nj) { bad = 1; break; }
       ja = nj;
     }
     ja[nnz++] = r;
     mark[r] = r;
     for (size_t q = start[r]; q < start[r + 1]; q++) {
-      cell_dofs(p, rc[q], rg, cg);
+      col_dofs(p, ecell[q], cg);
       for (int k = 0; k < cs; k++)
         if (mark[cg[k]] != r) { mark[cg[k]] = r; ja[nnz++] = cg[k]; }
     }
-    qsort(ja + ia[r], nnz - (size_t)ia[r], sizeof(PetscInt), int_cmp);
+    sort_row(ja + ia[r], nnz - (size_t)ia[r]);
+    if (nnz > (size_t)INT32_MAX) { bad = 2; break; }
+    /* the marker now holds positions (>= N would clash with row numbers: use -2 - position) */
+    for (size_t k = (size_t)ia[r]; k < nnz; k++) mark[ja[k]] = -2 - (int)k;
+    p->coo_pos[r] = -2 - mark[r];
+    for (size_t q = start[r]; q < start[r + 1]; q++) {
+      col_dofs(p, ecell[q], cg);
+      int *pos = p->coo_pos + ebase[q];
+      for (int k = 0; k < cs; k++) pos[k] = -2 - mark[cg[k]];
+    }
+    /* back to "not in row r" for the columns of the next rows */
+    for (size_t k = (size_t)ia[r]; k < nnz; k++) mark[ja[k]] = r;
   }
-  ia[N] = (PetscInt)nnz;
-  free(rc);
   free(start);
   free(mark);
-  if (nnz > (size_t)INT32_MAX) { free(ia); free(ja); lg_seterr(env, "the matrix has %zu nonzeros: more than lugal indexes (2^31)", nnz); return 1; }
+  free(ebase);
+  free(ecell);
+  if (bad) {
+    free(ia); free(ja);
+    if (bad == 2) lg_seterr(env, "the matrix has more than 2^31 nonzeros: more than lugal indexes");
+    else lg_seterr(env, "out of memory for the sparsity pattern");
+    return 1;
+  }
+  ia[N] = (PetscInt)nnz;
   p->nnz = (PetscInt)nnz;
-  /* each element entry's place */
-  p->coo_pos = malloc(sizeof(int) * ((size_t)n + 1));
-  p->mbuf = malloc(sizeof(double) * ((size_t)LG_CHUNK * rs * cs + 1));
-  if (!p->coo_pos || !p->mbuf) { free(ia); free(ja); lg_seterr(env, "out of memory for %ld matrix entries", (long)n); return 1; }
-  for (int r = 0; r < N; r++) {
-    const PetscInt *row = ja + ia[r], *hit = bsearch(&(PetscInt){r}, row, (size_t)(ia[r + 1] - ia[r]), sizeof(PetscInt), int_cmp);
-    p->coo_pos[r] = (int)(hit - ja);
-  }
-  for (int i = 0; i < p->nterm; i++) {
-    prob_term *t = &p->t[i];
-    if (!t->have_mat) continue;
-    int *pos = p->coo_pos + t->coo_off;
-    for (int it = 0; it < t->nitems; it++) {
-      cell_dofs(p, t->cells[it], rg, cg);
-      for (int r = 0; r < rs; r++) {
-        const PetscInt *row = ja + ia[rg[r]];
-        size_t len = (size_t)(ia[rg[r] + 1] - ia[rg[r]]);
-        for (int k = 0; k < cs; k++) {
-          const PetscInt *hit = bsearch(&cg[k], row, len, sizeof(PetscInt), int_cmp);
-          *pos++ = (int)(hit - ja);
-        }
-      }
-    }
-  }
   PetscErrorCode ierr;
   ierr = MatCreate(PETSC_COMM_SELF, &p->A);
   if (!ierr) ierr = MatSetSizes(p->A, p->N, p->N, p->N, p->N);

@@ -419,15 +419,22 @@ int lg_interpolate(lg_env *env, lg_function *f, expr *e) {
   int share = 0;
   for (int i = 0; i < nb; i++) share |= bind[i].vals == f->x;
   if (share) tmp = malloc(sizeof(double) * (size_t)f->dm->ndof);
-  if (!w || !tmp) { free(w); if (share) free(tmp); expr_tape_free(&t); lg_seterr(env, "out of memory"); return 1; }
+  /* each node once (a P1 node is shared by about 6 triangles or 24 tetrahedra); a
+   * discontinuous expression (a gradient of a discrete function) takes the first cell's value */
+  unsigned char *done = calloc((size_t)f->dm->ndof + 1, 1);
+  if (!w || !tmp || !done) { free(w); free(done); if (share) free(tmp); expr_tape_free(&t); lg_seterr(env, "out of memory"); return 1; }
   mesh *m = f->mesh->m;
   pt_ctx p = {env, f->mesh, 0, {0, 0, 0}, {0, 0, 0}, {{0}}, nb, bind};
   int rc = 0;
   for (int c = 0; c < m->ncell && !rc; c++) {
     double J[3][3];
-    simplex_jacobian(m, c, J, p.K);
+    int mapped = 0;
     p.cell = c;
     for (int k = 0; k < f->dm->nloc && !rc; k++) {
+      int dof = f->dm->cell_dofs[(size_t)c * f->dm->nloc + k];
+      if (done[dof]) continue;
+      done[dof] = 1;
+      if (!mapped) { simplex_jacobian(m, c, J, p.K); mapped = 1; }
       memcpy(p.xi, f->dm->el.node + 3 * k, sizeof p.xi);
       dofmap_node_coords(f->dm, c, k, p.x);
       double v;
@@ -439,11 +446,12 @@ int lg_interpolate(lg_env *env, lg_function *f, expr *e) {
         else lg_seterr(env, "the expression %s is not finite (%g) at (%g, %g, %g)", buf, v, p.x[0], p.x[1], p.x[2]);
         rc = 1;
       }
-      if (!rc) tmp[f->dm->cell_dofs[(size_t)c * f->dm->nloc + k]] = v;
+      if (!rc) tmp[dof] = v;
     }
   }
   if (share && !rc) memcpy(f->x, tmp, sizeof(double) * (size_t)f->dm->ndof);
   if (share) free(tmp);
+  free(done);
   free(w);
   expr_tape_free(&t);
   return rc;

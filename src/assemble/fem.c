@@ -82,6 +82,7 @@ int gauss_jacobi(int n, double a, double b, double *x, double *w) {
 int quad_simplex(int dim, int degree, quad_rule *q) {
   if (degree < 0) degree = 0;
   if (degree > FEM_MAXDEG) return 1;
+  if (dim >= 2 && !quad_table_rule(dim, degree, q)) return 0;
   int m = (degree + 2) / 2; /* exact for 2m-1 >= degree */
   double xa[64], wa[64], xb[64], wb[64], xc[64], wc[64];
   q->dim = dim;

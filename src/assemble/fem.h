@@ -20,8 +20,13 @@ typedef struct {
 /* Gauss–Jacobi nodes and weights on [-1,1] for (1-x)^a (1+x)^b; returns 0 on success */
 int gauss_jacobi(int n, double a, double b, double *x, double *w);
 /* a rule exact for polynomials of total degree `degree` on the reference simplex of
- * dimension dim (1: [0,1], 2: triangle, 3: tetrahedron), collapsed (Stroud) product */
+ * dimension dim (1: [0,1], 2: triangle, 3: tetrahedron): the symmetric rules of quadtab.c
+ * where there is one (triangles to degree 20, tetrahedra to 10: degree 12 on a triangle 33
+ * points instead of 49, degree 8 on a tetrahedron 46 instead of 125), else a collapsed
+ * (Stroud) product of Gauss-Jacobi rules */
 int quad_simplex(int dim, int degree, quad_rule *q);
+/* the symmetric rule of quadtab.c for (dim, degree), or 1 when there is none */
+int quad_table_rule(int dim, int degree, quad_rule *q);
 /* max degree offered: 20 on every simplex (beyond the 10 / 8 the design asks for) */
 #define FEM_MAXDEG 20
 

@@ -9,9 +9,22 @@ static double fact(int n) { double f = 1; for (int i = 2; i <= n; i++) f *= i; r
 
 int main(void) {
   for (int dim = 1; dim <= 3; dim++) {
-    for (int deg = 0; deg <= 12; deg++) {
+    for (int deg = 0; deg <= FEM_MAXDEG; deg++) {
       quad_rule q;
       CHECK(quad_simplex(dim, deg, &q) == 0, "rule dim %d degree %d", dim, deg);
+      CHECK(q.degree >= deg, "dim %d degree %d: the rule has degree %d", dim, deg, q.degree);
+      /* positive weights, points strictly inside */
+      for (int i = 0; i < q.n; i++) {
+        double sx = 0;
+        int inside = q.w[i] > 0;
+        for (int d = 0; d < dim; d++) { inside &= q.x[dim * i + d] > 0; sx += q.x[dim * i + d]; }
+        CHECK(inside && sx < 1, "dim %d degree %d: point %d outside or a weight not positive", dim, deg, i);
+      }
+      /* the symmetric tables where they exist: fewer points than the collapsed product */
+      static const int tri_n[21] = {1, 1, 3, 6, 6, 7, 12, 15, 16, 19, 25, 28, 33, 37, 42, 49, 60, 60, 67, 73, 79};
+      static const int tet_n[11] = {1, 1, 4, 8, 14, 14, 24, 35, 46, 59, 81};
+      if (dim == 2) CHECK(q.n == tri_n[deg], "triangle degree %d: %d points (want %d)", deg, q.n, tri_n[deg]);
+      if (dim == 3 && deg <= 10) CHECK(q.n == tet_n[deg], "tetrahedron degree %d: %d points (want %d)", deg, q.n, tet_n[deg]);
       for (int a = 0; a <= deg; a++)
         for (int b = 0; a + b <= deg && (dim >= 2 || b == 0); b++)
           for (int c = 0; a + b + c <= deg && (dim == 3 || c == 0); c++) {

@@ -108,6 +108,7 @@ void jit_set_backend(lg_jit *j, jit_backend b) {
 }
 void jit_set_tier_ms(lg_jit *j, double ms) { j->tier_ms = ms; }
 void jit_set_verbose(lg_jit *j, int v) { j->verbose = v; }
+int jit_verbose(const lg_jit *j) { return j->verbose; }
 size_t jit_count(const lg_jit *j) { return j->n; }
 
 static void hash_src(const char *s, uint64_t *h1, uint64_t *h2) {

@@ -533,6 +533,10 @@ int kernel_build(lg_jit *j, expr_ctx *c, cell_type ct, int facet, int qdeg, cons
   int rc = jit_compile(j, src, &k->fn, &k->jid, &k->compile_ms, &k->cached, err, errlen);
   free(src);
   if (rc) return 1;
+  if (jit_verbose(j) && !k->cached)
+    fprintf(stderr, "lugal: kernel %d: %s %s integral, arity %d, quadrature degree %d (%d points), %d cached values per point, "
+                    "compiled in %.2f ms\n", k->jid, cell_name(ct), facet ? "facet" : "cell", k->arity, qdeg, k->nq, k->ncache,
+            k->compile_ms);
   if (k->ncache > 0 && !(k->pc = calloc(1, sizeof *k->pc))) {
     snprintf(err, errlen, "out of memory");
     return 1;

@@ -72,6 +72,7 @@ void jit_free(lg_jit *j); /* stops background compilers */
 void jit_set_backend(lg_jit *j, jit_backend b);
 void jit_set_tier_ms(lg_jit *j, double ms);
 void jit_set_verbose(lg_jit *j, int verbose);
+int jit_verbose(const lg_jit *j);
 /* compile (or find compiled) a source defining `lugal_kernel`: its code and its id */
 int jit_compile(lg_jit *j, const char *src, kernel_fn *fn, int *id, double *ms, int *cached, char *err, size_t errlen);
 /* the best code of kernel id now (a finished background build is swapped in here) */

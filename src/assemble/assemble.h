@@ -206,6 +206,9 @@ int lg_reduced_control_size(const lg_reduced *rf, int i); /* dofs of a field, 1 
 lg_problem *lg_reduced_problem(const lg_reduced *rf);
 /* a control's values changed: the next value or gradient solves the state again */
 void lg_reduced_changed(lg_reduced *rf);
+/* rf and from have the same state problem and from's state is that of the current controls
+ * (which both see): rf takes it without solving again; returns 1 if it did */
+int lg_reduced_share_state(lg_reduced *rf, const lg_reduced *from);
 int lg_reduced_value(lg_env *env, lg_reduced *rf, double *J);
 /* the gradient dj/dm_i as dual vectors (g[i] has lg_reduced_control_size values): one
  * adjoint solve with the state's factorization */

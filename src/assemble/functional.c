@@ -366,6 +366,11 @@ int lg_reduced_ncontrols(const lg_reduced *rf) { return rf->nc; }
 const lg_control *lg_reduced_control(const lg_reduced *rf, int i) { return &rf->c[i]; }
 lg_problem *lg_reduced_problem(const lg_reduced *rf) { return rf->p; }
 void lg_reduced_changed(lg_reduced *rf) { rf->solved = 0; rf->grad_fresh = 0; }
+int lg_reduced_share_state(lg_reduced *rf, const lg_reduced *from) {
+  if (rf->solved || !from->solved || rf->p != from->p) return 0;
+  rf->solved = 1;
+  return 1;
+}
 
 int lg_reduced_control_size(const lg_reduced *rf, int i) {
   return rf->c[i].kind == LG_CONTROL_FIELD ? rf->c[i].f->dm->ndof : 1;

@@ -39,6 +39,8 @@ typedef struct {
   char **files;
   double *cg[LG_MAXCONTROL]; /* a constraint's gradient */
   Tao outer;                 /* almm hands its monitors to its subsolver: report the outer one */
+  double *xlast;             /* almm: the point last set (the objective and the constraints
+                              * are asked at the same point one after the other) */
   double fs, cs[LG_MAXCONS];  /* almm: TAO sees J / fs and (g_j - c_j) / cs_j */
 } opt_ctx;
 
@@ -52,6 +54,12 @@ static int tao_fail(lg_env *env, PetscErrorCode ierr, const char *what) {
 
 /* controls <-> the TAO vector x = sqrt(d) m */
 static void to_controls(opt_ctx *C, const PetscScalar *x) {
+  int n = C->off[C->nc];
+  if (C->xlast) {
+    if (C->xlast[n] == 1 && !memcmp(C->xlast, x, sizeof(double) * (size_t)n)) return;
+    memcpy(C->xlast, x, sizeof(double) * (size_t)n);
+    C->xlast[n] = 1;
+  }
   for (int i = 0; i < C->nc; i++) {
     const lg_control *c = lg_reduced_control(C->rf, i);
     const double *q = C->sq + C->off[i];
@@ -81,6 +89,7 @@ static PetscErrorCode objective_gradient(Tao tao, Vec X, PetscReal *f, Vec G, vo
   PetscCall(VecRestoreArrayRead(X, &x));
   C->evals++;
   double J;
+  for (int j = 0; j < C->o->ncons; j++) lg_reduced_share_state(C->rf, C->o->cons[j].rf);
   if (lg_reduced_value(C->env, C->rf, &J) || lg_reduced_gradient(C->env, C->rf, C->g)) {
     C->failed = 1;
     *f = PETSC_INFINITY; /* lets a line search back off; a failure at the start is reported */
@@ -112,6 +121,7 @@ static int constraint_values(opt_ctx *C, Vec X, Vec V, int eq) {
     int kind = C->o->cons[j].kind;
     if ((kind == LG_CON_EQ) != eq) continue;
     double g;
+    lg_reduced_share_state(C->o->cons[j].rf, C->rf);
     if (lg_reduced_value(C->env, C->o->cons[j].rf, &g)) { bad = 1; break; }
     v[r++] = (kind == LG_CON_LE ? C->o->cons[j].c - g : g - C->o->cons[j].c) / C->cs[j];
   }
@@ -143,6 +153,7 @@ static int constraint_jacobian(opt_ctx *C, Vec X, Mat A, int eq) {
     if ((kind == LG_CON_EQ) != eq) continue;
     double g;
     lg_reduced *rg = C->o->cons[j].rf;
+    lg_reduced_share_state(rg, C->rf);
     if (lg_reduced_value(C->env, rg, &g) || lg_reduced_gradient(C->env, rg, C->cg)) {
       free(cols); free(row); C->failed = 1; return 1;
     }
@@ -310,6 +321,7 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
     /* hd[0] doubles as a scratch of all n values in hessian_mult */
     C.hd[i] = newton ? malloc(i ? sz : sizeof(double) * ((size_t)n + 1)) : NULL;
     C.cg[i] = almm ? malloc(sz) : NULL;
+    if (almm && i == 0 && !(C.xlast = calloc((size_t)n + 1, sizeof(double)))) { lg_seterr(env, "out of memory"); rc = 1; goto done_early; }
     if (!C.g[i] || (newton && (!C.dm[i] || !C.hd[i])) || (almm && !C.cg[i])) { lg_seterr(env, "out of memory"); rc = 1; goto done_early; }
   }
   if (newton && !(C.xh = malloc(sizeof(double) * ((size_t)n + 1)))) { lg_seterr(env, "out of memory"); rc = 1; goto done_early; }
@@ -542,5 +554,6 @@ done:
 done_early:
   for (int i = 0; i < C.nc; i++) { free(C.g[i]); free(C.dm[i]); free(C.hd[i]); free(C.cg[i]); }
   free(C.xh);
+  free(C.xlast);
   return rc;
 }

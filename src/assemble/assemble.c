@@ -56,7 +56,7 @@ void lg_mesh_free(lg_mesh *lm) {
 }
 
 dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree) {
-  if (degree < 1 || degree > 3) { lg_seterr(env, "Lagrange degree %d is not available (1, 2, 3)", degree); return NULL; }
+  if (degree < 0 || degree > 3) { lg_seterr(env, "Lagrange degree %d is not available (0, 1, 2, 3)", degree); return NULL; }
   if (!lm->dm[degree]) {
     char err[256];
     lm->dm[degree] = dofmap_new(lm->m, degree, err);

@@ -186,8 +186,8 @@ int lagrange_init(lagrange_element *e, cell_type cell, int p, char *err) {
                        "tetrahedra are)", cell_plural(cell));
     return 1;
   }
-  if (p < 1 || p > 3) {
-    snprintf(err, 256, "Lagrange degree %d is not available (1, 2 and 3 are)", p);
+  if (p < 0 || p > 3) {
+    snprintf(err, 256, "Lagrange degree %d is not available (0, 1, 2 and 3 are)", p);
     return 1;
   }
   int dim = cell == CELL_TRIANGLE ? 2 : 3;
@@ -195,13 +195,19 @@ int lagrange_init(lagrange_element *e, cell_type cell, int p, char *err) {
   e->dim = dim;
   e->degree = p;
   int nv = dim + 1, k = 0;
+  if (p == 0) { /* P0: one node at the centroid, owned by the cell */
+    for (int d = 0; d < dim; d++) e->node[d] = 1.0 / (dim + 1);
+    e->ent_dim[0] = 3; e->ent_id[0] = 0; e->ent_k[0] = 0;
+    k = 1;
+    nv = 0;
+  }
   /* vertices */
   for (int v = 0; v < nv; v++, k++) {
     for (int d = 0; d < dim; d++) e->node[k * 3 + d] = dim == 2 ? tri_v[v][d] : tet_v[v][d];
     e->ent_dim[k] = 0; e->ent_id[k] = v; e->ent_k[k] = 0;
   }
   /* edges: p-1 nodes from the first to the second local vertex */
-  int ne = cell_nedges(cell);
+  int ne = p == 0 ? 0 : cell_nedges(cell);
   for (int ed = 0; ed < ne; ed++) {
     const int *ev = cell_edge_verts(cell, ed);
     for (int j = 1; j < p; j++, k++) {
@@ -339,13 +345,13 @@ dofmap *dofmap_new(mesh *m, int degree, char *err) {
   dm->nloc = nloc;
   if (p >= 2 && mesh_build_edges(m)) { snprintf(err, 256, "%.200s", m->err); free(dm); return NULL; }
   if (p >= 3 && m->dim == 3 && mesh_build_faces(m)) { snprintf(err, 256, "%.200s", m->err); free(dm); return NULL; }
-  long nd = m->nvert;
+  long nd = p == 0 ? 0 : m->nvert; /* P0: the cells' dofs only */
   long edge_off = nd;
   if (p >= 2) nd += (long)m->nedge * (p - 1);
   long face_off = nd;
   if (p >= 3 && m->dim == 3) nd += m->nface;
   long cell_off = nd;
-  if (p >= 3 && m->dim == 2) nd += m->ncell;
+  if ((p >= 3 && m->dim == 2) || p == 0) nd += m->ncell;
   if (nd > 2000000000L) { snprintf(err, 256, "too many dofs"); free(dm); return NULL; }
   dm->ndof = (int)nd;
   dm->cell_dofs = malloc(sizeof(int) * (size_t)m->ncell * (size_t)nloc);

@@ -120,7 +120,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
         k->coef_func[ci] = e->i0;
         k->coef_degree[ci] = fi->degree;
       }
-      if (fi->degree < 1 || fi->degree > 3) KERR("coefficient %s has unsupported degree %d", fi->name, fi->degree);
+      if (fi->degree < 0 || fi->degree > 3) KERR("coefficient %s has unsupported degree %d", fi->name, fi->degree);
       if (d < 0) need_val[fi->degree] = 1;
       else need_grad[fi->degree] = 1;
     }
@@ -132,7 +132,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
       t = k->coef_degree[j]; k->coef_degree[j] = k->coef_degree[j - 1]; k->coef_degree[j - 1] = t;
     }
   lagrange_element el[4];
-  for (int p = 1; p <= 3; p++)
+  for (int p = 0; p <= 3; p++)
     if (lagrange_init(&el[p], ct, p, err)) goto fail;
   k->wsize = 0;
   for (int i = 0; i < k->ncoef; i++) {
@@ -206,7 +206,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   free(qw);
   if (need_x) emit_table(&b, "QX", qx, (long)nf * q.n * dim);
   /* basis tables */
-  for (int p = 1; p <= 3; p++) {
+  for (int p = 0; p <= 3; p++) {
     if (!need_val[p] && !need_grad[p]) continue;
     int nl = el[p].nloc;
     double *bv = malloc(sizeof(double) * (size_t)nf * q.n * nl);
@@ -395,7 +395,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
       sb_printf(&b, ";\n");
     }
   }
-  for (int p = 1; p <= 3; p++) {
+  for (int p = 0; p <= 3; p++) {
     int nl = el[p].nloc;
     if (need_val[p]) sb_printf(&b, "    const double *b%d = B%d + qq*%d;\n", p, p, nl);
     if (need_grad[p]) {

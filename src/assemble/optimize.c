@@ -228,7 +228,7 @@ static int write_step(opt_ctx *C, int it) {
     const lg_control *ci = lg_reduced_control(C->rf, i);
     if (ci->kind != LG_CONTROL_FIELD || ci->f->mesh != c->f->mesh) continue;
     expr_func_info *fi = expr_func_get(C->env->c, ci->f->fid);
-    fl[nf++] = (mesh_field){fi ? fi->name : "m", 1, 0, ci->f->x};
+    fl[nf++] = (mesh_field){fi ? fi->name : "m", 1, ci->f->dm->degree == 0, ci->f->x};
   }
   size_t l = strlen(C->o->series);
   char *file = malloc(l + 32);

@@ -343,6 +343,12 @@ static int compute_bcs(lg_env *env, lg_problem *p) {
   for (int i = 0; i < p->nbct; i++) {
     bc_term *bt = &p->bct[i];
     dofmap *dm = p->rdm[bt->field];
+    if (!dm->el.nfacet_dofs) {
+      free(src);
+      lg_seterr(env, "essential_bc: boundary condition %d is on a piecewise-constant (P0) field, which has no values on "
+                     "the boundary (they belong to cells): impose it weakly, in the equation", bt->src + 1);
+      return 1;
+    }
     double *w = malloc(sizeof(double) * (size_t)(bt->tape.n + 1));
     if (!w) { free(src); lg_seterr(env, "out of memory"); return 1; }
     bc_pt pt = {env, p, 0, {0, 0, 0}, {0, 0, 0}, {{0}}};

@@ -172,7 +172,8 @@ static int form_tostring(lua_State *L) {
 
 static int l_lagrange(lua_State *L) {
   lua_Integer p = luaL_checkinteger(L, 1);
-  if (p < 1 || p > 3) return luaL_error(L, "lg.lagrange: argument 1 must be a degree 1, 2 or 3, got %I", p);
+  if (p < 0 || p > 3)
+    return luaL_error(L, "lg.lagrange: argument 1 must be a degree 0 (piecewise constants), 1, 2 or 3, got %I", p);
   ud_basis *u = new_ud(L, sizeof *u, MT_BASIS, 0, NULL);
   u->degree = (int)p;
   return 1;

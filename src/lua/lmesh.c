@@ -607,7 +607,8 @@ static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, in
         fl[nf] = (mesh_field){name, 1, 1, qa->v};
       } else if (uf) {
         if (uf->f->mesh != lm) return luaL_error(L, "%s: field '%s' lives on a different mesh", fn, name);
-        fl[nf] = (mesh_field){name, 1, 0, uf->f->x}; /* vertex dofs come first in every Lagrange numbering */
+        /* vertex dofs come first in every Lagrange numbering; P0 dofs are the cells' */
+        fl[nf] = (mesh_field){name, 1, uf->f->dm->degree == 0, uf->f->x};
       } else if (lua_istable(L, -1)) {
         lua_Integer n = luaL_len(L, -1);
         if (n != m->ncell && n != m->nvert)

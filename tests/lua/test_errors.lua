@@ -20,7 +20,7 @@ fails(function() return lg.grad(u) * lg.grad(v) end, "cannot multiply a 2-vector
 fails(function() return lg.dot(lg.grad(u), lg.list(1, 2, 3)) end, "dot product of a 2-vector and a 3-vector")
 fails(function() return lg.grad("x") end, "lg.grad: argument 1 must be an expression", "got string")
 fails(function() return lg.sin({}) end, "lg.sin")
-fails(function() return lg.lagrange(5) end, "lg.lagrange: argument 1 must be a degree 1, 2 or 3, got 5")
+fails(function() return lg.lagrange(5) end, "lg.lagrange: argument 1 must be a degree 0 (piecewise constants), 1, 2 or 3, got 5")
 fails(function() return lg.unknown(3) end, "lg.unknown: argument 1 must be a basis")
 fails(function() return lg.integral(mesh, u*v) end, "lg.integral: argument 1 must be a region")
 fails(function() return lg.mesh.rectangle{nx = 0} end, "lg.mesh.rectangle", "at least 1")

@@ -67,9 +67,10 @@ struct lg_problem {
   int have_solution;
   form *eqn, *bcf;    /* copies of the forms, for derived operators */
   int test[KER_MAXFIELD], unk[KER_MAXFIELD];
-  KSP adj_ksp;        /* nonlinear problems: the transposed Jacobian at the solution */
   int matrix_ready;   /* lg_problem_solve_vector: the matrix is assembled and factored */
   int adj_stale;      /* the adjoint Jacobian is not the one at the last solution */
+  int jac_at_solution; /* nonlinear: A holds the Jacobian at the solution, factored by the
+                        * SNES's solver (the adjoint's): a warm Newton start there reuses it */
   uint64_t matrix_fp; /* linear problems: what the assembled, factored matrix was made from */
   double *elem;       /* element tensor scratch */
   size_t elem_cap;
@@ -693,7 +694,6 @@ void lg_problem_free(lg_problem *p) {
   free(p->solution);
   form_free(p->eqn);
   form_free(p->bcf);
-  if (p->adj_ksp) KSPDestroy(&p->adj_ksp);
   free(p->elem);
   if (p->A) MatDestroy(&p->A);
   if (p->b) VecDestroy(&p->b);
@@ -1028,6 +1028,10 @@ static PetscErrorCode snes_jacobian(SNES snes, Vec X, Mat J, Mat P, void *ctx) {
   PetscCall(VecGetArrayRead(X, &x));
   memcpy(p->state, x, sizeof(double) * (size_t)p->N);
   PetscCall(VecRestoreArrayRead(X, &x));
+  /* a warm start at the last solution, whose Jacobian the adjoint assembled and factored:
+   * leave the matrix alone, so that the solver's factorization is reused */
+  if (p->jac_at_solution && P == p->A && !memcmp(p->state, p->solution, sizeof(double) * (size_t)p->N)) return 0;
+  p->jac_at_solution = 0;
   if (assemble_matrix(p->env, p, p->state, P)) {
     p->failed = 1;
     PetscCall(SNESSetJacobianDomainError(snes));
@@ -1115,6 +1119,7 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
   memcpy(p->solution, xr, sizeof(double) * (size_t)p->N);
   p->have_solution = 1;
   p->adj_stale = 1;
+  p->jac_at_solution = 0;
   int rc = out ? make_outputs(env, p, xr, out) : 0;
   VecRestoreArrayRead(p->x, &xr);
   return rc;
@@ -1302,23 +1307,19 @@ static int jacobian_solver(lg_env *env, lg_problem *p, KSP *out) {
   if (!p->have_solution) { lg_seterr(env, "the adjoint or sensitivity needs a solved state: solve the problem first"); return 1; }
   KSP ksp = p->ksp;
   if (p->nonlinear) {
-    if (!p->adj_ksp) {
-      PCHK(KSPCreate(PETSC_COMM_SELF, &p->adj_ksp), "KSPCreate");
-      if (p->prefix[0]) PCHK(KSPSetOptionsPrefix(p->adj_ksp, p->prefix), "KSPSetOptionsPrefix");
-      PC pc;
-      PCHK(KSPSetType(p->adj_ksp, KSPPREONLY), "KSPSetType");
-      PCHK(KSPGetPC(p->adj_ksp, &pc), "KSPGetPC");
-      if (default_lu(env, p, pc)) return 1;
-      PCHK(KSPSetFromOptions(p->adj_ksp), "KSPSetFromOptions");
-    }
+    /* the SNES's own solver, so that the next Newton solve, warm-started at this solution,
+     * finds the matrix and its factorization unchanged (snes_jacobian): one factorization
+     * less per evaluation of an optimization (three were two Newton steps and this one) */
+    if (!p->snes) { lg_seterr(env, "the adjoint needs a solved state: solve the problem first"); return 1; }
+    PCHK(SNESGetKSP(p->snes, &ksp), "SNESGetKSP");
     if (p->adj_stale) {
       memcpy(p->state, p->solution, sizeof(double) * (size_t)p->N);
       if (assemble_matrix(env, p, p->state, p->A)) return 1;
       PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, NULL, NULL), "MatZeroRows");
-      PCHK(KSPSetOperators(p->adj_ksp, p->A, p->A), "KSPSetOperators");
+      PCHK(KSPSetOperators(ksp, p->A, p->A), "KSPSetOperators");
       p->adj_stale = 0;
+      p->jac_at_solution = 1;
     }
-    ksp = p->adj_ksp;
   }
   if (!ksp || (!p->nonlinear && !p->matrix_fp && !p->bc_symmetric)) {
     /* a linear problem's matrix was reassembled since its solve (problem:assemble) */

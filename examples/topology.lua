@@ -58,3 +58,4 @@ assert(info.J < 0.7*C0, "the optimized design is not stiffer than the uniform on
 assert(vol <= V*L*H*(1 + 1e-4), "the volume bound is violated")
 local rho_f, u_x, u_y = compliance:state()
 mesh:write("topology.vtu", {rho = rho_opt, rho_f = rho_f, ux = u_x, uy = u_y})
+mesh:write("topology.svg", {rho = rho_opt})

@@ -2,6 +2,7 @@
  * (mesh:cells, mesh:boundary), output (VTU, MSH, .pvd series), quality arrays and reports,
  * untangling, smoothing and motion. */
 #include "largs.h"
+#include "../mesh/svg.h"
 
 #include "../mesh/untangle.h"
 
@@ -635,6 +636,50 @@ static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, in
   return 0;
 }
 
+/* an SVG picture of a 2D mesh coloured by one per-cell field {name = P0 function, quality
+ * array or array of one number per cell}, over the field's range */
+static int write_svg(lua_State *L, mesh *m, lg_mesh *lm, const char *path, const char *fn) {
+  if (m->dim != 2) return luaL_error(L, "%s: an SVG picture is of a 2D mesh, this one is %dD", fn, m->dim);
+  if (!lua_istable(L, 3)) return typeerror(L, fn, 3, "a table {name = one value per cell} for an SVG picture");
+  lua_pushnil(L);
+  if (!lua_next(L, 3)) return luaL_error(L, "%s: an SVG picture needs one per-cell field", fn);
+  if (lua_type(L, -2) != LUA_TSTRING) return luaL_error(L, "%s: field names must be strings", fn);
+  const char *name = lua_tostring(L, -2);
+  int vidx = lua_gettop(L);
+  lua_pushvalue(L, -2);
+  if (lua_next(L, 3)) return luaL_error(L, "%s: an SVG picture shows one field, the table has more", fn);
+  const double *v = NULL;
+  double *own = NULL;
+  ud_func *uf = luaL_testudata(L, vidx, MT_FUNC);
+  ud_qarray *qa = luaL_testudata(L, vidx, MT_QARRAY);
+  if (uf) {
+    if (uf->f->mesh != lm) return luaL_error(L, "%s: field '%s' lives on a different mesh", fn, name);
+    if (uf->f->dm->degree != 0)
+      return luaL_error(L, "%s: an SVG picture colours cells: field '%s' must be piecewise constant (P0), or write a .vtu", fn, name);
+    v = uf->f->x;
+  } else if (qa) {
+    if (qa->n != m->ncell) return luaL_error(L, "%s: quality array '%s' belongs to a mesh of %d cells", fn, name, qa->n);
+    v = qa->v;
+  } else if (lua_istable(L, vidx) && luaL_len(L, vidx) == m->ncell) {
+    own = lua_newuserdatauv(L, sizeof(double) * ((size_t)m->ncell + 1), 0);
+    for (int i = 0; i < m->ncell; i++) {
+      lua_geti(L, vidx, i + 1);
+      int isnum;
+      own[i] = lua_tonumberx(L, -1, &isnum);
+      if (!isnum) return luaL_error(L, "%s: array '%s' entry %d must be a number", fn, name, i + 1);
+      lua_pop(L, 1);
+    }
+    v = own;
+  } else return luaL_error(L, "%s: field '%s' must be a P0 function, a quality array or %d numbers (one per cell)", fn, name, m->ncell);
+  double lo = INFINITY, hi = -INFINITY;
+  for (int i = 0; i < m->ncell; i++)
+    if (isfinite(v[i])) { lo = fmin(lo, v[i]); hi = fmax(hi, v[i]); }
+  if (!(lo <= hi)) lo = 0, hi = 1;
+  char err[MESH_ERRLEN];
+  if (mesh_write_svg(m, path, v, lo, hi, name, err)) return luaL_error(L, "%s: %s", fn, err);
+  return 0;
+}
+
 static int mesh_write(lua_State *L) {
   const char *fn = "mesh:write";
   ud_mesh *u = check_mesh(L, 1, fn);
@@ -644,8 +689,9 @@ static int mesh_write(lua_State *L) {
     if (mesh_write_gmsh(u->lm->m, path)) return luaL_error(L, "%s: %s", fn, u->lm->m->err);
     return 0;
   }
+  if (l > 4 && !strcmp(path + l - 4, ".svg")) return write_svg(L, u->lm->m, u->lm, path, fn);
   if (!(l > 4 && !strcmp(path + l - 4, ".vtu")))
-    return luaL_error(L, "%s: argument 1 must end in .vtu (ParaView) or .msh (Gmsh), got \"%s\"", fn, path);
+    return luaL_error(L, "%s: argument 1 must end in .vtu (ParaView), .msh (Gmsh) or .svg (a 2D picture), got \"%s\"", fn, path);
   write_fields(L, u->lm->m, u->lm, path, 3, fn);
   return 0;
 }

@@ -51,6 +51,16 @@ local fh = io.open(out .. "p0_control.vtu")
 local text = fh:read("a")
 fh:close()
 T.check(text:find('<CellData>%s*<DataArray type="Float64" Name="f"') ~= nil, "the P0 control is cell data in the VTU")
+-- an SVG picture of the P0 control: one polygon per cell
+m8:write(out .. "p0_control.svg", {f = f})
+fh = io.open(out .. "p0_control.svg")
+text = fh:read("a")
+fh:close()
+local npoly = select(2, text:gsub("<polygon", ""))
+T.check(npoly == m8:ncells(), "the SVG has %d polygons for %d cells", npoly, m8:ncells())
+T.fails(function() return m8:write(out .. "x.svg", {u = rf:state()}) end, "must be piecewise constant (P0), or write a .vtu")
+T.fails(function() return m8:write(out .. "x.svg", {f = f, g = f}) end, "an SVG picture shows one field")
+T.fails(function() return lg.mesh.box{nx = 2}:write(out .. "x.svg", {}) end, "an SVG picture is of a 2D mesh")
 -- tetrahedra, a nonlinear state
 local box = lg.mesh.box{nx = 3}
 local P1t = lg.lagrange(1)

@@ -1,7 +1,8 @@
 /* untangle.c — untangling (seed: "Untangling of 2D triangular and quadrilateral meshes in ALE
- * simulations", sections 1–4), quality-guarded smoothing and Laplacian mesh motion (seed:
- * "Morphing and modification of unstructured meshes", eqs. 1.1–1.3). See untangle.h. */
-#include "untangle.h"
+ * simulations", sections 1–4) and Laplacian mesh motion (seed: "Morphing and modification of
+ * unstructured meshes", eqs. 1.1–1.3), with the machinery they share with the smoother
+ * (smooth.c) declared in untangle_int.h. See untangle.h. */
+#include "untangle_int.h"
 
 #include "quality.h"
 
@@ -12,7 +13,7 @@
 #include <string.h>
 #include <time.h>
 
-static double now(void) {
+double ut_now(void) {
   struct timespec t;
   clock_gettime(CLOCK_MONOTONIC, &t);
   return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
@@ -20,28 +21,11 @@ static double now(void) {
 
 /* ---------------------------------------------------------------- corners and adjacency */
 
-/* The corners of a cell (section 1: "an element is valid if each corner is valid"): the
- * corner vertex, then its d neighbours in right-handed order. A simplex has one corner (its
- * Jacobian is d! times the signed measure). */
-typedef struct {
-  mesh *m;
-  int d, nvc, ncorner;
-  int ct[8][4];
-  int *vc_off, *vc; /* vertex -> cells */
-  unsigned char *bnd;   /* on the topological boundary */
-  unsigned char *fixed; /* may not move: boundary corners, or every boundary vertex */
-  int *bnb;             /* 2D: the two boundary neighbours of a boundary vertex */
-  int *bf_off, *bf;     /* 3D: vertex -> its boundary facets (cell * nfacets + facet) */
-  unsigned char *ntan;  /* 3D: directions a boundary vertex may slide in: 2 on a flat face,
-                         * 1 on a straight edge between two flat faces, 0 elsewhere */
-  double *tan;          /* 3D: those directions, 2 unit vectors per vertex */
-  double jtol;          /* corner Jacobians <= jtol count as invalid */
-  double jscale;        /* a typical corner Jacobian, to scale the objective */
-} ctx;
+
 
 static const int *cell_of(const ctx *C, int c) { return C->m->cells + (size_t)c * C->nvc; }
 
-static void ctx_free(ctx *C) {
+void ut_ctx_free(ctx *C) {
   free(C->vc_off);
   free(C->vc);
   free(C->bnd);
@@ -54,7 +38,7 @@ static void ctx_free(ctx *C) {
 }
 
 /* the shortest edge at v */
-static double star_h(const ctx *C, int v) {
+double ut_star_h(const ctx *C, int v) {
   int d = C->d;
   const double *p0 = C->m->x + (size_t)v * d;
   double h = INFINITY;
@@ -330,11 +314,11 @@ static int on_star(const ctx *C, const double *x, int v, const double *p) {
 /* 3D: one boundary vertex descends pen (evaluated at the current coordinates) along its
  * slide directions — central-difference gradient in the tangent basis, backtracking — while
  * it stays on its boundary star; 1 if it moved */
-typedef double (*vertex_penalty)(const ctx *C, int v, const void *arg, int probe); /* probe: for the gradient, no guard */
-static int slide_3d(const ctx *C, double *x, int v, vertex_penalty pen, const void *arg) {
+
+int ut_slide_3d(const ctx *C, double *x, int v, vertex_penalty pen, const void *arg) {
   int nt = C->ntan[v], moved = 0;
   const double *t = C->tan + 6 * (size_t)v;
-  double *p = x + 3 * (size_t)v, h = star_h(C, v), f = pen(C, v, arg, 0);
+  double *p = x + 3 * (size_t)v, h = ut_star_h(C, v), f = pen(C, v, arg, 0);
   if (!nt || !(f > 0) || !isfinite(f)) return 0;
   for (int it = 0; it < 20; it++) {
     double p0[3] = {p[0], p[1], p[2]}, g[2] = {0, 0}, e = 1e-6 * h, dir[3] = {0, 0, 0}, gn = 0;
@@ -366,7 +350,7 @@ static int slide_3d(const ctx *C, double *x, int v, vertex_penalty pen, const vo
   return moved;
 }
 
-static int ctx_init(ctx *C, mesh *m, int slide, char *err) {
+int ut_ctx_init(ctx *C, mesh *m, int slide, char *err) {
   memset(C, 0, sizeof *C);
   C->m = m;
   C->d = m->dim;
@@ -450,16 +434,16 @@ static double corner_jac(const ctx *C, const double *x, const int *cell, int k, 
 }
 
 
-static double cell_min_jac(const ctx *C, const double *x, int c) {
+double ut_cell_min_jac(const ctx *C, const double *x, int c) {
   double mn = INFINITY;
   for (int k = 0; k < C->ncorner; k++) mn = fmin(mn, corner_jac(C, x, cell_of(C, c), k, NULL));
   return mn;
 }
 
-static void count_cells(const ctx *C, const double *x, double beta, int *ninv, int *nbelow) {
+void ut_count_cells(const ctx *C, const double *x, double beta, int *ninv, int *nbelow) {
   int a = 0, b = 0;
   for (int c = 0; c < C->m->ncell; c++) {
-    double j = cell_min_jac(C, x, c);
+    double j = ut_cell_min_jac(C, x, c);
     a += !(j > C->jtol);
     b += !(j >= beta);
   }
@@ -708,29 +692,13 @@ static int feasible_passes(ctx *C, double *x, double target, int stage3, const u
 
 /* ---------------------------------------------------------------- stage 2: optimization */
 
-/* f = Σ ((|J − β| − (J − β)) / (2 S))² = Σ (max(0, β − J)/S)² over the corners of cells,
- * the quadratic objective (3.3) scaled by a typical corner Jacobian S */
-typedef struct {
-  ctx *C;
-  double beta, S;
-  int ncell;
-  const int *cells; /* cells whose corners enter f */
-  const int *fidx;  /* vertex -> free index or -1 */
-  int lift;         /* a cell counts as bad when below β (stage 3), else when invalid */
-  /* global smoothing instead of (3.3): f = Σ 1/q over the cells, +∞ when a cell is invalid
-   * or the smallest q falls below qfloor; gradient by central differences over each free
-   * vertex's star (exact up to O(e²): only the star's cells depend on the vertex) */
-  int smooth, measure;
-  double qfloor;
-  const int *freev;
-  const double *hv; /* per free vertex: its shortest edge, for the difference step */
-} objective;
+
 
 
 static int obj_bad(const objective *o, const double *x) {
   int bad = 0;
   for (int i = 0; i < o->ncell; i++) {
-    double J = cell_min_jac(o->C, x, o->cells[i]);
+    double J = ut_cell_min_jac(o->C, x, o->cells[i]);
     bad += o->lift ? !(J >= o->beta) : !(J > o->C->jtol);
   }
   return bad;
@@ -760,7 +728,6 @@ static double obj_eval(const objective *o, const double *x, double *grad, int nf
   return f;
 }
 
-static double star_objective(const ctx *C, int v, int q, double *qmin);
 
 static double smooth_eval(const objective *o, const double *x, double *grad, int nfree) {
   const ctx *C = o->C;
@@ -770,7 +737,7 @@ static double smooth_eval(const objective *o, const double *x, double *grad, int
   (void)x;
   for (int i = 0; i < o->ncell; i++) {
     int c = o->cells[i];
-    if (!(cell_min_jac(C, m->x, c) > C->jtol)) return INFINITY;
+    if (!(ut_cell_min_jac(C, m->x, c) > C->jtol)) return INFINITY;
     double val = mesh_cell_quality(m, c, o->measure);
     if (!(val > 0)) return INFINITY;
     f += 1 / val;
@@ -784,9 +751,9 @@ static double smooth_eval(const objective *o, const double *x, double *grad, int
       for (int j = 0; j < d; j++) {
         double *p = m->x + (size_t)v * d + j, p0 = *p;
         *p = p0 + e;
-        double fp = star_objective(C, v, o->measure, &qq);
+        double fp = ut_star_objective(C, v, o->measure, &qq);
         *p = p0 - e;
-        double fm = star_objective(C, v, o->measure, &qq);
+        double fm = ut_star_objective(C, v, o->measure, &qq);
         *p = p0;
         grad[(size_t)i * d + j] = isfinite(fp) && isfinite(fm) ? (fp - fm) / (2 * e) : 0;
       }
@@ -799,7 +766,7 @@ static double eval(const objective *o, const double *x, double *grad, int nfree)
 }
 
 /* L-BFGS (memory 8, Armijo backtracking) on the free vertices' coordinates */
-static int lbfgs(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout) {
+int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout) {
   int d = o->C->d, n = nfree * d, M = 8, it;
   double *g = malloc(sizeof(double) * n), *gn = malloc(sizeof(double) * n), *p = malloc(sizeof(double) * n),
          *x0 = malloc(sizeof(double) * n), *S = malloc(sizeof(double) * n * M), *Y = malloc(sizeof(double) * n * M),
@@ -933,7 +900,7 @@ static int slide_boundary(ctx *C, double *x, double beta, const unsigned char *r
     for (int v = 0; v < m->nvert; v++) {
       if (!C->bnd[v] || C->fixed[v] || !region[v]) continue;
       if (C->d == 3) {
-        if (slide_3d(C, x, v, untangle_penalty, &pa)) {
+        if (ut_slide_3d(C, x, v, untangle_penalty, &pa)) {
           changed++;
           if (!moved[v]) total++;
           moved[v] = 1;
@@ -977,7 +944,7 @@ static void grow_region(const ctx *C, const double *x, int rings, unsigned char 
   mesh *m = C->m;
   memset(region, 0, (size_t)m->nvert);
   for (int c = 0; c < m->ncell; c++)
-    if (!(cell_min_jac(C, x, c) > C->jtol))
+    if (!(ut_cell_min_jac(C, x, c) > C->jtol))
       for (int i = 0; i < C->nvc; i++) region[cell_of(C, c)[i]] = 1;
   unsigned char *next = malloc((size_t)m->nvert);
   if (!next) return;
@@ -993,15 +960,10 @@ static void grow_region(const ctx *C, const double *x, int rings, unsigned char 
   free(next);
 }
 
-/* reusable per-vertex / per-cell marks, kept at their rest values (-1 / 0) between uses */
-typedef struct {
-  int *fidx;            /* vertex -> free index, -1 */
-  unsigned char *cmark; /* cell taken, 0 */
-  int *cells;
-} work;
+
 
 /* the cells around the free vertices (each once) */
-static int cells_around(const ctx *C, work *W, const int *freev, int nfree) {
+int ut_cells_around(const ctx *C, work *W, const int *freev, int nfree) {
   int n = 0;
   for (int i = 0; i < nfree; i++)
     for (int p = C->vc_off[freev[i]]; p < C->vc_off[freev[i] + 1]; p++)
@@ -1126,10 +1088,10 @@ static int optimize_vertices(ctx *C, work *W, double *x, double beta, int lift, 
     W->fidx[freev[i]] = i;
     for (int j = 0; j < d; j++) xs[i * d + j] = x[(size_t)freev[i] * d + j];
   }
-  int ncell = cells_around(C, W, freev, nfree);
+  int ncell = ut_cells_around(C, W, freev, nfree);
   objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx, lift, 0, 0, 0, NULL, NULL};
   double f = 0;
-  int it = nfree ? lbfgs(&o, x, freev, nfree, maxit, &f) : 0;
+  int it = nfree ? ut_lbfgs(&o, x, freev, nfree, maxit, &f) : 0;
   int total = 0;
   for (int i = 0; i < nfree; i++) {
     int v = freev[i], ch = 0;
@@ -1170,15 +1132,15 @@ static int region_pieces(const ctx *C, const unsigned char *region, int *list, i
 }
 
 static int piece_invalid(const ctx *C, work *W, const double *x, const int *verts, int n) {
-  int ncell = cells_around(C, W, verts, n), bad = 0;
-  for (int i = 0; i < ncell; i++) bad += !(cell_min_jac(C, x, W->cells[i]) > C->jtol);
+  int ncell = ut_cells_around(C, W, verts, n), bad = 0;
+  for (int i = 0; i < ncell; i++) bad += !(ut_cell_min_jac(C, x, W->cells[i]) > C->jtol);
   return bad;
 }
 
 static double piece_min_jac(const ctx *C, work *W, const double *x, const int *verts, int n) {
-  int ncell = cells_around(C, W, verts, n);
+  int ncell = ut_cells_around(C, W, verts, n);
   double mn = INFINITY;
-  for (int i = 0; i < ncell; i++) mn = fmin(mn, cell_min_jac(C, x, W->cells[i]));
+  for (int i = 0; i < ncell; i++) mn = fmin(mn, ut_cell_min_jac(C, x, W->cells[i]));
   return mn;
 }
 
@@ -1200,11 +1162,11 @@ static void stage_print(const untangle_stage *s) {
 static double stage_begin(untangle_stage *s, const char *name, int invalid_before) {
   s->name = name;
   s->invalid_before = invalid_before;
-  return now();
+  return ut_now();
 }
 static void stage_end(const ctx *C, const double *x, double beta, untangle_stage *s, double ts, int verbose) {
-  count_cells(C, x, beta, &s->invalid_after, &s->below_beta_after);
-  s->seconds = now() - ts;
+  ut_count_cells(C, x, beta, &s->invalid_after, &s->below_beta_after);
+  s->seconds = ut_now() - ts;
   if (verbose) stage_print(s);
 }
 
@@ -1222,7 +1184,7 @@ static void best_offer(const ctx *C, const double *x, best_state *b, size_t nx, 
   int ninv = 0;
   double jmin = INFINITY;
   for (int c = 0; c < C->m->ncell; c++) {
-    double j = cell_min_jac(C, x, c);
+    double j = ut_cell_min_jac(C, x, c);
     ninv += !(j > C->jtol);
     jmin = fmin(jmin, j);
   }
@@ -1236,11 +1198,11 @@ static void best_offer(const ctx *C, const double *x, best_state *b, size_t nx, 
 }
 
 static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, char *err) {
-  double t0 = now();
+  double t0 = ut_now();
   memset(r, 0, sizeof *r);
   if (m->ncell == 0) { snprintf(err, MESH_ERRLEN, "the mesh has no cells"); return 1; }
   ctx C;
-  if (ctx_init(&C, m, o->slide, err)) { ctx_free(&C); return 1; }
+  if (ut_ctx_init(&C, m, o->slide, err)) { ut_ctx_free(&C); return 1; }
   double beta = o->beta < 0 ? untangle_default_beta(m) : o->beta;
   r->beta = beta;
   size_t nx = (size_t)m->nvert * m->dim;
@@ -1248,13 +1210,13 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
   unsigned char *moved = calloc((size_t)m->nvert + 1, 1), *region = calloc((size_t)m->nvert + 1, 1),
                 *touched = calloc((size_t)m->nvert + 1, 1);
   if (!x0 || !moved || !region || !touched) {
-    free(x0); free(moved); free(region); free(touched); ctx_free(&C);
+    free(x0); free(moved); free(region); free(touched); ut_ctx_free(&C);
     snprintf(err, MESH_ERRLEN, "out of memory");
     return 1;
   }
   memcpy(x0, m->x, sizeof(double) * nx);
   int maxit = o->max_iterations > 0 ? o->max_iterations : 100;
-  count_cells(&C, m->x, beta, &r->invalid_before, NULL);
+  ut_count_cells(&C, m->x, beta, &r->invalid_before, NULL);
   /* the best state seen (fewest invalid cells, then the largest smallest corner Jacobian):
    * a mesh with no valid embedding may defeat the stages, but is never left worse */
   best_state best = {malloc(sizeof(double) * (nx + 1)), INT_MAX, -INFINITY, -1};
@@ -1316,7 +1278,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
       if (!bad) continue;
       /* a piece where more than a quarter of the cells are inverted is a scrambled knot:
        * go straight to the harmonic restart below */
-      int knot = bad > cells_around(&C, &W, pv, n) / 4;
+      int knot = bad > ut_cells_around(&C, &W, pv, n) / 4;
       if (!knot) {
         int got = optimize_vertices(&C, &W, m->x, beta, 0, pv, n, 10 * maxit, moved, &s->iterations);
         if (got < 0) break;
@@ -1354,7 +1316,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
     }
     int pass;
     s->moved += feasible_passes(&C, m->x, 0, 0, region, o->placement, maxit, moved, &pass);
-    count_cells(&C, m->x, beta, &ninv, NULL);
+    ut_count_cells(&C, m->x, beta, &ninv, NULL);
     /* stop when there is nothing left to grow into and the last round did not help */
     if ((all && rings > 64) || (whole && ninv >= prev_inv)) break;
     prev_inv = ninv;
@@ -1384,7 +1346,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
       const int *cell = cell_of(&C, c);
       int near = 0;
       for (int i = 0; i < C.nvc; i++) near |= t2[cell[i]];
-      if (!near || cell_min_jac(&C, m->x, c) >= beta) continue;
+      if (!near || ut_cell_min_jac(&C, m->x, c) >= beta) continue;
       for (int i = 0; i < C.nvc; i++)
         if (!C.bnd[cell[i]] && !trial[cell[i]]) { trial[cell[i]] = 1; list[nlift++] = cell[i]; }
     }
@@ -1438,13 +1400,13 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
     r->max_displacement = fmax(r->max_displacement, sqrt(dd));
   }
   r->mean_displacement = r->moved ? sum / r->moved : 0;
-  r->seconds = now() - t0;
+  r->seconds = ut_now() - t0;
   if (o->verbose)
     printf("untangle: %s — %d invalid left, %d vertices moved (mean %.3g, max %.3g), %.3f s\n",
            r->invalid_after ? "FAILED" : "done", r->invalid_after, r->moved, r->mean_displacement,
            r->max_displacement, r->seconds);
   free(x0); free(moved); free(region); free(touched);
-  ctx_free(&C);
+  ut_ctx_free(&C);
   return 0;
 }
 
@@ -1458,10 +1420,10 @@ void untangle_report_print(const untangle_report *r, const mesh *m) {
 /* ---------------------------------------------------------------- motion */
 
 static int move_run(mesh *m, const double *disp, const unsigned char *fixed, move_report *r, char *err) {
-  double t0 = now();
+  double t0 = ut_now();
   memset(r, 0, sizeof *r);
   ctx C;
-  if (ctx_init(&C, m, 0, err)) { ctx_free(&C); return 1; }
+  if (ut_ctx_init(&C, m, 0, err)) { ut_ctx_free(&C); return 1; }
   int d = m->dim, nfree = 0, status = 0;
   double *z = malloc(sizeof(double) * (size_t)m->nvert * d), *tau = malloc(sizeof(double) * ((size_t)m->ncell + 1));
   int *freev = malloc(sizeof(int) * ((size_t)m->nvert + 1));
@@ -1499,222 +1461,18 @@ static int move_run(mesh *m, const double *disp, const unsigned char *fixed, mov
     goto done;
   }
   for (size_t i = 0; i < (size_t)m->nvert * d; i++) m->x[i] += z[i];
-  count_cells(&C, m->x, 0, &r->invalid_after, NULL);
+  ut_count_cells(&C, m->x, 0, &r->invalid_after, NULL);
 done:
-  r->seconds = now() - t0;
+  r->seconds = ut_now() - t0;
   free(z); free(tau); free(freev); free(W.fidx); free(W.cmark); free(W.cells);
-  ctx_free(&C);
+  ut_ctx_free(&C);
   return status;
-}
-
-/* ---------------------------------------------------------------- smoothing */
-
-/* Σ 1/q over the cells of v, +∞ when one is invalid; the smallest q in *qmin */
-static double star_objective(const ctx *C, int v, int q, double *qmin) {
-  double s = 0, mn = INFINITY;
-  for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++) {
-    int c = C->vc[p];
-    if (!(cell_min_jac(C, C->m->x, c) > C->jtol)) { *qmin = -INFINITY; return INFINITY; }
-    double val = mesh_cell_quality(C->m, c, q);
-    if (!(val > 0)) { *qmin = -INFINITY; return INFINITY; }
-    s += 1 / val;
-    mn = fmin(mn, val);
-  }
-  *qmin = mn;
-  return s;
-}
-
-
-/* one local step at v (interior: along minus the central-difference gradient of Σ 1/q over
- * its star; 2D sliding boundary vertex: along the better boundary edge); 1 if v moved */
-typedef struct {
-  int measure;
-  double qmin0;
-} smooth_arg;
-static double smooth_penalty(const ctx *C, int v, const void *arg, int probe) {
-  const smooth_arg *a = arg;
-  double qmin, f = star_objective(C, v, a->measure, &qmin);
-  return probe || qmin >= a->qmin0 ? f : INFINITY;
-}
-
-static int smooth_vertex_step(ctx *C, int v, int measure) {
-  mesh *m = C->m;
-  int d = m->dim;
-  if (C->fixed[v]) return 0;
-  double *p = m->x + (size_t)v * d, p0[3], qmin0, f0 = star_objective(C, v, measure, &qmin0);
-  if (C->bnd[v] && d == 3) { /* along the flat face or straight edge, never lowering the star's minimum */
-    smooth_arg a = {measure, qmin0};
-    return slide_3d(C, m->x, v, smooth_penalty, &a);
-  }
-  for (int j = 0; j < d; j++) p0[j] = p[j];
-  double h = star_h(C, v), dir[3] = {0, 0, 0};
-  if (C->bnd[v]) { /* 2D sliding: the better of the two boundary edges, by a probe */
-    double best = f0, bq;
-    for (int side = 0; side < 2; side++) {
-      const double *a = m->x + 2 * C->bnb[2 * v + side];
-      for (int j = 0; j < 2; j++) p[j] = p0[j] + 1e-3 * (a[j] - p0[j]);
-      double f = star_objective(C, v, measure, &bq);
-      if (f < best) { best = f; for (int j = 0; j < 2; j++) dir[j] = a[j] - p0[j]; }
-    }
-    for (int j = 0; j < 2; j++) p[j] = p0[j];
-    if (best == f0) return 0;
-  } else { /* interior: minus the central-difference gradient, scaled to the star's size */
-    double e = 1e-6 * h, gn = 0, qq;
-    for (int j = 0; j < d; j++) {
-      p[j] = p0[j] + e;
-      double fp = star_objective(C, v, measure, &qq);
-      p[j] = p0[j] - e;
-      double fm = star_objective(C, v, measure, &qq);
-      p[j] = p0[j];
-      dir[j] = isfinite(fp) && isfinite(fm) ? -(fp - fm) / (2 * e) : 0;
-      gn += dir[j] * dir[j];
-    }
-    gn = sqrt(gn);
-    if (!(gn > 0)) return 0;
-    for (int j = 0; j < d; j++) dir[j] *= 0.5 * h / gn;
-  }
-  /* backtracking: accept only a step that keeps every cell valid, lowers Σ 1/q and does
-   * not lower the smallest q around v — so the mesh minimum never decreases */
-  for (double t = C->bnd[v] ? 0.5 : 1; t > 1e-4; t *= 0.5) {
-    for (int j = 0; j < d; j++) p[j] = p0[j] + t * dir[j];
-    double qmin, f = star_objective(C, v, measure, &qmin);
-    if (f < f0 && qmin >= qmin0) return 1;
-  }
-  for (int j = 0; j < d; j++) p[j] = p0[j];
-  return 0;
-}
-
-/* the step, and what it gained: f0 − f of the star is the change of Σ 1/q over the mesh */
-static int smooth_vertex(ctx *C, int v, int measure, double *gain) {
-  if (C->fixed[v]) return 0;
-  double q0, q1, f0 = star_objective(C, v, measure, &q0);
-  if (!smooth_vertex_step(C, v, measure)) return 0;
-  *gain += f0 - star_objective(C, v, measure, &q1);
-  return 1;
-}
-
-/* global smoothing: L-BFGS on Σ 1/q over all interior vertices together (Mesquite's
- * inverse-mean-ratio objective when q is the mean ratio), rounds of up to 20 iterations;
- * a step is taken only when every cell stays valid and no q falls below the mesh's
- * smallest q before smoothing (a floor that rises with every round blocks the steps
- * once many cells share the minimum). 2D sliding boundary vertices take one local step
- * each between rounds. Stops when a round lowers Σ 1/q by less than 1e-4 (relative). */
-static int smooth_global(ctx *C, const smooth_opts *o, smooth_report *r, char *err) {
-  mesh *m = C->m;
-  int nfree = 0;
-  int *freev = malloc(sizeof(int) * ((size_t)m->nvert + 1)), *fidx = malloc(sizeof(int) * ((size_t)m->nvert + 1)),
-      *cells = malloc(sizeof(int) * ((size_t)m->ncell + 1));
-  unsigned char *cmark = calloc((size_t)m->ncell + 1, 1);
-  double *hv = malloc(sizeof(double) * ((size_t)m->nvert + 1));
-  if (!freev || !fidx || !cells || !cmark || !hv) {
-    free(freev); free(fidx); free(cells); free(cmark); free(hv);
-    snprintf(err, MESH_ERRLEN, "out of memory");
-    return 1;
-  }
-  for (int v = 0; v < m->nvert; v++) {
-    fidx[v] = -1;
-    if (!C->bnd[v]) { fidx[v] = nfree; hv[nfree] = star_h(C, v); freev[nfree++] = v; }
-  }
-  work W = {fidx, cmark, cells};
-  int ncell = cells_around(C, &W, freev, nfree), status = 0;
-  objective ob = {C, 0, C->jscale, ncell, cells, fidx, 0, 1, o->measure, 0, freev, hv};
-  double fprev = INFINITY;
-  ob.qfloor = INFINITY;
-  for (int i = 0; i < ncell; i++) ob.qfloor = fmin(ob.qfloor, mesh_cell_quality(m, cells[i], o->measure));
-  for (int round = 0; round < o->iterations; round++) {
-    double f0 = 0;
-    for (int i = 0; i < ncell; i++) f0 += 1 / mesh_cell_quality(m, cells[i], o->measure);
-    /* the last round (optimization and sliding together) gained less than 1e-4: done */
-    if (!(f0 < fprev * (1 - 1e-4))) break;
-    fprev = f0;
-    double f = f0;
-    int its = nfree ? lbfgs(&ob, m->x, freev, nfree, 20, &f) : 0, slid = 0;
-    double gain = 0;
-    if (its < 0) { snprintf(err, MESH_ERRLEN, "out of memory"); status = 1; break; }
-    if (o->slide)
-      for (int v = 0; v < m->nvert; v++)
-        if (C->bnd[v]) slid += smooth_vertex(C, v, o->measure, &gain);
-    r->sweeps = round + 1;
-    if (o->verbose) printf("smooth: round %d, %d L-BFGS iterations, sum 1/q %.6g -> %.6g, %d boundary vertices slid\n",
-                           round + 1, its, f0, f, slid);
-    if (!its && !slid) break;
-  }
-  free(freev); free(fidx); free(cells); free(cmark); free(hv);
-  return status;
-}
-
-static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
-  double t0 = now();
-  memset(r, 0, sizeof *r);
-  r->measure = o->measure;
-  if (o->measure < 0 || o->measure >= QM_COUNT || !quality_applies(o->measure, m->type) ||
-      !quality_larger_is_better(o->measure) || quality_is_deformation(o->measure) || o->measure == QM_SIGNED_MEASURE ||
-      o->measure == QM_MIN_CORNER_JACOBIAN || o->measure == QM_MIN_EDGE || o->measure == QM_MAX_EDGE ||
-      o->measure == QM_MIN_ANGLE || (o->measure >= QM_V_AREA && o->measure != QM_V_SHAPE && o->measure != QM_V_SCALED_JACOBIAN)) {
-    snprintf(err, MESH_ERRLEN, "smoothing needs a shape measure in (0, 1] that applies to %s (e.g. %s)",
-             cell_plural(m->type), m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? "mean_ratio" : "corner_condition");
-    return 1;
-  }
-  ctx C;
-  if (ctx_init(&C, m, o->slide, err)) { ctx_free(&C); return 1; }
-  int ninv;
-  count_cells(&C, m->x, 0, &ninv, NULL);
-  if (ninv) {
-    snprintf(err, MESH_ERRLEN, "the mesh has %d invalid cell%s: untangle it first (mesh:untangle())", ninv,
-             ninv == 1 ? "" : "s");
-    ctx_free(&C);
-    return 1;
-  }
-  double *q = mesh_big_alloc(sizeof(double) * ((size_t)m->ncell + 1));
-  unsigned char *moved = calloc((size_t)m->nvert + 1, 1);
-  if (!q || !moved) { mesh_big_free(q); free(moved); ctx_free(&C); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
-  quality_stats st;
-  mesh_quality(m, o->measure, NULL, q, err);
-  quality_stats_compute(q, m->ncell, &st);
-  r->min_before = st.min;
-  r->mean_before = st.mean;
-  int d = m->dim;
-  double *x0 = malloc(sizeof(double) * ((size_t)m->nvert * d + 1));
-  if (!x0) { mesh_big_free(q); free(moved); ctx_free(&C); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
-  memcpy(x0, m->x, sizeof(double) * (size_t)m->nvert * d);
-  if (!o->global)
-    for (int sweep = 0; sweep < o->iterations; sweep++) {
-      int changed = 0;
-      double total = 0, gain = 0;
-      for (int c = 0; c < m->ncell; c++) total += 1 / mesh_cell_quality(m, c, o->measure);
-      for (int v = 0; v < m->nvert; v++) changed += smooth_vertex(&C, v, o->measure, &gain);
-      r->sweeps = sweep + 1;
-      if (o->verbose) printf("smooth: sweep %d moved %d vertices, sum 1/q %.6g -> %.6g\n", sweep + 1, changed, total,
-                             total - gain);
-      /* converged: the sweep lowered Σ 1/q by less than 1e-4 of it */
-      if (!changed || gain < 1e-4 * total) break;
-    }
-  else if (smooth_global(&C, o, r, err)) {
-    memcpy(m->x, x0, sizeof(double) * (size_t)m->nvert * d);
-    free(x0); mesh_big_free(q); free(moved); ctx_free(&C);
-    return 1;
-  }
-  for (int v = 0; v < m->nvert; v++) {
-    int ch = 0;
-    for (int j = 0; j < d; j++) ch |= m->x[(size_t)v * d + j] != x0[(size_t)v * d + j];
-    r->moved += ch;
-  }
-  free(x0);
-  mesh_quality(m, o->measure, NULL, q, err);
-  quality_stats_compute(q, m->ncell, &st);
-  r->min_after = st.min;
-  r->mean_after = st.mean;
-  r->seconds = now() - t0;
-  mesh_big_free(q);
-  free(moved);
-  ctx_free(&C);
-  return 0;
 }
 
 /* ---------------------------------------------------------------- entry points */
 
 /* every vertex coordinate finite, or a message naming the first that is not */
-static int check_finite(const mesh *m, const char *what, char *err) {
+int ut_check_finite(const mesh *m, const char *what, char *err) {
   for (size_t i = 0; i < (size_t)m->nvert * m->dim; i++)
     if (!isfinite(m->x[i])) {
       snprintf(err, MESH_ERRLEN, "vertex %zu has a non-finite coordinate %c = %g: %s needs finite coordinates", i / m->dim + 1,
@@ -1724,17 +1482,9 @@ static int check_finite(const mesh *m, const char *what, char *err) {
   return 0;
 }
 
-/* A mesh far from unit size (bounding box below 1e-100 or above 1e100) is worked on in
- * coordinates translated to its box centre and scaled by a power of two, then mapped back:
- * corner Jacobians (lengths to the power d) and the tolerances would underflow or overflow.
- * Vertices that did not move get their original coordinates back bit for bit. */
-typedef struct {
-  int e;          /* true = unit * 2^e + c */
-  double c[3];    /* the centre, scaled by 2^-e */
-  double *orig;   /* NULL: not active */
-} unit_frame;
 
-static int frame_enter(mesh *m, unit_frame *f, double extra, char *err) {
+
+int ut_frame_enter(mesh *m, unit_frame *f, double extra, char *err) {
   memset(f, 0, sizeof *f);
   int d = m->dim;
   double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
@@ -1756,7 +1506,7 @@ static int frame_enter(mesh *m, unit_frame *f, double extra, char *err) {
   return 0;
 }
 
-static void frame_leave(mesh *m, unit_frame *f) {
+void ut_frame_leave(mesh *m, unit_frame *f) {
   if (!f->orig) return;
   int d = m->dim;
   for (int v = 0; v < m->nvert; v++) {
@@ -1784,7 +1534,7 @@ static int check_opts(const untangle_opts *o, char *err) {
 
 /* a result with a non-finite coordinate (a mesh spanning 1e300 and 1: the way back from the
  * unit frame overflows) is never returned: the input is, unchanged */
-static int finite_or_restore(mesh *m, const double *keep) {
+int ut_finite_or_restore(mesh *m, const double *keep) {
   size_t nx = (size_t)m->nvert * m->dim;
   for (size_t i = 0; i < nx; i++)
     if (!isfinite(m->x[i])) {
@@ -1796,13 +1546,13 @@ static int finite_or_restore(mesh *m, const double *keep) {
 
 int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err) {
   memset(r, 0, sizeof *r);
-  if (check_opts(o, err) || check_finite(m, "untangling", err)) return 1;
+  if (check_opts(o, err) || ut_check_finite(m, "untangling", err)) return 1;
   size_t nx = (size_t)m->nvert * m->dim;
   double *keep = malloc(sizeof(double) * (nx + 1));
   if (!keep) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
   memcpy(keep, m->x, sizeof(double) * nx);
   unit_frame f;
-  if (frame_enter(m, &f, 0, err)) { free(keep); return 1; }
+  if (ut_frame_enter(m, &f, 0, err)) { free(keep); return 1; }
   untangle_opts oo = *o;
   if (f.orig && oo.beta > 0) oo.beta = ldexp(oo.beta, -m->dim * f.e); /* beta is a length^d */
   int rc = untangle_run(m, &oo, r, err);
@@ -1811,8 +1561,8 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
     r->mean_displacement = ldexp(r->mean_displacement, f.e);
     r->max_displacement = ldexp(r->max_displacement, f.e);
   }
-  frame_leave(m, &f);
-  if (!rc && !finite_or_restore(m, keep)) {
+  ut_frame_leave(m, &f);
+  if (!rc && !ut_finite_or_restore(m, keep)) {
     r->invalid_after = r->invalid_before;
     r->moved = 0;
     r->mean_displacement = r->max_displacement = 0;
@@ -1824,7 +1574,7 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
 
 int mesh_move(mesh *m, const double *disp, const unsigned char *fixed, move_report *r, char *err) {
   memset(r, 0, sizeof *r);
-  if (check_finite(m, "mesh motion", err)) return 1;
+  if (ut_check_finite(m, "mesh motion", err)) return 1;
   for (int v = 0; v < m->nvert; v++)
     for (int j = 0; fixed[v] && j < m->dim; j++)
       if (!isfinite(disp[(size_t)v * m->dim + j])) {
@@ -1840,16 +1590,16 @@ int mesh_move(mesh *m, const double *disp, const unsigned char *fixed, move_repo
   if (!keep) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
   memcpy(keep, m->x, sizeof(double) * nx);
   unit_frame f;
-  if (frame_enter(m, &f, dmax, err)) { free(keep); return 1; }
+  if (ut_frame_enter(m, &f, dmax, err)) { free(keep); return 1; }
   double *ds = NULL;
   if (f.orig) {
     ds = malloc(sizeof(double) * (nx + 1));
-    if (!ds) { frame_leave(m, &f); free(keep); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+    if (!ds) { ut_frame_leave(m, &f); free(keep); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
     for (size_t i = 0; i < nx; i++) ds[i] = ldexp(disp[i], -f.e);
   }
   int rc = move_run(m, ds ? ds : disp, fixed, r, err);
   free(ds);
-  frame_leave(m, &f);
+  ut_frame_leave(m, &f);
   for (size_t i = 0; !rc && i < nx; i++)
     if (!isfinite(m->x[i])) {
       snprintf(err, MESH_ERRLEN, "the motion makes vertex %zu's coordinates non-finite (the displacement is too large for "
@@ -1867,26 +1617,3 @@ int mesh_move(mesh *m, const double *disp, const unsigned char *fixed, move_repo
   return rc;
 }
 
-int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
-  memset(r, 0, sizeof *r);
-  if (o->iterations < 1 || o->iterations > 1000000) {
-    snprintf(err, MESH_ERRLEN, "iterations must be 1 to 1000000, got %d", o->iterations);
-    return 1;
-  }
-  if (check_finite(m, "smoothing", err)) return 1;
-  size_t nx = (size_t)m->nvert * m->dim;
-  double *keep = malloc(sizeof(double) * (nx + 1));
-  if (!keep) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
-  memcpy(keep, m->x, sizeof(double) * nx);
-  unit_frame f;
-  if (frame_enter(m, &f, 0, err)) { free(keep); return 1; }
-  int rc = smooth_run(m, o, r, err);
-  frame_leave(m, &f);
-  if (!rc && !finite_or_restore(m, keep)) {
-    r->moved = 0;
-    r->min_after = r->min_before;
-    r->mean_after = r->mean_before;
-  }
-  free(keep);
-  return rc;
-}

@@ -1,0 +1,240 @@
+/* smooth.c — quality-guarded smoothing (seed, simplex and quadrilateral shape measures):
+ * local, a vertex at a time, never lowering the smallest quality of its star, or global,
+ * L-BFGS on the sum of 1/q with a floor. The corner context and L-BFGS are untangle.c's
+ * (untangle_int.h). See untangle.h. */
+#include "untangle_int.h"
+
+#include "quality.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ---------------------------------------------------------------- smoothing */
+
+/* Σ 1/q over the cells of v, +∞ when one is invalid; the smallest q in *qmin */
+double ut_star_objective(const ctx *C, int v, int q, double *qmin) {
+  double s = 0, mn = INFINITY;
+  for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++) {
+    int c = C->vc[p];
+    if (!(ut_cell_min_jac(C, C->m->x, c) > C->jtol)) { *qmin = -INFINITY; return INFINITY; }
+    double val = mesh_cell_quality(C->m, c, q);
+    if (!(val > 0)) { *qmin = -INFINITY; return INFINITY; }
+    s += 1 / val;
+    mn = fmin(mn, val);
+  }
+  *qmin = mn;
+  return s;
+}
+
+
+/* one local step at v (interior: along minus the central-difference gradient of Σ 1/q over
+ * its star; 2D sliding boundary vertex: along the better boundary edge); 1 if v moved */
+typedef struct {
+  int measure;
+  double qmin0;
+} smooth_arg;
+static double smooth_penalty(const ctx *C, int v, const void *arg, int probe) {
+  const smooth_arg *a = arg;
+  double qmin, f = ut_star_objective(C, v, a->measure, &qmin);
+  return probe || qmin >= a->qmin0 ? f : INFINITY;
+}
+
+static int smooth_vertex_step(ctx *C, int v, int measure) {
+  mesh *m = C->m;
+  int d = m->dim;
+  if (C->fixed[v]) return 0;
+  double *p = m->x + (size_t)v * d, p0[3], qmin0, f0 = ut_star_objective(C, v, measure, &qmin0);
+  if (C->bnd[v] && d == 3) { /* along the flat face or straight edge, never lowering the star's minimum */
+    smooth_arg a = {measure, qmin0};
+    return ut_slide_3d(C, m->x, v, smooth_penalty, &a);
+  }
+  for (int j = 0; j < d; j++) p0[j] = p[j];
+  double h = ut_star_h(C, v), dir[3] = {0, 0, 0};
+  if (C->bnd[v]) { /* 2D sliding: the better of the two boundary edges, by a probe */
+    double best = f0, bq;
+    for (int side = 0; side < 2; side++) {
+      const double *a = m->x + 2 * C->bnb[2 * v + side];
+      for (int j = 0; j < 2; j++) p[j] = p0[j] + 1e-3 * (a[j] - p0[j]);
+      double f = ut_star_objective(C, v, measure, &bq);
+      if (f < best) { best = f; for (int j = 0; j < 2; j++) dir[j] = a[j] - p0[j]; }
+    }
+    for (int j = 0; j < 2; j++) p[j] = p0[j];
+    if (best == f0) return 0;
+  } else { /* interior: minus the central-difference gradient, scaled to the star's size */
+    double e = 1e-6 * h, gn = 0, qq;
+    for (int j = 0; j < d; j++) {
+      p[j] = p0[j] + e;
+      double fp = ut_star_objective(C, v, measure, &qq);
+      p[j] = p0[j] - e;
+      double fm = ut_star_objective(C, v, measure, &qq);
+      p[j] = p0[j];
+      dir[j] = isfinite(fp) && isfinite(fm) ? -(fp - fm) / (2 * e) : 0;
+      gn += dir[j] * dir[j];
+    }
+    gn = sqrt(gn);
+    if (!(gn > 0)) return 0;
+    for (int j = 0; j < d; j++) dir[j] *= 0.5 * h / gn;
+  }
+  /* backtracking: accept only a step that keeps every cell valid, lowers Σ 1/q and does
+   * not lower the smallest q around v — so the mesh minimum never decreases */
+  for (double t = C->bnd[v] ? 0.5 : 1; t > 1e-4; t *= 0.5) {
+    for (int j = 0; j < d; j++) p[j] = p0[j] + t * dir[j];
+    double qmin, f = ut_star_objective(C, v, measure, &qmin);
+    if (f < f0 && qmin >= qmin0) return 1;
+  }
+  for (int j = 0; j < d; j++) p[j] = p0[j];
+  return 0;
+}
+
+/* the step, and what it gained: f0 − f of the star is the change of Σ 1/q over the mesh */
+static int smooth_vertex(ctx *C, int v, int measure, double *gain) {
+  if (C->fixed[v]) return 0;
+  double q0, q1, f0 = ut_star_objective(C, v, measure, &q0);
+  if (!smooth_vertex_step(C, v, measure)) return 0;
+  *gain += f0 - ut_star_objective(C, v, measure, &q1);
+  return 1;
+}
+
+/* global smoothing: L-BFGS on Σ 1/q over all interior vertices together (Mesquite's
+ * inverse-mean-ratio objective when q is the mean ratio), rounds of up to 20 iterations;
+ * a step is taken only when every cell stays valid and no q falls below the mesh's
+ * smallest q before smoothing (a floor that rises with every round blocks the steps
+ * once many cells share the minimum). 2D sliding boundary vertices take one local step
+ * each between rounds. Stops when a round lowers Σ 1/q by less than 1e-4 (relative). */
+static int smooth_global(ctx *C, const smooth_opts *o, smooth_report *r, char *err) {
+  mesh *m = C->m;
+  int nfree = 0;
+  int *freev = malloc(sizeof(int) * ((size_t)m->nvert + 1)), *fidx = malloc(sizeof(int) * ((size_t)m->nvert + 1)),
+      *cells = malloc(sizeof(int) * ((size_t)m->ncell + 1));
+  unsigned char *cmark = calloc((size_t)m->ncell + 1, 1);
+  double *hv = malloc(sizeof(double) * ((size_t)m->nvert + 1));
+  if (!freev || !fidx || !cells || !cmark || !hv) {
+    free(freev); free(fidx); free(cells); free(cmark); free(hv);
+    snprintf(err, MESH_ERRLEN, "out of memory");
+    return 1;
+  }
+  for (int v = 0; v < m->nvert; v++) {
+    fidx[v] = -1;
+    if (!C->bnd[v]) { fidx[v] = nfree; hv[nfree] = ut_star_h(C, v); freev[nfree++] = v; }
+  }
+  work W = {fidx, cmark, cells};
+  int ncell = ut_cells_around(C, &W, freev, nfree), status = 0;
+  objective ob = {C, 0, C->jscale, ncell, cells, fidx, 0, 1, o->measure, 0, freev, hv};
+  double fprev = INFINITY;
+  ob.qfloor = INFINITY;
+  for (int i = 0; i < ncell; i++) ob.qfloor = fmin(ob.qfloor, mesh_cell_quality(m, cells[i], o->measure));
+  for (int round = 0; round < o->iterations; round++) {
+    double f0 = 0;
+    for (int i = 0; i < ncell; i++) f0 += 1 / mesh_cell_quality(m, cells[i], o->measure);
+    /* the last round (optimization and sliding together) gained less than 1e-4: done */
+    if (!(f0 < fprev * (1 - 1e-4))) break;
+    fprev = f0;
+    double f = f0;
+    int its = nfree ? ut_lbfgs(&ob, m->x, freev, nfree, 20, &f) : 0, slid = 0;
+    double gain = 0;
+    if (its < 0) { snprintf(err, MESH_ERRLEN, "out of memory"); status = 1; break; }
+    if (o->slide)
+      for (int v = 0; v < m->nvert; v++)
+        if (C->bnd[v]) slid += smooth_vertex(C, v, o->measure, &gain);
+    r->sweeps = round + 1;
+    if (o->verbose) printf("smooth: round %d, %d L-BFGS iterations, sum 1/q %.6g -> %.6g, %d boundary vertices slid\n",
+                           round + 1, its, f0, f, slid);
+    if (!its && !slid) break;
+  }
+  free(freev); free(fidx); free(cells); free(cmark); free(hv);
+  return status;
+}
+
+static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
+  double t0 = ut_now();
+  memset(r, 0, sizeof *r);
+  r->measure = o->measure;
+  if (o->measure < 0 || o->measure >= QM_COUNT || !quality_applies(o->measure, m->type) ||
+      !quality_larger_is_better(o->measure) || quality_is_deformation(o->measure) || o->measure == QM_SIGNED_MEASURE ||
+      o->measure == QM_MIN_CORNER_JACOBIAN || o->measure == QM_MIN_EDGE || o->measure == QM_MAX_EDGE ||
+      o->measure == QM_MIN_ANGLE || (o->measure >= QM_V_AREA && o->measure != QM_V_SHAPE && o->measure != QM_V_SCALED_JACOBIAN)) {
+    snprintf(err, MESH_ERRLEN, "smoothing needs a shape measure in (0, 1] that applies to %s (e.g. %s)",
+             cell_plural(m->type), m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? "mean_ratio" : "corner_condition");
+    return 1;
+  }
+  ctx C;
+  if (ut_ctx_init(&C, m, o->slide, err)) { ut_ctx_free(&C); return 1; }
+  int ninv;
+  ut_count_cells(&C, m->x, 0, &ninv, NULL);
+  if (ninv) {
+    snprintf(err, MESH_ERRLEN, "the mesh has %d invalid cell%s: untangle it first (mesh:untangle())", ninv,
+             ninv == 1 ? "" : "s");
+    ut_ctx_free(&C);
+    return 1;
+  }
+  double *q = mesh_big_alloc(sizeof(double) * ((size_t)m->ncell + 1));
+  unsigned char *moved = calloc((size_t)m->nvert + 1, 1);
+  if (!q || !moved) { mesh_big_free(q); free(moved); ut_ctx_free(&C); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  quality_stats st;
+  mesh_quality(m, o->measure, NULL, q, err);
+  quality_stats_compute(q, m->ncell, &st);
+  r->min_before = st.min;
+  r->mean_before = st.mean;
+  int d = m->dim;
+  double *x0 = malloc(sizeof(double) * ((size_t)m->nvert * d + 1));
+  if (!x0) { mesh_big_free(q); free(moved); ut_ctx_free(&C); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  memcpy(x0, m->x, sizeof(double) * (size_t)m->nvert * d);
+  if (!o->global)
+    for (int sweep = 0; sweep < o->iterations; sweep++) {
+      int changed = 0;
+      double total = 0, gain = 0;
+      for (int c = 0; c < m->ncell; c++) total += 1 / mesh_cell_quality(m, c, o->measure);
+      for (int v = 0; v < m->nvert; v++) changed += smooth_vertex(&C, v, o->measure, &gain);
+      r->sweeps = sweep + 1;
+      if (o->verbose) printf("smooth: sweep %d moved %d vertices, sum 1/q %.6g -> %.6g\n", sweep + 1, changed, total,
+                             total - gain);
+      /* converged: the sweep lowered Σ 1/q by less than 1e-4 of it */
+      if (!changed || gain < 1e-4 * total) break;
+    }
+  else if (smooth_global(&C, o, r, err)) {
+    memcpy(m->x, x0, sizeof(double) * (size_t)m->nvert * d);
+    free(x0); mesh_big_free(q); free(moved); ut_ctx_free(&C);
+    return 1;
+  }
+  for (int v = 0; v < m->nvert; v++) {
+    int ch = 0;
+    for (int j = 0; j < d; j++) ch |= m->x[(size_t)v * d + j] != x0[(size_t)v * d + j];
+    r->moved += ch;
+  }
+  free(x0);
+  mesh_quality(m, o->measure, NULL, q, err);
+  quality_stats_compute(q, m->ncell, &st);
+  r->min_after = st.min;
+  r->mean_after = st.mean;
+  r->seconds = ut_now() - t0;
+  mesh_big_free(q);
+  free(moved);
+  ut_ctx_free(&C);
+  return 0;
+}
+
+int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
+  memset(r, 0, sizeof *r);
+  if (o->iterations < 1 || o->iterations > 1000000) {
+    snprintf(err, MESH_ERRLEN, "iterations must be 1 to 1000000, got %d", o->iterations);
+    return 1;
+  }
+  if (ut_check_finite(m, "smoothing", err)) return 1;
+  size_t nx = (size_t)m->nvert * m->dim;
+  double *keep = malloc(sizeof(double) * (nx + 1));
+  if (!keep) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  memcpy(keep, m->x, sizeof(double) * nx);
+  unit_frame f;
+  if (ut_frame_enter(m, &f, 0, err)) { free(keep); return 1; }
+  int rc = smooth_run(m, o, r, err);
+  ut_frame_leave(m, &f);
+  if (!rc && !ut_finite_or_restore(m, keep)) {
+    r->moved = 0;
+    r->min_after = r->min_before;
+    r->mean_after = r->mean_before;
+  }
+  free(keep);
+  return rc;
+}

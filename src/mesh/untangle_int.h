@@ -1,0 +1,86 @@
+/* untangle_int.h — what untangle.c (untangling, mesh motion) and smooth.c (smoothing) share
+ * inside src/mesh: the corner and adjacency context, the L-BFGS objective, the unit frame
+ * for meshes far from unit size. Not an interface of the mesh layer: see untangle.h. */
+#ifndef LUGAL_UNTANGLE_INT_H
+#define LUGAL_UNTANGLE_INT_H
+
+#include "untangle.h"
+
+/* The corners of a cell (section 1: "an element is valid if each corner is valid"): the
+ * corner vertex, then its d neighbours in right-handed order. A simplex has one corner (its
+ * Jacobian is d! times the signed measure). */
+typedef struct {
+  mesh *m;
+  int d, nvc, ncorner;
+  int ct[8][4];
+  int *vc_off, *vc; /* vertex -> cells */
+  unsigned char *bnd;   /* on the topological boundary */
+  unsigned char *fixed; /* may not move: boundary corners, or every boundary vertex */
+  int *bnb;             /* 2D: the two boundary neighbours of a boundary vertex */
+  int *bf_off, *bf;     /* 3D: vertex -> its boundary facets (cell * nfacets + facet) */
+  unsigned char *ntan;  /* 3D: directions a boundary vertex may slide in: 2 on a flat face,
+                         * 1 on a straight edge between two flat faces, 0 elsewhere */
+  double *tan;          /* 3D: those directions, 2 unit vectors per vertex */
+  double jtol;          /* corner Jacobians <= jtol count as invalid */
+  double jscale;        /* a typical corner Jacobian, to scale the objective */
+} ctx;
+
+typedef double (*vertex_penalty)(const ctx *C, int v, const void *arg, int probe); /* probe: for the gradient, no guard */
+
+/* f = Σ ((|J − β| − (J − β)) / (2 S))² = Σ (max(0, β − J)/S)² over the corners of cells,
+ * the quadratic objective (3.3) scaled by a typical corner Jacobian S */
+typedef struct {
+  ctx *C;
+  double beta, S;
+  int ncell;
+  const int *cells; /* cells whose corners enter f */
+  const int *fidx;  /* vertex -> free index or -1 */
+  int lift;         /* a cell counts as bad when below β (stage 3), else when invalid */
+  /* global smoothing instead of (3.3): f = Σ 1/q over the cells, +∞ when a cell is invalid
+   * or the smallest q falls below qfloor; gradient by central differences over each free
+   * vertex's star (exact up to O(e²): only the star's cells depend on the vertex) */
+  int smooth, measure;
+  double qfloor;
+  const int *freev;
+  const double *hv; /* per free vertex: its shortest edge, for the difference step */
+} objective;
+
+/* reusable per-vertex / per-cell marks, kept at their rest values (-1 / 0) between uses */
+typedef struct {
+  int *fidx;            /* vertex -> free index, -1 */
+  unsigned char *cmark; /* cell taken, 0 */
+  int *cells;
+} work;
+
+/* A mesh far from unit size (bounding box below 1e-100 or above 1e100) is worked on in
+ * coordinates translated to its box centre and scaled by a power of two, then mapped back:
+ * corner Jacobians (lengths to the power d) and the tolerances would underflow or overflow.
+ * Vertices that did not move get their original coordinates back bit for bit. */
+typedef struct {
+  int e;          /* true = unit * 2^e + c */
+  double c[3];    /* the centre, scaled by 2^-e */
+  double *orig;   /* NULL: not active */
+} unit_frame;
+
+double ut_now(void);
+int ut_ctx_init(ctx *C, mesh *m, int slide, char *err);
+void ut_ctx_free(ctx *C);
+/* the shortest edge at v */
+double ut_star_h(const ctx *C, int v);
+double ut_cell_min_jac(const ctx *C, const double *x, int c);
+void ut_count_cells(const ctx *C, const double *x, double beta, int *ninv, int *nbelow);
+/* 3D: one boundary vertex descends pen along its slide directions; 1 if it moved */
+int ut_slide_3d(const ctx *C, double *x, int v, vertex_penalty pen, const void *arg);
+int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout);
+/* the cells around the free vertices (each once) */
+int ut_cells_around(const ctx *C, work *W, const int *freev, int nfree);
+/* the smoothing objective of the cells around v: sum 1/q (smooth.c) */
+double ut_star_objective(const ctx *C, int v, int q, double *qmin);
+int ut_frame_enter(mesh *m, unit_frame *f, double extra, char *err);
+void ut_frame_leave(mesh *m, unit_frame *f);
+/* every vertex coordinate finite, or a message naming the first that is not */
+int ut_check_finite(const mesh *m, const char *what, char *err);
+/* a non-finite result is replaced by the input (keep); 0 when that happened */
+int ut_finite_or_restore(mesh *m, const double *keep);
+
+#endif

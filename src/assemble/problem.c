@@ -902,6 +902,20 @@ static uint64_t matrix_fingerprint(lg_env *env, lg_problem *p) {
   return h | 1;
 }
 
+/* the linear solver of a linear problem: direct LU by default (default_lu), every -ksp_* and
+ * -pc_* option (with the problem's prefix) applied once */
+static int ensure_ksp(lg_env *env, lg_problem *p) {
+  if (p->ksp) return 0;
+  PCHK(KSPCreate(PETSC_COMM_SELF, &p->ksp), "KSPCreate");
+  if (p->prefix[0]) PCHK(KSPSetOptionsPrefix(p->ksp, p->prefix), "KSPSetOptionsPrefix");
+  PC pc;
+  PCHK(KSPSetType(p->ksp, KSPPREONLY), "KSPSetType");
+  PCHK(KSPGetPC(p->ksp, &pc), "KSPGetPC");
+  if (default_lu(env, p, pc)) return 1;
+  PCHK(KSPSetFromOptions(p->ksp), "KSPSetFromOptions");
+  return 0;
+}
+
 static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_info *info) {
   double t0 = now_ms();
   memset(p->state, 0, sizeof(double) * (size_t)p->N);
@@ -931,18 +945,8 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
   else PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, p->x, p->b), "MatZeroRows");
   info->assemble_ms = now_ms() - t0;
   t0 = now_ms();
-  if (!p->ksp) {
-    PCHK(KSPCreate(PETSC_COMM_SELF, &p->ksp), "KSPCreate");
-    if (p->prefix[0]) PCHK(KSPSetOptionsPrefix(p->ksp, p->prefix), "KSPSetOptionsPrefix");
-    PC pc;
-    PCHK(KSPSetType(p->ksp, KSPPREONLY), "KSPSetType");
-    PCHK(KSPGetPC(p->ksp, &pc), "KSPGetPC");
-    if (default_lu(env, p, pc)) return 1;
-    PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
-    PCHK(KSPSetFromOptions(p->ksp), "KSPSetFromOptions");
-  } else {
-    PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
-  }
+  if (ensure_ksp(env, p)) return 1;
+  PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
   PetscErrorCode ierr = KSPSolve(p->ksp, p->b, p->x);
   if (ierr) return petsc_fail(env, ierr, "the linear solve");
   KSPConvergedReason reason;
@@ -1375,15 +1379,7 @@ static int prepare_matrix(lg_env *env, lg_problem *p) {
     if (assemble_matrix(env, p, p->state, p->A)) return 1;
     if (compute_bcs(env, p)) return 1;
     PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, NULL, NULL), "MatZeroRows");
-    if (!p->ksp) {
-      PCHK(KSPCreate(PETSC_COMM_SELF, &p->ksp), "KSPCreate");
-      if (p->prefix[0]) PCHK(KSPSetOptionsPrefix(p->ksp, p->prefix), "KSPSetOptionsPrefix");
-      PC pc;
-      PCHK(KSPSetType(p->ksp, KSPPREONLY), "KSPSetType");
-      PCHK(KSPGetPC(p->ksp, &pc), "KSPGetPC");
-      if (default_lu(env, p, pc)) return 1;
-      PCHK(KSPSetFromOptions(p->ksp), "KSPSetFromOptions");
-    }
+    if (ensure_ksp(env, p)) return 1;
     PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
     p->matrix_ready = 1;
   }

@@ -68,9 +68,9 @@ struct lg_problem {
   form *eqn, *bcf;    /* copies of the forms, for derived operators */
   int test[KER_MAXFIELD], unk[KER_MAXFIELD];
   int matrix_ready;   /* lg_problem_solve_vector: the matrix is assembled and factored */
-  int adj_stale;      /* the adjoint Jacobian is not the one at the last solution */
-  int jac_at_solution; /* nonlinear: A holds the Jacobian at the solution, factored by the
-                        * SNES's solver (the adjoint's): a warm Newton start there reuses it */
+  int adj_stale;      /* A does not hold the Jacobian at the last solution, factored by the
+                       * SNES's solver (nonlinear problems: the adjoint makes it so, and a
+                       * Newton solve warm-started at the solution then reuses it) */
   uint64_t matrix_fp; /* linear problems: what the assembled, factored matrix was made from */
   double *elem;       /* element tensor scratch */
   size_t elem_cap;
@@ -1034,8 +1034,9 @@ static PetscErrorCode snes_jacobian(SNES snes, Vec X, Mat J, Mat P, void *ctx) {
   PetscCall(VecRestoreArrayRead(X, &x));
   /* a warm start at the last solution, whose Jacobian the adjoint assembled and factored:
    * leave the matrix alone, so that the solver's factorization is reused */
-  if (p->jac_at_solution && P == p->A && !memcmp(p->state, p->solution, sizeof(double) * (size_t)p->N)) return 0;
-  p->jac_at_solution = 0;
+  if (p->have_solution && !p->adj_stale && P == p->A && !memcmp(p->state, p->solution, sizeof(double) * (size_t)p->N))
+    return 0;
+  p->adj_stale = 1; /* A no longer holds the Jacobian at the solution */
   if (assemble_matrix(p->env, p, p->state, P)) {
     p->failed = 1;
     PetscCall(SNESSetJacobianDomainError(snes));
@@ -1123,7 +1124,6 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
   memcpy(p->solution, xr, sizeof(double) * (size_t)p->N);
   p->have_solution = 1;
   p->adj_stale = 1;
-  p->jac_at_solution = 0;
   int rc = out ? make_outputs(env, p, xr, out) : 0;
   VecRestoreArrayRead(p->x, &xr);
   return rc;
@@ -1322,7 +1322,6 @@ static int jacobian_solver(lg_env *env, lg_problem *p, KSP *out) {
       PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, NULL, NULL), "MatZeroRows");
       PCHK(KSPSetOperators(ksp, p->A, p->A), "KSPSetOperators");
       p->adj_stale = 0;
-      p->jac_at_solution = 1;
     }
   }
   if (!ksp || (!p->nonlinear && !p->matrix_fp && !p->bc_symmetric)) {

@@ -467,6 +467,28 @@ int lg_quad_degree(lg_env *env, expr *e, int order, int dim) {
   return d > cap ? cap : d;
 }
 
+/* the polynomial degree of the products a kernel integrates: coefficient degree plus the
+ * degrees of the test and trial basis functions (less their derivative orders), so that a
+ * stiffness matrix is not integrated with the rule a transcendental load needs */
+static int leaf_degree(lg_env *env, const expr *leaf) {
+  expr_func_info *fi = expr_func_get(env->c, leaf->i0);
+  int d = fi ? fi->degree - leaf->order : 0;
+  return d < 0 ? 0 : d;
+}
+
+int lg_table_degree(lg_env *env, const coef_table *t, int arity, int dim) {
+  int d = 0;
+  int n = arity == 2 ? t->njac : t->nres;
+  for (int i = 0; i < n; i++) {
+    int k;
+    if (arity == 2) k = expr_degree(env->c, t->jac[i], 1) + leaf_degree(env, t->jac_test[i]) + leaf_degree(env, t->jac_trial[i]);
+    else k = expr_degree(env->c, t->res[i], 1) + leaf_degree(env, t->res_leaf[i]);
+    if (k > d) d = k;
+  }
+  int cap = dim == 2 ? 12 : 8;
+  return d > cap ? cap : d;
+}
+
 int lg_integrate(lg_env *env, lg_mesh *lm, const region *r, expr *e, int order, double *result) {
   if (!e) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
   if (e->kind == E_LIST) {

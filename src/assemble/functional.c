@@ -87,6 +87,19 @@ lg_form_kernels *lg_form_kernels_new(lg_env *env, lg_mesh *lm, const form *F, in
       rows.nloc[0] = dm->nloc;
       rows.off[0] = 0;
       rows.size = dm->nloc;
+      /* the derivative's own, lower degree where that rule integrates it exactly and so
+       * gives what the functional's rule gives (alpha/2 f^2: 2 instead of 12 with a
+       * transcendental d in the same term); otherwise the functional's rule, so that the
+       * gradient is the derivative of the J that was computed (a Taylor test sees any
+       * difference: (u - d) v with d = sin(pi x) keeps the rule of (u - d)^2) */
+      int exact = F->t[i].order < 0;
+      for (int r = 0; r < t->tab.nres && exact; r++) {
+        int ex;
+        expr_degree_exact(env->c, t->tab.res[r], 1, &ex);
+        exact = ex;
+      }
+      int own = lg_table_degree(env, &t->tab, 1, lm->m->dim);
+      if (exact && own <= qd) qd = own;
     } else if (f->kind == E_CONST && f->value == 0)
       continue;
     if (kernel_build(env->jit, env->c, lm->m->type, t->reg.kind == REGION_BOUNDARY, qd, &s, K->arity ? &rows : NULL, NULL,

@@ -126,28 +126,6 @@ static int contains_funcs(lg_env *env, expr *e, int n, const int *funcs, expr **
   return 0;
 }
 
-/* the polynomial degree of the products a kernel integrates: coefficient degree plus the
- * degrees of the test and trial basis functions (less their derivative orders), so that a
- * stiffness matrix is not integrated with the rule a transcendental load needs */
-static int leaf_degree(lg_env *env, const expr *leaf) {
-  expr_func_info *fi = expr_func_get(env->c, leaf->i0);
-  int d = fi ? fi->degree - leaf->order : 0;
-  return d < 0 ? 0 : d;
-}
-
-static int table_degree(lg_env *env, const coef_table *t, int arity, int dim) {
-  int d = 0;
-  int n = arity == 2 ? t->njac : t->nres;
-  for (int i = 0; i < n; i++) {
-    int k;
-    if (arity == 2) k = expr_degree(env->c, t->jac[i], 1) + leaf_degree(env, t->jac_test[i]) + leaf_degree(env, t->jac_trial[i]);
-    else k = expr_degree(env->c, t->res[i], 1) + leaf_degree(env, t->res_leaf[i]);
-    if (k > d) d = k;
-  }
-  int cap = dim == 2 ? 12 : 8;
-  return d > cap ? cap : d;
-}
-
 static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *test, const int *unk, int nf) {
   p->nterm = eqn->n;
   p->t = calloc((size_t)eqn->n + 1, sizeof(prob_term));
@@ -195,7 +173,7 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
     int facet = t->reg.kind == REGION_BOUNDARY;
     if (t->tab.njac > 0) {
       kernel_spec s = {2, &t->tab, NULL};
-      int qd = eqn->t[i].order >= 0 ? t->qdeg : table_degree(env, &t->tab, 2, p->lm->m->dim);
+      int qd = eqn->t[i].order >= 0 ? t->qdeg : lg_table_degree(env, &t->tab, 2, p->lm->m->dim);
       if (kernel_build(env->jit, env->c, p->lm->m->type, facet, qd, &s, &p->rows, &p->cols, &t->kmat, err, sizeof err)) {
         lg_seterr(env, "%s", err);
         return 1;
@@ -206,7 +184,7 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
     }
     if (t->tab.nres > 0) {
       kernel_spec s = {1, &t->tab, NULL};
-      int qd = eqn->t[i].order >= 0 ? t->qdeg : table_degree(env, &t->tab, 1, p->lm->m->dim);
+      int qd = eqn->t[i].order >= 0 ? t->qdeg : lg_table_degree(env, &t->tab, 1, p->lm->m->dim);
       if (kernel_build(env->jit, env->c, p->lm->m->type, facet, qd, &s, &p->rows, &p->cols, &t->kres, err, sizeof err)) {
         lg_seterr(env, "%s", err);
         return 1;

@@ -1294,6 +1294,7 @@ expr *expr_find_kink(expr_ctx *c, expr *e, int nf, const int *fids, int np, cons
 typedef struct {
   expr_ctx *c;
   int cd;
+  int inexact;  /* a node that is not a polynomial of its arguments (sin, u^0.5, 1/u, ...) */
   memo_map deg; /* node id -> (expr *)(degree + 1) */
 } degree_ctx;
 
@@ -1324,12 +1325,16 @@ static int degree_visit(void *ud, expr *e) {
     int b = deg_of(D, e->ch[0]);
     expr *p = e->ch[1];
     if (p->kind == E_CONST && p->value >= 0 && p->value == floor(p->value) && p->value < 100) d = b * (int)p->value;
-    else d = b ? b + 2 : 0;
+    else {
+      d = b ? b + 2 : 0;
+      D->inexact |= b > 0 || deg_of(D, p) > 0;
+    }
     break;
   }
   case E_FUNC: {
     int b = deg_of(D, e->ch[0]);
     d = b ? b + 2 : 0;
+    D->inexact |= b > 0;
     break;
   }
   }
@@ -1337,17 +1342,22 @@ static int degree_visit(void *ud, expr *e) {
   return memo_put(&D->deg, e->id, (expr *)(intptr_t)(d + 1));
 }
 
-int expr_degree(expr_ctx *c, expr *e, int cd) {
+int expr_degree_exact(expr_ctx *c, expr *e, int cd, int *exact) {
+  if (exact) *exact = 1;
   e = expr_canon(c, e);
   if (!e) return 0;
   memo_map seen = {0, 0, NULL};
-  degree_ctx D = {c, cd, {0, 0, NULL}};
+  degree_ctx D = {c, cd, 0, {0, 0, NULL}};
   int d = 0;
   if (!post_order(c, e, &seen, degree_visit, NULL, &D)) d = deg_of(&D, e);
+  else D.inexact = 1;
   memo_free(&seen);
   memo_free(&D.deg);
+  if (exact) *exact = !D.inexact && d < 1000;
   return d < 0 ? 0 : d;
 }
+
+int expr_degree(expr_ctx *c, expr *e, int cd) { return expr_degree_exact(c, e, cd, NULL); }
 
 /* ---------------------------------------------------------------- printing */
 

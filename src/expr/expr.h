@@ -149,6 +149,9 @@ int expr_uses(expr_ctx *c, expr *e, expr_kind kind, int *maxcomp);
 expr *expr_find_kink(expr_ctx *c, expr *e, int nf, const int *fids, int np, const int *pids);
 /* a polynomial-degree estimate used to choose quadrature orders */
 int expr_degree(expr_ctx *c, expr *e, int cell_degree_of_coords);
+/* the same, and *exact = 1 when e is a polynomial (the estimate is its degree): no
+ * transcendental function, non-integer power or division of a non-constant */
+int expr_degree_exact(expr_ctx *c, expr *e, int cell_degree_of_coords, int *exact);
 
 /* text form for messages and __tostring */
 void expr_print(expr_ctx *c, const expr *e, char *buf, size_t len);

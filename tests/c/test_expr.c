@@ -58,6 +58,17 @@ int main(void) {
   CHECK(a == expr_num(C, 0), "3u - 3u != 0");
   CHECK(expr_pow(C, expr_pow(C, u, two), expr_num(C, 3)) == expr_pow(C, u, expr_num(C, 6)), "(u^2)^3 != u^6");
 
+  /* degree estimates (quadrature orders) and whether they are exact (a polynomial) */
+  {
+    int ex;
+    expr *d = expr_mul(C, expr_apply(C, FN_SIN, x), expr_apply(C, FN_SIN, y));
+    CHECK(expr_degree_exact(C, expr_pow(C, expr_sub(C, u, d), two), 1, &ex) == 12 && !ex, "(u - sin x sin y)^2: degree 12, inexact");
+    CHECK(expr_degree_exact(C, expr_mul(C, expr_mul(C, u, w), x), 1, &ex) == 3 && ex, "u w x: degree 3, exact");
+    CHECK(expr_degree_exact(C, expr_pow(C, u, expr_num(C, 0.5)), 1, &ex) == 3 && !ex, "u^0.5: inexact");
+    CHECK(expr_degree_exact(C, expr_div(C, w, u), 1, &ex) >= 1 && !ex, "w/u: inexact");
+    CHECK(expr_degree_exact(C, expr_mul(C, expr_apply(C, FN_SIN, expr_num(C, 2)), u), 1, &ex) == 1 && ex, "sin(2) u: exact");
+  }
+
   /* derivatives against central finite differences at random points */
   expr *fs[8];
   fs[0] = expr_mul(C, expr_apply(C, FN_SIN, expr_mul(C, u, w)), expr_apply(C, FN_EXP, u));

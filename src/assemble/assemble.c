@@ -50,19 +50,25 @@ void lg_mesh_changed(lg_mesh *lm) {
 
 void lg_mesh_free(lg_mesh *lm) {
   if (!lm) return;
-  for (int i = 0; i < 4; i++) dofmap_free(lm->dm[i]);
+  for (int i = 0; i < 4; i++)
+    for (int j = 0; j < FEM_MAXBS; j++) dofmap_free(lm->dm[i][j]);
   mesh_free(lm->m);
   free(lm);
 }
 
-dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree) {
+dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree, int ncomp) {
   if (degree < 0 || degree > 3) { lg_seterr(env, "Lagrange degree %d is not available (0, 1, 2, 3)", degree); return NULL; }
-  if (!lm->dm[degree]) {
-    char err[256];
-    lm->dm[degree] = dofmap_new(lm->m, degree, err);
-    if (!lm->dm[degree]) { lg_seterr(env, "%s", err); return NULL; }
+  if (ncomp < 1 || ncomp > FEM_MAXBS) { lg_seterr(env, "a vector space has 1 to %d components (got %d)", FEM_MAXBS, ncomp); return NULL; }
+  char err[256];
+  if (!lm->dm[degree][0]) {
+    lm->dm[degree][0] = dofmap_new(lm->m, degree, err);
+    if (!lm->dm[degree][0]) { lg_seterr(env, "%s", err); return NULL; }
   }
-  return lm->dm[degree];
+  if (!lm->dm[degree][ncomp - 1]) {
+    lm->dm[degree][ncomp - 1] = dofmap_block(lm->dm[degree][0], ncomp, err);
+    if (!lm->dm[degree][ncomp - 1]) { lg_seterr(env, "%s", err); return NULL; }
+  }
+  return lm->dm[degree][ncomp - 1];
 }
 
 int lg_mesh_check(lg_env *env, lg_mesh *lm) {
@@ -83,8 +89,8 @@ int lg_mesh_check(lg_env *env, lg_mesh *lm) {
   return 0;
 }
 
-lg_function *lg_function_new(lg_env *env, lg_mesh *lm, int degree, const char *name) {
-  dofmap *dm = lg_mesh_dofmap(env, lm, degree);
+lg_function *lg_function_new(lg_env *env, lg_mesh *lm, int degree, int ncomp, const char *name) {
+  dofmap *dm = lg_mesh_dofmap(env, lm, degree, ncomp);
   if (!dm) return NULL;
   lg_function *f = calloc(1, sizeof *f);
   if (!f) { lg_seterr(env, "out of memory"); return NULL; }
@@ -93,7 +99,7 @@ lg_function *lg_function_new(lg_env *env, lg_mesh *lm, int degree, const char *n
   f->degree = degree;
   f->x = calloc((size_t)dm->ndof, sizeof(double));
   if (!f->x) { free(f); lg_seterr(env, "out of memory for %d dofs", dm->ndof); return NULL; }
-  f->fid = expr_func_new(env->c, FK_DISCRETE, name ? name : "uh", degree, 1, f);
+  f->fid = expr_func_new(env->c, FK_DISCRETE, name ? name : "uh", degree, ncomp, f);
   if (f->fid < 0) { free(f->x); free(f); lg_seterr(env, "out of memory"); return NULL; }
   return f;
 }
@@ -360,24 +366,29 @@ static int pt_leaf(void *ud, const expr *e, double *out) {
     return 1;
   }
   if (e->order > 1) { lg_seterr(p->env, "second derivatives cannot be evaluated at points yet"); return 1; }
+  *out = lg_eval_leaf(b->dm, b->vals, p->cell, p->xi, p->K, e);
+  return 0;
+}
+
+double lg_eval_leaf(const dofmap *dm, const double *vals, int cell, const double *xi, const double K[3][3], const expr *e) {
   double val[FEM_MAXLOC], grad[FEM_MAXLOC * 3];
-  lagrange_eval(&b->dm->el, p->xi, val, grad);
-  const int *cd = b->dm->cell_dofs + (size_t)p->cell * (size_t)b->dm->nloc;
-  int dir = -1, dim = p->lm->m->dim;
+  lagrange_eval(&dm->el, xi, val, grad);
+  int bs = dm->bs, comp = e->i1 < bs ? e->i1 : 0;
+  const int *cd = dm->cell_dofs + (size_t)cell * (size_t)dm->nloc;
+  int dir = -1, dim = dm->m->dim;
   for (int d = 0; d < EXPR_MAXDIM; d++)
     if (e->alpha[d]) dir = d;
   double s = 0;
-  for (int i = 0; i < b->dm->nloc; i++) {
+  for (int i = 0; i < dm->el.nloc; i++) {
     double phi;
     if (dir < 0) phi = val[i];
     else {
       phi = 0;
-      for (int k = 0; k < dim; k++) phi += grad[i * dim + k] * p->K[k][dir];
+      for (int k = 0; k < dim; k++) phi += grad[i * dim + k] * K[k][dir];
     }
-    s += b->vals[cd[i]] * phi;
+    s += vals[cd[i * bs + comp]] * phi;
   }
-  *out = s;
-  return 0;
+  return s;
 }
 
 static int bind_all_discrete(lg_env *env, lg_mesh *lm, expr_tape *t, coef_binding *bind, int *nb) {
@@ -408,9 +419,27 @@ static int bind_all_discrete(lg_env *env, lg_mesh *lm, expr_tape *t, coef_bindin
 
 int lg_interpolate(lg_env *env, lg_function *f, expr *e) {
   if (!e) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
-  if (e->kind == E_LIST) { lg_seterr(env, "lg.interpolate: the expression must be a scalar"); return 1; }
+  int bs = f->dm->bs;
+  expr *roots[FEM_MAXBS];
+  if (bs == 1) {
+    if (e->kind == E_LIST) {
+      char sh[64];
+      expr_describe_shape(e, sh, sizeof sh);
+      lg_seterr(env, "the function is a scalar, the expression %s", sh);
+      return 1;
+    }
+    roots[0] = e;
+  } else {
+    char sh[64];
+    expr_describe_shape(e, sh, sizeof sh);
+    if (e->kind != E_LIST || e->n != bs) { lg_seterr(env, "the function has %d components, the expression is %s", bs, sh); return 1; }
+    for (int j = 0; j < bs; j++) {
+      roots[j] = e->ch[j];
+      if (roots[j]->kind == E_LIST) { lg_seterr(env, "the function has %d components, the expression is %s", bs, sh); return 1; }
+    }
+  }
   expr_tape t;
-  if (expr_tape_build(env->c, 1, &e, &t)) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
+  if (expr_tape_build(env->c, bs, roots, &t)) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
   coef_binding bind[KER_MAXCOEF];
   int nb;
   if (bind_all_discrete(env, f->mesh, &t, bind, &nb)) { expr_tape_free(&t); return 1; }
@@ -430,23 +459,25 @@ int lg_interpolate(lg_env *env, lg_function *f, expr *e) {
     double J[3][3];
     int mapped = 0;
     p.cell = c;
-    for (int k = 0; k < f->dm->nloc && !rc; k++) {
-      int dof = f->dm->cell_dofs[(size_t)c * f->dm->nloc + k];
-      if (done[dof]) continue;
-      done[dof] = 1;
+    const int *cd = f->dm->cell_dofs + (size_t)c * f->dm->nloc;
+    for (int k = 0; k < f->dm->el.nloc && !rc; k++) {
+      if (done[cd[k * bs]]) continue;
+      done[cd[k * bs]] = 1;
       if (!mapped) { simplex_jacobian(m, c, J, p.K); mapped = 1; }
       memcpy(p.xi, f->dm->el.node + 3 * k, sizeof p.xi);
-      dofmap_node_coords(f->dm, c, k, p.x);
-      double v;
-      rc = expr_tape_eval(&t, expr_param_values(env->c), pt_leaf, &p, w, &v);
-      if (!rc && !isfinite(v)) {
-        char buf[200];
-        expr_print(env->c, e, buf, sizeof buf);
-        if (m->dim == 2) lg_seterr(env, "the expression %s is not finite (%g) at (%g, %g)", buf, v, p.x[0], p.x[1]);
-        else lg_seterr(env, "the expression %s is not finite (%g) at (%g, %g, %g)", buf, v, p.x[0], p.x[1], p.x[2]);
-        rc = 1;
+      dofmap_node_coords(f->dm, c, k * bs, p.x);
+      double v[FEM_MAXBS];
+      rc = expr_tape_eval(&t, expr_param_values(env->c), pt_leaf, &p, w, v);
+      for (int j = 0; j < bs && !rc; j++) {
+        if (!isfinite(v[j])) {
+          char buf[200];
+          expr_print(env->c, roots[j], buf, sizeof buf);
+          if (m->dim == 2) lg_seterr(env, "the expression %s is not finite (%g) at (%g, %g)", buf, v[j], p.x[0], p.x[1]);
+          else lg_seterr(env, "the expression %s is not finite (%g) at (%g, %g, %g)", buf, v[j], p.x[0], p.x[1], p.x[2]);
+          rc = 1;
+        }
+        if (!rc) tmp[cd[k * bs + j]] = v[j];
       }
-      if (!rc) tmp[dof] = v;
     }
   }
   if (share && !rc) memcpy(f->x, tmp, sizeof(double) * (size_t)f->dm->ndof);

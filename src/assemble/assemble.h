@@ -36,7 +36,7 @@ typedef struct {
 
 typedef struct {
   mesh *m;
-  dofmap *dm[4];        /* by degree, built on demand */
+  dofmap *dm[4][FEM_MAXBS]; /* by degree and number of components - 1, built on demand */
   int validated;        /* the validity check passed for the current geometry */
   unsigned long geometry; /* counts geometry changes (lg_mesh_changed) */
 } lg_mesh;
@@ -57,11 +57,13 @@ lg_mesh *lg_mesh_wrap(mesh *m);
 void lg_mesh_free(lg_mesh *lm);
 /* drop dof maps and the validity flag after the mesh changed */
 void lg_mesh_changed(lg_mesh *lm);
-dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree);
+/* the dof map of Lagrange degree `degree` (0..3) with ncomp components (1..3) */
+dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree, int ncomp);
 /* the validity check run before assembly */
 int lg_mesh_check(lg_env *env, lg_mesh *lm);
 
-lg_function *lg_function_new(lg_env *env, lg_mesh *lm, int degree, const char *name);
+/* a discrete function of degree `degree` with ncomp components (1: scalar), all zero */
+lg_function *lg_function_new(lg_env *env, lg_mesh *lm, int degree, int ncomp, const char *name);
 void lg_function_free(lg_function *f);
 
 /* items (cell, local facet) of a region */
@@ -88,6 +90,10 @@ int lg_bind_discrete(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nextra,
 
 /* every value of v (dm->ndof) finite, or a message "<what> is not finite (nan) at dof 7 (x, y)" */
 int lg_check_finite(lg_env *env, const dofmap *dm, const double *v, const char *what);
+/* the value of field leaf e (its component, a first derivative or none) of the function
+ * with dof map dm and values vals at reference point xi of cell c, K the inverse Jacobian */
+double lg_eval_leaf(const dofmap *dm, const double *vals, int c, const double *xi, const double K[3][3], const expr *e);
+/* f = e at f's nodes; e a scalar, or a list of f's number of components */
 int lg_interpolate(lg_env *env, lg_function *f, expr *e);
 /* integrate a scalar expression over a region (cells or boundary) */
 int lg_integrate(lg_env *env, lg_mesh *lm, const region *r, expr *e, int order, double *result);

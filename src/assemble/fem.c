@@ -321,11 +321,13 @@ double simplex_jacobian(const mesh *m, int c, double J[3][3], double K[3][3]) {
   return det;
 }
 
+const double *dofmap_node_ref(const dofmap *dm, int k) { return dm->el.node + 3 * (k / dm->bs); }
+
 void dofmap_node_coords(const dofmap *dm, int c, int k, double *x) {
   const mesh *m = dm->m;
   int d = m->dim;
   const int *v = m->cells + (size_t)c * (size_t)m->nvc;
-  const double *xi = dm->el.node + 3 * k;
+  const double *xi = dofmap_node_ref(dm, k);
   double lam0 = 1;
   for (int i = 0; i < d; i++) lam0 -= xi[i];
   for (int i = 0; i < d; i++) {
@@ -340,6 +342,7 @@ dofmap *dofmap_new(mesh *m, int degree, char *err) {
   if (!dm) { snprintf(err, 256, "out of memory"); return NULL; }
   dm->m = m;
   dm->degree = degree;
+  dm->bs = 1;
   if (lagrange_init(&dm->el, m->type, degree, err)) { free(dm); return NULL; }
   int p = degree, nloc = dm->el.nloc;
   dm->nloc = nloc;
@@ -376,6 +379,23 @@ dofmap *dofmap_new(mesh *m, int degree, char *err) {
       }
     }
   }
+  return dm;
+}
+
+dofmap *dofmap_block(const dofmap *s, int bs, char *err) {
+  if (bs < 1 || bs > 3 || s->bs != 1) { snprintf(err, 256, "a vector space has 1 to 3 components (got %d)", bs); return NULL; }
+  if ((long)s->ndof * bs > 2000000000L) { snprintf(err, 256, "too many dofs"); return NULL; }
+  dofmap *dm = malloc(sizeof *dm);
+  if (!dm) { snprintf(err, 256, "out of memory"); return NULL; }
+  *dm = *s;
+  dm->bs = bs;
+  dm->nloc = s->nloc * bs;
+  dm->ndof = s->ndof * bs;
+  size_t n = (size_t)s->m->ncell * (size_t)s->nloc;
+  dm->cell_dofs = malloc(sizeof(int) * n * (size_t)bs + 1);
+  if (!dm->cell_dofs) { free(dm); snprintf(err, 256, "out of memory"); return NULL; }
+  for (size_t i = 0; i < n; i++)
+    for (int j = 0; j < bs; j++) dm->cell_dofs[i * (size_t)bs + (size_t)j] = bs * s->cell_dofs[i] + j;
   return dm;
 }
 

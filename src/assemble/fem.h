@@ -8,6 +8,7 @@
 
 #define FEM_MAXQ 1331
 #define FEM_MAXLOC 20 /* P3 tetrahedron */
+#define FEM_MAXBS 3   /* components of a vector space */
 
 /* a rule on the reference cell (or facet): points in reference coordinates and weights
  * summing to the reference measure (cells) or to 1 (facets, scaled by the facet size) */
@@ -51,18 +52,25 @@ void lagrange_eval(const lagrange_element *e, const double *xi, double *val, dou
 void ref_facet_point(cell_type t, int facet, const double *s, double *xi);
 void ref_facet_normal(cell_type t, int facet, double *n);
 
-/* a Lagrange space of some degree on a mesh: global numbering */
+/* a Lagrange space of some degree on a mesh: global numbering. A vector space of bs
+ * components (bs > 1) interlaces them: local dof i*bs + j is component j at node i of the
+ * element, global dof bs*n + j component j at scalar dof n (the block layout PETSc's
+ * MatSetBlockSize and GAMG expect); nloc and ndof count every component */
 typedef struct {
   mesh *m;
-  int degree, nloc, ndof;
+  int degree, nloc, ndof, bs;
   lagrange_element el;
   int *cell_dofs; /* ncell*nloc */
 } dofmap;
 
 dofmap *dofmap_new(mesh *m, int degree, char *err);
+/* the bs-component space over a scalar one (bs = 1 .. 3) */
+dofmap *dofmap_block(const dofmap *scalar, int bs, char *err);
 void dofmap_free(dofmap *d);
-/* physical coordinates of local node k of cell c */
+/* physical coordinates of local dof k of cell c (its node: k / bs) */
 void dofmap_node_coords(const dofmap *d, int c, int k, double *x);
+/* reference coordinates of local dof k (3 values) */
+const double *dofmap_node_ref(const dofmap *d, int k);
 
 /* affine map of a simplex: x = X0 + J xi; J[d][k] = dx_d/dxi_k, K = J^-1; returns det J */
 double simplex_jacobian(const mesh *m, int c, double J[3][3], double K[3][3]);

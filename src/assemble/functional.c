@@ -85,6 +85,7 @@ lg_form_kernels *lg_form_kernels_new(lg_env *env, lg_mesh *lm, const form *F, in
       rows.func[0] = func;
       rows.degree[0] = fi ? fi->degree : dm->degree;
       rows.nloc[0] = dm->nloc;
+      rows.bs[0] = dm->bs;
       rows.off[0] = 0;
       rows.size = dm->nloc;
       /* the derivative's own, lower degree where that rule integrates it exactly and so
@@ -343,7 +344,7 @@ lg_reduced *lg_reduced_new(lg_env *env, lg_problem *p, const form *J, int nc, co
     expr_func_info *fu = expr_func_get(env->c, rf->fld[a].unknown);
     char nm[80];
     snprintf(nm, sizeof nm, "lambda_%s", fu ? fu->name : "u");
-    rf->lam[a] = lg_function_new(env, rf->lm, rf->fld[a].dm->degree, nm);
+    rf->lam[a] = lg_function_new(env, rf->lm, rf->fld[a].dm->degree, rf->fld[a].dm->bs, nm);
     if (!rf->lam[a]) goto fail;
   }
   for (int i = 0; i < F->n; i++) {
@@ -622,7 +623,7 @@ static int hessian_setup(lg_env *env, lg_reduced *rf) {
     }
   for (int i = 0; i < rf->nc; i++) {
     if (rf->c[i].kind == LG_CONTROL_FIELD) {
-      if (!(rf->dmf[i] = lg_function_new(env, rf->lm, rf->c[i].f->degree, "dm"))) { hessian_free(rf); return 1; }
+      if (!(rf->dmf[i] = lg_function_new(env, rf->lm, rf->c[i].f->degree, rf->c[i].f->dm->bs, "dm"))) { hessian_free(rf); return 1; }
     } else if ((rf->dpar[i] = expr_param_new(env->c, "dm", 0)) < 0) {
       lg_seterr(env, "out of memory");
       hessian_free(rf);
@@ -630,8 +631,8 @@ static int hessian_setup(lg_env *env, lg_reduced *rf) {
     }
   }
   for (int a = 0; a < rf->nf; a++)
-    if (!(rf->du[a] = lg_function_new(env, rf->lm, rf->fld[a].dm->degree, "du")) ||
-        !(rf->dlam[a] = lg_function_new(env, rf->lm, rf->fld[a].dm->degree, "dlambda"))) {
+    if (!(rf->du[a] = lg_function_new(env, rf->lm, rf->fld[a].dm->degree, rf->fld[a].dm->bs, "du")) ||
+        !(rf->dlam[a] = lg_function_new(env, rf->lm, rf->fld[a].dm->degree, rf->fld[a].dm->bs, "dlambda"))) {
       hessian_free(rf);
       return 1;
     }

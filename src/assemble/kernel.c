@@ -31,8 +31,10 @@ static void leafname(void *ud, const expr *e, char *buf, size_t len) {
   int dir = -1;
   for (int d = 0; d < EXPR_MAXDIM; d++)
     if (e->alpha[d]) dir = d;
-  if (dir < 0) snprintf(buf, len, "w%dv", ci);
-  else snprintf(buf, len, "w%dg%d", ci, dir);
+  char comp[16] = "";
+  if (lc->k->coef_ncomp[ci] > 1) snprintf(comp, sizeof comp, "c%d", e->i1);
+  if (dir < 0) snprintf(buf, len, "w%d%sv", ci, comp);
+  else snprintf(buf, len, "w%d%sg%d", ci, comp, dir);
 }
 
 static void emit_table(strbuf *b, const char *name, const double *v, long n) {
@@ -54,11 +56,39 @@ static void basis_name(const expr *e, int p, char *buf, size_t len) {
   else snprintf(buf, len, "g%d_%d", p, d);
 }
 
-static int layout_find(const field_layout *l, int func) {
+/* the scalar blocks of a layout: one per (field, component), its local dofs off + i*stride */
+#define KER_MAXV (KER_MAXFIELD * FEM_MAXBS)
+typedef struct {
+  int n;
+  int func[KER_MAXV], comp[KER_MAXV], degree[KER_MAXV], nloc[KER_MAXV], off[KER_MAXV], stride[KER_MAXV];
+  int size;
+} vlayout;
+
+static void vlayout_of(const field_layout *l, vlayout *v) {
+  v->n = 0;
+  v->size = l ? l->size : 0;
+  for (int a = 0; l && a < l->n; a++) {
+    int bs = l->bs[a] > 1 ? l->bs[a] : 1;
+    for (int j = 0; j < bs && v->n < KER_MAXV; j++) {
+      int i = v->n++;
+      v->func[i] = l->func[a];
+      v->comp[i] = j;
+      v->degree[i] = l->degree[a];
+      v->nloc[i] = l->nloc[a] / bs;
+      v->off[i] = l->off[a] + j;
+      v->stride[i] = bs;
+    }
+  }
+}
+
+/* the block of a field leaf (its function and component) */
+static int layout_find(const vlayout *l, const expr *leaf) {
   for (int i = 0; i < l->n; i++)
-    if (l->func[i] == func) return i;
+    if (l->func[i] == leaf->i0 && l->comp[i] == leaf->i1) return i;
   return -1;
 }
+
+static int same_block(const vlayout *l, int a, const expr *leaf) { return l->func[a] == leaf->i0 && l->comp[a] == leaf->i1; }
 
 /* does block (a, b) have any reference tensor */
 static int block_used(unsigned char used[4][4]) {
@@ -85,6 +115,9 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   k->qdeg = qdeg;
   if (rows) k->rows = *rows;
   if (cols) k->cols = *cols;
+  vlayout vr, vc;
+  vlayout_of(rows, &vr);
+  vlayout_of(cols, &vc);
 
   /* the coefficient expressions */
   int nroot = s->arity == 2 ? s->tab->njac : s->arity == 1 ? s->tab->nres : 1;
@@ -119,7 +152,9 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
         ci = k->ncoef++;
         k->coef_func[ci] = e->i0;
         k->coef_degree[ci] = fi->degree;
+        k->coef_ncomp[ci] = fi->ncomp > 1 ? fi->ncomp : 1;
       }
+      if (e->i1 >= k->coef_ncomp[ci]) KERR("component %d of %s, which has %d", e->i1 + 1, fi->name, k->coef_ncomp[ci]);
       if (fi->degree < 0 || fi->degree > 3) KERR("coefficient %s has unsupported degree %d", fi->name, fi->degree);
       if (d < 0) need_val[fi->degree] = 1;
       else need_grad[fi->degree] = 1;
@@ -130,6 +165,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     for (int j = i; j > 0 && k->coef_func[j - 1] > k->coef_func[j]; j--) {
       int t = k->coef_func[j]; k->coef_func[j] = k->coef_func[j - 1]; k->coef_func[j - 1] = t;
       t = k->coef_degree[j]; k->coef_degree[j] = k->coef_degree[j - 1]; k->coef_degree[j - 1] = t;
+      t = k->coef_ncomp[j]; k->coef_ncomp[j] = k->coef_ncomp[j - 1]; k->coef_ncomp[j - 1] = t;
     }
   lagrange_element el[4];
   for (int p = 0; p <= 3; p++)
@@ -137,7 +173,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   k->wsize = 0;
   for (int i = 0; i < k->ncoef; i++) {
     k->coef_off[i] = k->wsize;
-    k->wsize += el[k->coef_degree[i]].nloc;
+    k->wsize += el[k->coef_degree[i]].nloc * k->coef_ncomp[i];
   }
   /* Jacobian entries whose coefficient is constant on the cell (no coordinate, field or
    * normal in it) are integrated exactly on the reference cell ahead of time: on an
@@ -160,18 +196,18 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     for (int i = 0; i < n; i++) {
       if (s->arity == 2 && isconst[i]) continue;
       const expr *tl = s->arity == 2 ? s->tab->jac_test[i] : s->tab->res_leaf[i];
-      int fi = layout_find(rows, tl->i0);
+      int fi = layout_find(&vr, tl);
       if (fi < 0) KERR("internal error: test function not in the row layout");
       if (tl->order > 1) KERR("second derivatives of test functions are not supported yet");
       if (leaf_dir(tl) >= dim) KERR("the form differentiates a test function in %c on a %dD mesh", "xyz"[leaf_dir(tl)], dim);
-      if (tl->order) need_grad[rows->degree[fi]] = 1; else need_val[rows->degree[fi]] = 1;
+      if (tl->order) need_grad[vr.degree[fi]] = 1; else need_val[vr.degree[fi]] = 1;
       if (s->arity == 2) {
         const expr *ul = s->tab->jac_trial[i];
-        int fj = layout_find(cols, ul->i0);
+        int fj = layout_find(&vc, ul);
         if (fj < 0) KERR("internal error: unknown not in the column layout");
         if (ul->order > 1) KERR("second derivatives of unknowns are not supported yet");
         if (leaf_dir(ul) >= dim) KERR("the form differentiates an unknown in %c on a %dD mesh", "xyz"[leaf_dir(ul)], dim);
-        if (ul->order) need_grad[cols->degree[fj]] = 1; else need_val[cols->degree[fj]] = 1;
+        if (ul->order) need_grad[vc.degree[fj]] = 1; else need_val[vc.degree[fj]] = 1;
       }
     }
   }
@@ -230,21 +266,27 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     emit_table(&b, "NR", nr, (long)cell_nfacets(ct) * dim);
   }
 
-  /* reference tensors R[a][b][k][l][i][j] = ∫ D_k phi_i D_l psi_j on the reference cell,
-   * k, l = 0 for values and 1..dim for derivatives, exact (degree pa + pb) */
-  unsigned char rused[KER_MAXFIELD][KER_MAXFIELD][4][4];
+  /* reference tensors R<pa><pb>_<k><l>[i][j] = ∫ D_k phi_i D_l psi_j on the reference cell
+   * for degrees pa, pb (shared by every block pair of those degrees), k, l = 0 for values and
+   * 1..dim for derivatives, exact (degree pa + pb) */
+  unsigned char rused[KER_MAXV][KER_MAXV][4][4];
+  unsigned char dused[4][4][4][4];
   memset(rused, 0, sizeof rused);
+  memset(dused, 0, sizeof dused);
   for (int i = 0; i < nent; i++) {
     if (!isconst[i]) continue;
-    int a = layout_find(rows, s->tab->jac_test[i]->i0), bb = layout_find(cols, s->tab->jac_trial[i]->i0);
+    int a = layout_find(&vr, s->tab->jac_test[i]), bb = layout_find(&vc, s->tab->jac_trial[i]);
     int da = leaf_dir(s->tab->jac_test[i]), db = leaf_dir(s->tab->jac_trial[i]);
     for (int kk = (da < 0 ? -1 : 0); kk < (da < 0 ? 0 : dim); kk++)
-      for (int ll = (db < 0 ? -1 : 0); ll < (db < 0 ? 0 : dim); ll++) rused[a][bb][kk + 1][ll + 1] = 1;
+      for (int ll = (db < 0 ? -1 : 0); ll < (db < 0 ? 0 : dim); ll++) {
+        rused[a][bb][kk + 1][ll + 1] = 1;
+        dused[vr.degree[a]][vc.degree[bb]][kk + 1][ll + 1] = 1;
+      }
   }
-  for (int a = 0; rows && a < rows->n; a++)
-    for (int bb = 0; cols && bb < cols->n; bb++) {
-      if (!block_used(rused[a][bb])) continue;
-      const lagrange_element *ea = &el[rows->degree[a]], *eb = &el[cols->degree[bb]];
+  for (int pa = 0; pa <= 3; pa++)
+    for (int pb = 0; pb <= 3; pb++) {
+      if (!block_used(dused[pa][pb])) continue;
+      const lagrange_element *ea = &el[pa], *eb = &el[pb];
       quad_rule rq;
       if (quad_simplex(dim, ea->degree + eb->degree, &rq)) KERR("no reference rule");
       int na = ea->nloc, nb = eb->nloc;
@@ -256,7 +298,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
         lagrange_eval(eb, rq.x + dim * qi, vb, gb);
         for (int kk = 0; kk <= dim; kk++)
           for (int ll = 0; ll <= dim; ll++) {
-            if (!rused[a][bb][kk][ll]) continue;
+            if (!dused[pa][pb][kk][ll]) continue;
             double *r = R + (size_t)(kk * 4 + ll) * na * nb;
             for (int i = 0; i < na; i++) {
               double fi = kk ? ga[i * dim + kk - 1] : va[i];
@@ -266,9 +308,9 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
       }
       for (int kk = 0; kk <= dim; kk++)
         for (int ll = 0; ll <= dim; ll++) {
-          if (!rused[a][bb][kk][ll]) continue;
+          if (!dused[pa][pb][kk][ll]) continue;
           char nm[32];
-          snprintf(nm, sizeof nm, "R%d_%d_%d%d", a, bb, kk, ll);
+          snprintf(nm, sizeof nm, "R%d%d_%d%d", pa, pb, kk, ll);
           emit_table(&b, nm, R + (size_t)(kk * 4 + ll) * na * nb, (long)na * nb);
         }
       free(R);
@@ -338,16 +380,14 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   k->ncache = expr_tape_point_cache(&tape, pcls, pslot);
   if (k->ncache < 0) KERR("out of memory");
   char ref[128];
-  for (int a = 0; rows && a < rows->n; a++)
-    for (int bb = 0; cols && bb < cols->n; bb++) {
+  for (int a = 0; a < vr.n; a++)
+    for (int bb = 0; bb < vc.n; bb++) {
       if (!block_used(rused[a][bb])) continue;
       for (int kk = 0; kk <= dim; kk++)
         for (int ll = 0; ll <= dim; ll++)
           if (rused[a][bb][kk][ll]) sb_printf(&b, "  double G%d_%d_%d%d = 0.0;\n", a, bb, kk, ll);
       for (int i = 0; i < nent; i++) {
-        if (!isconst[i] || layout_find(rows, s->tab->jac_test[i]->i0) != a ||
-            layout_find(cols, s->tab->jac_trial[i]->i0) != bb)
-          continue;
+        if (!isconst[i] || !same_block(&vr, a, s->tab->jac_test[i]) || !same_block(&vc, bb, s->tab->jac_trial[i])) continue;
         int da = leaf_dir(s->tab->jac_test[i]), db = leaf_dir(s->tab->jac_trial[i]);
         expr_codegen_ref(&tape, tape.root[i], "t", leafname, &lc, ref, sizeof ref);
         /* physical derivative d/dx_da = sum_k K[k][da] d/dxi_k */
@@ -359,15 +399,16 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
             sb_printf(&b, ";\n");
           }
       }
-      int na = rows->nloc[a], nb = cols->nloc[bb];
-      sb_printf(&b, "  for (int i = 0; i < %d; ++i) {\n    double *Ai = A + (%d + i)*%d + %d;\n", na,
-                rows->off[a], cols->size, cols->off[bb]);
-      sb_printf(&b, "    for (int j = 0; j < %d; ++j) Ai[j] += scale*(", nb);
+      int na = vr.nloc[a], nb = vc.nloc[bb];
+      sb_printf(&b, "  for (int i = 0; i < %d; ++i) {\n    double *Ai = A + (%d + i*%d)*%d + %d;\n", na, vr.off[a], vr.stride[a],
+                vc.size, vc.off[bb]);
+      sb_printf(&b, "    for (int j = 0; j < %d; ++j) Ai[j*%d] += scale*(", nb, vc.stride[bb]);
       int first = 1;
       for (int kk = 0; kk <= dim; kk++)
         for (int ll = 0; ll <= dim; ll++) {
           if (!rused[a][bb][kk][ll]) continue;
-          sb_printf(&b, "%sG%d_%d_%d%d*R%d_%d_%d%d[i*%d + j]", first ? "" : " + ", a, bb, kk, ll, a, bb, kk, ll, nb);
+          sb_printf(&b, "%sG%d_%d_%d%d*R%d%d_%d%d[i*%d + j]", first ? "" : " + ", a, bb, kk, ll, vr.degree[a], vc.degree[bb], kk, ll,
+                    nb);
           first = 0;
         }
       sb_printf(&b, ");\n  }\n");
@@ -414,12 +455,16 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   for (int i = 0; i < tape.n; i++) {
     const expr *e = tape.node[i];
     if (e->kind != E_FIELD) continue;
-    int ci = coef_index(k, e->i0), p = k->coef_degree[ci], nl = el[p].nloc;
+    int ci = coef_index(k, e->i0), p = k->coef_degree[ci], nl = el[p].nloc, nc = k->coef_ncomp[ci];
     char nm[32], bn[32];
     leafname(&lc, e, nm, sizeof nm);
     basis_name(e, p, bn, sizeof bn);
-    sb_printf(&b, "    double %s = 0.0;\n    for (int i = 0; i < %d; ++i) %s += W[%d + i]*%s[i];\n",
-              nm, nl, nm, k->coef_off[ci], bn);
+    if (nc == 1)
+      sb_printf(&b, "    double %s = 0.0;\n    for (int i = 0; i < %d; ++i) %s += W[%d + i]*%s[i];\n", nm, nl, nm,
+                k->coef_off[ci], bn);
+    else
+      sb_printf(&b, "    double %s = 0.0;\n    for (int i = 0; i < %d; ++i) %s += W[%d + i*%d]*%s[i];\n", nm, nl, nm,
+                k->coef_off[ci] + e->i1, nc, bn);
   }
   if (k->ncache > 0) {
     /* cached coordinate-only values: read them, or compute (and store) them */
@@ -451,17 +496,17 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     expr_codegen_ref(&tape, tape.root[0], "t", leafname, &lc, ref, sizeof ref);
     sb_printf(&b, "    A[0] += wq*%s;\n", ref);
   } else if (s->arity == 1) {
-    for (int a = 0; a < rows->n; a++) {
+    for (int a = 0; a < vr.n; a++) {
       int any = 0;
-      for (int i = 0; i < s->tab->nres; i++) any |= s->tab->res_leaf[i]->i0 == rows->func[a];
+      for (int i = 0; i < s->tab->nres; i++) any |= same_block(&vr, a, s->tab->res_leaf[i]);
       if (!any) continue;
-      sb_printf(&b, "    for (int i = 0; i < %d; ++i) A[%d + i] += wq*(", rows->nloc[a], rows->off[a]);
+      sb_printf(&b, "    for (int i = 0; i < %d; ++i) A[%d + i*%d] += wq*(", vr.nloc[a], vr.off[a], vr.stride[a]);
       int first = 1;
       for (int i = 0; i < s->tab->nres; i++) {
         const expr *tl = s->tab->res_leaf[i];
-        if (tl->i0 != rows->func[a]) continue;
+        if (!same_block(&vr, a, tl)) continue;
         char bn[32];
-        basis_name(tl, rows->degree[a], bn, sizeof bn);
+        basis_name(tl, vr.degree[a], bn, sizeof bn);
         expr_codegen_ref(&tape, tape.root[i], "t", leafname, &lc, ref, sizeof ref);
         sb_printf(&b, "%s%s*%s[i]", first ? "" : " + ", ref, bn);
         first = 0;
@@ -469,38 +514,38 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
       sb_printf(&b, ");\n");
     }
   } else {
-    for (int a = 0; a < rows->n; a++)
-      for (int bb = 0; bb < cols->n; bb++) {
+    for (int a = 0; a < vr.n; a++)
+      for (int bb = 0; bb < vc.n; bb++) {
         /* distinct test leaves for this block */
         const expr *tls[64];
         int nt = 0;
         for (int i = 0; i < s->tab->njac; i++) {
           const expr *tl = s->tab->jac_test[i];
-          if (isconst[i] || tl->i0 != rows->func[a] || s->tab->jac_trial[i]->i0 != cols->func[bb]) continue;
+          if (isconst[i] || !same_block(&vr, a, tl) || !same_block(&vc, bb, s->tab->jac_trial[i])) continue;
           int found = 0;
           for (int t = 0; t < nt; t++) found |= tls[t] == tl;
           if (!found && nt < 64) tls[nt++] = tl;
         }
         if (!nt) continue;
-        sb_printf(&b, "    for (int j = 0; j < %d; ++j) {\n", cols->nloc[bb]);
+        sb_printf(&b, "    for (int j = 0; j < %d; ++j) {\n", vc.nloc[bb]);
         for (int t = 0; t < nt; t++) {
           sb_printf(&b, "      const double u%d = wq*(", t);
           int first = 1;
           for (int i = 0; i < s->tab->njac; i++) {
-            if (isconst[i] || s->tab->jac_test[i] != tls[t] || s->tab->jac_trial[i]->i0 != cols->func[bb]) continue;
+            if (isconst[i] || s->tab->jac_test[i] != tls[t] || !same_block(&vc, bb, s->tab->jac_trial[i])) continue;
             char bn[32];
-            basis_name(s->tab->jac_trial[i], cols->degree[bb], bn, sizeof bn);
+            basis_name(s->tab->jac_trial[i], vc.degree[bb], bn, sizeof bn);
             expr_codegen_ref(&tape, tape.root[i], "t", leafname, &lc, ref, sizeof ref);
             sb_printf(&b, "%s%s*%s[j]", first ? "" : " + ", ref, bn);
             first = 0;
           }
           sb_printf(&b, ");\n");
         }
-        sb_printf(&b, "      double *Aj = A + %d + j;\n", cols->off[bb]);
-        sb_printf(&b, "      for (int i = 0; i < %d; ++i) Aj[(%d + i)*%d] += ", rows->nloc[a], rows->off[a], cols->size);
+        sb_printf(&b, "      double *Aj = A + %d + j*%d;\n", vc.off[bb], vc.stride[bb]);
+        sb_printf(&b, "      for (int i = 0; i < %d; ++i) Aj[(%d + i*%d)*%d] += ", vr.nloc[a], vr.off[a], vr.stride[a], vc.size);
         for (int t = 0; t < nt; t++) {
           char bn[32];
-          basis_name(tls[t], rows->degree[a], bn, sizeof bn);
+          basis_name(tls[t], vr.degree[a], bn, sizeof bn);
           sb_printf(&b, "%s%s[i]*u%d", t ? " + " : "", bn, t);
         }
         sb_printf(&b, ";\n    }\n");

@@ -35,12 +35,16 @@ typedef struct {
 } kernel_pcache;
 #define KER_PCACHE_MAX ((size_t)1 << 24) /* doubles (128 MB) per kernel at most */
 
+/* the fields of an element tensor's rows (or columns): field i has nloc[i] local dofs from
+ * off[i]; a vector field of bs[i] components (0 or 1: scalar) interlaces them, local dof
+ * off + k*bs + j being component j at node k (fem.h) */
 typedef struct {
   int n;
   int func[KER_MAXFIELD];
   int degree[KER_MAXFIELD];
   int nloc[KER_MAXFIELD];
   int off[KER_MAXFIELD];
+  int bs[KER_MAXFIELD];
   int size;
 } field_layout;
 
@@ -51,6 +55,7 @@ typedef struct {
   int ncoef;
   int coef_func[KER_MAXCOEF];
   int coef_degree[KER_MAXCOEF];
+  int coef_ncomp[KER_MAXCOEF]; /* components (interlaced in W) */
   int coef_off[KER_MAXCOEF];
   int wsize;
   double compile_ms;

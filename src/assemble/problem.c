@@ -26,6 +26,7 @@ typedef struct {
 
 typedef struct {
   int field;          /* row/column field */
+  int comp;           /* its component (vector fields) */
   int src;            /* the boundary condition it comes from (form term index) */
   expr_tape tape;     /* roots: a (coefficient of u), r (rest): u = -r/a */
   expr *g;            /* the value -r/a (controls differentiate it) */
@@ -105,9 +106,10 @@ static int layout(lg_env *env, lg_mesh *lm, int n, const int *funcs, field_layou
     if (!fi) { lg_seterr(env, "bad %s function", what); return 1; }
     l->func[i] = funcs[i];
     l->degree[i] = fi->degree;
-    dm[i] = lg_mesh_dofmap(env, lm, fi->degree);
+    dm[i] = lg_mesh_dofmap(env, lm, fi->degree, fi->ncomp);
     if (!dm[i]) return 1;
     l->nloc[i] = dm[i]->nloc;
+    l->bs[i] = dm[i]->bs;
     l->off[i] = l->size;
     l->size += dm[i]->nloc;
     glob[i + 1] = glob[i] + dm[i]->ndof;
@@ -200,7 +202,7 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
 
 static int setup_bcs(lg_env *env, lg_problem *p, const form *bc, const int *test, const int *unk, int nf) {
   if (!bc || !bc->n) return 0;
-  p->bct = calloc((size_t)bc->n * (size_t)nf + 1, sizeof(bc_term));
+  p->bct = calloc((size_t)bc->n * (size_t)nf * FEM_MAXBS + 1, sizeof(bc_term)); /* a term per test leaf: field and component */
   if (!p->bct) { lg_seterr(env, "out of memory"); return 1; }
   long cap = 0;
   for (int i = 0; i < bc->n; i++) {
@@ -232,7 +234,7 @@ static int setup_bcs(lg_env *env, lg_problem *p, const form *bc, const int *test
       expr *r = tab.res[j];
       /* r = a*u + rest with u the unknown paired with this test function */
       unsigned char zero3[3] = {0, 0, 0};
-      expr *u = expr_field(env->c, unk[a], 0, zero3);
+      expr *u = expr_field(env->c, unk[a], tl->i1, zero3);
       expr *ca = expr_diff(env->c, r, u);
       expr *z = expr_num(env->c, 0);
       expr *rest = expr_subs(env->c, r, 1, &u, &z);
@@ -255,6 +257,7 @@ static int setup_bcs(lg_env *env, lg_problem *p, const form *bc, const int *test
       }
       bc_term *bt = &p->bct[p->nbct++];
       bt->field = a;
+      bt->comp = tl->i1;
       bt->src = i;
       expr *roots[2] = {ca, rest};
       bt->g = expr_div(env->c, expr_neg(env->c, rest), ca);
@@ -288,22 +291,7 @@ static int bc_leaf(void *ud, const expr *e, double *val) {
   if (!fi || fi->kind != FK_DISCRETE || !fi->user) { lg_seterr(b->env, "essential_bc: %s has no value here", fi ? fi->name : "?"); return 1; }
   lg_function *fn = fi->user;
   if (fn->mesh != b->p->lm) { lg_seterr(b->env, "essential_bc: %s lives on a different mesh", fi->name); return 1; }
-  double v[FEM_MAXLOC], g[FEM_MAXLOC * 3];
-  lagrange_eval(&fn->dm->el, b->xi, v, g);
-  const int *cd = fn->dm->cell_dofs + (size_t)b->cell * fn->dm->nloc;
-  int dir = -1, dim = b->p->lm->m->dim;
-  for (int d = 0; d < EXPR_MAXDIM; d++)
-    if (e->alpha[d]) dir = d;
-  double s = 0;
-  for (int i = 0; i < fn->dm->nloc; i++) {
-    double phi = v[i];
-    if (dir >= 0) {
-      phi = 0;
-      for (int k = 0; k < dim; k++) phi += g[i * dim + k] * b->K[k][dir];
-    }
-    s += fn->x[cd[i]] * phi;
-  }
-  *val = s;
+  *val = lg_eval_leaf(fn->dm, fn->x, b->cell, b->xi, b->K, e);
   return 0;
 }
 
@@ -337,8 +325,8 @@ static int compute_bcs(lg_env *env, lg_problem *p) {
       simplex_jacobian(m, c, J, pt.K);
       pt.cell = c;
       for (int kk = 0; kk < dm->el.nfacet_dofs; kk++) {
-        int k = dm->el.facet_dofs[f][kk];
-        memcpy(pt.xi, dm->el.node + 3 * k, sizeof pt.xi);
+        int k = dm->el.facet_dofs[f][kk] * dm->bs + bt->comp; /* the local dof */
+        memcpy(pt.xi, dofmap_node_ref(dm, k), sizeof pt.xi);
         dofmap_node_coords(dm, c, k, pt.x);
         double out[2];
         if (expr_tape_eval(&bt->tape, expr_param_values(env->c), bc_leaf, &pt, w, out)) { free(w); free(src); return 1; }
@@ -461,6 +449,46 @@ static void sort_row(PetscInt *v, size_t n) {
  * element matrices straight into the matrix (no MatSetValues search, no COO scatter). This
  * replaced MatSetPreallocationCOO, which sorted every (row, column) pair: 70% of the setup of
  * a P1 Laplacian on 1.5 M tetrahedra (issue 11). */
+/* the block size of the matrix: the number of components when every field has the same
+ * (an elasticity problem: 2 or 3), else 1 (Taylor-Hood, scalar systems) */
+static int matrix_block_size(const lg_problem *p) {
+  int bs = p->cdm[0]->bs;
+  for (int a = 0; a < p->cols.n; a++)
+    if (p->cdm[a]->bs != bs || p->rdm[a]->bs != bs) return 1;
+  return p->rows.n == p->cols.n ? bs : 1;
+}
+
+/* a single vector field of the mesh's dimension (elasticity): the rigid body modes as the
+ * near null space, which PETSc's GAMG needs to coarsen it well (it is ignored by direct
+ * solvers and unpreconditioned Krylov methods) */
+static int set_near_nullspace(lg_env *env, lg_problem *p) {
+  int dim = p->lm->m->dim;
+  if (p->cols.n != 1 || p->rows.n != 1 || matrix_block_size(p) != dim || dim < 2 || p->cdm[0]->degree < 1) return 0;
+  const dofmap *dm = p->cdm[0];
+  Vec X;
+  PCHK(VecCreateSeq(PETSC_COMM_SELF, p->N, &X), "VecCreateSeq");
+  PCHK(VecSetBlockSize(X, dim), "VecSetBlockSize");
+  PetscScalar *x;
+  PCHK(VecGetArray(X, &x), "VecGetArray");
+  mesh *m = p->lm->m;
+  for (int c = 0; c < m->ncell; c++) {
+    const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
+    for (int k = 0; k < dm->el.nloc; k++) {
+      double xyz[3];
+      dofmap_node_coords(dm, c, k * dim, xyz);
+      for (int j = 0; j < dim; j++) x[cd[k * dim + j]] = xyz[j];
+    }
+  }
+  PCHK(VecRestoreArray(X, &x), "VecRestoreArray");
+  MatNullSpace ns;
+  PetscErrorCode ierr = MatNullSpaceCreateRigidBody(X, &ns);
+  if (!ierr) ierr = MatSetNearNullSpace(p->A, ns);
+  if (!ierr) ierr = MatNullSpaceDestroy(&ns);
+  VecDestroy(&X);
+  if (ierr) return petsc_fail(env, ierr, "the rigid body modes (near null space)");
+  return 0;
+}
+
 static int setup_matrix(lg_env *env, lg_problem *p) {
   int N = p->N, rs = p->rows.size, cs = p->cols.size;
   PetscCount n = N;
@@ -472,7 +500,7 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
   }
   p->ncoo = n;
   /* the element rows of each matrix row: (entry of the row's first column, cell) pairs */
-  PetscInt rg[KER_MAXFIELD * FEM_MAXLOC], cg[KER_MAXFIELD * FEM_MAXLOC];
+  PetscInt rg[KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS], cg[KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS];
   size_t *start = calloc((size_t)N + 2, sizeof(size_t));
   int *mark = malloc(sizeof(int) * ((size_t)N + 1));
   if (!start || !mark) { free(start); free(mark); lg_seterr(env, "out of memory"); return 1; }
@@ -562,6 +590,8 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
   if (!ierr) ierr = MatSetSizes(p->A, p->N, p->N, p->N, p->N);
   if (!ierr) ierr = MatSetType(p->A, MATSEQAIJ);
   if (!ierr && p->prefix[0]) ierr = MatSetOptionsPrefix(p->A, p->prefix);
+  int bs = matrix_block_size(p);
+  if (!ierr && bs > 1) ierr = MatSetBlockSize(p->A, bs);
   if (!ierr) ierr = MatSeqAIJSetPreallocationCSR(p->A, ia, ja, NULL);
   /* the value array must be in this pattern's order: checked once */
   if (!ierr) {
@@ -581,7 +611,7 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
   PCHK(MatSetOption(p->A, MAT_KEEP_NONZERO_PATTERN, PETSC_TRUE), "MatSetOption");
   PCHK(MatSetOption(p->A, MAT_NEW_NONZERO_LOCATION_ERR, PETSC_TRUE), "MatSetOption");
   PCHK(MatCreateVecs(p->A, &p->x, &p->b), "vector creation");
-  return 0;
+  return set_near_nullspace(env, p);
 }
 
 lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
@@ -824,7 +854,7 @@ static int make_outputs(lg_env *env, lg_problem *p, const double *x, lg_function
     expr_func_info *fi = expr_func_get(env->c, p->cols.func[a]);
     char nm[80];
     snprintf(nm, sizeof nm, "%sh", fi->name);
-    out[a] = lg_function_new(env, p->lm, p->cols.degree[a], nm);
+    out[a] = lg_function_new(env, p->lm, p->cols.degree[a], p->cdm[a]->bs, nm);
     if (!out[a]) {
       for (int b = 0; b < a; b++) lg_function_free(out[b]);
       return 1;
@@ -1058,6 +1088,12 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
     PCHK(KSPSetType(ksp, KSPPREONLY), "KSPSetType");
     PCHK(KSPGetPC(ksp, &pc), "KSPGetPC");
     if (default_lu(env, p, pc)) return 1;
+    /* full Newton steps by default, as FEniCS and FEniCSx take (-snes_linesearch_type bt
+     * restores PETSc's backtracking): on a Neo-Hookean beam the backtracking search cut
+     * every step to a tenth after the first full step raised |F| (47 iterations instead of 3) */
+    SNESLineSearch ls;
+    PCHK(SNESGetLineSearch(p->snes, &ls), "SNESGetLineSearch");
+    PCHK(SNESLineSearchSetType(ls, SNESLINESEARCHBASIC), "SNESLineSearchSetType");
     PCHK(SNESSetFromOptions(p->snes), "SNESSetFromOptions");
   }
   static PetscReal hist[128];
@@ -1243,7 +1279,7 @@ int lg_problem_bc_derivative(lg_env *env, lg_problem *p, int fid, int param, int
     bc_pt pt = {env, p, cell, {0, 0, 0}, {0, 0, 0}, {{0}}};
     double J[3][3], d;
     simplex_jacobian(m, cell, J, pt.K);
-    memcpy(pt.xi, dm->el.node + 3 * k, sizeof pt.xi);
+    memcpy(pt.xi, dofmap_node_ref(dm, k), sizeof pt.xi);
     dofmap_node_coords(dm, cell, k, pt.x);
     if (expr_tape_eval(&p->bcd[slot].tape[t], expr_param_values(env->c), bc_leaf, &pt, w, &d)) {
       free(r); free(c); free(v); free(w);

@@ -907,10 +907,17 @@ expr *expr_div_op(expr_ctx *c, expr *a) {
   if (!a) return NULL;
   int rank;
   int n = expr_shape(a, &rank);
+  if (rank == 2 && n >= 1 && n <= EXPR_MAXDIM) {
+    /* a matrix: the divergence of each row, (div A)_i = d A_ij / d x_j */
+    expr *rows[EXPR_MAXDIM];
+    for (int i = 0; i < n; i++)
+      if (!(rows[i] = expr_div_op(c, a->ch[i]))) return NULL;
+    return expr_list(c, n, rows);
+  }
   if (rank != 1 || n != c->dim) {
     char s[64];
     expr_describe_shape(a, s, sizeof s);
-    expr_set_error(c, "div takes a %d-vector, got %s", c->dim, s);
+    expr_set_error(c, "div takes a %d-vector or a matrix of %d columns, got %s", c->dim, c->dim, s);
     return NULL;
   }
   expr *t[EXPR_MAXDIM];

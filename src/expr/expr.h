@@ -133,6 +133,19 @@ expr *expr_grad(expr_ctx *c, expr *a);             /* appends an index of size d
 expr *expr_div_op(expr_ctx *c, expr *a);           /* divergence of a vector */
 expr *expr_dx(expr_ctx *c, expr *a, int dir);      /* spatial derivative, pushed to leaves */
 
+/* tensor algebra (tensor.c), shapes checked (a message and NULL otherwise): matrices are
+ * lists of rows, 1x1 to 3x3 */
+expr *expr_transpose(expr_ctx *c, expr *a);
+expr *expr_sym(expr_ctx *c, expr *a);   /* (A + A^T)/2 */
+expr *expr_skew(expr_ctx *c, expr *a);  /* (A - A^T)/2 */
+expr *expr_trace(expr_ctx *c, expr *a);
+expr *expr_det(expr_ctx *c, expr *a);
+expr *expr_inv(expr_ctx *c, expr *a);
+expr *expr_identity(expr_ctx *c, int n);
+expr *expr_outer(expr_ctx *c, expr *a, expr *b); /* a_i b_j */
+expr *expr_cross(expr_ctx *c, expr *a, expr *b); /* 3-vectors; two 2-vectors give a scalar */
+expr *expr_dev(expr_ctx *c, expr *a);   /* A - tr(A)/n I */
+
 /* shape: 0 for scalars, else the list length; *rank the nesting depth */
 int expr_shape(const expr *e, int *rank);
 void expr_describe_shape(const expr *e, char *buf, size_t len);

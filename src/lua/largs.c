@@ -77,6 +77,31 @@ void push_expr(lua_State *L, expr *e, int ndeps, const int *deps, const char *fn
   u->e = e;
 }
 
+expr *symbol_expr(lg_env *env, int fid) {
+  unsigned char z[3] = {0, 0, 0};
+  expr_func_info *fi = expr_func_get(env->c, fid);
+  int n = fi && fi->ncomp > 1 ? fi->ncomp : 1;
+  if (n == 1) return expr_field(env->c, fid, 0, z);
+  expr *c[FEM_MAXBS];
+  for (int j = 0; j < n && j < FEM_MAXBS; j++) c[j] = expr_field(env->c, fid, j, z);
+  return expr_list(env->c, n, c);
+}
+
+int symbol_func(lg_env *env, expr *e) {
+  if (!e) return -1;
+  if (e->kind == E_FIELD) {
+    expr_func_info *fi = expr_func_get(env->c, e->i0);
+    return !e->order && e->i1 == 0 && fi && fi->ncomp <= 1 ? e->i0 : -1;
+  }
+  if (e->kind != E_LIST || e->n < 2 || e->ch[0]->kind != E_FIELD) return -1;
+  int f = e->ch[0]->i0;
+  expr_func_info *fi = expr_func_get(env->c, f);
+  if (!fi || fi->ncomp != e->n) return -1;
+  for (int j = 0; j < e->n; j++)
+    if (e->ch[j]->kind != E_FIELD || e->ch[j]->i0 != f || e->ch[j]->i1 != j || e->ch[j]->order) return -1;
+  return f;
+}
+
 static expr *to_expr_depth(lua_State *L, int idx, int *ok, int depth);
 
 static expr *table_to_list(lua_State *L, int idx, int *ok, int depth) {
@@ -104,10 +129,7 @@ static expr *to_expr_depth(lua_State *L, int idx, int *ok, int depth) {
   ud_expr *ue = luaL_testudata(L, idx, MT_EXPR);
   if (ue) return ue->e;
   ud_func *uf = luaL_testudata(L, idx, MT_FUNC);
-  if (uf) {
-    unsigned char z[3] = {0, 0, 0};
-    return expr_field(env->c, uf->f->fid, 0, z);
-  }
+  if (uf) return symbol_expr(env, uf->f->fid);
   if (lua_type(L, idx) == LUA_TTABLE) return table_to_list(L, lua_absindex(L, idx), ok, depth);
   *ok = 0;
   return NULL;

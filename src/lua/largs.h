@@ -27,7 +27,7 @@
 
 typedef struct { lg_mesh *lm; } ud_mesh;
 typedef struct { region r; } ud_region;
-typedef struct { int degree; } ud_basis;
+typedef struct { int degree, ncomp; } ud_basis; /* ncomp 1: scalar */
 typedef struct { expr *e; } ud_expr;
 typedef struct { lg_function *f; } ud_func;
 typedef struct { form *f; } ud_form;
@@ -44,6 +44,10 @@ int exprerror(lua_State *L, const char *fn);
 void *new_ud(lua_State *L, size_t size, const char *mt, int ndeps, const int *deps);
 void push_expr(lua_State *L, expr *e, int ndeps, const int *deps, const char *fn);
 expr *to_expr_opt(lua_State *L, int idx, int *ok);
+/* the expression of a function symbol (unknown, test, discrete function): its leaf, or the
+ * list of its components for a vector; and back: the function id of such an expression, or -1 */
+expr *symbol_expr(lg_env *env, int fid);
+int symbol_func(lg_env *env, expr *e);
 /* an expression argument, resolved (check_expr) or possibly pending (check_expr_raw, for
  * the + - * that build sums term by term) */
 expr *check_expr(lua_State *L, int idx, const char *fn);

@@ -171,17 +171,35 @@ static int form_tostring(lua_State *L) {
 }
 
 static int l_lagrange(lua_State *L) {
+  if (lua_gettop(L) > 1) return luaL_error(L, "lg.lagrange: takes one argument (the degree), got %d", lua_gettop(L));
   lua_Integer p = luaL_checkinteger(L, 1);
   if (p < 0 || p > 3)
     return luaL_error(L, "lg.lagrange: argument 1 must be a degree 0 (piecewise constants), 1, 2 or 3, got %I", p);
   ud_basis *u = new_ud(L, sizeof *u, MT_BASIS, 0, NULL);
   u->degree = (int)p;
+  u->ncomp = 1;
   return 1;
 }
 
 static int basis_tostring(lua_State *L) {
   ud_basis *u = luaL_checkudata(L, 1, MT_BASIS);
-  lua_pushfstring(L, "Lagrange P%d", u->degree);
+  if (u->ncomp > 1) lua_pushfstring(L, "Lagrange P%d, %d components", u->degree, u->ncomp);
+  else lua_pushfstring(L, "Lagrange P%d", u->degree);
+  return 1;
+}
+
+/* lg.vector(basis[, n]): n components (default: the dimension of the last mesh made) of a
+ * scalar basis, interlaced in one dof map */
+static int l_vector(lua_State *L) {
+  const char *fn = "lg.vector";
+  ud_basis *b = luaL_testudata(L, 1, MT_BASIS);
+  if (!b) return typeerror(L, fn, 1, "a scalar basis (lg.lagrange(p))");
+  if (b->ncomp > 1) return luaL_error(L, "%s: argument 1 is already a vector basis (%d components)", fn, b->ncomp);
+  if (lua_gettop(L) > 2) return luaL_error(L, "%s: takes a basis and a number of components, got %d arguments", fn, lua_gettop(L));
+  int n = lua_isnoneornil(L, 2) ? expr_dim(get_env(L)->c) : check_int_arg(L, 2, 1, FEM_MAXBS, fn);
+  ud_basis *u = new_ud(L, sizeof *u, MT_BASIS, 0, NULL);
+  u->degree = b->degree;
+  u->ncomp = n;
   return 1;
 }
 
@@ -189,11 +207,11 @@ static int new_symbol(lua_State *L, func_kind kind, const char *fn) {
   ud_basis *b = luaL_testudata(L, 1, MT_BASIS);
   if (!b) return typeerror(L, fn, 1, "a basis (lg.lagrange(p))");
   const char *name = luaL_optstring(L, 2, kind == FK_TEST ? "v" : "u");
+  if (lua_gettop(L) > 2) return luaL_error(L, "%s: takes a basis and a name, got %d arguments", fn, lua_gettop(L));
   lg_env *env = get_env(L);
-  int id = expr_func_new(env->c, kind, name, b->degree, 1, NULL);
+  int id = expr_func_new(env->c, kind, name, b->degree, b->ncomp, NULL);
   if (id < 0) return luaL_error(L, "%s: out of memory", fn);
-  unsigned char z[3] = {0, 0, 0};
-  push_expr(L, expr_field(env->c, id, 0, z), 0, NULL, fn);
+  push_expr(L, symbol_expr(env, id), 0, NULL, fn);
   return 1;
 }
 
@@ -290,6 +308,67 @@ static int l_diff(lua_State *L) {
   expr *v = check_expr(L, 2, "lg.diff");
   int deps[2] = {1, 2};
   push_expr(L, expr_diff(get_env(L)->c, a, v), 2, deps, "lg.diff");
+  return 1;
+}
+
+/* tensor algebra (src/expr/tensor.c) */
+#define TENSOR1(NAME, FN)                                                  \
+  static int l_##NAME(lua_State *L) {                                      \
+    if (lua_gettop(L) != 1) return luaL_error(L, "lg." #NAME ": takes one matrix, got %d arguments", lua_gettop(L)); \
+    expr *a = check_expr(L, 1, "lg." #NAME);                               \
+    int deps[1] = {1};                                                     \
+    push_expr(L, FN(get_env(L)->c, a), 1, deps, "lg." #NAME);              \
+    return 1;                                                              \
+  }
+TENSOR1(transpose, expr_transpose)
+TENSOR1(sym, expr_sym)
+TENSOR1(skew, expr_skew)
+TENSOR1(tr, expr_trace)
+TENSOR1(det, expr_det)
+TENSOR1(inv, expr_inv)
+TENSOR1(dev, expr_dev)
+
+static int l_outer(lua_State *L) { return arith(L, expr_outer, "lg.outer"); }
+static int l_cross(lua_State *L) { return arith(L, expr_cross, "lg.cross"); }
+
+static int l_identity(lua_State *L) {
+  int n = lua_isnoneornil(L, 1) ? expr_dim(get_env(L)->c) : check_int_arg(L, 1, 1, 3, "lg.identity");
+  push_expr(L, expr_identity(get_env(L)->c, n), 0, NULL, "lg.identity");
+  return 1;
+}
+
+/* lg.derivative(F, u, v): the Gateaux derivative of F (an expression or a form) at u in the
+ * direction v, d/dt F(u + t v) at t = 0; u an unknown or discrete function (scalar or
+ * vector), v a function of the same shape (a test function for a residual) */
+static int l_derivative(lua_State *L) {
+  const char *fn = "lg.derivative";
+  lg_env *env = get_env(L);
+  int fu = -1, fv = -1;
+  int ok;
+  expr *ue = to_expr_opt(L, 2, &ok);
+  if (ok && ue) fu = symbol_func(env, expr_canon(env->c, ue));
+  if (fu < 0) return typeerror(L, fn, 2, "an unknown, test or discrete function (lg.unknown, lg.test, lg.function)");
+  expr *ve = to_expr_opt(L, 3, &ok);
+  if (ok && ve) fv = symbol_func(env, expr_canon(env->c, ve));
+  if (fv < 0) return typeerror(L, fn, 3, "a function symbol of the same shape as argument 2 (lg.test, lg.unknown)");
+  expr_func_info *iu = expr_func_get(env->c, fu), *iv = expr_func_get(env->c, fv);
+  if ((iu->ncomp > 1 ? iu->ncomp : 1) != (iv->ncomp > 1 ? iv->ncomp : 1))
+    return luaL_error(L, "%s: argument 3 has %d components, argument 2 %d", fn, iv->ncomp > 1 ? iv->ncomp : 1,
+                      iu->ncomp > 1 ? iu->ncomp : 1);
+  if (lua_gettop(L) > 3) return luaL_error(L, "%s: takes 3 arguments (F, u, v), got %d", fn, lua_gettop(L));
+  ud_form *uf = luaL_testudata(L, 1, MT_FORM);
+  if (uf) {
+    form *r = form_variation(env->c, uf->f, 1, &fu, &fv);
+    if (!r) return exprerror(L, fn);
+    if (r->n == 0) { form_free(r); return luaL_error(L, "%s: the form does not depend on %s", fn, iu->name); }
+    int deps[3] = {1, 2, 3};
+    ud_form *out = new_ud(L, sizeof *out, MT_FORM, 3, deps);
+    out->f = r;
+    return 1;
+  }
+  expr *F = check_expr(L, 1, fn);
+  int deps[3] = {1, 2, 3};
+  push_expr(L, form_directional(env->c, F, fu, fv), 3, deps, fn);
   return 1;
 }
 
@@ -399,10 +478,12 @@ void lg_lua_expr_register(lua_State *L) {
 }
 
 const luaL_Reg lg_expr_lib[] = {
-    {"lagrange", l_lagrange}, {"unknown", l_unknown}, {"test", l_test}, {"coord", l_coord},
+    {"lagrange", l_lagrange}, {"vector", l_vector}, {"unknown", l_unknown}, {"test", l_test}, {"coord", l_coord},
     {"normal", l_normal}, {"parameter", l_parameter}, {"sin", l_sin}, {"cos", l_cos}, {"tan", l_tan},
     {"exp", l_exp}, {"log", l_log}, {"sqrt", l_sqrt}, {"abs", l_abs}, {"tanh", l_tanh}, {"sinh", l_sinh},
     {"cosh", l_cosh}, {"atan", l_atan}, {"asin", l_asin}, {"acos", l_acos}, {"sign", l_sign},
     {"pow", l_pow}, {"grad", l_grad}, {"div", l_div}, {"dot", l_dot}, {"inner", l_inner}, {"dx", l_dx},
     {"diff", l_diff}, {"list", l_list}, {"integral", l_integral}, {"essential_bc", l_essential_bc},
-    {"integrate", l_integrate}, {NULL, NULL}};
+    {"integrate", l_integrate}, {"transpose", l_transpose}, {"sym", l_sym}, {"skew", l_skew}, {"tr", l_tr},
+    {"det", l_det}, {"inv", l_inv}, {"dev", l_dev}, {"outer", l_outer}, {"cross", l_cross}, {"identity", l_identity},
+    {"derivative", l_derivative}, {NULL, NULL}};

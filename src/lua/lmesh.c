@@ -609,7 +609,17 @@ static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, in
       } else if (uf) {
         if (uf->f->mesh != lm) return luaL_error(L, "%s: field '%s' lives on a different mesh", fn, name);
         /* vertex dofs come first in every Lagrange numbering; P0 dofs are the cells' */
-        fl[nf] = (mesh_field){name, 1, uf->f->dm->degree == 0, uf->f->x};
+        int bs = uf->f->dm->bs, oncells = uf->f->dm->degree == 0;
+        if (bs == 1) fl[nf] = (mesh_field){name, 1, oncells, uf->f->x};
+        else {
+          /* a vector: three components per point as ParaView expects (z = 0 in 2D) */
+          size_t n = oncells ? (size_t)m->ncell : (size_t)m->nvert;
+          double *v = lua_newuserdatauv(L, sizeof(double) * 3 * n + 1, 0);
+          lua_rawseti(L, anchor, nf + 1);
+          for (size_t i = 0; i < n; i++)
+            for (int j = 0; j < 3; j++) v[3 * i + j] = j < bs ? uf->f->x[(size_t)bs * i + (size_t)j] : 0;
+          fl[nf] = (mesh_field){name, 3, oncells, v};
+        }
       } else if (lua_istable(L, -1)) {
         lua_Integer n = luaL_len(L, -1);
         if (n != m->ncell && n != m->nvert)

@@ -22,13 +22,13 @@ static int l_control(lua_State *L) {
   ud_mesh *um = check_mesh(L, 2, fn);
   const char *name = luaL_optstring(L, 3, "m");
   lg_env *env = get_env(L);
-  lg_function *f = lg_function_new(env, um->lm, b->degree, name);
+  lg_function *f = lg_function_new(env, um->lm, b->degree, b->ncomp, name);
   if (!f) return lgerror(L, fn, env);
   push_function(L, f, 2);
   if (!lua_isnoneornil(L, 4)) {
     ud_func *g = luaL_testudata(L, 4, MT_FUNC);
     if (g) {
-      if (g->f->mesh != f->mesh || g->f->degree != f->degree)
+      if (g->f->dm != f->dm)
         return luaL_error(L, "%s: argument 4 must be a discrete function of the same basis and mesh", fn);
       memcpy(f->x, g->f->x, sizeof(double) * (size_t)f->dm->ndof);
     } else {
@@ -163,7 +163,7 @@ static void set_control(lua_State *L, lg_reduced *rf, int i, int idx, const char
   ud_func *g = luaL_testudata(L, idx, MT_FUNC);
   if (g) {
     if (g->f == c->f) { lg_reduced_changed(rf); return; }
-    if (g->f->mesh != c->f->mesh || g->f->degree != c->f->degree)
+    if (g->f->dm != c->f->dm)
       luaL_error(L, "%s: control %d must be given as a discrete function of its own basis and mesh (P%d)", fn, i + 1, c->f->degree);
     if (lg_check_finite(env, g->f->dm, g->f->x, "the control")) lgerror(L, fn, env);
     memcpy(c->f->x, g->f->x, sizeof(double) * (size_t)c->f->dm->ndof);
@@ -234,7 +234,7 @@ static void read_direction(lua_State *L, lg_reduced *rf, int idx, double **dm, c
     } else {
       ud_func *df = luaL_testudata(L, k, MT_FUNC);
       if (df) {
-        if (df->f->mesh != c->f->mesh || df->f->degree != c->f->degree)
+        if (df->f->dm != c->f->dm)
           luaL_error(L, "%s: the direction of control %d must be a discrete function of its basis and mesh (P%d)", fn, i + 1,
                      c->f->degree);
         memcpy(dm[i], df->f->x, sizeof(double) * (size_t)n);
@@ -242,7 +242,7 @@ static void read_direction(lua_State *L, lg_reduced *rf, int idx, double **dm, c
         int ok;
         expr *e = to_expr_opt(L, k, &ok);
         if (!ok) typeerror(L, fn, k, "a direction: a discrete function, an expression or a number");
-        lg_function *t = lg_function_new(env, c->f->mesh, c->f->degree, "dm");
+        lg_function *t = lg_function_new(env, c->f->mesh, c->f->degree, c->f->dm->bs, "dm");
         if (!t) lgerror(L, fn, env);
         int rc = lg_interpolate(env, t, e);
         if (!rc) memcpy(dm[i], t->x, sizeof(double) * (size_t)n);
@@ -295,7 +295,7 @@ static int push_riesz(lua_State *L, lg_reduced *rf, double **g, int riesz, const
     expr_func_info *fi = expr_func_get(env->c, c->f->fid);
     char nm[80];
     snprintf(nm, sizeof nm, "%s_%s", prefix, fi ? fi->name : "m");
-    lg_function *gf = lg_function_new(env, c->f->mesh, c->f->degree, nm);
+    lg_function *gf = lg_function_new(env, c->f->mesh, c->f->degree, c->f->dm->bs, nm);
     if (!gf) return lgerror(L, fn, env);
     push_functions_of(L, 1, &gf, 1);
     if (lg_reduced_riesz(env, rf, i, riesz, g[i], gf->x)) return lgerror(L, fn, env);
@@ -369,7 +369,7 @@ static int reduced_state(lua_State *L) {
     expr_func_info *info = expr_func_get(env->c, fi[a].unknown);
     char nm[80];
     snprintf(nm, sizeof nm, "%sh", info ? info->name : "u");
-    out[a] = lg_function_new(env, lg_problem_mesh(p), fi[a].dm->degree, nm);
+    out[a] = lg_function_new(env, lg_problem_mesh(p), fi[a].dm->degree, fi[a].dm->bs, nm);
     if (!out[a]) return lgerror(L, fn, env);
     memcpy(out[a]->x, x + fi[a].offset, sizeof(double) * (size_t)fi[a].dm->ndof);
   }
@@ -519,7 +519,7 @@ static const double *bound_values(lua_State *L, lg_reduced *rf, int i, int idx, 
   double *v = lua_newuserdatauv(L, sizeof(double) * ((size_t)n + 1), 0);
   ud_func *uf = luaL_testudata(L, idx, MT_FUNC);
   if (uf) {
-    if (c->kind != LG_CONTROL_FIELD || uf->f->mesh != c->f->mesh || uf->f->degree != c->f->degree)
+    if (c->kind != LG_CONTROL_FIELD || uf->f->dm != c->f->dm)
       luaL_error(L, "%s: the %s bound of control %d must be a number or a discrete function of the control's basis and mesh", fn,
                  which, i + 1);
     memcpy(v, uf->f->x, sizeof(double) * (size_t)n);
@@ -738,7 +738,7 @@ static int l_kkt_problem(lua_State *L) {
                           expr_func_get(env->c, unk[i])->name);
   for (int a = 0; a < ns; a++) {
     const expr_func_info *s = expr_func_get(env->c, unk[a]), *l = expr_func_get(env->c, unk[ns + a]);
-    if (s->degree != l->degree)
+    if (s->degree != l->degree || s->ncomp != l->ncomp)
       return luaL_error(L, "%s: the adjoint %s must use the basis of its state %s (P%d), got P%d", fn, l->name, s->name, s->degree,
                         l->degree);
   }
@@ -767,7 +767,7 @@ static int l_kkt_problem(lua_State *L) {
     const expr_func_info *fi = expr_func_get(env->c, unk[i]);
     char nm[80];
     snprintf(nm, sizeof nm, "%.60s_test", fi->name);
-    if ((test[i] = expr_func_new(env->c, FK_TEST, nm, fi->degree, 1, NULL)) < 0) return luaL_error(L, "%s: out of memory", fn);
+    if ((test[i] = expr_func_new(env->c, FK_TEST, nm, fi->degree, fi->ncomp, NULL)) < 0) return luaL_error(L, "%s: out of memory", fn);
   }
   lua_getfield(L, 1, "bc");
   int bc_idx = lua_gettop(L);
@@ -795,7 +795,14 @@ static int l_kkt_problem(lua_State *L) {
       expr_func_info *fi = expr_func_get(env->c, leaf[k]->i0);
       if (fi && fi->kind == FK_TEST && leaf[k]->i0 != test[a]) e = form_replace_function(env->c, e, leaf[k]->i0, test[a]);
     }
-    expr *hom = expr_mul(env->c, expr_field(env->c, test[ns + a], 0, z), expr_field(env->c, unk[ns + a], 0, z));
+    /* the adjoint's homogeneous condition on the same boundary and components */
+    expr *hom = expr_num(env->c, 0), *tl[16];
+    int ntl = e ? expr_collect_fields(env->c, 1, &e, test[a], 16, tl) : 0;
+    unsigned comps = 0;
+    for (int k = 0; k < ntl && k < 16; k++) comps |= 1u << tl[k]->i1;
+    for (int j = 0; hom && j < FEM_MAXBS; j++)
+      if (comps & (1u << j))
+        hom = expr_add(env->c, hom, expr_mul(env->c, expr_field(env->c, test[ns + a], j, z), expr_field(env->c, unk[ns + a], j, z)));
     if (!e || !hom || form_add_term(bc, &t->reg, e, -1) || form_add_term(bc, &t->reg, hom, -1))
       snprintf(err, sizeof err, "%s", expr_error(env->c)[0] ? expr_error(env->c) : "out of memory");
   }

@@ -37,7 +37,7 @@ static int func_assign(lua_State *L) {
   ud_func *u = check_func(L, 1, "f:assign");
   ud_func *g = luaL_testudata(L, 2, MT_FUNC);
   if (g) {
-    if (g->f->mesh != u->f->mesh || g->f->degree != u->f->degree)
+    if (g->f->dm != u->f->dm)
       return luaL_error(L, "f:assign: argument 1 must be a discrete function of the same basis and mesh");
     memcpy(u->f->x, g->f->x, sizeof(double) * (size_t)u->f->dm->ndof);
     return 0;
@@ -74,13 +74,30 @@ static int func_index(lua_State *L) {
     if (!lua_isnil(L, -1)) return 1;
     return luaL_error(L, "discrete functions have no field '%s'", lua_tostring(L, 2));
   }
-  return luaL_error(L, "discrete functions are scalar: they cannot be indexed");
+  ud_func *u = check_func(L, 1, "index");
+  int n = u->f->dm->bs;
+  if (n == 1) return luaL_error(L, "a scalar discrete function cannot be indexed");
+  lua_Integer i = luaL_checkinteger(L, 2);
+  if (i < 1 || i > n) return luaL_error(L, "index %I out of range 1..%d", i, n);
+  unsigned char z[3] = {0, 0, 0};
+  int deps[1] = {1};
+  push_expr(L, expr_field(get_env(L)->c, u->f->fid, (int)i - 1, z), 1, deps, "index");
+  return 1;
+}
+
+static int func_len(lua_State *L) {
+  ud_func *u = check_func(L, 1, "#");
+  lua_pushinteger(L, u->f->dm->bs > 1 ? u->f->dm->bs : 0);
+  return 1;
 }
 
 static int func_tostring(lua_State *L) {
   ud_func *u = check_func(L, 1, "tostring");
   expr_func_info *fi = expr_func_get(get_env(L)->c, u->f->fid);
-  lua_pushfstring(L, "discrete function %s (P%d, %d dofs)", fi ? fi->name : "?", u->f->degree, u->f->dm->ndof);
+  if (u->f->dm->bs > 1)
+    lua_pushfstring(L, "discrete function %s (P%d, %d components, %d dofs)", fi ? fi->name : "?", u->f->degree, u->f->dm->bs,
+                    u->f->dm->ndof);
+  else lua_pushfstring(L, "discrete function %s (P%d, %d dofs)", fi ? fi->name : "?", u->f->degree, u->f->dm->ndof);
   return 1;
 }
 
@@ -92,7 +109,7 @@ static int l_interpolate(lua_State *L) {
   expr *e = check_expr(L, 3, fn);
   lg_env *env = get_env(L);
   const char *name = luaL_optstring(L, 4, "f");
-  lg_function *f = lg_function_new(env, um->lm, b->degree, name);
+  lg_function *f = lg_function_new(env, um->lm, b->degree, b->ncomp, name);
   if (!f) return lgerror(L, fn, env);
   push_function(L, f, 2);
   if (lg_interpolate(env, f, e)) return lgerror(L, fn, env);
@@ -105,7 +122,7 @@ static int l_function(lua_State *L) {
   if (!b) return typeerror(L, fn, 1, "a basis (lg.lagrange(p))");
   ud_mesh *um = check_mesh(L, 2, fn);
   lg_env *env = get_env(L);
-  lg_function *f = lg_function_new(env, um->lm, b->degree, luaL_optstring(L, 3, "f"));
+  lg_function *f = lg_function_new(env, um->lm, b->degree, b->ncomp, luaL_optstring(L, 3, "f"));
   if (!f) return lgerror(L, fn, env);
   push_function(L, f, 2);
   return 1;
@@ -122,16 +139,18 @@ int check_symbols(lua_State *L, int t, const char *key, func_kind kind, int *ids
     for (int i = 1; i <= n; i++) {
       lua_geti(L, -1, i);
       ud_expr *u = luaL_testudata(L, -1, MT_EXPR);
-      if (!u || expr_of(L, u)->kind != E_FIELD || u->e->order || expr_func_get(get_env(L)->c, u->e->i0)->kind != kind)
+      int f = u ? symbol_func(get_env(L), expr_of(L, u)) : -1;
+      if (f < 0 || expr_func_get(get_env(L)->c, f)->kind != kind)
         luaL_error(L, "%s: option '%s' entry %d must be %s", fn, key, i, what);
-      ids[i - 1] = u->e->i0;
+      ids[i - 1] = f;
       lua_pop(L, 1);
     }
   } else {
     ud_expr *u = luaL_testudata(L, -1, MT_EXPR);
-    if (!u || expr_of(L, u)->kind != E_FIELD || u->e->order || expr_func_get(get_env(L)->c, u->e->i0)->kind != kind)
+    int f = u ? symbol_func(get_env(L), expr_of(L, u)) : -1;
+    if (f < 0 || expr_func_get(get_env(L)->c, f)->kind != kind)
       luaL_error(L, "%s: option '%s' must be %s, got %s", fn, key, what, ty == LUA_TNIL ? "nothing" : luaL_typename(L, -1));
-    ids[0] = u->e->i0;
+    ids[0] = f;
     n = 1;
   }
   lua_pop(L, 1);
@@ -293,7 +312,7 @@ static int prob_sensitivity(lua_State *L) {
     expr_func_info *info = expr_func_get(env->c, fi[a].unknown);
     char nm[80];
     snprintf(nm, sizeof nm, "d%s_d%s", info ? info->name : "u", expr_param_name(env->c, ue->e->i0));
-    out[a] = lg_function_new(env, lg_problem_mesh(u->p), fi[a].dm->degree, nm);
+    out[a] = lg_function_new(env, lg_problem_mesh(u->p), fi[a].dm->degree, fi[a].dm->bs, nm);
     if (!out[a]) return lgerror(L, fn, env);
     memcpy(out[a]->x, du + fi[a].offset, sizeof(double) * (size_t)fi[a].dm->ndof);
   }
@@ -406,6 +425,7 @@ void lg_lua_problem_register(lua_State *L) {
   lua_pushcfunction(L, func_gc); lua_setfield(L, -2, "__gc");
   lua_pushcfunction(L, func_tostring); lua_setfield(L, -2, "__tostring");
   lua_pushcfunction(L, func_index); lua_setfield(L, -2, "__index");
+  lua_pushcfunction(L, func_len); lua_setfield(L, -2, "__len");
   lua_newtable(L);
   luaL_setfuncs(L, func_methods, 0);
   lua_setfield(L, -2, "methods");

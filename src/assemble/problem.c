@@ -8,6 +8,7 @@
 #include <math.h>
 #include <stdint.h>
 #include <petscsnes.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -1436,6 +1437,9 @@ int lg_petsc_init(int *argc, char ***argv) {
   if (ierr) return 1;
   /* errors come back as codes with messages; lugal reports them, PETSc does not print */
   PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
+  /* output into a closed pipe (lugal run.lua | head) ends the run quietly, as any Unix
+   * tool's does, not with PETSc's signal report and an MPI_ABORT */
+  signal(SIGPIPE, SIG_DFL);
   return 0;
 }
 

@@ -103,6 +103,7 @@ static int func_tostring(lua_State *L) {
 
 static int l_interpolate(lua_State *L) {
   const char *fn = "lg.interpolate";
+  if (lua_gettop(L) > 4) return luaL_error(L, "%s: takes a basis, a mesh, an expression and a name, got %d arguments", fn, lua_gettop(L));
   ud_basis *b = luaL_testudata(L, 1, MT_BASIS);
   if (!b) return typeerror(L, fn, 1, "a basis (lg.lagrange(p))");
   ud_mesh *um = check_mesh(L, 2, fn);
@@ -117,7 +118,8 @@ static int l_interpolate(lua_State *L) {
 }
 
 static int l_function(lua_State *L) {
-  const char *fn = "lg.function";
+  const char *fn = "lg.zero_function";
+  if (lua_gettop(L) > 3) return luaL_error(L, "%s: takes a basis, a mesh and a name, got %d arguments", fn, lua_gettop(L));
   ud_basis *b = luaL_testudata(L, 1, MT_BASIS);
   if (!b) return typeerror(L, fn, 1, "a basis (lg.lagrange(p))");
   ud_mesh *um = check_mesh(L, 2, fn);
@@ -437,6 +439,6 @@ void lg_lua_problem_register(lua_State *L) {
 }
 
 const luaL_Reg lg_problem_lib[] = {
-    {"interpolate", l_interpolate}, {"function", l_function}, {"linear_problem", l_linear_problem},
+    {"interpolate", l_interpolate}, {"zero_function", l_function}, {"function", l_function}, {"linear_problem", l_linear_problem},
     {"nonlinear_problem", l_nonlinear_problem}, {"options", l_options}, {"jit", l_jit}, {"jit_status", l_jit_status},
     {"stats", l_stats}, {"wtime", l_wtime}, {NULL, NULL}};

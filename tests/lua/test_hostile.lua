@@ -72,7 +72,7 @@ fails(function() return lg.interpolate(P1, mesh, lg.log(lg.x)) end, "lg.interpol
 local a = lg.parameter("a", 1)
 fails(function() a:set(0 / 0) end, "set: parameter a must be set to a finite number")
 fails(function() return lg.parameter("b", math.huge) end, "lg.parameter: argument 2", "must be a finite number")
-local w = lg["function"](P1, mesh, "w")
+local w = lg.zero_function(P1, mesh, "w")
 local nan = {}
 for i = 1, w:ndof() do nan[i] = 0 end
 nan[7] = 0 / 0
@@ -83,12 +83,12 @@ local inv = lg.nonlinear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg
 fails(function() return inv:solve(lg.interpolate(P1, mesh, 0*lg.x)) end,
       "at the initial guess", "residual is not finite", "log or square root of a negative value")
 local lin = poisson(mesh, lg.essential_bc(mesh:boundary(), v*u))
-local guess = lg["function"](P1, mesh, "g")
+local guess = lg["function"](P1, mesh, "g") -- the old spelling still works
 local gv = {}
 for i = 1, guess:ndof() do gv[i] = 1 end
 guess:assign(gv)
 T.check(lin:solve(), "a good problem solves")
-local coef = lg["function"](P1, mesh, "k")
+local coef = lg.zero_function(P1, mesh, "k")
 local kv = {}
 for i = 1, coef:ndof() do kv[i] = 1 end
 coef:assign(kv)

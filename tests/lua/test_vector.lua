@@ -170,6 +170,8 @@ end
 T.fails(function() lg.vector(lg.lagrange(1), 4) end, "lg.vector")
 T.fails(function() lg.vector(lg.vector(lg.lagrange(1))) end, "already a vector basis")
 T.fails(function() lg.lagrange(1, 3) end, "takes one argument")
+T.fails(function() lg.unknown(lg.lagrange(1), "u", 3) end, "takes a basis and a name")
+T.fails(function() lg.zero_function(lg.lagrange(1), lg.mesh.rectangle{nx = 1}, "f", 2) end, "takes a basis, a mesh and a name")
 local mesh = lg.mesh.rectangle{nx = 2}
 T.fails(function() lg.interpolate(lg.vector(lg.lagrange(1)), mesh, x) end, "the function has 2 components, the expression is a scalar")
 T.fails(function() lg.interpolate(lg.lagrange(1), mesh, {x, y}) end, "the function is a scalar")

@@ -116,6 +116,12 @@ typedef struct {
   int nonlinear;
   int bc_symmetric;      /* eliminate BC columns too (keeps a symmetric operator symmetric) */
   const char *prefix;    /* PETSc options prefix, may be NULL */
+  /* a singular problem's null space (nullspace=): the constants of these unknowns (one
+   * vector per component; the solution's mean is set to zero), or the rigid body modes of
+   * the single vector unknown (null_rigid) */
+  int nnull;
+  const int *null_fields;
+  int null_rigid;
 } lg_problem_spec;
 
 lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s);

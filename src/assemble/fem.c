@@ -263,6 +263,18 @@ int lagrange_init(lagrange_element *e, cell_type cell, int p, char *err) {
     }
     e->nfacet_dofs = c;
   }
+  /* the mean of each basis function over the cell (exact: a rule of the element's degree) */
+  quad_rule q;
+  if (quad_simplex(dim, p > 0 ? p : 1, &q)) { snprintf(err, 256, "no quadrature rule for the basis means"); return 1; }
+  double vol = 0;
+  memset(e->mean, 0, sizeof e->mean);
+  for (int i = 0; i < q.n; i++) {
+    double val[FEM_MAXLOC], grad[FEM_MAXLOC * 3];
+    lagrange_eval(e, q.x + dim * i, val, grad);
+    for (int n = 0; n < k; n++) e->mean[n] += q.w[i] * val[n];
+    vol += q.w[i];
+  }
+  for (int n = 0; n < k; n++) e->mean[n] /= vol;
   return 0;
 }
 

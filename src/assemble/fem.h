@@ -42,6 +42,7 @@ typedef struct {
   int facet_dofs[6][FEM_MAXLOC];
   /* entity of each local node: 0 vertex, 1 edge, 2 face, 3 interior; and its index */
   int ent_dim[FEM_MAXLOC], ent_id[FEM_MAXLOC], ent_k[FEM_MAXLOC];
+  double mean[FEM_MAXLOC];     /* mean of each basis function over the cell (they sum to 1) */
 } lagrange_element;
 
 int lagrange_init(lagrange_element *e, cell_type cell, int degree, char *err);

@@ -481,18 +481,23 @@ int lg_reduced_gradient(lg_env *env, lg_reduced *rf, double **g) {
 /* the Gram matrix of a field control's space: L2 (mass) or H1 (mass + stiffness) */
 lg_problem *lg_reduced_gram(lg_env *env, lg_reduced *rf, int i, int h1) {
   if (rf->riesz[i][h1]) return rf->riesz[i][h1];
-  int deg = rf->c[i].f->degree;
-  int ft = expr_func_new(env->c, FK_TEST, "psi", deg, 1, NULL), fu = expr_func_new(env->c, FK_UNKNOWN, "phi", deg, 1, NULL);
+  int deg = rf->c[i].f->degree, bs = rf->c[i].f->dm->bs;
+  int ft = expr_func_new(env->c, FK_TEST, "psi", deg, bs, NULL), fu = expr_func_new(env->c, FK_UNKNOWN, "phi", deg, bs, NULL);
   if (ft < 0 || fu < 0) { lg_seterr(env, "out of memory"); return NULL; }
   unsigned char z[3] = {0, 0, 0};
-  expr *v = expr_field(env->c, ft, 0, z), *u = expr_field(env->c, fu, 0, z);
-  expr *e = expr_mul(env->c, u, v);
+  expr *vc[FEM_MAXBS], *uc[FEM_MAXBS];
+  for (int j = 0; j < bs; j++) {
+    vc[j] = expr_field(env->c, ft, j, z);
+    uc[j] = expr_field(env->c, fu, j, z);
+  }
+  expr *v = bs == 1 ? vc[0] : expr_list(env->c, bs, vc), *u = bs == 1 ? uc[0] : expr_list(env->c, bs, uc);
+  expr *e = expr_inner(env->c, u, v);
   if (h1) e = expr_add(env->c, e, expr_inner(env->c, expr_grad(env->c, u), expr_grad(env->c, v)));
   if (!e) { lg_seterr(env, "%s", expr_error(env->c)); return NULL; }
   form *F = form_new();
   region all = {REGION_CELLS, 0, {0}, rf->lm};
   if (!F || form_add_term(F, &all, e, -1)) { form_free(F); lg_seterr(env, "out of memory"); return NULL; }
-  lg_problem_spec s = {rf->lm, F, NULL, 1, &ft, &fu, 0, 0, NULL};
+  lg_problem_spec s = {rf->lm, F, NULL, 1, &ft, &fu, 0, 0, NULL, 0, NULL, 0};
   rf->riesz[i][h1] = lg_problem_new(env, &s);
   form_free(F);
   return rf->riesz[i][h1];

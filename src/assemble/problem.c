@@ -77,6 +77,10 @@ struct lg_problem {
   double *elem;       /* element tensor scratch */
   size_t elem_cap;
   int failed;         /* a callback failed: env->err holds why */
+  int nnull;          /* dimension of the null space given with nullspace= (0: none) */
+  MatNullSpace null;  /* that null space (constants of some fields, rigid body modes) */
+  int null_const[KER_MAXFIELD]; /* fields whose constants are in it: their mean is set to 0 */
+  int null_rigid;     /* it is the rigid body modes */
   char prefix[64];
 };
 
@@ -462,9 +466,10 @@ static int matrix_block_size(const lg_problem *p) {
 /* a single vector field of the mesh's dimension (elasticity): the rigid body modes as the
  * near null space, which PETSc's GAMG needs to coarsen it well (it is ignored by direct
  * solvers and unpreconditioned Krylov methods) */
-static int set_near_nullspace(lg_env *env, lg_problem *p) {
+/* the node coordinates of a single vector field of the mesh's dimension, interlaced like
+ * its dofs (what MatNullSpaceCreateRigidBody takes) */
+static int node_coordinates(lg_env *env, lg_problem *p, Vec *out) {
   int dim = p->lm->m->dim;
-  if (p->cols.n != 1 || p->rows.n != 1 || matrix_block_size(p) != dim || dim < 2 || p->cdm[0]->degree < 1) return 0;
   const dofmap *dm = p->cdm[0];
   Vec X;
   PCHK(VecCreateSeq(PETSC_COMM_SELF, p->N, &X), "VecCreateSeq");
@@ -481,6 +486,15 @@ static int set_near_nullspace(lg_env *env, lg_problem *p) {
     }
   }
   PCHK(VecRestoreArray(X, &x), "VecRestoreArray");
+  *out = X;
+  return 0;
+}
+
+static int set_near_nullspace(lg_env *env, lg_problem *p) {
+  int dim = p->lm->m->dim;
+  if (p->cols.n != 1 || p->rows.n != 1 || matrix_block_size(p) != dim || dim < 2 || p->cdm[0]->degree < 1) return 0;
+  Vec X;
+  if (node_coordinates(env, p, &X)) return 1;
   MatNullSpace ns;
   PetscErrorCode ierr = MatNullSpaceCreateRigidBody(X, &ns);
   if (!ierr) ierr = MatSetNearNullSpace(p->A, ns);
@@ -615,6 +629,73 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
   return set_near_nullspace(env, p);
 }
 
+/* nullspace=: the constants of some unknowns (one unit vector per component), or the rigid
+ * body modes; attached to the matrix (MatSetNullSpace) for Krylov solvers, and the count
+ * that MUMPS's null pivots may reach */
+static int setup_nullspace(lg_env *env, lg_problem *p, const lg_problem_spec *s) {
+  if (!s->nnull && !s->null_rigid) return 0;
+  int dim = p->lm->m->dim;
+  MatNullSpace ns = NULL;
+  PetscErrorCode ierr = 0;
+  if (s->null_rigid) {
+    if (p->cols.n != 1 || p->cdm[0]->bs != dim || dim < 2 || p->cdm[0]->degree < 1) {
+      lg_seterr(env, "nullspace = \"rigid\": the rigid body modes need a single vector unknown of the mesh's dimension (%d "
+                     "components)", dim);
+      return 1;
+    }
+    for (int i = 0; i < p->nbct; i++) {
+      lg_seterr(env, "nullspace = \"rigid\": the problem has essential conditions, which already fix the rigid motions");
+      return 1;
+    }
+    Vec X;
+    if (node_coordinates(env, p, &X)) return 1;
+    ierr = MatNullSpaceCreateRigidBody(X, &ns);
+    VecDestroy(&X);
+    p->nnull = dim == 2 ? 3 : 6;
+    p->null_rigid = 1;
+  } else {
+    Vec v[KER_MAXFIELD * FEM_MAXBS];
+    int nv = 0;
+    for (int k = 0; k < s->nnull; k++) {
+      int a = -1;
+      for (int j = 0; j < p->cols.n; j++)
+        if (p->cols.func[j] == s->null_fields[k]) a = j;
+      expr_func_info *fi = expr_func_get(env->c, s->null_fields[k]);
+      if (a < 0) {
+        lg_seterr(env, "nullspace: %s is not an unknown of the problem", fi ? fi->name : "?");
+        for (int i = 0; i < nv; i++) VecDestroy(&v[i]);
+        return 1;
+      }
+      for (int i = 0; i < p->nbct; i++)
+        if (p->bct[i].field == a) {
+          lg_seterr(env, "nullspace: %s has essential conditions, which fix its constant already", fi ? fi->name : "?");
+          for (int t = 0; t < nv; t++) VecDestroy(&v[t]);
+          return 1;
+        }
+      p->null_const[a] = 1;
+      int bs = p->cdm[a]->bs;
+      for (int j = 0; j < bs && !ierr; j++) {
+        ierr = VecCreateSeq(PETSC_COMM_SELF, p->N, &v[nv]);
+        PetscScalar *x;
+        if (!ierr) ierr = VecSet(v[nv], 0);
+        if (!ierr) ierr = VecGetArray(v[nv], &x);
+        if (ierr) break;
+        for (int i = j; i < p->cdm[a]->ndof; i += bs) x[p->cglob[a] + i] = 1;
+        VecRestoreArray(v[nv], &x);
+        ierr = VecNormalize(v[nv], NULL);
+        nv++;
+      }
+    }
+    if (!ierr) ierr = MatNullSpaceCreate(PETSC_COMM_SELF, PETSC_FALSE, nv, v, &ns);
+    for (int i = 0; i < nv; i++) VecDestroy(&v[i]);
+    p->nnull = nv;
+  }
+  if (!ierr) ierr = MatSetNullSpace(p->A, ns);
+  p->null = ns;
+  if (ierr) return petsc_fail(env, ierr, "the null space");
+  return 0;
+}
+
 lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
   double t0 = now_ms();
   if (s->nfield < 1 || s->nfield > KER_MAXFIELD) {
@@ -658,6 +739,7 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
   if (setup_terms(env, p, s->eqn, s->test, s->unknown, s->nfield)) goto fail;
   if (setup_bcs(env, p, s->bc, s->test, s->unknown, s->nfield)) goto fail;
   if (setup_matrix(env, p)) goto fail;
+  if (setup_nullspace(env, p, s)) goto fail;
   p->state = calloc((size_t)p->N + 1, sizeof(double));
   p->solution = calloc((size_t)p->N + 1, sizeof(double));
   p->eqn = form_copy(s->eqn);
@@ -676,6 +758,7 @@ fail:
 
 void lg_problem_free(lg_problem *p) {
   if (!p) return;
+  if (p->null) MatNullSpaceDestroy(&p->null);
   for (int i = 0; i < p->nterm; i++) {
     coef_table_free(&p->t[i].tab);
     kernel_release(&p->t[i].kmat);
@@ -875,6 +958,76 @@ static int default_lu(lg_env *env, lg_problem *p, PC pc) {
   return 0;
 }
 
+/* the MUMPS factor of a KSP's LU preconditioner, or NULL (another solver or method) */
+static Mat mumps_factor(KSP ksp, int create) {
+  PC pc;
+  PetscBool lu = PETSC_FALSE;
+  MatSolverType st = NULL;
+  Mat F = NULL;
+  if (KSPGetPC(ksp, &pc) || PetscObjectTypeCompare((PetscObject)pc, PCLU, &lu) || !lu) return NULL;
+  if (PCFactorGetMatSolverType(pc, &st) || !st || strcmp(st, MATSOLVERMUMPS)) return NULL;
+  if (create && PCFactorSetUpMatSolverType(pc)) return NULL;
+  if (PCFactorGetMatrix(pc, &F)) return NULL;
+  return F;
+}
+
+/* MUMPS returns a solution of a singular system without failing; with null pivot detection
+ * (ICNTL(24)) it counts the null pivots (INFOG(28)), so a singular matrix is reported
+ * instead of solved into garbage, and a singular system with its null space given (the
+ * pressure of an enclosed flow) is solved. Call after the operators are set, before the
+ * first factorization */
+static void mumps_detect_null_pivots(KSP ksp) {
+  Mat F = mumps_factor(ksp, 1);
+  if (!F) return;
+  MatMumpsSetIcntl(F, 24, 1);
+  /* a pivot below 1e-12 |A| is null (MUMPS's default, 1e-5 eps |A|, missed the constant of
+   * a pure Neumann Laplacian, whose pivot was 1e-15 |A|; a SIMP stiffness with a 1e-9
+   * contrast keeps its pivots well above); -mat_mumps_cntl_3 overrides */
+  MatMumpsSetCntl(F, 3, -1e-12);
+}
+
+/* 0, or 1 with a message when the last factorization found more null pivots than the null
+ * space given */
+static int check_null_pivots(lg_env *env, lg_problem *p, KSP ksp) {
+  Mat F = mumps_factor(ksp, 0);
+  PetscInt n = 0;
+  if (!F || MatMumpsGetInfog(F, 28, &n) || n <= p->nnull) return 0;
+  if (p->nnull)
+    lg_seterr(env, "the matrix is singular: %d null pivots, more than the %d null space vectors given with nullspace=", (int)n,
+              p->nnull);
+  else
+    lg_seterr(env, "the matrix is singular (%d null pivot%s in the factorization): are boundary conditions missing? A "
+                   "problem determined only up to a constant (pure Neumann, an enclosed flow's pressure) takes "
+                   "nullspace = that unknown", (int)n, n == 1 ? "" : "s");
+  return 1;
+}
+
+/* a constant null space field: shift it to mean zero (Lagrange bases hold the constants:
+ * subtracting c from every dof subtracts c) */
+static void null_mean_zero(lg_env *env, lg_problem *p, double *x) {
+  for (int a = 0; a < p->cols.n; a++) {
+    if (!p->null_const[a]) continue;
+    const dofmap *dm = p->cdm[a];
+    int bs = dm->bs;
+    for (int j = 0; j < bs; j++) {
+      /* the mean of component j: the integral of the interpolant over the mesh's measure */
+      double num = 0, vol = 0;
+      mesh *m = p->lm->m;
+      for (int c = 0; c < m->ncell; c++) {
+        double J[3][3], K[3][3], det = fabs(simplex_jacobian(m, c, J, K));
+        double s = 0;
+        const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
+        for (int k = 0; k < dm->el.nloc; k++) s += x[p->cglob[a] + cd[k * bs + j]] * dm->el.mean[k];
+        num += s * det;
+        vol += det;
+      }
+      double mean = vol > 0 ? num / vol : 0;
+      for (int i = j; i < dm->ndof; i += bs) x[p->cglob[a] + i] -= mean;
+    }
+  }
+  (void)env;
+}
+
 /* what a linear problem's matrix depends on: the values of the discrete functions and the
  * parameters its kernels read, and the mesh's geometry. Equal fingerprints: the matrix, its
  * essential rows and its factorization are still valid (a control that enters only the
@@ -925,6 +1078,20 @@ static int ensure_ksp(lg_env *env, lg_problem *p) {
   return 0;
 }
 
+/* the solution's null space part: constants to mean zero, rigid motions projected out */
+static int remove_null(lg_env *env, lg_problem *p) {
+  if (!p->null) return 0;
+  if (p->null_rigid) {
+    PCHK(MatNullSpaceRemove(p->null, p->x), "MatNullSpaceRemove");
+    return 0;
+  }
+  PetscScalar *x;
+  PCHK(VecGetArray(p->x, &x), "VecGetArray");
+  null_mean_zero(env, p, x);
+  PCHK(VecRestoreArray(p->x, &x), "VecRestoreArray");
+  return 0;
+}
+
 static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_info *info) {
   double t0 = now_ms();
   memset(p->state, 0, sizeof(double) * (size_t)p->N);
@@ -956,8 +1123,10 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
   t0 = now_ms();
   if (ensure_ksp(env, p)) return 1;
   PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
+  mumps_detect_null_pivots(p->ksp);
   PetscErrorCode ierr = KSPSolve(p->ksp, p->b, p->x);
   if (ierr) return petsc_fail(env, ierr, "the linear solve");
+  if (check_null_pivots(env, p, p->ksp)) return 1;
   KSPConvergedReason reason;
   PCHK(KSPGetConvergedReason(p->ksp, &reason), "KSPGetConvergedReason");
   PetscInt its;
@@ -992,11 +1161,17 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
     VecNorm(p->b, NORM_2, &bn);
     VecDestroy(&r);
     if (!(rn <= 1e-8 * (bn > 0 ? bn : 1))) {
-      lg_seterr(env, "the linear solve failed: the matrix is singular (the direct solver's residual is "
-                     "%.2e relative to the right side); are boundary conditions missing?", bn > 0 ? rn / bn : rn);
+      if (p->nnull)
+        lg_seterr(env, "the linear solve failed: the right side is not compatible with the null space given (the residual "
+                       "is %.2e relative to it): the data must be orthogonal to the null space (for a pure Neumann "
+                       "problem, the sources must balance the boundary fluxes)", bn > 0 ? rn / bn : rn);
+      else
+        lg_seterr(env, "the linear solve failed: the matrix is singular (the direct solver's residual is "
+                       "%.2e relative to the right side); are boundary conditions missing?", bn > 0 ? rn / bn : rn);
       return 1;
     }
   }
+  if (remove_null(env, p)) return 1;
   const PetscScalar *x;
   PCHK(VecGetArrayRead(p->x, &x), "VecGetArrayRead");
   for (int i = 0; i < p->N; i++)

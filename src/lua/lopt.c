@@ -809,7 +809,7 @@ static int l_kkt_problem(lua_State *L) {
   form_free(bc_user);
   lg_problem *p = NULL;
   if (!err[0]) {
-    lg_problem_spec s = {um->lm, F, bc->n ? bc : NULL, n, test, unk, 1, 0, prefix};
+    lg_problem_spec s = {um->lm, F, bc->n ? bc : NULL, n, test, unk, 1, 0, prefix, 0, NULL, 0};
     p = lg_problem_new(env, &s);
     if (!p) snprintf(err, sizeof err, "%s", env->err);
   }

@@ -204,7 +204,7 @@ void push_problem(lua_State *L, lg_problem *p, int nfield, int nonlinear, int nd
 static int make_problem(lua_State *L, int nonlinear) {
   const char *fn = nonlinear ? "lg.nonlinear_problem" : "lg.linear_problem";
   if (!lua_istable(L, 1)) return typeerror(L, fn, 1, "a table {mesh=, eqn=, bc=, test=, unknown=}");
-  static const char *const keys[] = {"mesh", "eqn", "bc", "test", "unknown", "initial", "symmetric", "prefix", NULL};
+  static const char *const keys[] = {"mesh", "eqn", "bc", "test", "unknown", "initial", "symmetric", "prefix", "nullspace", NULL};
   check_keys(L, 1, fn, keys);
   lua_getfield(L, 1, "mesh");
   ud_mesh *um = luaL_testudata(L, -1, MT_MESH);
@@ -223,6 +223,24 @@ static int make_problem(lua_State *L, int nonlinear) {
   int sym = lua_toboolean(L, -1);
   lua_pop(L, 1);
   const char *prefix = opt_str(L, 1, "prefix", NULL, fn);
+  /* nullspace = an unknown (its constants), a table of them, or "rigid" */
+  int nnull = 0, null_fields[KER_MAXFIELD], rigid = 0;
+  int nty = lua_getfield(L, 1, "nullspace");
+  lua_pop(L, 1);
+  if (nty == LUA_TSTRING) {
+    lua_getfield(L, 1, "nullspace");
+    const char *k = lua_tostring(L, -1);
+    if (strcmp(k, "rigid")) return luaL_error(L, "%s: option 'nullspace' must be an unknown, a table of unknowns or \"rigid\", got \"%s\"", fn, k);
+    lua_pop(L, 1);
+    rigid = 1;
+  } else if (nty != LUA_TNIL) {
+    nnull = check_symbols(L, 1, "nullspace", FK_UNKNOWN, null_fields, fn);
+    for (int i = 0; i < nnull; i++) {
+      int found = 0;
+      for (int j = 0; j < nu; j++) found |= unk[j] == null_fields[i];
+      if (!found) return luaL_error(L, "%s: option 'nullspace' lists %s, which is not one of the unknowns", fn, expr_func_get(get_env(L)->c, null_fields[i])->name);
+    }
+  }
   /* last: what raises an error after this frees bc_owned first */
   lua_getfield(L, 1, "bc");
   int bc_idx = lua_gettop(L);
@@ -233,7 +251,7 @@ static int make_problem(lua_State *L, int nonlinear) {
   for (int i = 0; bcf && i < bcf->n; i++)
     if (bcf->t[i].reg.mesh != um->lm) { form_free(bc_owned); return luaL_error(L, "%s: a boundary condition is on a different mesh than 'mesh'", fn); }
   lg_env *env = get_env(L);
-  lg_problem_spec s = {um->lm, ue->f, bcf, nt, test, unk, nonlinear, sym, prefix};
+  lg_problem_spec s = {um->lm, ue->f, bcf, nt, test, unk, nonlinear, sym, prefix, nnull, null_fields, rigid};
   lg_problem *p = lg_problem_new(env, &s);
   form_free(bc_owned);
   if (!p) return lgerror(L, fn, env);

@@ -91,7 +91,26 @@ fails(function() return lg.integrate(mesh, u) end, "the unknown u", "has no valu
 -- a singular system: pure Neumann Poisson has constants in its kernel
 local sing = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) - v),
                                test = v, unknown = u}
-fails(function() return sing:solve() end, "problem:solve: the linear solve failed")
+fails(function() return sing:solve() end, "problem:solve: the matrix is singular", "nullspace")
+-- with its null space given: compatible data solve to the mean-zero solution, incompatible
+-- data are refused
+local nf = lg.cos(math.pi*lg.x)*lg.cos(math.pi*lg.y)
+local neu = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) - 2*math.pi^2*nf*v),
+                              test = v, unknown = u, nullspace = u}
+local un = neu:solve()
+T.check(math.abs(lg.integrate(mesh, un)) < 1e-12, "nullspace = u: the solution has mean zero (%.2e)", lg.integrate(mesh, un))
+local en = math.sqrt(lg.integrate(mesh, (un - nf)^2))
+T.check(en < 0.15 and en > 1e-4, "nullspace = u: the pure Neumann solution (L2 error %.3e on this coarse mesh)", en)
+local bad = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) - v),
+                              test = v, unknown = u, nullspace = u}
+fails(function() return bad:solve() end, "not compatible with the null space")
+fails(function() return lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) - v),
+                                           test = v, unknown = u, nullspace = u, bc = lg.essential_bc(mesh:boundary(), v*u)} end,
+      "has essential conditions")
+fails(function() return lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) - v),
+                                           test = v, unknown = u, nullspace = "rigid"} end, "single vector unknown")
+fails(function() return lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) - v),
+                                           test = v, unknown = u, nullspace = "constant"} end, "must be an unknown")
 
 -- Newton that cannot converge is reported (lambda beyond the Bratu turning point)
 local lam = lg.parameter("lam", 50)

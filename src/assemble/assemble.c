@@ -52,6 +52,7 @@ void lg_mesh_free(lg_mesh *lm) {
   if (!lm) return;
   for (int i = 0; i < 4; i++)
     for (int j = 0; j < FEM_MAXBS; j++) dofmap_free(lm->dm[i][j]);
+  lg_locator_free(lm->locator);
   mesh_free(lm->m);
   free(lm);
 }

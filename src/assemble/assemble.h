@@ -34,8 +34,11 @@ typedef struct {
   char err[LG_ERRLEN];
 } lg_env;
 
+typedef struct lg_locator lg_locator; /* locate.c */
+
 typedef struct {
   mesh *m;
+  lg_locator *locator;  /* which cell holds a point, built on demand for one geometry */
   dofmap *dm[4][FEM_MAXBS]; /* by degree and number of components - 1, built on demand */
   int validated;        /* the validity check passed for the current geometry */
   unsigned long geometry; /* counts geometry changes (lg_mesh_changed) */
@@ -93,6 +96,12 @@ int lg_check_finite(lg_env *env, const dofmap *dm, const double *v, const char *
 /* the value of field leaf e (its component, a first derivative or none) of the function
  * with dof map dm and values vals at reference point xi of cell c, K the inverse Jacobian */
 double lg_eval_leaf(const dofmap *dm, const double *vals, int c, const double *xi, const double K[3][3], const expr *e);
+/* point location (locate.c): the cell holding x and x's reference coordinates there:
+ * 0, 1 when x is outside the mesh, -1 on failure (env->err) */
+int lg_locate(lg_env *env, lg_mesh *lm, const double *x, int *cell, double *xi);
+void lg_locator_free(lg_locator *L);
+/* the value of f (its components: out[bs]) at the point x; outside the mesh an error */
+int lg_eval_point(lg_env *env, lg_function *f, const double *x, double *out);
 /* f = e at f's nodes; e a scalar, or a list of f's number of components */
 int lg_interpolate(lg_env *env, lg_function *f, expr *e);
 /* integrate a scalar expression over a region (cells or boundary) */

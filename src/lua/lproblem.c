@@ -91,6 +91,77 @@ static int func_len(lua_State *L) {
   return 1;
 }
 
+/* uh(x, y[, z]): the value at a point (a vector function returns its components) */
+static int func_call(lua_State *L) {
+  ud_func *u = check_func(L, 1, "f(x, y)");
+  int dim = u->f->mesh->m->dim, n = lua_gettop(L) - 1;
+  if (n != dim) return luaL_error(L, "f(x, y%s): give the %d coordinates of a point, got %d arguments", dim == 3 ? ", z" : "", dim, n);
+  double x[3] = {0, 0, 0}, out[FEM_MAXBS];
+  for (int k = 0; k < dim; k++) {
+    x[k] = luaL_checknumber(L, k + 2);
+    if (!isfinite(x[k])) return luaL_error(L, "f(x, y): coordinate %d is not finite (%f)", k + 1, x[k]);
+  }
+  lg_env *env = get_env(L);
+  if (lg_eval_point(env, u->f, x, out)) return lgerror(L, "f(x, y)", env);
+  for (int j = 0; j < u->f->dm->bs; j++) lua_pushnumber(L, out[j]);
+  return u->f->dm->bs;
+}
+
+/* f:eval({{x, y}, ...}): the values at many points (tables of components for a vector) */
+static int func_eval(lua_State *L) {
+  const char *fn = "f:eval";
+  ud_func *u = check_func(L, 1, fn);
+  if (!lua_istable(L, 2)) return typeerror(L, fn, 1, "a table of points {{x, y}, ...}");
+  int dim = u->f->mesh->m->dim, bs = u->f->dm->bs;
+  lua_Integer n = luaL_len(L, 2);
+  lua_createtable(L, n > 0 && n < INT_MAX ? (int)n : 0, 0);
+  lg_env *env = get_env(L);
+  for (lua_Integer i = 1; i <= n; i++) {
+    lua_geti(L, 2, i);
+    if (!lua_istable(L, -1) || luaL_len(L, -1) != dim) return luaL_error(L, "%s: point %I must be a table of %d coordinates", fn, i, dim);
+    double x[3] = {0, 0, 0}, out[FEM_MAXBS];
+    for (int k = 0; k < dim; k++) {
+      lua_geti(L, -1, k + 1);
+      int isnum;
+      x[k] = lua_tonumberx(L, -1, &isnum);
+      if (!isnum || !isfinite(x[k])) return luaL_error(L, "%s: coordinate %d of point %I must be a finite number", fn, k + 1, i);
+      lua_pop(L, 1);
+    }
+    lua_pop(L, 1);
+    if (lg_eval_point(env, u->f, x, out)) return luaL_error(L, "%s: point %I: %s", fn, i, env->err);
+    if (bs == 1) lua_pushnumber(L, out[0]);
+    else {
+      lua_createtable(L, bs, 0);
+      for (int j = 0; j < bs; j++) { lua_pushnumber(L, out[j]); lua_rawseti(L, -2, j + 1); }
+    }
+    lua_rawseti(L, -2, i);
+  }
+  return 1;
+}
+
+/* f:dof_coordinates(): the point of every dof ({x, y} tables, in dof order) */
+static int func_dof_coordinates(lua_State *L) {
+  ud_func *u = check_func(L, 1, "f:dof_coordinates");
+  const dofmap *dm = u->f->dm;
+  int dim = dm->m->dim;
+  lua_createtable(L, dm->ndof, 0);
+  unsigned char *done = calloc((size_t)dm->ndof + 1, 1);
+  if (!done) return luaL_error(L, "f:dof_coordinates: out of memory");
+  for (int c = 0; c < dm->m->ncell; c++)
+    for (int k = 0; k < dm->nloc; k++) {
+      int g = dm->cell_dofs[(size_t)c * dm->nloc + k];
+      if (done[g]) continue;
+      done[g] = 1;
+      double x[3];
+      dofmap_node_coords(dm, c, k, x);
+      lua_createtable(L, dim, 0);
+      for (int j = 0; j < dim; j++) { lua_pushnumber(L, x[j]); lua_rawseti(L, -2, j + 1); }
+      lua_rawseti(L, -2, g + 1);
+    }
+  free(done);
+  return 1;
+}
+
 static int func_tostring(lua_State *L) {
   ud_func *u = check_func(L, 1, "tostring");
   expr_func_info *fi = expr_func_get(get_env(L)->c, u->f->fid);
@@ -439,13 +510,15 @@ static int l_stats(lua_State *L) {
 
 void lg_lua_problem_register(lua_State *L) {
   static const luaL_Reg func_methods[] = {{"values", func_values}, {"assign", func_assign}, {"ndof", func_ndof},
-                                          {"degree", func_degree}, {NULL, NULL}};
+                                          {"degree", func_degree}, {"eval", func_eval},
+                                          {"dof_coordinates", func_dof_coordinates}, {NULL, NULL}};
   luaL_newmetatable(L, MT_FUNC);
   luaL_setfuncs(L, lg_arith_mm, 0);
   lua_pushcfunction(L, func_gc); lua_setfield(L, -2, "__gc");
   lua_pushcfunction(L, func_tostring); lua_setfield(L, -2, "__tostring");
   lua_pushcfunction(L, func_index); lua_setfield(L, -2, "__index");
   lua_pushcfunction(L, func_len); lua_setfield(L, -2, "__len");
+  lua_pushcfunction(L, func_call); lua_setfield(L, -2, "__call");
   lua_newtable(L);
   luaL_setfuncs(L, func_methods, 0);
   lua_setfield(L, -2, "methods");

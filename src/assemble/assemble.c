@@ -464,8 +464,8 @@ int lg_interpolate(lg_env *env, lg_function *f, expr *e) {
     for (int k = 0; k < f->dm->el.nloc && !rc; k++) {
       if (done[cd[k * bs]]) continue;
       done[cd[k * bs]] = 1;
-      if (!mapped) { simplex_jacobian(m, c, J, p.K); mapped = 1; }
       memcpy(p.xi, f->dm->el.node + 3 * k, sizeof p.xi);
+      if (!mapped) { cell_jacobian(m, c, p.xi, J, p.K); mapped = cell_is_simplex(m->type); }
       dofmap_node_coords(f->dm, c, k * bs, p.x);
       double v[FEM_MAXBS];
       rc = expr_tape_eval(&t, expr_param_values(env->c), pt_leaf, &p, w, v);
@@ -489,32 +489,34 @@ int lg_interpolate(lg_env *env, lg_function *f, expr *e) {
   return rc;
 }
 
-int lg_quad_degree(lg_env *env, expr *e, int order, int dim) {
+int lg_quad_degree(lg_env *env, expr *e, int order, cell_type ct) {
   if (order >= 0) return order > FEM_MAXDEG ? FEM_MAXDEG : order;
   /* the estimate treats sin, exp, ... as degree +2 (as FEniCS does); products of such
    * factors overestimate quickly, so automatic orders stop at 12 (2D) and 8 (3D): pass
    * {order=} for more */
-  int d = expr_degree(env->c, e, 1);
-  int cap = dim == 2 ? 12 : 8;
+  int d = expr_degree_cell(env->c, e, 1, cell_is_simplex(ct), NULL);
+  int cap = cell_dim(ct) == 2 ? 12 : 8;
   return d > cap ? cap : d;
 }
 
 /* the polynomial degree of the products a kernel integrates: coefficient degree plus the
- * degrees of the test and trial basis functions (less their derivative orders), so that a
+ * degrees of the test and trial basis functions (less their derivative orders on simplices;
+ * a derivative of a Q1 function is still linear in the other variables), so that a
  * stiffness matrix is not integrated with the rule a transcendental load needs */
-static int leaf_degree(lg_env *env, const expr *leaf) {
+static int leaf_degree(lg_env *env, const expr *leaf, int simplex) {
   expr_func_info *fi = expr_func_get(env->c, leaf->i0);
-  int d = fi ? fi->degree - leaf->order : 0;
+  int d = fi ? fi->degree - (simplex ? leaf->order : 0) : 0;
   return d < 0 ? 0 : d;
 }
 
-int lg_table_degree(lg_env *env, const coef_table *t, int arity, int dim) {
-  int d = 0;
+int lg_table_degree(lg_env *env, const coef_table *t, int arity, cell_type ct) {
+  int d = 0, sx = cell_is_simplex(ct), dim = cell_dim(ct);
   int n = arity == 2 ? t->njac : t->nres;
   for (int i = 0; i < n; i++) {
     int k;
-    if (arity == 2) k = expr_degree(env->c, t->jac[i], 1) + leaf_degree(env, t->jac_test[i]) + leaf_degree(env, t->jac_trial[i]);
-    else k = expr_degree(env->c, t->res[i], 1) + leaf_degree(env, t->res_leaf[i]);
+    if (arity == 2)
+      k = expr_degree_cell(env->c, t->jac[i], 1, sx, NULL) + leaf_degree(env, t->jac_test[i], sx) + leaf_degree(env, t->jac_trial[i], sx);
+    else k = expr_degree_cell(env->c, t->res[i], 1, sx, NULL) + leaf_degree(env, t->res_leaf[i], sx);
     if (k > d) d = k;
   }
   int cap = dim == 2 ? 12 : 8;
@@ -531,7 +533,7 @@ int lg_integrate(lg_env *env, lg_mesh *lm, const region *r, expr *e, int order, 
   }
   if (lg_mesh_check(env, lm)) return 1;
   kernel_spec s = {0, NULL, e};
-  int qd = lg_quad_degree(env, e, order, lm->m->dim), facet = r->kind == REGION_BOUNDARY, ct = (int)lm->m->type;
+  int qd = lg_quad_degree(env, e, order, lm->m->type), facet = r->kind == REGION_BOUNDARY, ct = (int)lm->m->type;
   /* the kernel of the same integrand, kept from an earlier call, or a new one in the least
    * recently used place */
   lg_kept_kernel *kk = NULL, *old = &env->kept[0];

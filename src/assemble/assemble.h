@@ -107,10 +107,10 @@ int lg_interpolate(lg_env *env, lg_function *f, expr *e);
 /* integrate a scalar expression over a region (cells or boundary) */
 int lg_integrate(lg_env *env, lg_mesh *lm, const region *r, expr *e, int order, double *result);
 /* quadrature degree for an integrand */
-int lg_quad_degree(lg_env *env, expr *e, int order, int dim);
+int lg_quad_degree(lg_env *env, expr *e, int order, cell_type ct);
 /* the degree of a linearized form's products (coefficient + test + trial degrees), capped as
  * lg_quad_degree; arity 2 reads the Jacobian entries, arity 1 the residual entries */
-int lg_table_degree(lg_env *env, const coef_table *t, int arity, int dim);
+int lg_table_degree(lg_env *env, const coef_table *t, int arity, cell_type ct);
 
 /* ---- problems */
 typedef struct lg_problem lg_problem;

@@ -125,16 +125,47 @@ int quad_simplex(int dim, int degree, quad_rule *q) {
 
 /* ---------------------------------------------------------------- reference facets */
 
-static const double tri_v[3][2] = {{0, 0}, {1, 0}, {0, 1}};
+static const double tri_v[3][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
 static const double tet_v[4][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+/* the unit square and cube, vertices in the mesh layer's order (counterclockwise, bottom
+ * then top) */
+static const double quad_v[4][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+static const double hex_v[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
+
+int cell_is_simplex(cell_type t) { return t == CELL_TRIANGLE || t == CELL_TETRAHEDRON; }
+
+const double *ref_vertex(cell_type t, int v) {
+  switch (t) {
+  case CELL_TRIANGLE: return tri_v[v];
+  case CELL_TETRAHEDRON: return tet_v[v];
+  case CELL_QUADRILATERAL: return quad_v[v];
+  default: return hex_v[v];
+  }
+}
 
 void ref_facet_point(cell_type t, int f, const double *s, double *xi) {
   const int *fv = cell_facet_verts(t, f);
-  if (t == CELL_TRIANGLE) {
-    for (int d = 0; d < 2; d++) xi[d] = (1 - s[0]) * tri_v[fv[0]][d] + s[0] * tri_v[fv[1]][d];
+  const double *a = ref_vertex(t, fv[0]), *b = ref_vertex(t, fv[1]);
+  int dim = cell_dim(t);
+  if (dim == 2) {
+    for (int d = 0; d < 2; d++) xi[d] = (1 - s[0]) * a[d] + s[0] * b[d];
+  } else if (t == CELL_TETRAHEDRON) {
+    const double *c = ref_vertex(t, fv[2]);
+    for (int d = 0; d < 3; d++) xi[d] = (1 - s[0] - s[1]) * a[d] + s[0] * b[d] + s[1] * c[d];
   } else {
-    for (int d = 0; d < 3; d++)
-      xi[d] = (1 - s[0] - s[1]) * tet_v[fv[0]][d] + s[0] * tet_v[fv[1]][d] + s[1] * tet_v[fv[2]][d];
+    /* a hexahedron's face: the unit square along its first and last edges (cyclic order) */
+    const double *c = ref_vertex(t, fv[3]);
+    for (int d = 0; d < 3; d++) xi[d] = a[d] + s[0] * (b[d] - a[d]) + s[1] * (c[d] - a[d]);
+  }
+}
+
+void ref_facet_tangents(cell_type t, int f, double t0[3], double t1[3]) {
+  const int *fv = cell_facet_verts(t, f);
+  const double *a = ref_vertex(t, fv[0]), *b = ref_vertex(t, fv[1]);
+  const double *c = ref_vertex(t, fv[cell_dim(t) == 3 && t == CELL_HEXAHEDRON ? 3 : cell_dim(t) == 3 ? 2 : 1]);
+  for (int d = 0; d < 3; d++) {
+    t0[d] = b[d] - a[d];
+    t1[d] = c[d] - a[d];
   }
 }
 
@@ -142,8 +173,75 @@ void ref_facet_normal(cell_type t, int f, double *n) {
   static const double tn[3][2] = {{0.70710678118654752, 0.70710678118654752}, {-1, 0}, {0, -1}};
   static const double en[4][3] = {{0.57735026918962576, 0.57735026918962576, 0.57735026918962576},
                                   {-1, 0, 0}, {0, -1, 0}, {0, 0, -1}};
-  if (t == CELL_TRIANGLE) { n[0] = tn[f][0]; n[1] = tn[f][1]; }
-  else { n[0] = en[f][0]; n[1] = en[f][1]; n[2] = en[f][2]; }
+  if (t == CELL_TRIANGLE) { n[0] = tn[f][0]; n[1] = tn[f][1]; return; }
+  if (t == CELL_TETRAHEDRON) { n[0] = en[f][0]; n[1] = en[f][1]; n[2] = en[f][2]; return; }
+  /* the unit square and cube: the axis from the centre through the facet's centre */
+  int dim = cell_dim(t), nv = dim == 2 ? 2 : 4;
+  const int *fv = cell_facet_verts(t, f);
+  for (int d = 0; d < dim; d++) {
+    double c = 0;
+    for (int i = 0; i < nv; i++) c += ref_vertex(t, fv[i])[d];
+    c = c / nv - 0.5;
+    n[d] = c > 0.25 ? 1 : c < -0.25 ? -1 : 0;
+  }
+}
+
+/* the bilinear (trilinear) map of a quadrilateral (hexahedron): shape values and reference
+ * gradients of its vertices at xi */
+void q1_shape(cell_type t, const double *xi, double *N, double *dN) {
+  int nv = t == CELL_QUADRILATERAL ? 4 : 8, dim = cell_dim(t);
+  for (int i = 0; i < nv; i++) {
+    const double *v = ref_vertex(t, i);
+    double f[3], g[3];
+    for (int d = 0; d < dim; d++) {
+      f[d] = v[d] > 0.5 ? xi[d] : 1 - xi[d];
+      g[d] = v[d] > 0.5 ? 1 : -1;
+    }
+    double p = 1;
+    for (int d = 0; d < dim; d++) p *= f[d];
+    if (N) N[i] = p;
+    for (int d = 0; d < dim && dN; d++) {
+      double q = g[d];
+      for (int e = 0; e < dim; e++)
+        if (e != d) q *= f[e];
+      dN[i * dim + d] = q;
+    }
+  }
+}
+
+/* ---------------------------------------------------------------- tensor rules */
+
+/* Gauss-Legendre with m points per direction on [0,1]^dim: exact to degree 2m - 1 in each
+ * variable (the rule of quadrilaterals and hexahedra, and of a hexahedron's faces) */
+static int gauss_box(int dim, int degree, quad_rule *q) {
+  int m = (degree + 2) / 2;
+  if (m < 1) m = 1;
+  double x[64], w[64];
+  if (m > 64 || gauss_jacobi(m, 0, 0, x, w)) return 1;
+  long n = 1;
+  for (int d = 0; d < dim; d++) n *= m;
+  if (n > FEM_MAXQ) return 1;
+  q->dim = dim;
+  q->degree = 2 * m - 1;
+  q->n = (int)n;
+  for (long i = 0; i < n; i++) {
+    long r = i;
+    double wt = 1;
+    for (int d = 0; d < dim; d++) {
+      int k = (int)(r % m);
+      r /= m;
+      q->x[i * dim + d] = 0.5 * (1 + x[k]);
+      wt *= 0.5 * w[k];
+    }
+    q->w[i] = wt;
+  }
+  return 0;
+}
+
+int quad_cell(cell_type t, int facet, int degree, quad_rule *q) {
+  int dim = cell_dim(t) - (facet ? 1 : 0);
+  if (cell_is_simplex(t) || (facet && t == CELL_QUADRILATERAL)) return quad_simplex(dim, degree, q);
+  return gauss_box(dim, degree, q);
 }
 
 /* ---------------------------------------------------------------- Lagrange */
@@ -179,12 +277,66 @@ static int gauss_solve(int n, double *A, int m, double *B) {
   return 0;
 }
 
+static int lagrange_finish(lagrange_element *e, char *err);
+
+/* Q0, Q1, Q2 on the unit square and cube: vertices, edge midpoints, face centres, the
+ * centre; the basis spans the monomials of degree <= p in each variable */
+static int lagrange_init_box(lagrange_element *e, cell_type cell, int p, char *err) {
+  int dim = cell_dim(cell), k = 0;
+  e->cell = cell;
+  e->dim = dim;
+  e->degree = p;
+  if (p == 0) {
+    for (int d = 0; d < dim; d++) e->node[d] = 0.5;
+    e->ent_dim[0] = 3; e->ent_id[0] = 0; e->ent_k[0] = 0;
+    k = 1;
+  } else {
+    for (int v = 0; v < cell_nverts(cell); v++, k++) {
+      memcpy(e->node + 3 * k, ref_vertex(cell, v), sizeof(double) * 3);
+      e->ent_dim[k] = 0; e->ent_id[k] = v; e->ent_k[k] = 0;
+    }
+    if (p == 2) {
+      for (int ed = 0; ed < cell_nedges(cell); ed++, k++) {
+        const int *ev = cell_edge_verts(cell, ed);
+        for (int d = 0; d < 3; d++) e->node[3 * k + d] = 0.5 * (ref_vertex(cell, ev[0])[d] + ref_vertex(cell, ev[1])[d]);
+        e->ent_dim[k] = 1; e->ent_id[k] = ed; e->ent_k[k] = 0;
+      }
+      for (int f = 0; dim == 3 && f < cell_nfacets(cell); f++, k++) {
+        const int *fv = cell_facet_verts(cell, f);
+        for (int d = 0; d < 3; d++) {
+          double c = 0;
+          for (int i = 0; i < 4; i++) c += ref_vertex(cell, fv[i])[d];
+          e->node[3 * k + d] = c / 4;
+        }
+        e->ent_dim[k] = 2; e->ent_id[k] = f; e->ent_k[k] = 0;
+      }
+      for (int d = 0; d < dim; d++) e->node[3 * k + d] = 0.5;
+      e->ent_dim[k] = 3; e->ent_id[k] = 0; e->ent_k[k] = 0;
+      k++;
+    }
+  }
+  e->nloc = k;
+  int m = 0;
+  for (int a = 0; a <= p; a++)
+    for (int b = 0; b <= p; b++)
+      for (int c = 0; c <= (dim == 3 ? p : 0); c++) {
+        e->mono[m][0] = a; e->mono[m][1] = b; e->mono[m][2] = c;
+        m++;
+      }
+  e->nmono = m;
+  if (m != k) { snprintf(err, 256, "internal error: %d nodes for %d monomials", k, m); return 1; }
+  return 0;
+}
+
 int lagrange_init(lagrange_element *e, cell_type cell, int p, char *err) {
   memset(e, 0, sizeof *e);
-  if (cell != CELL_TRIANGLE && cell != CELL_TETRAHEDRON) {
-    snprintf(err, 256, "Lagrange elements on %s are not implemented yet (triangles and "
-                       "tetrahedra are)", cell_plural(cell));
-    return 1;
+  if (!cell_is_simplex(cell)) {
+    if (p < 0 || p > 2) {
+      snprintf(err, 256, "Lagrange degree %d is not available on %s (0, 1 and 2 are)", p, cell_plural(cell));
+      return 1;
+    }
+    if (lagrange_init_box(e, cell, p, err)) return 1;
+    return lagrange_finish(e, err);
   }
   if (p < 0 || p > 3) {
     snprintf(err, 256, "Lagrange degree %d is not available (0, 1, 2 and 3 are)", p);
@@ -245,6 +397,14 @@ int lagrange_init(lagrange_element *e, cell_type cell, int p, char *err) {
     }
   e->nmono = m;
   if (m != k) { snprintf(err, 256, "internal error: %d nodes for %d monomials", k, m); return 1; }
+  return lagrange_finish(e, err);
+}
+
+/* the nodal basis (an inverse Vandermonde matrix), the facet closures and the basis means
+ * of an element whose nodes and monomials are set */
+static int lagrange_finish(lagrange_element *e, char *err) {
+  int k = e->nloc, m = e->nmono, dim = e->dim, p = e->degree;
+  cell_type cell = e->cell;
   /* V[n][m] = mono_m(node_n); coef = V^-1 so that phi_n(x) = sum_m coef[m][n] mono_m(x) */
   double V[FEM_MAXLOC * FEM_MAXLOC], I[FEM_MAXLOC * FEM_MAXLOC];
   for (int n = 0; n < k; n++)
@@ -252,20 +412,29 @@ int lagrange_init(lagrange_element *e, cell_type cell, int p, char *err) {
   for (int i = 0; i < k * k; i++) I[i] = (i / k) == (i % k);
   if (gauss_solve(k, V, k, I)) { snprintf(err, 256, "singular Vandermonde matrix"); return 1; }
   memcpy(e->coef, I, sizeof(double) * (size_t)k * k);
-  /* facet closures: nodes whose barycentric coordinate opposite the facet vanishes */
+  /* facet closures: nodes whose barycentric coordinate opposite the facet vanishes (a
+   * simplex), or that lie on the facet's coordinate plane (the unit square and cube) */
   int nf = cell_nfacets(cell);
   for (int f = 0; f < nf; f++) {
     int c = 0;
+    double nr[3] = {0, 0, 0};
+    if (!cell_is_simplex(cell)) ref_facet_normal(cell, f, nr);
     for (int n = 0; n < k; n++) {
       const double *x = e->node + 3 * n;
-      double lam = f == 0 ? 1 - x[0] - x[1] - (dim == 3 ? x[2] : 0) : x[f - 1];
+      double lam;
+      if (cell_is_simplex(cell)) lam = f == 0 ? 1 - x[0] - x[1] - (dim == 3 ? x[2] : 0) : x[f - 1];
+      else {
+        lam = 0;
+        for (int d = 0; d < dim; d++)
+          if (nr[d] != 0) lam = nr[d] > 0 ? 1 - x[d] : x[d];
+      }
       if (fabs(lam) < 1e-12) e->facet_dofs[f][c++] = n;
     }
     e->nfacet_dofs = c;
   }
   /* the mean of each basis function over the cell (exact: a rule of the element's degree) */
   quad_rule q;
-  if (quad_simplex(dim, p > 0 ? p : 1, &q)) { snprintf(err, 256, "no quadrature rule for the basis means"); return 1; }
+  if (quad_cell(cell, 0, p > 0 ? p : 1, &q)) { snprintf(err, 256, "no quadrature rule for the basis means"); return 1; }
   double vol = 0;
   memset(e->mean, 0, sizeof e->mean);
   for (int i = 0; i < q.n; i++) {
@@ -306,12 +475,8 @@ void lagrange_eval(const lagrange_element *e, const double *xi, double *val, dou
 
 /* ---------------------------------------------------------------- dof maps */
 
-double simplex_jacobian(const mesh *m, int c, double J[3][3], double K[3][3]) {
-  int d = m->dim;
-  const int *v = m->cells + (size_t)c * (size_t)m->nvc;
-  const double *x0 = m->x + d * v[0];
-  for (int i = 0; i < d; i++)
-    for (int k = 0; k < d; k++) J[i][k] = m->x[d * v[k + 1] + i] - x0[i];
+/* K = J^-1 (2x2 or 3x3); returns det J */
+static double invert_jacobian(int d, double J[3][3], double K[3][3]) {
   double det;
   if (d == 2) {
     det = J[0][0] * J[1][1] - J[0][1] * J[1][0];
@@ -333,6 +498,30 @@ double simplex_jacobian(const mesh *m, int c, double J[3][3], double K[3][3]) {
   return det;
 }
 
+double simplex_jacobian(const mesh *m, int c, double J[3][3], double K[3][3]) {
+  int d = m->dim;
+  const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+  const double *x0 = m->x + d * v[0];
+  for (int i = 0; i < d; i++)
+    for (int k = 0; k < d; k++) J[i][k] = m->x[d * v[k + 1] + i] - x0[i];
+  return invert_jacobian(d, J, K);
+}
+
+double cell_jacobian(const mesh *m, int c, const double *xi, double J[3][3], double K[3][3]) {
+  if (cell_is_simplex(m->type)) return simplex_jacobian(m, c, J, K);
+  int d = m->dim;
+  const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+  double dN[8 * 3];
+  q1_shape(m->type, xi, NULL, dN);
+  for (int i = 0; i < d; i++)
+    for (int k = 0; k < d; k++) {
+      double s = 0;
+      for (int j = 0; j < m->nvc; j++) s += m->x[d * v[j] + i] * dN[j * d + k];
+      J[i][k] = s;
+    }
+  return invert_jacobian(d, J, K);
+}
+
 const double *dofmap_node_ref(const dofmap *dm, int k) { return dm->el.node + 3 * (k / dm->bs); }
 
 void dofmap_node_coords(const dofmap *dm, int c, int k, double *x) {
@@ -340,6 +529,16 @@ void dofmap_node_coords(const dofmap *dm, int c, int k, double *x) {
   int d = m->dim;
   const int *v = m->cells + (size_t)c * (size_t)m->nvc;
   const double *xi = dofmap_node_ref(dm, k);
+  if (!cell_is_simplex(m->type)) {
+    double N[8];
+    q1_shape(m->type, xi, N, NULL);
+    for (int i = 0; i < d; i++) {
+      double s = 0;
+      for (int j = 0; j < m->nvc; j++) s += N[j] * m->x[d * v[j] + i];
+      x[i] = s;
+    }
+    return;
+  }
   double lam0 = 1;
   for (int i = 0; i < d; i++) lam0 -= xi[i];
   for (int i = 0; i < d; i++) {
@@ -356,22 +555,26 @@ dofmap *dofmap_new(mesh *m, int degree, char *err) {
   dm->degree = degree;
   dm->bs = 1;
   if (lagrange_init(&dm->el, m->type, degree, err)) { free(dm); return NULL; }
-  int p = degree, nloc = dm->el.nloc;
+  int nloc = dm->el.nloc;
   dm->nloc = nloc;
-  if (p >= 2 && mesh_build_edges(m)) { snprintf(err, 256, "%.200s", m->err); free(dm); return NULL; }
-  if (p >= 3 && m->dim == 3 && mesh_build_faces(m)) { snprintf(err, 256, "%.200s", m->err); free(dm); return NULL; }
-  long nd = p == 0 ? 0 : m->nvert; /* P0: the cells' dofs only */
+  /* the entities that own dofs: count the element's nodes on each kind */
+  int nper[4] = {0, 0, 0, 0};
+  for (int k = 0; k < nloc; k++) nper[dm->el.ent_dim[k]]++;
+  int ne = cell_nedges(m->type), nfc = cell_nfacets(m->type);
+  int edge_per = ne ? nper[1] / ne : 0, face_per = m->dim == 3 ? nper[2] / nfc : 0, cell_per = nper[3];
+  if (nper[1] && mesh_build_edges(m)) { snprintf(err, 256, "%.200s", m->err); free(dm); return NULL; }
+  if (nper[2] && mesh_build_faces(m)) { snprintf(err, 256, "%.200s", m->err); free(dm); return NULL; }
+  long nd = nper[0] ? m->nvert : 0; /* P0: the cells' dofs only */
   long edge_off = nd;
-  if (p >= 2) nd += (long)m->nedge * (p - 1);
+  nd += (long)m->nedge * edge_per;
   long face_off = nd;
-  if (p >= 3 && m->dim == 3) nd += m->nface;
+  nd += (long)m->nface * face_per;
   long cell_off = nd;
-  if ((p >= 3 && m->dim == 2) || p == 0) nd += m->ncell;
+  nd += (long)m->ncell * cell_per;
   if (nd > 2000000000L) { snprintf(err, 256, "too many dofs"); free(dm); return NULL; }
   dm->ndof = (int)nd;
   dm->cell_dofs = malloc(sizeof(int) * (size_t)m->ncell * (size_t)nloc);
   if (!dm->cell_dofs) { snprintf(err, 256, "out of memory"); free(dm); return NULL; }
-  int ne = cell_nedges(m->type);
   for (int c = 0; c < m->ncell; c++) {
     const int *v = m->cells + (size_t)c * (size_t)m->nvc;
     int *cd = dm->cell_dofs + (size_t)c * (size_t)nloc;
@@ -382,12 +585,12 @@ dofmap *dofmap_new(mesh *m, int degree, char *err) {
         int ge = m->cell_edges[(size_t)c * (size_t)ne + (size_t)id];
         const int *lv = cell_edge_verts(m->type, id);
         int forward = v[lv[0]] < v[lv[1]]; /* global edges run from the lower vertex id */
-        int jj = forward ? j : (p - 2 - j);
-        cd[k] = (int)(edge_off + (long)ge * (p - 1) + jj);
+        int jj = forward ? j : (edge_per - 1 - j);
+        cd[k] = (int)(edge_off + (long)ge * edge_per + jj);
       } else if (ed == 2) {
-        cd[k] = (int)(face_off + m->cell_faces[(size_t)c * 4 + (size_t)id]);
+        cd[k] = (int)(face_off + (long)m->cell_faces[(size_t)c * (size_t)nfc + (size_t)id] * face_per + j);
       } else {
-        cd[k] = (int)(cell_off + c);
+        cd[k] = (int)(cell_off + (long)c * cell_per + j);
       }
     }
   }

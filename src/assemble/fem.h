@@ -7,7 +7,7 @@
 #include "../mesh/mesh.h"
 
 #define FEM_MAXQ 1331
-#define FEM_MAXLOC 20 /* P3 tetrahedron */
+#define FEM_MAXLOC 27 /* Q2 hexahedron */
 #define FEM_MAXBS 3   /* components of a vector space */
 
 /* a rule on the reference cell (or facet): points in reference coordinates and weights
@@ -49,9 +49,25 @@ int lagrange_init(lagrange_element *e, cell_type cell, int degree, char *err);
 /* values (nloc) and reference gradients (nloc*dim) at a reference point */
 void lagrange_eval(const lagrange_element *e, const double *xi, double *val, double *grad);
 
-/* reference facet geometry */
-void ref_facet_point(cell_type t, int facet, const double *s, double *xi);
-void ref_facet_normal(cell_type t, int facet, double *n);
+/* reference cells: triangles and tetrahedra (the unit simplex), quadrilaterals and
+ * hexahedra (the unit square and cube, mapped by their bilinear / trilinear map) */
+int cell_is_simplex(cell_type t);
+const double *ref_vertex(cell_type t, int v); /* 3 coordinates */
+/* the rule of a cell (facet = 0) or of its facets (1): simplex rules on simplices and on a
+ * quadrilateral's edges, Gauss-Legendre products on the square and cube and a
+ * hexahedron's faces, exact to `degree` (in each variable on the products) */
+int quad_cell(cell_type t, int facet, int degree, quad_rule *q);
+/* reference facet geometry: a facet rule's point s to cell coordinates, the facet's
+ * reference tangents (t1 unused on 2D cells), its outward reference normal */
+void ref_facet_point(cell_type t, int f, const double *s, double *xi);
+void ref_facet_tangents(cell_type t, int f, double t0[3], double t1[3]);
+void ref_facet_normal(cell_type t, int f, double *n);
+/* the bilinear / trilinear map of a quadrilateral / hexahedron: vertex shape values N (4 or
+ * 8, may be NULL) and reference gradients dN (nv*dim) at xi */
+void q1_shape(cell_type t, const double *xi, double *N, double *dN);
+/* the map's Jacobian J[d][k] = dx_d/dxi_k and its inverse at xi (simplices: constant, xi
+ * unused); returns det J */
+double cell_jacobian(const mesh *m, int c, const double *xi, double J[3][3], double K[3][3]);
 
 /* a Lagrange space of some degree on a mesh: global numbering. A vector space of bs
  * components (bs > 1) interlaces them: local dof i*bs + j is component j at node i of the

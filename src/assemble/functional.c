@@ -68,7 +68,7 @@ lg_form_kernels *lg_form_kernels_new(lg_env *env, lg_mesh *lm, const form *F, in
       return NULL;
     }
     expr *f = expr_canon(env->c, F->t[i].integrand);
-    int qd = lg_quad_degree(env, f, F->t[i].order, lm->m->dim);
+    int qd = lg_quad_degree(env, f, F->t[i].order, lm->m->type);
     kernel_spec s = {0, NULL, f};
     field_layout rows = {0};
     if (K->arity == 1) {
@@ -93,13 +93,13 @@ lg_form_kernels *lg_form_kernels_new(lg_env *env, lg_mesh *lm, const form *F, in
        * transcendental d in the same term); otherwise the functional's rule, so that the
        * gradient is the derivative of the J that was computed (a Taylor test sees any
        * difference: (u - d) v with d = sin(pi x) keeps the rule of (u - d)^2) */
-      int exact = F->t[i].order < 0;
+      int exact = F->t[i].order < 0 && cell_is_simplex(lm->m->type); /* a box's map is not affine */
       for (int r = 0; r < t->tab.nres && exact; r++) {
         int ex;
         expr_degree_exact(env->c, t->tab.res[r], 1, &ex);
         exact = ex;
       }
-      int own = lg_table_degree(env, &t->tab, 1, lm->m->dim);
+      int own = lg_table_degree(env, &t->tab, 1, lm->m->type);
       if (exact && own <= qd) qd = own;
     } else if (f->kind == E_CONST && f->value == 0)
       continue;

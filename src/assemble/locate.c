@@ -104,6 +104,10 @@ static lg_locator *locator_build(lg_env *env, lg_mesh *lm) {
 }
 
 int lg_locate(lg_env *env, lg_mesh *lm, const double *x, int *cell, double *xi) {
+  if (!cell_is_simplex(lm->m->type)) {
+    lg_seterr(env, "point values on %s are not supported yet (triangles and tetrahedra are)", cell_plural(lm->m->type));
+    return -1;
+  }
   if (lm->locator && lm->locator->geometry != lm->geometry) {
     lg_locator_free(lm->locator);
     lm->locator = NULL;

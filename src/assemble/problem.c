@@ -176,11 +176,11 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
       }
       t->tab.nres = k;
     }
-    t->qdeg = lg_quad_degree(env, f, eqn->t[i].order, p->lm->m->dim);
+    t->qdeg = lg_quad_degree(env, f, eqn->t[i].order, p->lm->m->type);
     int facet = t->reg.kind == REGION_BOUNDARY;
     if (t->tab.njac > 0) {
       kernel_spec s = {2, &t->tab, NULL};
-      int qd = eqn->t[i].order >= 0 ? t->qdeg : lg_table_degree(env, &t->tab, 2, p->lm->m->dim);
+      int qd = eqn->t[i].order >= 0 ? t->qdeg : lg_table_degree(env, &t->tab, 2, p->lm->m->type);
       if (kernel_build(env->jit, env->c, p->lm->m->type, facet, qd, &s, &p->rows, &p->cols, &t->kmat, err, sizeof err)) {
         lg_seterr(env, "%s", err);
         return 1;
@@ -191,7 +191,7 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
     }
     if (t->tab.nres > 0) {
       kernel_spec s = {1, &t->tab, NULL};
-      int qd = eqn->t[i].order >= 0 ? t->qdeg : lg_table_degree(env, &t->tab, 1, p->lm->m->dim);
+      int qd = eqn->t[i].order >= 0 ? t->qdeg : lg_table_degree(env, &t->tab, 1, p->lm->m->type);
       if (kernel_build(env->jit, env->c, p->lm->m->type, facet, qd, &s, &p->rows, &p->cols, &t->kres, err, sizeof err)) {
         lg_seterr(env, "%s", err);
         return 1;
@@ -327,11 +327,11 @@ static int compute_bcs(lg_env *env, lg_problem *p) {
     for (int it = 0; it < bt->nitems; it++) {
       int c = bt->cells[it], f = bt->facets[it];
       double J[3][3];
-      simplex_jacobian(m, c, J, pt.K);
       pt.cell = c;
       for (int kk = 0; kk < dm->el.nfacet_dofs; kk++) {
         int k = dm->el.facet_dofs[f][kk] * dm->bs + bt->comp; /* the local dof */
         memcpy(pt.xi, dofmap_node_ref(dm, k), sizeof pt.xi);
+        cell_jacobian(m, c, pt.xi, J, pt.K);
         dofmap_node_coords(dm, c, k, pt.x);
         double out[2];
         if (expr_tape_eval(&bt->tape, expr_param_values(env->c), bc_leaf, &pt, w, out)) { free(w); free(src); return 1; }
@@ -1013,13 +1013,30 @@ static void null_mean_zero(lg_env *env, lg_problem *p, double *x) {
       /* the mean of component j: the integral of the interpolant over the mesh's measure */
       double num = 0, vol = 0;
       mesh *m = p->lm->m;
-      for (int c = 0; c < m->ncell; c++) {
-        double J[3][3], K[3][3], det = fabs(simplex_jacobian(m, c, J, K));
-        double s = 0;
-        const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
-        for (int k = 0; k < dm->el.nloc; k++) s += x[p->cglob[a] + cd[k * bs + j]] * dm->el.mean[k];
-        num += s * det;
-        vol += det;
+      if (cell_is_simplex(m->type)) {
+        for (int c = 0; c < m->ncell; c++) {
+          double J[3][3], K[3][3], det = fabs(simplex_jacobian(m, c, J, K));
+          double s = 0;
+          const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
+          for (int k = 0; k < dm->el.nloc; k++) s += x[p->cglob[a] + cd[k * bs + j]] * dm->el.mean[k];
+          num += s * det;
+          vol += det;
+        }
+      } else {
+        /* a quadrilateral's or hexahedron's Jacobian varies: a rule of the basis degree + 1 */
+        quad_rule q;
+        quad_cell(m->type, 0, dm->degree + 1, &q);
+        for (int c = 0; c < m->ncell; c++) {
+          const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
+          for (int i = 0; i < q.n; i++) {
+            double J[3][3], K[3][3], val[FEM_MAXLOC], grad[FEM_MAXLOC * 3];
+            double w = q.w[i] * fabs(cell_jacobian(m, c, q.x + m->dim * i, J, K)), s = 0;
+            lagrange_eval(&dm->el, q.x + m->dim * i, val, grad);
+            for (int k = 0; k < dm->el.nloc; k++) s += x[p->cglob[a] + cd[k * bs + j]] * val[k];
+            num += w * s;
+            vol += w;
+          }
+        }
       }
       double mean = vol > 0 ? num / vol : 0;
       for (int i = j; i < dm->ndof; i += bs) x[p->cglob[a] + i] -= mean;
@@ -1454,8 +1471,8 @@ int lg_problem_bc_derivative(lg_env *env, lg_problem *p, int fid, int param, int
     dofmap *dm = p->rdm[bt->field];
     bc_pt pt = {env, p, cell, {0, 0, 0}, {0, 0, 0}, {{0}}};
     double J[3][3], d;
-    simplex_jacobian(m, cell, J, pt.K);
     memcpy(pt.xi, dofmap_node_ref(dm, k), sizeof pt.xi);
+    cell_jacobian(m, cell, pt.xi, J, pt.K);
     dofmap_node_coords(dm, cell, k, pt.x);
     if (expr_tape_eval(&p->bcd[slot].tape[t], expr_param_values(env->c), bc_leaf, &pt, w, &d)) {
       free(r); free(c); free(v); free(w);

@@ -1301,6 +1301,7 @@ expr *expr_find_kink(expr_ctx *c, expr *e, int nf, const int *fids, int np, cons
 typedef struct {
   expr_ctx *c;
   int cd;
+  int simplex;  /* derivatives lower a leaf's degree (not on tensor-product cells) */
   int inexact;  /* a node that is not a polynomial of its arguments (sin, u^0.5, 1/u, ...) */
   memo_map deg; /* node id -> (expr *)(degree + 1) */
 } degree_ctx;
@@ -1315,7 +1316,7 @@ static int degree_visit(void *ud, expr *e) {
   case E_COORD: d = D->cd; break;
   case E_FIELD: {
     expr_func_info *f = expr_func_get(D->c, e->i0);
-    d = f ? f->degree - e->order : 0;
+    d = f ? f->degree - (D->simplex ? e->order : 0) : 0;
     if (d < 0) d = 0;
     break;
   }
@@ -1349,12 +1350,14 @@ static int degree_visit(void *ud, expr *e) {
   return memo_put(&D->deg, e->id, (expr *)(intptr_t)(d + 1));
 }
 
-int expr_degree_exact(expr_ctx *c, expr *e, int cd, int *exact) {
+int expr_degree_exact(expr_ctx *c, expr *e, int cd, int *exact) { return expr_degree_cell(c, e, cd, 1, exact); }
+
+int expr_degree_cell(expr_ctx *c, expr *e, int cd, int simplex, int *exact) {
   if (exact) *exact = 1;
   e = expr_canon(c, e);
   if (!e) return 0;
   memo_map seen = {0, 0, NULL};
-  degree_ctx D = {c, cd, 0, {0, 0, NULL}};
+  degree_ctx D = {c, cd, simplex, 0, {0, 0, NULL}};
   int d = 0;
   if (!post_order(c, e, &seen, degree_visit, NULL, &D)) d = deg_of(&D, e);
   else D.inexact = 1;

@@ -165,6 +165,9 @@ int expr_degree(expr_ctx *c, expr *e, int cell_degree_of_coords);
 /* the same, and *exact = 1 when e is a polynomial (the estimate is its degree): no
  * transcendental function, non-integer power or division of a non-constant */
 int expr_degree_exact(expr_ctx *c, expr *e, int cell_degree_of_coords, int *exact);
+/* the same on a cell kind: simplex = 0 (quadrilaterals, hexahedra: degrees per variable of
+ * tensor-product bases) keeps a leaf's degree under a derivative, as UFL does there */
+int expr_degree_cell(expr_ctx *c, expr *e, int cell_degree_of_coords, int simplex, int *exact);
 
 /* text form for messages and __tostring */
 void expr_print(expr_ctx *c, const expr *e, char *buf, size_t len);

@@ -627,8 +627,8 @@ int mesh_build_edges(mesh *m) {
 }
 
 int mesh_build_faces(mesh *m) {
-  if (m->faces || m->type != CELL_TETRAHEDRON) return 0;
-  return number_entities(m, 4, 3, cell_facet_verts, &m->cell_faces, &m->faces, &m->nface);
+  if (m->faces || (m->type != CELL_TETRAHEDRON && m->type != CELL_HEXAHEDRON)) return 0;
+  return number_entities(m, cell_nfacets(m->type), m->nvf, cell_facet_verts, &m->cell_faces, &m->faces, &m->nface);
 }
 
 int mesh_build_boundary_cells(mesh *m) {

@@ -48,9 +48,9 @@ typedef struct mesh {
   int nedge;
   int *edges;      /* nedge*2, sorted vertex pairs */
   int *cell_edges; /* ncell*nedges_per_cell */
-  int nface;       /* faces of tetrahedra (3D simplices only) */
-  int *faces;      /* nface*3 sorted */
-  int *cell_faces; /* ncell*4 */
+  int nface;       /* faces of tetrahedra and hexahedra */
+  int *faces;      /* nface*nvf */
+  int *cell_faces; /* ncell*nfacets */
   int *bf_cell;    /* nbf: owning cell of each tagged boundary facet */
   int *bf_local;   /* nbf: local facet index in that cell */
 

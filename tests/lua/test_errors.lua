@@ -118,11 +118,13 @@ local nl = lg.nonlinear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.
                                 bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}
 fails(function() return nl:solve() end, "problem:solve: the nonlinear solve did not converge")
 
--- Lagrange elements exist on triangles and tetrahedra only: a quadrilateral mesh is refused
--- with a message naming the cell type and the supported ones
+-- quadrilaterals have Q0-Q2: a cubic basis there is refused with a message naming the
+-- cell type and the degrees it has
 local qm = lg.mesh.rectangle{nx = 2, cell = "quadrilateral"}
+local P3 = lg.lagrange(3)
+local u3, v3 = lg.unknown(P3, "u"), lg.test(P3, "v")
 fails(function()
-  return lg.linear_problem{mesh = qm, eqn = lg.integral(qm:cells(), u*v - v), test = v, unknown = u}
-end, "quadrilaterals", "triangles and tetrahedra are")
+  return lg.linear_problem{mesh = qm, eqn = lg.integral(qm:cells(), u3*v3 - v3), test = v3, unknown = u3}
+end, "quadrilaterals", "0, 1 and 2 are")
 
 print(n .. " bad inputs reported as errors")

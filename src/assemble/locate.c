@@ -103,11 +103,37 @@ static lg_locator *locator_build(lg_env *env, lg_mesh *lm) {
   return L;
 }
 
-int lg_locate(lg_env *env, lg_mesh *lm, const double *x, int *cell, double *xi) {
-  if (!cell_is_simplex(lm->m->type)) {
-    lg_seterr(env, "point values on %s are not supported yet (triangles and tetrahedra are)", cell_plural(lm->m->type));
-    return -1;
+/* the reference coordinates of x in a quadrilateral or hexahedron by Newton's method on its
+ * bilinear / trilinear map; how far inside it is (the smallest of xi_d and 1 - xi_d), or
+ * -inf when Newton does not converge (x far outside a distorted cell) */
+static double box_inside(const mesh *m, int c, const double *x, double *xi) {
+  int d = m->dim;
+  const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+  for (int k = 0; k < d; k++) xi[k] = 0.5;
+  for (int it = 0; it < 30; it++) {
+    double N[8], J[3][3], K[3][3], r[3] = {0, 0, 0};
+    q1_shape(m->type, xi, N, NULL);
+    for (int k = 0; k < d; k++) {
+      for (int j = 0; j < m->nvc; j++) r[k] += N[j] * m->x[(size_t)v[j] * d + k];
+      r[k] -= x[k];
+    }
+    double det = cell_jacobian(m, c, xi, J, K), step = 0;
+    if (!(fabs(det) > 0)) return -INFINITY;
+    for (int k = 0; k < d; k++) {
+      double dk = 0;
+      for (int j = 0; j < d; j++) dk += K[k][j] * r[j];
+      xi[k] -= dk;
+      step = fmax(step, fabs(dk));
+    }
+    if (!(fabs(xi[0]) < 10 && fabs(xi[1]) < 10 && (d < 3 || fabs(xi[2]) < 10))) return -INFINITY;
+    if (step < 1e-14) break;
   }
+  double in = INFINITY;
+  for (int k = 0; k < d; k++) in = fmin(in, fmin(xi[k], 1 - xi[k]));
+  return in;
+}
+
+int lg_locate(lg_env *env, lg_mesh *lm, const double *x, int *cell, double *xi) {
   if (lm->locator && lm->locator->geometry != lm->geometry) {
     lg_locator_free(lm->locator);
     lm->locator = NULL;
@@ -128,8 +154,18 @@ int lg_locate(lg_env *env, lg_mesh *lm, const double *x, int *cell, double *xi) 
    * a point on a shared facet belongs to either, one just outside the boundary to none */
   int best = -1;
   double bestmin = -1e-10, bxi[3] = {0, 0, 0};
+  int box = !cell_is_simplex(m->type);
   for (int i = L->start[bi]; i < L->start[bi + 1]; i++) {
     int c = L->list[i];
+    if (box) {
+      double loc[3] = {0, 0, 0}, in = box_inside(m, c, x, loc);
+      if (in > bestmin) {
+        bestmin = in;
+        best = c;
+        memcpy(bxi, loc, sizeof bxi);
+      }
+      continue;
+    }
     double J[3][3], K[3][3], r[3], loc[3] = {0, 0, 0};
     simplex_jacobian(m, c, J, K);
     const int *v = m->cells + (size_t)c * (size_t)m->nvc;
@@ -165,7 +201,7 @@ int lg_eval_point(lg_env *env, lg_function *f, const double *x, double *out) {
     return 1;
   }
   double J[3][3], K[3][3];
-  simplex_jacobian(f->mesh->m, cell, J, K);
+  cell_jacobian(f->mesh->m, cell, xi, J, K);
   unsigned char z[3] = {0, 0, 0};
   for (int j = 0; j < f->dm->bs; j++) {
     expr leaf;

@@ -365,7 +365,7 @@ static int prob_solve(lua_State *L) {
         init[i - 1] = g ? g->f : NULL;
         lua_pop(L, 1);
       }
-    } else return typeerror(L, fn, init_idx, "a discrete function (initial guess)");
+    } else return typeerror(L, fn, init_idx, u->nfield == 1 ? "a discrete function (initial guess)" : "a table of discrete functions (initial guesses, one per unknown)");
   }
   lg_function *out[KER_MAXFIELD];
   lg_solve_info info;

@@ -123,8 +123,28 @@ do
   T.check(math.abs(r - 3) < 0.15, "vector Q2 elasticity rate %.3f", r)
 end
 
+-- point values on quadrilaterals and hexahedra (Newton's method on the cell's map): at the
+-- dof points of distorted meshes the dof values, and a bilinear function exactly
+do
+  local m2 = lg.mesh.rectangle{nx = 5, ny = 4, cell = "quadrilateral"}
+  distort(m2, 0.04)
+  local g = lg.interpolate(lg.lagrange(2), m2, x*x*y - y + 2)
+  local pts, vals, w2 = g:dof_coordinates(), g:values(), 0
+  for i, pt in ipairs(pts) do w2 = math.max(w2, math.abs(g(pt[1], pt[2]) - vals[i])) end
+  T.check(w2 < 1e-12, "Q2 on distorted quadrilaterals: at the dof points the dof values (%.2e)", w2)
+  local h = lg.mesh.box{nx = 3, cell = "hexahedron"}
+  distort(h, 0.03)
+  local gh = lg.interpolate(lg.lagrange(1), h, 1 + x - y + 2*z)
+  local hp, hv, w3 = gh:dof_coordinates(), gh:values(), 0
+  for i, pt in ipairs(hp) do w3 = math.max(w3, math.abs(gh(pt[1], pt[2], pt[3]) - hv[i])) end
+  T.check(w3 < 1e-12, "Q1 on distorted hexahedra: at the vertices the dof values (%.2e)", w3)
+  local bil = function(a, b) return 1 + a - 2*b + 3*a*b end
+  local u1 = lg.interpolate(lg.lagrange(1), lg.mesh.rectangle{nx = 3, cell = "quadrilateral"}, bil(x, y))
+  T.close(u1(0.37, 0.81), bil(0.37, 0.81), 1e-13, "Q1 reproduces a bilinear function on a square mesh")
+end
+
 -- what is not there yet says so
 local q = lg.mesh.rectangle{nx = 2, cell = "quadrilateral"}
 T.fails(function() return lg.interpolate(lg.lagrange(3), q, x) end, "degree 3 is not available on quadrilaterals")
-T.fails(function() return lg.interpolate(lg.lagrange(1), q, x)(0.5, 0.5) end, "point values on quadrilaterals are not supported yet")
+T.fails(function() return lg.interpolate(lg.lagrange(1), q, x)(1.5, 0.5) end, "outside the mesh")
 print("quadrilaterals and hexahedra: all checks passed")

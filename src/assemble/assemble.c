@@ -124,6 +124,25 @@ int lg_region_items(lg_env *env, lg_mesh *lm, const region *r, int *n, int **cel
   *cells = NULL;
   *facets = NULL;
   *n = 0;
+  if (r->kind == REGION_POINTS) {
+    /* a vertex: one cell that has it and its local index there (facets[] holds it) */
+    *cells = malloc(sizeof(int) * (size_t)(r->ntag + 1));
+    *facets = malloc(sizeof(int) * (size_t)(r->ntag + 1));
+    if (!*cells || !*facets) { free(*cells); free(*facets); *cells = *facets = NULL; lg_seterr(env, "out of memory"); return 1; }
+    for (int i = 0; i < r->ntag; i++) (*cells)[i] = -1;
+    for (int c = 0; c < m->ncell; c++)
+      for (int k = 0; k < m->nvc; k++)
+        for (int i = 0; i < r->ntag; i++)
+          if ((*cells)[i] < 0 && m->cells[(size_t)c * (size_t)m->nvc + k] == r->tags[i]) { (*cells)[i] = c; (*facets)[i] = k; }
+    for (int i = 0; i < r->ntag; i++)
+      if ((*cells)[i] < 0) {
+        free(*cells); free(*facets); *cells = *facets = NULL;
+        lg_seterr(env, "vertex %d belongs to no cell", r->tags[i] + 1);
+        return 1;
+      }
+    *n = r->ntag;
+    return 0;
+  }
   if (r->kind == REGION_CELLS) {
     int cnt = 0;
     for (int c = 0; c < m->ncell; c++) {

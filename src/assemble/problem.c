@@ -28,6 +28,7 @@ typedef struct {
 typedef struct {
   int field;          /* row/column field */
   int comp;           /* its component (vector fields) */
+  int points;         /* on vertices (facets[] holds the local vertex), not on facets */
   int src;            /* the boundary condition it comes from (form term index) */
   expr_tape tape;     /* roots: a (coefficient of u), r (rest): u = -r/a */
   expr *g;            /* the value -r/a (controls differentiate it) */
@@ -212,8 +213,9 @@ static int setup_bcs(lg_env *env, lg_problem *p, const form *bc, const int *test
   long cap = 0;
   for (int i = 0; i < bc->n; i++) {
     const form_term *ft = &bc->t[i];
-    if (ft->reg.kind != REGION_BOUNDARY) {
-      lg_seterr(env, "an essential boundary condition must be given on boundary facets (mesh:boundary(...))");
+    if (ft->reg.kind == REGION_CELLS) {
+      lg_seterr(env, "an essential boundary condition must be given on boundary facets (mesh:boundary(...)) or vertices "
+                     "(mesh:vertices{near = ...})");
       return 1;
     }
     coef_table tab;
@@ -268,7 +270,8 @@ static int setup_bcs(lg_env *env, lg_problem *p, const form *bc, const int *test
       bt->g = expr_div(env->c, expr_neg(env->c, rest), ca);
       if (!bt->g || expr_tape_build(env->c, 2, roots, &bt->tape)) { coef_table_free(&tab); lg_seterr(env, "%s", expr_error(env->c)); return 1; }
       if (lg_region_items(env, p->lm, &ft->reg, &bt->nitems, &bt->cells, &bt->facets)) { coef_table_free(&tab); return 1; }
-      cap += (long)bt->nitems * p->rdm[a]->el.nfacet_dofs;
+      bt->points = ft->reg.kind == REGION_POINTS;
+      cap += (long)bt->nitems * (bt->points ? 1 : p->rdm[a]->el.nfacet_dofs);
     }
     coef_table_free(&tab);
   }
@@ -315,6 +318,12 @@ static int compute_bcs(lg_env *env, lg_problem *p) {
   for (int i = 0; i < p->nbct; i++) {
     bc_term *bt = &p->bct[i];
     dofmap *dm = p->rdm[bt->field];
+    if (!dm->el.nfacet_dofs && bt->points) {
+      free(src);
+      lg_seterr(env, "essential_bc: condition %d pins a vertex of a piecewise-constant (P0) field, which has no vertex "
+                     "values (they belong to cells)", bt->src + 1);
+      return 1;
+    }
     if (!dm->el.nfacet_dofs) {
       free(src);
       lg_seterr(env, "essential_bc: boundary condition %d is on a piecewise-constant (P0) field, which has no values on "
@@ -328,8 +337,20 @@ static int compute_bcs(lg_env *env, lg_problem *p) {
       int c = bt->cells[it], f = bt->facets[it];
       double J[3][3];
       pt.cell = c;
-      for (int kk = 0; kk < dm->el.nfacet_dofs; kk++) {
-        int k = dm->el.facet_dofs[f][kk] * dm->bs + bt->comp; /* the local dof */
+      int nk = bt->points ? 1 : dm->el.nfacet_dofs;
+      for (int kk = 0; kk < nk; kk++) {
+        int node = -1;
+        if (bt->points) {
+          for (int j = 0; j < dm->el.nloc; j++)
+            if (dm->el.ent_dim[j] == 0 && dm->el.ent_id[j] == f) node = j;
+        } else node = dm->el.facet_dofs[f][kk];
+        if (node < 0) {
+          free(w);
+          free(src);
+          lg_seterr(env, "essential_bc: condition %d pins a vertex of a field without vertex values (P0)", bt->src + 1);
+          return 1;
+        }
+        int k = node * dm->bs + bt->comp; /* the local dof */
         memcpy(pt.xi, dofmap_node_ref(dm, k), sizeof pt.xi);
         cell_jacobian(m, c, pt.xi, J, pt.K);
         dofmap_node_coords(dm, c, k, pt.x);

@@ -214,7 +214,8 @@ void expr_codegen_ref(const expr_tape *t, int k, const char *prefix, expr_leaf_n
                       void *ud, char *buf, size_t len);
 
 /* ---- forms: sums of integrals of scalar integrands over regions */
-typedef enum { REGION_CELLS, REGION_BOUNDARY } region_kind;
+/* REGION_POINTS: mesh vertices (tags holds their ids), for essential conditions only */
+typedef enum { REGION_CELLS, REGION_BOUNDARY, REGION_POINTS } region_kind;
 #define REGION_MAXTAGS 64
 typedef struct {
   region_kind kind;

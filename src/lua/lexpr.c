@@ -406,6 +406,9 @@ static int quad_order(lua_State *L, int idx, const char *fn) {
 static int make_integral(lua_State *L, const char *fn, const char *mt) {
   ud_region *r = luaL_testudata(L, 1, MT_REGION);
   if (!r) return typeerror(L, fn, 1, "a region (mesh:cells() or mesh:boundary(...))");
+  if (r->r.kind == REGION_POINTS && !strcmp(mt, MT_FORM))
+    return luaL_error(L, "%s: argument 1 is a set of vertices (mesh:vertices), which has no measure: it is for "
+                         "lg.essential_bc (pinning values); integrate over cells or boundary facets", fn);
   expr *e = check_expr(L, 2, fn);
   if (e->kind == E_LIST) {
     char s[64];
@@ -425,8 +428,9 @@ static int l_integral(lua_State *L) { return make_integral(L, "lg.integral", MT_
 
 static int l_essential_bc(lua_State *L) {
   ud_region *r = luaL_testudata(L, 1, MT_REGION);
-  if (r && r->r.kind != REGION_BOUNDARY)
-    return luaL_error(L, "lg.essential_bc: argument 1 must be a boundary region (mesh:boundary(...)), got cells");
+  if (r && r->r.kind == REGION_CELLS)
+    return luaL_error(L, "lg.essential_bc: argument 1 must be a boundary region (mesh:boundary(...)) or vertices "
+                         "(mesh:vertices{near = ...}), got cells");
   return make_integral(L, "lg.essential_bc", MT_BC);
 }
 
@@ -448,6 +452,8 @@ static int l_integrate(lua_State *L) {
   const char *fn = "lg.integrate";
   region r;
   lg_mesh *lm = region_or_mesh(L, 1, fn, &r);
+  if (r.kind == REGION_POINTS)
+    return luaL_error(L, "%s: argument 1 is a set of vertices (mesh:vertices), which has no measure", fn);
   expr *e = check_expr(L, 2, fn);
   int order = quad_order(L, 3, fn);
   lg_env *env = get_env(L);

@@ -271,6 +271,57 @@ static int mesh_cells(lua_State *L) { return region_new(L, REGION_CELLS, "mesh:c
 
 static int mesh_boundary(lua_State *L) { return region_new(L, REGION_BOUNDARY, "mesh:boundary"); }
 
+/* mesh:vertices{near = {x, y}} or {near = {{x, y}, ...}}: the vertex nearest to each point,
+ * a region for lg.essential_bc (a pinned pressure, a fixed point of a free body) */
+static int mesh_vertices(lua_State *L) {
+  const char *fn = "mesh:vertices";
+  ud_mesh *um = check_mesh(L, 1, fn);
+  mesh *m = um->lm->m;
+  if (!lua_istable(L, 2)) return typeerror(L, fn, 1, "a table {near = {x, y}} or {near = {{x, y}, ...}}");
+  static const char *const keys[] = {"near", NULL};
+  check_keys(L, 2, fn, keys);
+  if (lua_getfield(L, 2, "near") != LUA_TTABLE) return luaL_error(L, "%s: option 'near' must be a point {x, y} or a table of points", fn);
+  int t = lua_gettop(L);
+  region r;
+  memset(&r, 0, sizeof r);
+  r.kind = REGION_POINTS;
+  r.mesh = um->lm;
+  int list = lua_geti(L, t, 1) == LUA_TTABLE;
+  lua_pop(L, 1);
+  lua_Integer np = list ? luaL_len(L, t) : 1;
+  if (np < 1 || np > REGION_MAXTAGS) return luaL_error(L, "%s: option 'near' lists 1 to %d points, got %I", fn, REGION_MAXTAGS, np);
+  for (lua_Integer i = 1; i <= np; i++) {
+    if (list) lua_geti(L, t, i);
+    else lua_pushvalue(L, t);
+    if (!lua_istable(L, -1) || luaL_len(L, -1) != m->dim)
+      return luaL_error(L, "%s: point %I of option 'near' must be a table of %d coordinates", fn, i, m->dim);
+    double x[3] = {0, 0, 0};
+    for (int d = 0; d < m->dim; d++) {
+      lua_geti(L, -1, d + 1);
+      int isnum;
+      x[d] = lua_tonumberx(L, -1, &isnum);
+      if (!isnum || !isfinite(x[d])) return luaL_error(L, "%s: coordinate %d of point %I must be a finite number", fn, d + 1, i);
+      lua_pop(L, 1);
+    }
+    lua_pop(L, 1);
+    int best = -1;
+    double bd = INFINITY;
+    for (int v = 0; v < m->nvert; v++) {
+      double s = 0;
+      for (int d = 0; d < m->dim; d++) s += (m->x[(size_t)v * m->dim + d] - x[d]) * (m->x[(size_t)v * m->dim + d] - x[d]);
+      if (s < bd) { bd = s; best = v; }
+    }
+    if (best < 0) return luaL_error(L, "%s: the mesh has no vertices", fn);
+    int dup = 0;
+    for (int k = 0; k < r.ntag; k++) dup |= r.tags[k] == best;
+    if (!dup) r.tags[r.ntag++] = best;
+  }
+  int deps[1] = {1};
+  ud_region *ur = new_ud(L, sizeof *ur, MT_REGION, 1, deps);
+  ur->r = r;
+  return 1;
+}
+
 static int mesh_info(lua_State *L) {
   ud_mesh *u = check_mesh(L, 1, "mesh:info");
   mesh *m = u->lm->m;
@@ -1018,7 +1069,7 @@ static int series_gc(lua_State *L) {
 
 void lg_lua_mesh_register(lua_State *L) {
   static const luaL_Reg mesh_mm[] = {{"__gc", mesh_gc}, {"__tostring", mesh_tostring}, {NULL, NULL}};
-  static const luaL_Reg mesh_methods[] = {{"cells", mesh_cells}, {"boundary", mesh_boundary}, {"info", mesh_info},
+  static const luaL_Reg mesh_methods[] = {{"cells", mesh_cells}, {"boundary", mesh_boundary}, {"vertices", mesh_vertices}, {"info", mesh_info},
                                           {"write", mesh_write}, {"refine", lmesh_refine}, {"copy", lmesh_copy}, {"hmax", lmesh_hmax},
                                           {"check", mesh_check}, {"nvertices", mesh_nvertices}, {"ncells", mesh_ncells},
                                           {"dim", mesh_dim}, {"coordinates", mesh_coordinates},

@@ -92,6 +92,32 @@ do
   T.check(rp > 1.9, "Stokes pressure L2 rate %.3f (at least 2)", rp)
 end
 
+-- a pinned pressure (Sundance's way: an essential condition at one vertex) gives the
+-- velocity of the null-space solve and its pressure up to the constant
+do
+  local mesh = lg.mesh.rectangle{nx = 8}
+  local u, p = lg.unknown(lg.vector(lg.lagrange(2)), "u"), lg.unknown(lg.lagrange(1), "p")
+  local v, q = lg.test(lg.vector(lg.lagrange(2)), "v"), lg.test(lg.lagrange(1), "q")
+  local eqn = lg.integral(mesh:cells(), lg.inner(lg.grad(u), lg.grad(v)) - p*lg.div(v) - q*lg.div(u))
+  local walls = {lg.essential_bc(mesh:boundary("left", "right", "bottom"), lg.dot(v, u)),
+                 lg.essential_bc(mesh:boundary("top"), lg.dot(v, u - {16*x^2*(1 - x)^2, 0}))}
+  local pin = {walls[1], walls[2], lg.essential_bc(mesh:vertices{near = {0.01, -0.02}}, q*(p - 0.25))}
+  local u1, p1 = lg.linear_problem{mesh = mesh, eqn = eqn, bc = pin, test = {v, q}, unknown = {u, p}}:solve()
+  local u2, p2 = lg.linear_problem{mesh = mesh, eqn = eqn, bc = walls, test = {v, q}, unknown = {u, p}, nullspace = p}:solve()
+  T.close(p1(0, 0), 0.25, 1e-14, "the pressure pinned at the vertex nearest to (0.01, -0.02)")
+  local du = math.sqrt(lg.integrate(mesh, lg.dot(u1 - u2, u1 - u2)))
+  local dp = math.sqrt(lg.integrate(mesh, (p1 - p2 - (0.25 - p2(0, 0)))^2))
+  T.check(du < 1e-12 and dp < 1e-10, "pinned and null-space pressures agree up to the constant (%.1e, %.1e)", du, dp)
+  T.fails(function() return lg.integral(mesh:vertices{near = {0, 0}}, p*q) end, "has no measure")
+  T.fails(function() return lg.integrate(mesh:vertices{near = {0, 0}}, x) end, "has no measure")
+  T.fails(function() return mesh:vertices{near = {0}} end, "must be a table of 2 coordinates")
+  local r0 = lg.unknown(lg.lagrange(0), "r")
+  local s0 = lg.test(lg.lagrange(0), "s")
+  T.fails(function() return lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), r0*s0 - s0), test = s0, unknown = r0,
+                                              bc = lg.essential_bc(mesh:vertices{near = {0, 0}}, s0*r0)}:solve() end,
+          "has no vertex values")
+end
+
 -- componentwise conditions (rollers) and a traction: plane-strain uniaxial tension, an
 -- affine solution that P1 reproduces to round-off
 do

@@ -82,6 +82,13 @@ int gauss_jacobi(int n, double a, double b, double *x, double *w) {
 int quad_simplex(int dim, int degree, quad_rule *q) {
   if (degree < 0) degree = 0;
   if (degree > FEM_MAXDEG) return 1;
+  if (dim == 0) { /* a point (an interval's facet) */
+    q->dim = 0;
+    q->degree = FEM_MAXDEG;
+    q->n = 1;
+    q->w[0] = 1;
+    return 0;
+  }
   if (dim >= 2 && !quad_table_rule(dim, degree, q)) return 0;
   int m = (degree + 2) / 2; /* exact for 2m-1 >= degree */
   double xa[64], wa[64], xb[64], wb[64], xc[64], wc[64];
@@ -125,6 +132,7 @@ int quad_simplex(int dim, int degree, quad_rule *q) {
 
 /* ---------------------------------------------------------------- reference facets */
 
+static const double int_v[2][3] = {{0, 0, 0}, {1, 0, 0}};
 static const double tri_v[3][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
 static const double tet_v[4][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
 /* the unit square and cube, vertices in the mesh layer's order (counterclockwise, bottom
@@ -132,10 +140,11 @@ static const double tet_v[4][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
 static const double quad_v[4][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
 static const double hex_v[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
 
-int cell_is_simplex(cell_type t) { return t == CELL_TRIANGLE || t == CELL_TETRAHEDRON; }
+int cell_is_simplex(cell_type t) { return t == CELL_TRIANGLE || t == CELL_TETRAHEDRON || t == CELL_INTERVAL; }
 
 const double *ref_vertex(cell_type t, int v) {
   switch (t) {
+  case CELL_INTERVAL: return int_v[v];
   case CELL_TRIANGLE: return tri_v[v];
   case CELL_TETRAHEDRON: return tet_v[v];
   case CELL_QUADRILATERAL: return quad_v[v];
@@ -147,7 +156,10 @@ void ref_facet_point(cell_type t, int f, const double *s, double *xi) {
   const int *fv = cell_facet_verts(t, f);
   const double *a = ref_vertex(t, fv[0]), *b = ref_vertex(t, fv[1]);
   int dim = cell_dim(t);
-  if (dim == 2) {
+  if (dim == 1) {
+    xi[0] = a[0];
+    (void)b;
+  } else if (dim == 2) {
     for (int d = 0; d < 2; d++) xi[d] = (1 - s[0]) * a[d] + s[0] * b[d];
   } else if (t == CELL_TETRAHEDRON) {
     const double *c = ref_vertex(t, fv[2]);
@@ -161,6 +173,10 @@ void ref_facet_point(cell_type t, int f, const double *s, double *xi) {
 
 void ref_facet_tangents(cell_type t, int f, double t0[3], double t1[3]) {
   const int *fv = cell_facet_verts(t, f);
+  if (t == CELL_INTERVAL) { /* a point: no tangents */
+    for (int d = 0; d < 3; d++) t0[d] = t1[d] = 0;
+    return;
+  }
   const double *a = ref_vertex(t, fv[0]), *b = ref_vertex(t, fv[1]);
   const double *c = ref_vertex(t, fv[cell_dim(t) == 3 && t == CELL_HEXAHEDRON ? 3 : cell_dim(t) == 3 ? 2 : 1]);
   for (int d = 0; d < 3; d++) {
@@ -173,6 +189,7 @@ void ref_facet_normal(cell_type t, int f, double *n) {
   static const double tn[3][2] = {{0.70710678118654752, 0.70710678118654752}, {-1, 0}, {0, -1}};
   static const double en[4][3] = {{0.57735026918962576, 0.57735026918962576, 0.57735026918962576},
                                   {-1, 0, 0}, {0, -1, 0}, {0, 0, -1}};
+  if (t == CELL_INTERVAL) { n[0] = f == 0 ? 1 : -1; return; } /* facet 0 is x = 1 */
   if (t == CELL_TRIANGLE) { n[0] = tn[f][0]; n[1] = tn[f][1]; return; }
   if (t == CELL_TETRAHEDRON) { n[0] = en[f][0]; n[1] = en[f][1]; n[2] = en[f][2]; return; }
   /* the unit square and cube: the axis from the centre through the facet's centre */
@@ -342,7 +359,7 @@ int lagrange_init(lagrange_element *e, cell_type cell, int p, char *err) {
     snprintf(err, 256, "Lagrange degree %d is not available (0, 1, 2 and 3 are)", p);
     return 1;
   }
-  int dim = cell == CELL_TRIANGLE ? 2 : 3;
+  int dim = cell_dim(cell);
   e->cell = cell;
   e->dim = dim;
   e->degree = p;
@@ -355,7 +372,7 @@ int lagrange_init(lagrange_element *e, cell_type cell, int p, char *err) {
   }
   /* vertices */
   for (int v = 0; v < nv; v++, k++) {
-    for (int d = 0; d < dim; d++) e->node[k * 3 + d] = dim == 2 ? tri_v[v][d] : tet_v[v][d];
+    for (int d = 0; d < dim; d++) e->node[k * 3 + d] = ref_vertex(cell, v)[d];
     e->ent_dim[k] = 0; e->ent_id[k] = v; e->ent_k[k] = 0;
   }
   /* edges: p-1 nodes from the first to the second local vertex */
@@ -365,15 +382,20 @@ int lagrange_init(lagrange_element *e, cell_type cell, int p, char *err) {
     for (int j = 1; j < p; j++, k++) {
       double s = (double)j / p;
       for (int d = 0; d < dim; d++) {
-        double a = dim == 2 ? tri_v[ev[0]][d] : tet_v[ev[0]][d];
-        double b = dim == 2 ? tri_v[ev[1]][d] : tet_v[ev[1]][d];
+        double a = ref_vertex(cell, ev[0])[d];
+        double b = ref_vertex(cell, ev[1])[d];
         e->node[k * 3 + d] = (1 - s) * a + s * b;
       }
       e->ent_dim[k] = 1; e->ent_id[k] = ed; e->ent_k[k] = j - 1;
     }
   }
+  /* an interval's interior nodes belong to the cell */
+  for (int j = 1; dim == 1 && j < p; j++, k++) {
+    e->node[k * 3] = (double)j / p;
+    e->ent_dim[k] = 3; e->ent_id[k] = 0; e->ent_k[k] = j - 1;
+  }
   /* P3: one node per triangular face (the triangle itself in 2D: interior) */
-  if (p == 3) {
+  if (p == 3 && dim >= 2) {
     if (dim == 2) {
       e->node[k * 3] = e->node[k * 3 + 1] = 1.0 / 3;
       e->ent_dim[k] = 3; e->ent_id[k] = 0; e->ent_k[k] = 0;
@@ -391,8 +413,8 @@ int lagrange_init(lagrange_element *e, cell_type cell, int p, char *err) {
   /* monomials of total degree <= p */
   int m = 0;
   for (int a = 0; a <= p; a++)
-    for (int b = 0; a + b <= p; b++) {
-      if (dim == 2) { e->mono[m][0] = a; e->mono[m][1] = b; e->mono[m][2] = 0; m++; continue; }
+    for (int b = 0; a + b <= p && (dim >= 2 || b == 0); b++) {
+      if (dim <= 2) { e->mono[m][0] = a; e->mono[m][1] = b; e->mono[m][2] = 0; m++; continue; }
       for (int c = 0; a + b + c <= p; c++) { e->mono[m][0] = a; e->mono[m][1] = b; e->mono[m][2] = c; m++; }
     }
   e->nmono = m;
@@ -478,7 +500,10 @@ void lagrange_eval(const lagrange_element *e, const double *xi, double *val, dou
 /* K = J^-1 (2x2 or 3x3); returns det J */
 static double invert_jacobian(int d, double J[3][3], double K[3][3]) {
   double det;
-  if (d == 2) {
+  if (d == 1) {
+    det = J[0][0];
+    K[0][0] = 1 / det;
+  } else if (d == 2) {
     det = J[0][0] * J[1][1] - J[0][1] * J[1][0];
     K[0][0] = J[1][1] / det; K[0][1] = -J[0][1] / det;
     K[1][0] = -J[1][0] / det; K[1][1] = J[0][0] / det;

@@ -345,6 +345,8 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   /* geometry: once for an affine simplex; a quadrilateral's or hexahedron's varies from
    * point to point and is computed in the quadrature loop */
   if (!affine) {
+  } else if (dim == 1) {
+    sb_printf(&b, "  const double J00 = X[1] - X[0], det = J00, idet = 1.0/det, K00 = idet;\n");
   } else if (dim == 2) {
     sb_printf(&b, "  const double J00 = X[2] - X[0], J01 = X[4] - X[0], J10 = X[3] - X[1], J11 = X[5] - X[1];\n"
                   "  const double det = J00*J11 - J01*J10, idet = 1.0/det;\n"
@@ -373,7 +375,9 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
       sb_printf(&b, "}");
     }
     sb_printf(&b, "};\n");
-    if (dim == 2) {
+    if (dim == 1) {
+      sb_printf(&b, "  const double scale = 1.0; (void)FV;\n"); /* a point */
+    } else if (dim == 2) {
       sb_printf(&b, "  const double *fa = X + 2*FV[facet][0], *fb = X + 2*FV[facet][1];\n"
                     "  const double scale = sqrt((fb[0]-fa[0])*(fb[0]-fa[0]) + (fb[1]-fa[1])*(fb[1]-fa[1]));\n");
     } else {
@@ -390,7 +394,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
         for (int kk = 0; kk < dim; kk++) sb_printf(&b, "%sK%d%d*NR[facet*%d+%d]", kk ? " + " : "", kk, d, dim, kk);
         sb_printf(&b, ";\n");
       }
-      sb_printf(&b, "  const double mn = 1.0/sqrt(m0*m0 + m1*m1%s);\n", dim == 3 ? " + m2*m2" : "");
+      sb_printf(&b, "  const double mn = 1.0/sqrt(m0*m0%s%s);\n", dim >= 2 ? " + m1*m1" : "", dim == 3 ? " + m2*m2" : "");
       for (int d = 0; d < dim; d++) sb_printf(&b, "  const double n%d = m%d*mn;\n", d, d);
     }
   }

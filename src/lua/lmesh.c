@@ -22,6 +22,21 @@ static int mesh_gc(lua_State *L) {
   return 0;
 }
 
+static int l_interval(lua_State *L) {
+  const char *fn = "lg.mesh.interval";
+  if (lua_isnoneornil(L, 1)) lua_newtable(L);
+  if (!lua_istable(L, 1)) typeerror(L, fn, 1, "a table of options {n =, x0 =, x1 =}");
+  static const char *const keys[] = {"n", "nx", "x0", "x1", NULL};
+  check_keys(L, 1, fn, keys);
+  int n = opt_int(L, 1, "n", opt_int(L, 1, "nx", 8, fn), fn);
+  double x0 = opt_num(L, 1, "x0", 0, fn), x1 = opt_num(L, 1, "x1", 1, fn);
+  char err[MESH_ERRLEN];
+  mesh *m = mesh_interval(n, x0, x1, err);
+  if (!m) return luaL_error(L, "%s: %s", fn, err);
+  push_mesh(L, m);
+  return 1;
+}
+
 static int l_rectangle(lua_State *L) {
   const char *fn = "lg.mesh.rectangle";
   if (lua_isnoneornil(L, 1)) lua_newtable(L);
@@ -1095,5 +1110,5 @@ void lg_lua_mesh_register(lua_State *L) {
 
 const luaL_Reg lg_output_lib[] = {{"series", l_series}, {NULL, NULL}};
 
-const luaL_Reg lg_mesh_lib[] = {{"rectangle", l_rectangle}, {"box", l_box}, {"read", l_read},
+const luaL_Reg lg_mesh_lib[] = {{"interval", l_interval}, {"rectangle", l_rectangle}, {"box", l_box}, {"read", l_read},
                                 {"new", l_mesh_new}, {NULL, NULL}};

@@ -191,7 +191,8 @@ static int gmsh_nnodes(int64_t type) {
 }
 static int gmsh_dim(int type) { return type == 15 ? 0 : type == 1 ? 1 : type <= 3 ? 2 : 3; }
 static cell_type gmsh_cell(int type) {
-  return type == 2 ? CELL_TRIANGLE : type == 3 ? CELL_QUADRILATERAL : type == 4 ? CELL_TETRAHEDRON : CELL_HEXAHEDRON;
+  return type == 1 ? CELL_INTERVAL : type == 2 ? CELL_TRIANGLE : type == 3 ? CELL_QUADRILATERAL : type == 4 ? CELL_TETRAHEDRON
+                                                                                                : CELL_HEXAHEDRON;
 }
 
 typedef struct {
@@ -431,7 +432,7 @@ static void read_elements(lex *l, gfile *g) {
       e.edim = -1;
       for (int j = 0; j < e.nn && !l->failed; j++) e.nodes[j] = tok_int(l, "element node", 1, INT64_MAX);
       if (l->failed) break;
-      if (type == 15) continue; /* points carry nothing lugal uses */
+      /* points are the facets of a 1D mesh (and carry nothing in 2D and 3D) */
       if (GROW(l, g->e, g->cape, g->ne + 1)) break;
       g->e[g->ne++] = e;
     }
@@ -455,12 +456,12 @@ static void read_elements(lex *l, gfile *g) {
       }
       long n = tok_count(l, "elements in block", 1 + e.nn);
       if (l->failed) break;
-      if (type != 15 && GROW(l, g->e, g->cape, g->ne + (size_t)n)) break;
+      if (GROW(l, g->e, g->cape, g->ne + (size_t)n)) break;
       for (long i = 0; i < n && !l->failed; i++) {
         e.id = tok_int(l, "element tag", 1, INT64_MAX);
         e.line = l->tline;
         for (int j = 0; j < e.nn && !l->failed; j++) e.nodes[j] = tok_int(l, "element node", 1, INT64_MAX);
-        if (!l->failed && type != 15) g->e[g->ne++] = e;
+        if (!l->failed) g->e[g->ne++] = e;
       }
       k += n;
     }
@@ -640,9 +641,9 @@ static mesh *build_mesh(gfile *g, const char *path, char *err) {
   int cdim = 0, ctype = -1;
   for (size_t i = 0; i < g->ne; i++)
     if (gmsh_dim(g->e[i].type) > cdim) cdim = gmsh_dim(g->e[i].type);
-  if (cdim < 2) {
-    snprintf(err, MESH_ERRLEN, "%.200s: no 2D or 3D elements (lugal reads triangles, quadrilaterals, tetrahedra "
-                               "and hexahedra)", path);
+  if (cdim < 1) {
+    snprintf(err, MESH_ERRLEN, "%.200s: no 1D, 2D or 3D elements (lugal reads lines, triangles, quadrilaterals, "
+                               "tetrahedra and hexahedra)", path);
     return NULL;
   }
   long nc = 0;
@@ -745,6 +746,11 @@ static mesh *build_mesh(gfile *g, const char *path, char *err) {
     if (newid[i] < 0) continue;
     const double *p = g->nx + 3 * i;
     for (int d = 0; d < cdim; d++) x[(size_t)newid[i] * cdim + d] = p[d];
+    if (cdim == 1 && (fabs(p[1]) > 1e-12 * (1 + fabs(p[0])) || fabs(p[2]) > 1e-12 * (1 + fabs(p[0])))) {
+      snprintf(err, MESH_ERRLEN, "%.200s: a 1D mesh must lie on the x axis (node %lld has y = %g, z = %g)", path,
+               (long long)g->ntag[i], p[1], p[2]);
+      goto fail;
+    }
     if (cdim == 2 && fabs(p[2]) > 1e-12 * (1 + fabs(p[0]) + fabs(p[1]))) {
       snprintf(err, MESH_ERRLEN, "%.200s: a 2D mesh must lie in the plane z = 0 (node %lld has z = %g)", path,
                (long long)g->ntag[i], p[2]);
@@ -758,7 +764,7 @@ static mesh *build_mesh(gfile *g, const char *path, char *err) {
   mesh_orient_consistently(m);
   /* facets with physical tags become tagged boundary facets, one per (facet, tag) */
   {
-    int nvf = m->nvf, ftype = cdim == 2 ? 1 : ct == CELL_TETRAHEDRON ? 2 : 3;
+    int nvf = m->nvf, ftype = cdim == 1 ? 15 : cdim == 2 ? 1 : ct == CELL_TETRAHEDRON ? 2 : 3;
     size_t nf = 0, capf = 0, capt = 0;
     for (size_t i = 0; i < g->ne; i++) {
       const gelem *e = &g->e[i];
@@ -969,8 +975,8 @@ int mesh_write_gmsh(mesh *m, const char *path) {
   outfile o;
   if (outfile_open(&o, path, m->err, MESH_ERRLEN)) return 1;
   FILE *f = o.f;
-  static const int ctype[] = {2, 3, 4, 5};
-  int ftype = m->dim == 2 ? 1 : (m->nvf == 3 ? 2 : 3);
+  static const int ctype[] = {2, 3, 4, 5, 1};
+  int ftype = m->dim == 1 ? 15 : m->dim == 2 ? 1 : (m->nvf == 3 ? 2 : 3);
   fprintf(f, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n");
   if (m->nbname + m->ncname) {
     fprintf(f, "$PhysicalNames\n%d\n", m->nbname + m->ncname);
@@ -988,7 +994,7 @@ int mesh_write_gmsh(mesh *m, const char *path) {
   }
   fprintf(f, "$Nodes\n%d\n", m->nvert);
   for (int i = 0; i < m->nvert; i++)
-    fprintf(f, "%d %.17g %.17g %.17g\n", i + 1, m->x[(size_t)m->dim * i], m->x[(size_t)m->dim * i + 1],
+    fprintf(f, "%d %.17g %.17g %.17g\n", i + 1, m->x[(size_t)m->dim * i], m->dim >= 2 ? m->x[(size_t)m->dim * i + 1] : 0.0,
             m->dim == 3 ? m->x[3 * (size_t)i + 2] : 0.0);
   fprintf(f, "$EndNodes\n$Elements\n%d\n", m->nbf + m->ncell);
   int id = 1;

@@ -13,6 +13,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* an interval's facets opposite its vertices, as a simplex's: facet 0 is vertex 1 */
+static const int int_facets[2][1] = {{1}, {0}};
+static const int int_edges[1][2] = {{0, 1}};
 static const int tri_facets[3][2] = {{1, 2}, {2, 0}, {0, 1}};
 static const int tri_edges[3][2] = {{1, 2}, {0, 2}, {0, 1}};
 static const int quad_facets[4][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}};
@@ -23,25 +26,27 @@ static const int hex_facets[6][4] = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4},
 static const int hex_edges[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6},
                                      {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
 
-int cell_nfacets(cell_type t) { static const int n[] = {3, 4, 4, 6}; return n[t]; }
-int cell_nedges(cell_type t) { static const int n[] = {3, 4, 6, 12}; return n[t]; }
-int cell_dim(cell_type t) { return t <= CELL_QUADRILATERAL ? 2 : 3; }
-int cell_nverts(cell_type t) { static const int n[] = {3, 4, 4, 8}; return n[t]; }
+int cell_nfacets(cell_type t) { static const int n[] = {3, 4, 4, 6, 2}; return n[t]; }
+/* an interval's interior dofs belong to the cell, not to an edge */
+int cell_nedges(cell_type t) { static const int n[] = {3, 4, 6, 12, 0}; return n[t]; }
+int cell_dim(cell_type t) { return t == CELL_INTERVAL ? 1 : t <= CELL_QUADRILATERAL ? 2 : 3; }
+int cell_nverts(cell_type t) { static const int n[] = {3, 4, 4, 8, 2}; return n[t]; }
 const char *cell_name(cell_type t) {
-  static const char *n[] = {"triangle", "quadrilateral", "tetrahedron", "hexahedron"};
+  static const char *n[] = {"triangle", "quadrilateral", "tetrahedron", "hexahedron", "interval"};
   return n[t];
 }
 const char *cell_plural(cell_type t) {
-  static const char *n[] = {"triangles", "quadrilaterals", "tetrahedra", "hexahedra"};
+  static const char *n[] = {"triangles", "quadrilaterals", "tetrahedra", "hexahedra", "intervals"};
   return n[t];
 }
-static int cell_nvf(cell_type t) { static const int n[] = {2, 2, 3, 4}; return n[t]; }
+static int cell_nvf(cell_type t) { static const int n[] = {2, 2, 3, 4, 1}; return n[t]; }
 
 const int *cell_facet_verts(cell_type t, int f) {
   switch (t) {
   case CELL_TRIANGLE: return tri_facets[f];
   case CELL_QUADRILATERAL: return quad_facets[f];
   case CELL_TETRAHEDRON: return tet_facets[f];
+  case CELL_INTERVAL: return int_facets[f];
   default: return hex_facets[f];
   }
 }
@@ -50,6 +55,7 @@ const int *cell_edge_verts(cell_type t, int e) {
   case CELL_TRIANGLE: return tri_edges[e];
   case CELL_QUADRILATERAL: return quad_facets[e];
   case CELL_TETRAHEDRON: return tet_edges[e];
+  case CELL_INTERVAL: return int_edges[e];
   default: return hex_edges[e];
   }
 }
@@ -357,6 +363,7 @@ double mesh_cell_signed_measure(const mesh *m, int c) {
   const int *v = m->cells + (size_t)c * (size_t)m->nvc;
   const double *x = m->x;
   switch (m->type) {
+  case CELL_INTERVAL: return x[v[1]] - x[v[0]];
   case CELL_TRIANGLE: {
     const double *a = x + 2 * v[0], *b = x + 2 * v[1], *d = x + 2 * v[2];
     return 0.5 * ((b[0] - a[0]) * (d[1] - a[1]) - (b[1] - a[1]) * (d[0] - a[0]));
@@ -482,6 +489,7 @@ int mesh_cell_normalized(const mesh *m, int c, double *out) {
 /* signed measure of a cell given its (normalized) coordinates */
 static double coords_signed_measure(cell_type t, const double *x) {
   switch (t) {
+  case CELL_INTERVAL: return x[1] - x[0];
   case CELL_TRIANGLE:
     return 0.5 * ((x[2] - x[0]) * (x[5] - x[1]) - (x[3] - x[1]) * (x[4] - x[0]));
   case CELL_QUADRILATERAL: {
@@ -524,6 +532,7 @@ double mesh_cell_relative_validity(const mesh *m, int c) {
   double x[8 * 3];
   mesh_cell_normalized(m, c, x);
   if (isnan(x[0])) return NAN;
+  if (m->type == CELL_INTERVAL) return x[1] - x[0] > 0 ? 1 : x[1] - x[0] < 0 ? -1 : 0; /* normalized: the sign */
   double q = m->type == CELL_QUADRILATERAL || m->type == CELL_HEXAHEDRON ? coords_min_corner_jacobian(m->type, x)
                                                                            : coords_signed_measure(m->type, x);
   /* relative to the longest edge to the power dim (the coordinates are O(1) now) */
@@ -566,7 +575,7 @@ int mesh_orient_consistently(mesh *m) {
   for (int c = 0; c < m->ncell; c++) {
     int *v = m->cells + (size_t)c * (size_t)nvc, t;
     switch (m->type) {
-    case CELL_TRIANGLE: case CELL_TETRAHEDRON:
+    case CELL_TRIANGLE: case CELL_TETRAHEDRON: case CELL_INTERVAL:
       t = v[nvc - 1]; v[nvc - 1] = v[nvc - 2]; v[nvc - 2] = t;
       break;
     case CELL_QUADRILATERAL:
@@ -697,6 +706,23 @@ static void orient_simplices(mesh *m) {
       v[m->nvc - 2] = t;
     }
   }
+}
+
+mesh *mesh_interval(int nx, double x0, double x1, char *err) {
+  if (nx < 1) { seterr(err, "nx must be at least 1 (got %d)", nx); return NULL; }
+  if (!(x1 > x0) || !isfinite(x0) || !isfinite(x1)) { seterr(err, "need finite x0 < x1 (got %g, %g)", x0, x1); return NULL; }
+  if (nx > 1000000000) { seterr(err, "nx = %d is too large", nx); return NULL; }
+  mesh *m = mesh_create(CELL_INTERVAL, nx + 1, NULL, nx, NULL, err);
+  if (!m) return NULL;
+  for (int i = 0; i <= nx; i++) m->x[i] = i == nx ? x1 : x0 + (x1 - x0) * i / nx;
+  for (int c = 0; c < nx; c++) { m->cells[2 * c] = c; m->cells[2 * c + 1] = c + 1; }
+  int left = 0, right = nx;
+  if (mesh_add_boundary_facets(m, 1, &left, 1, "left") || mesh_add_boundary_facets(m, 1, &right, 2, "right")) {
+    seterr(err, "%s", m->err);
+    mesh_free(m);
+    return NULL;
+  }
+  return m;
 }
 
 mesh *mesh_rectangle(const mesh_box_opts *o, char *err) {

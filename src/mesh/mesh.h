@@ -15,7 +15,8 @@ typedef enum {
   CELL_TRIANGLE = 0,
   CELL_QUADRILATERAL = 1,
   CELL_TETRAHEDRON = 2,
-  CELL_HEXAHEDRON = 3
+  CELL_HEXAHEDRON = 3,
+  CELL_INTERVAL = 4   /* 1D: two vertices; its facets are points ("left", "right") */
 } cell_type;
 
 #define MESH_ERRLEN 512
@@ -29,7 +30,7 @@ typedef struct {
 
 typedef struct mesh {
   cell_type type;
-  int dim;        /* topological = geometric dimension: 2 or 3 */
+  int dim;        /* topological = geometric dimension: 1, 2 or 3 */
   int nvc;        /* vertices per cell */
   int nvf;        /* vertices per facet */
   int nvert;
@@ -106,6 +107,8 @@ typedef struct {
 } mesh_box_opts;
 
 mesh *mesh_rectangle(const mesh_box_opts *o, char *err);
+/* [x0, x1] in nx intervals; boundary points "left" (tag 1) and "right" (tag 2) */
+mesh *mesh_interval(int nx, double x0, double x1, char *err);
 mesh *mesh_box(const mesh_box_opts *o, char *err);
 
 /* Gmsh MSH 2.2 and 4.1 ASCII (gmsh.c): from a file (a regular file or a pipe) or from

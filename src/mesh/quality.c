@@ -78,6 +78,7 @@ void quality_names(char *buf, size_t len) {
 }
 
 int quality_applies(int q, cell_type t) {
+  if (t == CELL_INTERVAL) return 0; /* the shape measures are of 2D and 3D cells */
   int simplex = t == CELL_TRIANGLE || t == CELL_TETRAHEDRON;
   switch (q) {
   case QM_MIN_DIHEDRAL_ANGLE: return t == CELL_TETRAHEDRON;
@@ -1395,6 +1396,7 @@ int mesh_deformation(const mesh *m, const double *xref, int q, double p, double 
     return 1;
   }
   if (!(p >= 1)) { snprintf(err, MESH_ERRLEN, "the Schatten exponent p must be >= 1 (or infinity), got %g", p); return 1; }
+  if (m->type == CELL_INTERVAL) { snprintf(err, MESH_ERRLEN, "deformation measures are of 2D and 3D meshes, not intervals"); return 1; }
   int d = m->dim, nvc = m->nvc;
   int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON;
   int ncorner = simplex ? 1 : nvc;

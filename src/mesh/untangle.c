@@ -356,6 +356,9 @@ int ut_ctx_init(ctx *C, mesh *m, int slide, char *err) {
   C->d = m->dim;
   C->nvc = m->nvc;
   switch (m->type) {
+  case CELL_INTERVAL:
+    snprintf(err, MESH_ERRLEN, "untangling, smoothing and mesh motion are for 2D and 3D meshes, not intervals");
+    return 1;
   case CELL_TRIANGLE: C->ncorner = 1; C->ct[0][0] = 0; C->ct[0][1] = 1; C->ct[0][2] = 2; break;
   case CELL_TETRAHEDRON: C->ncorner = 1; for (int i = 0; i < 4; i++) C->ct[0][i] = i; break;
   case CELL_QUADRILATERAL:
@@ -1546,6 +1549,7 @@ int ut_finite_or_restore(mesh *m, const double *keep) {
 
 int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err) {
   memset(r, 0, sizeof *r);
+  if (m->type == CELL_INTERVAL) { snprintf(err, MESH_ERRLEN, "untangling is for 2D and 3D meshes, not intervals"); return 1; }
   if (check_opts(o, err) || ut_check_finite(m, "untangling", err)) return 1;
   size_t nx = (size_t)m->nvert * m->dim;
   double *keep = malloc(sizeof(double) * (nx + 1));
@@ -1574,6 +1578,7 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
 
 int mesh_move(mesh *m, const double *disp, const unsigned char *fixed, move_report *r, char *err) {
   memset(r, 0, sizeof *r);
+  if (m->type == CELL_INTERVAL) { snprintf(err, MESH_ERRLEN, "mesh motion is for 2D and 3D meshes, not intervals"); return 1; }
   if (ut_check_finite(m, "mesh motion", err)) return 1;
   for (int v = 0; v < m->nvert; v++)
     for (int j = 0; fixed[v] && j < m->dim; j++)

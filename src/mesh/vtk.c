@@ -20,7 +20,7 @@ int mesh_write_vtu(mesh *m, const char *path, int nfield, const mesh_field *fl) 
   outfile o;
   if (outfile_open(&o, path, m->err, MESH_ERRLEN)) return 1;
   FILE *f = o.f;
-  static const int vtk_type[] = {5, 9, 10, 12};
+  static const int vtk_type[] = {5, 9, 10, 12, 3};
   fprintf(f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" "
              "byte_order=\"LittleEndian\">\n<UnstructuredGrid>\n"
              "<Piece NumberOfPoints=\"%d\" NumberOfCells=\"%d\">\n", m->nvert, m->ncell);
@@ -43,7 +43,7 @@ int mesh_write_vtu(mesh *m, const char *path, int nfield, const mesh_field *fl) 
   }
   fprintf(f, "<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n");
   for (int i = 0; i < m->nvert; i++)
-    fprintf(f, "%.17g %.17g %.17g\n", m->x[m->dim * i], m->x[m->dim * i + 1],
+    fprintf(f, "%.17g %.17g %.17g\n", m->x[m->dim * i], m->dim >= 2 ? m->x[m->dim * i + 1] : 0.0,
             m->dim == 3 ? m->x[3 * i + 2] : 0.0);
   fprintf(f, "</DataArray>\n</Points>\n<Cells>\n"
              "<DataArray type=\"Int32\" Name=\"connectivity\" format=\"ascii\">\n");

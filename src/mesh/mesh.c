@@ -900,7 +900,36 @@ mesh *mesh_box(const mesh_box_opts *o, char *err) {
 
 /* ---------------------------------------------------------------- refinement */
 
+/* an interval mesh: each interval into two at its midpoint; the boundary points and names
+ * stay (they are vertices of the old mesh, which keep their ids) */
+static mesh *refine_intervals(const mesh *m, char *err) {
+  if ((long)m->nvert + m->ncell > 2000000000L || 2L * m->ncell > 1000000000L) { seterr(err, "refined mesh too large"); return NULL; }
+  mesh *r = mesh_copy(m);
+  if (!r) { seterr(err, "out of memory"); return NULL; }
+  int nv = m->nvert + m->ncell, nc = 2 * m->ncell;
+  double *x = mesh_big_alloc(sizeof(double) * (size_t)nv);
+  int *cells = mesh_big_alloc(sizeof(int) * 2 * (size_t)nc), *tag = calloc((size_t)nc, sizeof(int));
+  if (!x || !cells || !tag) {
+    mesh_big_free(x); mesh_big_free(cells); free(tag); mesh_free(r);
+    seterr(err, "out of memory");
+    return NULL;
+  }
+  memcpy(x, m->x, sizeof(double) * (size_t)m->nvert);
+  for (int c = 0; c < m->ncell; c++) {
+    int a = m->cells[2 * c], b = m->cells[2 * c + 1], mid = m->nvert + c;
+    x[mid] = 0.5 * m->x[a] + 0.5 * m->x[b];
+    cells[4 * c] = a; cells[4 * c + 1] = mid; cells[4 * c + 2] = mid; cells[4 * c + 3] = b;
+    tag[2 * c] = tag[2 * c + 1] = m->cell_tag[c];
+  }
+  mesh_big_free(r->x); mesh_big_free(r->cells); free(r->cell_tag);
+  mesh_free_derived(r);
+  r->x = x; r->cells = cells; r->cell_tag = tag;
+  r->nvert = nv; r->ncell = nc;
+  return r;
+}
+
 mesh *mesh_refine(const mesh *m, char *err) {
+  if (m->type == CELL_INTERVAL) return refine_intervals(m, err);
   if (m->type == CELL_HEXAHEDRON) {
     seterr(err, "uniform refinement of hexahedral meshes is not implemented yet");
     return NULL;

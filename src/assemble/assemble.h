@@ -190,6 +190,9 @@ int lg_problem_tangent(lg_env *env, lg_problem *p, const double *rhs, double *du
 int lg_problem_solve_vector(lg_env *env, lg_problem *p, const double *rhs, double *x);
 /* that matrix (a PETSc Mat, assembled), NULL with a message on failure */
 void *lg_problem_matrix(lg_env *env, lg_problem *p);
+/* y = A x with that matrix (N values each), and its Frobenius norm */
+int lg_problem_matrix_mult(lg_env *env, lg_problem *p, const double *x, double *y);
+int lg_problem_matrix_norm(lg_env *env, lg_problem *p, double *norm);
 
 /* assembled operators for tests and benchmarks: the matrix (values into a dense n*n array
  * when n is small) */

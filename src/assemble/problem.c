@@ -1615,6 +1615,28 @@ static int prepare_matrix(lg_env *env, lg_problem *p) {
 
 void *lg_problem_matrix(lg_env *env, lg_problem *p) { return prepare_matrix(env, p) ? NULL : (void *)p->A; }
 
+int lg_problem_matrix_mult(lg_env *env, lg_problem *p, const double *x, double *y) {
+  if (prepare_matrix(env, p)) return 1;
+  PetscScalar *b;
+  PCHK(VecGetArray(p->b, &b), "VecGetArray");
+  memcpy(b, x, sizeof(double) * (size_t)p->N);
+  PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
+  PCHK(MatMult(p->A, p->b, p->x), "MatMult");
+  const PetscScalar *r;
+  PCHK(VecGetArrayRead(p->x, &r), "VecGetArrayRead");
+  memcpy(y, r, sizeof(double) * (size_t)p->N);
+  PCHK(VecRestoreArrayRead(p->x, &r), "VecRestoreArrayRead");
+  return 0;
+}
+
+int lg_problem_matrix_norm(lg_env *env, lg_problem *p, double *norm) {
+  if (prepare_matrix(env, p)) return 1;
+  PetscReal n;
+  PCHK(MatNorm(p->A, NORM_FROBENIUS, &n), "MatNorm");
+  *norm = n;
+  return 0;
+}
+
 /* solve the problem's matrix (assembled at u = 0, essential rows homogeneous) with a given
  * right-hand side: the Riesz maps of gradients (a mass or H1 matrix) */
 int lg_problem_solve_vector(lg_env *env, lg_problem *p, const double *rhs, double *x) {

@@ -90,6 +90,8 @@ extern const luaL_Reg lg_output_lib[];   /* lg.series */
 void lg_lua_problem_register(lua_State *L);
 extern const luaL_Reg lg_problem_lib[];
 void lg_lua_opt_register(lua_State *L);
-extern const luaL_Reg lg_opt_lib[];     /* lg.control, lg.functional, lg.reduced_functional, lg.taylor_test */
+extern const luaL_Reg lg_opt_lib[];
+void lg_lua_operator_register(lua_State *L);
+extern const luaL_Reg lg_operator_lib[]; /* lg.assemble */     /* lg.control, lg.functional, lg.reduced_functional, lg.taylor_test */
 
 #endif

@@ -74,11 +74,13 @@ int luaopen_lugal(lua_State *L) {
   lg_lua_mesh_register(L);
   lg_lua_problem_register(L);
   lg_lua_opt_register(L);
+  lg_lua_operator_register(L);
   lua_newtable(L);
   luaL_setfuncs(L, lg_expr_lib, 0);
   luaL_setfuncs(L, lg_problem_lib, 0);
   luaL_setfuncs(L, lg_output_lib, 0);
   luaL_setfuncs(L, lg_opt_lib, 0);
+  luaL_setfuncs(L, lg_operator_lib, 0);
   lua_newtable(L);
   luaL_setfuncs(L, lg_mesh_lib, 0);
   lua_setfield(L, -2, "mesh");

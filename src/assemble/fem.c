@@ -154,11 +154,10 @@ const double *ref_vertex(cell_type t, int v) {
 
 void ref_facet_point(cell_type t, int f, const double *s, double *xi) {
   const int *fv = cell_facet_verts(t, f);
-  const double *a = ref_vertex(t, fv[0]), *b = ref_vertex(t, fv[1]);
   int dim = cell_dim(t);
+  const double *a = ref_vertex(t, fv[0]), *b = dim >= 2 ? ref_vertex(t, fv[1]) : a;
   if (dim == 1) {
     xi[0] = a[0];
-    (void)b;
   } else if (dim == 2) {
     for (int d = 0; d < 2; d++) xi[d] = (1 - s[0]) * a[d] + s[0] * b[d];
   } else if (t == CELL_TETRAHEDRON) {

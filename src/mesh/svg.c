@@ -127,7 +127,7 @@ int write_svg_histogram(const char *path, const int *counts, int nbins, double l
     double xv = lo + (hi - lo) * k / 4, px = L + pw * k / 4;
     fprintf(f, "<text x=\"%.1f\" y=\"%.1f\" font-family=\"sans-serif\" font-size=\"11\" text-anchor=\"middle\">%.3g</text>\n",
             px, T + ph + 16, xv);
-    double yv = cmax * k / 4.0, py = T + ph - ph * k / 4;
+    double yv = (double)cmax * k / 4.0, py = T + ph - ph * k / 4;
     fprintf(f, "<text x=\"%.1f\" y=\"%.1f\" font-family=\"sans-serif\" font-size=\"11\" text-anchor=\"end\">%.0f</text>\n",
             L - 6, py + 4, yv);
   }

@@ -4,6 +4,7 @@ cells, read from the file), and compare the solutions at the mesh vertices with 
 data lugal wrote there. Run by bench/compare_fenicsx.sh; never part of the build or tests.
   CASE stokes:     the regularized lid-driven cavity, Taylor-Hood P2/P1, mean-zero pressure
   CASE elasticity: the 3D cantilever under its own weight, vector P2, LU"""
+import base64
 import sys
 import xml.etree.ElementTree as ET
 
@@ -17,23 +18,31 @@ import ufl
 case, path = sys.argv[1], sys.argv[2]
 
 
+def read_array(da, header):
+    """a DataArray of a lugal VTU: ascii, or VTK's inline binary (base64 of a byte count of
+    the header type, then the raw little-endian values)"""
+    kind = {"Float64": "<f8", "Int32": "<i4", "UInt8": "u1"}[da.get("type")]
+    if da.get("format") == "ascii":
+        return np.array(da.text.split(), dtype=float if kind == "<f8" else np.int64)
+    raw = base64.b64decode("".join(da.text.split()))
+    hs = 8 if header == "UInt64" else 4
+    n = int.from_bytes(raw[:hs], "little")
+    return np.frombuffer(raw[hs:hs + n], dtype=kind)
+
+
 def read_vtu(path):
     root = ET.parse(path).getroot()
+    header = root.get("header_type", "UInt32")
     piece = root.find(".//Piece")
-    arrays = {}
-    for da in piece.iter("DataArray"):
-        arrays.setdefault(da.get("Name"), []).append(
-            (da, np.array(da.text.split(), dtype=float if da.get("type", "").startswith("Float") else np.int64)))
-    pts = piece.find("Points/DataArray")
-    x = np.array(pts.text.split(), dtype=float).reshape(-1, 3)
-    conn = np.array(piece.find("Cells/DataArray[@Name='connectivity']").text.split(), dtype=np.int64)
-    offs = np.array(piece.find("Cells/DataArray[@Name='offsets']").text.split(), dtype=np.int64)
+    x = read_array(piece.find("Points/DataArray"), header).astype(float).reshape(-1, 3)
+    conn = read_array(piece.find("Cells/DataArray[@Name='connectivity']"), header).astype(np.int64)
+    offs = read_array(piece.find("Cells/DataArray[@Name='offsets']"), header).astype(np.int64)
     nv = offs[0]
     cells = conn.reshape(-1, nv)
     point = {}
     for da in piece.find("PointData").iter("DataArray"):
         nc = int(da.get("NumberOfComponents", "1"))
-        point[da.get("Name")] = np.array(da.text.split(), dtype=float).reshape(-1, nc)
+        point[da.get("Name")] = read_array(da, header).astype(float).reshape(-1, nc)
     return x, cells, point
 
 

@@ -651,7 +651,7 @@ static int mesh_set_coordinates(lua_State *L) {
 
 /* the VTU of a mesh with the fields of the table at tidx; every buffer lives in a table on
  * the stack until the file is written (never under user-named keys in the registry) */
-static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, int tidx, const char *fn) {
+static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, int tidx, const char *fn, int ascii) {
   int nf = 0;
   if (!lua_isnoneornil(L, tidx)) {
     if (!lua_istable(L, tidx)) return typeerror(L, fn, tidx, "a table {name = function or array}");
@@ -706,7 +706,7 @@ static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, in
       lua_pop(L, 1);
     }
   }
-  int rc = mesh_write_vtu(m, path, nf, fl);
+  int rc = mesh_write_vtu_format(m, path, nf, fl, ascii);
   lua_pop(L, 2);
   if (rc) return luaL_error(L, "%s: %s", fn, m->err);
   return 0;
@@ -768,7 +768,18 @@ static int mesh_write(lua_State *L) {
   if (l > 4 && !strcmp(path + l - 4, ".svg")) return write_svg(L, u->lm->m, u->lm, path, fn);
   if (!(l > 4 && !strcmp(path + l - 4, ".vtu")))
     return luaL_error(L, "%s: argument 1 must end in .vtu (ParaView), .msh (Gmsh) or .svg (a 2D picture), got \"%s\"", fn, path);
-  write_fields(L, u->lm->m, u->lm, path, 3, fn);
+  int ascii = 0;
+  if (!lua_isnoneornil(L, 4)) {
+    if (!lua_istable(L, 4)) return typeerror(L, fn, 3, "a table of options {format = \"binary\" or \"ascii\"}");
+    static const char *const keys[] = {"format", NULL};
+    check_keys(L, 4, fn, keys);
+    const char *f = opt_str(L, 4, "format", "binary", fn);
+    if (strcmp(f, "binary") && strcmp(f, "ascii"))
+      return luaL_error(L, "%s: option 'format' must be \"binary\" or \"ascii\", got \"%s\"", fn, f);
+    ascii = !strcmp(f, "ascii");
+  }
+  lua_settop(L, 3);
+  write_fields(L, u->lm->m, u->lm, path, 3, fn, ascii);
   return 0;
 }
 
@@ -1058,7 +1069,7 @@ static int series_write(lua_State *L) {
   }
   char file[600];
   snprintf(file, sizeof file, "%.*s_%04d.vtu", (int)(strlen(u->path) - 4), u->path, u->n);
-  write_fields(L, um->lm->m, um->lm, file, 3, fn);
+  write_fields(L, um->lm->m, um->lm, file, 3, fn, 0);
   u->files[u->n] = strdup(file);
   u->t[u->n] = t;
   if (!u->files[u->n]) return luaL_error(L, "%s: out of memory", fn);

@@ -3,6 +3,7 @@
 #include "mesh.h"
 #include "outfile.h"
 
+#include <stdint.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -16,14 +17,92 @@ static void xml_name(FILE *f, const char *s) {
   }
 }
 
-int mesh_write_vtu(mesh *m, const char *path, int nfield, const mesh_field *fl) {
+/* VTK's inline binary: base64 of a 64-bit byte count followed by the raw little-endian data
+ * (header_type="UInt64"), streamed three bytes at a time */
+typedef struct {
+  FILE *f;
+  unsigned char buf[3];
+  int n;
+} b64;
+
+static void b64_flush(b64 *e, int final) {
+  static const char al[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  if (e->n == 3 || (final && e->n)) {
+    unsigned v = (unsigned)e->buf[0] << 16 | (unsigned)(e->n > 1 ? e->buf[1] : 0) << 8 | (e->n > 2 ? e->buf[2] : 0);
+    char out[4] = {al[v >> 18 & 63], al[v >> 12 & 63], e->n > 1 ? al[v >> 6 & 63] : '=', e->n > 2 ? al[v & 63] : '='};
+    fwrite(out, 1, 4, e->f);
+    e->n = 0;
+  }
+}
+
+static void b64_put(b64 *e, const void *p, size_t n) {
+  const unsigned char *c = p;
+  for (size_t i = 0; i < n; i++) {
+    e->buf[e->n++] = c[i];
+    if (e->n == 3) b64_flush(e, 0);
+  }
+}
+
+/* one array's values, in ascii or binary: kind 0 doubles, 1 int32, 2 uint8; value i of get */
+typedef double (*value_fn)(const void *ud, long i);
+
+static void write_array(FILE *f, int binary, int kind, long n, int per_line, value_fn get, const void *ud) {
+  if (!binary) {
+    for (long i = 0; i < n; i++) {
+      double v = get(ud, i);
+      if (kind == 0) fprintf(f, "%.17g", v);
+      else fprintf(f, "%ld", (long)v);
+      fputc((i + 1) % per_line ? ' ' : '\n', f);
+    }
+    return;
+  }
+  static const int size[] = {8, 4, 1};
+  uint64_t bytes = (uint64_t)n * (uint64_t)size[kind];
+  b64 e = {f, {0, 0, 0}, 0};
+  unsigned char h[8];
+  for (int k = 0; k < 8; k++) h[k] = (unsigned char)(bytes >> (8 * k));
+  b64_put(&e, h, 8);
+  for (long i = 0; i < n; i++) {
+    double v = get(ud, i);
+    unsigned char w[8];
+    if (kind == 0) {
+      uint64_t u;
+      memcpy(&u, &v, 8);
+      for (int k = 0; k < 8; k++) w[k] = (unsigned char)(u >> (8 * k));
+    } else if (kind == 1) {
+      uint32_t u = (uint32_t)(int32_t)v;
+      for (int k = 0; k < 4; k++) w[k] = (unsigned char)(u >> (8 * k));
+    } else w[0] = (unsigned char)v;
+    b64_put(&e, w, (size_t)size[kind]);
+  }
+  b64_flush(&e, 1);
+  fputc('\n', f);
+}
+
+static double get_field(const void *ud, long i) { return ((const mesh_field *)ud)->val[i]; }
+static double get_point(const void *ud, long i) {
+  const mesh *m = ud;
+  long v = i / 3;
+  int d = (int)(i % 3);
+  return d < m->dim ? m->x[(size_t)v * (size_t)m->dim + (size_t)d] : 0.0;
+}
+static double get_conn(const void *ud, long i) { return ((const mesh *)ud)->cells[i]; }
+static double get_offset(const void *ud, long i) { return (double)((i + 1) * ((const mesh *)ud)->nvc); }
+static double get_type(const void *ud, long i) {
+  static const int vtk_type[] = {5, 9, 10, 12, 3};
+  (void)i;
+  return vtk_type[((const mesh *)ud)->type];
+}
+
+int mesh_write_vtu_format(mesh *m, const char *path, int nfield, const mesh_field *fl, int ascii) {
   outfile o;
   if (outfile_open(&o, path, m->err, MESH_ERRLEN)) return 1;
   FILE *f = o.f;
-  static const int vtk_type[] = {5, 9, 10, 12, 3};
+  int bin = !ascii;
+  const char *fmt = bin ? "binary" : "ascii";
   fprintf(f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" "
-             "byte_order=\"LittleEndian\">\n<UnstructuredGrid>\n"
-             "<Piece NumberOfPoints=\"%d\" NumberOfCells=\"%d\">\n", m->nvert, m->ncell);
+             "byte_order=\"LittleEndian\"%s>\n<UnstructuredGrid>\n"
+             "<Piece NumberOfPoints=\"%d\" NumberOfCells=\"%d\">\n", bin ? " header_type=\"UInt64\"" : "", m->nvert, m->ncell);
   for (int pass = 0; pass < 2; pass++) {
     int any = 0;
     for (int i = 0; i < nfield; i++) any |= fl[i].on_cells == pass;
@@ -33,31 +112,26 @@ int mesh_write_vtu(mesh *m, const char *path, int nfield, const mesh_field *fl) 
       if (fl[i].on_cells != pass) continue;
       fprintf(f, "<DataArray type=\"Float64\" Name=\"");
       xml_name(f, fl[i].name);
-      fprintf(f, "\" NumberOfComponents=\"%d\" format=\"ascii\">\n", fl[i].ncomp);
-      int n = pass ? m->ncell : m->nvert;
-      for (long k = 0; k < (long)n * fl[i].ncomp; k++)
-        fprintf(f, "%.17g%c", fl[i].val[k], (k + 1) % fl[i].ncomp ? ' ' : '\n');
+      fprintf(f, "\" NumberOfComponents=\"%d\" format=\"%s\">\n", fl[i].ncomp, fmt);
+      long n = (long)(pass ? m->ncell : m->nvert) * fl[i].ncomp;
+      write_array(f, bin, 0, n, fl[i].ncomp, get_field, &fl[i]);
       fprintf(f, "</DataArray>\n");
     }
     fprintf(f, pass ? "</CellData>\n" : "</PointData>\n");
   }
-  fprintf(f, "<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n");
-  for (int i = 0; i < m->nvert; i++)
-    fprintf(f, "%.17g %.17g %.17g\n", m->x[m->dim * i], m->dim >= 2 ? m->x[m->dim * i + 1] : 0.0,
-            m->dim == 3 ? m->x[3 * i + 2] : 0.0);
-  fprintf(f, "</DataArray>\n</Points>\n<Cells>\n"
-             "<DataArray type=\"Int32\" Name=\"connectivity\" format=\"ascii\">\n");
-  for (int c = 0; c < m->ncell; c++) {
-    for (int j = 0; j < m->nvc; j++) fprintf(f, "%d ", m->cells[(size_t)c * m->nvc + j]);
-    fputc('\n', f);
-  }
-  fprintf(f, "</DataArray>\n<DataArray type=\"Int32\" Name=\"offsets\" format=\"ascii\">\n");
-  for (int c = 0; c < m->ncell; c++) fprintf(f, "%d\n", (c + 1) * m->nvc);
-  fprintf(f, "</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
-  for (int c = 0; c < m->ncell; c++) fprintf(f, "%d\n", vtk_type[m->type]);
+  fprintf(f, "<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"%s\">\n", fmt);
+  write_array(f, bin, 0, 3L * m->nvert, 3, get_point, m);
+  fprintf(f, "</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int32\" Name=\"connectivity\" format=\"%s\">\n", fmt);
+  write_array(f, bin, 1, (long)m->ncell * m->nvc, m->nvc, get_conn, m);
+  fprintf(f, "</DataArray>\n<DataArray type=\"Int32\" Name=\"offsets\" format=\"%s\">\n", fmt);
+  write_array(f, bin, 1, m->ncell, 1, get_offset, m);
+  fprintf(f, "</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"%s\">\n", fmt);
+  write_array(f, bin, 2, m->ncell, 1, get_type, m);
   fprintf(f, "</DataArray>\n</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
   return outfile_commit(&o, m->err, MESH_ERRLEN);
 }
+
+int mesh_write_vtu(mesh *m, const char *path, int nfield, const mesh_field *fl) { return mesh_write_vtu_format(m, path, nfield, fl, 0); }
 
 int mesh_write_pvd(const char *pvd, int nstep, const double *times, char **files, char *err) {
   outfile o;

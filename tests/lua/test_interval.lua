@@ -41,11 +41,19 @@ do
   T.fails(function() return uh(1.5) end, "the point")
   -- VTU (line cells, type 3) and Gmsh (lines and points) output; the Gmsh file reads back
   local vtu, msh = os.tmpname() .. ".vtu", os.tmpname() .. ".msh"
-  mesh:write(vtu, {u = uh})
+  mesh:write(vtu, {u = uh}, {format = "ascii"})
   local f = io.open(vtu)
   local text = f:read("a")
   f:close()
   T.check(text:find("\n3\n", 1, true) ~= nil, "VTU cells of type 3 (VTK_LINE)")
+  mesh:write(vtu, {u = uh})
+  f = io.open(vtu)
+  text = f:read("a")
+  f:close()
+  T.check(text:find('header_type="UInt64"', 1, true) and text:find('format="binary"', 1, true), "binary VTU by default")
+  -- the cell types array: 8 bytes of count (5) then five 3s, base64 "BQAAAAAAAAADAwMDAw=="
+  T.check(text:find("BQAAAAAAAAADAwMDAw==", 1, true) ~= nil, "the binary types array of 5 lines")
+  T.fails(function() return mesh:write(vtu, {u = uh}, {format = "hdf5"}) end, "must be \"binary\" or \"ascii\"")
   mesh:write(msh)
   local back = lg.mesh.read(msh)
   T.check(back:dim() == 1 and back:ncells() == 5, "the Gmsh file reads back as 5 intervals")

@@ -1,6 +1,9 @@
 -- bench/assembly.lua N degree [repeats] [form] — time of reassembling the stiffness matrix
--- of -Δ (form "laplace", the default) or of linear elasticity with a vector P<degree>
--- displacement (form "elasticity": 2 mu eps(u):eps(v) + lambda div u div v) on the unit
+-- of -Δ (form "laplace", the default), of linear elasticity with a vector P<degree>
+-- displacement (form "elasticity": 2 mu eps(u):eps(v) + lambda div u div v) or the Jacobian
+-- of a compressible Neo-Hookean energy at a given displacement u0 (form "neohookean": the
+-- second Gateaux derivative of psi = mu/2 (tr C - 3) - mu ln J + lambda/2 (ln J)^2, at
+-- quadrature degree 4 as FEniCSx is told too) on the unit
 -- cube with N×N×N cubes, 6 tetrahedra each, into an existing PETSc matrix (median of the
 -- repeats; compilation and sparsity excluded and reported separately). Prints one line of
 -- key=value pairs.
@@ -9,16 +12,25 @@ local N = tonumber(arg[1]) or 32
 local p = tonumber(arg[2]) or 1
 local reps = tonumber(arg[3]) or 5
 local form = arg[4] or "laplace"
-assert(form == "laplace" or form == "elasticity", "form: laplace | elasticity")
+assert(form == "laplace" or form == "elasticity" or form == "neohookean", "form: laplace | elasticity | neohookean")
 
 local clock = os.clock
 local t0 = clock()
 local mesh = lg.mesh.box{nx = N, ny = N, nz = N}
 local tmesh = clock() - t0
-local P = form == "elasticity" and lg.vector(lg.lagrange(p)) or lg.lagrange(p)
+local P = form ~= "laplace" and lg.vector(lg.lagrange(p)) or lg.lagrange(p)
 local u, v = lg.unknown(P, "u"), lg.test(P, "v")
-local a
-if form == "elasticity" then
+local a, order
+if form == "neohookean" then
+  local x, y, z = lg.x, lg.y, lg.z
+  local u0 = lg.interpolate(P, mesh, {0.1*x*y, -0.05*y*z, 0.08*x*z}, "u0")
+  local mu, lambda = 1.0, 1.25
+  local F = lg.identity(3) + lg.grad(u0)
+  local J = lg.det(F)
+  local psi = mu/2*(lg.tr(lg.dot(lg.transpose(F), F)) - 3) - mu*lg.log(J) + lambda/2*lg.log(J)^2
+  a = lg.derivative(lg.derivative(psi, u0, v), u0, u)
+  order = 4
+elseif form == "elasticity" then
   local mu, lambda = 1.0, 1.25
   local function eps(w) return lg.sym(lg.grad(w)) end
   a = 2*mu*lg.inner(eps(u), eps(v)) + lambda*lg.div(u)*lg.div(v)
@@ -26,7 +38,7 @@ else
   a = lg.dot(lg.grad(v), lg.grad(u))
 end
 t0 = clock()
-local prob = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), a), test = v, unknown = u}
+local prob = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), a, order and {order = order} or nil), test = v, unknown = u}
 local tsetup = clock() - t0
 local times, nnz = {}, 0
 for r = 1, reps do

@@ -10,6 +10,7 @@ from mpi4py import MPI
 import dolfinx
 import dolfinx.fem.petsc
 import ufl
+import numpy as np
 
 N = int(sys.argv[1]) if len(sys.argv) > 1 else 32
 p = int(sys.argv[2]) if len(sys.argv) > 2 else 1
@@ -19,13 +20,21 @@ form = sys.argv[4] if len(sys.argv) > 4 else "laplace"
 t0 = time.perf_counter()
 mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_WORLD, N, N, N, dolfinx.mesh.CellType.tetrahedron)
 tmesh = time.perf_counter() - t0
-if form == "elasticity":
+if form in ("elasticity", "neohookean"):
     V = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", p))
 else:
     V = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", p))
 u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
 t0 = time.perf_counter()
-if form == "elasticity":
+if form == "neohookean":
+    u0 = dolfinx.fem.Function(V)
+    u0.interpolate(lambda X: np.vstack((0.1 * X[0] * X[1], -0.05 * X[1] * X[2], 0.08 * X[0] * X[2])))
+    F = ufl.Identity(3) + ufl.grad(u0)
+    Jd = ufl.det(F)
+    psi = 0.5 * (ufl.tr(F.T * F) - 3) - ufl.ln(Jd) + 1.25 / 2 * ufl.ln(Jd) ** 2
+    Pi = psi * ufl.dx(metadata={"quadrature_degree": 4})
+    a = dolfinx.fem.form(ufl.derivative(ufl.derivative(Pi, u0, v), u0, u))
+elif form == "elasticity":
     eps = lambda w: ufl.sym(ufl.grad(w))
     a = dolfinx.fem.form((2.0 * ufl.inner(eps(u), eps(v)) + 1.25 * ufl.div(u) * ufl.div(v)) * ufl.dx)
 else:

@@ -78,6 +78,8 @@ void push_functions_of(lua_State *L, int owner, lg_function **f, int n);
 int check_symbols(lua_State *L, int t, const char *key, func_kind kind, int *ids, const char *fn);
 const form *check_bcs(lua_State *L, int idx, const char *fn, form **owned);
 void push_problem(lua_State *L, lg_problem *p, int nfield, int nonlinear, int ndeps, const int *deps);
+/* the assembled matrix of p as a Lua table of rows (small problems: n <= 2000) */
+int push_dense_matrix(lua_State *L, lg_problem *p, const char *fn);
 void new_mt(lua_State *L, const char *name, const luaL_Reg *mm, const luaL_Reg *methods);
 
 /* the bindings of each layer: metatables (register) and library functions */

@@ -136,22 +136,8 @@ static int matrix_dot(lua_State *L) {
 }
 
 static int matrix_values(lua_State *L) {
-  const char *fn = "matrix:values";
   ud_matrix *u = luaL_checkudata(L, 1, MT_MATRIX);
-  int n = u->n;
-  if (n > 2000) return luaL_error(L, "%s: the dense matrix is for small operators (n <= 2000, this one has %d)", fn, n);
-  double *d = malloc(sizeof(double) * (size_t)n * (size_t)n + 1);
-  if (!d) return luaL_error(L, "%s: out of memory", fn);
-  lg_env *env = get_env(L);
-  if (lg_problem_dense_matrix(env, u->p, d, n)) { free(d); return lgerror(L, fn, env); }
-  lua_createtable(L, n, 0);
-  for (int i = 0; i < n; i++) {
-    lua_createtable(L, n, 0);
-    for (int j = 0; j < n; j++) { lua_pushnumber(L, d[(size_t)i * n + j]); lua_rawseti(L, -2, j + 1); }
-    lua_rawseti(L, -2, i + 1);
-  }
-  free(d);
-  return 1;
+  return push_dense_matrix(L, u->p, "matrix:values");
 }
 
 static int matrix_size(lua_State *L) { lua_pushinteger(L, ((ud_matrix *)luaL_checkudata(L, 1, MT_MATRIX))->n); return 1; }

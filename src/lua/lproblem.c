@@ -411,15 +411,13 @@ static int prob_sensitivity(lua_State *L) {
   return nf;
 }
 
-static int prob_matrix(lua_State *L) {
-  const char *fn = "problem:matrix";
-  ud_prob *u = luaL_checkudata(L, 1, MT_PROB);
-  int n = lg_problem_size(u->p);
+int push_dense_matrix(lua_State *L, lg_problem *p, const char *fn) {
+  int n = lg_problem_size(p);
   if (n > 2000) return luaL_error(L, "%s: the dense matrix is for small problems (n <= 2000, this one has %d)", fn, n);
   double *d = malloc(sizeof(double) * (size_t)n * n);
   if (!d) return luaL_error(L, "%s: out of memory", fn);
   lg_env *env = get_env(L);
-  if (lg_problem_dense_matrix(env, u->p, d, n)) { free(d); return lgerror(L, fn, env); }
+  if (lg_problem_dense_matrix(env, p, d, n)) { free(d); return lgerror(L, fn, env); }
   lua_createtable(L, n, 0);
   for (int i = 0; i < n; i++) {
     lua_createtable(L, n, 0);
@@ -428,6 +426,11 @@ static int prob_matrix(lua_State *L) {
   }
   free(d);
   return 1;
+}
+
+static int prob_matrix(lua_State *L) {
+  ud_prob *u = luaL_checkudata(L, 1, MT_PROB);
+  return push_dense_matrix(L, u->p, "problem:matrix");
 }
 
 static int prob_assemble(lua_State *L) {

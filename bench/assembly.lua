@@ -1,4 +1,4 @@
--- bench/assembly.lua N degree [repeats] [form] — time of reassembling the stiffness matrix
+-- bench/assembly.lua N degree [repeats] [form] [cell] — time of reassembling the stiffness matrix
 -- of -Δ (form "laplace", the default), of linear elasticity with a vector P<degree>
 -- displacement (form "elasticity": 2 mu eps(u):eps(v) + lambda div u div v) or the Jacobian
 -- of a compressible Neo-Hookean energy at a given displacement u0 (form "neohookean": the
@@ -12,11 +12,12 @@ local N = tonumber(arg[1]) or 32
 local p = tonumber(arg[2]) or 1
 local reps = tonumber(arg[3]) or 5
 local form = arg[4] or "laplace"
+local cell = arg[5] or "tetrahedron" -- or "hexahedron" (N^3 cubes, Q<degree>)
 assert(form == "laplace" or form == "elasticity" or form == "neohookean", "form: laplace | elasticity | neohookean")
 
 local clock = os.clock
 local t0 = clock()
-local mesh = lg.mesh.box{nx = N, ny = N, nz = N}
+local mesh = lg.mesh.box{nx = N, ny = N, nz = N, cell = cell}
 local tmesh = clock() - t0
 local P = form ~= "laplace" and lg.vector(lg.lagrange(p)) or lg.lagrange(p)
 local u, v = lg.unknown(P, "u"), lg.test(P, "v")
@@ -48,5 +49,5 @@ for r = 1, reps do
 end
 table.sort(times)
 local st = lg.stats()
-print(string.format("lugal " .. form .. " N=%d P%d cells=%d dofs=%d nnz=%d assemble_median_s=%.4f assemble_min_s=%.4f setup_s=%.3f mesh_s=%.3f jit_ms=%.2f",
+print(string.format("lugal " .. form .. (cell == "hexahedron" and " hex" or "") .. " N=%d P%d cells=%d dofs=%d nnz=%d assemble_median_s=%.4f assemble_min_s=%.4f setup_s=%.3f mesh_s=%.3f jit_ms=%.2f",
                     N, p, mesh:ncells(), prob:size(), nnz, times[math.ceil(reps / 2)], times[1], tsetup, tmesh, st.kernel_ms))

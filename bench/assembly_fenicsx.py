@@ -16,9 +16,11 @@ N = int(sys.argv[1]) if len(sys.argv) > 1 else 32
 p = int(sys.argv[2]) if len(sys.argv) > 2 else 1
 reps = int(sys.argv[3]) if len(sys.argv) > 3 else 5
 form = sys.argv[4] if len(sys.argv) > 4 else "laplace"
+cell = sys.argv[5] if len(sys.argv) > 5 else "tetrahedron"
 
 t0 = time.perf_counter()
-mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_WORLD, N, N, N, dolfinx.mesh.CellType.tetrahedron)
+mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_WORLD, N, N, N, dolfinx.mesh.CellType.hexahedron if cell == "hexahedron"
+                                     else dolfinx.mesh.CellType.tetrahedron)
 tmesh = time.perf_counter() - t0
 if form in ("elasticity", "neohookean"):
     V = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", p))
@@ -52,6 +54,6 @@ for _ in range(reps):
     times.append(time.perf_counter() - t0)
 times.sort()
 ncells = mesh.topology.index_map(3).size_local
-print(("fenicsx %s " + form + " N=%d P%d cells=%d dofs=%d nnz=%d assemble_median_s=%.4f assemble_min_s=%.4f setup_s=%.3f mesh_s=%.3f jit_s=%.2f") % (
+print(("fenicsx %s " + form + (" hex" if cell == "hexahedron" else "") + " N=%d P%d cells=%d dofs=%d nnz=%d assemble_median_s=%.4f assemble_min_s=%.4f setup_s=%.3f mesh_s=%.3f jit_s=%.2f") % (
     dolfinx.__version__, N, p, ncells, V.dofmap.index_map.size_global * V.dofmap.index_map_bs, A.getInfo()["nz_used"],
     times[len(times) // 2], times[0], tsetup, tmesh, tjit))

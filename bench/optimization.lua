@@ -3,6 +3,7 @@
 -- problems, meshes, controls and stopping rules). CPU time (os.clock), kernels warm.
 --   CASE mother:    -lap u = f, u = 0 on the boundary, J = 1/2 |u - d|^2 + alpha/2 |f|^2,
 --                   d = sin(pi x) sin(pi y) / (2 pi^2), alpha = 1e-6, P1 state and control
+--   CASE mother0:   the same with a P0 (piecewise constant) control
 --   CASE nonlinear: the same with -div((1 + u^2) grad u) = f
 --   CASE inversion: -div(k grad u) = 1, J = 1/2 |u - u_obs|^2 + beta/2 |grad k|^2, k >= 1
 -- Prints one line per measurement: the median of 3 of one state solve (a new problem:
@@ -12,7 +13,8 @@
 local lg = require "lugal"
 local case = arg and arg[1] or "mother"
 local N = tonumber(arg and arg[2]) or 32
-assert(case == "mother" or case == "nonlinear" or case == "inversion", "case: mother | nonlinear | inversion")
+assert(case == "mother" or case == "mother0" or case == "nonlinear" or case == "inversion",
+       "case: mother | mother0 | nonlinear | inversion")
 
 local pi, x, y = math.pi, lg.x, lg.y
 local mesh = lg.mesh.rectangle{nx = N}
@@ -40,7 +42,7 @@ local function build()
     local J = lg.functional(lg.integral(mesh:cells(), 0.5*(u - uobs)^2 + beta/2*lg.dot(lg.grad(k), lg.grad(k))))
     return lg.reduced_functional{problem = st, functional = J, control = k}
   end
-  local f = lg.control(P1, mesh, "f")
+  local f = lg.control(case == "mother0" and lg.lagrange(0) or P1, mesh, "f")
   local kappa = case == "nonlinear" and (1 + u^2) or 1
   local mk = case == "nonlinear" and lg.nonlinear_problem or lg.linear_problem
   local st = mk{mesh = mesh, eqn = lg.integral(mesh:cells(), kappa*lg.dot(lg.grad(v), lg.grad(u)) - f*v),

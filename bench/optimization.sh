@@ -9,7 +9,7 @@ ROOT=$(cd "$(dirname "$0")/.." && pwd)
 PYADJOINT=${PYADJOINT:-/opt/pyadjoint}
 have_pa=0
 PYTHONPATH="$PYADJOINT:$PYTHONPATH" /usr/bin/python3 -c "import fenics_adjoint" 2>/dev/null && have_pa=1
-for cn in "mother 32" "mother 64" "mother 128" "nonlinear 32" "nonlinear 64" "inversion 32" "inversion 64"; do
+for cn in "mother 32" "mother 64" "mother 128" "mother0 32" "mother0 64" "nonlinear 32" "nonlinear 64" "inversion 32" "inversion 64"; do
   # shellcheck disable=SC2086
   "$ROOT/build/lugal" "$ROOT/bench/optimization.lua" $cn
   # shellcheck disable=SC2086

@@ -75,6 +75,7 @@ struct lg_problem {
                        * SNES's solver (nonlinear problems: the adjoint makes it so, and a
                        * Newton solve warm-started at the solution then reuses it) */
   uint64_t matrix_fp; /* linear problems: what the assembled, factored matrix was made from */
+  uint64_t adj_fp;    /* nonlinear problems: what the adjoint's Jacobian was made from (besides the state) */
   double *elem;       /* element tensor scratch */
   size_t elem_cap;
   int failed;         /* a callback failed: env->err holds why */
@@ -1278,8 +1279,11 @@ static PetscErrorCode snes_jacobian(SNES snes, Vec X, Mat J, Mat P, void *ctx) {
   memcpy(p->state, x, sizeof(double) * (size_t)p->N);
   PetscCall(VecRestoreArrayRead(X, &x));
   /* a warm start at the last solution, whose Jacobian the adjoint assembled and factored:
-   * leave the matrix alone, so that the solver's factorization is reused */
-  if (p->have_solution && !p->adj_stale && P == p->A && !memcmp(p->state, p->solution, sizeof(double) * (size_t)p->N))
+   * leave the matrix alone, so that the solver's factorization is reused, unless what else
+   * the Jacobian reads changed (a control in the stiffness, as the SIMP density: the step
+   * would be taken with the last control's Jacobian) */
+  if (p->have_solution && !p->adj_stale && P == p->A && !memcmp(p->state, p->solution, sizeof(double) * (size_t)p->N) &&
+      p->adj_fp && p->adj_fp == matrix_fingerprint(p->env, p))
     return 0;
   p->adj_stale = 1; /* A no longer holds the Jacobian at the solution */
   if (assemble_matrix(p->env, p, p->state, P)) {
@@ -1301,9 +1305,10 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
   for (int a = 0; a < p->cols.n; a++) {
     lg_function *g = initial ? initial[a] : NULL;
     if (!g) continue;
-    if (g->mesh != p->lm || g->degree != p->cols.degree[a]) {
+    if (g->dm != p->cdm[a]) {
       VecRestoreArray(p->x, &x);
-      lg_seterr(env, "the initial guess for unknown %d must be a discrete function of degree %d on the problem's mesh", a + 1, p->cols.degree[a]);
+      lg_seterr(env, "the initial guess for unknown %d must be a discrete function of the unknown's space (degree %d, %d "
+                     "component%s) on the problem's mesh", a + 1, p->cols.degree[a], p->cdm[a]->bs, p->cdm[a]->bs == 1 ? "" : "s");
       return 1;
     }
     expr_func_info *fi = expr_func_get(env->c, p->cols.func[a]);
@@ -1573,6 +1578,7 @@ static int jacobian_solver(lg_env *env, lg_problem *p, KSP *out) {
       PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, NULL, NULL), "MatZeroRows");
       PCHK(KSPSetOperators(ksp, p->A, p->A), "KSPSetOperators");
       p->adj_stale = 0;
+      p->adj_fp = matrix_fingerprint(env, p);
     }
   }
   if (!ksp || (!p->nonlinear && !p->matrix_fp && !p->bc_symmetric)) {

@@ -232,4 +232,11 @@ T.fails(function() lg.derivative(x*y, x, lg.test(lg.lagrange(1))) end, "argument
 T.fails(function() lg.derivative(lg.unknown(lg.lagrange(1))^2, lg.unknown(lg.lagrange(1)), lg.test(lg.vector(lg.lagrange(1)))) end,
         "components")
 T.fails(function() return lg.interpolate(lg.lagrange(1), mesh, x)[1] end, "cannot be indexed")
+do
+  local V = lg.vector(lg.lagrange(1))
+  local u, v = lg.unknown(V, "u"), lg.test(V, "v")
+  local nl = lg.nonlinear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.inner(lg.grad(u), lg.grad(v)) + lg.dot(u, u)*lg.dot(u, v) - v[1]),
+                                  test = v, unknown = u, bc = lg.essential_bc(mesh:boundary(), lg.dot(v, u))}
+  T.fails(function() return nl:solve(lg.interpolate(lg.lagrange(1), mesh, x)) end, "initial guess for unknown 1 must be", "2 components")
+end
 print("vector spaces and tensor algebra: all checks passed")

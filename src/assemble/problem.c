@@ -23,6 +23,7 @@ typedef struct {
   int nitems;
   int *cells, *facets;
   PetscCount coo_off;
+  size_t blk_off, str_off; /* block layout (B > 1): its first node pair and node row */
 } prob_term;
 
 typedef struct {
@@ -58,7 +59,11 @@ struct lg_problem {
   struct { int fid, param, n; expr_tape *tape; } bcd[LG_BCD_CACHE]; /* d g / d control, per bc term */
   int nbcd;
   PetscCount ncoo;      /* element matrix entries (the diagonal first) */
-  int *coo_pos;         /* where each goes in the CSR value array of A */
+  int *coo_pos;         /* where each goes in the CSR value array of A (B = 1) */
+  /* B > 1 (every field a B-vector): per element node pair the place of its B x B block's
+   * first entry, per element node row the length of its matrix rows (entry (a, b) of the
+   * block is at pos + a*stride + b): B^2 fewer positions */
+  int *blk_pos, *blk_stride;
   double *mbuf;         /* element matrices of one chunk of items */
   PetscInt nnz;
   Mat A;
@@ -540,7 +545,16 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
    * rows and columns come in blocks of B, and the pattern is that of the node graph, each
    * entry a B x B block (9x less work for 3D elasticity, whose rows hold about 250 entries);
    * B = 1 otherwise */
-  int B = matrix_block_size(p), Nn = N / B;
+  int B = matrix_block_size(p), Nn = N / B, rn = rs / B, cn = cs / B;
+  size_t nblk = 0, nstr = 0;
+  for (int i = 0; B > 1 && i < p->nterm; i++) {
+    prob_term *t = &p->t[i];
+    if (!t->have_mat) continue;
+    t->blk_off = nblk;
+    t->str_off = nstr;
+    nblk += (size_t)t->nitems * (size_t)rn * (size_t)cn;
+    nstr += (size_t)t->nitems * (size_t)rn;
+  }
   /* the element rows of each node row: (entry of the row's first column, cell) pairs */
   PetscInt rg[KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS], cg[KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS];
   size_t *start = calloc((size_t)Nn + 2, sizeof(size_t));
@@ -559,7 +573,12 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
   size_t nent = start[Nn + 1];
   PetscCount *ebase = malloc(sizeof(PetscCount) * (nent + 1));
   int *ecell = malloc(sizeof(int) * (nent + 1));
-  if (!ebase || !ecell) { free(start); free(mark); free(nodes); free(ebase); free(ecell); lg_seterr(env, "out of memory"); return 1; }
+  size_t *estr = B > 1 ? malloc(sizeof(size_t) * (nent + 1)) : NULL;
+  if (!ebase || !ecell || (B > 1 && !estr)) {
+    free(start); free(mark); free(nodes); free(ebase); free(ecell); free(estr);
+    lg_seterr(env, "out of memory");
+    return 1;
+  }
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
@@ -567,7 +586,10 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
       cell_dofs(p, t->cells[it], rg, cg);
       for (int r = 0; r < rs; r += B) {
         size_t q = start[rg[r] / B + 1]++;
-        ebase[q] = t->coo_off + ((PetscCount)it * rs + r) * cs;
+        if (B > 1) {
+          ebase[q] = (PetscCount)(t->blk_off + ((size_t)it * rn + (size_t)(r / B)) * (size_t)cn);
+          estr[q] = t->str_off + (size_t)it * rn + (size_t)(r / B);
+        } else ebase[q] = t->coo_off + ((PetscCount)it * rs + r) * cs;
         ecell[q] = t->cells[it];
       }
     }
@@ -579,10 +601,13 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
   PetscInt *ia = malloc(sizeof(PetscInt) * ((size_t)N + 1)), *ja = NULL;
   size_t nnz = 0, cap = (size_t)N * 8 + 16;
   ja = malloc(sizeof(PetscInt) * cap);
-  p->coo_pos = malloc(sizeof(int) * ((size_t)n + 1));
+  if (B > 1) {
+    p->blk_pos = malloc(sizeof(int) * (nblk + 1));
+    p->blk_stride = malloc(sizeof(int) * (nstr + 1));
+  } else p->coo_pos = malloc(sizeof(int) * ((size_t)n + 1));
   p->mbuf = malloc(sizeof(double) * ((size_t)LG_CHUNK * rs * cs + 1));
-  if (!ia || !ja || !p->coo_pos || !p->mbuf) {
-    free(start); free(mark); free(nodes); free(ebase); free(ecell); free(ia); free(ja);
+  if (!ia || !ja || (B > 1 ? !p->blk_pos || !p->blk_stride : !p->coo_pos) || !p->mbuf) {
+    free(start); free(mark); free(nodes); free(ebase); free(ecell); free(estr); free(ia); free(ja);
     lg_seterr(env, "out of memory for %ld matrix entries", (long)n);
     return 1;
   }
@@ -616,8 +641,14 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
     }
     /* the marker now holds positions (>= Nn would clash with row numbers: use -2 - position) */
     for (size_t k = 0; k < len; k++) mark[nodes[k]] = -2 - (int)k;
-    for (int a = 0; a < B; a++) p->coo_pos[R * B + a] = (int)ia[R * B + a] + (-2 - mark[R]) * B + a;
-    for (size_t q = start[R]; q < start[R + 1]; q++) {
+    if (B == 1) p->coo_pos[R] = (int)ia[R] + (-2 - mark[R]);
+    for (size_t q = start[R]; q < start[R + 1] && B > 1; q++) {
+      col_dofs(p, ecell[q], cg);
+      int *bp = p->blk_pos + ebase[q];
+      for (int k = 0; k < cs; k += B) bp[k / B] = (int)ia[R * B] + (-2 - mark[cg[k] / B]) * B;
+      p->blk_stride[estr[q]] = (int)(len * (size_t)B);
+    }
+    for (size_t q = start[R]; q < start[R + 1] && B == 1; q++) {
       col_dofs(p, ecell[q], cg);
       for (int a = 0; a < B; a++) {
         int *pos = p->coo_pos + ebase[q] + (PetscCount)a * cs;
@@ -633,6 +664,7 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
     for (size_t k = 0; k < len; k++) mark[nodes[k]] = R;
   }
   free(nodes);
+  free(estr);
   free(start);
   free(mark);
   free(ebase);
@@ -827,6 +859,8 @@ void lg_problem_free(lg_problem *p) {
   free(p->bc_org);
   free(p->mbuf);
   free(p->coo_pos);
+  free(p->blk_pos);
+  free(p->blk_stride);
   free(p->state);
   free(p->solution);
   form_free(p->eqn);
@@ -904,9 +938,34 @@ static int assemble_matrix(lg_env *env, lg_problem *p, const double *state, Mat 
       rc = lg_assemble_range(env, p->lm, &t->kmat, t->nitems, t->cells, t->facets, first, n, t->kmat.ncoef, bind, p->mbuf) ||
            check_element_tensors(env, p, i, first, n, p->mbuf, size, p->nonlinear ? "Jacobian" : "matrix");
       if (rc) break;
-      const int *pos = p->coo_pos + t->coo_off + (size_t)first * size;
       const double *v = p->mbuf;
-      for (size_t e = 0, ne2 = (size_t)n * size; e < ne2; e++) a[pos[e]] += v[e];
+      if (p->blk_pos) {
+        /* B x B blocks: a node pair's entries from its block's first place and the row length */
+        int B = p->cdm[0]->bs, rn = p->rows.size / B, cn = p->cols.size / B, cs = p->cols.size;
+        for (int e = 0; e < n; e++) {
+          const double *ve = v + (size_t)e * size;
+          const int *bp = p->blk_pos + t->blk_off + (size_t)(first + e) * rn * cn;
+          const int *st = p->blk_stride + t->str_off + (size_t)(first + e) * rn;
+          for (int i = 0; i < rn; i++)
+            for (int r = 0; r < B; r++) {
+              const double *row = ve + (size_t)(i * B + r) * cs;
+              const int *bpi = bp + i * cn, off = r * st[i];
+              if (B == 3)
+                for (int j = 0; j < cn; j++) {
+                  double *dst = a + bpi[j] + off;
+                  dst[0] += row[3 * j]; dst[1] += row[3 * j + 1]; dst[2] += row[3 * j + 2];
+                }
+              else
+                for (int j = 0; j < cn; j++) {
+                  double *dst = a + bpi[j] + off;
+                  for (int c = 0; c < B; c++) dst[c] += row[j * B + c];
+                }
+            }
+        }
+      } else {
+        const int *pos = p->coo_pos + t->coo_off + (size_t)first * size;
+        for (size_t e = 0, ne2 = (size_t)n * size; e < ne2; e++) a[pos[e]] += v[e];
+      }
     }
   }
   PCHK(MatSeqAIJRestoreArray(A, &a), "matrix assembly");

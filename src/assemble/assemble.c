@@ -50,26 +50,29 @@ void lg_mesh_changed(lg_mesh *lm) {
 
 void lg_mesh_free(lg_mesh *lm) {
   if (!lm) return;
-  for (int i = 0; i < 4; i++)
-    for (int j = 0; j < FEM_MAXBS; j++) dofmap_free(lm->dm[i][j]);
+  for (int d = 0; d < 2; d++)
+    for (int i = 0; i < 4; i++)
+      for (int j = 0; j < FEM_MAXBS; j++) dofmap_free(lm->dm[d][i][j]);
   lg_locator_free(lm->locator);
   mesh_free(lm->m);
   free(lm);
 }
 
-dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree, int ncomp) {
+dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree, int ncomp, int disc) {
   if (degree < 0 || degree > 3) { lg_seterr(env, "Lagrange degree %d is not available (0, 1, 2, 3)", degree); return NULL; }
   if (ncomp < 1 || ncomp > FEM_MAXBS) { lg_seterr(env, "a vector space has 1 to %d components (got %d)", FEM_MAXBS, ncomp); return NULL; }
   char err[256];
-  if (!lm->dm[degree][0]) {
-    lm->dm[degree][0] = dofmap_new(lm->m, degree, err);
-    if (!lm->dm[degree][0]) { lg_seterr(env, "%s", err); return NULL; }
+  int d = disc && degree > 0; /* P0 is discontinuous already */
+  dofmap **s = &lm->dm[d][degree][0], **v = &lm->dm[d][degree][ncomp - 1];
+  if (!*s) {
+    *s = d ? dofmap_new_discontinuous(lm->m, degree, err) : dofmap_new(lm->m, degree, err);
+    if (!*s) { lg_seterr(env, "%s", err); return NULL; }
   }
-  if (!lm->dm[degree][ncomp - 1]) {
-    lm->dm[degree][ncomp - 1] = dofmap_block(lm->dm[degree][0], ncomp, err);
-    if (!lm->dm[degree][ncomp - 1]) { lg_seterr(env, "%s", err); return NULL; }
+  if (!*v) {
+    *v = dofmap_block(*s, ncomp, err);
+    if (!*v) { lg_seterr(env, "%s", err); return NULL; }
   }
-  return lm->dm[degree][ncomp - 1];
+  return *v;
 }
 
 int lg_mesh_check(lg_env *env, lg_mesh *lm) {
@@ -90,9 +93,9 @@ int lg_mesh_check(lg_env *env, lg_mesh *lm) {
   return 0;
 }
 
-lg_function *lg_function_new(lg_env *env, lg_mesh *lm, int degree, int ncomp, const char *name) {
-  dofmap *dm = lg_mesh_dofmap(env, lm, degree, ncomp);
+lg_function *lg_function_new(lg_env *env, lg_mesh *lm, dofmap *dm, const char *name) {
   if (!dm) return NULL;
+  int degree = dm->degree, ncomp = dm->bs;
   lg_function *f = calloc(1, sizeof *f);
   if (!f) { lg_seterr(env, "out of memory"); return NULL; }
   f->mesh = lm;
@@ -102,6 +105,7 @@ lg_function *lg_function_new(lg_env *env, lg_mesh *lm, int degree, int ncomp, co
   if (!f->x) { free(f); lg_seterr(env, "out of memory for %d dofs", dm->ndof); return NULL; }
   f->fid = expr_func_new(env->c, FK_DISCRETE, name ? name : "uh", degree, ncomp, f);
   if (f->fid < 0) { free(f->x); free(f); lg_seterr(env, "out of memory"); return NULL; }
+  expr_func_get(env->c, f->fid)->disc = dm->disc;
   return f;
 }
 

@@ -39,7 +39,7 @@ typedef struct lg_locator lg_locator; /* locate.c */
 typedef struct {
   mesh *m;
   lg_locator *locator;  /* which cell holds a point, built on demand for one geometry */
-  dofmap *dm[4][FEM_MAXBS]; /* by degree and number of components - 1, built on demand */
+  dofmap *dm[2][4][FEM_MAXBS]; /* by continuity (0 Lagrange, 1 discontinuous), degree and number of components - 1 */
   int validated;        /* the validity check passed for the current geometry */
   unsigned long geometry; /* counts geometry changes (lg_mesh_changed) */
 } lg_mesh;
@@ -60,13 +60,14 @@ lg_mesh *lg_mesh_wrap(mesh *m);
 void lg_mesh_free(lg_mesh *lm);
 /* drop dof maps and the validity flag after the mesh changed */
 void lg_mesh_changed(lg_mesh *lm);
-/* the dof map of Lagrange degree `degree` (0..3) with ncomp components (1..3) */
-dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree, int ncomp);
+/* the dof map of Lagrange degree `degree` (0..3) with ncomp components (1..3), continuous or
+ * discontinuous (disc = 1: every cell owns its nodes) */
+dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree, int ncomp, int disc);
 /* the validity check run before assembly */
 int lg_mesh_check(lg_env *env, lg_mesh *lm);
 
-/* a discrete function of degree `degree` with ncomp components (1: scalar), all zero */
-lg_function *lg_function_new(lg_env *env, lg_mesh *lm, int degree, int ncomp, const char *name);
+/* a discrete function on the dof map dm of lm (lg_mesh_dofmap), all zero */
+lg_function *lg_function_new(lg_env *env, lg_mesh *lm, dofmap *dm, const char *name);
 void lg_function_free(lg_function *f);
 
 /* items (cell, local facet) of a region */

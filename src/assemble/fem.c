@@ -621,6 +621,24 @@ dofmap *dofmap_new(mesh *m, int degree, char *err) {
   return dm;
 }
 
+dofmap *dofmap_new_discontinuous(mesh *m, int degree, char *err) {
+  dofmap *dm = calloc(1, sizeof *dm);
+  if (!dm) { snprintf(err, 256, "out of memory"); return NULL; }
+  dm->m = m;
+  dm->degree = degree;
+  dm->bs = 1;
+  dm->disc = 1;
+  if (lagrange_init(&dm->el, m->type, degree, err)) { free(dm); return NULL; }
+  dm->nloc = dm->el.nloc;
+  long nd = (long)m->ncell * dm->nloc;
+  if (nd > 2000000000L) { snprintf(err, 256, "too many dofs"); free(dm); return NULL; }
+  dm->ndof = (int)nd;
+  dm->cell_dofs = malloc(sizeof(int) * (size_t)nd + 1);
+  if (!dm->cell_dofs) { snprintf(err, 256, "out of memory"); free(dm); return NULL; }
+  for (long i = 0; i < nd; i++) dm->cell_dofs[i] = (int)i;
+  return dm;
+}
+
 dofmap *dofmap_block(const dofmap *s, int bs, char *err) {
   if (bs < 1 || bs > 3 || s->bs != 1) { snprintf(err, 256, "a vector space has 1 to 3 components (got %d)", bs); return NULL; }
   if ((long)s->ndof * bs > 2000000000L) { snprintf(err, 256, "too many dofs"); return NULL; }

@@ -76,11 +76,14 @@ double cell_jacobian(const mesh *m, int c, const double *xi, double J[3][3], dou
 typedef struct {
   mesh *m;
   int degree, nloc, ndof, bs;
+  int disc;       /* discontinuous: every cell owns its nodes (dof c*nloc + k) */
   lagrange_element el;
   int *cell_dofs; /* ncell*nloc */
 } dofmap;
 
 dofmap *dofmap_new(mesh *m, int degree, char *err);
+/* the discontinuous space of a degree: the same element, every node owned by its cell */
+dofmap *dofmap_new_discontinuous(mesh *m, int degree, char *err);
 /* the bs-component space over a scalar one (bs = 1 .. 3) */
 dofmap *dofmap_block(const dofmap *scalar, int bs, char *err);
 void dofmap_free(dofmap *d);

@@ -344,7 +344,7 @@ lg_reduced *lg_reduced_new(lg_env *env, lg_problem *p, const form *J, int nc, co
     expr_func_info *fu = expr_func_get(env->c, rf->fld[a].unknown);
     char nm[80];
     snprintf(nm, sizeof nm, "lambda_%s", fu ? fu->name : "u");
-    rf->lam[a] = lg_function_new(env, rf->lm, rf->fld[a].dm->degree, rf->fld[a].dm->bs, nm);
+    rf->lam[a] = lg_function_new(env, rf->lm, (dofmap *)rf->fld[a].dm, nm);
     if (!rf->lam[a]) goto fail;
   }
   for (int i = 0; i < F->n; i++) {
@@ -484,6 +484,7 @@ lg_problem *lg_reduced_gram(lg_env *env, lg_reduced *rf, int i, int h1) {
   int deg = rf->c[i].f->degree, bs = rf->c[i].f->dm->bs;
   int ft = expr_func_new(env->c, FK_TEST, "psi", deg, bs, NULL), fu = expr_func_new(env->c, FK_UNKNOWN, "phi", deg, bs, NULL);
   if (ft < 0 || fu < 0) { lg_seterr(env, "out of memory"); return NULL; }
+  expr_func_get(env->c, ft)->disc = expr_func_get(env->c, fu)->disc = rf->c[i].f->dm->disc;
   unsigned char z[3] = {0, 0, 0};
   expr *vc[FEM_MAXBS], *uc[FEM_MAXBS];
   for (int j = 0; j < bs; j++) {
@@ -628,7 +629,7 @@ static int hessian_setup(lg_env *env, lg_reduced *rf) {
     }
   for (int i = 0; i < rf->nc; i++) {
     if (rf->c[i].kind == LG_CONTROL_FIELD) {
-      if (!(rf->dmf[i] = lg_function_new(env, rf->lm, rf->c[i].f->degree, rf->c[i].f->dm->bs, "dm"))) { hessian_free(rf); return 1; }
+      if (!(rf->dmf[i] = lg_function_new(env, rf->lm, rf->c[i].f->dm, "dm"))) { hessian_free(rf); return 1; }
     } else if ((rf->dpar[i] = expr_param_new(env->c, "dm", 0)) < 0) {
       lg_seterr(env, "out of memory");
       hessian_free(rf);
@@ -636,8 +637,8 @@ static int hessian_setup(lg_env *env, lg_reduced *rf) {
     }
   }
   for (int a = 0; a < rf->nf; a++)
-    if (!(rf->du[a] = lg_function_new(env, rf->lm, rf->fld[a].dm->degree, rf->fld[a].dm->bs, "du")) ||
-        !(rf->dlam[a] = lg_function_new(env, rf->lm, rf->fld[a].dm->degree, rf->fld[a].dm->bs, "dlambda"))) {
+    if (!(rf->du[a] = lg_function_new(env, rf->lm, (dofmap *)rf->fld[a].dm, "du")) ||
+        !(rf->dlam[a] = lg_function_new(env, rf->lm, (dofmap *)rf->fld[a].dm, "dlambda"))) {
       hessian_free(rf);
       return 1;
     }

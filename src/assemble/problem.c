@@ -118,7 +118,7 @@ static int layout(lg_env *env, lg_mesh *lm, int n, const int *funcs, field_layou
     if (!fi) { lg_seterr(env, "bad %s function", what); return 1; }
     l->func[i] = funcs[i];
     l->degree[i] = fi->degree;
-    dm[i] = lg_mesh_dofmap(env, lm, fi->degree, fi->ncomp);
+    dm[i] = lg_mesh_dofmap(env, lm, fi->degree, fi->ncomp > 1 ? fi->ncomp : 1, fi->disc);
     if (!dm[i]) return 1;
     l->nloc[i] = dm[i]->nloc;
     l->bs[i] = dm[i]->bs;
@@ -1042,7 +1042,7 @@ static int make_outputs(lg_env *env, lg_problem *p, const double *x, lg_function
     expr_func_info *fi = expr_func_get(env->c, p->cols.func[a]);
     char nm[80];
     snprintf(nm, sizeof nm, "%sh", fi->name);
-    out[a] = lg_function_new(env, p->lm, p->cols.degree[a], p->cdm[a]->bs, nm);
+    out[a] = lg_function_new(env, p->lm, p->cdm[a], nm);
     if (!out[a]) {
       for (int b = 0; b < a; b++) lg_function_free(out[b]);
       return 1;

@@ -69,6 +69,7 @@ typedef struct {
   char name[64]; /* for messages only; never emitted into generated code */
   int degree;    /* polynomial degree of the basis (for quadrature selection) */
   int ncomp;
+  int disc;      /* discontinuous (lg.discontinuous): its dofs belong to the cells */
   void *user;    /* owned by the layer that created it */
 } expr_func_info;
 

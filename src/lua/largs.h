@@ -27,7 +27,7 @@
 
 typedef struct { lg_mesh *lm; } ud_mesh;
 typedef struct { region r; } ud_region;
-typedef struct { int degree, ncomp; } ud_basis; /* ncomp 1: scalar */
+typedef struct { int degree, ncomp, disc; } ud_basis; /* ncomp 1: scalar; disc: lg.discontinuous */
 typedef struct { expr *e; } ud_expr;
 typedef struct { lg_function *f; } ud_func;
 typedef struct { form *f; } ud_form;

@@ -183,8 +183,22 @@ static int l_lagrange(lua_State *L) {
 
 static int basis_tostring(lua_State *L) {
   ud_basis *u = luaL_checkudata(L, 1, MT_BASIS);
-  if (u->ncomp > 1) lua_pushfstring(L, "Lagrange P%d, %d components", u->degree, u->ncomp);
-  else lua_pushfstring(L, "Lagrange P%d", u->degree);
+  const char *fam = u->disc ? "discontinuous Lagrange" : "Lagrange";
+  if (u->ncomp > 1) lua_pushfstring(L, "%s P%d, %d components", fam, u->degree, u->ncomp);
+  else lua_pushfstring(L, "%s P%d", fam, u->degree);
+  return 1;
+}
+
+/* lg.discontinuous(p): the Lagrange element of degree p with every node owned by its cell
+ * (DG Pk on simplices, Qk on quadrilaterals and hexahedra; p = 0 is lg.lagrange(0)) */
+static int l_discontinuous(lua_State *L) {
+  if (lua_gettop(L) > 1) return luaL_error(L, "lg.discontinuous: takes one argument (the degree), got %d", lua_gettop(L));
+  lua_Integer p = luaL_checkinteger(L, 1);
+  if (p < 0 || p > 3) return luaL_error(L, "lg.discontinuous: argument 1 must be a degree 0, 1, 2 or 3, got %I", p);
+  ud_basis *u = new_ud(L, sizeof *u, MT_BASIS, 0, NULL);
+  u->degree = (int)p;
+  u->ncomp = 1;
+  u->disc = p > 0;
   return 1;
 }
 
@@ -200,6 +214,7 @@ static int l_vector(lua_State *L) {
   ud_basis *u = new_ud(L, sizeof *u, MT_BASIS, 0, NULL);
   u->degree = b->degree;
   u->ncomp = n;
+  u->disc = b->disc;
   return 1;
 }
 
@@ -211,6 +226,7 @@ static int new_symbol(lua_State *L, func_kind kind, const char *fn) {
   lg_env *env = get_env(L);
   int id = expr_func_new(env->c, kind, name, b->degree, b->ncomp, NULL);
   if (id < 0) return luaL_error(L, "%s: out of memory", fn);
+  expr_func_get(env->c, id)->disc = b->disc;
   push_expr(L, symbol_expr(env, id), 0, NULL, fn);
   return 1;
 }
@@ -484,7 +500,7 @@ void lg_lua_expr_register(lua_State *L) {
 }
 
 const luaL_Reg lg_expr_lib[] = {
-    {"lagrange", l_lagrange}, {"vector", l_vector}, {"unknown", l_unknown}, {"test", l_test}, {"coord", l_coord},
+    {"lagrange", l_lagrange}, {"discontinuous", l_discontinuous}, {"vector", l_vector}, {"unknown", l_unknown}, {"test", l_test}, {"coord", l_coord},
     {"normal", l_normal}, {"parameter", l_parameter}, {"sin", l_sin}, {"cos", l_cos}, {"tan", l_tan},
     {"exp", l_exp}, {"log", l_log}, {"sqrt", l_sqrt}, {"abs", l_abs}, {"tanh", l_tanh}, {"sinh", l_sinh},
     {"cosh", l_cosh}, {"atan", l_atan}, {"asin", l_asin}, {"acos", l_acos}, {"sign", l_sign},

@@ -675,8 +675,30 @@ static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, in
       } else if (uf) {
         if (uf->f->mesh != lm) return luaL_error(L, "%s: field '%s' lives on a different mesh", fn, name);
         /* vertex dofs come first in every Lagrange numbering; P0 dofs are the cells' */
-        int bs = uf->f->dm->bs, oncells = uf->f->dm->degree == 0;
-        if (bs == 1) fl[nf] = (mesh_field){name, 1, oncells, uf->f->x};
+        const dofmap *dm = uf->f->dm;
+        int bs = dm->bs, oncells = dm->degree == 0;
+        if (dm->disc && !oncells) {
+          /* a discontinuous field has a value per cell at each vertex: their mean (what
+           * ParaView can show as point data) */
+          double *v = lua_newuserdatauv(L, sizeof(double) * 3 * (size_t)m->nvert + 1, 0);
+          lua_rawseti(L, anchor, nf + 1);
+          int *cnt = calloc((size_t)m->nvert + 1, sizeof(int));
+          if (!cnt) return luaL_error(L, "%s: out of memory", fn);
+          memset(v, 0, sizeof(double) * 3 * (size_t)m->nvert);
+          for (int c = 0; c < m->ncell; c++)
+            for (int k = 0; k < dm->el.nloc; k++) {
+              if (dm->el.ent_dim[k] != 0) continue;
+              int vx = m->cells[(size_t)c * m->nvc + dm->el.ent_id[k]];
+              for (int j = 0; j < bs; j++) v[3 * (size_t)vx + j] += uf->f->x[dm->cell_dofs[(size_t)c * dm->nloc + k * bs + j]];
+              cnt[vx]++;
+            }
+          for (int i = 0; i < m->nvert; i++)
+            for (int j = 0; j < 3; j++) v[3 * (size_t)i + j] = cnt[i] ? v[3 * (size_t)i + j] / cnt[i] : 0;
+          free(cnt);
+          if (bs == 1)
+            for (int i = 0; i < m->nvert; i++) v[i] = v[3 * (size_t)i];
+          fl[nf] = (mesh_field){name, bs == 1 ? 1 : 3, 0, v};
+        } else if (bs == 1) fl[nf] = (mesh_field){name, 1, oncells, uf->f->x};
         else {
           /* a vector: three components per point as ParaView expects (z = 0 in 2D) */
           size_t n = oncells ? (size_t)m->ncell : (size_t)m->nvert;

@@ -194,7 +194,7 @@ static int l_assemble(lua_State *L) {
   }
   expr_func_info *ti = expr_func_get(env->c, tests[0]);
   if (nu == 0) {
-    const dofmap *dm = lg_mesh_dofmap(env, lm, ti->degree, ti->ncomp > 1 ? ti->ncomp : 1);
+    const dofmap *dm = lg_mesh_dofmap(env, lm, ti->degree, ti->ncomp > 1 ? ti->ncomp : 1, ti->disc);
     if (!dm) return lgerror(L, fn, env);
     lg_form_kernels *K = lg_form_kernels_new(env, lm, F, tests[0], dm);
     if (!K) return lgerror(L, fn, env);
@@ -205,7 +205,7 @@ static int l_assemble(lua_State *L) {
     return 1;
   }
   expr_func_info *ui = expr_func_get(env->c, unks[0]);
-  if (ui->degree != ti->degree || ui->ncomp != ti->ncomp)
+  if (ui->degree != ti->degree || ui->ncomp != ti->ncomp || ui->disc != ti->disc)
     return luaL_error(L, "%s: the test function %s and the unknown %s are of different spaces: rectangular operators are not "
                          "supported yet", fn, ti->name, ui->name);
   lg_problem_spec s = {lm, F, NULL, 1, &tests[0], &unks[0], 0, 0, NULL, 0, NULL, 0};

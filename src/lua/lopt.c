@@ -22,7 +22,7 @@ static int l_control(lua_State *L) {
   ud_mesh *um = check_mesh(L, 2, fn);
   const char *name = luaL_optstring(L, 3, "m");
   lg_env *env = get_env(L);
-  lg_function *f = lg_function_new(env, um->lm, b->degree, b->ncomp, name);
+  lg_function *f = lg_function_new(env, um->lm, lg_mesh_dofmap(env, um->lm, b->degree, b->ncomp, b->disc), name);
   if (!f) return lgerror(L, fn, env);
   push_function(L, f, 2);
   if (!lua_isnoneornil(L, 4)) {
@@ -242,7 +242,7 @@ static void read_direction(lua_State *L, lg_reduced *rf, int idx, double **dm, c
         int ok;
         expr *e = to_expr_opt(L, k, &ok);
         if (!ok) typeerror(L, fn, k, "a direction: a discrete function, an expression or a number");
-        lg_function *t = lg_function_new(env, c->f->mesh, c->f->degree, c->f->dm->bs, "dm");
+        lg_function *t = lg_function_new(env, c->f->mesh, c->f->dm, "dm");
         if (!t) lgerror(L, fn, env);
         int rc = lg_interpolate(env, t, e);
         if (!rc) memcpy(dm[i], t->x, sizeof(double) * (size_t)n);
@@ -295,7 +295,7 @@ static int push_riesz(lua_State *L, lg_reduced *rf, double **g, int riesz, const
     expr_func_info *fi = expr_func_get(env->c, c->f->fid);
     char nm[80];
     snprintf(nm, sizeof nm, "%s_%s", prefix, fi ? fi->name : "m");
-    lg_function *gf = lg_function_new(env, c->f->mesh, c->f->degree, c->f->dm->bs, nm);
+    lg_function *gf = lg_function_new(env, c->f->mesh, c->f->dm, nm);
     if (!gf) return lgerror(L, fn, env);
     push_functions_of(L, 1, &gf, 1);
     if (lg_reduced_riesz(env, rf, i, riesz, g[i], gf->x)) return lgerror(L, fn, env);
@@ -369,7 +369,7 @@ static int reduced_state(lua_State *L) {
     expr_func_info *info = expr_func_get(env->c, fi[a].unknown);
     char nm[80];
     snprintf(nm, sizeof nm, "%sh", info ? info->name : "u");
-    out[a] = lg_function_new(env, lg_problem_mesh(p), fi[a].dm->degree, fi[a].dm->bs, nm);
+    out[a] = lg_function_new(env, lg_problem_mesh(p), (dofmap *)fi[a].dm, nm);
     if (!out[a]) return lgerror(L, fn, env);
     memcpy(out[a]->x, x + fi[a].offset, sizeof(double) * (size_t)fi[a].dm->ndof);
   }
@@ -738,7 +738,7 @@ static int l_kkt_problem(lua_State *L) {
                           expr_func_get(env->c, unk[i])->name);
   for (int a = 0; a < ns; a++) {
     const expr_func_info *s = expr_func_get(env->c, unk[a]), *l = expr_func_get(env->c, unk[ns + a]);
-    if (s->degree != l->degree || s->ncomp != l->ncomp)
+    if (s->degree != l->degree || s->ncomp != l->ncomp || s->disc != l->disc)
       return luaL_error(L, "%s: the adjoint %s must use the basis of its state %s (P%d), got P%d", fn, l->name, s->name, s->degree,
                         l->degree);
   }
@@ -768,6 +768,7 @@ static int l_kkt_problem(lua_State *L) {
     char nm[80];
     snprintf(nm, sizeof nm, "%.60s_test", fi->name);
     if ((test[i] = expr_func_new(env->c, FK_TEST, nm, fi->degree, fi->ncomp, NULL)) < 0) return luaL_error(L, "%s: out of memory", fn);
+    expr_func_get(env->c, test[i])->disc = fi->disc;
   }
   lua_getfield(L, 1, "bc");
   int bc_idx = lua_gettop(L);

@@ -181,7 +181,7 @@ static int l_interpolate(lua_State *L) {
   expr *e = check_expr(L, 3, fn);
   lg_env *env = get_env(L);
   const char *name = luaL_optstring(L, 4, "f");
-  lg_function *f = lg_function_new(env, um->lm, b->degree, b->ncomp, name);
+  lg_function *f = lg_function_new(env, um->lm, lg_mesh_dofmap(env, um->lm, b->degree, b->ncomp, b->disc), name);
   if (!f) return lgerror(L, fn, env);
   push_function(L, f, 2);
   if (lg_interpolate(env, f, e)) return lgerror(L, fn, env);
@@ -195,7 +195,7 @@ static int l_function(lua_State *L) {
   if (!b) return typeerror(L, fn, 1, "a basis (lg.lagrange(p))");
   ud_mesh *um = check_mesh(L, 2, fn);
   lg_env *env = get_env(L);
-  lg_function *f = lg_function_new(env, um->lm, b->degree, b->ncomp, luaL_optstring(L, 3, "f"));
+  lg_function *f = lg_function_new(env, um->lm, lg_mesh_dofmap(env, um->lm, b->degree, b->ncomp, b->disc), luaL_optstring(L, 3, "f"));
   if (!f) return lgerror(L, fn, env);
   push_function(L, f, 2);
   return 1;
@@ -403,7 +403,7 @@ static int prob_sensitivity(lua_State *L) {
     expr_func_info *info = expr_func_get(env->c, fi[a].unknown);
     char nm[80];
     snprintf(nm, sizeof nm, "d%s_d%s", info ? info->name : "u", expr_param_name(env->c, ue->e->i0));
-    out[a] = lg_function_new(env, lg_problem_mesh(u->p), fi[a].dm->degree, fi[a].dm->bs, nm);
+    out[a] = lg_function_new(env, lg_problem_mesh(u->p), (dofmap *)fi[a].dm, nm);
     if (!out[a]) return lgerror(L, fn, env);
     memcpy(out[a]->x, du + fi[a].offset, sizeof(double) * (size_t)fi[a].dm->ndof);
   }

@@ -625,11 +625,19 @@ static int mesh_check(lua_State *L) {
   return 2;
 }
 
+/* argument 1 of a vertex method: a vertex number 1..nvert */
+static lua_Integer vertex_arg(lua_State *L, const mesh *m, const char *fn) {
+  int isint;
+  lua_Integer i = lua_tointegerx(L, 2, &isint);
+  if (!isint) luaL_error(L, "%s: argument 1 must be a vertex number (an integer 1..%d), got %s", fn, m->nvert, luaL_typename(L, 2));
+  if (i < 1 || i > m->nvert) luaL_error(L, "%s: vertex %I out of range 1..%d", fn, i, m->nvert);
+  return i;
+}
+
 static int mesh_coordinates(lua_State *L) {
   ud_mesh *u = check_mesh(L, 1, "mesh:coordinates");
   mesh *m = u->lm->m;
-  lua_Integer i = luaL_checkinteger(L, 2);
-  if (i < 1 || i > m->nvert) return luaL_error(L, "mesh:coordinates: vertex %I out of range 1..%d", i, m->nvert);
+  lua_Integer i = vertex_arg(L, m, "mesh:coordinates");
   for (int d = 0; d < m->dim; d++) lua_pushnumber(L, m->x[(size_t)(i - 1) * m->dim + d]);
   return m->dim;
 }
@@ -637,11 +645,14 @@ static int mesh_coordinates(lua_State *L) {
 static int mesh_set_coordinates(lua_State *L) {
   ud_mesh *u = check_mesh(L, 1, "mesh:set_coordinates");
   mesh *m = u->lm->m;
-  lua_Integer i = luaL_checkinteger(L, 2);
-  if (i < 1 || i > m->nvert) return luaL_error(L, "mesh:set_coordinates: vertex %I out of range 1..%d", i, m->nvert);
+  lua_Integer i = vertex_arg(L, m, "mesh:set_coordinates");
   double v[3];
   for (int d = 0; d < m->dim; d++) {
-    v[d] = luaL_checknumber(L, 3 + d);
+    int isnum;
+    v[d] = lua_tonumberx(L, 3 + d, &isnum);
+    if (!isnum)
+      return luaL_error(L, "mesh:set_coordinates: argument %d must be coordinate %d (a number), got %s", 2 + d, d + 1,
+                        luaL_typename(L, 3 + d));
     if (!isfinite(v[d])) return luaL_error(L, "mesh:set_coordinates: argument %d is not finite (%f)", 3 + d, v[d]);
   }
   for (int d = 0; d < m->dim; d++) m->x[(size_t)(i - 1) * m->dim + d] = v[d];

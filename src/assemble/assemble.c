@@ -65,7 +65,7 @@ dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree, int ncomp, int disc
   int d = disc && degree > 0; /* P0 is discontinuous already */
   dofmap **s = &lm->dm[d][degree][0], **v = &lm->dm[d][degree][ncomp - 1];
   if (!*s) {
-    *s = d ? dofmap_new_discontinuous(lm->m, degree, err) : dofmap_new(lm->m, degree, err);
+    *s = dofmap_new(lm->m, degree, d, err);
     if (!*s) { lg_seterr(env, "%s", err); return NULL; }
   }
   if (!*v) {
@@ -394,14 +394,12 @@ static int pt_leaf(void *ud, const expr *e, double *out) {
   return 0;
 }
 
-double lg_eval_leaf(const dofmap *dm, const double *vals, int cell, const double *xi, const double K[3][3], const expr *e) {
+double lg_eval_at(const dofmap *dm, const double *vals, int cell, const double *xi, const double K[3][3], int comp, int dir) {
   double val[FEM_MAXLOC], grad[FEM_MAXLOC * 3];
   lagrange_eval(&dm->el, xi, val, grad);
-  int bs = dm->bs, comp = e->i1 < bs ? e->i1 : 0;
+  int bs = dm->bs, dim = dm->m->dim;
+  if (comp >= bs) comp = 0;
   const int *cd = dm->cell_dofs + (size_t)cell * (size_t)dm->nloc;
-  int dir = -1, dim = dm->m->dim;
-  for (int d = 0; d < EXPR_MAXDIM; d++)
-    if (e->alpha[d]) dir = d;
   double s = 0;
   for (int i = 0; i < dm->el.nloc; i++) {
     double phi;
@@ -413,6 +411,13 @@ double lg_eval_leaf(const dofmap *dm, const double *vals, int cell, const double
     s += vals[cd[i * bs + comp]] * phi;
   }
   return s;
+}
+
+double lg_eval_leaf(const dofmap *dm, const double *vals, int cell, const double *xi, const double K[3][3], const expr *e) {
+  int dir = -1;
+  for (int d = 0; d < EXPR_MAXDIM; d++)
+    if (e->alpha[d]) dir = d;
+  return lg_eval_at(dm, vals, cell, xi, K, e->i1, dir);
 }
 
 static int bind_all_discrete(lg_env *env, lg_mesh *lm, expr_tape *t, coef_binding *bind, int *nb) {

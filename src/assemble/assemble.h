@@ -94,8 +94,10 @@ int lg_bind_discrete(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nextra,
 
 /* every value of v (dm->ndof) finite, or a message "<what> is not finite (nan) at dof 7 (x, y)" */
 int lg_check_finite(lg_env *env, const dofmap *dm, const double *v, const char *what);
-/* the value of field leaf e (its component, a first derivative or none) of the function
- * with dof map dm and values vals at reference point xi of cell c, K the inverse Jacobian */
+/* component comp of the function with dof map dm and values vals, or its derivative in
+ * direction dir (-1: the value), at reference point xi of cell c, K the inverse Jacobian */
+double lg_eval_at(const dofmap *dm, const double *vals, int c, const double *xi, const double K[3][3], int comp, int dir);
+/* the same for a field leaf (its component and first derivative) */
 double lg_eval_leaf(const dofmap *dm, const double *vals, int c, const double *xi, const double K[3][3], const expr *e);
 /* point location (locate.c): the cell holding x and x's reference coordinates there:
  * 0, 1 when x is outside the mesh, -1 on failure (env->err) */

@@ -572,18 +572,20 @@ void dofmap_node_coords(const dofmap *dm, int c, int k, double *x) {
   }
 }
 
-dofmap *dofmap_new(mesh *m, int degree, char *err) {
+dofmap *dofmap_new(mesh *m, int degree, int disc, char *err) {
   dofmap *dm = calloc(1, sizeof *dm);
   if (!dm) { snprintf(err, 256, "out of memory"); return NULL; }
   dm->m = m;
   dm->degree = degree;
   dm->bs = 1;
+  dm->disc = disc;
   if (lagrange_init(&dm->el, m->type, degree, err)) { free(dm); return NULL; }
   int nloc = dm->el.nloc;
   dm->nloc = nloc;
-  /* the entities that own dofs: count the element's nodes on each kind */
+  /* the entities that own dofs: count the element's nodes on each kind (discontinuous: the
+   * cell owns them all) */
   int nper[4] = {0, 0, 0, 0};
-  for (int k = 0; k < nloc; k++) nper[dm->el.ent_dim[k]]++;
+  for (int k = 0; k < nloc; k++) nper[disc ? 3 : dm->el.ent_dim[k]]++;
   int ne = cell_nedges(m->type), nfc = cell_nfacets(m->type);
   int edge_per = ne ? nper[1] / ne : 0, face_per = m->dim == 3 ? nper[2] / nfc : 0, cell_per = nper[3];
   if (nper[1] && mesh_build_edges(m)) { snprintf(err, 256, "%.200s", m->err); free(dm); return NULL; }
@@ -603,7 +605,7 @@ dofmap *dofmap_new(mesh *m, int degree, char *err) {
     const int *v = m->cells + (size_t)c * (size_t)m->nvc;
     int *cd = dm->cell_dofs + (size_t)c * (size_t)nloc;
     for (int k = 0; k < nloc; k++) {
-      int ed = dm->el.ent_dim[k], id = dm->el.ent_id[k], j = dm->el.ent_k[k];
+      int ed = disc ? 3 : dm->el.ent_dim[k], id = dm->el.ent_id[k], j = disc ? k : dm->el.ent_k[k];
       if (ed == 0) cd[k] = v[id];
       else if (ed == 1) {
         int ge = m->cell_edges[(size_t)c * (size_t)ne + (size_t)id];
@@ -618,24 +620,6 @@ dofmap *dofmap_new(mesh *m, int degree, char *err) {
       }
     }
   }
-  return dm;
-}
-
-dofmap *dofmap_new_discontinuous(mesh *m, int degree, char *err) {
-  dofmap *dm = calloc(1, sizeof *dm);
-  if (!dm) { snprintf(err, 256, "out of memory"); return NULL; }
-  dm->m = m;
-  dm->degree = degree;
-  dm->bs = 1;
-  dm->disc = 1;
-  if (lagrange_init(&dm->el, m->type, degree, err)) { free(dm); return NULL; }
-  dm->nloc = dm->el.nloc;
-  long nd = (long)m->ncell * dm->nloc;
-  if (nd > 2000000000L) { snprintf(err, 256, "too many dofs"); free(dm); return NULL; }
-  dm->ndof = (int)nd;
-  dm->cell_dofs = malloc(sizeof(int) * (size_t)nd + 1);
-  if (!dm->cell_dofs) { snprintf(err, 256, "out of memory"); free(dm); return NULL; }
-  for (long i = 0; i < nd; i++) dm->cell_dofs[i] = (int)i;
   return dm;
 }
 

@@ -81,9 +81,9 @@ typedef struct {
   int *cell_dofs; /* ncell*nloc */
 } dofmap;
 
-dofmap *dofmap_new(mesh *m, int degree, char *err);
-/* the discontinuous space of a degree: the same element, every node owned by its cell */
-dofmap *dofmap_new_discontinuous(mesh *m, int degree, char *err);
+/* the space of Lagrange degree `degree`, continuous, or discontinuous (disc = 1: the same
+ * element with every node owned by its cell) */
+dofmap *dofmap_new(mesh *m, int degree, int disc, char *err);
 /* the bs-component space over a scalar one (bs = 1 .. 3) */
 dofmap *dofmap_block(const dofmap *scalar, int bs, char *err);
 void dofmap_free(dofmap *d);

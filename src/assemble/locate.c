@@ -202,15 +202,6 @@ int lg_eval_point(lg_env *env, lg_function *f, const double *x, double *out) {
   }
   double J[3][3], K[3][3];
   cell_jacobian(f->mesh->m, cell, xi, J, K);
-  unsigned char z[3] = {0, 0, 0};
-  for (int j = 0; j < f->dm->bs; j++) {
-    expr leaf;
-    memset(&leaf, 0, sizeof leaf);
-    leaf.kind = E_FIELD;
-    leaf.i0 = f->fid;
-    leaf.i1 = j;
-    memcpy(leaf.alpha, z, sizeof z);
-    out[j] = lg_eval_leaf(f->dm, f->x, cell, xi, K, &leaf);
-  }
+  for (int j = 0; j < f->dm->bs; j++) out[j] = lg_eval_at(f->dm, f->x, cell, xi, K, j, -1);
   return 0;
 }

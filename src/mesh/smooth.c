@@ -217,12 +217,11 @@ static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err
 
 int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
   memset(r, 0, sizeof *r);
-  if (m->type == CELL_INTERVAL) { snprintf(err, MESH_ERRLEN, "smoothing is for 2D and 3D meshes, not intervals"); return 1; }
+  if (ut_check_finite(m, "smoothing", err)) return 1;
   if (o->iterations < 1 || o->iterations > 1000000) {
     snprintf(err, MESH_ERRLEN, "iterations must be 1 to 1000000, got %d", o->iterations);
     return 1;
   }
-  if (ut_check_finite(m, "smoothing", err)) return 1;
   size_t nx = (size_t)m->nvert * m->dim;
   double *keep = malloc(sizeof(double) * (nx + 1));
   if (!keep) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }

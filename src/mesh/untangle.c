@@ -1476,6 +1476,7 @@ done:
 
 /* every vertex coordinate finite, or a message naming the first that is not */
 int ut_check_finite(const mesh *m, const char *what, char *err) {
+  if (m->type == CELL_INTERVAL) { snprintf(err, MESH_ERRLEN, "%s is for 2D and 3D meshes, not intervals", what); return 1; }
   for (size_t i = 0; i < (size_t)m->nvert * m->dim; i++)
     if (!isfinite(m->x[i])) {
       snprintf(err, MESH_ERRLEN, "vertex %zu has a non-finite coordinate %c = %g: %s needs finite coordinates", i / m->dim + 1,
@@ -1549,7 +1550,6 @@ int ut_finite_or_restore(mesh *m, const double *keep) {
 
 int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err) {
   memset(r, 0, sizeof *r);
-  if (m->type == CELL_INTERVAL) { snprintf(err, MESH_ERRLEN, "untangling is for 2D and 3D meshes, not intervals"); return 1; }
   if (check_opts(o, err) || ut_check_finite(m, "untangling", err)) return 1;
   size_t nx = (size_t)m->nvert * m->dim;
   double *keep = malloc(sizeof(double) * (nx + 1));
@@ -1578,7 +1578,6 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
 
 int mesh_move(mesh *m, const double *disp, const unsigned char *fixed, move_report *r, char *err) {
   memset(r, 0, sizeof *r);
-  if (m->type == CELL_INTERVAL) { snprintf(err, MESH_ERRLEN, "mesh motion is for 2D and 3D meshes, not intervals"); return 1; }
   if (ut_check_finite(m, "mesh motion", err)) return 1;
   for (int v = 0; v < m->nvert; v++)
     for (int j = 0; fixed[v] && j < m->dim; j++)

@@ -79,6 +79,7 @@ double ut_star_objective(const ctx *C, int v, int q, double *qmin);
 int ut_frame_enter(mesh *m, unit_frame *f, double extra, char *err);
 void ut_frame_leave(mesh *m, unit_frame *f);
 /* every vertex coordinate finite, or a message naming the first that is not */
+/* what ("untangling", ...) can run on m: a 2D or 3D mesh with finite coordinates */
 int ut_check_finite(const mesh *m, const char *what, char *err);
 /* a non-finite result is replaced by the input (keep); 0 when that happened */
 int ut_finite_or_restore(mesh *m, const double *keep);

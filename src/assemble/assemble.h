@@ -146,6 +146,7 @@ typedef struct {
   int nres;
   double res[128];       /* residual norm history (nonlinear) */
   char reason[64];
+  char solver[64];       /* "lu/petsc", "lu/mumps", or the KSP and PC types ("cg/gamg") */
   double assemble_ms, solve_ms, setup_ms;
 } lg_solve_info;
 int lg_problem_solve(lg_env *env, lg_problem *p, lg_function **initial, lg_function **out,

@@ -3,6 +3,7 @@
  * added in place), essential boundary conditions by row replacement, KSP and SNES
  * solves with failures reported, never ignored. */
 #include "assemble.h"
+#include "solver.h"
 
 #include <ctype.h>
 #include <math.h>
@@ -81,6 +82,10 @@ struct lg_problem {
                        * Newton solve warm-started at the solution then reuses it) */
   uint64_t matrix_fp; /* linear problems: what the assembled, factored matrix was made from */
   uint64_t adj_fp;    /* nonlinear problems: what the adjoint's Jacobian was made from (besides the state) */
+  int chord;          /* a warm-started resolve (an optimization's next evaluation): steps may
+                       * keep the last Jacobian while it contracts the residual (snes_jacobian) */
+  int lag_valid;      /* A holds a Jacobian assembled for this solve's data (any iterate) */
+  double lag_fnorm;   /* |F| at the last Jacobian evaluation */
   double *elem;       /* element tensor scratch */
   size_t elem_cap;
   int failed;         /* a callback failed: env->err holds why */
@@ -1052,50 +1057,18 @@ static int make_outputs(lg_env *env, lg_problem *p, const double *x, lg_function
   return 0;
 }
 
-/* the default solver: a direct LU factorization, by MUMPS when PETSc has it (several times
- * faster than PETSc's own LU on 3D problems); -ksp_type / -pc_type override it */
+/* the default solver: a direct LU factorization (solver.c chooses PETSc's or MUMPS);
+ * -ksp_type / -pc_type / -pc_factor_mat_solver_type override it */
 static int default_lu(lg_env *env, lg_problem *p, PC pc) {
-  PCHK(PCSetType(pc, PCLU), "PCSetType");
-  PetscBool have = PETSC_FALSE;
-  MatGetFactorAvailable(p->A, MATSOLVERMUMPS, MAT_FACTOR_LU, &have);
-  if (have) PCHK(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS), "PCFactorSetMatSolverType");
+  PCHK(lg_lu_default(pc, p->A, p->N, p->lm->m->dim, p->cols.n, p->nnull), "the default LU");
   return 0;
-}
-
-/* the MUMPS factor of a KSP's LU preconditioner, or NULL (another solver or method) */
-static Mat mumps_factor(KSP ksp, int create) {
-  PC pc;
-  PetscBool lu = PETSC_FALSE;
-  MatSolverType st = NULL;
-  Mat F = NULL;
-  if (KSPGetPC(ksp, &pc) || PetscObjectTypeCompare((PetscObject)pc, PCLU, &lu) || !lu) return NULL;
-  if (PCFactorGetMatSolverType(pc, &st) || !st || strcmp(st, MATSOLVERMUMPS)) return NULL;
-  if (create && PCFactorSetUpMatSolverType(pc)) return NULL;
-  if (PCFactorGetMatrix(pc, &F)) return NULL;
-  return F;
-}
-
-/* MUMPS returns a solution of a singular system without failing; with null pivot detection
- * (ICNTL(24)) it counts the null pivots (INFOG(28)), so a singular matrix is reported
- * instead of solved into garbage, and a singular system with its null space given (the
- * pressure of an enclosed flow) is solved. Call after the operators are set, before the
- * first factorization */
-static void mumps_detect_null_pivots(KSP ksp) {
-  Mat F = mumps_factor(ksp, 1);
-  if (!F) return;
-  MatMumpsSetIcntl(F, 24, 1);
-  /* a pivot below 1e-12 |A| is null (MUMPS's default, 1e-5 eps |A|, missed the constant of
-   * a pure Neumann Laplacian, whose pivot was 1e-15 |A|; a SIMP stiffness with a 1e-9
-   * contrast keeps its pivots well above); -mat_mumps_cntl_3 overrides */
-  MatMumpsSetCntl(F, 3, -1e-12);
 }
 
 /* 0, or 1 with a message when the last factorization found more null pivots than the null
  * space given */
 static int check_null_pivots(lg_env *env, lg_problem *p, KSP ksp) {
-  Mat F = mumps_factor(ksp, 0);
-  PetscInt n = 0;
-  if (!F || MatMumpsGetInfog(F, 28, &n) || n <= p->nnull) return 0;
+  PetscInt n = lg_mumps_null_pivots(ksp);
+  if (n <= p->nnull) return 0;
   if (p->nnull)
     lg_seterr(env, "the matrix is singular: %d null pivots, more than the %d null space vectors given with nullspace=", (int)n,
               p->nnull);
@@ -1213,6 +1186,61 @@ static int remove_null(lg_env *env, lg_problem *p) {
   return 0;
 }
 
+/* one KSPSolve of a linear problem with its checks: 0, 1 with a message, or 2 when the
+ * default PETSc LU failed and MUMPS should try (lg_lu_fallback) */
+static int linear_solve_checked(lg_env *env, lg_problem *p, lg_solve_info *info) {
+  int native = lg_lu_native(p->ksp, p->prefix);
+  PetscErrorCode ierr = KSPSolve(p->ksp, p->b, p->x);
+  if (ierr) return petsc_fail(env, ierr, "the linear solve");
+  if (check_null_pivots(env, p, p->ksp)) return 1;
+  KSPConvergedReason reason;
+  PCHK(KSPGetConvergedReason(p->ksp, &reason), "KSPGetConvergedReason");
+  PetscInt its;
+  KSPGetIterationNumber(p->ksp, &its);
+  info->iterations = info->linear_iterations = (int)its;
+  snprintf(info->reason, sizeof info->reason, "%s", ksp_reason_name(reason));
+  if (reason < 0 && native) return 2;
+  if (reason < 0) {
+    const char *hint = "";
+    if (reason == KSP_DIVERGED_PC_FAILED) {
+      PC pc;
+      PCFailedReason pr = PC_NOERROR;
+      KSPGetPC(p->ksp, &pc);
+      PCGetFailedReason(pc, &pr);
+      if (pr == PC_FACTOR_NUMERIC_ZEROPIVOT || pr == PC_FACTOR_STRUCT_ZEROPIVOT)
+        hint = " (zero pivot in the factorization: the system is singular; are boundary conditions missing?)";
+    }
+    lg_seterr(env, "the linear solve failed: %s after %d iterations%s", info->reason, info->iterations, hint);
+    return 1;
+  }
+  /* a direct solver may return garbage for a singular matrix without failing: check the
+   * residual of what it returned */
+  KSPType kt;
+  KSPGetType(p->ksp, &kt);
+  if (kt && !strcmp(kt, KSPPREONLY)) {
+    Vec r;
+    PetscReal rn, bn;
+    PCHK(VecDuplicate(p->b, &r), "VecDuplicate");
+    PCHK(MatMult(p->A, p->x, r), "MatMult");
+    PCHK(VecAXPY(r, -1.0, p->b), "VecAXPY");
+    VecNorm(r, NORM_2, &rn);
+    VecNorm(p->b, NORM_2, &bn);
+    VecDestroy(&r);
+    if (!(rn <= 1e-8 * (bn > 0 ? bn : 1))) {
+      if (native) return 2;
+      if (p->nnull)
+        lg_seterr(env, "the linear solve failed: the right side is not compatible with the null space given (the residual "
+                       "is %.2e relative to it): the data must be orthogonal to the null space (for a pure Neumann "
+                       "problem, the sources must balance the boundary fluxes)", bn > 0 ? rn / bn : rn);
+      else
+        lg_seterr(env, "the linear solve failed: the matrix is singular (the direct solver's residual is "
+                       "%.2e relative to the right side); are boundary conditions missing?", bn > 0 ? rn / bn : rn);
+      return 1;
+    }
+  }
+  return 0;
+}
+
 static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_info *info) {
   double t0 = now_ms();
   memset(p->state, 0, sizeof(double) * (size_t)p->N);
@@ -1244,54 +1272,14 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
   t0 = now_ms();
   if (ensure_ksp(env, p)) return 1;
   PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
-  mumps_detect_null_pivots(p->ksp);
-  PetscErrorCode ierr = KSPSolve(p->ksp, p->b, p->x);
-  if (ierr) return petsc_fail(env, ierr, "the linear solve");
-  if (check_null_pivots(env, p, p->ksp)) return 1;
-  KSPConvergedReason reason;
-  PCHK(KSPGetConvergedReason(p->ksp, &reason), "KSPGetConvergedReason");
-  PetscInt its;
-  KSPGetIterationNumber(p->ksp, &its);
-  info->iterations = info->linear_iterations = (int)its;
-  snprintf(info->reason, sizeof info->reason, "%s", ksp_reason_name(reason));
+  if (!reuse) PCHK(lg_lu_scale_zero_pivot(p->ksp, p->A, p->bc_rows, p->nbc, p->prefix), "the LU's zero pivot");
+  lg_mumps_detect_null_pivots(p->ksp);
+  while ((rc = linear_solve_checked(env, p, info)) == 2)
+    /* PETSc's LU (no pivoting) found a zero pivot or solved inaccurately: MUMPS, once */
+    PCHK(lg_lu_fallback(p->ksp, p->A), "the switch to MUMPS");
   info->solve_ms = now_ms() - t0;
-  if (reason < 0) {
-    const char *hint = "";
-    if (reason == KSP_DIVERGED_PC_FAILED) {
-      PC pc;
-      PCFailedReason pr = PC_NOERROR;
-      KSPGetPC(p->ksp, &pc);
-      PCGetFailedReason(pc, &pr);
-      if (pr == PC_FACTOR_NUMERIC_ZEROPIVOT || pr == PC_FACTOR_STRUCT_ZEROPIVOT)
-        hint = " (zero pivot in the factorization: the system is singular; are boundary conditions missing?)";
-    }
-    lg_seterr(env, "the linear solve failed: %s after %d iterations%s", info->reason, info->iterations, hint);
-    return 1;
-  }
-  /* a direct solver may return garbage for a singular matrix without failing: check the
-   * residual of what it returned */
-  KSPType kt;
-  KSPGetType(p->ksp, &kt);
-  if (kt && !strcmp(kt, KSPPREONLY)) {
-    Vec r;
-    PetscReal rn, bn;
-    PCHK(VecDuplicate(p->b, &r), "VecDuplicate");
-    PCHK(MatMult(p->A, p->x, r), "MatMult");
-    PCHK(VecAXPY(r, -1.0, p->b), "VecAXPY");
-    VecNorm(r, NORM_2, &rn);
-    VecNorm(p->b, NORM_2, &bn);
-    VecDestroy(&r);
-    if (!(rn <= 1e-8 * (bn > 0 ? bn : 1))) {
-      if (p->nnull)
-        lg_seterr(env, "the linear solve failed: the right side is not compatible with the null space given (the residual "
-                       "is %.2e relative to it): the data must be orthogonal to the null space (for a pure Neumann "
-                       "problem, the sources must balance the boundary fluxes)", bn > 0 ? rn / bn : rn);
-      else
-        lg_seterr(env, "the linear solve failed: the matrix is singular (the direct solver's residual is "
-                       "%.2e relative to the right side); are boundary conditions missing?", bn > 0 ? rn / bn : rn);
-      return 1;
-    }
-  }
+  lg_solver_name(p->ksp, info->solver, sizeof info->solver);
+  if (rc) return 1;
   if (remove_null(env, p)) return 1;
   const PetscScalar *x;
   PCHK(VecGetArrayRead(p->x, &x), "VecGetArrayRead");
@@ -1329,9 +1317,11 @@ static PetscErrorCode snes_function(SNES snes, Vec X, Vec F, void *ctx) {
   return 0;
 }
 
+/* the residual reduction of a step with a kept Jacobian that keeps it for the next step */
+#define LAG_CONTRACTION 0.1
+
 static PetscErrorCode snes_jacobian(SNES snes, Vec X, Mat J, Mat P, void *ctx) {
   lg_problem *p = ctx;
-  (void)snes;
   (void)J;
   const PetscScalar *x;
   PetscCall(VecGetArrayRead(X, &x));
@@ -1341,16 +1331,36 @@ static PetscErrorCode snes_jacobian(SNES snes, Vec X, Mat J, Mat P, void *ctx) {
    * leave the matrix alone, so that the solver's factorization is reused, unless what else
    * the Jacobian reads changed (a control in the stiffness, as the SIMP density: the step
    * would be taken with the last control's Jacobian) */
-  if (p->have_solution && !p->adj_stale && P == p->A && !memcmp(p->state, p->solution, sizeof(double) * (size_t)p->N) &&
-      p->adj_fp && p->adj_fp == matrix_fingerprint(p->env, p))
+  PetscInt k = 0;
+  PetscReal fn = 0;
+  PetscCall(SNESGetIterationNumber(snes, &k));
+  PetscCall(SNESGetFunctionNorm(snes, &fn));
+  int keep = 0;
+  if (k == 0)
+    keep = p->have_solution && !p->adj_stale && P == p->A &&
+           !memcmp(p->state, p->solution, sizeof(double) * (size_t)p->N) && p->adj_fp &&
+           p->adj_fp == matrix_fingerprint(p->env, p);
+  else
+    /* a resolve near the last solution: the last Jacobian stays (its factorization too) for
+     * as long as a step with it cut |F| tenfold (chord steps, each a residual and a
+     * triangular solve instead of a factorization); a poorer step refreshes it */
+    keep = p->chord && p->lag_valid && P == p->A && fn <= LAG_CONTRACTION * p->lag_fnorm;
+  p->lag_fnorm = fn;
+  if (keep) {
+    p->lag_valid = 1;
     return 0;
+  }
   p->adj_stale = 1; /* A no longer holds the Jacobian at the solution */
+  p->lag_valid = 1;
   if (assemble_matrix(p->env, p, p->state, P)) {
     p->failed = 1;
     PetscCall(SNESSetJacobianDomainError(snes));
     return 0;
   }
   PetscCall(MatZeroRows(P, p->nbc, p->bc_rows, 1.0, NULL, NULL));
+  KSP ksp;
+  PetscCall(SNESGetKSP(snes, &ksp));
+  PetscCall(lg_lu_scale_zero_pivot(ksp, P, p->bc_rows, p->nbc, p->prefix));
   return 0;
 }
 
@@ -1401,9 +1411,12 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
   static PetscInt hits[128];
   PCHK(SNESSetConvergenceHistory(p->snes, hist, hits, 128, PETSC_TRUE), "SNESSetConvergenceHistory");
   p->failed = 0;
+  p->chord = warm && p->have_solution;
+  p->lag_valid = 0;
   info->setup_ms = now_ms() - t0;
   t0 = now_ms();
   PetscErrorCode ierr = SNESSolve(p->snes, NULL, p->x);
+  p->chord = 0;
   info->solve_ms = now_ms() - t0;
   if (p->failed) {
     /* a callback failed: at the initial guess that is the data's fault; later, Newton diverged */
@@ -1429,6 +1442,15 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
   info->nres = (int)(nh < 128 ? nh : 128);
   for (int i = 0; i < info->nres; i++) info->res[i] = h[i];
   snprintf(info->reason, sizeof info->reason, "%s", SNESConvergedReasons[reason]);
+  KSP sksp;
+  PCHK(SNESGetKSP(p->snes, &sksp), "SNESGetKSP");
+  lg_solver_name(sksp, info->solver, sizeof info->solver);
+  if (reason < 0 && lg_lu_native(sksp, p->prefix)) {
+    /* PETSc's LU (no pivoting) may be what failed: again with MUMPS, once */
+    PCHK(lg_lu_fallback(sksp, p->A), "the switch to MUMPS");
+    p->adj_stale = 1;
+    return solve_nonlinear(env, p, initial, out, info, warm);
+  }
   if (reason < 0) {
     lg_seterr(env, "the nonlinear solve did not converge: %s after %d Newton iterations (residual %.3e)",
               info->reason, info->iterations, info->nres ? info->res[info->nres - 1] : NAN);
@@ -1636,6 +1658,7 @@ static int jacobian_solver(lg_env *env, lg_problem *p, KSP *out) {
       if (assemble_matrix(env, p, p->state, p->A)) return 1;
       PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, NULL, NULL), "MatZeroRows");
       PCHK(KSPSetOperators(ksp, p->A, p->A), "KSPSetOperators");
+      PCHK(lg_lu_scale_zero_pivot(ksp, p->A, p->bc_rows, p->nbc, p->prefix), "the LU's zero pivot");
       p->adj_stale = 0;
       p->adj_fp = matrix_fingerprint(env, p);
     }
@@ -1660,9 +1683,16 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   VecGetArray(r, &a);
   memcpy(a, rhs, sizeof(double) * (size_t)p->N);
   VecRestoreArray(r, &a);
-  PetscErrorCode ierr = transpose ? KSPSolveTranspose(ksp, r, l) : KSPSolve(ksp, r, l);
-  KSPConvergedReason reason = KSP_CONVERGED_ITS;
-  if (!ierr) KSPGetConvergedReason(ksp, &reason);
+  PetscErrorCode ierr;
+  KSPConvergedReason reason;
+  for (;;) {
+    ierr = transpose ? KSPSolveTranspose(ksp, r, l) : KSPSolve(ksp, r, l);
+    reason = KSP_CONVERGED_ITS;
+    if (!ierr) KSPGetConvergedReason(ksp, &reason);
+    if (ierr || reason >= 0 || !lg_lu_native(ksp, p->prefix)) break;
+    /* PETSc's LU (no pivoting) failed: MUMPS, once */
+    if ((ierr = lg_lu_fallback(ksp, p->A))) break;
+  }
   if (!ierr && reason >= 0) {
     const PetscScalar *lv;
     VecGetArrayRead(l, &lv);
@@ -1696,7 +1726,9 @@ static int prepare_matrix(lg_env *env, lg_problem *p) {
     PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, NULL, NULL), "MatZeroRows");
     if (ensure_ksp(env, p)) return 1;
     PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
+    PCHK(lg_lu_scale_zero_pivot(p->ksp, p->A, p->bc_rows, p->nbc, p->prefix), "the LU's zero pivot");
     p->matrix_ready = 1;
+    p->adj_stale = 1; /* a nonlinear problem's A no longer holds its Jacobian */
   }
   return 0;
 }
@@ -1734,10 +1766,15 @@ int lg_problem_solve_vector(lg_env *env, lg_problem *p, const double *rhs, doubl
   memcpy(b, rhs, sizeof(double) * (size_t)p->N);
   for (int i = 0; i < p->nbc; i++) b[p->bc_rows[i]] = 0;
   PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
-  PetscErrorCode ierr = KSPSolve(p->ksp, p->b, p->x);
-  if (ierr) return petsc_fail(env, ierr, "a solve with the problem's matrix");
+  PetscErrorCode ierr;
   KSPConvergedReason reason;
-  KSPGetConvergedReason(p->ksp, &reason);
+  for (;;) {
+    ierr = KSPSolve(p->ksp, p->b, p->x);
+    if (ierr) return petsc_fail(env, ierr, "a solve with the problem's matrix");
+    KSPGetConvergedReason(p->ksp, &reason);
+    if (reason >= 0 || !lg_lu_native(p->ksp, p->prefix)) break;
+    PCHK(lg_lu_fallback(p->ksp, p->A), "the switch to MUMPS"); /* PETSc's LU failed: MUMPS, once */
+  }
   if (reason < 0) { lg_seterr(env, "a solve with the problem's matrix failed: %s", ksp_reason_name(reason)); return 1; }
   const PetscScalar *xv;
   PCHK(VecGetArrayRead(p->x, &xv), "VecGetArrayRead");

@@ -377,6 +377,7 @@ static int prob_solve(lua_State *L) {
   lua_pushinteger(L, info.iterations); lua_setfield(L, -2, "iterations");
   lua_pushinteger(L, info.linear_iterations); lua_setfield(L, -2, "linear_iterations");
   lua_pushstring(L, info.reason); lua_setfield(L, -2, "reason");
+  lua_pushstring(L, info.solver); lua_setfield(L, -2, "solver");
   lua_pushnumber(L, info.assemble_ms); lua_setfield(L, -2, "assemble_ms");
   lua_pushnumber(L, info.solve_ms); lua_setfield(L, -2, "solve_ms");
   lua_createtable(L, info.nres, 0);

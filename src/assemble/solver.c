@@ -1,0 +1,141 @@
+/* solver.c — the direct solvers of lugal's problems: the default LU factorization (PETSc's
+ * own for small single-field systems, MUMPS otherwise), the switch to MUMPS when the
+ * default one fails, and MUMPS's null pivot detection, which turns a singular matrix into
+ * an error instead of a solution of garbage. */
+#include "solver.h"
+
+#include <stdio.h>
+#include <string.h>
+
+/* PETSc's LU against MUMPS, one factorization and one solve of the P1 Laplacian
+ * (bench/RESULTS.md, "Direct solvers"): PETSc's is faster on 2D systems up to about 10^5
+ * unknowns (total 0.04 against 0.09 s at 16 641, 0.30 against 0.46 s at 66 049; MUMPS
+ * wins at 263 169) and on 3D ones up to about 10^4 (equal at 4 913, MUMPS 16% faster to
+ * factor at 15 625), and its triangular solves are 4-7 times faster at every size, which an
+ * optimization, solving several times per factorization, feels most */
+#define LU_NATIVE_MAX_2D 100000
+#define LU_NATIVE_MAX_3D 10000
+
+PetscErrorCode lg_lu_default(PC pc, Mat A, PetscInt n, int dim, int nfields, int nnull) {
+  PetscFunctionBeginUser;
+  PetscCall(PCSetType(pc, PCLU));
+  PetscBool have = PETSC_FALSE;
+  PetscCall(MatGetFactorAvailable(A, MATSOLVERMUMPS, MAT_FACTOR_LU, &have));
+  /* PETSc's LU does not pivot: a mixed system (a saddle point's zero block) needs MUMPS,
+   * and so does a singular one with its null space given (MUMPS solves past null pivots) */
+  int native = !have || (nfields == 1 && nnull == 0 && n <= (dim >= 3 ? LU_NATIVE_MAX_3D : LU_NATIVE_MAX_2D));
+  if (native) {
+    PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERPETSC));
+    PetscCall(PCFactorSetMatOrderingType(pc, MATORDERINGND));
+  } else PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
+  PetscFunctionReturn(0);
+}
+
+static int is_lu(KSP ksp, PC *pc, MatSolverType *st) {
+  PetscBool lu = PETSC_FALSE;
+  *st = NULL;
+  if (KSPGetPC(ksp, pc) || PetscObjectTypeCompare((PetscObject)*pc, PCLU, &lu) || !lu) return 0;
+  if (PCFactorGetMatSolverType(*pc, st) || !*st) return 0;
+  return 1;
+}
+
+int lg_lu_native(KSP ksp, const char *prefix) {
+  PC pc;
+  MatSolverType st;
+  if (!is_lu(ksp, &pc, &st) || strcmp(st, MATSOLVERPETSC)) return 0;
+  PetscBool user = PETSC_FALSE;
+  PetscOptionsHasName(NULL, prefix && prefix[0] ? prefix : NULL, "-pc_factor_mat_solver_type", &user);
+  return !user;
+}
+
+PetscErrorCode lg_lu_scale_zero_pivot(KSP ksp, Mat A, const PetscInt *bc_rows, int nbc, const char *prefix) {
+  PetscFunctionBeginUser;
+  if (!lg_lu_native(ksp, prefix)) PetscFunctionReturn(0);
+  PetscBool user = PETSC_FALSE;
+  PetscCall(PetscOptionsHasName(NULL, prefix && prefix[0] ? prefix : NULL, "-pc_factor_zeropivot", &user));
+  if (user) PetscFunctionReturn(0);
+  /* PETSc compares pivots with an absolute threshold (1e-12 by default), which a matrix in
+   * small units fails and a large one passes when singular: take 1e-12 of the mean
+   * diagonal outside the essential rows (whose diagonal is 1), the rule lugal gives MUMPS */
+  Vec d;
+  PetscInt n;
+  const PetscScalar *a;
+  PetscCall(MatCreateVecs(A, &d, NULL));
+  PetscCall(MatGetDiagonal(A, d));
+  PetscCall(VecGetLocalSize(d, &n));
+  PetscCall(VecGetArrayRead(d, &a));
+  /* the essential rows skipped, not subtracted: their 1s would swallow a tiny diagonal */
+  char *bc;
+  PetscCall(PetscCalloc1(n, &bc));
+  for (int i = 0; i < nbc; i++)
+    if (bc_rows[i] >= 0 && bc_rows[i] < n) bc[bc_rows[i]] = 1;
+  double s = 0;
+  PetscInt m = 0;
+  for (PetscInt i = 0; i < n; i++)
+    if (!bc[i]) { s += PetscAbsScalar(a[i]); m++; }
+  PetscCall(PetscFree(bc));
+  PetscCall(VecRestoreArrayRead(d, &a));
+  PetscCall(VecDestroy(&d));
+  double mean = m ? s / (double)m : 1.0;
+  PC pc;
+  PetscCall(KSPGetPC(ksp, &pc));
+  PetscCall(PCFactorSetZeroPivot(pc, mean > 0 ? 1e-12 * mean : 1e-12));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode lg_lu_fallback(KSP ksp, Mat A) {
+  PC pc;
+  PetscFunctionBeginUser;
+  PetscCall(KSPGetPC(ksp, &pc));
+  PetscCall(PCReset(pc));
+  PetscCall(PCSetType(pc, PCLU));
+  PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
+  PetscCall(KSPSetOperators(ksp, A, A));
+  lg_mumps_detect_null_pivots(ksp);
+  PetscCall(PetscInfo(ksp, "lugal: PETSc's LU failed; refactoring with MUMPS\n"));
+  PetscFunctionReturn(0);
+}
+
+/* the MUMPS factor of a KSP's LU preconditioner, or NULL (another solver or method) */
+static Mat mumps_factor(KSP ksp, int create) {
+  PC pc;
+  MatSolverType st;
+  Mat F = NULL;
+  if (!is_lu(ksp, &pc, &st) || strcmp(st, MATSOLVERMUMPS)) return NULL;
+  if (create && PCFactorSetUpMatSolverType(pc)) return NULL;
+  if (PCFactorGetMatrix(pc, &F)) return NULL;
+  return F;
+}
+
+/* MUMPS returns a solution of a singular system without failing; with null pivot detection
+ * (ICNTL(24)) it counts the null pivots (INFOG(28)), so a singular matrix is reported
+ * instead of solved into garbage, and a singular system with its null space given (the
+ * pressure of an enclosed flow) is solved */
+void lg_mumps_detect_null_pivots(KSP ksp) {
+  Mat F = mumps_factor(ksp, 1);
+  if (!F) return;
+  MatMumpsSetIcntl(F, 24, 1);
+  /* a pivot below 1e-12 |A| is null (MUMPS's default, 1e-5 eps |A|, missed the constant of
+   * a pure Neumann Laplacian, whose pivot was 1e-15 |A|; a SIMP stiffness with a 1e-9
+   * contrast keeps its pivots well above); -mat_mumps_cntl_3 overrides */
+  MatMumpsSetCntl(F, 3, -1e-12);
+}
+
+PetscInt lg_mumps_null_pivots(KSP ksp) {
+  Mat F = mumps_factor(ksp, 0);
+  PetscInt n = 0;
+  if (!F || MatMumpsGetInfog(F, 28, &n)) return 0;
+  return n;
+}
+
+void lg_solver_name(KSP ksp, char *out, size_t len) {
+  PC pc;
+  MatSolverType st;
+  KSPType kt = NULL;
+  PCType pt = NULL;
+  KSPGetType(ksp, &kt);
+  if (KSPGetPC(ksp, &pc) == 0) PCGetType(pc, &pt);
+  int direct = kt && !strcmp(kt, KSPPREONLY);
+  if (is_lu(ksp, &pc, &st) && direct) snprintf(out, len, "lu/%s", st);
+  else snprintf(out, len, "%s/%s", kt ? kt : "?", pt ? pt : "?");
+}

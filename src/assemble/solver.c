@@ -24,10 +24,10 @@ PetscErrorCode lg_lu_default(PC pc, Mat A, PetscInt n, int dim, int nfields, int
   /* PETSc's LU does not pivot: a mixed system (a saddle point's zero block) needs MUMPS,
    * and so does a singular one with its null space given (MUMPS solves past null pivots) */
   int native = !have || (nfields == 1 && nnull == 0 && n <= (dim >= 3 ? LU_NATIVE_MAX_3D : LU_NATIVE_MAX_2D));
-  if (native) {
-    PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERPETSC));
-    PetscCall(PCFactorSetMatOrderingType(pc, MATORDERINGND));
-  } else PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
+  /* no ordering is set: PETSc's LU prefers nested dissection by itself, and an ordering set
+   * on the PC would be handed to MUMPS too after a switch (40 s instead of 0.3 s for one
+   * factorization at 66 049 dofs, against MUMPS's own ordering) */
+  PetscCall(PCFactorSetMatSolverType(pc, native ? MATSOLVERPETSC : MATSOLVERMUMPS));
   PetscFunctionReturn(0);
 }
 

@@ -67,6 +67,8 @@ struct lg_problem {
   int *blk_pos, *blk_stride;
   double *mbuf;         /* element matrices of one chunk of items */
   PetscInt nnz;
+  PetscInt *csr_i, *csr_j; /* the pattern, A's own arrays (MatCreateSeqAIJWithArrays): freed after A */
+  PetscScalar *csr_a;
   Mat A;
   Vec b, x;
   KSP ksp;
@@ -453,20 +455,15 @@ static int compute_bcs(lg_env *env, lg_problem *p) {
   return 0;
 }
 
-/* the global row and column dofs of cell c, in the element matrix's order */
-static void cell_dofs(const lg_problem *p, int c, PetscInt *rg, PetscInt *cg) {
-  for (int a = 0; a < p->rows.n; a++)
-    for (int k = 0; k < p->rows.nloc[a]; k++)
-      rg[p->rows.off[a] + k] = p->rglob[a] + p->rdm[a]->cell_dofs[(size_t)c * p->rdm[a]->nloc + k];
-  for (int a = 0; a < p->cols.n; a++)
-    for (int k = 0; k < p->cols.nloc[a]; k++)
-      cg[p->cols.off[a] + k] = p->cglob[a] + p->cdm[a]->cell_dofs[(size_t)c * p->cdm[a]->nloc + k];
-}
-
-static void col_dofs(const lg_problem *p, int c, PetscInt *cg) {
-  for (int a = 0; a < p->cols.n; a++)
-    for (int k = 0; k < p->cols.nloc[a]; k++)
-      cg[p->cols.off[a] + k] = p->cglob[a] + p->cdm[a]->cell_dofs[(size_t)c * p->cdm[a]->nloc + k];
+/* the global nodes of cell c for the rows or the columns of the element matrix, in its
+ * order: with B components per node (every field a B-vector) the dof / B of every B-th
+ * local dof, with B = 1 the global dofs */
+static void layout_nodes(const field_layout *l, dofmap *const *dm, const int *glob, int c, int B, PetscInt *out) {
+  for (int a = 0; a < l->n; a++) {
+    const int nl = l->nloc[a], *cd = dm[a]->cell_dofs + (size_t)c * nl;
+    PetscInt *o = out + l->off[a] / B, g = glob[a];
+    for (int k = 0, i = 0; k < nl; k += B, i++) o[i] = (g + cd[k]) / B;
+  }
 }
 
 /* rows are short (tens of entries): insertion sort */
@@ -561,7 +558,7 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
     nstr += (size_t)t->nitems * (size_t)rn;
   }
   /* the element rows of each node row: (entry of the row's first column, cell) pairs */
-  PetscInt rg[KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS], cg[KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS];
+  PetscInt rg[KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS];
   size_t *start = calloc((size_t)Nn + 2, sizeof(size_t));
   int *mark = malloc(sizeof(int) * ((size_t)Nn + 1));
   PetscInt *nodes = malloc(sizeof(PetscInt) * ((size_t)Nn + 1)); /* one node row */
@@ -570,8 +567,8 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
     for (int it = 0; it < t->nitems; it++) {
-      cell_dofs(p, t->cells[it], rg, cg);
-      for (int r = 0; r < rs; r += B) start[rg[r] / B + 2]++;
+      layout_nodes(&p->rows, p->rdm, p->rglob, t->cells[it], B, rg);
+      for (int r = 0; r < rn; r++) start[rg[r] + 2]++;
     }
   }
   for (int r = 0; r < Nn; r++) start[r + 2] += start[r + 1];
@@ -588,12 +585,12 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
     for (int it = 0; it < t->nitems; it++) {
-      cell_dofs(p, t->cells[it], rg, cg);
-      for (int r = 0; r < rs; r += B) {
-        size_t q = start[rg[r] / B + 1]++;
+      layout_nodes(&p->rows, p->rdm, p->rglob, t->cells[it], B, rg);
+      for (int r = 0; r < rn; r++) {
+        size_t q = start[rg[r] + 1]++;
         if (B > 1) {
-          ebase[q] = (PetscCount)(t->blk_off + ((size_t)it * rn + (size_t)(r / B)) * (size_t)cn);
-          estr[q] = t->str_off + (size_t)it * rn + (size_t)(r / B);
+          ebase[q] = (PetscCount)(t->blk_off + ((size_t)it * rn + (size_t)r) * (size_t)cn);
+          estr[q] = t->str_off + (size_t)it * rn + (size_t)r;
         } else ebase[q] = t->coo_off + ((PetscCount)it * rs + r) * cs;
         ecell[q] = t->cells[it];
       }
@@ -618,17 +615,25 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
   }
   for (int r = 0; r < Nn; r++) mark[r] = -1;
   int bad = 0;
+  /* the column nodes of the row's elements, gathered once for the union and the places */
+  size_t bcap = 0;
+  PetscInt *ebuf = NULL;
   for (int R = 0; R < Nn && !bad; R++) {
+    size_t ne = start[R + 1] - start[R];
+    if (ne * (size_t)cn > bcap) {
+      bcap = 2 * ne * (size_t)cn;
+      PetscInt *nb = realloc(ebuf, sizeof(PetscInt) * bcap);
+      if (!nb) { bad = 1; break; }
+      ebuf = nb;
+    }
+    for (size_t q = 0; q < ne; q++) layout_nodes(&p->cols, p->cdm, p->cglob, ecell[start[R] + q], B, ebuf + q * (size_t)cn);
     /* the row's nodes */
     size_t len = 0;
     nodes[len++] = R;
     mark[R] = R;
-    for (size_t q = start[R]; q < start[R + 1]; q++) {
-      col_dofs(p, ecell[q], cg);
-      for (int k = 0; k < cs; k += B) {
-        int J = (int)(cg[k] / B);
-        if (mark[J] != R) { mark[J] = R; nodes[len++] = J; }
-      }
+    for (size_t k = 0; k < ne * (size_t)cn; k++) {
+      PetscInt J = ebuf[k];
+      if (mark[J] != R) { mark[J] = R; nodes[len++] = J; }
     }
     sort_row(nodes, len);
     size_t need = nnz + len * (size_t)B * (size_t)B;
@@ -646,28 +651,25 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
     }
     /* the marker now holds positions (>= Nn would clash with row numbers: use -2 - position) */
     for (size_t k = 0; k < len; k++) mark[nodes[k]] = -2 - (int)k;
-    if (B == 1) p->coo_pos[R] = (int)ia[R] + (-2 - mark[R]);
-    for (size_t q = start[R]; q < start[R + 1] && B > 1; q++) {
-      col_dofs(p, ecell[q], cg);
-      int *bp = p->blk_pos + ebase[q];
-      for (int k = 0; k < cs; k += B) bp[k / B] = (int)ia[R * B] + (-2 - mark[cg[k] / B]) * B;
-      p->blk_stride[estr[q]] = (int)(len * (size_t)B);
-    }
-    for (size_t q = start[R]; q < start[R + 1] && B == 1; q++) {
-      col_dofs(p, ecell[q], cg);
-      for (int a = 0; a < B; a++) {
-        int *pos = p->coo_pos + ebase[q] + (PetscCount)a * cs;
-        int base = (int)ia[R * B + a];
-        /* a node's B columns are consecutive in the element and in the row */
-        for (int k = 0; k < cs; k += B) {
-          int at = base + (-2 - mark[cg[k] / B]) * B;
-          for (int b2 = 0; b2 < B; b2++) pos[k + b2] = at + b2;
-        }
+    int base = (int)ia[R * B];
+    if (B == 1) p->coo_pos[R] = base + (-2 - mark[R]);
+    for (size_t q = 0; q < ne; q++) {
+      const PetscInt *en = ebuf + q * (size_t)cn;
+      size_t e = start[R] + q;
+      if (B > 1) {
+        /* one place per B x B block (its first entry) and the row length, the stride */
+        int *bp = p->blk_pos + ebase[e];
+        for (int k = 0; k < cn; k++) bp[k] = base + (-2 - mark[en[k]]) * B;
+        p->blk_stride[estr[e]] = (int)(len * (size_t)B);
+      } else {
+        int *pos = p->coo_pos + ebase[e];
+        for (int k = 0; k < cn; k++) pos[k] = base + (-2 - mark[en[k]]);
       }
     }
     /* back to "not in row R" for the columns of the next rows */
     for (size_t k = 0; k < len; k++) mark[nodes[k]] = R;
   }
+  free(ebuf);
   free(nodes);
   free(estr);
   free(start);
@@ -682,28 +684,20 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
   }
   ia[N] = (PetscInt)nnz;
   p->nnz = (PetscInt)nnz;
-  PetscErrorCode ierr;
-  ierr = MatCreate(PETSC_COMM_SELF, &p->A);
-  if (!ierr) ierr = MatSetSizes(p->A, p->N, p->N, p->N, p->N);
-  if (!ierr) ierr = MatSetType(p->A, MATSEQAIJ);
-  if (!ierr && p->prefix[0]) ierr = MatSetOptionsPrefix(p->A, p->prefix);
+  /* the matrix is made on these arrays, not a copy of them: PETSc's own preallocation from a
+   * CSR pattern inserts every entry through MatSetValues (a third of the setup of a vector
+   * P2 matrix) and holds a second pattern while ours is alive. The values start as zero
+   * pages, touched first by the first assembly */
+  PetscInt *jt = realloc(ja, sizeof(PetscInt) * (nnz ? nnz : 1));
+  if (jt) ja = jt;
+  p->csr_i = ia;
+  p->csr_j = ja;
+  p->csr_a = calloc(nnz ? nnz : 1, sizeof(PetscScalar));
+  if (!p->csr_a) { lg_seterr(env, "out of memory for %ld matrix values", (long)nnz); return 1; }
   int bs = matrix_block_size(p);
-  if (!ierr && bs > 1) ierr = MatSetBlockSize(p->A, bs);
-  if (!ierr) ierr = MatSeqAIJSetPreallocationCSR(p->A, ia, ja, NULL);
-  /* the value array must be in this pattern's order: checked once */
-  if (!ierr) {
-    const PetscInt *ai, *aj;
-    PetscInt an;
-    PetscBool done;
-    ierr = MatGetRowIJ(p->A, 0, PETSC_FALSE, PETSC_FALSE, &an, &ai, &aj, &done);
-    int same = !ierr && done && an == N && !memcmp(ai, ia, sizeof(PetscInt) * ((size_t)N + 1)) &&
-               !memcmp(aj, ja, sizeof(PetscInt) * nnz);
-    if (!ierr) ierr = MatRestoreRowIJ(p->A, 0, PETSC_FALSE, PETSC_FALSE, &an, &ai, &aj, &done);
-    if (!ierr && !same) { free(ia); free(ja); lg_seterr(env, "internal error: PETSc stored the matrix pattern in another order"); return 1; }
-  }
-  free(ia);
-  free(ja);
-  if (ierr) return petsc_fail(env, ierr, "matrix preallocation");
+  PCHK(MatCreateSeqAIJWithArrays(PETSC_COMM_SELF, N, N, ia, ja, p->csr_a, &p->A), "matrix creation");
+  if (p->prefix[0]) PCHK(MatSetOptionsPrefix(p->A, p->prefix), "MatSetOptionsPrefix");
+  if (bs > 1) PCHK(MatSetBlockSize(p->A, bs), "MatSetBlockSize");
   /* row replacement must keep the pattern: the element places are reused every assembly */
   PCHK(MatSetOption(p->A, MAT_KEEP_NONZERO_PATTERN, PETSC_TRUE), "MatSetOption");
   PCHK(MatSetOption(p->A, MAT_NEW_NONZERO_LOCATION_ERR, PETSC_TRUE), "MatSetOption");
@@ -814,14 +808,20 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
       goto fail;
     }
   }
+  double ph[5];
+  ph[0] = now_ms();
   if (layout(env, s->mesh, s->nfield, s->test, &p->rows, p->rdm, p->rglob, "test")) goto fail;
   if (layout(env, s->mesh, s->nfield, s->unknown, &p->cols, p->cdm, p->cglob, "unknown")) goto fail;
   p->N = p->rglob[s->nfield];
   if (!s->eqn || s->eqn->n == 0) { lg_seterr(env, "the equation has no integrals"); goto fail; }
+  ph[1] = now_ms();
   if (setup_terms(env, p, s->eqn, s->test, s->unknown, s->nfield)) goto fail;
+  ph[2] = now_ms();
   if (setup_bcs(env, p, s->bc, s->test, s->unknown, s->nfield)) goto fail;
+  ph[3] = now_ms();
   if (setup_matrix(env, p)) goto fail;
   if (setup_nullspace(env, p, s)) goto fail;
+  ph[4] = now_ms();
   p->state = calloc((size_t)p->N + 1, sizeof(double));
   p->solution = calloc((size_t)p->N + 1, sizeof(double));
   p->eqn = form_copy(s->eqn);
@@ -830,8 +830,10 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
   memcpy(p->test, s->test, sizeof(int) * (size_t)s->nfield);
   memcpy(p->unk, s->unknown, sizeof(int) * (size_t)s->nfield);
   if (env->verbose)
-    fprintf(stderr, "[lugal] problem: %d dofs, %ld matrix entries before summation, %d kernels compiled in %.2f ms, setup %.2f ms\n",
-            p->N, (long)p->ncoo, env->nkernels, env->kernel_ms, now_ms() - t0);
+    fprintf(stderr, "[lugal] problem: %d dofs, %ld matrix entries before summation, %d kernels compiled in %.2f ms, setup %.2f ms "
+                    "(dof maps %.2f, terms and kernels %.2f, essential conditions %.2f, sparsity and matrix %.2f)\n",
+            p->N, (long)p->ncoo, env->nkernels, env->kernel_ms, now_ms() - t0, ph[1] - ph[0], ph[2] - ph[1],
+            ph[3] - ph[2], ph[4] - ph[3]);
   return p;
 fail:
   lg_problem_free(p);
@@ -872,6 +874,9 @@ void lg_problem_free(lg_problem *p) {
   form_free(p->bcf);
   free(p->elem);
   if (p->A) MatDestroy(&p->A);
+  free(p->csr_i);
+  free(p->csr_j);
+  free(p->csr_a);
   if (p->b) VecDestroy(&p->b);
   if (p->x) VecDestroy(&p->x);
   if (p->ksp) KSPDestroy(&p->ksp);

@@ -37,8 +37,9 @@ end
 local function build()
   if case == "inversion" then
     local k = lg.control(P1, mesh, "k", 1 + 0*x)
+    -- a symmetric form: symmetric elimination keeps the matrix symmetric (Cholesky)
     local st = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), k*lg.dot(lg.grad(v), lg.grad(u)) - v),
-                                 bc = bc, test = v, unknown = u}
+                                 bc = bc, test = v, unknown = u, symmetric = true}
     local J = lg.functional(lg.integral(mesh:cells(), 0.5*(u - uobs)^2 + beta/2*lg.dot(lg.grad(k), lg.grad(k))))
     return lg.reduced_functional{problem = st, functional = J, control = k}
   end

@@ -69,6 +69,9 @@ struct lg_problem {
   PetscInt nnz;
   PetscInt *csr_i, *csr_j; /* the pattern, A's own arrays (MatCreateSeqAIJWithArrays): freed after A */
   PetscScalar *csr_a;
+  size_t bcc_n;         /* symmetric elimination: the essential columns' entries (keep_bc_columns) */
+  int *bcc_row, *bcc_col;
+  double *bcc_val;
   Mat A;
   Vec b, x;
   KSP ksp;
@@ -877,6 +880,9 @@ void lg_problem_free(lg_problem *p) {
   free(p->csr_i);
   free(p->csr_j);
   free(p->csr_a);
+  free(p->bcc_row);
+  free(p->bcc_col);
+  free(p->bcc_val);
   if (p->b) VecDestroy(&p->b);
   if (p->x) VecDestroy(&p->x);
   if (p->ksp) KSPDestroy(&p->ksp);
@@ -1246,10 +1252,53 @@ static int linear_solve_checked(lg_env *env, lg_problem *p, lg_solve_info *info)
   return 0;
 }
 
+/* symmetric elimination zeroes the essential columns too, moving a_ij g_j to the right
+ * side; their entries (rows outside the essential set) are kept so that a solve with the
+ * same matrix and new data (an optimization's next evaluation, other essential values)
+ * reuses the factorization */
+static int keep_bc_columns(lg_env *env, lg_problem *p) {
+  int *at = malloc(sizeof(int) * ((size_t)p->N + 1));
+  if (!at) { lg_seterr(env, "out of memory"); return 1; }
+  for (int i = 0; i < p->N; i++) at[i] = -1;
+  for (int k = 0; k < p->nbc; k++) at[p->bc_rows[k]] = k;
+  size_t n = 0;
+  const PetscScalar *av;
+  if (MatSeqAIJGetArrayRead(p->A, &av)) { free(at); lg_seterr(env, "MatSeqAIJGetArrayRead failed"); return 1; }
+  for (int pass = 0; pass < 2; pass++) {
+    if (pass) {
+      free(p->bcc_row); free(p->bcc_col); free(p->bcc_val);
+      p->bcc_row = malloc(sizeof(int) * (n + 1));
+      p->bcc_col = malloc(sizeof(int) * (n + 1));
+      p->bcc_val = malloc(sizeof(double) * (n + 1));
+      if (!p->bcc_row || !p->bcc_col || !p->bcc_val) {
+        MatSeqAIJRestoreArrayRead(p->A, &av);
+        free(at);
+        p->bcc_n = 0;
+        lg_seterr(env, "out of memory");
+        return 1;
+      }
+      n = 0;
+    }
+    for (int i = 0; i < p->N; i++) {
+      if (at[i] >= 0) continue;
+      for (PetscInt e = p->csr_i[i]; e < p->csr_i[i + 1]; e++) {
+        int k = at[p->csr_j[e]];
+        if (k < 0 || av[e] == 0) continue;
+        if (pass) { p->bcc_row[n] = i; p->bcc_col[n] = k; p->bcc_val[n] = av[e]; }
+        n++;
+      }
+    }
+  }
+  MatSeqAIJRestoreArrayRead(p->A, &av);
+  p->bcc_n = n;
+  free(at);
+  return 0;
+}
+
 static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_info *info) {
   double t0 = now_ms();
   memset(p->state, 0, sizeof(double) * (size_t)p->N);
-  uint64_t fp = p->bc_symmetric ? 0 : matrix_fingerprint(env, p);
+  uint64_t fp = matrix_fingerprint(env, p);
   int reuse = fp && fp == p->matrix_fp && p->ksp;
   p->matrix_fp = 0;
   if (!reuse) {
@@ -1267,17 +1316,21 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
   PCHK(VecSetValues(p->x, p->nbc, p->bc_rows, p->bc_vals, INSERT_VALUES), "VecSetValues");
   PCHK(VecAssemblyBegin(p->x), "VecAssembly");
   PCHK(VecAssemblyEnd(p->x), "VecAssembly");
-  if (reuse) { /* the rows are identity rows already: only the right-hand side's */
+  if (reuse) { /* the rows are identity rows already: only the right-hand side's, and with
+                * symmetric elimination the eliminated columns times the values */
     PCHK(VecGetArray(p->b, &b), "VecGetArray");
+    for (size_t i = 0; i < p->bcc_n; i++) b[p->bcc_row[i]] -= p->bcc_val[i] * p->bc_vals[p->bcc_col[i]];
     for (int i = 0; i < p->nbc; i++) b[p->bc_rows[i]] = p->bc_vals[i];
     PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
-  } else if (p->bc_symmetric) PCHK(MatZeroRowsColumns(p->A, p->nbc, p->bc_rows, 1.0, p->x, p->b), "MatZeroRowsColumns");
-  else PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, p->x, p->b), "MatZeroRows");
+  } else if (p->bc_symmetric) {
+    if (keep_bc_columns(env, p)) return 1;
+    PCHK(MatZeroRowsColumns(p->A, p->nbc, p->bc_rows, 1.0, p->x, p->b), "MatZeroRowsColumns");
+  } else PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, p->x, p->b), "MatZeroRows");
   info->assemble_ms = now_ms() - t0;
   t0 = now_ms();
   if (ensure_ksp(env, p)) return 1;
   PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
-  if (!reuse) PCHK(lg_lu_scale_zero_pivot(p->ksp, p->A, p->bc_rows, p->nbc, p->prefix), "the LU's zero pivot");
+  if (!reuse) PCHK(lg_lu_prepare(p->ksp, p->A, p->bc_rows, p->nbc, p->prefix, 1), "the factorization's choice");
   lg_mumps_detect_null_pivots(p->ksp);
   while ((rc = linear_solve_checked(env, p, info)) == 2)
     /* PETSc's LU (no pivoting) found a zero pivot or solved inaccurately: MUMPS, once */
@@ -1365,7 +1418,7 @@ static PetscErrorCode snes_jacobian(SNES snes, Vec X, Mat J, Mat P, void *ctx) {
   PetscCall(MatZeroRows(P, p->nbc, p->bc_rows, 1.0, NULL, NULL));
   KSP ksp;
   PetscCall(SNESGetKSP(snes, &ksp));
-  PetscCall(lg_lu_scale_zero_pivot(ksp, P, p->bc_rows, p->nbc, p->prefix));
+  PetscCall(lg_lu_prepare(ksp, P, p->bc_rows, p->nbc, p->prefix, 0));
   return 0;
 }
 
@@ -1663,7 +1716,7 @@ static int jacobian_solver(lg_env *env, lg_problem *p, KSP *out) {
       if (assemble_matrix(env, p, p->state, p->A)) return 1;
       PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, NULL, NULL), "MatZeroRows");
       PCHK(KSPSetOperators(ksp, p->A, p->A), "KSPSetOperators");
-      PCHK(lg_lu_scale_zero_pivot(ksp, p->A, p->bc_rows, p->nbc, p->prefix), "the LU's zero pivot");
+      PCHK(lg_lu_prepare(ksp, p->A, p->bc_rows, p->nbc, p->prefix, 0), "the factorization's choice");
       p->adj_stale = 0;
       p->adj_fp = matrix_fingerprint(env, p);
     }
@@ -1726,12 +1779,13 @@ static int prepare_matrix(lg_env *env, lg_problem *p) {
   if (!p->matrix_ready) {
     if (lg_mesh_check(env, p->lm)) return 1;
     memset(p->state, 0, sizeof(double) * (size_t)p->N);
+    p->matrix_fp = 0; /* A no longer holds the last solve's matrix */
     if (assemble_matrix(env, p, p->state, p->A)) return 1;
     if (compute_bcs(env, p)) return 1;
     PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, NULL, NULL), "MatZeroRows");
     if (ensure_ksp(env, p)) return 1;
     PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
-    PCHK(lg_lu_scale_zero_pivot(p->ksp, p->A, p->bc_rows, p->nbc, p->prefix), "the LU's zero pivot");
+    PCHK(lg_lu_prepare(p->ksp, p->A, p->bc_rows, p->nbc, p->prefix, !p->nonlinear), "the factorization's choice");
     p->matrix_ready = 1;
     p->adj_stale = 1; /* a nonlinear problem's A no longer holds its Jacobian */
   }

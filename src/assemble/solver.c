@@ -31,10 +31,13 @@ PetscErrorCode lg_lu_default(PC pc, Mat A, PetscInt n, int dim, int nfields, int
   PetscFunctionReturn(0);
 }
 
+/* a direct factorization (LU, or the Cholesky lugal picks for symmetric matrices) */
 static int is_lu(KSP ksp, PC *pc, MatSolverType *st) {
-  PetscBool lu = PETSC_FALSE;
+  PetscBool lu = PETSC_FALSE, ch = PETSC_FALSE;
   *st = NULL;
-  if (KSPGetPC(ksp, pc) || PetscObjectTypeCompare((PetscObject)*pc, PCLU, &lu) || !lu) return 0;
+  if (KSPGetPC(ksp, pc) || PetscObjectTypeCompare((PetscObject)*pc, PCLU, &lu) ||
+      PetscObjectTypeCompare((PetscObject)*pc, PCCHOLESKY, &ch) || !(lu || ch))
+    return 0;
   if (PCFactorGetMatSolverType(*pc, st) || !*st) return 0;
   return 1;
 }
@@ -48,9 +51,65 @@ int lg_lu_native(KSP ksp, const char *prefix) {
   return !user;
 }
 
-PetscErrorCode lg_lu_scale_zero_pivot(KSP ksp, Mat A, const PetscInt *bc_rows, int nbc, const char *prefix) {
+/* whether A is symmetric to rounding, entry by entry relative to the larger of a_ij, a_ji
+ * (the two triangles of a symmetric form's element matrices are summed in different
+ * orders; an absolute tolerance would call an identity row with a column of tiny entries
+ * symmetric). Read only: MatIsSymmetric marks the matrix changed, which refactors it */
+static PetscErrorCode symmetric(Mat A, PetscBool *sym) {
+  const PetscInt *ia, *ja;
+  const PetscScalar *a;
+  PetscInt n;
+  PetscBool done;
+  PetscFunctionBeginUser;
+  *sym = PETSC_FALSE;
+  PetscCall(MatGetRowIJ(A, 0, PETSC_FALSE, PETSC_FALSE, &n, &ia, &ja, &done));
+  if (!done) PetscFunctionReturn(0);
+  PetscCall(MatSeqAIJGetArrayRead(A, &a));
+  int ok = 1;
+  for (PetscInt i = 0; i < n && ok; i++)
+    for (PetscInt k = ia[i]; k < ia[i + 1] && ok; k++) {
+      PetscInt j = ja[k];
+      if (j <= i) continue;
+      /* a_ji: binary search in row j's sorted columns */
+      PetscInt lo = ia[j], hi = ia[j + 1] - 1;
+      PetscScalar aji = 0;
+      while (lo <= hi) {
+        PetscInt mid = (lo + hi) / 2;
+        if (ja[mid] == i) { aji = a[mid]; break; }
+        if (ja[mid] < i) lo = mid + 1; else hi = mid - 1;
+      }
+      PetscReal m = PetscMax(PetscAbsScalar(a[k]), PetscAbsScalar(aji));
+      ok = PetscAbsScalar(a[k] - aji) <= 1e-12 * m;
+    }
+  PetscCall(MatSeqAIJRestoreArrayRead(A, &a));
+  PetscCall(MatRestoreRowIJ(A, 0, PETSC_FALSE, PETSC_FALSE, &n, &ia, &ja, &done));
+  *sym = ok ? PETSC_TRUE : PETSC_FALSE;
+  PetscFunctionReturn(0);
+}
+
+/* Cholesky (half the work of LU) for a matrix that is symmetric, LU otherwise, unless the
+ * user chose the preconditioner */
+static PetscErrorCode choose_factorization(KSP ksp, Mat A, const char *prefix) {
+  PetscBool user = PETSC_FALSE, sym = PETSC_FALSE, ch = PETSC_FALSE;
+  PC pc;
+  PetscFunctionBeginUser;
+  PetscCall(PetscOptionsHasName(NULL, prefix && prefix[0] ? prefix : NULL, "-pc_type", &user));
+  if (user) PetscFunctionReturn(0);
+  PetscCall(KSPGetPC(ksp, &pc));
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCCHOLESKY, &ch));
+  PetscCall(symmetric(A, &sym));
+  if ((sym != PETSC_FALSE) == (ch != PETSC_FALSE)) PetscFunctionReturn(0);
+  PetscCall(PCReset(pc));
+  PetscCall(PCSetType(pc, sym ? PCCHOLESKY : PCLU));
+  PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERPETSC));
+  PetscCall(KSPSetOperators(ksp, A, A));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode lg_lu_prepare(KSP ksp, Mat A, const PetscInt *bc_rows, int nbc, const char *prefix, int may_cholesky) {
   PetscFunctionBeginUser;
   if (!lg_lu_native(ksp, prefix)) PetscFunctionReturn(0);
+  if (may_cholesky) PetscCall(choose_factorization(ksp, A, prefix));
   PetscBool user = PETSC_FALSE;
   PetscCall(PetscOptionsHasName(NULL, prefix && prefix[0] ? prefix : NULL, "-pc_factor_zeropivot", &user));
   if (user) PetscFunctionReturn(0);
@@ -136,6 +195,6 @@ void lg_solver_name(KSP ksp, char *out, size_t len) {
   KSPGetType(ksp, &kt);
   if (KSPGetPC(ksp, &pc) == 0) PCGetType(pc, &pt);
   int direct = kt && !strcmp(kt, KSPPREONLY);
-  if (is_lu(ksp, &pc, &st) && direct) snprintf(out, len, "lu/%s", st);
+  if (is_lu(ksp, &pc, &st) && direct) snprintf(out, len, "%s/%s", pt ? pt : "lu", st);
   else snprintf(out, len, "%s/%s", kt ? kt : "?", pt ? pt : "?");
 }

@@ -15,9 +15,10 @@ PetscErrorCode lg_lu_default(PC pc, Mat A, PetscInt n, int dim, int nfields, int
  * -pc_factor_mat_solver_type): it may be replaced by MUMPS after a failure */
 int lg_lu_native(KSP ksp, const char *prefix);
 
-/* the native LU's zero pivot threshold, relative to the size of the matrix's diagonal
- * outside the essential rows; call after each assembly of A, before its factorization */
-PetscErrorCode lg_lu_scale_zero_pivot(KSP ksp, Mat A, const PetscInt *bc_rows, int nbc, const char *prefix);
+/* after each assembly of A, before its factorization, for the default PETSc LU: its zero
+ * pivot threshold relative to the size of the matrix's diagonal outside the essential rows,
+ * and with may_cholesky (a linear problem's fixed form) Cholesky while A is symmetric */
+PetscErrorCode lg_lu_prepare(KSP ksp, Mat A, const PetscInt *bc_rows, int nbc, const char *prefix, int may_cholesky);
 
 /* replace the native LU by MUMPS (with null pivot detection) after a failure */
 PetscErrorCode lg_lu_fallback(KSP ksp, Mat A);

@@ -45,6 +45,32 @@ local u1, us = poisson(1), poisson(1e-20)
 T.close(us(0.5, 0.5), u1(0.5, 0.5), 1e-12, "scaled stiffness: u(1/2, 1/2) as at scale 1")
 T.check(u1(0.5, 0.5) > 0.07 and u1(0.5, 0.5) < 0.075, "u(1/2, 1/2) = %.6f (0.0737 exact)", u1(0.5, 0.5))
 
+-- symmetric elimination of a symmetric form: Cholesky; a second solve with other essential
+-- values and the same matrix reuses the factorization, its right side corrected with the
+-- eliminated columns kept from the first: the same solution as a new problem
+local g = lg.interpolate(P1, sq, x + 2*y, "g")
+local function dirichlet()
+  return lg.linear_problem{mesh = sq, test = v, unknown = u, symmetric = true,
+                           eqn = lg.integral(sq:cells(), (1 + x)*lg.dot(lg.grad(v), lg.grad(u)) - v),
+                           bc = lg.essential_bc(sq:boundary(), v*(u - g))}
+end
+local ds = dirichlet()
+local _, di = ds:solve()
+T.check(di.solver == "cholesky/petsc", "symmetric = true on a symmetric form: Cholesky (%s)", di.solver)
+g:assign(3*(x + 2*y))
+local ua = ds:solve()
+local ub = dirichlet():solve()
+local dmax = 0
+for i, val in ipairs(ua:values()) do dmax = math.max(dmax, math.abs(val - ub:values()[i])) end
+T.check(dmax < 1e-12, "new essential values, reused factorization: as a new problem (max difference %.2e)", dmax)
+T.close(ua(0.5, 0.5), ub(0.5, 0.5), 1e-12, "u(1/2, 1/2)")
+T.check(ua(0.5, 0.5) > 3*1.5*0.9, "u(1/2, 1/2) = %.4f follows the essential values", ua(0.5, 0.5))
+-- an advection term makes the form unsymmetric: LU even with symmetric elimination
+local _, ni = lg.linear_problem{mesh = sq, test = v, unknown = u, symmetric = true,
+                                eqn = lg.integral(sq:cells(), lg.dot(lg.grad(v), lg.grad(u)) + v*lg.grad(u)[1] - v),
+                                bc = lg.essential_bc(sq:boundary(), v*u)}:solve()
+T.check(ni.solver == "lu/petsc", "an unsymmetric form: LU (%s)", ni.solver)
+
 -- a mixed system (Stokes, a zero pressure block) goes to MUMPS at once
 local V, Q = lg.vector(lg.lagrange(2)), lg.lagrange(1)
 local w, q = lg.unknown(V, "w"), lg.unknown(Q, "q")

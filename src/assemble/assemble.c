@@ -147,6 +147,22 @@ int lg_region_items(lg_env *env, lg_mesh *lm, const region *r, int *n, int **cel
     *n = r->ntag;
     return 0;
   }
+  if (r->kind == REGION_INTERIOR) {
+    /* cells holds the '+' cells then the '-' cells (2n), facets the code
+     * f+ + nf*(f- + nf*perm) that interior facet kernels take (kernel.h) */
+    if (mesh_build_interior_facets(m)) { lg_seterr(env, "%s", m->err); return 1; }
+    int nf = cell_nfacets(m->type), ni = m->nif;
+    *cells = malloc(sizeof(int) * (size_t)(2 * ni + 1));
+    *facets = malloc(sizeof(int) * (size_t)(ni + 1));
+    if (!*cells || !*facets) { free(*cells); free(*facets); *cells = *facets = NULL; lg_seterr(env, "out of memory"); return 1; }
+    for (int i = 0; i < ni; i++) {
+      (*cells)[i] = m->if_cell[2 * i];
+      (*cells)[ni + i] = m->if_cell[2 * i + 1];
+      (*facets)[i] = m->if_local[2 * i] + nf * (m->if_local[2 * i + 1] + nf * m->if_perm[i]);
+    }
+    *n = ni;
+    return 0;
+  }
   if (r->kind == REGION_CELLS) {
     int cnt = 0;
     for (int c = 0; c < m->ncell; c++) {
@@ -322,6 +338,8 @@ int lg_assemble_range(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, c
     cm = k->pc->mode;
     C = k->pc->v;
   }
+  /* interior facets: the '-' cells follow the '+' cells (lg_region_items) */
+  const int *cells_m = k->facet == 2 ? cells + total + first : NULL;
   cells += first;
   if (facets) facets += first;
   if (C) C += (size_t)first * (size_t)k->nq * (size_t)k->ncache;
@@ -342,13 +360,18 @@ int lg_assemble_range(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, c
   struct timespec t0, t1;
   clock_gettime(CLOCK_MONOTONIC, &t0);
   for (int it = 0; it < nitems; it++) {
-    int c = cells[it];
+    int c = cells[it], cm2 = cells_m ? cells_m[it] : c;
     const int *v = m->cells + (size_t)c * (size_t)nvc;
     for (int i = 0; i < nvc; i++)
       for (int j = 0; j < d; j++) X[i * d + j] = m->x[(size_t)v[i] * d + j];
+    if (cells_m) {
+      const int *vm = m->cells + (size_t)cm2 * (size_t)nvc;
+      for (int i = 0; i < nvc; i++)
+        for (int j = 0; j < d; j++) X[(nvc + i) * d + j] = m->x[(size_t)vm[i] * d + j];
+    }
     for (int ci = 0; ci < k->ncoef; ci++) {
       const dofmap *dm = bind[ci].dm;
-      const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
+      const int *cd = dm->cell_dofs + (size_t)(k->coef_side[ci] ? cm2 : c) * (size_t)dm->nloc;
       double *w = W + k->coef_off[ci];
       for (int i = 0; i < dm->nloc; i++) w[i] = bind[ci].vals[cd[i]];
     }
@@ -561,7 +584,8 @@ int lg_integrate(lg_env *env, lg_mesh *lm, const region *r, expr *e, int order, 
   }
   if (lg_mesh_check(env, lm)) return 1;
   kernel_spec s = {0, NULL, e};
-  int qd = lg_quad_degree(env, e, order, lm->m->type), facet = r->kind == REGION_BOUNDARY, ct = (int)lm->m->type;
+  int qd = lg_quad_degree(env, e, order, lm->m->type), ct = (int)lm->m->type;
+  int facet = r->kind == REGION_BOUNDARY ? 1 : r->kind == REGION_INTERIOR ? 2 : 0;
   /* the kernel of the same integrand, kept from an earlier call, or a new one in the least
    * recently used place */
   lg_kept_kernel *kk = NULL, *old = &env->kept[0];

@@ -218,8 +218,7 @@ static form *form_param_derivative(lg_env *env, const form *F, int param) {
 
 static void free_scratch(lg_env *env, lg_function *f) {
   if (!f) return;
-  expr_func_info *fi = expr_func_get(env->c, f->fid);
-  if (fi) fi->user = NULL;
+  expr_func_forget_user(env->c, f->fid);
   lg_function_free(f);
 }
 
@@ -250,8 +249,7 @@ void lg_reduced_free(lg_reduced *rf) {
   for (int a = 0; a < rf->nf; a++) {
     lg_form_kernels_free(rf->dJdu[a]);
     if (rf->lam[a]) {
-      expr_func_info *fi = expr_func_get(rf->env->c, rf->lam[a]->fid);
-      if (fi) fi->user = NULL;
+      expr_func_forget_user(rf->env->c, rf->lam[a]->fid);
       lg_function_free(rf->lam[a]);
     }
   }

@@ -3,6 +3,7 @@
  * identifiers, bakes the basis tabulations in as static tables and hoists parameter-only
  * subexpressions out of the quadrature loop. */
 #include "kernel.h"
+#include "../mesh/mesh.h"
 
 #include <math.h>
 #include <stdint.h>
@@ -50,10 +51,48 @@ static int leaf_dir(const expr *e) {
 }
 
 /* name of the basis array for field leaf e of degree p: values b<p> or gradient g<p>_<d> */
-static void basis_name(const expr *e, int p, char *buf, size_t len) {
+/* the basis values (b) or derivatives (g) of degree p at the point, on the '-' side of an
+ * interior facet (bm, gm) for the restriction of a function to it */
+static void basis_name(expr_ctx *c, const expr *e, int p, char *buf, size_t len) {
   int d = leaf_dir(e);
-  if (d < 0) snprintf(buf, len, "b%d", p);
-  else snprintf(buf, len, "g%d_%d", p, d);
+  expr_func_info *fi = expr_func_get(c, e->i0);
+  const char *m = fi && fi->side ? "m" : "";
+  if (d < 0) snprintf(buf, len, "b%s%d", m, p);
+  else snprintf(buf, len, "g%s%d_%d", m, p, d);
+}
+
+static int func_side(expr_ctx *c, int f) {
+  expr_func_info *fi = expr_func_get(c, f);
+  return fi ? fi->side : 0;
+}
+
+/* an affine simplex's J, det J and K = J^-1 from the vertex coordinates xn, the names
+ * suffixed by sfx (the '-' cell of an interior facet: JM00, detM, KM00) */
+static void emit_affine_geometry(strbuf *b, int dim, const char *xn, const char *sf) {
+  if (dim == 1) {
+    sb_printf(b, "  const double J%s00 = %s[1] - %s[0], det%s = J%s00, idet%s = 1.0/det%s, K%s00 = idet%s;\n", sf, xn, xn, sf, sf, sf,
+              sf, sf, sf);
+  } else if (dim == 2) {
+    sb_printf(b, "  const double J%s00 = %s[2] - %s[0], J%s01 = %s[4] - %s[0], J%s10 = %s[3] - %s[1], J%s11 = %s[5] - %s[1];\n", sf,
+              xn, xn, sf, xn, xn, sf, xn, xn, sf, xn, xn);
+    sb_printf(b, "  const double det%s = J%s00*J%s11 - J%s01*J%s10, idet%s = 1.0/det%s;\n", sf, sf, sf, sf, sf, sf, sf);
+    sb_printf(b, "  const double K%s00 = J%s11*idet%s, K%s01 = -J%s01*idet%s, K%s10 = -J%s10*idet%s, K%s11 = J%s00*idet%s;\n", sf, sf,
+              sf, sf, sf, sf, sf, sf, sf, sf, sf, sf);
+  } else {
+    for (int i = 0; i < 3; i++)
+      sb_printf(b, "  const double J%s%d0 = %s[%d] - %s[%d], J%s%d1 = %s[%d] - %s[%d], J%s%d2 = %s[%d] - %s[%d];\n", sf, i, xn, 3 + i, xn,
+                i, sf, i, xn, 6 + i, xn, i, sf, i, xn, 9 + i, xn, i);
+    sb_printf(b, "  const double C%s00 = J%s11*J%s22 - J%s12*J%s21, C%s01 = J%s02*J%s21 - J%s01*J%s22, C%s02 = J%s01*J%s12 - J%s02*J%s11;\n",
+              sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf);
+    sb_printf(b, "  const double det%s = J%s00*C%s00 + J%s10*C%s01 + J%s20*C%s02, idet%s = 1.0/det%s;\n", sf, sf, sf, sf, sf, sf, sf,
+              sf, sf);
+    sb_printf(b, "  const double K%s00 = C%s00*idet%s, K%s01 = C%s01*idet%s, K%s02 = C%s02*idet%s;\n", sf, sf, sf, sf, sf, sf, sf, sf,
+              sf);
+    sb_printf(b, "  const double K%s10 = (J%s12*J%s20 - J%s10*J%s22)*idet%s, K%s11 = (J%s00*J%s22 - J%s02*J%s20)*idet%s, "
+                 "K%s12 = (J%s02*J%s10 - J%s00*J%s12)*idet%s;\n", sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf);
+    sb_printf(b, "  const double K%s20 = (J%s10*J%s21 - J%s11*J%s20)*idet%s, K%s21 = (J%s01*J%s20 - J%s00*J%s21)*idet%s, "
+                 "K%s22 = (J%s00*J%s11 - J%s01*J%s10)*idet%s;\n", sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf);
+  }
 }
 
 /* the scalar blocks of a layout: one per (field, component), its local dofs off + i*stride */
@@ -109,6 +148,15 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   int *pslot = NULL;
   int dim = cell_dim(ct);
   int nf = facet ? cell_nfacets(ct) : 1;
+  /* interior facets (facet == 2): the item's code is f+ + nf*(f- + nf*perm), the '-' side's
+   * points tabulated per (f-, perm), perm the rank of the facet vertex permutation between
+   * the two cells (mesh_perm_of_rank) */
+  int interior = facet == 2, nvf = dim, nperm = 1;
+  for (int i = 2; i <= nvf; i++) nperm *= i;
+  if (interior && !cell_is_simplex(ct)) {
+    snprintf(err, errlen, "interior facet integrals are implemented on intervals, triangles and tetrahedra");
+    return NULL;
+  }
   memset(k, 0, sizeof *k);
   k->arity = s->arity;
   k->facet = facet;
@@ -129,14 +177,15 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   free(roots);
 
   /* leaves: coefficient functions, coordinates, normals */
-  int need_val[4] = {0, 0, 0, 0}, need_grad[4] = {0, 0, 0, 0}, need_x = 0, need_n = 0;
+  /* per side (0: the cell, or '+'; 1: the '-' cell of an interior facet) and degree */
+  int need_val[2][4] = {{0}}, need_grad[2][4] = {{0}}, need_x = 0, need_n = 0;
   for (int i = 0; i < tape.n; i++) {
     const expr *e = tape.node[i];
     if (e->kind == E_COORD) {
       if (e->i0 >= dim) KERR("the integrand uses the coordinate %c, but the mesh is %dD", "xyz"[e->i0], dim);
       need_x = 1;
     } else if (e->kind == E_NORMAL) {
-      if (!facet) KERR("the normal vector can only be used in boundary integrals");
+      if (!facet) KERR("the normal vector can only be used in boundary and interior facet integrals");
       if (e->i0 >= dim) KERR("the integrand uses normal component %d on a %dD mesh", e->i0 + 1, dim);
       need_n = 1;
     } else if (e->kind == E_FIELD) {
@@ -156,8 +205,9 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
       }
       if (e->i1 >= k->coef_ncomp[ci]) KERR("component %d of %s, which has %d", e->i1 + 1, fi->name, k->coef_ncomp[ci]);
       if (fi->degree < 0 || fi->degree > 3) KERR("coefficient %s has unsupported degree %d", fi->name, fi->degree);
-      if (d < 0) need_val[fi->degree] = 1;
-      else need_grad[fi->degree] = 1;
+      if (fi->side && !interior) KERR("%s is restricted to the '-' side of a facet (lg.jump, lg.avg, lg.minus): that needs an integral over mesh:interior_facets()", fi->name);
+      if (d < 0) need_val[fi->side][fi->degree] = 1;
+      else need_grad[fi->side][fi->degree] = 1;
     }
   }
   /* sort coefficients by function id for a canonical W layout */
@@ -176,6 +226,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     if (lagrange_init(&el[p], ct, p, err)) goto fail;
   for (int i = 0; i < k->ncoef; i++)
     if (k->coef_degree[i] > maxp) KERR("a function of degree %d on %s (at most %d)", k->coef_degree[i], cell_plural(ct), maxp);
+  for (int i = 0; i < k->ncoef; i++) k->coef_side[i] = func_side(c, k->coef_func[i]);
   k->wsize = 0;
   for (int i = 0; i < k->ncoef; i++) {
     k->coef_off[i] = k->wsize;
@@ -206,21 +257,25 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
       if (fi < 0) KERR("internal error: test function not in the row layout");
       if (tl->order > 1) KERR("second derivatives of test functions are not supported yet");
       if (leaf_dir(tl) >= dim) KERR("the form differentiates a test function in %c on a %dD mesh", "xyz"[leaf_dir(tl)], dim);
-      if (tl->order) need_grad[vr.degree[fi]] = 1; else need_val[vr.degree[fi]] = 1;
+      int ts = func_side(c, vr.func[fi]);
+      if (ts && !interior) KERR("a test function is restricted to the '-' side of a facet: that needs an integral over mesh:interior_facets()");
+      if (tl->order) need_grad[ts][vr.degree[fi]] = 1; else need_val[ts][vr.degree[fi]] = 1;
       if (s->arity == 2) {
         const expr *ul = s->tab->jac_trial[i];
         int fj = layout_find(&vc, ul);
         if (fj < 0) KERR("internal error: unknown not in the column layout");
         if (ul->order > 1) KERR("second derivatives of unknowns are not supported yet");
         if (leaf_dir(ul) >= dim) KERR("the form differentiates an unknown in %c on a %dD mesh", "xyz"[leaf_dir(ul)], dim);
-        if (ul->order) need_grad[vc.degree[fj]] = 1; else need_val[vc.degree[fj]] = 1;
+        int us = func_side(c, vc.func[fj]);
+        if (us && !interior) KERR("an unknown is restricted to the '-' side of a facet: that needs an integral over mesh:interior_facets()");
+        if (ul->order) need_grad[us][vc.degree[fj]] = 1; else need_val[us][vc.degree[fj]] = 1;
       }
     }
   }
 
   /* quadrature */
   quad_rule q;
-  if (quad_cell(ct, facet, qdeg, &q)) KERR("no quadrature rule of degree %d on %s", qdeg, cell_plural(ct));
+  if (quad_cell(ct, facet != 0, qdeg, &q)) KERR("no quadrature rule of degree %d on %s", qdeg, cell_plural(ct));
   k->nq = q.n;
 
   sb_printf(&b, "/* generated by lugal: %s %s kernel, arity %d, quadrature degree %d, %d points */\n",
@@ -266,7 +321,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   }
   /* basis tables */
   for (int p = 0; p <= 3; p++) {
-    if (!need_val[p] && !need_grad[p]) continue;
+    if (!need_val[0][p] && !need_grad[0][p]) continue;
     int nl = el[p].nloc;
     double *bv = malloc(sizeof(double) * (size_t)nf * q.n * nl);
     double *bg = malloc(sizeof(double) * (size_t)nf * q.n * nl * dim);
@@ -277,12 +332,50 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
         lagrange_eval(&el[p], qx + qq * dim, bv + qq * nl, bg + qq * nl * dim);
       }
     char nm[16];
-    if (need_val[p]) { snprintf(nm, sizeof nm, "B%d", p); emit_table(&b, nm, bv, (long)nf * q.n * nl); }
-    if (need_grad[p]) { snprintf(nm, sizeof nm, "G%d", p); emit_table(&b, nm, bg, (long)nf * q.n * nl * dim); }
+    if (need_val[0][p]) { snprintf(nm, sizeof nm, "B%d", p); emit_table(&b, nm, bv, (long)nf * q.n * nl); }
+    if (need_grad[0][p]) { snprintf(nm, sizeof nm, "G%d", p); emit_table(&b, nm, bg, (long)nf * q.n * nl * dim); }
     free(bv);
     free(bg);
   }
   free(qx);
+  if (interior) {
+    /* the '-' side: facet point i of the '+' side is sum_k lambda_k(s_i) times facet vertex k,
+     * which is facet vertex perm[k] of the '-' cell's facet f-: its reference point there */
+    size_t nm_pts = (size_t)nf * (size_t)nperm * (size_t)q.n;
+    double *qm = malloc(sizeof(double) * nm_pts * 3 + 1);
+    if (!qm) KERR("out of memory");
+    for (int fm = 0; fm < nf; fm++)
+      for (int pr = 0; pr < nperm; pr++) {
+        int perm[4];
+        mesh_perm_of_rank(nvf, pr, perm);
+        const int *fv = cell_facet_verts(ct, fm);
+        for (int i = 0; i < q.n; i++) {
+          const double *sp = q.x + q.dim * i;
+          double lam[3] = {1, 0, 0};
+          if (dim == 2) { lam[0] = 1 - sp[0]; lam[1] = sp[0]; }
+          if (dim == 3) { lam[0] = 1 - sp[0] - sp[1]; lam[1] = sp[0]; lam[2] = sp[1]; }
+          double *xi = qm + (((size_t)pr * nf + fm) * q.n + i) * dim; /* fmq = f- + nf*perm */
+          for (int d = 0; d < dim; d++) xi[d] = 0;
+          for (int kk = 0; kk < nvf; kk++) {
+            const double *rv = ref_vertex(ct, fv[perm[kk]]);
+            for (int d = 0; d < dim; d++) xi[d] += lam[kk] * rv[d];
+          }
+        }
+      }
+    for (int p = 0; p <= 3; p++) {
+      if (!need_val[1][p] && !need_grad[1][p]) continue;
+      int nl = el[p].nloc;
+      double *bv = malloc(sizeof(double) * nm_pts * nl + 1), *bg = malloc(sizeof(double) * nm_pts * nl * dim + 1);
+      if (!bv || !bg) { free(bv); free(bg); free(qm); KERR("out of memory"); }
+      for (size_t i = 0; i < nm_pts; i++) lagrange_eval(&el[p], qm + i * dim, bv + i * nl, bg + i * nl * dim);
+      char nm[16];
+      if (need_val[1][p]) { snprintf(nm, sizeof nm, "BM%d", p); emit_table(&b, nm, bv, (long)(nm_pts * nl)); }
+      if (need_grad[1][p]) { snprintf(nm, sizeof nm, "GM%d", p); emit_table(&b, nm, bg, (long)(nm_pts * nl * dim)); }
+      free(bv);
+      free(bg);
+    }
+    free(qm);
+  }
   if (need_n) {
     double nr[18];
     for (int f = 0; f < cell_nfacets(ct); f++) ref_facet_normal(ct, f, nr + f * dim);
@@ -340,27 +433,16 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     }
 
   sb_printf(&b, "void lugal_kernel(const double *restrict X, const double *restrict W, "
-                "const double *restrict P, int facet, double *restrict A, double *restrict C, int cm)\n{\n");
+                "const double *restrict P, int %s, double *restrict A, double *restrict C, int cm)\n{\n",
+            interior ? "fcode" : "facet");
+  if (interior)
+    sb_printf(&b, "  const int facet = fcode %% %d, fmq = fcode / %d;\n  const double *XM = X + %d;\n", nf, nf,
+              cell_nverts(ct) * dim);
   sb_printf(&b, "  (void)W; (void)P; (void)facet; (void)C; (void)cm;\n");
   /* geometry: once for an affine simplex; a quadrilateral's or hexahedron's varies from
    * point to point and is computed in the quadrature loop */
-  if (!affine) {
-  } else if (dim == 1) {
-    sb_printf(&b, "  const double J00 = X[1] - X[0], det = J00, idet = 1.0/det, K00 = idet;\n");
-  } else if (dim == 2) {
-    sb_printf(&b, "  const double J00 = X[2] - X[0], J01 = X[4] - X[0], J10 = X[3] - X[1], J11 = X[5] - X[1];\n"
-                  "  const double det = J00*J11 - J01*J10, idet = 1.0/det;\n"
-                  "  const double K00 = J11*idet, K01 = -J01*idet, K10 = -J10*idet, K11 = J00*idet;\n");
-  } else {
-    sb_printf(&b, "  const double J00 = X[3] - X[0], J01 = X[6] - X[0], J02 = X[9] - X[0];\n"
-                  "  const double J10 = X[4] - X[1], J11 = X[7] - X[1], J12 = X[10] - X[1];\n"
-                  "  const double J20 = X[5] - X[2], J21 = X[8] - X[2], J22 = X[11] - X[2];\n"
-                  "  const double C00 = J11*J22 - J12*J21, C01 = J02*J21 - J01*J22, C02 = J01*J12 - J02*J11;\n"
-                  "  const double det = J00*C00 + J10*C01 + J20*C02, idet = 1.0/det;\n"
-                  "  const double K00 = C00*idet, K01 = C01*idet, K02 = C02*idet;\n"
-                  "  const double K10 = (J12*J20 - J10*J22)*idet, K11 = (J00*J22 - J02*J20)*idet, K12 = (J02*J10 - J00*J12)*idet;\n"
-                  "  const double K20 = (J10*J21 - J11*J20)*idet, K21 = (J01*J20 - J00*J21)*idet, K22 = (J00*J11 - J01*J10)*idet;\n");
-  }
+  if (affine) emit_affine_geometry(&b, dim, "X", "");
+  if (interior) emit_affine_geometry(&b, dim, "XM", "M");
   if (!affine) {
   } else if (!facet) {
     sb_printf(&b, "  const double scale = det < 0.0 ? -det : det;\n");
@@ -458,6 +540,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   sb_printf(&b, "  for (int q = 0; q < %d; ++q) {\n", q.n);
   if (facet) sb_printf(&b, "    const int qq = facet*%d + q;\n", q.n);
   else sb_printf(&b, "    const int qq = q;\n");
+  if (interior) sb_printf(&b, "    const int qm = fmq*%d + q;\n", q.n);
   if (!affine) {
     int nv = cell_nverts(ct);
     sb_printf(&b, "    const double *gq = GQ + qq*%d;\n", nv * dim);
@@ -512,21 +595,23 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
       sb_printf(&b, ";\n");
     }
   }
-  for (int p = 0; p <= 3; p++) {
-    int nl = el[p].nloc;
-    if (need_val[p]) sb_printf(&b, "    const double *b%d = B%d + qq*%d;\n", p, p, nl);
-    if (need_grad[p]) {
-      sb_printf(&b, "    double ");
-      for (int d = 0; d < dim; d++) sb_printf(&b, "%sg%d_%d[%d]", d ? ", " : "", p, d, nl);
-      sb_printf(&b, ";\n    for (int i = 0; i < %d; ++i) {\n      const double *gr = G%d + (qq*%d + i)*%d;\n", nl, p, nl, dim);
-      for (int d = 0; d < dim; d++) {
-        sb_printf(&b, "      g%d_%d[i] = ", p, d);
-        for (int kk = 0; kk < dim; kk++) sb_printf(&b, "%sgr[%d]*K%d%d", kk ? " + " : "", kk, kk, d);
-        sb_printf(&b, ";\n");
+  for (int sd = 0; sd < 2; sd++)
+    for (int p = 0; p <= 3; p++) {
+      int nl = el[p].nloc;
+      const char *m = sd ? "m" : "", *M = sd ? "M" : "", *qi = sd ? "qm" : "qq";
+      if (need_val[sd][p]) sb_printf(&b, "    const double *b%s%d = B%s%d + %s*%d;\n", m, p, M, p, qi, nl);
+      if (need_grad[sd][p]) {
+        sb_printf(&b, "    double ");
+        for (int d = 0; d < dim; d++) sb_printf(&b, "%sg%s%d_%d[%d]", d ? ", " : "", m, p, d, nl);
+        sb_printf(&b, ";\n    for (int i = 0; i < %d; ++i) {\n      const double *gr = G%s%d + (%s*%d + i)*%d;\n", nl, M, p, qi, nl, dim);
+        for (int d = 0; d < dim; d++) {
+          sb_printf(&b, "      g%s%d_%d[i] = ", m, p, d);
+          for (int kk = 0; kk < dim; kk++) sb_printf(&b, "%sgr[%d]*K%s%d%d", kk ? " + " : "", kk, M, kk, d);
+          sb_printf(&b, ";\n");
+        }
+        sb_printf(&b, "    }\n");
       }
-      sb_printf(&b, "    }\n");
     }
-  }
   /* coefficient values and gradients */
   for (int i = 0; i < tape.n; i++) {
     const expr *e = tape.node[i];
@@ -534,7 +619,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     int ci = coef_index(k, e->i0), p = k->coef_degree[ci], nl = el[p].nloc, nc = k->coef_ncomp[ci];
     char nm[32], bn[32];
     leafname(&lc, e, nm, sizeof nm);
-    basis_name(e, p, bn, sizeof bn);
+    basis_name(c, e, p, bn, sizeof bn);
     if (nc == 1)
       sb_printf(&b, "    double %s = 0.0;\n    for (int i = 0; i < %d; ++i) %s += W[%d + i]*%s[i];\n", nm, nl, nm,
                 k->coef_off[ci], bn);
@@ -582,7 +667,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
         const expr *tl = s->tab->res_leaf[i];
         if (!same_block(&vr, a, tl)) continue;
         char bn[32];
-        basis_name(tl, vr.degree[a], bn, sizeof bn);
+        basis_name(c, tl, vr.degree[a], bn, sizeof bn);
         expr_codegen_ref(&tape, tape.root[i], "t", leafname, &lc, ref, sizeof ref);
         sb_printf(&b, "%s%s*%s[i]", first ? "" : " + ", ref, bn);
         first = 0;
@@ -610,7 +695,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
           for (int i = 0; i < s->tab->njac; i++) {
             if (isconst[i] || s->tab->jac_test[i] != tls[t] || !same_block(&vc, bb, s->tab->jac_trial[i])) continue;
             char bn[32];
-            basis_name(s->tab->jac_trial[i], vc.degree[bb], bn, sizeof bn);
+            basis_name(c, s->tab->jac_trial[i], vc.degree[bb], bn, sizeof bn);
             expr_codegen_ref(&tape, tape.root[i], "t", leafname, &lc, ref, sizeof ref);
             sb_printf(&b, "%s%s*%s[j]", first ? "" : " + ", ref, bn);
             first = 0;
@@ -621,7 +706,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
         sb_printf(&b, "      for (int i = 0; i < %d; ++i) Aj[(%d + i*%d)*%d] += ", vr.nloc[a], vr.off[a], vr.stride[a], vc.size);
         for (int t = 0; t < nt; t++) {
           char bn[32];
-          basis_name(tls[t], vr.degree[a], bn, sizeof bn);
+          basis_name(c, tls[t], vr.degree[a], bn, sizeof bn);
           sb_printf(&b, "%s%s[i]*u%d", t ? " + " : "", bn, t);
         }
         sb_printf(&b, ";\n    }\n");

@@ -57,6 +57,7 @@ typedef struct {
   int coef_degree[KER_MAXCOEF];
   int coef_ncomp[KER_MAXCOEF]; /* components (interlaced in W) */
   int coef_off[KER_MAXCOEF];
+  int coef_side[KER_MAXCOEF];  /* 1: the '-' cell's values (interior facets) */
   int wsize;
   double compile_ms;
   int cached; /* 1 when the JIT found it compiled already */

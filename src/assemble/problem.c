@@ -229,7 +229,7 @@ static int setup_bcs(lg_env *env, lg_problem *p, const form *bc, const int *test
   long cap = 0;
   for (int i = 0; i < bc->n; i++) {
     const form_term *ft = &bc->t[i];
-    if (ft->reg.kind == REGION_CELLS) {
+    if (ft->reg.kind == REGION_CELLS || ft->reg.kind == REGION_INTERIOR) {
       lg_seterr(env, "an essential boundary condition must be given on boundary facets (mesh:boundary(...)) or vertices "
                      "(mesh:vertices{near = ...})");
       return 1;

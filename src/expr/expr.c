@@ -157,6 +157,9 @@ int expr_func_new(expr_ctx *c, func_kind kind, const char *name, int degree, int
   snprintf(f->name, sizeof f->name, "%s", name ? name : "f");
   f->degree = degree;
   f->ncomp = ncomp;
+  f->disc = 0;
+  f->side = 0;
+  f->twin = -1;
   f->user = user;
   return c->nfunc++;
 }
@@ -164,6 +167,59 @@ expr_func_info *expr_func_get(expr_ctx *c, int id) {
   return id >= 0 && id < c->nfunc ? &c->funcs[id] : NULL;
 }
 int expr_func_count(const expr_ctx *c) { return c->nfunc; }
+
+void expr_func_forget_user(expr_ctx *c, int id) {
+  expr_func_info *f = expr_func_get(c, id);
+  if (!f) return;
+  f->user = NULL;
+  if (f->twin >= 0) c->funcs[f->twin].user = NULL;
+}
+
+int expr_func_side(expr_ctx *c, int id, int side) {
+  expr_func_info *f = expr_func_get(c, id);
+  if (!f) return -1;
+  if (f->side == side) return id;
+  if (f->twin >= 0) return f->twin;
+  /* copy before expr_func_new, which may move the table */
+  expr_func_info g = *f;
+  char name[80];
+  snprintf(name, sizeof name, "%.60s('-')", g.name);
+  int t = expr_func_new(c, g.kind, name, g.degree, g.ncomp, g.user);
+  if (t < 0) return -1;
+  c->funcs[t].disc = g.disc;
+  c->funcs[t].side = 1;
+  c->funcs[t].twin = id;
+  c->funcs[id].twin = t;
+  return t;
+}
+
+expr *expr_restrict(expr_ctx *c, expr *e, int side) {
+  e = expr_canon(c, e);
+  if (!e || side == 0) return e;
+  int n = expr_collect_fields(c, 1, &e, -1, 0, NULL), maxn = -1;
+  expr_uses(c, e, E_NORMAL, &maxn);
+  size_t cap = (size_t)n + EXPR_MAXDIM + 1;
+  expr **from = malloc(sizeof(expr *) * cap), **to = malloc(sizeof(expr *) * cap);
+  if (!from || !to) { free(from); free(to); expr_set_error(c, "out of memory"); return NULL; }
+  n = expr_collect_fields(c, 1, &e, -1, n, from);
+  int m = 0;
+  for (int i = 0; i < n; i++) {
+    expr_func_info *f = expr_func_get(c, from[i]->i0);
+    if (!f || f->side == 1) continue;
+    int t = expr_func_side(c, from[i]->i0, 1);
+    if (t < 0) { free(from); free(to); expr_set_error(c, "out of memory"); return NULL; }
+    from[m] = from[i];
+    to[m++] = expr_field(c, t, from[i]->i1, from[i]->alpha);
+  }
+  for (int k = 0; k <= maxn; k++) {
+    from[m] = expr_normal(c, k);
+    to[m++] = expr_neg(c, expr_normal(c, k));
+  }
+  expr *r = m ? expr_subs(c, e, m, from, to) : e;
+  free(from);
+  free(to);
+  return r;
+}
 
 /* ---------------------------------------------------------------- hash-consing */
 

@@ -70,6 +70,9 @@ typedef struct {
   int degree;    /* polynomial degree of the basis (for quadrature selection) */
   int ncomp;
   int disc;      /* discontinuous (lg.discontinuous): its dofs belong to the cells */
+  int side;      /* interior facets: 1 for a function's restriction to the '-' side (its
+                  * values from the neighbour cell), 0 otherwise */
+  int twin;      /* the function of the other side, -1 until expr_func_side makes it */
   void *user;    /* owned by the layer that created it */
 } expr_func_info;
 
@@ -98,6 +101,17 @@ const char *expr_param_name(const expr_ctx *c, int i);
 int expr_func_new(expr_ctx *c, func_kind kind, const char *name, int degree, int ncomp, void *user);
 expr_func_info *expr_func_get(expr_ctx *c, int id);
 int expr_func_count(const expr_ctx *c);
+
+/* the user data of a function is gone (a freed discrete function): NULL in it and in its
+ * other side's copy */
+void expr_func_forget_user(expr_ctx *c, int id);
+/* the function id of function id restricted to side 0 ('+', the function itself) or 1
+ * ('-': a copy of it, made once, with the same kind, basis and user data); -1 on error */
+int expr_func_side(expr_ctx *c, int id, int side);
+/* e restricted to one side of an interior facet: side 0 is e; side 1 replaces every
+ * function by its '-' copy (functions already on '-' stay) and the normal n by -n (the
+ * normal of an interior facet points from its '+' cell to its '-' cell) */
+expr *expr_restrict(expr_ctx *c, expr *e, int side);
 
 /* leaves */
 expr *expr_num(expr_ctx *c, double v);
@@ -216,7 +230,9 @@ void expr_codegen_ref(const expr_tape *t, int k, const char *prefix, expr_leaf_n
 
 /* ---- forms: sums of integrals of scalar integrands over regions */
 /* REGION_POINTS: mesh vertices (tags holds their ids), for essential conditions only */
-typedef enum { REGION_CELLS, REGION_BOUNDARY, REGION_POINTS } region_kind;
+/* REGION_INTERIOR: the facets shared by two cells (integrands restricted to a side:
+ * expr_restrict) */
+typedef enum { REGION_CELLS, REGION_BOUNDARY, REGION_POINTS, REGION_INTERIOR } region_kind;
 #define REGION_MAXTAGS 64
 typedef struct {
   region_kind kind;

@@ -163,7 +163,7 @@ static int form_tostring(lua_State *L) {
     char buf[1024];
     expr_print(env->c, f->t[i].integrand, buf, sizeof buf);
     if (i) luaL_addstring(&b, " + ");
-    luaL_addstring(&b, f->t[i].reg.kind == REGION_CELLS ? "∫_cells " : "∫_boundary ");
+    luaL_addstring(&b, f->t[i].reg.kind == REGION_CELLS ? "∫_cells " : f->t[i].reg.kind == REGION_INTERIOR ? "∫_interior " : "∫_boundary ");
     luaL_addstring(&b, buf);
   }
   luaL_pushresult(&b);
@@ -336,6 +336,67 @@ static int l_diff(lua_State *L) {
     push_expr(L, FN(get_env(L)->c, a), 1, deps, "lg." #NAME);              \
     return 1;                                                              \
   }
+/* restrictions to the sides of an interior facet (mesh:interior_facets()): lg.minus(e) is
+ * e on the '-' cell (its functions' values there, n -> -n), lg.plus(e) e on the '+' cell
+ * (e itself: the normal points from '+' to '-'), lg.jump(e) = e+ - e-, lg.jump(e, n) =
+ * e+ n+ + e- n- (for a vector e the normal component of the jump), lg.avg(e) = (e+ + e-)/2 */
+static expr *minus_side(lua_State *L, expr *e, const char *fn) {
+  expr *r = expr_restrict(get_env(L)->c, e, 1);
+  if (!r) exprerror(L, fn);
+  return r;
+}
+
+static void one_expression(lua_State *L, const char *fn, int most) {
+  int n = lua_gettop(L);
+  if (n < 1 || n > most)
+    luaL_error(L, "%s: takes %s, got %d argument%s", fn, most == 1 ? "one expression" : "an expression and optionally the normal",
+               n, n == 1 ? "" : "s");
+}
+
+static int l_minus(lua_State *L) {
+  one_expression(L, "lg.minus", 1);
+  expr *e = check_expr(L, 1, "lg.minus");
+  int deps[1] = {1};
+  push_expr(L, minus_side(L, e, "lg.minus"), 1, deps, "lg.minus");
+  return 1;
+}
+
+static int l_plus(lua_State *L) {
+  one_expression(L, "lg.plus", 1);
+  expr *e = check_expr(L, 1, "lg.plus");
+  int deps[1] = {1};
+  push_expr(L, e, 1, deps, "lg.plus");
+  return 1;
+}
+
+static int l_jump(lua_State *L) {
+  one_expression(L, "lg.jump", 2);
+  expr_ctx *c = get_env(L)->c;
+  expr *e = check_expr(L, 1, "lg.jump");
+  expr *j = expr_sub(c, e, minus_side(L, e, "lg.jump"));
+  if (lua_gettop(L) == 2) {
+    expr *n = check_expr(L, 2, "lg.jump");
+    int rank = 0, len = expr_shape(n, &rank);
+    if (rank != 1) return luaL_error(L, "lg.jump: argument #2 must be the normal (a vector, lg.normal()), got a %s", len ? "matrix" : "scalar");
+    int er = 0;
+    expr_shape(j, &er);
+    j = er == 0 ? expr_mul(c, j, n) : expr_dot(c, j, n);
+  }
+  int deps[2] = {1, 2};
+  push_expr(L, j, lua_gettop(L), deps, "lg.jump");
+  return 1;
+}
+
+static int l_avg(lua_State *L) {
+  one_expression(L, "lg.avg", 1);
+  expr_ctx *c = get_env(L)->c;
+  expr *e = check_expr(L, 1, "lg.avg");
+  expr *a = expr_mul(c, expr_num(c, 0.5), expr_add(c, e, minus_side(L, e, "lg.avg")));
+  int deps[1] = {1};
+  push_expr(L, a, 1, deps, "lg.avg");
+  return 1;
+}
+
 TENSOR1(transpose, expr_transpose)
 TENSOR1(sym, expr_sym)
 TENSOR1(skew, expr_skew)
@@ -508,4 +569,4 @@ const luaL_Reg lg_expr_lib[] = {
     {"diff", l_diff}, {"list", l_list}, {"integral", l_integral}, {"essential_bc", l_essential_bc},
     {"integrate", l_integrate}, {"transpose", l_transpose}, {"sym", l_sym}, {"skew", l_skew}, {"tr", l_tr},
     {"det", l_det}, {"inv", l_inv}, {"dev", l_dev}, {"outer", l_outer}, {"cross", l_cross}, {"identity", l_identity},
-    {"derivative", l_derivative}, {NULL, NULL}};
+    {"derivative", l_derivative}, {"jump", l_jump}, {"avg", l_avg}, {"minus", l_minus}, {"plus", l_plus}, {NULL, NULL}};

@@ -286,6 +286,27 @@ static int mesh_cells(lua_State *L) { return region_new(L, REGION_CELLS, "mesh:c
 
 static int mesh_boundary(lua_State *L) { return region_new(L, REGION_BOUNDARY, "mesh:boundary"); }
 
+/* mesh:interior_facets(): the facets shared by two cells, for the jumps and averages of
+ * discontinuous Galerkin and interior penalty forms */
+static int mesh_interior_facets(lua_State *L) {
+  const char *fn = "mesh:interior_facets";
+  ud_mesh *um = check_mesh(L, 1, fn);
+  if (lua_gettop(L) > 1) return luaL_error(L, "%s: takes no arguments, got %d", fn, lua_gettop(L) - 1);
+  mesh *m = um->lm->m;
+  if (m->type != CELL_TRIANGLE && m->type != CELL_TETRAHEDRON && m->type != CELL_INTERVAL)
+    return luaL_error(L, "%s: interior facet integrals are implemented on intervals, triangles and tetrahedra, not on %s",
+                      fn, m->type == CELL_QUADRILATERAL ? "quadrilaterals" : "hexahedra");
+  if (mesh_build_interior_facets(m)) return luaL_error(L, "%s: %s", fn, m->err);
+  region r;
+  memset(&r, 0, sizeof r);
+  r.kind = REGION_INTERIOR;
+  r.mesh = um->lm;
+  int deps[1] = {1};
+  ud_region *u = new_ud(L, sizeof *u, MT_REGION, 1, deps);
+  u->r = r;
+  return 1;
+}
+
 /* mesh:vertices{near = {x, y}} or {near = {{x, y}, ...}}: the vertex nearest to each point,
  * a region for lg.essential_bc (a pinned pressure, a fixed point of a free body) */
 static int mesh_vertices(lua_State *L) {
@@ -1128,7 +1149,7 @@ static int series_gc(lua_State *L) {
 
 void lg_lua_mesh_register(lua_State *L) {
   static const luaL_Reg mesh_mm[] = {{"__gc", mesh_gc}, {"__tostring", mesh_tostring}, {NULL, NULL}};
-  static const luaL_Reg mesh_methods[] = {{"cells", mesh_cells}, {"boundary", mesh_boundary}, {"vertices", mesh_vertices}, {"info", mesh_info},
+  static const luaL_Reg mesh_methods[] = {{"cells", mesh_cells}, {"boundary", mesh_boundary}, {"interior_facets", mesh_interior_facets}, {"vertices", mesh_vertices}, {"info", mesh_info},
                                           {"write", mesh_write}, {"refine", lmesh_refine}, {"copy", lmesh_copy}, {"hmax", lmesh_hmax},
                                           {"check", mesh_check}, {"nvertices", mesh_nvertices}, {"ncells", mesh_ncells},
                                           {"dim", mesh_dim}, {"coordinates", mesh_coordinates},

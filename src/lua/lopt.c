@@ -246,8 +246,7 @@ static void read_direction(lua_State *L, lg_reduced *rf, int idx, double **dm, c
         if (!t) lgerror(L, fn, env);
         int rc = lg_interpolate(env, t, e);
         if (!rc) memcpy(dm[i], t->x, sizeof(double) * (size_t)n);
-        expr_func_info *fi = expr_func_get(env->c, t->fid);
-        if (fi) fi->user = NULL;
+        expr_func_forget_user(env->c, t->fid);
         lg_function_free(t);
         if (rc) lgerror(L, fn, env);
       }

@@ -18,8 +18,7 @@ static int func_gc(lua_State *L) {
   ud_env *ue = lua_touserdata(L, -1);
   lua_pop(L, 1);
   if (ue && ue->env) {
-    expr_func_info *fi = expr_func_get(ue->env->c, u->f->fid);
-    if (fi) fi->user = NULL;
+    expr_func_forget_user(ue->env->c, u->f->fid);
   }
   lg_function_free(u->f);
   u->f = NULL;

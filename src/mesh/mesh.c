@@ -146,8 +146,10 @@ static int copy_names(mesh_name **dst, int *nd, int *capd, const mesh_name *src,
 static void mesh_free_derived(mesh *m) {
   free(m->edges); free(m->cell_edges); free(m->faces); free(m->cell_faces);
   free(m->bf_cell); free(m->bf_local);
+  free(m->if_cell); free(m->if_local); free(m->if_perm);
   m->edges = m->cell_edges = m->faces = m->cell_faces = m->bf_cell = m->bf_local = NULL;
-  m->nedge = m->nface = 0;
+  m->if_cell = m->if_local = m->if_perm = NULL;
+  m->nedge = m->nface = m->nif = 0;
 }
 
 void mesh_free(mesh *m) {
@@ -638,6 +640,85 @@ int mesh_build_edges(mesh *m) {
 int mesh_build_faces(mesh *m) {
   if (m->faces || (m->type != CELL_TETRAHEDRON && m->type != CELL_HEXAHEDRON)) return 0;
   return number_entities(m, cell_nfacets(m->type), m->nvf, cell_facet_verts, &m->cell_faces, &m->faces, &m->nface);
+}
+
+void mesh_perm_of_rank(int n, int r, int *p) {
+  int used[4] = {0, 0, 0, 0}, fact = 1;
+  for (int i = 2; i < n; i++) fact *= i;
+  for (int k = 0; k < n; k++) {
+    int q = n - 1 - k > 0 ? r / fact : 0;
+    r -= q * fact;
+    if (n - 1 - k > 1) fact /= n - 1 - k;
+    for (int j = 0; j < n; j++)
+      if (!used[j] && q-- == 0) { p[k] = j; used[j] = 1; break; }
+  }
+}
+
+int mesh_perm_rank(int n, const int *p) {
+  int nperm = 1;
+  for (int i = 2; i <= n; i++) nperm *= i;
+  for (int r = 0; r < nperm; r++) {
+    int q[4];
+    mesh_perm_of_rank(n, r, q);
+    if (!memcmp(q, p, sizeof(int) * (size_t)n)) return r;
+  }
+  return -1;
+}
+
+int mesh_build_interior_facets(mesh *m) {
+  if (m->if_cell || m->ncell == 0) return 0;
+  int nf = cell_nfacets(m->type), *cf = NULL, *list = NULL, n = 0;
+  if (number_entities(m, nf, m->nvf, cell_facet_verts, &cf, &list, &n)) return 1;
+  free(list);
+  /* the first and second cell of each facet */
+  int *first = malloc(sizeof(int) * (size_t)(n + 1)), *second = malloc(sizeof(int) * (size_t)(n + 1));
+  if (!first || !second) { free(cf); free(first); free(second); seterr(m->err, "out of memory"); return 1; }
+  for (int i = 0; i < n; i++) first[i] = second[i] = -1;
+  int nif = 0;
+  for (int c = 0; c < m->ncell; c++)
+    for (int f = 0; f < nf; f++) {
+      int id = cf[(size_t)c * (size_t)nf + (size_t)f], slot = c * nf + f;
+      if (first[id] < 0) first[id] = slot;
+      else if (second[id] < 0) { second[id] = slot; nif++; }
+      else {
+        seterr(m->err, "a facet is shared by more than two cells (cells %d, %d and %d): the mesh is not a manifold there",
+               first[id] / nf + 1, second[id] / nf + 1, c + 1);
+        free(cf); free(first); free(second);
+        return 1;
+      }
+    }
+  free(cf);
+  m->if_cell = malloc(sizeof(int) * (size_t)(2 * nif + 1));
+  m->if_local = malloc(sizeof(int) * (size_t)(2 * nif + 1));
+  m->if_perm = malloc(sizeof(int) * (size_t)(nif + 1));
+  if (!m->if_cell || !m->if_local || !m->if_perm) {
+    free(first); free(second);
+    free(m->if_cell); free(m->if_local); free(m->if_perm);
+    m->if_cell = m->if_local = m->if_perm = NULL;
+    seterr(m->err, "out of memory");
+    return 1;
+  }
+  int k = 0;
+  for (int i = 0; i < n; i++) {
+    if (second[i] < 0) continue;
+    int cp = first[i] / nf, fp = first[i] % nf, cm = second[i] / nf, fm = second[i] % nf;
+    const int *vp = m->cells + (size_t)cp * (size_t)m->nvc, *vm = m->cells + (size_t)cm * (size_t)m->nvc;
+    const int *lp = cell_facet_verts(m->type, fp), *lm = cell_facet_verts(m->type, fm);
+    int perm[4] = {0, 0, 0, 0};
+    for (int a = 0; a < m->nvf; a++)
+      for (int b = 0; b < m->nvf; b++)
+        if (vp[lp[a]] == vm[lm[b]]) perm[a] = b;
+    m->if_cell[2 * k] = cp;
+    m->if_cell[2 * k + 1] = cm;
+    m->if_local[2 * k] = fp;
+    m->if_local[2 * k + 1] = fm;
+    m->if_perm[k] = mesh_perm_rank(m->nvf, perm);
+    k++;
+  }
+  free(first);
+  free(second);
+  m->nif = nif;
+  return 0;
 }
 
 int mesh_build_boundary_cells(mesh *m) {

@@ -54,6 +54,12 @@ typedef struct mesh {
   int *cell_faces; /* ncell*nfacets */
   int *bf_cell;    /* nbf: owning cell of each tagged boundary facet */
   int *bf_local;   /* nbf: local facet index in that cell */
+  int nif;         /* interior facets (shared by two cells), mesh_build_interior_facets */
+  int *if_cell;    /* nif*2: the '+' cell (the lower index) and the '-' cell */
+  int *if_local;   /* nif*2: the facet's local index in each */
+  int *if_perm;    /* nif: the rank, among the permutations of nvf items in lexicographic
+                    * order, of p with facet vertex k of '+' = facet vertex p[k] of '-' (each
+                    * in its cell's local facet order) */
 
   char err[MESH_ERRLEN];
 } mesh;
@@ -142,6 +148,12 @@ int mesh_write_pvd(const char *pvd, int nstep, const double *times, char **files
 int mesh_build_edges(mesh *m);
 int mesh_build_faces(mesh *m);
 int mesh_build_boundary_cells(mesh *m);
+/* the facets shared by two cells (a facet in more than two cells is an error: the mesh is
+ * not a manifold there) */
+int mesh_build_interior_facets(mesh *m);
+/* permutation rank r of n items (lexicographic) into p, and its inverse */
+void mesh_perm_of_rank(int n, int r, int *p);
+int mesh_perm_rank(int n, const int *p);
 
 /* geometry */
 double mesh_cell_signed_measure(const mesh *m, int c);

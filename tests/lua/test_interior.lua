@@ -1,0 +1,68 @@
+-- Interior facet integrals (mesh:interior_facets()) with jumps and averages: exact values
+-- on a four-triangle mesh worked by hand, the normal's orientation (n+ points from the '+'
+-- cell to the '-' cell), and zero jumps of discontinuous functions that interpolate a
+-- polynomial of their degree (the two sides' quadrature points are the same physical
+-- points, for every facet orientation, in 1D, 2D and 3D).
+package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
+local T = require "testlib"
+local lg = require "lugal"
+local x, y, z = lg.x, lg.y, lg.z
+
+-- the unit square cut into four triangles at its centre (vertex 5)
+local m4 = lg.mesh.new{cell = "triangle", vertices = {{0, 0}, {1, 0}, {1, 1}, {0, 1}, {0.5, 0.5}},
+                       cells = {{1, 2, 5}, {2, 3, 5}, {3, 4, 5}, {4, 1, 5}}}
+local F = m4:interior_facets()
+local s2 = math.sqrt(2)
+T.close(lg.integrate(F, 1), 2*s2, 1e-14, "the interior facets' length (4 half diagonals)")
+-- a piecewise constant w = x + 2y at the centroids: 5/6, 11/6, 13/6, 7/6
+local w = lg.interpolate(lg.lagrange(0), m4, x + 2*y, "w")
+T.close(lg.integrate(F, lg.jump(w)^2), s2/2*(1 + 1/9 + 1 + 1/9), 1e-14, "∫ jump(w)^2")
+T.close(lg.integrate(F, lg.avg(w)), s2/2*6, 1e-14, "∫ avg(w)")
+local jn = lg.jump(w, lg.normal())
+T.close(lg.integrate(F, lg.dot(jn, jn)), s2/2*(20/9), 1e-14, "∫ |jump(w, n)|^2")
+T.close(lg.integrate(F, jn[1]), -2/3, 1e-14, "∫ jump(w, n)_x = sum of (w+ - w-) n+_x |e| (the normal's orientation)")
+T.close(lg.integrate(F, jn[2]), -4/3, 1e-14, "∫ jump(w, n)_y")
+-- the '+' and '-' values themselves: avg = (plus + minus)/2 and jump = plus - minus
+T.close(lg.integrate(F, lg.plus(w) + lg.minus(w)), 2*lg.integrate(F, lg.avg(w)), 1e-14, "plus + minus = 2 avg")
+-- a continuous P1 function does not jump; its average is its value
+local u = lg.interpolate(lg.lagrange(1), m4, x^2 + y, "u")
+T.check(lg.integrate(F, lg.jump(u)^2) < 1e-30, "a continuous function has no jump")
+T.close(lg.integrate(F, lg.avg(u)), s2/2*3.5, 1e-14, "∫ avg(u) on the four half diagonals")
+-- the gradient of the P1 interpolant of x^2 + y jumps across the half diagonals: by hand
+-- (grad u = (1, 1/2), (3/2, 1), (1, 3/2), (1/2, 1) on the four cells) each normal jump
+-- (grad u+ - grad u-).n+ times the length is -1/2
+local gj = lg.integrate(F, lg.jump(lg.grad(u), lg.normal()))
+T.close(gj, -2, 1e-14, "∫ jump(grad u, n)")
+T.close(lg.integrate(F, lg.dot(lg.grad(u) - lg.minus(lg.grad(u)), lg.normal())), gj, 1e-14, "jump(grad u, n) = (grad u+ - grad u-).n+")
+
+-- discontinuous functions interpolating polynomials of their degree do not jump, on every
+-- interior facet of structured and unstructured (refined) meshes: the '-' side's points are
+-- the '+' side's, whatever the facets' vertex order in the two cells
+local function nojump(mesh, p, f, what)
+  local Fi = mesh:interior_facets()
+  local d = lg.interpolate(lg.discontinuous(p), mesh, f, "d")
+  local jj = lg.integrate(Fi, lg.jump(d)^2)
+  local gg = lg.integrate(Fi, lg.dot(lg.jump(lg.grad(d)), lg.jump(lg.grad(d))))
+  local aa = lg.integrate(Fi, lg.avg(d)) - lg.integrate(Fi, d)
+  T.check(jj < 1e-24 and gg < 1e-20 and math.abs(aa) < 1e-12,
+          "%s: DG%d of a degree-%d polynomial: ∫ jump^2 %.1e, ∫ |jump grad|^2 %.1e, avg - plus %.1e", what, p, p, jj, gg, aa)
+end
+nojump(lg.mesh.interval{n = 7}, 2, x^2 - x, "interval")
+nojump(lg.mesh.rectangle{nx = 4, ny = 3}, 1, 1 + 2*x - 3*y, "rectangle")
+nojump(m4:refine():refine(), 2, x^2 - x*y + 3*y^2, "refined four-triangle mesh")
+nojump(lg.mesh.box{nx = 2}, 1, 1 + x - 2*y + 3*z, "box")
+nojump(lg.mesh.box{nx = 2}:refine(), 2, x*y - z^2 + x, "refined box")
+-- a discontinuous function does jump: a DG0 function of x on the unit square's 4x4 mesh
+-- jumps by 1/4 across each vertical line, by (x_right - x_left) of the centroids across
+-- diagonals (1/12... summed); the total is compared with its count on vertical lines only
+local r4 = lg.mesh.rectangle{nx = 4}
+local c0 = lg.interpolate(lg.lagrange(0), r4, x, "c0")
+T.check(lg.integrate(r4:interior_facets(), lg.jump(c0)^2) > 0.01, "a DG0 function of x jumps")
+T.close(lg.integrate(r4:interior_facets(), 1), 3 + 3 + 16*math.sqrt(2)/4, 1e-13, "the 4x4 rectangle's interior facets")
+
+-- errors
+T.fails(function() return lg.integrate(m4:cells(), lg.jump(w)) end, "'-' side", "interior_facets")
+T.fails(function() return lg.mesh.rectangle{nx = 2, cell = "quadrilateral"}:interior_facets() end, "triangles and tetrahedra")
+T.fails(function() return lg.jump() end, "lg.jump", "expression")
+T.fails(function() return lg.jump(w, 1) end, "lg.jump", "normal")
+print("interior facets: all checks passed")

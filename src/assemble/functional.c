@@ -103,7 +103,15 @@ lg_form_kernels *lg_form_kernels_new(lg_env *env, lg_mesh *lm, const form *F, in
       if (exact && own <= qd) qd = own;
     } else if (f->kind == E_CONST && f->value == 0)
       continue;
-    if (kernel_build(env->jit, env->c, lm->m->type, t->reg.kind == REGION_BOUNDARY, qd, &s, K->arity ? &rows : NULL, NULL,
+    if (K->arity == 1 && t->reg.kind == REGION_INTERIOR) {
+      lg_seterr(env, "term %d integrates over interior facets: derivatives of such terms (adjoints, gradients, "
+                     "sensitivities) are not implemented yet", i + 1);
+      coef_table_free(&t->tab);
+      lg_form_kernels_free(K);
+      return NULL;
+    }
+    int facet = t->reg.kind == REGION_BOUNDARY ? 1 : t->reg.kind == REGION_INTERIOR ? 2 : 0;
+    if (kernel_build(env->jit, env->c, lm->m->type, facet, qd, &s, K->arity ? &rows : NULL, NULL,
                      &t->k, err, sizeof err)) {
       lg_seterr(env, "%s", err);
       coef_table_free(&t->tab);

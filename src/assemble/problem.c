@@ -22,7 +22,10 @@ typedef struct {
   lg_kernel kmat, kres;
   int have_mat, have_res;
   int nitems;
-  int *cells, *facets;
+  int *cells, *facets; /* interior facets: cells holds the '+' cells then the '-' cells */
+  int interior;        /* an interior facet term: its element rows and columns are the
+                        * problem's fields on the '+' cell, then on the '-' cell */
+  field_layout rl, cl; /* the element tensor's rows and columns (the problem's layout, or it twice) */
   PetscCount coo_off;
   size_t blk_off, str_off; /* block layout (B > 1): its first node pair and node row */
 } prob_term;
@@ -163,7 +166,40 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
       return 1;
     }
     expr *f = eqn->t[i].integrand;
-    if (form_linearize(env->c, f, nf, test, nf, unk, 1, &t->tab)) {
+    /* an interior facet term is linearized in the test functions and unknowns of both
+     * sides: its element rows and columns are the fields on '+', then on '-' */
+    t->interior = t->reg.kind == REGION_INTERIOR;
+    t->rl = p->rows;
+    t->cl = p->cols;
+    int tf[2 * KER_MAXFIELD], uf[2 * KER_MAXFIELD], nt = nf;
+    memcpy(tf, test, sizeof(int) * (size_t)nf);
+    memcpy(uf, unk, sizeof(int) * (size_t)nf);
+    if (t->interior) {
+      if (2 * nf > KER_MAXFIELD) {
+        lg_seterr(env, "term %d integrates over interior facets: at most %d unknowns there (got %d)", i + 1, KER_MAXFIELD / 2, nf);
+        return 1;
+      }
+      for (int a = 0; a < nf; a++) {
+        tf[nf + a] = expr_func_side(env->c, test[a], 1);
+        uf[nf + a] = expr_func_side(env->c, unk[a], 1);
+        if (tf[nf + a] < 0 || uf[nf + a] < 0) { lg_seterr(env, "out of memory"); return 1; }
+      }
+      nt = 2 * nf;
+      field_layout *ls[2] = {&t->rl, &t->cl};
+      for (int w = 0; w < 2; w++) {
+        field_layout *l = ls[w];
+        for (int a = 0; a < nf; a++) {
+          l->func[nf + a] = w ? uf[nf + a] : tf[nf + a];
+          l->degree[nf + a] = l->degree[a];
+          l->nloc[nf + a] = l->nloc[a];
+          l->bs[nf + a] = l->bs[a];
+          l->off[nf + a] = l->off[a] + l->size;
+        }
+        l->n = 2 * nf;
+        l->size *= 2;
+      }
+    }
+    if (form_linearize(env->c, f, nt, tf, nt, uf, 1, &t->tab)) {
       lg_seterr(env, "%s", expr_error(env->c));
       return 1;
     }
@@ -171,7 +207,7 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
       /* a linear problem: J must not depend on u; the right side is -R(0) */
       for (int j = 0; j < t->tab.njac; j++) {
         expr *w;
-        if (contains_funcs(env, t->tab.jac[j], nf, unk, &w)) {
+        if (contains_funcs(env, t->tab.jac[j], nt, uf, &w)) {
           expr_func_info *fi = expr_func_get(env->c, w->i0);
           lg_seterr(env, "the equation is not linear in the unknown %s; use lg.nonlinear_problem", fi->name);
           return 1;
@@ -179,7 +215,7 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
       }
       expr *ul[256];
       int nu = 0;
-      for (int j = 0; j < nf; j++) nu += expr_collect_fields(env->c, t->tab.nres, t->tab.res, unk[j], 256 - nu, ul + nu);
+      for (int j = 0; j < nt; j++) nu += expr_collect_fields(env->c, t->tab.nres, t->tab.res, uf[j], 256 - nu, ul + nu);
       if (nu > 256) { lg_seterr(env, "too many unknown leaves"); return 1; }
       expr *zero[256];
       for (int j = 0; j < nu; j++) zero[j] = expr_num(env->c, 0);
@@ -194,11 +230,11 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
       t->tab.nres = k;
     }
     t->qdeg = lg_quad_degree(env, f, eqn->t[i].order, p->lm->m->type);
-    int facet = t->reg.kind == REGION_BOUNDARY;
+    int facet = t->reg.kind == REGION_BOUNDARY ? 1 : t->interior ? 2 : 0;
     if (t->tab.njac > 0) {
       kernel_spec s = {2, &t->tab, NULL};
       int qd = eqn->t[i].order >= 0 ? t->qdeg : lg_table_degree(env, &t->tab, 2, p->lm->m->type);
-      if (kernel_build(env->jit, env->c, p->lm->m->type, facet, qd, &s, &p->rows, &p->cols, &t->kmat, err, sizeof err)) {
+      if (kernel_build(env->jit, env->c, p->lm->m->type, facet, qd, &s, &t->rl, &t->cl, &t->kmat, err, sizeof err)) {
         lg_seterr(env, "%s", err);
         return 1;
       }
@@ -209,7 +245,7 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
     if (t->tab.nres > 0) {
       kernel_spec s = {1, &t->tab, NULL};
       int qd = eqn->t[i].order >= 0 ? t->qdeg : lg_table_degree(env, &t->tab, 1, p->lm->m->type);
-      if (kernel_build(env->jit, env->c, p->lm->m->type, facet, qd, &s, &p->rows, &p->cols, &t->kres, err, sizeof err)) {
+      if (kernel_build(env->jit, env->c, p->lm->m->type, facet, qd, &s, &t->rl, &t->cl, &t->kres, err, sizeof err)) {
         lg_seterr(env, "%s", err);
         return 1;
       }
@@ -458,13 +494,19 @@ static int compute_bcs(lg_env *env, lg_problem *p) {
   return 0;
 }
 
-/* the global nodes of cell c for the rows or the columns of the element matrix, in its
- * order: with B components per node (every field a B-vector) the dof / B of every B-th
- * local dof, with B = 1 the global dofs */
-static void layout_nodes(const field_layout *l, dofmap *const *dm, const int *glob, int c, int B, PetscInt *out) {
+/* the global nodes of item it of term t for the rows (or the columns) of its element
+ * matrix, in its order: with B components per node (every field a B-vector) the dof / B of
+ * every B-th local dof, with B = 1 the global dofs. An interior facet term's second half of
+ * fields are the problem's fields again, on the '-' cell */
+static void term_nodes(const lg_problem *p, const prob_term *t, int it, int rows, int B, PetscInt *out) {
+  const field_layout *l = rows ? &t->rl : &t->cl;
+  dofmap *const *dm = rows ? p->rdm : p->cdm;
+  const int *glob = rows ? p->rglob : p->cglob;
+  int nf = rows ? p->rows.n : p->cols.n;
   for (int a = 0; a < l->n; a++) {
-    const int nl = l->nloc[a], *cd = dm[a]->cell_dofs + (size_t)c * nl;
-    PetscInt *o = out + l->off[a] / B, g = glob[a];
+    int f = a % nf, c = t->interior && a >= nf ? t->cells[t->nitems + it] : t->cells[it];
+    const int nl = l->nloc[a], *cd = dm[f]->cell_dofs + (size_t)c * nl;
+    PetscInt *o = out + l->off[a] / B, g = glob[f];
     for (int k = 0, i = 0; k < nl; k += B, i++) o[i] = (g + cd[k]) / B;
   }
 }
@@ -537,31 +579,33 @@ static int set_near_nullspace(lg_env *env, lg_problem *p) {
 }
 
 static int setup_matrix(lg_env *env, lg_problem *p) {
-  int N = p->N, rs = p->rows.size, cs = p->cols.size;
+  int N = p->N;
   PetscCount n = N;
+  size_t maxsize = 1;
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
     t->coo_off = n;
-    n += (PetscCount)t->nitems * rs * cs;
+    n += (PetscCount)t->nitems * t->rl.size * t->cl.size;
+    if ((size_t)t->rl.size * (size_t)t->cl.size > maxsize) maxsize = (size_t)t->rl.size * (size_t)t->cl.size;
   }
   p->ncoo = n;
   /* the pattern of nodes: with B components per node everywhere (a vector field, B = bs) the
    * rows and columns come in blocks of B, and the pattern is that of the node graph, each
    * entry a B x B block (9x less work for 3D elasticity, whose rows hold about 250 entries);
    * B = 1 otherwise */
-  int B = matrix_block_size(p), Nn = N / B, rn = rs / B, cn = cs / B;
+  int B = matrix_block_size(p), Nn = N / B;
   size_t nblk = 0, nstr = 0;
   for (int i = 0; B > 1 && i < p->nterm; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
     t->blk_off = nblk;
     t->str_off = nstr;
-    nblk += (size_t)t->nitems * (size_t)rn * (size_t)cn;
-    nstr += (size_t)t->nitems * (size_t)rn;
+    nblk += (size_t)t->nitems * (size_t)(t->rl.size / B) * (size_t)(t->cl.size / B);
+    nstr += (size_t)t->nitems * (size_t)(t->rl.size / B);
   }
-  /* the element rows of each node row: (entry of the row's first column, cell) pairs */
-  PetscInt rg[KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS];
+  /* the element rows of each node row: (entry of the row's first column, term, item) */
+  PetscInt rg[2 * KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS];
   size_t *start = calloc((size_t)Nn + 2, sizeof(size_t));
   int *mark = malloc(sizeof(int) * ((size_t)Nn + 1));
   PetscInt *nodes = malloc(sizeof(PetscInt) * ((size_t)Nn + 1)); /* one node row */
@@ -569,33 +613,36 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
+    int rn = t->rl.size / B;
     for (int it = 0; it < t->nitems; it++) {
-      layout_nodes(&p->rows, p->rdm, p->rglob, t->cells[it], B, rg);
+      term_nodes(p, t, it, 1, B, rg);
       for (int r = 0; r < rn; r++) start[rg[r] + 2]++;
     }
   }
   for (int r = 0; r < Nn; r++) start[r + 2] += start[r + 1];
   size_t nent = start[Nn + 1];
   PetscCount *ebase = malloc(sizeof(PetscCount) * (nent + 1));
-  int *ecell = malloc(sizeof(int) * (nent + 1));
+  int *eterm = malloc(sizeof(int) * (nent + 1)), *eitem = malloc(sizeof(int) * (nent + 1));
   size_t *estr = B > 1 ? malloc(sizeof(size_t) * (nent + 1)) : NULL;
-  if (!ebase || !ecell || (B > 1 && !estr)) {
-    free(start); free(mark); free(nodes); free(ebase); free(ecell); free(estr);
+  if (!ebase || !eterm || !eitem || (B > 1 && !estr)) {
+    free(start); free(mark); free(nodes); free(ebase); free(eterm); free(eitem); free(estr);
     lg_seterr(env, "out of memory");
     return 1;
   }
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
+    int rn = t->rl.size / B, cn = t->cl.size / B;
     for (int it = 0; it < t->nitems; it++) {
-      layout_nodes(&p->rows, p->rdm, p->rglob, t->cells[it], B, rg);
+      term_nodes(p, t, it, 1, B, rg);
       for (int r = 0; r < rn; r++) {
         size_t q = start[rg[r] + 1]++;
         if (B > 1) {
           ebase[q] = (PetscCount)(t->blk_off + ((size_t)it * rn + (size_t)r) * (size_t)cn);
           estr[q] = t->str_off + (size_t)it * rn + (size_t)r;
-        } else ebase[q] = t->coo_off + ((PetscCount)it * rs + r) * cs;
-        ecell[q] = t->cells[it];
+        } else ebase[q] = t->coo_off + ((PetscCount)it * rn + r) * cn;
+        eterm[q] = i;
+        eitem[q] = it;
       }
     }
   }
@@ -610,31 +657,42 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
     p->blk_pos = malloc(sizeof(int) * (nblk + 1));
     p->blk_stride = malloc(sizeof(int) * (nstr + 1));
   } else p->coo_pos = malloc(sizeof(int) * ((size_t)n + 1));
-  p->mbuf = malloc(sizeof(double) * ((size_t)LG_CHUNK * rs * cs + 1));
+  p->mbuf = malloc(sizeof(double) * ((size_t)LG_CHUNK * maxsize + 1));
   if (!ia || !ja || (B > 1 ? !p->blk_pos || !p->blk_stride : !p->coo_pos) || !p->mbuf) {
-    free(start); free(mark); free(nodes); free(ebase); free(ecell); free(estr); free(ia); free(ja);
+    free(start); free(mark); free(nodes); free(ebase); free(eterm); free(eitem); free(estr); free(ia); free(ja);
     lg_seterr(env, "out of memory for %ld matrix entries", (long)n);
     return 1;
   }
   for (int r = 0; r < Nn; r++) mark[r] = -1;
   int bad = 0;
   /* the column nodes of the row's elements, gathered once for the union and the places */
-  size_t bcap = 0;
+  size_t bcap = 0, ocap = 0, *eoff = NULL;
   PetscInt *ebuf = NULL;
   for (int R = 0; R < Nn && !bad; R++) {
-    size_t ne = start[R + 1] - start[R];
-    if (ne * (size_t)cn > bcap) {
-      bcap = 2 * ne * (size_t)cn;
+    size_t ne = start[R + 1] - start[R], tot = 0;
+    if (ne + 1 > ocap) {
+      ocap = 2 * (ne + 1);
+      size_t *no = realloc(eoff, sizeof(size_t) * ocap);
+      if (!no) { bad = 1; break; }
+      eoff = no;
+    }
+    for (size_t q = 0; q < ne; q++) {
+      eoff[q] = tot;
+      tot += (size_t)(p->t[eterm[start[R] + q]].cl.size / B);
+    }
+    eoff[ne] = tot;
+    if (tot > bcap) {
+      bcap = 2 * tot;
       PetscInt *nb = realloc(ebuf, sizeof(PetscInt) * bcap);
       if (!nb) { bad = 1; break; }
       ebuf = nb;
     }
-    for (size_t q = 0; q < ne; q++) layout_nodes(&p->cols, p->cdm, p->cglob, ecell[start[R] + q], B, ebuf + q * (size_t)cn);
+    for (size_t q = 0; q < ne; q++) term_nodes(p, &p->t[eterm[start[R] + q]], eitem[start[R] + q], 0, B, ebuf + eoff[q]);
     /* the row's nodes */
     size_t len = 0;
     nodes[len++] = R;
     mark[R] = R;
-    for (size_t k = 0; k < ne * (size_t)cn; k++) {
+    for (size_t k = 0; k < tot; k++) {
       PetscInt J = ebuf[k];
       if (mark[J] != R) { mark[J] = R; nodes[len++] = J; }
     }
@@ -657,7 +715,8 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
     int base = (int)ia[R * B];
     if (B == 1) p->coo_pos[R] = base + (-2 - mark[R]);
     for (size_t q = 0; q < ne; q++) {
-      const PetscInt *en = ebuf + q * (size_t)cn;
+      const PetscInt *en = ebuf + eoff[q];
+      int cn = (int)(eoff[q + 1] - eoff[q]);
       size_t e = start[R] + q;
       if (B > 1) {
         /* one place per B x B block (its first entry) and the row length, the stride */
@@ -673,12 +732,14 @@ static int setup_matrix(lg_env *env, lg_problem *p) {
     for (size_t k = 0; k < len; k++) mark[nodes[k]] = R;
   }
   free(ebuf);
+  free(eoff);
   free(nodes);
   free(estr);
   free(start);
   free(mark);
   free(ebase);
-  free(ecell);
+  free(eterm);
+  free(eitem);
   if (bad) {
     free(ia); free(ja);
     if (bad == 2) lg_seterr(env, "the matrix has more than 2^31 nonzeros: more than lugal indexes");
@@ -900,13 +961,20 @@ long lg_problem_nnz(const lg_problem *p) {
 
 /* ---------------------------------------------------------------- assembly */
 
+/* the unknowns' values (and their '-' side copies', for interior facet terms) from state */
 static int bind_unknowns(lg_problem *p, const double *state, coef_binding *extra) {
+  int n = 0;
   for (int a = 0; a < p->cols.n; a++) {
-    extra[a].func = p->cols.func[a];
-    extra[a].dm = p->cdm[a];
-    extra[a].vals = state + p->cglob[a];
+    extra[n].func = p->cols.func[a];
+    extra[n].dm = p->cdm[a];
+    extra[n++].vals = state + p->cglob[a];
+    expr_func_info *fi = expr_func_get(p->env->c, p->cols.func[a]);
+    if (fi && fi->twin >= 0) {
+      extra[n] = extra[n - 1];
+      extra[n++].func = fi->twin;
+    }
   }
-  return p->cols.n;
+  return n;
 }
 
 /* the centre of cell c, for messages */
@@ -937,17 +1005,18 @@ static int check_element_tensors(lg_env *env, lg_problem *p, int term, int first
 }
 
 static int assemble_matrix(lg_env *env, lg_problem *p, const double *state, Mat A) {
-  coef_binding extra[KER_MAXFIELD], bind[KER_MAXCOEF];
+  coef_binding extra[2 * KER_MAXFIELD], bind[KER_MAXCOEF];
   int ne = bind_unknowns(p, state, extra);
   /* element matrices a chunk of items at a time, added in place into the value array (no
    * per-entry buffer beyond one chunk) */
   PetscScalar *a;
   PCHK(MatSeqAIJGetArray(A, &a), "matrix assembly");
   memset(a, 0, sizeof(PetscScalar) * (size_t)p->nnz);
-  int size = p->rows.size * p->cols.size, rc = 0;
+  int rc = 0;
   for (int i = 0; i < p->nterm && !rc; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
+    int size = t->rl.size * t->cl.size;
     if (lg_bind_discrete(env, p->lm, &t->kmat, ne, extra, bind)) { rc = 1; break; }
     for (int first = 0; first < t->nitems && !rc; first += LG_CHUNK) {
       int n = t->nitems - first < LG_CHUNK ? t->nitems - first : LG_CHUNK;
@@ -957,7 +1026,7 @@ static int assemble_matrix(lg_env *env, lg_problem *p, const double *state, Mat 
       const double *v = p->mbuf;
       if (p->blk_pos) {
         /* B x B blocks: a node pair's entries from its block's first place and the row length */
-        int B = p->cdm[0]->bs, rn = p->rows.size / B, cn = p->cols.size / B, cs = p->cols.size;
+        int B = p->cdm[0]->bs, rn = t->rl.size / B, cn = t->cl.size / B, cs = t->cl.size;
         for (int e = 0; e < n; e++) {
           const double *ve = v + (size_t)e * size;
           const int *bp = p->blk_pos + t->blk_off + (size_t)(first + e) * rn * cn;
@@ -990,13 +1059,13 @@ static int assemble_matrix(lg_env *env, lg_problem *p, const double *state, Mat 
 
 /* R(state) into r (N), before boundary conditions */
 static int assemble_residual(lg_env *env, lg_problem *p, const double *state, double *r) {
-  coef_binding extra[KER_MAXFIELD], bind[KER_MAXCOEF];
+  coef_binding extra[2 * KER_MAXFIELD], bind[KER_MAXCOEF];
   int ne = bind_unknowns(p, state, extra);
   memset(r, 0, sizeof(double) * (size_t)p->N);
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_res) continue;
-    size_t need = (size_t)t->nitems * (size_t)p->rows.size + 1;
+    size_t need = (size_t)t->nitems * (size_t)t->rl.size + 1;
     if (need > p->elem_cap) {
       double *ne2 = realloc(p->elem, sizeof(double) * need);
       if (!ne2) { lg_seterr(env, "out of memory"); return 1; }
@@ -1006,15 +1075,13 @@ static int assemble_residual(lg_env *env, lg_problem *p, const double *state, do
     if (lg_bind_discrete(env, p->lm, &t->kres, ne, extra, bind)) return 1;
     if (lg_assemble_items(env, p->lm, &t->kres, t->nitems, t->cells, t->facets, t->kres.ncoef, bind, p->elem))
       return 1;
-    if (check_element_tensors(env, p, i, 0, t->nitems, p->elem, p->rows.size, p->nonlinear ? "residual" : "right-hand side"))
+    if (check_element_tensors(env, p, i, 0, t->nitems, p->elem, t->rl.size, p->nonlinear ? "residual" : "right-hand side"))
       return 1;
+    PetscInt rg[2 * KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS];
     for (int it = 0; it < t->nitems; it++) {
-      int c = t->cells[it];
-      const double *ev = p->elem + (size_t)it * p->rows.size;
-      for (int a = 0; a < p->rows.n; a++) {
-        const int *cd = p->rdm[a]->cell_dofs + (size_t)c * p->rdm[a]->nloc;
-        for (int k = 0; k < p->rows.nloc[a]; k++) r[p->rglob[a] + cd[k]] += ev[p->rows.off[a] + k];
-      }
+      const double *ev = p->elem + (size_t)it * t->rl.size;
+      term_nodes(p, t, it, 1, 1, rg);
+      for (int k = 0; k < t->rl.size; k++) r[rg[k]] += ev[k];
     }
   }
   return 0;
@@ -1147,7 +1214,7 @@ static uint64_t matrix_fingerprint(lg_env *env, lg_problem *p) {
   MIX(&p->lm->geometry, sizeof p->lm->geometry);
   const double *pv = expr_param_values(env->c);
   MIX(pv, sizeof(double) * (size_t)expr_param_count(env->c));
-  coef_binding extra[KER_MAXFIELD], bind[KER_MAXCOEF];
+  coef_binding extra[2 * KER_MAXFIELD], bind[KER_MAXCOEF];
   int ne = bind_unknowns(p, p->state, extra);
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];

@@ -92,6 +92,32 @@ T.check(sipg(lg.mesh.rectangle{nx = 4}, lg.discontinuous(1), 1 + 2*x - y, true) 
 local vx = lg.vector(lg.discontinuous(1))
 T.check(sipg(lg.mesh.rectangle{nx = 4}, vx, lg.list{1 + x, 2*y - x}, false, true) < 1e-11, "vector SIPG (B x B blocks): exact")
 
+-- SIPG rates against a smooth solution: L2 p + 1 and broken H1 p (cellwise gradients)
+do
+  local ue = lg.sin(math.pi*x)*lg.sin(math.pi*y) + x
+  local fsrc = 2*math.pi^2*lg.sin(math.pi*x)*lg.sin(math.pi*y)
+  local function errs(p, N)
+    local mesh = lg.mesh.rectangle{nx = N}
+    local V = lg.discontinuous(p)
+    local u, v = lg.unknown(V, "u"), lg.test(V, "v")
+    local n, h, sigma = lg.normal(), 1/N, 10*p*p
+    local eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(u), lg.grad(v)) - fsrc*v)
+      + lg.integral(mesh:interior_facets(), -lg.dot(lg.avg(lg.grad(u)), lg.jump(v, n)) - lg.dot(lg.avg(lg.grad(v)), lg.jump(u, n))
+                                              + sigma/h*lg.dot(lg.jump(u, n), lg.jump(v, n)))
+      + lg.integral(mesh:boundary(), -lg.dot(lg.grad(u), n)*v - lg.dot(lg.grad(v), n)*(u - ue) + sigma/h*(u - ue)*v)
+    local e = lg.linear_problem{mesh = mesh, eqn = eqn, test = v, unknown = u}:solve() - ue
+    return math.sqrt(lg.integrate(mesh, e^2)), math.sqrt(lg.integrate(mesh, lg.dot(lg.grad(e), lg.grad(e))))
+  end
+  for p, Ns in ipairs{{16, 32}, {8, 16}} do
+    local a2, a1 = errs(p, Ns[1])
+    local b2, b1 = errs(p, Ns[2])
+    local r2, r1 = math.log(a2/b2, 2), math.log(a1/b1, 2)
+    print(string.format("SIPG DG%d, %d -> %d: L2 rate %.3f, broken H1 rate %.3f", p, Ns[1], Ns[2], r2, r1))
+    T.check(math.abs(r2 - (p + 1)) < 0.1, "SIPG DG%d L2 rate %.3f", p, r2)
+    T.check(math.abs(r1 - p) < 0.1, "SIPG DG%d broken H1 rate %.3f", p, r1)
+  end
+end
+
 -- what is not there yet says so: derivatives of interior facet terms for adjoints
 do
   local mesh = lg.mesh.rectangle{nx = 4}

@@ -490,7 +490,7 @@ static int lmesh_smooth(lua_State *L) {
     check_keys(L, 2, fn, keys);
     t = 2;
   }
-  smooth_opts o = {m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 20, 1, 0, 0};
+  smooth_opts o = {m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 20, 1, 0, 0, 0};
   int quiet = 0;
   if (t) {
     const char *name = opt_str(L, t, "measure", NULL, fn);
@@ -504,8 +504,9 @@ static int lmesh_smooth(lua_State *L) {
     }
     const char *method = opt_str(L, t, "method", "local", fn);
     if (!strcmp(method, "global")) o.global = 1;
+    else if (!strcmp(method, "energy")) o.global = o.energy = 1;
     else if (strcmp(method, "local"))
-      return luaL_error(L, "%s: option 'method' must be \"local\" or \"global\", got '%s'", fn, method);
+      return luaL_error(L, "%s: option 'method' must be \"local\", \"global\" or \"energy\", got '%s'", fn, method);
     o.iterations = opt_int(L, t, "iterations", 20, fn);
     if (o.iterations < 1) return luaL_error(L, "%s: option 'iterations' must be >= 1", fn);
     lua_getfield(L, t, "quiet");
@@ -519,12 +520,12 @@ static int lmesh_smooth(lua_State *L) {
   lg_mesh_changed(u->lm);
   char text[512];
   snprintf(text, sizeof text, "smooth (%s): %s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s",
-           o.global ? "global" : "local", quality_name(o.measure), r.min_before, r.min_after, r.mean_before, r.mean_after,
-           r.moved, r.sweeps, o.global ? "rounds" : "sweeps", r.seconds);
+           o.energy ? "energy" : o.global ? "global" : "local", quality_name(o.measure), r.min_before, r.min_after, r.mean_before,
+           r.mean_after, r.moved, r.sweeps, o.global ? "rounds" : "sweeps", r.seconds);
   lua_createtable(L, 0, 10);
   lua_pushstring(L, quality_name(o.measure));
   lua_setfield(L, -2, "measure");
-  lua_pushstring(L, o.global ? "global" : "local");
+  lua_pushstring(L, o.energy ? "energy" : o.global ? "global" : "local");
   lua_setfield(L, -2, "method");
   set_num(L, "min_before", r.min_before);
   set_num(L, "min_after", r.min_after);

@@ -121,10 +121,11 @@ static int smooth_global(ctx *C, const smooth_opts *o, smooth_report *r, char *e
   }
   work W = {fidx, cmark, cells};
   int ncell = ut_cells_around(C, &W, freev, nfree), status = 0;
-  objective ob = {C, 0, C->jscale, ncell, cells, fidx, 0, 1, o->measure, 0, freev, hv};
+  objective ob = {C, 0, C->jscale, ncell, cells, fidx, 0, 1, o->measure, 0, freev, hv, 0, 0, {0}};
   double fprev = INFINITY;
   ob.qfloor = INFINITY;
   for (int i = 0; i < ncell; i++) ob.qfloor = fmin(ob.qfloor, mesh_cell_quality(m, cells[i], o->measure));
+  if (o->energy) ob.qfloor = 0; /* the barrier alone: 1/q is infinite on degenerate cells */
   for (int round = 0; round < o->iterations; round++) {
     double f0 = 0;
     for (int i = 0; i < ncell; i++) f0 += 1 / mesh_cell_quality(m, cells[i], o->measure);
@@ -198,14 +199,20 @@ static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err
     free(x0); mesh_big_free(q); free(moved); ut_ctx_free(&C);
     return 1;
   }
+  mesh_quality(m, o->measure, NULL, q, err);
+  quality_stats_compute(q, m->ncell, &st);
+  if (o->global && o->energy && !(st.min > r->min_before)) {
+    /* the energy's descent lowered the minimum: the input stays (never worse than it) */
+    memcpy(m->x, x0, sizeof(double) * (size_t)m->nvert * d);
+    mesh_quality(m, o->measure, NULL, q, err);
+    quality_stats_compute(q, m->ncell, &st);
+  }
   for (int v = 0; v < m->nvert; v++) {
     int ch = 0;
     for (int j = 0; j < d; j++) ch |= m->x[(size_t)v * d + j] != x0[(size_t)v * d + j];
     r->moved += ch;
   }
   free(x0);
-  mesh_quality(m, o->measure, NULL, q, err);
-  quality_stats_compute(q, m->ncell, &st);
   r->min_after = st.min;
   r->mean_after = st.mean;
   r->seconds = ut_now() - t0;

@@ -765,6 +765,7 @@ static double smooth_eval(const objective *o, const double *x, double *grad, int
 }
 
 static double eval(const objective *o, const double *x, double *grad, int nfree) {
+  if (o->smooth == 2) return ut_energy_eval(o, x, grad, nfree);
   return o->smooth ? smooth_eval(o, x, grad, nfree) : obj_eval(o, x, grad, nfree);
 }
 
@@ -894,6 +895,15 @@ static double untangle_penalty(const ctx *C, int v, const void *arg, int probe) 
   return local_penalty(C, a->x, v, a->beta, C->jscale);
 }
 
+/* none of the valid cells of v's star (the first 64; floor[p] > 0 for them) falls below its
+ * floor: the smaller of β and its corner Jacobian before the slide */
+static int keeps_valid(const ctx *C, const double *x, int v, const double *floor) {
+  int ns = C->vc_off[v + 1] - C->vc_off[v];
+  for (int p = 0; p < ns && p < 64; p++)
+    if (floor[p] > 0 && !(ut_cell_min_jac(C, x, C->vc[C->vc_off[v] + p]) >= floor[p])) return 0;
+  return 1;
+}
+
 static int slide_boundary(ctx *C, double *x, double beta, const unsigned char *region, unsigned char *moved) {
   int total = 0;
   mesh *m = C->m;
@@ -913,12 +923,22 @@ static int slide_boundary(ctx *C, double *x, double beta, const unsigned char *r
       double f0 = local_penalty(C, x, v, beta, C->jscale);
       if (f0 == 0) continue;
       double p0[2] = {x[2 * v], x[2 * v + 1]}, best = f0, bp[2] = {p0[0], p0[1]};
+      /* a slide may not invalidate a cell of v's star that is valid: the penalty would trade
+       * a boundary cell for the tangle beside it, and repeated slides of 0.95 of the edge
+       * put v onto its neighbour (a degenerate corner cell no interior vertex can repair);
+       * nor bring one below β (or below its corner Jacobian, when that is smaller) */
+      double floor[64];
+      int ns = C->vc_off[v + 1] - C->vc_off[v];
+      for (int p = 0; p < ns && p < 64; p++) {
+        double j = ut_cell_min_jac(C, x, C->vc[C->vc_off[v] + p]);
+        floor[p] = j > C->jtol ? fmin(j, beta > C->jtol ? beta : j) : 0;
+      }
       for (int side = 0; side < 2; side++) {
         const double *a = x + 2 * C->bnb[2 * v + side];
         double lo = 0, hi = 0.95, gr = (sqrt(5.0) - 1) / 2;
         double s1 = hi - gr * (hi - lo), s2 = lo + gr * (hi - lo), f1, f2;
 #define AT(s) (x[2 * v] = p0[0] + (s) * (a[0] - p0[0]), x[2 * v + 1] = p0[1] + (s) * (a[1] - p0[1]), \
-               local_penalty(C, x, v, beta, C->jscale))
+               keeps_valid(C, x, v, floor) ? local_penalty(C, x, v, beta, C->jscale) : INFINITY)
         f1 = AT(s1);
         f2 = AT(s2);
         for (int it = 0; it < 60; it++) {
@@ -1092,7 +1112,7 @@ static int optimize_vertices(ctx *C, work *W, double *x, double beta, int lift, 
     for (int j = 0; j < d; j++) xs[i * d + j] = x[(size_t)freev[i] * d + j];
   }
   int ncell = ut_cells_around(C, W, freev, nfree);
-  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx, lift, 0, 0, 0, NULL, NULL};
+  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx, lift, 0, 0, 0, NULL, NULL, 0, 0, {0}};
   double f = 0;
   int it = nfree ? ut_lbfgs(&o, x, freev, nfree, maxit, &f) : 0;
   int total = 0;
@@ -1323,6 +1343,23 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
     /* stop when there is nothing left to grow into and the last round did not help */
     if ((all && rings > 64) || (whole && ninv >= prev_inv)) break;
     prev_inv = ninv;
+  }
+  /* the local optimization left knots: every interior vertex together on the global
+   * barrier energy (untangle_global.c), kept only if it leaves fewer invalid cells */
+  if (ninv > 0 && W.fidx && W.cells && save && (m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON)) {
+    memcpy(save, m->x, sizeof(double) * nx);
+    int its = 0, mv = 0, after;
+    memset(trial, 0, (size_t)m->nvert);
+    if (ut_untangle_global(&C, &W, m->x, 10 * maxit, &its, &mv, trial) == 0) {
+      ut_count_cells(&C, m->x, beta, &after, NULL);
+      if (after < ninv) {
+        s->iterations += its;
+        for (int v = 0; v < m->nvert; v++)
+          if (trial[v] && !moved[v]) { moved[v] = 1; touched[v] = 1; s->moved++; }
+        ninv = after;
+      } else memcpy(m->x, save, sizeof(double) * nx);
+    } else memcpy(m->x, save, sizeof(double) * nx);
+    memset(trial, 0, (size_t)m->nvert);
   }
   stage_end(&C, m->x, beta, s, ts, o->verbose);
   best_offer(&C, m->x, &best, nx, 2);

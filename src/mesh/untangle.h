@@ -61,6 +61,9 @@ typedef struct {
   int slide;       /* 2D: boundary vertices slide along the boundary polyline */
   int verbose;
   int global;      /* 0: vertex by vertex; 1: all interior vertices together (L-BFGS) */
+  int energy;      /* with global: no floor on the smallest q during the descent, only the
+                    * validity barrier of Σ 1/q; the result is kept when its smallest q is
+                    * above the input's, else the input is restored */
 } smooth_opts;
 
 typedef struct {
@@ -72,8 +75,11 @@ typedef struct {
  * star's sum and a step is taken only when every cell around it stays valid and the smallest
  * q around it does not decrease. Global: L-BFGS over all interior vertices, a step taken only
  * when every cell stays valid and the mesh's smallest q does not decrease. Either way the
- * mesh minimum never decreases. The mesh must be valid. iterations: sweeps (local) or rounds
- * of up to 20 L-BFGS iterations (global). */
+ * mesh minimum never decreases. Energy (global + energy): L-BFGS on Σ 1/q with only its
+ * barrier (every cell stays valid), so the descent may lower the minimum on its way to a
+ * better mesh (the floor is what stalls the global method on bent and anisotropic meshes);
+ * the result is kept only if its minimum beats the input's. The mesh must be valid.
+ * iterations: sweeps (local) or rounds of up to 20 L-BFGS iterations (global, energy). */
 int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err);
 
 typedef struct {

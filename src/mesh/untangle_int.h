@@ -43,6 +43,8 @@ typedef struct {
   double qfloor;
   const int *freev;
   const double *hv; /* per free vertex: its shortest edge, for the difference step */
+  /* smooth == 2: the global untangling energy (untangle_global.c), analytic gradient */
+  double eps, theta, winv[9];
 } objective;
 
 /* reusable per-vertex / per-cell marks, kept at their rest values (-1 / 0) between uses */
@@ -76,6 +78,10 @@ int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int max
 int ut_cells_around(const ctx *C, work *W, const int *freev, int nfree);
 /* the smoothing objective of the cells around v: sum 1/q (smooth.c) */
 double ut_star_objective(const ctx *C, int v, int q, double *qmin);
+/* the global untangling stage (untangle_global.c): its energy, and the stage on every
+ * interior vertex of a triangle or tetrahedron mesh (0, or -1 out of memory) */
+double ut_energy_eval(const objective *o, const double *x, double *grad, int nfree);
+int ut_untangle_global(ctx *C, work *W, double *x, int maxit, int *iters, int *moved_count, unsigned char *moved);
 int ut_frame_enter(mesh *m, unit_frame *f, double extra, char *err);
 void ut_frame_leave(mesh *m, unit_frame *f);
 /* every vertex coordinate finite, or a message naming the first that is not */

@@ -78,6 +78,16 @@ static void exercise(mesh *m, fuzz_mesh_result *res) {
   const char *dir = fuzz_tmpdir();
   check_structure(m);
   mesh_count_invalid(m, 0, NULL, &res->ninvalid);
+  /* interior facets: two distinct cells per facet, local indices in range, a permutation */
+  if (!mesh_build_interior_facets(m)) {
+    int nf = cell_nfacets(m->type), nperm = 1;
+    for (int i = 2; i <= m->nvf; i++) nperm *= i;
+    for (int i = 0; i < m->nif; i++)
+      if (m->if_cell[2 * i] == m->if_cell[2 * i + 1] || m->if_cell[2 * i] < 0 || m->if_cell[2 * i + 1] >= m->ncell ||
+          m->if_local[2 * i] < 0 || m->if_local[2 * i] >= nf || m->if_local[2 * i + 1] < 0 || m->if_local[2 * i + 1] >= nf ||
+          m->if_perm[i] < 0 || m->if_perm[i] >= nperm)
+        __builtin_trap();
+  }
   double *q = calloc((size_t)m->ncell + 8, sizeof(double));
   int counts[16] = {0}; /* no measure applies to an interval mesh: the histogram stays empty */
   if (!q) return;
@@ -150,7 +160,7 @@ static void exercise(mesh *m, fuzz_mesh_result *res) {
       if (!mesh_untangle(c, &o, &ur, err)) {
         check_untangled(c, &ur);
         if (!ur.invalid_after) {
-          smooth_opts so = {simplex ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 2, 1, 0, 0};
+          smooth_opts so = {simplex ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 2, 1, 0, 0, 0};
           smooth_report sr;
           mesh_smooth(c, &so, &sr, err);
         }

@@ -48,8 +48,10 @@ echo "$out"
 echo "$out" | grep -q "smooth (local): corner_condition min"
 out=$("$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/smooth.msh" --method global)
 echo "$out" | grep -q "smooth (global): corner_condition min"
+out=$("$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/smooth.msh" --method energy)
+echo "$out" | grep -q "smooth (energy): corner_condition min"
 if "$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/x.msh" --method newton 2> "$T/err"; then exit 1; fi
-grep -q "method must be local or global" "$T/err"
+grep -q "method must be local, global or energy" "$T/err"
 if "$BUILD/lugal-mesh" smooth "$T/tangled.msh" "$T/x.msh" 2> "$T/err"; then exit 1; fi
 grep -q "untangle it first" "$T/err"
 if "$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/x.msh" --beta -1 2> "$T/err"; then exit 1; fi

@@ -1,0 +1,177 @@
+/* untangle_global.c — the global untangling stage: all interior vertices of a simplicial
+ * mesh together minimize a regularized barrier energy (the "foldover-free maps" approach of
+ * Garanzha et al., ACM TOG 2021): per cell, with J the map from a regular reference simplex
+ * of the mesh's mean cell size to the cell,
+ *     f(J) = (1 - θ) tr(JᵀJ) / χ(det J, ε)^(2/d) + θ (det²J + 1) / χ(det J, ε),
+ *     χ(D, ε) = (D + sqrt(ε² + D²)) / 2,
+ * which is finite for inverted cells (χ > 0 for every D when ε > 0) and, as ε falls, a
+ * barrier against det J ≤ 0; ε is set from the worst cell before each minimization,
+ * ε = sqrt(1e-8 + 0.04 min(det_min, 0)²), so that it goes to 1e-4 once every cell is valid.
+ * This is where the local stages stall: knots whose every vertex has an empty feasible set
+ * (30% of the cells of a Tutte-started spiral strip). Gradient analytic: ∂det/∂J is the
+ * cofactor matrix. See untangle_int.h. */
+#include "untangle_int.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+static double chi(double D, double eps) { return 0.5 * (D + sqrt(eps * eps + D * D)); }
+static double dchi(double D, double eps) { return 0.5 * (1 + D / sqrt(eps * eps + D * D)); }
+
+/* J = E W⁻¹ of cell c (E: the edge vectors from vertex 0 as columns), its determinant */
+static double cell_map(const ctx *C, const double *x, int c, const double *winv, double J[3][3], const int **vout) {
+  int d = C->d;
+  const int *v = C->m->cells + (size_t)c * (size_t)C->nvc;
+  *vout = v;
+  double E[3][3];
+  for (int i = 0; i < d; i++)
+    for (int k = 0; k < d; k++) E[i][k] = x[(size_t)v[k + 1] * d + i] - x[(size_t)v[0] * d + i];
+  for (int i = 0; i < d; i++)
+    for (int k = 0; k < d; k++) {
+      double s = 0;
+      for (int l = 0; l < d; l++) s += E[i][l] * winv[l * d + k];
+      J[i][k] = s;
+    }
+  if (d == 2) return J[0][0] * J[1][1] - J[0][1] * J[1][0];
+  return J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) - J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0]) +
+         J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
+}
+
+/* ∂ det J / ∂ J_ik */
+static void cofactor(int d, double J[3][3], double K[3][3]) {
+  if (d == 2) {
+    K[0][0] = J[1][1]; K[0][1] = -J[1][0];
+    K[1][0] = -J[0][1]; K[1][1] = J[0][0];
+    return;
+  }
+  for (int i = 0; i < 3; i++)
+    for (int k = 0; k < 3; k++) {
+      int i1 = (i + 1) % 3, i2 = (i + 2) % 3, k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+      K[i][k] = J[i1][k1] * J[i2][k2] - J[i1][k2] * J[i2][k1];
+    }
+}
+
+double ut_energy_eval(const objective *o, const double *x, double *grad, int nfree) {
+  const ctx *C = o->C;
+  int d = C->d;
+  double f = 0, theta = o->theta, eps = o->eps;
+  if (grad) memset(grad, 0, sizeof(double) * (size_t)nfree * d);
+  for (int i = 0; i < o->ncell; i++) {
+    int c = o->cells[i];
+    double J[3][3], K[3][3];
+    const int *v;
+    double D = cell_map(C, x, c, o->winv, J, &v), A = 0;
+    for (int a = 0; a < d; a++)
+      for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
+    double ch = chi(D, eps), chp = dchi(D, eps), cs = pow(ch, -2.0 / d);
+    f += (1 - theta) * A * cs + theta * (D * D + 1) / ch;
+    if (!grad) continue;
+    /* ∂f/∂J = (1-θ)(2 J cs - (2/d) A cs/χ χ' K) + θ (2 D χ - (D² + 1) χ')/χ² K */
+    cofactor(d, J, K);
+    double kd = -(1 - theta) * (2.0 / d) * A * cs / ch * chp + theta * (2 * D * ch - (D * D + 1) * chp) / (ch * ch);
+    double G[3][3], GE[3][3];
+    for (int a = 0; a < d; a++)
+      for (int b = 0; b < d; b++) G[a][b] = (1 - theta) * 2 * J[a][b] * cs + kd * K[a][b];
+    /* ∂f/∂E = G W⁻ᵀ: column k is the gradient in vertex k + 1, minus their sum vertex 0's */
+    for (int a = 0; a < d; a++)
+      for (int k = 0; k < d; k++) {
+        double s = 0;
+        for (int l = 0; l < d; l++) s += G[a][l] * o->winv[k * d + l];
+        GE[a][k] = s;
+      }
+    for (int k = 0; k <= d; k++) {
+      int fi = o->fidx[v[k]];
+      if (fi < 0) continue;
+      for (int a = 0; a < d; a++) {
+        double g = 0;
+        if (k) g = GE[a][k - 1];
+        else
+          for (int l = 0; l < d; l++) g -= GE[a][l];
+        grad[(size_t)fi * d + a] += g;
+      }
+    }
+  }
+  return f;
+}
+
+int ut_untangle_global(ctx *C, work *W, double *x, int maxit, int *iters, int *moved_count, unsigned char *moved) {
+  mesh *m = C->m;
+  int d = C->d;
+  *iters = 0;
+  if (m->type != CELL_TRIANGLE && m->type != CELL_TETRAHEDRON) return 0;
+  int nfree = 0;
+  int *freev = malloc(sizeof(int) * ((size_t)m->nvert + 1));
+  double *x0 = malloc(sizeof(double) * ((size_t)m->nvert * d + 1));
+  if (!freev || !x0) { free(freev); free(x0); return -1; }
+  memcpy(x0, x, sizeof(double) * (size_t)m->nvert * d);
+  for (int v = 0; v < m->nvert; v++)
+    if (!C->bnd[v]) { W->fidx[v] = nfree; freev[nfree++] = v; }
+  int ncell = ut_cells_around(C, W, freev, nfree);
+  /* the reference: a regular simplex whose edge-matrix determinant is the mean of the cells'
+   * (their signed sum does not change when interior vertices move) */
+  double sum = 0;
+  for (int c = 0; c < m->ncell; c++) {
+    const int *v = m->cells + (size_t)c * (size_t)C->nvc;
+    double E[3][3];
+    for (int i = 0; i < d; i++)
+      for (int k = 0; k < d; k++) E[i][k] = x[(size_t)v[k + 1] * d + i] - x[(size_t)v[0] * d + i];
+    sum += d == 2 ? E[0][0] * E[1][1] - E[0][1] * E[1][0]
+                  : E[0][0] * (E[1][1] * E[2][2] - E[1][2] * E[2][1]) - E[0][1] * (E[1][0] * E[2][2] - E[1][2] * E[2][0]) +
+                        E[0][2] * (E[1][0] * E[2][1] - E[1][1] * E[2][0]);
+  }
+  double mean = sum / m->ncell;
+  objective o;
+  memset(&o, 0, sizeof o);
+  o.C = C;
+  o.S = C->jscale;
+  o.ncell = ncell;
+  o.cells = W->cells;
+  o.fidx = W->fidx;
+  o.smooth = 2;
+  o.theta = 0.5; /* shape and size alike (0.1 and 0.9 untangled the same spirals) */
+  if (mean > 0 && nfree) {
+    double s, w[9];
+    if (d == 2) { /* columns (1, 0), (1/2, √3/2), scaled */
+      s = sqrt(mean / (sqrt(3.0) / 2));
+      double r[4] = {s, s / 2, 0, s * sqrt(3.0) / 2};
+      double det = r[0] * r[3] - r[1] * r[2];
+      w[0] = r[3] / det; w[1] = -r[1] / det; w[2] = -r[2] / det; w[3] = r[0] / det;
+    } else { /* columns (1,0,0), (1/2,√3/2,0), (1/2,√3/6,√(2/3)), scaled */
+      s = cbrt(mean / (sqrt(2.0) / 2));
+      double r[3][3] = {{s, s / 2, s / 2}, {0, s * sqrt(3.0) / 2, s * sqrt(3.0) / 6}, {0, 0, s * sqrt(2.0 / 3.0)}};
+      double J[3][3], K[3][3];
+      memcpy(J, r, sizeof J);
+      cofactor(3, J, K);
+      double det = r[0][0] * K[0][0] + r[0][1] * K[0][1] + r[0][2] * K[0][2];
+      for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 3; b++) w[a * 3 + b] = K[b][a] / det; /* inverse = cofactorᵀ / det */
+    }
+    memcpy(o.winv, w, sizeof w);
+    for (int outer = 0; outer < 100; outer++) {
+      double dmin = INFINITY, J[3][3];
+      const int *v;
+      for (int i = 0; i < ncell; i++) dmin = fmin(dmin, cell_map(C, x, W->cells[i], o.winv, J, &v));
+      int ninv;
+      ut_count_cells(C, x, 0, &ninv, NULL);
+      if (!ninv && outer > 0) break;
+      o.eps = sqrt(1e-8 + 0.04 * pow(fmin(dmin, 0), 2));
+      double f;
+      int it = ut_lbfgs(&o, x, freev, nfree, maxit, &f);
+      if (it < 0) break;
+      *iters += it;
+      if (!it) break;
+    }
+  }
+  int total = 0;
+  for (int i = 0; i < nfree; i++) {
+    int v = freev[i], ch = 0;
+    W->fidx[v] = -1;
+    for (int j = 0; j < d; j++) ch |= x[(size_t)v * d + j] != x0[(size_t)v * d + j];
+    if (ch && !moved[v]) { moved[v] = 1; total++; }
+  }
+  *moved_count += total;
+  free(freev);
+  free(x0);
+  return 0;
+}

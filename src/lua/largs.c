@@ -289,12 +289,91 @@ void push_function(lua_State *L, lg_function *f, int mesh_idx) {
   u->f = f;
 }
 
+/* The most arguments each function of the module takes (methods: besides self), so that an
+ * extra or misplaced argument is an error that names the function instead of being
+ * ignored (lg.sin(x, 2), mesh:hmax(1)). Functions with a variable number of arguments
+ * (mesh:cells(names...), lg.list) or that check their own arguments with their own message
+ * (lg.lagrange, lg.unknown, lg.interpolate, ...) are not listed. */
+typedef struct {
+  const char *table; /* "lg", "lg.mesh", or a metatable name */
+  const char *name;
+  int max;
+  const char *shown; /* the name in messages */
+} arity;
+static const arity arities[] = {
+    
+     {"lg", "coord", 1, "lg.coord"},
+    {"lg", "normal", 0, "lg.normal"}, {"lg", "parameter", 2, "lg.parameter"}, {"lg", "sin", 1, "lg.sin"},
+    {"lg", "cos", 1, "lg.cos"}, {"lg", "tan", 1, "lg.tan"}, {"lg", "exp", 1, "lg.exp"}, {"lg", "log", 1, "lg.log"},
+    {"lg", "sqrt", 1, "lg.sqrt"}, {"lg", "abs", 1, "lg.abs"}, {"lg", "tanh", 1, "lg.tanh"}, {"lg", "sinh", 1, "lg.sinh"},
+    {"lg", "cosh", 1, "lg.cosh"}, {"lg", "atan", 1, "lg.atan"}, {"lg", "asin", 1, "lg.asin"}, {"lg", "acos", 1, "lg.acos"},
+    {"lg", "sign", 1, "lg.sign"}, {"lg", "pow", 2, "lg.pow"}, {"lg", "grad", 1, "lg.grad"}, {"lg", "div", 1, "lg.div"},
+    {"lg", "dot", 2, "lg.dot"}, {"lg", "inner", 2, "lg.inner"}, {"lg", "dx", 2, "lg.dx"}, {"lg", "diff", 2, "lg.diff"},
+    {"lg", "integral", 3, "lg.integral"}, {"lg", "essential_bc", 2, "lg.essential_bc"},
+    {"lg", "integrate", 3, "lg.integrate"}, {"lg", "outer", 2, "lg.outer"}, {"lg", "cross", 2, "lg.cross"},
+    {"lg", "identity", 1, "lg.identity"}, 
+    
+     {"lg", "linear_problem", 1, "lg.linear_problem"},
+    {"lg", "nonlinear_problem", 1, "lg.nonlinear_problem"}, {"lg", "options", 1, "lg.options"}, {"lg", "jit", 2, "lg.jit"},
+    {"lg", "jit_status", 1, "lg.jit_status"}, {"lg", "stats", 0, "lg.stats"}, {"lg", "wtime", 0, "lg.wtime"},
+    {"lg", "control", 4, "lg.control"}, {"lg", "functional", 1, "lg.functional"},
+    {"lg", "reduced_functional", 1, "lg.reduced_functional"}, {"lg", "taylor_test", 4, "lg.taylor_test"},
+    {"lg", "minimize", 2, "lg.minimize"}, {"lg", "kkt_problem", 1, "lg.kkt_problem"}, {"lg", "series", 1, "lg.series"},
+    {"lg.mesh", "interval", 1, "lg.mesh.interval"}, {"lg.mesh", "rectangle", 1, "lg.mesh.rectangle"},
+    {"lg.mesh", "box", 1, "lg.mesh.box"}, {"lg.mesh", "read", 1, "lg.mesh.read"}, {"lg.mesh", "new", 1, "lg.mesh.new"},
+    {MT_MESH, "vertices", 1, "mesh:vertices"}, {MT_MESH, "info", 0, "mesh:info"}, {MT_MESH, "write", 3, "mesh:write"},
+    {MT_MESH, "refine", 0, "mesh:refine"}, {MT_MESH, "copy", 0, "mesh:copy"}, {MT_MESH, "hmax", 0, "mesh:hmax"},
+    {MT_MESH, "check", 0, "mesh:check"}, {MT_MESH, "nvertices", 0, "mesh:nvertices"}, {MT_MESH, "ncells", 0, "mesh:ncells"},
+    {MT_MESH, "dim", 0, "mesh:dim"}, {MT_MESH, "quality", 2, "mesh:quality"}, {MT_MESH, "quality_report", 1, "mesh:quality_report"},
+    {MT_MESH, "untangle", 1, "mesh:untangle"}, {MT_MESH, "smooth", 1, "mesh:smooth"}, {MT_MESH, "move", 1, "mesh:move"},
+    {MT_MESH, "displace", 1, "mesh:displace"}, {MT_QARRAY, "totable", 0, "q:totable"}, {MT_QARRAY, "min", 0, "q:min"},
+    {MT_QARRAY, "max", 0, "q:max"}, {MT_QARRAY, "mean", 0, "q:mean"}, {MT_QARRAY, "histogram", 3, "q:histogram"},
+    {MT_QARRAY, "worst", 1, "q:worst"}, {MT_FUNC, "values", 0, "f:values"}, {MT_FUNC, "assign", 1, "f:assign"},
+    {MT_FUNC, "ndof", 0, "f:ndof"}, {MT_FUNC, "degree", 0, "f:degree"}, {MT_FUNC, "eval", 1, "f:eval"},
+    {MT_FUNC, "dof_coordinates", 0, "f:dof_coordinates"}, {MT_PROB, "solve", 1, "problem:solve"},
+    {MT_PROB, "size", 0, "problem:size"}, {MT_PROB, "sensitivity", 1, "problem:sensitivity"},
+    {MT_REDUCED, "value", 1, "rf:value"}, {MT_REDUCED, "derivative", 2, "rf:derivative"},
+    {MT_REDUCED, "gradient", 2, "rf:gradient"}, {MT_REDUCED, "hessian", 3, "rf:hessian"}, {MT_REDUCED, "state", 0, "rf:state"},
+    {NULL, NULL, 0, NULL}};
+
+static int checked_call(lua_State *L) {
+  int max = (int)lua_tointeger(L, lua_upvalueindex(2)), self = (int)lua_tointeger(L, lua_upvalueindex(4));
+  int n = lua_gettop(L) - self;
+  if (n > max) {
+    const char *nm = lua_tostring(L, lua_upvalueindex(3));
+    if (max == 0) return luaL_error(L, "%s: takes no arguments, got %d", nm, n);
+    return luaL_error(L, "%s: takes at most %d argument%s, got %d (argument #%d is extra)", nm, max, max == 1 ? "" : "s", n,
+                      max + 1);
+  }
+  return lua_tocfunction(L, lua_upvalueindex(1))(L);
+}
+
+/* luaL_setfuncs(L, lib, 0) into the table on top, the functions of `table` listed above
+ * wrapped by their argument count check */
+void set_funcs_checked(lua_State *L, const luaL_Reg *lib, const char *table) {
+  int self = strcmp(table, "lg") && strcmp(table, "lg.mesh");
+  for (; lib->name; lib++) {
+    const arity *a = NULL;
+    for (const arity *r = arities; r->table && !a; r++)
+      if (!strcmp(r->table, table) && !strcmp(r->name, lib->name)) a = r;
+    if (!a) lua_pushcfunction(L, lib->func);
+    else {
+      lua_pushcfunction(L, lib->func);
+      lua_pushinteger(L, a->max);
+      lua_pushstring(L, a->shown);
+      lua_pushinteger(L, self);
+      lua_pushcclosure(L, checked_call, 4);
+    }
+    lua_setfield(L, -2, lib->name);
+  }
+}
+
 void new_mt(lua_State *L, const char *name, const luaL_Reg *mm, const luaL_Reg *methods) {
   luaL_newmetatable(L, name);
   if (mm) luaL_setfuncs(L, mm, 0);
   if (methods) {
     lua_newtable(L);
-    luaL_setfuncs(L, methods, 0);
+    set_funcs_checked(L, methods, name);
     lua_pushvalue(L, -1);
     lua_setfield(L, -3, "methods");
     if (lua_getfield(L, -2, "__index") == LUA_TNIL) {

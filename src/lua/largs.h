@@ -81,6 +81,9 @@ void push_problem(lua_State *L, lg_problem *p, int nfield, int nonlinear, int nd
 /* the assembled matrix of p as a Lua table of rows (small problems: n <= 2000) */
 int push_dense_matrix(lua_State *L, lg_problem *p, const char *fn);
 void new_mt(lua_State *L, const char *name, const luaL_Reg *mm, const luaL_Reg *methods);
+/* luaL_setfuncs(lib) into the table on top, each function of the module's arity table
+ * ("lg", "lg.mesh" or a metatable name) checking that it got no extra arguments */
+void set_funcs_checked(lua_State *L, const luaL_Reg *lib, const char *table);
 
 /* the bindings of each layer: metatables (register) and library functions */
 extern const luaL_Reg lg_arith_mm[]; /* + - * / ^ unary- for expressions and functions */

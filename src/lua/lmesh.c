@@ -1166,7 +1166,7 @@ void lg_lua_mesh_register(lua_State *L) {
   luaL_newmetatable(L, MT_QARRAY);
   luaL_setfuncs(L, qa_mm, 0);
   lua_newtable(L);
-  luaL_setfuncs(L, qa_methods, 0);
+  set_funcs_checked(L, qa_methods, MT_QARRAY);
   lua_setfield(L, -2, "methods");
   lua_pop(L, 1);
   static const luaL_Reg series_mm[] = {{"__gc", series_gc}, {NULL, NULL}};

@@ -76,13 +76,13 @@ int luaopen_lugal(lua_State *L) {
   lg_lua_opt_register(L);
   lg_lua_operator_register(L);
   lua_newtable(L);
-  luaL_setfuncs(L, lg_expr_lib, 0);
-  luaL_setfuncs(L, lg_problem_lib, 0);
-  luaL_setfuncs(L, lg_output_lib, 0);
-  luaL_setfuncs(L, lg_opt_lib, 0);
-  luaL_setfuncs(L, lg_operator_lib, 0);
+  set_funcs_checked(L, lg_expr_lib, "lg");
+  set_funcs_checked(L, lg_problem_lib, "lg");
+  set_funcs_checked(L, lg_output_lib, "lg");
+  set_funcs_checked(L, lg_opt_lib, "lg");
+  set_funcs_checked(L, lg_operator_lib, "lg");
   lua_newtable(L);
-  luaL_setfuncs(L, lg_mesh_lib, 0);
+  set_funcs_checked(L, lg_mesh_lib, "lg.mesh");
   lua_setfield(L, -2, "mesh");
   lg_env *env = get_env(L);
   for (int d = 0; d < 3; d++) {

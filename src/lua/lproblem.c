@@ -523,7 +523,7 @@ void lg_lua_problem_register(lua_State *L) {
   lua_pushcfunction(L, func_len); lua_setfield(L, -2, "__len");
   lua_pushcfunction(L, func_call); lua_setfield(L, -2, "__call");
   lua_newtable(L);
-  luaL_setfuncs(L, func_methods, 0);
+  set_funcs_checked(L, func_methods, MT_FUNC);
   lua_setfield(L, -2, "methods");
   lua_pop(L, 1);
   static const luaL_Reg prob_mm[] = {{"__gc", prob_gc}, {NULL, NULL}};

@@ -127,4 +127,21 @@ fails(function()
   return lg.linear_problem{mesh = qm, eqn = lg.integral(qm:cells(), u3*v3 - v3), test = v3, unknown = u3}
 end, "quadrilaterals", "0, 1 and 2 are")
 
+
+-- extra arguments are errors that name the function (issue 12), not silently ignored
+do
+  local m2 = lg.mesh.rectangle{nx = 2}
+  local Q1 = lg.lagrange(1)
+  local uq, vq = lg.unknown(Q1, "uq"), lg.test(Q1, "vq")
+  fails(function() return lg.sin(lg.x, 2) end, "lg.sin: takes at most 1 argument, got 2")
+  fails(function() return lg.dot(lg.grad(uq), lg.grad(vq), 3) end, "lg.dot: takes at most 2 arguments, got 3 (argument #3 is extra)")
+  fails(function() return lg.integral(m2:cells(), uq*vq, nil, 4) end, "lg.integral: takes at most 3 arguments, got 4")
+  fails(function() return lg.normal(1) end, "lg.normal: takes no arguments, got 1")
+  fails(function() return m2:hmax(1) end, "mesh:hmax: takes no arguments, got 1")
+  fails(function() return m2:quality("mean_ratio"):min(2) end, "q:min: takes no arguments, got 1")
+  fails(function() return lg.mesh.rectangle({nx = 2}, 3) end, "lg.mesh.rectangle: takes at most 1 argument, got 2")
+  local f = lg.interpolate(Q1, m2, lg.x, "fq")
+  fails(function() return f:values(1) end, "f:values: takes no arguments, got 1")
+  T.close(lg.integrate(m2, f), 0.5, 1e-14, "the checked functions still work")
+end
 print(n .. " bad inputs reported as errors")

@@ -52,6 +52,26 @@ static void cofactor(int d, double J[3][3], double K[3][3]) {
     }
 }
 
+/* W⁻¹ of a regular simplex whose edge matrix has determinant mean > 0 */
+void ut_regular_winv(int d, double mean, double *w) {
+  double s;
+  if (d == 2) { /* columns (1, 0), (1/2, √3/2), scaled */
+    s = sqrt(mean / (sqrt(3.0) / 2));
+    double r[4] = {s, s / 2, 0, s * sqrt(3.0) / 2};
+    double det = r[0] * r[3] - r[1] * r[2];
+    w[0] = r[3] / det; w[1] = -r[1] / det; w[2] = -r[2] / det; w[3] = r[0] / det;
+  } else { /* columns (1,0,0), (1/2,√3/2,0), (1/2,√3/6,√(2/3)), scaled */
+    s = cbrt(mean / (sqrt(2.0) / 2));
+    double r[3][3] = {{s, s / 2, s / 2}, {0, s * sqrt(3.0) / 2, s * sqrt(3.0) / 6}, {0, 0, s * sqrt(2.0 / 3.0)}};
+    double J[3][3], K[3][3];
+    memcpy(J, r, sizeof J);
+    cofactor(3, J, K);
+    double det = r[0][0] * K[0][0] + r[0][1] * K[0][1] + r[0][2] * K[0][2];
+    for (int a = 0; a < 3; a++)
+      for (int b = 0; b < 3; b++) w[a * 3 + b] = K[b][a] / det; /* inverse = cofactorᵀ / det */
+  }
+}
+
 double ut_energy_eval(const objective *o, const double *x, double *grad, int nfree) {
   const ctx *C = o->C;
   int d = C->d;
@@ -64,6 +84,7 @@ double ut_energy_eval(const objective *o, const double *x, double *grad, int nfr
     double D = cell_map(C, x, c, o->winv, J, &v), A = 0;
     for (int a = 0; a < d; a++)
       for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
+    if (eps == 0 && !(D > 0)) return INFINITY; /* ε = 0: the pure barrier (smoothing a valid mesh) */
     double ch = chi(D, eps), chp = dchi(D, eps), cs = pow(ch, -2.0 / d);
     f += (1 - theta) * A * cs + theta * (D * D + 1) / ch;
     if (!grad) continue;
@@ -131,23 +152,7 @@ int ut_untangle_global(ctx *C, work *W, double *x, int maxit, int *iters, int *m
   o.smooth = 2;
   o.theta = 0.5; /* shape and size alike (0.1 and 0.9 untangled the same spirals) */
   if (mean > 0 && nfree) {
-    double s, w[9];
-    if (d == 2) { /* columns (1, 0), (1/2, √3/2), scaled */
-      s = sqrt(mean / (sqrt(3.0) / 2));
-      double r[4] = {s, s / 2, 0, s * sqrt(3.0) / 2};
-      double det = r[0] * r[3] - r[1] * r[2];
-      w[0] = r[3] / det; w[1] = -r[1] / det; w[2] = -r[2] / det; w[3] = r[0] / det;
-    } else { /* columns (1,0,0), (1/2,√3/2,0), (1/2,√3/6,√(2/3)), scaled */
-      s = cbrt(mean / (sqrt(2.0) / 2));
-      double r[3][3] = {{s, s / 2, s / 2}, {0, s * sqrt(3.0) / 2, s * sqrt(3.0) / 6}, {0, 0, s * sqrt(2.0 / 3.0)}};
-      double J[3][3], K[3][3];
-      memcpy(J, r, sizeof J);
-      cofactor(3, J, K);
-      double det = r[0][0] * K[0][0] + r[0][1] * K[0][1] + r[0][2] * K[0][2];
-      for (int a = 0; a < 3; a++)
-        for (int b = 0; b < 3; b++) w[a * 3 + b] = K[b][a] / det; /* inverse = cofactorᵀ / det */
-    }
-    memcpy(o.winv, w, sizeof w);
+    ut_regular_winv(d, mean, o.winv);
     for (int outer = 0; outer < 100; outer++) {
       double dmin = INFINITY, J[3][3];
       const int *v;

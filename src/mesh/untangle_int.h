@@ -81,6 +81,8 @@ double ut_star_objective(const ctx *C, int v, int q, double *qmin);
 /* the global untangling stage (untangle_global.c): its energy, and the stage on every
  * interior vertex of a triangle or tetrahedron mesh (0, or -1 out of memory) */
 double ut_energy_eval(const objective *o, const double *x, double *grad, int nfree);
+/* W⁻¹ (d×d, row-major) of a regular simplex whose edge matrix has determinant mean > 0 */
+void ut_regular_winv(int d, double mean, double *winv);
 int ut_untangle_global(ctx *C, work *W, double *x, int maxit, int *iters, int *moved_count, unsigned char *moved);
 int ut_frame_enter(mesh *m, unit_frame *f, double extra, char *err);
 void ut_frame_leave(mesh *m, unit_frame *f);

@@ -1,0 +1,55 @@
+-- hard_meshes.lua — generators of hard tangles with a known valid solution (issue 13), for
+-- tests/lua/test_untangle_hard.lua and bench/untangle_hard.lua. Each returns the tangled
+-- mesh and the valid mesh it came from (same connectivity and boundary).
+local lg = require "lugal"
+local M = {}
+
+-- a strip of ns x nt squares (two triangles each) along a spiral of `turns` turns,
+-- r = 0.3 + 1.2 s + width t; the interior started from the Tutte embedding (each interior
+-- vertex the mean of its four grid neighbours, Gauss-Seidel), the boundary at its place
+function M.spiral(ns, nt, width, turns)
+  turns = turns or 1.5
+  local function pos(s, t)
+    local th, r = 2*math.pi*turns*s, 0.3 + 1.2*s + width*t
+    return r*math.cos(th), r*math.sin(th)
+  end
+  local verts, cells, bnd = {}, {}, {}
+  local function id(i, j) return j*(ns + 1) + i + 1 end
+  for j = 0, nt do for i = 0, ns do local a, b = pos(i/ns, j/nt); verts[#verts + 1] = {a, b} end end
+  for j = 0, nt - 1 do for i = 0, ns - 1 do
+    local a, b, c, d = id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)
+    cells[#cells + 1] = {a, c, b}; cells[#cells + 1] = {a, d, c}
+  end end
+  for i = 0, ns - 1 do bnd[#bnd + 1] = {id(i, 0), id(i + 1, 0)}; bnd[#bnd + 1] = {id(i, nt), id(i + 1, nt)} end
+  for j = 0, nt - 1 do bnd[#bnd + 1] = {id(0, j), id(0, j + 1)}; bnd[#bnd + 1] = {id(ns, j), id(ns, j + 1)} end
+  local mesh = lg.mesh.new{cell = "triangle", vertices = verts, cells = cells, boundary = {wall = bnd}}
+  local ref = mesh:copy()
+  local X = {}
+  for k, v in ipairs(verts) do X[k] = {v[1], v[2]} end
+  for _ = 1, 2000 do
+    for j = 1, nt - 1 do for i = 1, ns - 1 do
+      local a, b, c, d = X[id(i - 1, j)], X[id(i + 1, j)], X[id(i, j - 1)], X[id(i, j + 1)]
+      X[id(i, j)] = {(a[1] + b[1] + c[1] + d[1])/4, (a[2] + b[2] + c[2] + d[2])/4}
+    end end
+  end
+  for j = 1, nt - 1 do for i = 1, ns - 1 do local k = id(i, j); mesh:set_coordinates(k, X[k][1], X[k][2]) end end
+  return mesh, ref
+end
+
+-- a bar of 3n x n x n cubes (6 tetrahedra each), length L, twisted by `turns` turns about
+-- its axis: boundary vertices at their twisted places, interior vertices left straight
+function M.twisted_bar(n, L, turns)
+  local mesh = lg.mesh.box{nx = 3*n, ny = n, nz = n}
+  local ref = mesh:copy()
+  for k = 1, mesh:nvertices() do
+    local x, y, z = mesh:coordinates(k)
+    local th, cy, cz = 2*math.pi*(turns or 1)*x, y - 0.5, z - 0.5
+    local X, Y, Z = L*x, 0.5 + cy*math.cos(th) - cz*math.sin(th), 0.5 + cy*math.sin(th) + cz*math.cos(th)
+    ref:set_coordinates(k, X, Y, Z)
+    if x == 0 or x == 1 or y == 0 or y == 1 or z == 0 or z == 1 then mesh:set_coordinates(k, X, Y, Z)
+    else mesh:set_coordinates(k, L*x, y, z) end
+  end
+  return mesh, ref
+end
+
+return M

@@ -142,7 +142,8 @@ static int smooth_global(ctx *C, const smooth_opts *o, smooth_report *r, char *e
     if (!(f0 < fprev * (1 - 1e-4))) break;
     fprev = f0;
     double f = f0;
-    int its = nfree ? ut_lbfgs(&ob, m->x, freev, nfree, 20, &f) : 0, slid = 0;
+    /* rounds of 20 iterations; 100 with the analytic gradient of the energy method */
+    int its = nfree ? ut_lbfgs(&ob, m->x, freev, nfree, ob.smooth == 2 ? 100 : 20, &f) : 0, slid = 0;
     double gain = 0;
     if (its < 0) { snprintf(err, MESH_ERRLEN, "out of memory"); status = 1; break; }
     if (o->slide)

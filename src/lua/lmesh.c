@@ -486,11 +486,21 @@ static int lmesh_smooth(lua_State *L) {
   int t = 0;
   if (!lua_isnoneornil(L, 2)) {
     if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {measure=, method=, iterations=, boundary=, quiet=}");
-    static const char *const keys[] = {"measure", "method", "iterations", "boundary", "quiet", NULL};
+    static const char *const keys[] = {"measure", "method", "iterations", "boundary", "quiet", "reference", NULL};
     check_keys(L, 2, fn, keys);
     t = 2;
   }
-  smooth_opts o = {m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 20, 1, 0, 0, 0};
+  const mesh *ref = NULL;
+  if (t && lua_getfield(L, t, "reference") != LUA_TNIL) {
+    ud_mesh *ur = luaL_testudata(L, -1, MT_MESH);
+    if (!ur) return luaL_error(L, "%s: option 'reference' must be a mesh (the same mesh in another configuration)", fn);
+    ref = ur->lm->m;
+    if (ref->type != m->type || ref->nvert != m->nvert || ref->ncell != m->ncell ||
+        memcmp(ref->cells, m->cells, sizeof(int) * (size_t)m->ncell * (size_t)m->nvc))
+      return luaL_error(L, "%s: the reference must be the same mesh (same cells) in another configuration", fn);
+  }
+  if (t) lua_pop(L, 1);
+  smooth_opts o = {m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 20, 1, 0, 0, 0, NULL};
   int quiet = 0;
   if (t) {
     const char *name = opt_str(L, t, "measure", NULL, fn);
@@ -514,13 +524,23 @@ static int lmesh_smooth(lua_State *L) {
     lua_pop(L, 1);
   }
   o.slide = opt_boundary(L, t, fn);
+  if (ref) {
+    o.xref = ref->x;
+    if (t) {
+      lua_getfield(L, t, "method");
+      int given = !lua_isnil(L, -1);
+      lua_pop(L, 1);
+      if (!given) o.global = o.energy = 1; /* reference shapes are the energy method's */
+    }
+  }
   smooth_report r;
   char err[MESH_ERRLEN];
   if (mesh_smooth(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
   lg_mesh_changed(u->lm);
   char text[512];
-  snprintf(text, sizeof text, "smooth (%s): %s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s",
-           o.energy ? "energy" : o.global ? "global" : "local", quality_name(o.measure), r.min_before, r.min_after, r.mean_before,
+  snprintf(text, sizeof text, "smooth (%s): %s%s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s",
+           o.energy ? "energy" : o.global ? "global" : "local", quality_name(o.measure), ref ? " relative to the reference" : "",
+           r.min_before, r.min_after, r.mean_before,
            r.mean_after, r.moved, r.sweeps, o.global ? "rounds" : "sweeps", r.seconds);
   lua_createtable(L, 0, 10);
   lua_pushstring(L, quality_name(o.measure));

@@ -19,7 +19,7 @@ static void usage(FILE *f) {
              "       lugal-mesh untangle IN.msh OUT.msh [--beta B] [--boundary slide|fixed]\n"
              "                  [--placement chebyshev|corners] [--max-iterations N] [--report]\n"
              "       lugal-mesh smooth IN.msh OUT.msh [--measure NAME] [--iterations N]\n"
-             "                  [--method local|global|energy] [--boundary slide|fixed]\n"
+             "                  [--method local|global|energy] [--reference REST.msh] [--boundary slide|fixed]\n"
              "       lugal-mesh --version | --help\n\n"
              "quality   prints min, mean, max and the worst cell of every measure that applies to\n"
              "          the mesh's cells, and the number of inverted or degenerate cells;\n"
@@ -35,7 +35,9 @@ static void usage(FILE *f) {
              "          --method local (default) moves one vertex at a time, global all interior\n"
              "          vertices together by L-BFGS on the sum of 1/quality, energy the same\n"
              "          without the floor on the minimum during the descent (only validity), kept\n"
-             "          when its minimum beats the input's: for bent and anisotropic meshes.\n");
+             "          when its minimum beats the input's: for bent and anisotropic meshes;\n"
+             "          --reference REST.msh (triangles, tetrahedra; energy) aims at each cell's shape\n"
+             "          in REST.msh, the same mesh at rest, instead of regular cells.\n");
 }
 
 /* an integer option in lo..hi, or -1 with a message */
@@ -153,10 +155,10 @@ static int parse_boundary(const char *cmd, const char *v) {
 
 /* untangle and smooth: IN OUT and options */
 static int repair_cmd(const char *cmd, int argc, char **argv) {
-  const char *in = NULL, *out = NULL, *measure = NULL;
+  const char *in = NULL, *out = NULL, *measure = NULL, *refpath = NULL;
   untangle_opts uo;
   untangle_defaults(&uo);
-  int report = 0, iterations = 20, slide = 1, global = 0, energy = 0;
+  int report = 0, iterations = 20, slide = 1, global = 0, energy = 0, method_given = 0;
   for (int i = 0; i < argc; i++) {
     const char *a = argv[i];
     int has = i + 1 < argc;
@@ -176,6 +178,7 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
       else { fprintf(stderr, "lugal-mesh untangle: --placement must be chebyshev or corners\n"); return 2; }
     } else if (!strcmp(a, "--method") && has && !strcmp(cmd, "smooth")) {
       const char *v = argv[++i];
+      method_given = 1;
       if (!strcmp(v, "local")) global = 0;
       else if (!strcmp(v, "global")) global = 1;
       else if (!strcmp(v, "energy")) global = energy = 1;
@@ -184,6 +187,8 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
       if ((uo.max_iterations = int_option(cmd, "--max-iterations", argv[++i], 1, 1000000)) < 0) return 2;
     } else if (!strcmp(a, "--iterations") && has) {
       if ((iterations = int_option(cmd, "--iterations", argv[++i], 1, 1000000)) < 0) return 2;
+    } else if (!strcmp(a, "--reference") && has && !strcmp(cmd, "smooth")) {
+      refpath = argv[++i];
     } else if (!strcmp(a, "--measure") && has) measure = argv[++i];
     else if (!strcmp(a, "--report")) report = 1;
     else if (a[0] == '-') { fprintf(stderr, "lugal-mesh %s: unknown or incomplete option %s\n", cmd, a); return 2; }
@@ -205,12 +210,28 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
     rc = r.invalid_after ? 3 : 0;
   } else {
     int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON;
-    smooth_opts so = {quality_from_name(measure ? measure : simplex ? "mean_ratio" : "corner_condition"), iterations, slide, report, global, energy};
-    if (so.measure < 0) { fprintf(stderr, "lugal-mesh smooth: unknown measure %s\n", measure); mesh_free(m); return 2; }
+    mesh *ref = NULL;
+    if (refpath) {
+      /* reference shapes: the same mesh in its rest configuration; the energy method's */
+      if (!(ref = mesh_read_gmsh(refpath, err))) { fprintf(stderr, "lugal-mesh: %s\n", err); mesh_free(m); return 1; }
+      if (ref->type != m->type || ref->nvert != m->nvert || ref->ncell != m->ncell ||
+          memcmp(ref->cells, m->cells, sizeof(int) * (size_t)m->ncell * (size_t)m->nvc)) {
+        fprintf(stderr, "lugal-mesh smooth: the reference %s must be the same mesh (same cells) as %s\n", refpath, in);
+        mesh_free(ref); mesh_free(m);
+        return 2;
+      }
+      if (!method_given) global = energy = 1;
+    }
+    smooth_opts so = {quality_from_name(measure ? measure : simplex ? "mean_ratio" : "corner_condition"), iterations, slide, report, global, energy,
+                      ref ? ref->x : NULL};
+    if (so.measure < 0) { fprintf(stderr, "lugal-mesh smooth: unknown measure %s\n", measure); mesh_free(ref); mesh_free(m); return 2; }
     smooth_report r;
-    if (mesh_smooth(m, &so, &r, err)) { fprintf(stderr, "lugal-mesh smooth: %s\n", err); mesh_free(m); return 1; }
-    printf("smooth (%s): %s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s\n",
-           energy ? "energy" : global ? "global" : "local", quality_name(so.measure), r.min_before, r.min_after, r.mean_before, r.mean_after,
+    int bad = mesh_smooth(m, &so, &r, err);
+    mesh_free(ref);
+    if (bad) { fprintf(stderr, "lugal-mesh smooth: %s\n", err); mesh_free(m); return 1; }
+    printf("smooth (%s): %s%s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s\n",
+           energy ? "energy" : global ? "global" : "local", quality_name(so.measure), refpath ? " relative to the reference" : "",
+           r.min_before, r.min_after, r.mean_before, r.mean_after,
            r.moved, r.sweeps, global ? "rounds" : "sweeps", r.seconds);
   }
   if (mesh_write_gmsh(m, out)) { fprintf(stderr, "lugal-mesh: %s\n", m->err); rc = 1; }

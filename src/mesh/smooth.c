@@ -103,7 +103,7 @@ static int smooth_vertex(ctx *C, int v, int measure, double *gain) {
  * smallest q before smoothing (a floor that rises with every round blocks the steps
  * once many cells share the minimum). 2D sliding boundary vertices take one local step
  * each between rounds. Stops when a round lowers Σ 1/q by less than 1e-4 (relative). */
-static int smooth_global(ctx *C, const smooth_opts *o, smooth_report *r, char *err) {
+static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, smooth_report *r, char *err) {
   mesh *m = C->m;
   int nfree = 0;
   int *freev = malloc(sizeof(int) * ((size_t)m->nvert + 1)), *fidx = malloc(sizeof(int) * ((size_t)m->nvert + 1)),
@@ -121,12 +121,12 @@ static int smooth_global(ctx *C, const smooth_opts *o, smooth_report *r, char *e
   }
   work W = {fidx, cmark, cells};
   int ncell = ut_cells_around(C, &W, freev, nfree), status = 0;
-  objective ob = {C, 0, C->jscale, ncell, cells, fidx, 0, 1, o->measure, 0, freev, hv, 0, 0, {0}};
+  objective ob = {C, 0, C->jscale, ncell, cells, fidx, 0, 1, o->measure, 0, freev, hv, 0, 0, {0}, cwinv};
   double fprev = INFINITY;
   ob.qfloor = INFINITY;
-  for (int i = 0; i < ncell; i++) ob.qfloor = fmin(ob.qfloor, mesh_cell_quality(m, cells[i], o->measure));
+  for (int i = 0; i < ncell && !cwinv; i++) ob.qfloor = fmin(ob.qfloor, mesh_cell_quality(m, cells[i], o->measure));
   if (o->energy) ob.qfloor = 0; /* the barrier alone: 1/q is infinite on degenerate cells */
-  if (o->energy && o->measure == QM_MEAN_RATIO && (m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON)) {
+  if (o->energy && (cwinv || (o->measure == QM_MEAN_RATIO && (m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON)))) {
     /* Σ 1/q of the mean ratio is (1/d) Σ |J|²/det(J)^(2/d), J relative to a regular simplex:
      * the untangling energy's shape term at ε = 0 (a strict barrier), with its analytic
      * gradient instead of 2d star evaluations per vertex */
@@ -137,7 +137,9 @@ static int smooth_global(ctx *C, const smooth_opts *o, smooth_report *r, char *e
   }
   for (int round = 0; round < o->iterations; round++) {
     double f0 = 0;
-    for (int i = 0; i < ncell; i++) f0 += 1 / mesh_cell_quality(m, cells[i], o->measure);
+    if (ob.smooth == 2) f0 = ut_energy_eval(&ob, m->x, NULL, nfree);
+    else
+      for (int i = 0; i < ncell; i++) f0 += 1 / mesh_cell_quality(m, cells[i], o->measure);
     /* the last round (optimization and sliding together) gained less than 1e-4: done */
     if (!(f0 < fprev * (1 - 1e-4))) break;
     fprev = f0;
@@ -146,7 +148,7 @@ static int smooth_global(ctx *C, const smooth_opts *o, smooth_report *r, char *e
     int its = nfree ? ut_lbfgs(&ob, m->x, freev, nfree, ob.smooth == 2 ? 100 : 20, &f) : 0, slid = 0;
     double gain = 0;
     if (its < 0) { snprintf(err, MESH_ERRLEN, "out of memory"); status = 1; break; }
-    if (o->slide)
+    if (o->slide && !cwinv) /* with reference shapes the boundary stays */
       for (int v = 0; v < m->nvert; v++)
         if (C->bnd[v]) slid += smooth_vertex(C, v, o->measure, &gain);
     r->sweeps = round + 1;
@@ -180,11 +182,21 @@ static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err
     ut_ctx_free(&C);
     return 1;
   }
+  double *cwinv = NULL;
+  if (o->xref) {
+    if (!o->energy || (m->type != CELL_TRIANGLE && m->type != CELL_TETRAHEDRON) || o->measure != QM_MEAN_RATIO) {
+      snprintf(err, MESH_ERRLEN, "reference shapes need method \"energy\" and the mean ratio, on triangles or tetrahedra");
+      ut_ctx_free(&C);
+      return 1;
+    }
+    if (!(cwinv = ut_reference_winv(m, o->xref, err))) { ut_ctx_free(&C); return 1; }
+  }
   double *q = mesh_big_alloc(sizeof(double) * ((size_t)m->ncell + 1));
   unsigned char *moved = calloc((size_t)m->nvert + 1, 1);
-  if (!q || !moved) { mesh_big_free(q); free(moved); ut_ctx_free(&C); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  if (!q || !moved) { mesh_big_free(q); free(moved); free(cwinv); ut_ctx_free(&C); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
   quality_stats st;
-  mesh_quality(m, o->measure, NULL, q, err);
+#define QUALITY() (cwinv ? (ut_relative_mean_ratio(m, cwinv, q), 0) : mesh_quality(m, o->measure, NULL, q, err))
+  QUALITY();
   quality_stats_compute(q, m->ncell, &st);
   r->min_before = st.min;
   r->mean_before = st.mean;
@@ -204,19 +216,20 @@ static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err
       /* converged: the sweep lowered Σ 1/q by less than 1e-4 of it */
       if (!changed || gain < 1e-4 * total) break;
     }
-  else if (smooth_global(&C, o, r, err)) {
+  else if (smooth_global(&C, o, cwinv, r, err)) {
     memcpy(m->x, x0, sizeof(double) * (size_t)m->nvert * d);
-    free(x0); mesh_big_free(q); free(moved); ut_ctx_free(&C);
+    free(x0); mesh_big_free(q); free(moved); free(cwinv); ut_ctx_free(&C);
     return 1;
   }
-  mesh_quality(m, o->measure, NULL, q, err);
+  QUALITY();
   quality_stats_compute(q, m->ncell, &st);
   if (o->global && o->energy && !(st.min > r->min_before)) {
     /* the energy's descent lowered the minimum: the input stays (never worse than it) */
     memcpy(m->x, x0, sizeof(double) * (size_t)m->nvert * d);
-    mesh_quality(m, o->measure, NULL, q, err);
+    QUALITY();
     quality_stats_compute(q, m->ncell, &st);
   }
+#undef QUALITY
   for (int v = 0; v < m->nvert; v++) {
     int ch = 0;
     for (int j = 0; j < d; j++) ch |= m->x[(size_t)v * d + j] != x0[(size_t)v * d + j];
@@ -228,6 +241,7 @@ static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err
   r->seconds = ut_now() - t0;
   mesh_big_free(q);
   free(moved);
+  free(cwinv);
   ut_ctx_free(&C);
   return 0;
 }

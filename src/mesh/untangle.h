@@ -64,6 +64,9 @@ typedef struct {
   int energy;      /* with global: no floor on the smallest q during the descent, only the
                     * validity barrier of Σ 1/q; the result is kept when its smallest q is
                     * above the input's, else the input is restored */
+  const double *xref; /* energy on simplices: the shapes aimed at are those of this
+                    * configuration of the same mesh (nvert*dim), q the mean ratio of each
+                    * cell's map from its reference shape; NULL: regular simplices */
 } smooth_opts;
 
 typedef struct {

@@ -13,6 +13,7 @@
 #include "untangle_int.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -72,6 +73,51 @@ void ut_regular_winv(int d, double mean, double *w) {
   }
 }
 
+double *ut_reference_winv(const mesh *m, const double *xref, char *err) {
+  int d = m->dim, nv = m->nvc;
+  double *w = malloc(sizeof(double) * (size_t)m->ncell * d * d + 1);
+  if (!w) { snprintf(err, MESH_ERRLEN, "out of memory"); return NULL; }
+  for (int c = 0; c < m->ncell; c++) {
+    const int *v = m->cells + (size_t)c * (size_t)nv;
+    double E[3][3], K[3][3], det;
+    for (int i = 0; i < d; i++)
+      for (int k = 0; k < d; k++) E[i][k] = xref[(size_t)v[k + 1] * d + i] - xref[(size_t)v[0] * d + i];
+    if (d == 2) {
+      det = E[0][0] * E[1][1] - E[0][1] * E[1][0];
+      K[0][0] = E[1][1]; K[0][1] = -E[1][0]; K[1][0] = -E[0][1]; K[1][1] = E[0][0];
+    } else {
+      cofactor(3, E, K);
+      det = E[0][0] * K[0][0] + E[0][1] * K[0][1] + E[0][2] * K[0][2];
+    }
+    if (!(det > 0)) {
+      snprintf(err, MESH_ERRLEN, "cell %d of the reference is %s: reference shapes must be valid cells", c + 1,
+               det < 0 ? "inverted" : "degenerate");
+      free(w);
+      return NULL;
+    }
+    for (int a = 0; a < d; a++)
+      for (int b = 0; b < d; b++) w[(size_t)c * d * d + a * d + b] = K[b][a] / det;
+  }
+  return w;
+}
+
+void ut_relative_mean_ratio(const mesh *m, const double *cwinv, double *out) {
+  int d = m->dim;
+  ctx C0;
+  memset(&C0, 0, sizeof C0);
+  C0.m = (mesh *)m;
+  C0.d = d;
+  C0.nvc = m->nvc;
+  for (int c = 0; c < m->ncell; c++) {
+    double J[3][3], A = 0;
+    const int *v;
+    double D = cell_map(&C0, m->x, c, cwinv + (size_t)c * d * d, J, &v);
+    for (int a = 0; a < d; a++)
+      for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
+    out[c] = D > 0 && A > 0 ? d * pow(D, 2.0 / d) / A : 0;
+  }
+}
+
 double ut_energy_eval(const objective *o, const double *x, double *grad, int nfree) {
   const ctx *C = o->C;
   int d = C->d;
@@ -81,7 +127,8 @@ double ut_energy_eval(const objective *o, const double *x, double *grad, int nfr
     int c = o->cells[i];
     double J[3][3], K[3][3];
     const int *v;
-    double D = cell_map(C, x, c, o->winv, J, &v), A = 0;
+    const double *winv = o->cwinv ? o->cwinv + (size_t)c * d * d : o->winv;
+    double D = cell_map(C, x, c, winv, J, &v), A = 0;
     for (int a = 0; a < d; a++)
       for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
     if (eps == 0 && !(D > 0)) return INFINITY; /* ε = 0: the pure barrier (smoothing a valid mesh) */
@@ -98,7 +145,7 @@ double ut_energy_eval(const objective *o, const double *x, double *grad, int nfr
     for (int a = 0; a < d; a++)
       for (int k = 0; k < d; k++) {
         double s = 0;
-        for (int l = 0; l < d; l++) s += G[a][l] * o->winv[k * d + l];
+        for (int l = 0; l < d; l++) s += G[a][l] * winv[k * d + l];
         GE[a][k] = s;
       }
     for (int k = 0; k <= d; k++) {

@@ -45,6 +45,7 @@ typedef struct {
   const double *hv; /* per free vertex: its shortest edge, for the difference step */
   /* smooth == 2: the global untangling energy (untangle_global.c), analytic gradient */
   double eps, theta, winv[9];
+  const double *cwinv; /* per cell W⁻¹ (ncell*d*d) of its reference shape, or NULL: winv */
 } objective;
 
 /* reusable per-vertex / per-cell marks, kept at their rest values (-1 / 0) between uses */
@@ -83,6 +84,12 @@ double ut_star_objective(const ctx *C, int v, int q, double *qmin);
 double ut_energy_eval(const objective *o, const double *x, double *grad, int nfree);
 /* W⁻¹ (d×d, row-major) of a regular simplex whose edge matrix has determinant mean > 0 */
 void ut_regular_winv(int d, double mean, double *winv);
+/* per cell W⁻¹ of its shape in the configuration xref (ncell*d*d, malloc'd), NULL with a
+ * message in err when a reference cell is degenerate or inverted (or out of memory) */
+double *ut_reference_winv(const mesh *m, const double *xref, char *err);
+/* the mean ratio of each cell's map J = E W⁻¹ from its reference shape: d det(J)^(2/d) / |J|²,
+ * 0 when inverted */
+void ut_relative_mean_ratio(const mesh *m, const double *cwinv, double *out);
 int ut_untangle_global(ctx *C, work *W, double *x, int maxit, int *iters, int *moved_count, unsigned char *moved);
 int ut_frame_enter(mesh *m, unit_frame *f, double extra, char *err);
 void ut_frame_leave(mesh *m, unit_frame *f);

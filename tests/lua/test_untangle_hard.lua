@@ -4,7 +4,7 @@
 -- feasible set is empty. The default untangle must repair it (the global energy stage),
 -- with the boundary fixed too, and smoothing by the energy method must reach at least 0.9 of
 -- the structured strip's own minimum quality, which the local smoother, never lowering its
--- minimum, cannot. And a tetrahedral bar twisted by 360 degrees.
+-- minimum, cannot. A tetrahedral bar twisted by 360 degrees. Reference shapes.
 package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
 local T = require "testlib"
 local lg = require "lugal"
@@ -46,5 +46,44 @@ do
   local se = mesh:smooth{quiet = true, method = "energy", iterations = 30, boundary = "fixed"}
   print(string.format("twisted bar: after untangle %.4f, energy smoothing %.4f, the twisted bar's own %.4f", se.min_before, se.min_after, qref))
   T.check(se.min_after >= 0.9*qref, "twisted bar: energy smoothing reaches 0.9 of its minimum quality (%.4f vs %.4f)", se.min_after, qref)
+end
+-- reference shapes: a graded mesh (x -> 3 (x/3)^2, y -> y^2) is the reference; a perturbed
+-- copy smoothed by the energy method with {reference = graded} comes back to it (every
+-- cell's map from its reference shape a similarity), while smoothing towards regular
+-- triangles does not
+do
+  local ref = lg.mesh.rectangle{nx = 8, ny = 8, x1 = 3}
+  for k = 1, ref:nvertices() do local x, y = ref:coordinates(k); ref:set_coordinates(k, 3*(x/3)^2, y^2) end
+  local function perturbed()
+    local m = ref:copy()
+    math.randomseed(7)
+    for k = 1, m:nvertices() do
+      local x, y = m:coordinates(k)
+      if x > 1e-9 and x < 3 - 1e-9 and y > 1e-9 and y < 1 - 1e-9 then
+        m:set_coordinates(k, x + 0.03*x*(math.random() - 0.5), y + 0.03*y*(math.random() - 0.5))
+      end
+    end
+    return m
+  end
+  local a, b = perturbed(), perturbed()
+  local q0 = a:quality("deformation_quality", {reference = ref}):min()
+  local sa = a:smooth{quiet = true, reference = ref}
+  local sb = b:smooth{quiet = true, method = "energy", boundary = "fixed"}
+  local qa = a:quality("deformation_quality", {reference = ref}):min()
+  local qb = b:quality("deformation_quality", {reference = ref}):min()
+  local dmax = 0
+  for k = 1, a:nvertices() do
+    local x0, y0 = ref:coordinates(k)
+    local x1, y1 = a:coordinates(k)
+    dmax = math.max(dmax, math.abs(x1 - x0) + math.abs(y1 - y0))
+  end
+  print(string.format("reference shapes: relative mean ratio %.4f -> %.8f (report %.8f), %.4f towards regular triangles; distance to the reference %.1e",
+                      q0, qa, sa.min_after, qb, dmax))
+  T.check(sa.method == "energy" and math.abs(sa.min_after - qa) < 1e-12, "with a reference the report is the relative mean ratio")
+  T.check(qa > 0.9999 and q0 < 0.9, "smoothing with reference shapes reaches them (%.6f from %.4f)", qa, q0)
+  T.check(dmax < 1e-3, "and puts the vertices back where the reference has them (%.1e)", dmax)
+  T.check(qb < 0.5, "smoothing towards regular triangles does not (%.4f)", qb)
+  T.fails(function() return a:smooth{quiet = true, reference = ref, method = "local"} end, "mesh:smooth", "reference shapes need method")
+  T.fails(function() return a:smooth{quiet = true, reference = lg.mesh.rectangle{nx = 2}} end, "mesh:smooth", "same mesh")
 end
 print("hard tangles: all checks passed")

@@ -50,6 +50,9 @@ out=$("$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/smooth.msh" --method global)
 echo "$out" | grep -q "smooth (global): corner_condition min"
 out=$("$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/smooth.msh" --method energy)
 echo "$out" | grep -q "smooth (energy): corner_condition min"
+# --reference: quads are refused (reference shapes are for simplices), a different mesh too
+if "$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/x.msh" --reference "$T/fixed.msh" 2> "$T/err"; then exit 1; fi
+grep -q "reference shapes need" "$T/err"
 if "$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/x.msh" --method newton 2> "$T/err"; then exit 1; fi
 grep -q "method must be local, global or energy" "$T/err"
 if "$BUILD/lugal-mesh" smooth "$T/tangled.msh" "$T/x.msh" 2> "$T/err"; then exit 1; fi

@@ -405,13 +405,28 @@ static int opt_boundary(lua_State *L, int t, const char *fn) {
   return luaL_error(L, "%s: option 'boundary' must be \"slide\" or \"fixed\", got \"%s\"", fn, b);
 }
 
+/* the option 'reference' of table t: the same mesh as m in another configuration, or NULL */
+static const mesh *opt_reference(lua_State *L, int t, const mesh *m, const char *fn) {
+  const mesh *ref = NULL;
+  if (t && lua_getfield(L, t, "reference") != LUA_TNIL) {
+    ud_mesh *ur = luaL_testudata(L, -1, MT_MESH);
+    if (!ur) luaL_error(L, "%s: option 'reference' must be a mesh (the same mesh in another configuration)", fn);
+    ref = ur->lm->m;
+    if (ref->type != m->type || ref->nvert != m->nvert || ref->ncell != m->ncell ||
+        memcmp(ref->cells, m->cells, sizeof(int) * (size_t)m->ncell * (size_t)m->nvc))
+      luaL_error(L, "%s: the reference must be the same mesh (same cells) in another configuration", fn);
+  }
+  if (t) lua_pop(L, 1);
+  return ref;
+}
+
 static int lmesh_untangle(lua_State *L) {
   const char *fn = "mesh:untangle";
   ud_mesh *u = check_mesh(L, 1, fn);
   int t = 0;
   if (!lua_isnoneornil(L, 2)) {
     if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {beta=, max_iterations=, boundary=, placement=, quiet=}");
-    static const char *const keys[] = {"beta", "max_iterations", "boundary", "placement", "quiet", NULL};
+    static const char *const keys[] = {"beta", "max_iterations", "boundary", "placement", "quiet", "reference", NULL};
     check_keys(L, 2, fn, keys);
     t = 2;
   }
@@ -435,6 +450,8 @@ static int lmesh_untangle(lua_State *L) {
   }
   o.slide = opt_boundary(L, t, fn);
   mesh *m = u->lm->m;
+  const mesh *ref = opt_reference(L, t, m, fn);
+  if (ref) o.xref = ref->x;
   untangle_report r;
   char err[MESH_ERRLEN];
   if (mesh_untangle(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
@@ -490,16 +507,7 @@ static int lmesh_smooth(lua_State *L) {
     check_keys(L, 2, fn, keys);
     t = 2;
   }
-  const mesh *ref = NULL;
-  if (t && lua_getfield(L, t, "reference") != LUA_TNIL) {
-    ud_mesh *ur = luaL_testudata(L, -1, MT_MESH);
-    if (!ur) return luaL_error(L, "%s: option 'reference' must be a mesh (the same mesh in another configuration)", fn);
-    ref = ur->lm->m;
-    if (ref->type != m->type || ref->nvert != m->nvert || ref->ncell != m->ncell ||
-        memcmp(ref->cells, m->cells, sizeof(int) * (size_t)m->ncell * (size_t)m->nvc))
-      return luaL_error(L, "%s: the reference must be the same mesh (same cells) in another configuration", fn);
-  }
-  if (t) lua_pop(L, 1);
+  const mesh *ref = opt_reference(L, t, m, fn);
   smooth_opts o = {m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 20, 1, 0, 0, 0, NULL};
   int quiet = 0;
   if (t) {
@@ -928,15 +936,7 @@ static ud_qarray *push_quality(lua_State *L, int midx, const char *name, int tid
     if (!lua_istable(L, tidx)) typeerror(L, fn, tidx, "a table of options {metric=, reference=, p=}");
     static const char *const keys[] = {"metric", "reference", "p", NULL};
     check_keys(L, tidx, fn, keys);
-    if (lua_getfield(L, tidx, "reference") != LUA_TNIL) {
-      ud_mesh *ur = luaL_testudata(L, -1, MT_MESH);
-      if (!ur) luaL_error(L, "%s: option 'reference' must be a mesh (the same mesh in another configuration)", fn);
-      ref = ur->lm->m;
-      if (ref->type != m->type || ref->nvert != m->nvert || ref->ncell != m->ncell ||
-          memcmp(ref->cells, m->cells, sizeof(int) * (size_t)m->ncell * (size_t)m->nvc))
-        luaL_error(L, "%s: the reference must be the same mesh (same cells) in another configuration", fn);
-    }
-    lua_pop(L, 1);
+    ref = opt_reference(L, tidx, m, fn);
     pexp = opt_num(L, tidx, "p", 2, fn);
     pushed = read_metric(L, tidx, m, &buf, &qm, fn);
   }

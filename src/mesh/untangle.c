@@ -1173,6 +1173,7 @@ void untangle_defaults(untangle_opts *o) {
   o->slide = 1;
   o->placement = 0;
   o->verbose = 0;
+  o->xref = NULL;
 }
 
 static void stage_print(const untangle_stage *s) {
@@ -1238,6 +1239,16 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
     return 1;
   }
   memcpy(x0, m->x, sizeof(double) * nx);
+  /* reference shapes for the global stage */
+  double *cwinv = NULL;
+  if (o->xref) {
+    if (m->type != CELL_TRIANGLE && m->type != CELL_TETRAHEDRON) {
+      snprintf(err, MESH_ERRLEN, "reference shapes are implemented for triangles and tetrahedra");
+      free(x0); free(moved); free(region); free(touched); ut_ctx_free(&C);
+      return 1;
+    }
+    if (!(cwinv = ut_reference_winv(m, o->xref, err))) { free(x0); free(moved); free(region); free(touched); ut_ctx_free(&C); return 1; }
+  }
   int maxit = o->max_iterations > 0 ? o->max_iterations : 100;
   ut_count_cells(&C, m->x, beta, &r->invalid_before, NULL);
   /* the best state seen (fewest invalid cells, then the largest smallest corner Jacobian):
@@ -1350,7 +1361,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
     memcpy(save, m->x, sizeof(double) * nx);
     int its = 0, mv = 0, after;
     memset(trial, 0, (size_t)m->nvert);
-    if (ut_untangle_global(&C, &W, m->x, 10 * maxit, &its, &mv, trial) == 0) {
+    if (ut_untangle_global(&C, &W, m->x, 10 * maxit, cwinv, &its, &mv, trial) == 0) {
       ut_count_cells(&C, m->x, beta, &after, NULL);
       if (after < ninv) {
         s->iterations += its;
@@ -1445,7 +1456,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
     printf("untangle: %s — %d invalid left, %d vertices moved (mean %.3g, max %.3g), %.3f s\n",
            r->invalid_after ? "FAILED" : "done", r->invalid_after, r->moved, r->mean_displacement,
            r->max_displacement, r->seconds);
-  free(x0); free(moved); free(region); free(touched);
+  free(x0); free(moved); free(region); free(touched); free(cwinv);
   ut_ctx_free(&C);
   return 0;
 }

@@ -19,6 +19,8 @@ typedef struct {
   int placement;       /* stage 1/3 position in the feasible set: 0 Chebyshev centre, 1 mean of
                           three LP corners (the paper) */
   int verbose;         /* stage reports on stdout as they finish */
+  const double *xref;  /* triangles, tetrahedra: the global stage aims at each cell's shape in
+                          this configuration of the same mesh (nvert*dim); NULL: regular cells */
 } untangle_opts;
 
 typedef struct {

@@ -163,7 +163,8 @@ double ut_energy_eval(const objective *o, const double *x, double *grad, int nfr
   return f;
 }
 
-int ut_untangle_global(ctx *C, work *W, double *x, int maxit, int *iters, int *moved_count, unsigned char *moved) {
+int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwinv, int *iters, int *moved_count,
+                       unsigned char *moved) {
   mesh *m = C->m;
   int d = C->d;
   *iters = 0;
@@ -198,12 +199,16 @@ int ut_untangle_global(ctx *C, work *W, double *x, int maxit, int *iters, int *m
   o.fidx = W->fidx;
   o.smooth = 2;
   o.theta = 0.5; /* shape and size alike (0.1 and 0.9 untangled the same spirals) */
+  o.cwinv = cwinv; /* reference shapes, or the regular simplex below */
   if (mean > 0 && nfree) {
     ut_regular_winv(d, mean, o.winv);
     for (int outer = 0; outer < 100; outer++) {
       double dmin = INFINITY, J[3][3];
       const int *v;
-      for (int i = 0; i < ncell; i++) dmin = fmin(dmin, cell_map(C, x, W->cells[i], o.winv, J, &v));
+      for (int i = 0; i < ncell; i++) {
+        int c = W->cells[i];
+        dmin = fmin(dmin, cell_map(C, x, c, cwinv ? cwinv + (size_t)c * d * d : o.winv, J, &v));
+      }
       int ninv;
       ut_count_cells(C, x, 0, &ninv, NULL);
       if (!ninv && outer > 0) break;

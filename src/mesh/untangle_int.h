@@ -90,7 +90,8 @@ double *ut_reference_winv(const mesh *m, const double *xref, char *err);
 /* the mean ratio of each cell's map J = E W⁻¹ from its reference shape: d det(J)^(2/d) / |J|²,
  * 0 when inverted */
 void ut_relative_mean_ratio(const mesh *m, const double *cwinv, double *out);
-int ut_untangle_global(ctx *C, work *W, double *x, int maxit, int *iters, int *moved_count, unsigned char *moved);
+int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwinv, int *iters, int *moved_count,
+                       unsigned char *moved);
 int ut_frame_enter(mesh *m, unit_frame *f, double extra, char *err);
 void ut_frame_leave(mesh *m, unit_frame *f);
 /* every vertex coordinate finite, or a message naming the first that is not */

@@ -86,4 +86,17 @@ do
   T.fails(function() return a:smooth{quiet = true, reference = ref, method = "local"} end, "mesh:smooth", "reference shapes need method")
   T.fails(function() return a:smooth{quiet = true, reference = lg.mesh.rectangle{nx = 2}} end, "mesh:smooth", "same mesh")
 end
+-- untangling with reference shapes: the global stage aims at the structured strip's cells
+do
+  local m1, ref = H.spiral(40, 16, 0.75)
+  local m2 = m1:copy()
+  local r1 = m1:untangle{quiet = true}
+  local r2 = m2:untangle{quiet = true, reference = ref}
+  local q1 = m1:quality("deformation_quality", {reference = ref}):mean()
+  local q2 = m2:quality("deformation_quality", {reference = ref}):mean()
+  print(string.format("untangle with reference shapes: mean relative mean ratio %.4f (without: %.4f)", q2, q1))
+  T.check(r1.success and r2.success and q2 > q1, "untangled with and without reference shapes, closer to them with (%.4f > %.4f)", q2, q1)
+  local quads = lg.mesh.rectangle{nx = 2, cell = "quadrilateral"}
+  T.fails(function() return quads:untangle{quiet = true, reference = quads:copy()} end, "mesh:untangle", "triangles and tetrahedra")
+end
 print("hard tangles: all checks passed")

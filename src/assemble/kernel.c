@@ -150,11 +150,12 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   int nf = facet ? cell_nfacets(ct) : 1;
   /* interior facets (facet == 2): the item's code is f+ + nf*(f- + nf*perm), the '-' side's
    * points tabulated per (f-, perm), perm the rank of the facet vertex permutation between
-   * the two cells (mesh_perm_of_rank) */
+   * the two cells (mesh_perm_of_rank); simplices, intervals and quadrilaterals (whose '-'
+   * side gets its own bilinear map per point) */
   int interior = facet == 2, nvf = dim, nperm = 1;
   for (int i = 2; i <= nvf; i++) nperm *= i;
-  if (interior && !cell_is_simplex(ct)) {
-    snprintf(err, errlen, "interior facet integrals are implemented on intervals, triangles and tetrahedra");
+  if (interior && ct == CELL_HEXAHEDRON) {
+    snprintf(err, errlen, "interior facet integrals are implemented on intervals, triangles, quadrilaterals and tetrahedra");
     return NULL;
   }
   memset(k, 0, sizeof *k);
@@ -362,6 +363,15 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
           }
         }
       }
+    if (!affine) {
+      /* the '-' cell's bilinear map at those points: its J varies from point to point */
+      int nv = cell_nverts(ct);
+      double *gm = malloc(sizeof(double) * nm_pts * nv * dim + 1);
+      if (!gm) { free(qm); KERR("out of memory"); }
+      for (size_t i = 0; i < nm_pts; i++) q1_shape(ct, qm + i * dim, NULL, gm + i * nv * dim);
+      emit_table(&b, "GQM", gm, (long)(nm_pts * nv * dim));
+      free(gm);
+    }
     for (int p = 0; p <= 3; p++) {
       if (!need_val[1][p] && !need_grad[1][p]) continue;
       int nl = el[p].nloc;
@@ -442,7 +452,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   /* geometry: once for an affine simplex; a quadrilateral's or hexahedron's varies from
    * point to point and is computed in the quadrature loop */
   if (affine) emit_affine_geometry(&b, dim, "X", "");
-  if (interior) emit_affine_geometry(&b, dim, "XM", "M");
+  if (interior && affine) emit_affine_geometry(&b, dim, "XM", "M");
   if (!affine) {
   } else if (!facet) {
     sb_printf(&b, "  const double scale = det < 0.0 ? -det : det;\n");
@@ -559,6 +569,17 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
                     "    const double K00 = C00*idet, K01 = C01*idet, K02 = C02*idet;\n"
                     "    const double K10 = (J12*J20 - J10*J22)*idet, K11 = (J00*J22 - J02*J20)*idet, K12 = (J02*J10 - J00*J12)*idet;\n"
                     "    const double K20 = (J10*J21 - J11*J20)*idet, K21 = (J01*J20 - J00*J21)*idet, K22 = (J00*J11 - J01*J10)*idet;\n");
+    if (interior) { /* the '-' quadrilateral's map at the same physical point */
+      sb_printf(&b, "    const double *gqm = GQM + qm*%d;\n", nv * dim);
+      for (int i = 0; i < dim; i++)
+        for (int kk = 0; kk < dim; kk++) {
+          sb_printf(&b, "    const double JM%d%d = ", i, kk);
+          for (int j = 0; j < nv; j++) sb_printf(&b, "%sXM[%d]*gqm[%d]", j ? " + " : "", j * dim + i, j * dim + kk);
+          sb_printf(&b, ";\n");
+        }
+      sb_printf(&b, "    const double detM = JM00*JM11 - JM01*JM10, idetM = 1.0/detM;\n"
+                    "    const double KM00 = JM11*idetM, KM01 = -JM01*idetM, KM10 = -JM10*idetM, KM11 = JM00*idetM;\n");
+    }
     if (!facet) sb_printf(&b, "    const double scale = det < 0.0 ? -det : det;\n");
     else if (dim == 2)
       sb_printf(&b, "    const double e0 = J00*FT[facet*6] + J01*FT[facet*6+1], e1 = J10*FT[facet*6] + J11*FT[facet*6+1];\n"

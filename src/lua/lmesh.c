@@ -293,9 +293,9 @@ static int mesh_interior_facets(lua_State *L) {
   ud_mesh *um = check_mesh(L, 1, fn);
   if (lua_gettop(L) > 1) return luaL_error(L, "%s: takes no arguments, got %d", fn, lua_gettop(L) - 1);
   mesh *m = um->lm->m;
-  if (m->type != CELL_TRIANGLE && m->type != CELL_TETRAHEDRON && m->type != CELL_INTERVAL)
-    return luaL_error(L, "%s: interior facet integrals are implemented on intervals, triangles and tetrahedra, not on %s",
-                      fn, m->type == CELL_QUADRILATERAL ? "quadrilaterals" : "hexahedra");
+  if (m->type == CELL_HEXAHEDRON)
+    return luaL_error(L, "%s: interior facet integrals are implemented on intervals, triangles, quadrilaterals and "
+                         "tetrahedra, not on hexahedra", fn);
   if (mesh_build_interior_facets(m)) return luaL_error(L, "%s: %s", fn, m->err);
   region r;
   memset(&r, 0, sizeof r);

@@ -62,7 +62,7 @@ T.close(lg.integrate(r4:interior_facets(), 1), 3 + 3 + 16*math.sqrt(2)/4, 1e-13,
 
 -- errors
 T.fails(function() return lg.integrate(m4:cells(), lg.jump(w)) end, "'-' side", "interior_facets")
-T.fails(function() return lg.mesh.rectangle{nx = 2, cell = "quadrilateral"}:interior_facets() end, "triangles and tetrahedra")
+T.fails(function() return lg.mesh.box{nx = 1, cell = "hexahedron"}:interior_facets() end, "not on hexahedra")
 T.fails(function() return lg.jump() end, "lg.jump", "expression")
 T.fails(function() return lg.jump(w, 1) end, "lg.jump", "normal")
 print("interior facets: all checks passed")
@@ -116,6 +116,30 @@ do
     T.check(math.abs(r2 - (p + 1)) < 0.1, "SIPG DG%d L2 rate %.3f", p, r2)
     T.check(math.abs(r1 - p) < 0.1, "SIPG DG%d broken H1 rate %.3f", p, r1)
   end
+end
+
+-- quadrilaterals, straight and distorted (non-affine maps on both sides): DG Q1 and Q2
+-- interpolants of functions in their spaces do not jump, and SIPG with DG Q1 reproduces a
+-- linear solution (linear in x and y is bilinear in the reference coordinates)
+for _, dist in ipairs{false, true} do
+  local mesh = lg.mesh.rectangle{nx = 4, ny = 3, cell = "quadrilateral"}
+  if dist then
+    for k = 1, mesh:nvertices() do
+      local a, b = mesh:coordinates(k)
+      if a > 0 and a < 1 and b > 0 and b < 1 then mesh:set_coordinates(k, a + 0.06*math.sin(7*k), b + 0.05*math.cos(5*k)) end
+    end
+  end
+  local what = dist and "distorted quadrilaterals" or "quadrilaterals"
+  local Fq = mesh:interior_facets()
+  if not dist then T.close(lg.integrate(Fq, 1), 5, 1e-14, "the 4x3 quadrilateral grid's interior edges") end
+  for p = 1, 2 do
+    local g = p == 1 and 1 + 2*x - 3*y + x*y or x*x*y - y*y + x
+    local d = lg.interpolate(lg.discontinuous(p), mesh, g, "d")
+    local jj = lg.integrate(Fq, lg.jump(d)^2)
+    T.check(jj < 1e-28, "%s: DG Q%d interpolant of a Q%d function does not jump (%.1e)", what, p, p, jj)
+  end
+  local err = sipg(mesh, lg.discontinuous(1), 1 + 2*x - y)
+  T.check(err < 1e-12, "%s: SIPG DG Q1 reproduces a linear solution (%.1e)", what, err)
 end
 
 -- what is not there yet says so: derivatives of interior facet terms for adjoints

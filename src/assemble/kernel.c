@@ -66,6 +66,33 @@ static int func_side(expr_ctx *c, int f) {
   return fi ? fi->side : 0;
 }
 
+/* a bilinear or trilinear map's J, det J and K = J^-1 at quadrature point `qi` (the shape
+ * gradients from table `gt`, the vertices from `xn`), names suffixed by sf ('-' side: M) */
+static void emit_point_map(strbuf *b, int dim, int nv, const char *xn, const char *gt, const char *qi, const char *sf) {
+  sb_printf(b, "    const double *gq%s = %s + %s*%d;\n", sf, gt, qi, nv * dim);
+  for (int i = 0; i < dim; i++)
+    for (int kk = 0; kk < dim; kk++) {
+      sb_printf(b, "    const double J%s%d%d = ", sf, i, kk);
+      for (int j = 0; j < nv; j++) sb_printf(b, "%s%s[%d]*gq%s[%d]", j ? " + " : "", xn, j * dim + i, sf, j * dim + kk);
+      sb_printf(b, ";\n");
+    }
+  if (dim == 2) {
+    sb_printf(b, "    const double det%s = J%s00*J%s11 - J%s01*J%s10, idet%s = 1.0/det%s;\n", sf, sf, sf, sf, sf, sf, sf);
+    sb_printf(b, "    const double K%s00 = J%s11*idet%s, K%s01 = -J%s01*idet%s, K%s10 = -J%s10*idet%s, K%s11 = J%s00*idet%s;\n", sf,
+              sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf);
+    return;
+  }
+  sb_printf(b, "    const double C%s00 = J%s11*J%s22 - J%s12*J%s21, C%s01 = J%s02*J%s21 - J%s01*J%s22, C%s02 = J%s01*J%s12 - J%s02*J%s11;\n",
+            sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf);
+  sb_printf(b, "    const double det%s = J%s00*C%s00 + J%s10*C%s01 + J%s20*C%s02, idet%s = 1.0/det%s;\n", sf, sf, sf, sf, sf, sf, sf, sf,
+            sf);
+  sb_printf(b, "    const double K%s00 = C%s00*idet%s, K%s01 = C%s01*idet%s, K%s02 = C%s02*idet%s;\n", sf, sf, sf, sf, sf, sf, sf, sf, sf);
+  sb_printf(b, "    const double K%s10 = (J%s12*J%s20 - J%s10*J%s22)*idet%s, K%s11 = (J%s00*J%s22 - J%s02*J%s20)*idet%s, "
+               "K%s12 = (J%s02*J%s10 - J%s00*J%s12)*idet%s;\n", sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf);
+  sb_printf(b, "    const double K%s20 = (J%s10*J%s21 - J%s11*J%s20)*idet%s, K%s21 = (J%s01*J%s20 - J%s00*J%s21)*idet%s, "
+               "K%s22 = (J%s00*J%s11 - J%s01*J%s10)*idet%s;\n", sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf, sf);
+}
+
 /* an affine simplex's J, det J and K = J^-1 from the vertex coordinates xn, the names
  * suffixed by sfx (the '-' cell of an interior facet: JM00, detM, KM00) */
 static void emit_affine_geometry(strbuf *b, int dim, const char *xn, const char *sf) {
@@ -553,33 +580,9 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   if (interior) sb_printf(&b, "    const int qm = fmq*%d + q;\n", q.n);
   if (!affine) {
     int nv = cell_nverts(ct);
-    sb_printf(&b, "    const double *gq = GQ + qq*%d;\n", nv * dim);
-    for (int i = 0; i < dim; i++)
-      for (int kk = 0; kk < dim; kk++) {
-        sb_printf(&b, "    const double J%d%d = ", i, kk);
-        for (int j = 0; j < nv; j++) sb_printf(&b, "%sX[%d]*gq[%d]", j ? " + " : "", j * dim + i, j * dim + kk);
-        sb_printf(&b, ";\n");
-      }
-    if (dim == 2)
-      sb_printf(&b, "    const double det = J00*J11 - J01*J10, idet = 1.0/det;\n"
-                    "    const double K00 = J11*idet, K01 = -J01*idet, K10 = -J10*idet, K11 = J00*idet;\n");
-    else
-      sb_printf(&b, "    const double C00 = J11*J22 - J12*J21, C01 = J02*J21 - J01*J22, C02 = J01*J12 - J02*J11;\n"
-                    "    const double det = J00*C00 + J10*C01 + J20*C02, idet = 1.0/det;\n"
-                    "    const double K00 = C00*idet, K01 = C01*idet, K02 = C02*idet;\n"
-                    "    const double K10 = (J12*J20 - J10*J22)*idet, K11 = (J00*J22 - J02*J20)*idet, K12 = (J02*J10 - J00*J12)*idet;\n"
-                    "    const double K20 = (J10*J21 - J11*J20)*idet, K21 = (J01*J20 - J00*J21)*idet, K22 = (J00*J11 - J01*J10)*idet;\n");
-    if (interior) { /* the '-' quadrilateral's map at the same physical point */
-      sb_printf(&b, "    const double *gqm = GQM + qm*%d;\n", nv * dim);
-      for (int i = 0; i < dim; i++)
-        for (int kk = 0; kk < dim; kk++) {
-          sb_printf(&b, "    const double JM%d%d = ", i, kk);
-          for (int j = 0; j < nv; j++) sb_printf(&b, "%sXM[%d]*gqm[%d]", j ? " + " : "", j * dim + i, j * dim + kk);
-          sb_printf(&b, ";\n");
-        }
-      sb_printf(&b, "    const double detM = JM00*JM11 - JM01*JM10, idetM = 1.0/detM;\n"
-                    "    const double KM00 = JM11*idetM, KM01 = -JM01*idetM, KM10 = -JM10*idetM, KM11 = JM00*idetM;\n");
-    }
+    emit_point_map(&b, dim, nv, "X", "GQ", "qq", "");
+    /* the '-' quadrilateral's map at the same physical point */
+    if (interior) emit_point_map(&b, dim, nv, "XM", "GQM", "qm", "M");
     if (!facet) sb_printf(&b, "    const double scale = det < 0.0 ? -det : det;\n");
     else if (dim == 2)
       sb_printf(&b, "    const double e0 = J00*FT[facet*6] + J01*FT[facet*6+1], e1 = J10*FT[facet*6] + J11*FT[facet*6+1];\n"

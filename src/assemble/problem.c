@@ -2,7 +2,7 @@
  * coefficient tables, kernels, CSR assembly (the pattern from the dof maps, element entries
  * added in place), essential boundary conditions by row replacement, KSP and SNES
  * solves with failures reported, never ignored. */
-#include "assemble.h"
+#include "problem_int.h"
 #include "solver.h"
 
 #include <ctype.h>
@@ -15,109 +15,18 @@
 #include <string.h>
 #include <time.h>
 
-typedef struct {
-  region reg;
-  int qdeg;
-  coef_table tab;
-  lg_kernel kmat, kres;
-  int have_mat, have_res;
-  int nitems;
-  int *cells, *facets; /* interior facets: cells holds the '+' cells then the '-' cells */
-  int interior;        /* an interior facet term: its element rows and columns are the
-                        * problem's fields on the '+' cell, then on the '-' cell */
-  field_layout rl, cl; /* the element tensor's rows and columns (the problem's layout, or it twice) */
-  PetscCount coo_off;
-  size_t blk_off, str_off; /* block layout (B > 1): its first node pair and node row */
-} prob_term;
-
-typedef struct {
-  int field;          /* row/column field */
-  int comp;           /* its component (vector fields) */
-  int points;         /* on vertices (facets[] holds the local vertex), not on facets */
-  int src;            /* the boundary condition it comes from (form term index) */
-  expr_tape tape;     /* roots: a (coefficient of u), r (rest): u = -r/a */
-  expr *g;            /* the value -r/a (controls differentiate it) */
-  int nitems;
-  int *cells, *facets;
-} bc_term;
-
-#define LG_BCD_CACHE 8
-#define LG_CHUNK 4096 /* items per chunk of matrix assembly */
-struct lg_problem {
-  lg_env *env;
-  lg_mesh *lm;
-  int nonlinear, bc_symmetric;
-  field_layout rows, cols;
-  dofmap *rdm[KER_MAXFIELD], *cdm[KER_MAXFIELD];
-  int rglob[KER_MAXFIELD + 1], cglob[KER_MAXFIELD + 1];
-  int N;
-  int nterm;
-  prob_term *t;
-  int nbct;
-  bc_term *bct;
-  int nbc;
-  long bc_cap;
-  PetscInt *bc_rows;
-  PetscScalar *bc_vals;
-  int *bc_org;        /* per essential row: the bc term, cell and local node it came from */
-  struct { int fid, param, n; expr_tape *tape; } bcd[LG_BCD_CACHE]; /* d g / d control, per bc term */
-  int nbcd;
-  PetscCount ncoo;      /* element matrix entries (the diagonal first) */
-  int *coo_pos;         /* where each goes in the CSR value array of A (B = 1) */
-  /* B > 1 (every field a B-vector): per element node pair the place of its B x B block's
-   * first entry, per element node row the length of its matrix rows (entry (a, b) of the
-   * block is at pos + a*stride + b): B^2 fewer positions */
-  int *blk_pos, *blk_stride;
-  double *mbuf;         /* element matrices of one chunk of items */
-  PetscInt nnz;
-  PetscInt *csr_i, *csr_j; /* the pattern, A's own arrays (MatCreateSeqAIJWithArrays): freed after A */
-  PetscScalar *csr_a;
-  size_t bcc_n;         /* symmetric elimination: the essential columns' entries (keep_bc_columns) */
-  int *bcc_row, *bcc_col;
-  double *bcc_val;
-  Mat A;
-  Vec b, x;
-  KSP ksp;
-  SNES snes;
-  double *state;      /* current iterate (N) */
-  double *solution;   /* the last solution (N), for adjoints */
-  int have_solution;
-  form *eqn, *bcf;    /* copies of the forms, for derived operators */
-  int test[KER_MAXFIELD], unk[KER_MAXFIELD];
-  int matrix_ready;   /* lg_problem_solve_vector: the matrix is assembled and factored */
-  int adj_stale;      /* A does not hold the Jacobian at the last solution, factored by the
-                       * SNES's solver (nonlinear problems: the adjoint makes it so, and a
-                       * Newton solve warm-started at the solution then reuses it) */
-  uint64_t matrix_fp; /* linear problems: what the assembled, factored matrix was made from */
-  uint64_t adj_fp;    /* nonlinear problems: what the adjoint's Jacobian was made from (besides the state) */
-  int chord;          /* a warm-started resolve (an optimization's next evaluation): steps may
-                       * keep the last Jacobian while it contracts the residual (snes_jacobian) */
-  int lag_valid;      /* A holds a Jacobian assembled for this solve's data (any iterate) */
-  double lag_fnorm;   /* |F| at the last Jacobian evaluation */
-  double *elem;       /* element tensor scratch */
-  size_t elem_cap;
-  int failed;         /* a callback failed: env->err holds why */
-  int nnull;          /* dimension of the null space given with nullspace= (0: none) */
-  MatNullSpace null;  /* that null space (constants of some fields, rigid body modes) */
-  int null_const[KER_MAXFIELD]; /* fields whose constants are in it: their mean is set to 0 */
-  int null_rigid;     /* it is the rigid body modes */
-  char prefix[64];
-};
-
 static double now_ms(void) {
   struct timespec ts;
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
 }
 
-/* PETSc calls inside functions that return int: on error, record PETSc's message */
-static int petsc_fail(lg_env *env, PetscErrorCode ierr, const char *what) {
+int lg_petsc_fail(lg_env *env, PetscErrorCode ierr, const char *what) {
   const char *text = NULL;
   PetscErrorMessage(ierr, &text, NULL);
   lg_seterr(env, "%s failed: %s", what, text ? text : "PETSc error");
   return 1;
 }
-#define PCHK(call, what) do { PetscErrorCode ierr_ = (call); if (ierr_) return petsc_fail(env, ierr_, what); } while (0)
 
 /* ---------------------------------------------------------------- setup */
 
@@ -494,348 +403,6 @@ static int compute_bcs(lg_env *env, lg_problem *p) {
   return 0;
 }
 
-/* the global nodes of item it of term t for the rows (or the columns) of its element
- * matrix, in its order: with B components per node (every field a B-vector) the dof / B of
- * every B-th local dof, with B = 1 the global dofs. An interior facet term's second half of
- * fields are the problem's fields again, on the '-' cell */
-static void term_nodes(const lg_problem *p, const prob_term *t, int it, int rows, int B, PetscInt *out) {
-  const field_layout *l = rows ? &t->rl : &t->cl;
-  dofmap *const *dm = rows ? p->rdm : p->cdm;
-  const int *glob = rows ? p->rglob : p->cglob;
-  int nf = rows ? p->rows.n : p->cols.n;
-  for (int a = 0; a < l->n; a++) {
-    int f = a % nf, c = t->interior && a >= nf ? t->cells[t->nitems + it] : t->cells[it];
-    const int nl = l->nloc[a], *cd = dm[f]->cell_dofs + (size_t)c * nl;
-    PetscInt *o = out + l->off[a] / B, g = glob[f];
-    for (int k = 0, i = 0; k < nl; k += B, i++) o[i] = (g + cd[k]) / B;
-  }
-}
-
-/* rows are short (tens of entries): insertion sort */
-static void sort_row(PetscInt *v, size_t n) {
-  for (size_t i = 1; i < n; i++) {
-    PetscInt x = v[i];
-    size_t j = i;
-    for (; j > 0 && v[j - 1] > x; j--) v[j] = v[j - 1];
-    v[j] = x;
-  }
-}
-
-/* The sparsity pattern straight from the dof maps: the rows of the cells that matrix terms
- * integrate over, each row the union of its cells' column dofs (a marker per column, no
- * global sort), sorted per row, and the diagonal always (row replacement and ILU need it).
- * Then each element matrix entry's place in the CSR value array, so that assembly adds the
- * element matrices straight into the matrix (no MatSetValues search, no COO scatter). This
- * replaced MatSetPreallocationCOO, which sorted every (row, column) pair: 70% of the setup of
- * a P1 Laplacian on 1.5 M tetrahedra (issue 11). */
-/* the block size of the matrix: the number of components when every field has the same
- * (an elasticity problem: 2 or 3), else 1 (Taylor-Hood, scalar systems) */
-static int matrix_block_size(const lg_problem *p) {
-  int bs = p->cdm[0]->bs;
-  for (int a = 0; a < p->cols.n; a++)
-    if (p->cdm[a]->bs != bs || p->rdm[a]->bs != bs) return 1;
-  return p->rows.n == p->cols.n ? bs : 1;
-}
-
-/* a single vector field of the mesh's dimension (elasticity): the rigid body modes as the
- * near null space, which PETSc's GAMG needs to coarsen it well (it is ignored by direct
- * solvers and unpreconditioned Krylov methods) */
-/* the node coordinates of a single vector field of the mesh's dimension, interlaced like
- * its dofs (what MatNullSpaceCreateRigidBody takes) */
-static int node_coordinates(lg_env *env, lg_problem *p, Vec *out) {
-  int dim = p->lm->m->dim;
-  const dofmap *dm = p->cdm[0];
-  Vec X;
-  PCHK(VecCreateSeq(PETSC_COMM_SELF, p->N, &X), "VecCreateSeq");
-  PCHK(VecSetBlockSize(X, dim), "VecSetBlockSize");
-  PetscScalar *x;
-  PCHK(VecGetArray(X, &x), "VecGetArray");
-  mesh *m = p->lm->m;
-  for (int c = 0; c < m->ncell; c++) {
-    const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
-    for (int k = 0; k < dm->el.nloc; k++) {
-      double xyz[3];
-      dofmap_node_coords(dm, c, k * dim, xyz);
-      for (int j = 0; j < dim; j++) x[cd[k * dim + j]] = xyz[j];
-    }
-  }
-  PCHK(VecRestoreArray(X, &x), "VecRestoreArray");
-  *out = X;
-  return 0;
-}
-
-static int set_near_nullspace(lg_env *env, lg_problem *p) {
-  int dim = p->lm->m->dim;
-  if (p->cols.n != 1 || p->rows.n != 1 || matrix_block_size(p) != dim || dim < 2 || p->cdm[0]->degree < 1) return 0;
-  Vec X;
-  if (node_coordinates(env, p, &X)) return 1;
-  MatNullSpace ns;
-  PetscErrorCode ierr = MatNullSpaceCreateRigidBody(X, &ns);
-  if (!ierr) ierr = MatSetNearNullSpace(p->A, ns);
-  if (!ierr) ierr = MatNullSpaceDestroy(&ns);
-  VecDestroy(&X);
-  if (ierr) return petsc_fail(env, ierr, "the rigid body modes (near null space)");
-  return 0;
-}
-
-static int setup_matrix(lg_env *env, lg_problem *p) {
-  int N = p->N;
-  PetscCount n = N;
-  size_t maxsize = 1;
-  for (int i = 0; i < p->nterm; i++) {
-    prob_term *t = &p->t[i];
-    if (!t->have_mat) continue;
-    t->coo_off = n;
-    n += (PetscCount)t->nitems * t->rl.size * t->cl.size;
-    if ((size_t)t->rl.size * (size_t)t->cl.size > maxsize) maxsize = (size_t)t->rl.size * (size_t)t->cl.size;
-  }
-  p->ncoo = n;
-  /* the pattern of nodes: with B components per node everywhere (a vector field, B = bs) the
-   * rows and columns come in blocks of B, and the pattern is that of the node graph, each
-   * entry a B x B block (9x less work for 3D elasticity, whose rows hold about 250 entries);
-   * B = 1 otherwise */
-  int B = matrix_block_size(p), Nn = N / B;
-  size_t nblk = 0, nstr = 0;
-  for (int i = 0; B > 1 && i < p->nterm; i++) {
-    prob_term *t = &p->t[i];
-    if (!t->have_mat) continue;
-    t->blk_off = nblk;
-    t->str_off = nstr;
-    nblk += (size_t)t->nitems * (size_t)(t->rl.size / B) * (size_t)(t->cl.size / B);
-    nstr += (size_t)t->nitems * (size_t)(t->rl.size / B);
-  }
-  /* the element rows of each node row: (entry of the row's first column, term, item) */
-  PetscInt rg[2 * KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS];
-  size_t *start = calloc((size_t)Nn + 2, sizeof(size_t));
-  int *mark = malloc(sizeof(int) * ((size_t)Nn + 1));
-  PetscInt *nodes = malloc(sizeof(PetscInt) * ((size_t)Nn + 1)); /* one node row */
-  if (!start || !mark || !nodes) { free(start); free(mark); free(nodes); lg_seterr(env, "out of memory"); return 1; }
-  for (int i = 0; i < p->nterm; i++) {
-    prob_term *t = &p->t[i];
-    if (!t->have_mat) continue;
-    int rn = t->rl.size / B;
-    for (int it = 0; it < t->nitems; it++) {
-      term_nodes(p, t, it, 1, B, rg);
-      for (int r = 0; r < rn; r++) start[rg[r] + 2]++;
-    }
-  }
-  for (int r = 0; r < Nn; r++) start[r + 2] += start[r + 1];
-  size_t nent = start[Nn + 1];
-  PetscCount *ebase = malloc(sizeof(PetscCount) * (nent + 1));
-  int *eterm = malloc(sizeof(int) * (nent + 1)), *eitem = malloc(sizeof(int) * (nent + 1));
-  size_t *estr = B > 1 ? malloc(sizeof(size_t) * (nent + 1)) : NULL;
-  if (!ebase || !eterm || !eitem || (B > 1 && !estr)) {
-    free(start); free(mark); free(nodes); free(ebase); free(eterm); free(eitem); free(estr);
-    lg_seterr(env, "out of memory");
-    return 1;
-  }
-  for (int i = 0; i < p->nterm; i++) {
-    prob_term *t = &p->t[i];
-    if (!t->have_mat) continue;
-    int rn = t->rl.size / B, cn = t->cl.size / B;
-    for (int it = 0; it < t->nitems; it++) {
-      term_nodes(p, t, it, 1, B, rg);
-      for (int r = 0; r < rn; r++) {
-        size_t q = start[rg[r] + 1]++;
-        if (B > 1) {
-          ebase[q] = (PetscCount)(t->blk_off + ((size_t)it * rn + (size_t)r) * (size_t)cn);
-          estr[q] = t->str_off + (size_t)it * rn + (size_t)r;
-        } else ebase[q] = t->coo_off + ((PetscCount)it * rn + r) * cn;
-        eterm[q] = i;
-        eitem[q] = it;
-      }
-    }
-  }
-  /* each node row: the union of its element rows' column nodes (a marker per node, no
-   * global sort), sorted, the diagonal always; its B rows are laid out one after another,
-   * each the row's nodes times B columns. Then every element entry's place, read from the
-   * marker (it holds the column node's position in the row: no search) */
-  PetscInt *ia = malloc(sizeof(PetscInt) * ((size_t)N + 1)), *ja = NULL;
-  size_t nnz = 0, cap = (size_t)N * 8 + 16;
-  ja = malloc(sizeof(PetscInt) * cap);
-  if (B > 1) {
-    p->blk_pos = malloc(sizeof(int) * (nblk + 1));
-    p->blk_stride = malloc(sizeof(int) * (nstr + 1));
-  } else p->coo_pos = malloc(sizeof(int) * ((size_t)n + 1));
-  p->mbuf = malloc(sizeof(double) * ((size_t)LG_CHUNK * maxsize + 1));
-  if (!ia || !ja || (B > 1 ? !p->blk_pos || !p->blk_stride : !p->coo_pos) || !p->mbuf) {
-    free(start); free(mark); free(nodes); free(ebase); free(eterm); free(eitem); free(estr); free(ia); free(ja);
-    lg_seterr(env, "out of memory for %ld matrix entries", (long)n);
-    return 1;
-  }
-  for (int r = 0; r < Nn; r++) mark[r] = -1;
-  int bad = 0;
-  /* the column nodes of the row's elements, gathered once for the union and the places */
-  size_t bcap = 0, ocap = 0, *eoff = NULL;
-  PetscInt *ebuf = NULL;
-  for (int R = 0; R < Nn && !bad; R++) {
-    size_t ne = start[R + 1] - start[R], tot = 0;
-    if (ne + 1 > ocap) {
-      ocap = 2 * (ne + 1);
-      size_t *no = realloc(eoff, sizeof(size_t) * ocap);
-      if (!no) { bad = 1; break; }
-      eoff = no;
-    }
-    for (size_t q = 0; q < ne; q++) {
-      eoff[q] = tot;
-      tot += (size_t)(p->t[eterm[start[R] + q]].cl.size / B);
-    }
-    eoff[ne] = tot;
-    if (tot > bcap) {
-      bcap = 2 * tot;
-      PetscInt *nb = realloc(ebuf, sizeof(PetscInt) * bcap);
-      if (!nb) { bad = 1; break; }
-      ebuf = nb;
-    }
-    for (size_t q = 0; q < ne; q++) term_nodes(p, &p->t[eterm[start[R] + q]], eitem[start[R] + q], 0, B, ebuf + eoff[q]);
-    /* the row's nodes */
-    size_t len = 0;
-    nodes[len++] = R;
-    mark[R] = R;
-    for (size_t k = 0; k < tot; k++) {
-      PetscInt J = ebuf[k];
-      if (mark[J] != R) { mark[J] = R; nodes[len++] = J; }
-    }
-    sort_row(nodes, len);
-    size_t need = nnz + len * (size_t)B * (size_t)B;
-    if (need > (size_t)INT32_MAX) { bad = 2; break; }
-    if (need > cap) {
-      while (cap < need) cap *= 2;
-      PetscInt *nj = realloc(ja, sizeof(PetscInt) * cap);
-      if (!nj) { bad = 1; break; }
-      ja = nj;
-    }
-    for (int a = 0; a < B; a++) {
-      ia[R * B + a] = (PetscInt)nnz;
-      for (size_t k = 0; k < len; k++)
-        for (int b2 = 0; b2 < B; b2++) ja[nnz++] = nodes[k] * B + b2;
-    }
-    /* the marker now holds positions (>= Nn would clash with row numbers: use -2 - position) */
-    for (size_t k = 0; k < len; k++) mark[nodes[k]] = -2 - (int)k;
-    int base = (int)ia[R * B];
-    if (B == 1) p->coo_pos[R] = base + (-2 - mark[R]);
-    for (size_t q = 0; q < ne; q++) {
-      const PetscInt *en = ebuf + eoff[q];
-      int cn = (int)(eoff[q + 1] - eoff[q]);
-      size_t e = start[R] + q;
-      if (B > 1) {
-        /* one place per B x B block (its first entry) and the row length, the stride */
-        int *bp = p->blk_pos + ebase[e];
-        for (int k = 0; k < cn; k++) bp[k] = base + (-2 - mark[en[k]]) * B;
-        p->blk_stride[estr[e]] = (int)(len * (size_t)B);
-      } else {
-        int *pos = p->coo_pos + ebase[e];
-        for (int k = 0; k < cn; k++) pos[k] = base + (-2 - mark[en[k]]);
-      }
-    }
-    /* back to "not in row R" for the columns of the next rows */
-    for (size_t k = 0; k < len; k++) mark[nodes[k]] = R;
-  }
-  free(ebuf);
-  free(eoff);
-  free(nodes);
-  free(estr);
-  free(start);
-  free(mark);
-  free(ebase);
-  free(eterm);
-  free(eitem);
-  if (bad) {
-    free(ia); free(ja);
-    if (bad == 2) lg_seterr(env, "the matrix has more than 2^31 nonzeros: more than lugal indexes");
-    else lg_seterr(env, "out of memory for the sparsity pattern");
-    return 1;
-  }
-  ia[N] = (PetscInt)nnz;
-  p->nnz = (PetscInt)nnz;
-  /* the matrix is made on these arrays, not a copy of them: PETSc's own preallocation from a
-   * CSR pattern inserts every entry through MatSetValues (a third of the setup of a vector
-   * P2 matrix) and holds a second pattern while ours is alive. The values start as zero
-   * pages, touched first by the first assembly */
-  PetscInt *jt = realloc(ja, sizeof(PetscInt) * (nnz ? nnz : 1));
-  if (jt) ja = jt;
-  p->csr_i = ia;
-  p->csr_j = ja;
-  p->csr_a = calloc(nnz ? nnz : 1, sizeof(PetscScalar));
-  if (!p->csr_a) { lg_seterr(env, "out of memory for %ld matrix values", (long)nnz); return 1; }
-  int bs = matrix_block_size(p);
-  PCHK(MatCreateSeqAIJWithArrays(PETSC_COMM_SELF, N, N, ia, ja, p->csr_a, &p->A), "matrix creation");
-  if (p->prefix[0]) PCHK(MatSetOptionsPrefix(p->A, p->prefix), "MatSetOptionsPrefix");
-  if (bs > 1) PCHK(MatSetBlockSize(p->A, bs), "MatSetBlockSize");
-  /* row replacement must keep the pattern: the element places are reused every assembly */
-  PCHK(MatSetOption(p->A, MAT_KEEP_NONZERO_PATTERN, PETSC_TRUE), "MatSetOption");
-  PCHK(MatSetOption(p->A, MAT_NEW_NONZERO_LOCATION_ERR, PETSC_TRUE), "MatSetOption");
-  PCHK(MatCreateVecs(p->A, &p->x, &p->b), "vector creation");
-  return set_near_nullspace(env, p);
-}
-
-/* nullspace=: the constants of some unknowns (one unit vector per component), or the rigid
- * body modes; attached to the matrix (MatSetNullSpace) for Krylov solvers, and the count
- * that MUMPS's null pivots may reach */
-static int setup_nullspace(lg_env *env, lg_problem *p, const lg_problem_spec *s) {
-  if (!s->nnull && !s->null_rigid) return 0;
-  int dim = p->lm->m->dim;
-  MatNullSpace ns = NULL;
-  PetscErrorCode ierr = 0;
-  if (s->null_rigid) {
-    if (p->cols.n != 1 || p->cdm[0]->bs != dim || dim < 2 || p->cdm[0]->degree < 1) {
-      lg_seterr(env, "nullspace = \"rigid\": the rigid body modes need a single vector unknown of the mesh's dimension (%d "
-                     "components)", dim);
-      return 1;
-    }
-    for (int i = 0; i < p->nbct; i++) {
-      lg_seterr(env, "nullspace = \"rigid\": the problem has essential conditions, which already fix the rigid motions");
-      return 1;
-    }
-    Vec X;
-    if (node_coordinates(env, p, &X)) return 1;
-    ierr = MatNullSpaceCreateRigidBody(X, &ns);
-    VecDestroy(&X);
-    p->nnull = dim == 2 ? 3 : 6;
-    p->null_rigid = 1;
-  } else {
-    Vec v[KER_MAXFIELD * FEM_MAXBS];
-    int nv = 0;
-    for (int k = 0; k < s->nnull; k++) {
-      int a = -1;
-      for (int j = 0; j < p->cols.n; j++)
-        if (p->cols.func[j] == s->null_fields[k]) a = j;
-      expr_func_info *fi = expr_func_get(env->c, s->null_fields[k]);
-      if (a < 0) {
-        lg_seterr(env, "nullspace: %s is not an unknown of the problem", fi ? fi->name : "?");
-        for (int i = 0; i < nv; i++) VecDestroy(&v[i]);
-        return 1;
-      }
-      for (int i = 0; i < p->nbct; i++)
-        if (p->bct[i].field == a) {
-          lg_seterr(env, "nullspace: %s has essential conditions, which fix its constant already", fi ? fi->name : "?");
-          for (int t = 0; t < nv; t++) VecDestroy(&v[t]);
-          return 1;
-        }
-      p->null_const[a] = 1;
-      int bs = p->cdm[a]->bs;
-      for (int j = 0; j < bs && !ierr; j++) {
-        ierr = VecCreateSeq(PETSC_COMM_SELF, p->N, &v[nv]);
-        PetscScalar *x;
-        if (!ierr) ierr = VecSet(v[nv], 0);
-        if (!ierr) ierr = VecGetArray(v[nv], &x);
-        if (ierr) break;
-        for (int i = j; i < p->cdm[a]->ndof; i += bs) x[p->cglob[a] + i] = 1;
-        VecRestoreArray(v[nv], &x);
-        ierr = VecNormalize(v[nv], NULL);
-        nv++;
-      }
-    }
-    if (!ierr) ierr = MatNullSpaceCreate(PETSC_COMM_SELF, PETSC_FALSE, nv, v, &ns);
-    for (int i = 0; i < nv; i++) VecDestroy(&v[i]);
-    p->nnull = nv;
-  }
-  if (!ierr) ierr = MatSetNullSpace(p->A, ns);
-  p->null = ns;
-  if (ierr) return petsc_fail(env, ierr, "the null space");
-  return 0;
-}
-
 lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
   double t0 = now_ms();
   if (s->nfield < 1 || s->nfield > KER_MAXFIELD) {
@@ -883,8 +450,8 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
   ph[2] = now_ms();
   if (setup_bcs(env, p, s->bc, s->test, s->unknown, s->nfield)) goto fail;
   ph[3] = now_ms();
-  if (setup_matrix(env, p)) goto fail;
-  if (setup_nullspace(env, p, s)) goto fail;
+  if (lg_problem_setup_matrix(env, p)) goto fail;
+  if (lg_problem_setup_nullspace(env, p, s)) goto fail;
   ph[4] = now_ms();
   p->state = calloc((size_t)p->N + 1, sizeof(double));
   p->solution = calloc((size_t)p->N + 1, sizeof(double));
@@ -1080,7 +647,7 @@ static int assemble_residual(lg_env *env, lg_problem *p, const double *state, do
     PetscInt rg[2 * KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS];
     for (int it = 0; it < t->nitems; it++) {
       const double *ev = p->elem + (size_t)it * t->rl.size;
-      term_nodes(p, t, it, 1, 1, rg);
+      lg_term_nodes(p, t, it, 1, 1, rg);
       for (int k = 0; k < t->rl.size; k++) r[rg[k]] += ev[k];
     }
   }
@@ -1269,7 +836,7 @@ static int remove_null(lg_env *env, lg_problem *p) {
 static int linear_solve_checked(lg_env *env, lg_problem *p, lg_solve_info *info) {
   int native = lg_lu_native(p->ksp, p->prefix);
   PetscErrorCode ierr = KSPSolve(p->ksp, p->b, p->x);
-  if (ierr) return petsc_fail(env, ierr, "the linear solve");
+  if (ierr) return lg_petsc_fail(env, ierr, "the linear solve");
   if (check_null_pivots(env, p, p->ksp)) return 1;
   KSPConvergedReason reason;
   PCHK(KSPGetConvergedReason(p->ksp, &reason), "KSPGetConvergedReason");
@@ -1553,7 +1120,7 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
     else lg_seterr(env, "the nonlinear solve did not converge: after %d Newton iterations %s", (int)its, why);
     return 1;
   }
-  if (ierr) return petsc_fail(env, ierr, "the nonlinear solve");
+  if (ierr) return lg_petsc_fail(env, ierr, "the nonlinear solve");
   SNESConvergedReason reason;
   PetscInt its, lits, nh;
   SNESGetConvergedReason(p->snes, &reason);
@@ -1827,7 +1394,7 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   VecDestroy(&r);
   VecDestroy(&l);
   const char *what = transpose ? "the adjoint solve" : "the sensitivity solve";
-  if (ierr) return petsc_fail(env, ierr, what);
+  if (ierr) return lg_petsc_fail(env, ierr, what);
   if (reason < 0) { lg_seterr(env, "%s failed: %s", what, ksp_reason_name(reason)); return 1; }
   for (int i = 0; i < p->N; i++)
     if (!isfinite(lam[i])) { lg_seterr(env, "%s produced non-finite values", what); return 1; }
@@ -1896,7 +1463,7 @@ int lg_problem_solve_vector(lg_env *env, lg_problem *p, const double *rhs, doubl
   KSPConvergedReason reason;
   for (;;) {
     ierr = KSPSolve(p->ksp, p->b, p->x);
-    if (ierr) return petsc_fail(env, ierr, "a solve with the problem's matrix");
+    if (ierr) return lg_petsc_fail(env, ierr, "a solve with the problem's matrix");
     KSPGetConvergedReason(p->ksp, &reason);
     if (reason >= 0 || !lg_lu_native(p->ksp, p->prefix)) break;
     PCHK(lg_lu_fallback(p->ksp, p->A), "the switch to MUMPS"); /* PETSc's LU failed: MUMPS, once */

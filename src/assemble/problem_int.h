@@ -1,0 +1,114 @@
+/* problem_int.h — the state of a linear or nonlinear problem, shared by problem.c
+ * (setup, assembly, solves, derived operators) and sparsity.c (the matrix pattern and null
+ * spaces). Internal to the assembly layer: the interface is assemble.h. */
+#ifndef LUGAL_PROBLEM_INT_H
+#define LUGAL_PROBLEM_INT_H
+
+#include "assemble.h"
+
+#include <petscsnes.h>
+
+typedef struct {
+  region reg;
+  int qdeg;
+  coef_table tab;
+  lg_kernel kmat, kres;
+  int have_mat, have_res;
+  int nitems;
+  int *cells, *facets; /* interior facets: cells holds the '+' cells then the '-' cells */
+  int interior;        /* an interior facet term: its element rows and columns are the
+                        * problem's fields on the '+' cell, then on the '-' cell */
+  field_layout rl, cl; /* the element tensor's rows and columns (the problem's layout, or it twice) */
+  PetscCount coo_off;
+  size_t blk_off, str_off; /* block layout (B > 1): its first node pair and node row */
+} prob_term;
+
+typedef struct {
+  int field;          /* row/column field */
+  int comp;           /* its component (vector fields) */
+  int points;         /* on vertices (facets[] holds the local vertex), not on facets */
+  int src;            /* the boundary condition it comes from (form term index) */
+  expr_tape tape;     /* roots: a (coefficient of u), r (rest): u = -r/a */
+  expr *g;            /* the value -r/a (controls differentiate it) */
+  int nitems;
+  int *cells, *facets;
+} bc_term;
+
+#define LG_BCD_CACHE 8
+#define LG_CHUNK 4096 /* items per chunk of matrix assembly */
+struct lg_problem {
+  lg_env *env;
+  lg_mesh *lm;
+  int nonlinear, bc_symmetric;
+  field_layout rows, cols;
+  dofmap *rdm[KER_MAXFIELD], *cdm[KER_MAXFIELD];
+  int rglob[KER_MAXFIELD + 1], cglob[KER_MAXFIELD + 1];
+  int N;
+  int nterm;
+  prob_term *t;
+  int nbct;
+  bc_term *bct;
+  int nbc;
+  long bc_cap;
+  PetscInt *bc_rows;
+  PetscScalar *bc_vals;
+  int *bc_org;        /* per essential row: the bc term, cell and local node it came from */
+  struct { int fid, param, n; expr_tape *tape; } bcd[LG_BCD_CACHE]; /* d g / d control, per bc term */
+  int nbcd;
+  PetscCount ncoo;      /* element matrix entries (the diagonal first) */
+  int *coo_pos;         /* where each goes in the CSR value array of A (B = 1) */
+  /* B > 1 (every field a B-vector): per element node pair the place of its B x B block's
+   * first entry, per element node row the length of its matrix rows (entry (a, b) of the
+   * block is at pos + a*stride + b): B^2 fewer positions */
+  int *blk_pos, *blk_stride;
+  double *mbuf;         /* element matrices of one chunk of items */
+  PetscInt nnz;
+  PetscInt *csr_i, *csr_j; /* the pattern, A's own arrays (MatCreateSeqAIJWithArrays): freed after A */
+  PetscScalar *csr_a;
+  size_t bcc_n;         /* symmetric elimination: the essential columns' entries (keep_bc_columns) */
+  int *bcc_row, *bcc_col;
+  double *bcc_val;
+  Mat A;
+  Vec b, x;
+  KSP ksp;
+  SNES snes;
+  double *state;      /* current iterate (N) */
+  double *solution;   /* the last solution (N), for adjoints */
+  int have_solution;
+  form *eqn, *bcf;    /* copies of the forms, for derived operators */
+  int test[KER_MAXFIELD], unk[KER_MAXFIELD];
+  int matrix_ready;   /* lg_problem_solve_vector: the matrix is assembled and factored */
+  int adj_stale;      /* A does not hold the Jacobian at the last solution, factored by the
+                       * SNES's solver (nonlinear problems: the adjoint makes it so, and a
+                       * Newton solve warm-started at the solution then reuses it) */
+  uint64_t matrix_fp; /* linear problems: what the assembled, factored matrix was made from */
+  uint64_t adj_fp;    /* nonlinear problems: what the adjoint's Jacobian was made from (besides the state) */
+  int chord;          /* a warm-started resolve (an optimization's next evaluation): steps may
+                       * keep the last Jacobian while it contracts the residual (snes_jacobian) */
+  int lag_valid;      /* A holds a Jacobian assembled for this solve's data (any iterate) */
+  double lag_fnorm;   /* |F| at the last Jacobian evaluation */
+  double *elem;       /* element tensor scratch */
+  size_t elem_cap;
+  int failed;         /* a callback failed: env->err holds why */
+  int nnull;          /* dimension of the null space given with nullspace= (0: none) */
+  MatNullSpace null;  /* that null space (constants of some fields, rigid body modes) */
+  int null_const[KER_MAXFIELD]; /* fields whose constants are in it: their mean is set to 0 */
+  int null_rigid;     /* it is the rigid body modes */
+  char prefix[64];
+};
+
+/* PETSc calls inside functions that return int: on error, record PETSc's message */
+int lg_petsc_fail(lg_env *env, PetscErrorCode ierr, const char *what);
+#define PCHK(call, what) do { PetscErrorCode ierr_ = (call); if (ierr_) { lg_petsc_fail(env, ierr_, what); return 1; } } while (0)
+
+/* sparsity.c */
+/* the global nodes (B components per node) of item it of term t, rows or columns */
+void lg_term_nodes(const lg_problem *p, const prob_term *t, int it, int rows, int B, PetscInt *out);
+/* the number of components when every field has the same, else 1 */
+int lg_matrix_block_size(const lg_problem *p);
+/* the pattern, the element entries' places, the matrix and its vectors, the near null space */
+int lg_problem_setup_matrix(lg_env *env, lg_problem *p);
+/* nullspace= */
+int lg_problem_setup_nullspace(lg_env *env, lg_problem *p, const lg_problem_spec *s);
+
+#endif

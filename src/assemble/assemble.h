@@ -182,7 +182,8 @@ int lg_problem_bc_mixed(lg_env *env, const lg_problem *p, int fid1, int param1, 
 /* their derivatives dg_r/dm_j at the last solve: triplets (problem row, control dof (0 for a
  * parameter), value), allocated; returns how many, -1 on failure */
 int lg_problem_bc_derivative(lg_env *env, lg_problem *p, int fid, int param, int **rows, int **cols, double **vals);
-/* bindings of the unknowns to the last solution; returns how many */
+/* bindings of the unknowns (and of their '-' side copies, interior facets) to the last solution:
+ * up to 2 per unknown; returns how many */
 int lg_problem_bind_state(const lg_problem *p, coef_binding *b);
 /* the adjoint: (dR/du)^T lam = rhs at the last solution (N values each), R the discrete
  * residual whose essential rows are u_i - g_i */

@@ -21,7 +21,8 @@
 
 typedef struct {
   region reg;
-  int nitems, *cells, *facets;
+  int nitems, *cells, *facets; /* interior facets: cells holds the '+' then the '-' cells */
+  int interior;                /* arity 1: the element vector is func on '+', then on '-' */
   lg_kernel k;
   coef_table tab;
 } fk_term;
@@ -71,11 +72,40 @@ lg_form_kernels *lg_form_kernels_new(lg_env *env, lg_mesh *lm, const form *F, in
     int qd = lg_quad_degree(env, f, F->t[i].order, lm->m->type);
     kernel_spec s = {0, NULL, f};
     field_layout rows = {0};
+    t->interior = K->arity == 1 && t->reg.kind == REGION_INTERIOR;
     if (K->arity == 1) {
       if (form_gradient_table(env->c, f, func, &t->tab)) {
         lg_seterr(env, "%s", expr_error(env->c));
         lg_form_kernels_free(K);
         return NULL;
+      }
+      int twin = t->interior ? expr_func_side(env->c, func, 1) : -1;
+      if (t->interior && twin >= 0) {
+        /* an interior facet term also depends on func's '-' side restriction: its leaves'
+         * rows follow (the element vector is func on '+', then func on '-') */
+        coef_table tm;
+        if (form_gradient_table(env->c, f, twin, &tm)) {
+          lg_seterr(env, "%s", expr_error(env->c));
+          coef_table_free(&t->tab);
+          lg_form_kernels_free(K);
+          return NULL;
+        }
+        expr **rl = realloc(t->tab.res_leaf, sizeof(expr *) * (size_t)(t->tab.nres + tm.nres + 1));
+        if (rl) t->tab.res_leaf = rl;
+        expr **rr = realloc(t->tab.res, sizeof(expr *) * (size_t)(t->tab.nres + tm.nres + 1));
+        if (rr) t->tab.res = rr;
+        if (!rl || !rr) {
+          coef_table_free(&tm);
+          coef_table_free(&t->tab);
+          lg_form_kernels_free(K);
+          lg_seterr(env, "out of memory");
+          return NULL;
+        }
+        for (int r = 0; r < tm.nres; r++) {
+          t->tab.res_leaf[t->tab.nres] = tm.res_leaf[r];
+          t->tab.res[t->tab.nres++] = tm.res[r];
+        }
+        coef_table_free(&tm);
       }
       if (t->tab.nres == 0) { coef_table_free(&t->tab); continue; } /* the term does not depend on it */
       s.arity = 1;
@@ -88,6 +118,15 @@ lg_form_kernels *lg_form_kernels_new(lg_env *env, lg_mesh *lm, const form *F, in
       rows.bs[0] = dm->bs;
       rows.off[0] = 0;
       rows.size = dm->nloc;
+      if (t->interior) {
+        rows.n = 2;
+        rows.func[1] = twin;
+        rows.degree[1] = rows.degree[0];
+        rows.nloc[1] = dm->nloc;
+        rows.bs[1] = dm->bs;
+        rows.off[1] = dm->nloc;
+        rows.size = 2 * dm->nloc;
+      }
       /* the derivative's own, lower degree where that rule integrates it exactly and so
        * gives what the functional's rule gives (alpha/2 f^2: 2 instead of 12 with a
        * transcendental d in the same term); otherwise the functional's rule, so that the
@@ -103,13 +142,6 @@ lg_form_kernels *lg_form_kernels_new(lg_env *env, lg_mesh *lm, const form *F, in
       if (exact && own <= qd) qd = own;
     } else if (f->kind == E_CONST && f->value == 0)
       continue;
-    if (K->arity == 1 && t->reg.kind == REGION_INTERIOR) {
-      lg_seterr(env, "term %d integrates over interior facets: derivatives of such terms (adjoints, gradients, "
-                     "sensitivities) are not implemented yet", i + 1);
-      coef_table_free(&t->tab);
-      lg_form_kernels_free(K);
-      return NULL;
-    }
     int facet = t->reg.kind == REGION_BOUNDARY ? 1 : t->reg.kind == REGION_INTERIOR ? 2 : 0;
     if (kernel_build(env->jit, env->c, lm->m->type, facet, qd, &s, K->arity ? &rows : NULL, NULL,
                      &t->k, err, sizeof err)) {
@@ -143,8 +175,8 @@ int lg_form_kernels_eval(lg_env *env, lg_mesh *lm, lg_form_kernels *K, int nextr
       if (lg_assemble_items(env, lm, &t->k, t->nitems, t->cells, t->facets, t->k.ncoef, bind, out)) return 1;
       continue;
     }
-    int nl = K->dm->nloc;
-    size_t need = (size_t)t->nitems * (size_t)nl + 1;
+    int nl = K->dm->nloc, sides = t->interior ? 2 : 1;
+    size_t need = (size_t)t->nitems * (size_t)(sides * nl) + 1;
     if (need > K->elem_cap) {
       double *e = realloc(K->elem, sizeof(double) * need);
       if (!e) { lg_seterr(env, "out of memory"); return 1; }
@@ -152,10 +184,12 @@ int lg_form_kernels_eval(lg_env *env, lg_mesh *lm, lg_form_kernels *K, int nextr
       K->elem_cap = need;
     }
     if (lg_assemble_items(env, lm, &t->k, t->nitems, t->cells, t->facets, t->k.ncoef, bind, K->elem)) return 1;
-    for (int it = 0; it < t->nitems; it++) {
-      const int *cd = K->dm->cell_dofs + (size_t)t->cells[it] * nl;
-      for (int k = 0; k < nl; k++) out[cd[k]] += K->elem[(size_t)it * nl + k];
-    }
+    for (int it = 0; it < t->nitems; it++)
+      for (int sd = 0; sd < sides; sd++) {
+        const int *cd = K->dm->cell_dofs + (size_t)t->cells[sd * t->nitems + it] * nl;
+        const double *ev = K->elem + ((size_t)it * sides + sd) * nl;
+        for (int k = 0; k < nl; k++) out[cd[k]] += ev[k];
+      }
   }
   size_t n = K->arity ? (size_t)K->dm->ndof : 1;
   for (size_t i = 0; i < n; i++)
@@ -194,10 +228,14 @@ struct lg_reduced {
   lg_form_kernels *tan_rhs[KER_MAXFIELD], *soa_rhs[KER_MAXFIELD], *hD[LG_MAXCONTROL], *hG[LG_MAXCONTROL];
 };
 
+/* F uses func, or its '-' side restriction (interior facets) */
 static int form_uses(lg_env *env, const form *F, int func) {
+  expr_func_info *fi = expr_func_get(env->c, func);
+  int tw = fi ? fi->twin : -1;
   for (int i = 0; i < F->n; i++) {
     expr *e = expr_canon(env->c, F->t[i].integrand), *leaf;
     if (expr_collect_fields(env->c, 1, &e, func, 1, &leaf) > 0) return 1;
+    if (tw >= 0 && expr_collect_fields(env->c, 1, &e, tw, 1, &leaf) > 0) return 1;
   }
   return 0;
 }
@@ -302,8 +340,8 @@ lg_reduced *lg_reduced_new(lg_env *env, lg_problem *p, const form *J, int nc, co
         goto fail;
       }
       if (fi && fi->kind == FK_UNKNOWN) {
-        int ours = 0;
-        for (int a = 0; a < rf->nf; a++) ours |= rf->fld[a].unknown == leaf[k]->i0;
+        int ours = 0, base = fi->side ? fi->twin : leaf[k]->i0; /* a '-' side restriction is its function's */
+        for (int a = 0; a < rf->nf; a++) ours |= rf->fld[a].unknown == base;
         if (!ours) {
           lg_seterr(env, "the functional contains the unknown %s, which is not an unknown of the problem", fi->name);
           goto fail;
@@ -412,7 +450,7 @@ static int ensure_state(lg_env *env, lg_reduced *rf) {
 
 int lg_reduced_value(lg_env *env, lg_reduced *rf, double *J) {
   if (ensure_state(env, rf)) return 1;
-  coef_binding st[KER_MAXFIELD];
+  coef_binding st[2 * KER_MAXFIELD];
   int ns = lg_problem_bind_state(rf->p, st);
   return lg_form_kernels_eval(env, rf->lm, rf->Jval, ns, st, J);
 }
@@ -441,7 +479,7 @@ static int add_bc_action(lg_env *env, lg_reduced *rf, int i, const double *dm, d
 
 int lg_reduced_gradient(lg_env *env, lg_reduced *rf, double **g) {
   if (ensure_state(env, rf)) return 1;
-  coef_binding b[KER_MAXFIELD + KER_MAXFIELD];
+  coef_binding b[3 * KER_MAXFIELD];
   int ns = lg_problem_bind_state(rf->p, b);
   /* the adjoint: (dR/du)^T lam = -dJ/du */
   int N = lg_problem_size(rf->p);
@@ -538,7 +576,7 @@ int lg_sensitivity(lg_env *env, lg_problem *p, int param, double *du) {
   form *dF = form_param_derivative(env, F, param);
   double *rhs = calloc((size_t)N + 1, sizeof(double));
   if (!dF || !rhs) { form_free(dF); free(rhs); lg_seterr(env, "%s", dF ? "out of memory" : expr_error(env->c)); return 1; }
-  coef_binding st[KER_MAXFIELD];
+  coef_binding st[2 * KER_MAXFIELD];
   int ns = lg_problem_bind_state(p, st), rc = 0;
   /* dR/da: the equation differentiated with respect to a, as a linear form in each test space */
   for (int a = 0; a < nf && !rc; a++) {
@@ -709,7 +747,7 @@ int lg_reduced_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
     if (rf->c[i].kind == LG_CONTROL_FIELD) memcpy(rf->dmf[i]->x, dm[i], sizeof(double) * (size_t)rf->c[i].f->dm->ndof);
     else expr_param_values(env->c)[rf->dpar[i]] = dm[i][0];
   }
-  coef_binding st[KER_MAXFIELD];
+  coef_binding st[2 * KER_MAXFIELD];
   int ns = lg_problem_bind_state(rf->p, st), N = lg_problem_size(rf->p);
   int nbc = lg_problem_essential_rows(rf->p, NULL, 0);
   int *rows = malloc(sizeof(int) * (size_t)(nbc + 1));

@@ -1322,12 +1322,7 @@ int lg_problem_bc_derivative(lg_env *env, lg_problem *p, int fid, int param, int
 }
 
 int lg_problem_bind_state(const lg_problem *p, coef_binding *b) {
-  for (int a = 0; a < p->cols.n; a++) {
-    b[a].func = p->cols.func[a];
-    b[a].dm = p->cdm[a];
-    b[a].vals = p->solution + p->cglob[a];
-  }
-  return p->cols.n;
+  return bind_unknowns((lg_problem *)p, p->solution, b);
 }
 
 /* the transposed Jacobian solve of the adjoint: (dR/du)^T lam = rhs at the last solution,

@@ -281,13 +281,15 @@ void coef_table_free(coef_table *t);
  * right-hand sides, design derivatives) */
 int form_gradient_table(expr_ctx *c, expr *f, int func, coef_table *out);
 /* the directional derivative d/de f(w + e dw) at e = 0: sum over the leaves D^a w of f of
- * df/d(D^a w) * D^a dw (dw a function too: a tangent or a direction) */
+ * df/d(D^a w) * D^a dw (dw a function too: a tangent or a direction), w's '-' side
+ * restriction in the direction of dw's */
 expr *form_directional(expr_ctx *c, expr *f, int func, int dir);
 /* the first variation of a form: each integrand f replaced by sum_k d/de f(w_k + e dir_k),
  * terms that vanish dropped (a Lagrangian's variations in its test directions are the
  * equations of its stationary point) */
 form *form_variation(expr_ctx *c, const form *F, int n, const int *funcs, const int *dirs);
-/* f with every leaf D^a from_c replaced by D^a to_c (a test function by an adjoint) */
+/* f with every leaf D^a from_c replaced by D^a to_c (a test function by an adjoint), and
+ * from's '-' side restriction (interior facets) by to's */
 expr *form_replace_function(expr_ctx *c, expr *f, int from, int to);
 
 #endif

@@ -159,7 +159,22 @@ int form_gradient_table(expr_ctx *c, expr *f, int func, coef_table *out) {
   return 0;
 }
 
+static expr *replace_one(expr_ctx *c, expr *f, int from, int to);
+
+/* a function's restriction to the '-' side of interior facets (expr_func_side) follows it:
+ * replaced by the restriction of `to` */
 expr *form_replace_function(expr_ctx *c, expr *f, int from, int to) {
+  expr_func_info *fi = expr_func_get(c, from);
+  int tw = fi && !fi->side ? fi->twin : -1;
+  f = replace_one(c, f, from, to);
+  if (f && tw >= 0) {
+    int tt = expr_func_side(c, to, 1);
+    f = tt < 0 ? NULL : replace_one(c, f, tw, tt);
+  }
+  return f;
+}
+
+static expr *replace_one(expr_ctx *c, expr *f, int from, int to) {
   f = expr_canon(c, f);
   if (!f) return NULL;
   expr *leaf[MAXLEAF];
@@ -173,7 +188,22 @@ expr *form_replace_function(expr_ctx *c, expr *f, int from, int to) {
   return n ? expr_subs(c, f, n, leaf, img) : f;
 }
 
+static expr *directional_one(expr_ctx *c, expr *f, int func, int dir);
+
+/* with the '-' side's restriction of func (interior facets) in the direction's restriction */
 expr *form_directional(expr_ctx *c, expr *f, int func, int dir) {
+  expr_func_info *fi = expr_func_get(c, func);
+  int tw = fi && !fi->side ? fi->twin : -1;
+  expr *d = directional_one(c, f, func, dir);
+  if (d && tw >= 0) {
+    int td = expr_func_side(c, dir, 1);
+    expr *d2 = td < 0 ? NULL : directional_one(c, f, tw, td);
+    d = d2 ? expr_add(c, d, d2) : NULL;
+  }
+  return d;
+}
+
+static expr *directional_one(expr_ctx *c, expr *f, int func, int dir) {
   f = expr_canon(c, f);
   if (!f) return NULL;
   expr *leaf[MAXLEAF];

@@ -24,6 +24,7 @@ lg_env *lg_env_new(const char *tcc_libdir) {
   if (!env) return NULL;
   env->c = expr_ctx_new();
   env->jit = jit_new(JIT_AUTO, tcc_libdir);
+  env->pcache.prev = env->pcache.next = &env->pcache;
   if (!env->c || !env->jit) { lg_env_free(env); return NULL; }
   return env;
 }
@@ -31,6 +32,13 @@ lg_env *lg_env_new(const char *tcc_libdir) {
 void lg_env_free(lg_env *env) {
   if (!env) return;
   for (int i = 0; i < LG_INTEGRATE_KEEP; i++) kernel_release(&env->kept[i].k);
+  /* groups whose kernels outlive the environment (none when objects are freed in order) */
+  while (env->pcache.next && env->pcache.next != &env->pcache) {
+    kernel_pcache_group *g = env->pcache.next;
+    env->pcache.next = g->next;
+    free(g->v);
+    free(g);
+  }
   expr_ctx_free(env->c);
   jit_free(env->jit);
   free(env);
@@ -293,29 +301,49 @@ static uint64_t mix(uint64_t h, const void *p, size_t n) {
 }
 
 /* the point cache mode of this assembly (kernel.h, kernel_pcache): 0 compute, 1 compute and
- * store, 2 read; *C the cache when 1 or 2 */
-static int pcache_mode(lg_env *env, kernel_pcache *pc, const mesh *m, int nq, int ncache, int nitems,
-                       const int *cells, const int *facets, double **C) {
+ * store, 2 read; *C the cache when 1 or 2. The kernel links to the group of its csig and
+ * item list (created on first use). */
+static int pcache_mode(lg_env *env, const lg_kernel *k, const mesh *m, int nitems, const int *cells,
+                       const int *facets, double **C) {
   *C = NULL;
+  kernel_pcache *pc = k->pc;
   if (!pc || env->no_point_cache) return 0;
-  uint64_t h = 0xcbf29ce484222325ull;
-  h = mix(h, &nitems, sizeof nitems);
-  h = mix(h, m->x, sizeof(double) * (size_t)m->nvert * (size_t)m->dim);
-  h = mix(h, cells, sizeof(int) * (size_t)nitems);
-  if (facets) h = mix(h, facets, sizeof(int) * (size_t)nitems);
-  size_t n = (size_t)nitems * (size_t)nq * (size_t)ncache;
-  if (pc->valid && pc->key == h && pc->n == n) { *C = pc->v; return 2; }
-  if (pc->seen && pc->key == h && n > 0 && n <= KER_PCACHE_MAX) {
-    if (pc->n != n) {
-      free(pc->v);
-      pc->v = malloc(sizeof(double) * n);
-      pc->n = pc->v ? n : 0;
+  uint64_t ih = 0xcbf29ce484222325ull;
+  ih = mix(ih, &nitems, sizeof nitems);
+  ih = mix(ih, cells, sizeof(int) * (size_t)nitems);
+  if (facets) ih = mix(ih, facets, sizeof(int) * (size_t)nitems);
+  if (!pc->g || pc->g->sig != k->csig || pc->g->items != ih) {
+    kernel_pcache_unlink(pc);
+    kernel_pcache_group *head = &env->pcache, *g = head->next;
+    while (g != head && !(g->sig == k->csig && g->items == ih)) g = g->next;
+    if (g == head) {
+      if (!(g = calloc(1, sizeof *g))) return 0;
+      g->sig = k->csig;
+      g->items = ih;
+      g->prev = head;
+      g->next = head->next;
+      head->next->prev = g;
+      head->next = g;
     }
-    if (pc->v) { *C = pc->v; return 1; }
+    g->refs++;
+    pc->g = g;
   }
-  pc->key = h;
-  pc->seen = 1;
-  pc->valid = 0;
+  kernel_pcache_group *g = pc->g;
+  uint64_t h = mix(0x9E3779B97F4A7C15ull, m->x, sizeof(double) * (size_t)m->nvert * (size_t)m->dim);
+  size_t n = (size_t)nitems * (size_t)k->nq * (size_t)k->ncache;
+  if (g->valid && g->key == h && g->n == n) { *C = g->v; return 2; }
+  int store = n > 0 && n <= KER_PCACHE_MAX && ((g->seen && g->key == h) || n <= KER_PCACHE_FIRST);
+  g->key = h;
+  g->seen = 1;
+  g->valid = 0;
+  if (store) {
+    if (g->n != n) {
+      free(g->v);
+      g->v = malloc(sizeof(double) * n);
+      g->n = g->v ? n : 0;
+    }
+    if (g->v) { *C = g->v; return 1; }
+  }
   return 0;
 }
 
@@ -332,11 +360,11 @@ int lg_assemble_range(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, c
   /* the point cache belongs to the whole item list: its mode is decided at the first range */
   int cm = 0;
   if (first == 0) {
-    cm = pcache_mode(env, k->pc, m, k->nq, k->ncache, total, cells, facets, &C);
-    if (k->pc) k->pc->mode = cm;
+    cm = pcache_mode(env, k, m, total, cells, facets, &C);
+    if (k->pc) { k->pc->mode = cm; env->pcache_uses[cm]++; }
   } else if (k->pc && k->pc->mode) {
     cm = k->pc->mode;
-    C = k->pc->v;
+    C = k->pc->g->v;
   }
   /* interior facets: the '-' cells follow the '+' cells (lg_region_items) */
   const int *cells_m = k->facet == 2 ? cells + total + first : NULL;
@@ -382,7 +410,7 @@ int lg_assemble_range(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, c
   }
   clock_gettime(CLOCK_MONOTONIC, &t1);
   jit_account(env->jit, k->jid, (t1.tv_sec - t0.tv_sec) * 1e3 + (t1.tv_nsec - t0.tv_nsec) * 1e-6);
-  if (cm == 1 && first + nitems == total) k->pc->valid = 1;
+  if (cm == 1 && first + nitems == total) k->pc->g->valid = 1;
   if (k->arity == 0) out[0] += sum;
   free(W);
   free(Ab);

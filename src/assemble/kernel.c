@@ -528,6 +528,13 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   if (!pcls || !pslot) KERR("out of memory");
   k->ncache = expr_tape_point_cache(&tape, pcls, pslot);
   if (k->ncache < 0) KERR("out of memory");
+  /* what the cache holds: kernels with the same signature share their values (kernel.h) */
+  k->csig = 0x84222325cbf29ce4ull ^ ((uint64_t)ct << 40) ^ ((uint64_t)facet << 32) ^ ((uint64_t)qdeg << 16) ^ (uint64_t)k->nq;
+  for (int i = 0; i < tape.n; i++)
+    if (pcls[i] == PC_CACHED) {
+      k->csig = (k->csig ^ (tape.node[i]->hash + (uint64_t)pslot[i])) * 0x9E3779B97F4A7C15ull;
+      k->csig ^= k->csig >> 31;
+    }
   char ref[128];
   for (int a = 0; a < vr.n; a++)
     for (int bb = 0; bb < vc.n; bb++) {
@@ -774,9 +781,19 @@ int kernel_build(lg_jit *j, expr_ctx *c, cell_type ct, int facet, int qdeg, cons
   return 0;
 }
 
+void kernel_pcache_unlink(kernel_pcache *pc) {
+  kernel_pcache_group *g = pc->g;
+  pc->g = NULL;
+  if (!g || --g->refs > 0) return;
+  g->prev->next = g->next;
+  g->next->prev = g->prev;
+  free(g->v);
+  free(g);
+}
+
 void kernel_release(lg_kernel *k) {
   if (!k || !k->pc) return;
-  free(k->pc->v);
+  kernel_pcache_unlink(k->pc);
   free(k->pc);
   k->pc = NULL;
 }

@@ -22,17 +22,31 @@
 typedef void (*kernel_fn)(const double *X, const double *W, const double *P, int facet, double *A,
                           double *C, int cmode);
 
-/* the per-point cache of a kernel (see expr_tape_point_cache): the values of its cached
+/* the per-point cache of kernels (see expr_tape_point_cache): the values of their cached
  * coordinate-only subexpressions at every quadrature point of every item, kept for one
- * geometry and item list (key); filled on the second assembly with the same key, read from
- * the third on. The kernel's cmode: 0 compute, 1 compute and store in C, 2 read C. */
-typedef struct {
-  uint64_t key;
+ * geometry. Kernels that cache the same subexpressions with the same rule (their csig) on the
+ * same item list share one group, so the values a functional J computed serve dJ/du, the
+ * Hessian and the next problem built with them. A group is filled on its first assembly when
+ * small (KER_PCACHE_FIRST), else on its second with the same geometry, and read from then
+ * on. The kernel's cmode: 0 compute, 1 compute and store in C, 2 read C. */
+typedef struct kernel_pcache_group {
+  struct kernel_pcache_group *prev, *next; /* the environment's circular list (a sentinel) */
+  uint64_t sig, items; /* the kernels' csig and the item list's hash */
+  int refs;            /* kernels linked to it; freed with the last */
+  uint64_t key;        /* the geometry's hash when seen */
   int seen, valid;
-  int mode;  /* of the assembly in progress (a range after its first keeps it) */
   size_t n;
   double *v;
+} kernel_pcache_group;
+/* a kernel's link to its group, and the mode of the assembly in progress (a range after
+ * the first keeps it) */
+typedef struct {
+  kernel_pcache_group *g;
+  int mode;
 } kernel_pcache;
+/* drop the kernel's link (the group goes with its last kernel) */
+void kernel_pcache_unlink(kernel_pcache *pc);
+#define KER_PCACHE_FIRST ((size_t)1 << 21) /* doubles (16 MB): stored on the first assembly */
 #define KER_PCACHE_MAX ((size_t)1 << 24) /* doubles (128 MB) per kernel at most */
 
 /* the fields of an element tensor's rows (or columns): field i has nloc[i] local dofs from
@@ -63,6 +77,7 @@ typedef struct {
   int cached; /* 1 when the JIT found it compiled already */
   int jid;           /* the JIT's id of its code (jit_current) */
   int ncache;        /* cached values per quadrature point */
+  uint64_t csig;     /* what they are: the cached subexpressions, the rule, the integral kind */
   kernel_pcache *pc; /* NULL when ncache == 0; freed by kernel_release */
 } lg_kernel;
 

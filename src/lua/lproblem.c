@@ -506,6 +506,18 @@ static int l_stats(lua_State *L) {
   lua_pushinteger(L, env->nkernels); lua_setfield(L, -2, "kernels");
   lua_pushnumber(L, env->kernel_ms); lua_setfield(L, -2, "kernel_ms");
   lua_pushinteger(L, (lua_Integer)expr_node_count(env->c)); lua_setfield(L, -2, "nodes");
+  /* the point caches (kernel.h): live groups, their bytes, assemblies by mode */
+  lua_Integer ng = 0, nb = 0;
+  for (const kernel_pcache_group *g = env->pcache.next; g && g != &env->pcache; g = g->next) {
+    ng++;
+    nb += (lua_Integer)(g->n * sizeof(double));
+  }
+  lua_createtable(L, 0, 5);
+  lua_pushinteger(L, ng); lua_setfield(L, -2, "groups");
+  lua_pushinteger(L, nb); lua_setfield(L, -2, "bytes");
+  static const char *const modes[] = {"computed", "stored", "read"};
+  for (int i = 0; i < 3; i++) { lua_pushinteger(L, (lua_Integer)env->pcache_uses[i]); lua_setfield(L, -2, modes[i]); }
+  lua_setfield(L, -2, "point_cache");
   return 1;
 }
 

@@ -15,11 +15,6 @@
 #include <string.h>
 #include <time.h>
 
-static double now_ms(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
 
 int lg_petsc_fail(lg_env *env, PetscErrorCode ierr, const char *what) {
   const char *text = NULL;
@@ -465,6 +460,9 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
                     "(dof maps %.2f, terms and kernels %.2f, essential conditions %.2f, sparsity and matrix %.2f)\n",
             p->N, (long)p->ncoo, env->nkernels, env->kernel_ms, now_ms() - t0, ph[1] - ph[0], ph[2] - ph[1],
             ph[3] - ph[2], ph[4] - ph[3]);
+  if (env->verbose)
+    fprintf(stderr, "[lugal] sparsity and matrix: pattern %.2f ms (%ld nonzeros), PETSc matrix %.2f ms, near null space %.2f ms\n",
+            p->setup_ms[0], (long)p->nnz, p->setup_ms[1], p->setup_ms[2]);
   return p;
 fail:
   lg_problem_free(p);

@@ -7,6 +7,13 @@
 #include "assemble.h"
 
 #include <petscsnes.h>
+#include <time.h>
+
+static inline double now_ms(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
 
 typedef struct {
   region reg;
@@ -63,6 +70,7 @@ struct lg_problem {
   int *blk_pos, *blk_stride;
   double *mbuf;         /* element matrices of one chunk of items */
   PetscInt nnz;
+  double setup_ms[3]; /* lg_problem_setup_matrix's phases: pattern, PETSc matrix, near null space */
   PetscInt *csr_i, *csr_j; /* the pattern, A's own arrays (MatCreateSeqAIJWithArrays): freed after A */
   PetscScalar *csr_a;
   size_t bcc_n;         /* symmetric elimination: the essential columns' entries (keep_bc_columns) */

@@ -158,6 +158,45 @@ int main(int argc, char **argv) {
   mesh_count_invalid(bad, 3, ids, &ninv);
   CHECK(ninv == 2 && ids[0] == 1 && ids[1] == 2, "invalid cells: %d (%d, %d)", ninv, ids[0], ids[1]);
   mesh_free(bad);
+  /* the validity check's fast path for simplices (no normalization) decides as the
+   * normalized relative validity does, cell by cell: random tetrahedra and triangles at
+   * scales from 1e-250 to 1e250, a third of them flattened to within 1e-13 relative and
+   * a tenth with a vertex moved through the opposite face */
+  for (int dim = 2; dim <= 3; dim++) {
+    enum { NC = 3000 };
+    int nvc = dim + 1;
+    double *rx = malloc(sizeof(double) * NC * nvc * dim);
+    int *rc = malloc(sizeof(int) * NC * nvc);
+    unsigned long long st = 12345;
+    for (int c = 0; c < NC; c++) {
+      double scale = pow(10.0, -250 + 500.0 * (c % 101) / 100.0), *p = rx + (size_t)c * nvc * dim;
+      for (int i = 0; i < nvc * dim; i++) {
+        st = st * 6364136223846793005ull + 1442695040888963407ull;
+        p[i] = scale * ((double)(st >> 11) / 9007199254740992.0 + (i < dim ? 3.0 : 0.0));
+      }
+      if (c % 3 == 1) /* the last vertex on the plane of the others, up to 1e-13 */
+        for (int k = 0; k < dim; k++) {
+          double t = 0;
+          for (int i = 0; i < dim; i++) t += p[i * dim + k] / dim;
+          p[dim * dim + k] = t * (1 + 1e-13 * (double)(c % 7 - 3));
+        }
+      if (c % 10 == 3)
+        for (int k = 0; k < dim; k++) p[dim * dim + k] = 2 * p[k] - p[dim * dim + k];
+      for (int i = 0; i < nvc; i++) rc[c * nvc + i] = c * nvc + i;
+    }
+    mesh *rm = mesh_create(dim == 2 ? CELL_TRIANGLE : CELL_TETRAHEDRON, NC * nvc, rx, NC, rc, err);
+    CHECK(rm != NULL, "%s", err);
+    if (rm) {
+      int slow = 0, fast = 0;
+      for (int c = 0; c < NC; c++) slow += !(mesh_cell_relative_validity(rm, c) > 1e-13);
+      mesh_count_invalid(rm, 0, NULL, &fast);
+      CHECK(fast == slow && slow > NC / 20 && slow < NC - NC / 20, "dim %d: %d invalid by the fast path, %d by the normalized one",
+            dim, fast, slow);
+    }
+    mesh_free(rm);
+    free(rx);
+    free(rc);
+  }
   int badcells[] = {0, 1, 7};
   CHECK(mesh_create(CELL_TRIANGLE, 5, x, 1, badcells, err) == NULL && strstr(err, "refers to vertex 8"), "%s", err);
   files(data);

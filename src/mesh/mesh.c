@@ -783,14 +783,20 @@ int mesh_build_boundary_cells(mesh *m) {
   }
   m->bf_cell = malloc(sizeof(int) * (size_t)(unsigned)m->nbf);
   m->bf_local = malloc(sizeof(int) * (size_t)(unsigned)m->nbf);
-  if (!m->bf_cell || !m->bf_local) goto oom;
+  /* the vertices of tagged facets: a cell facet with an unmarked vertex is none of them, so
+   * only the few facets near the boundary are looked up (the lookup of every facet of 1.5 M
+   * tetrahedra was 0.2 s of a 3D problem's setup) */
+  unsigned char *onb = calloc((size_t)m->nvert + 1, 1);
+  if (!m->bf_cell || !m->bf_local || !onb) { free(onb); goto oom; }
+  for (size_t i = 0; i < (size_t)m->nbf * (size_t)m->nvf; i++) onb[m->bf_verts[i]] = 1;
   for (int b = 0; b < m->nbf; b++) m->bf_cell[b] = -1;
   for (int c = 0; c < m->ncell; c++) {
     const int *v = m->cells + (size_t)c * (size_t)m->nvc;
     for (int f = 0; f < nf; f++) {
       const int *fv = cell_facet_verts(m->type, f);
-      int k[4], found;
-      for (int i = 0; i < m->nvf; i++) k[i] = v[fv[i]];
+      int k[4], found, all = 1;
+      for (int i = 0; i < m->nvf; i++) { k[i] = v[fv[i]]; all &= onb[k[i]]; }
+      if (!all) continue;
       int b = th_get(&h, k, -1, &found);
       if (b >= 0) {
         m->bf_cell[b] = c;
@@ -798,6 +804,7 @@ int mesh_build_boundary_cells(mesh *m) {
       }
     }
   }
+  free(onb);
   /* duplicates of the same facet under different tags: resolve by direct lookup */
   for (int b = 0; b < m->nbf; b++) {
     if (m->bf_cell[b] >= 0) continue;

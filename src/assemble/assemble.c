@@ -347,6 +347,8 @@ static int pcache_mode(lg_env *env, const lg_kernel *k, const mesh *m, int nitem
   return 0;
 }
 
+#define LG_TIER_CHECK 2048 /* items between two looks at the JIT's tiers */
+
 int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells,
                       const int *facets, int nbind, const coef_binding *bind, double *out) {
   return lg_assemble_range(env, lm, k, nitems, cells, facets, 0, nitems, nbind, bind, out);
@@ -388,6 +390,15 @@ int lg_assemble_range(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, c
   struct timespec t0, t1;
   clock_gettime(CLOCK_MONOTONIC, &t0);
   for (int it = 0; it < nitems; it++) {
+    if (it && it % LG_TIER_CHECK == 0) {
+      /* a long assembly moves to the system compiler's code as soon as it is built: the
+       * time so far is accounted (which may start the build) and the kernel looked up
+       * again (a right-hand side on 1.5 M tetrahedra ran 2.5 s in libtcc's code) */
+      clock_gettime(CLOCK_MONOTONIC, &t1);
+      jit_account(env->jit, k->jid, (t1.tv_sec - t0.tv_sec) * 1e3 + (t1.tv_nsec - t0.tv_nsec) * 1e-6);
+      t0 = t1;
+      fn = jit_current(env->jit, k->jid, k->fn);
+    }
     int c = cells[it], cm2 = cells_m ? cells_m[it] : c;
     const int *v = m->cells + (size_t)c * (size_t)nvc;
     for (int i = 0; i < nvc; i++)
@@ -611,7 +622,7 @@ int lg_integrate(lg_env *env, lg_mesh *lm, const region *r, expr *e, int order, 
     return 1;
   }
   if (lg_mesh_check(env, lm)) return 1;
-  kernel_spec s = {0, NULL, e};
+  kernel_spec s = {0, NULL, e, env->no_vector_math};
   int qd = lg_quad_degree(env, e, order, lm->m->type), ct = (int)lm->m->type;
   int facet = r->kind == REGION_BOUNDARY ? 1 : r->kind == REGION_INTERIOR ? 2 : 0;
   /* the kernel of the same integrand, kept from an earlier call, or a new one in the least

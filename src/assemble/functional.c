@@ -70,7 +70,7 @@ lg_form_kernels *lg_form_kernels_new(lg_env *env, lg_mesh *lm, const form *F, in
     }
     expr *f = expr_canon(env->c, F->t[i].integrand);
     int qd = lg_quad_degree(env, f, F->t[i].order, lm->m->type);
-    kernel_spec s = {0, NULL, f};
+    kernel_spec s = {0, NULL, f, env->no_vector_math};
     field_layout rows = {0};
     t->interior = K->arity == 1 && t->reg.kind == REGION_INTERIOR;
     if (K->arity == 1) {

@@ -6,6 +6,7 @@
  * (degree-12 quadrature in an optimization loop: bench/RESULTS.md); a short script never
  * waits for gcc. Both tiers give the same bits (CC_FLAGS). */
 #include "kernel.h"
+#include "vmath.h"
 
 #include "../config.h"
 
@@ -128,6 +129,12 @@ static double now_ms(void) {
   return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
 }
 
+/* a kernel with vector calls has a pointer to the vector math routine (vmath.c), set
+ * when its code is loaded: one routine for both tiers, so that they agree to the bit */
+static void set_vmath(void *slot) {
+  if (slot) *(void (**)(int, double *, int))slot = lg_vmath;
+}
+
 #ifndef LUGAL_NO_TCC
 typedef struct {
   char *buf;
@@ -167,6 +174,7 @@ static kernel_fn compile_tcc(lg_jit *j, const char *src, jit_entry *ent, char *e
   }
   kernel_fn fn = (kernel_fn)tcc_get_symbol(s, "lugal_kernel");
   if (!fn) { snprintf(err, errlen, "libtcc: generated kernel has no entry point"); tcc_delete(s); return NULL; }
+  set_vmath(tcc_get_symbol(s, "lugal_vmath"));
   ent->tcc = s;
   return fn;
 }
@@ -354,6 +362,7 @@ static kernel_fn cc_finish(cc_job *c, int built, jit_entry *ent, char *err, size
   if (!dl) { snprintf(err, errlen, "cannot load %s: %s", c->sopath, dlerror()); return NULL; }
   kernel_fn fn = (kernel_fn)(uintptr_t)dlsym(dl, "lugal_kernel");
   if (!fn) { dlclose(dl); snprintf(err, errlen, "%s has no kernel", c->sopath); return NULL; }
+  set_vmath(dlsym(dl, "lugal_vmath"));
   ent->dl = dl;
   return fn;
 }

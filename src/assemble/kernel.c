@@ -38,6 +38,12 @@ static void leafname(void *ud, const expr *e, char *buf, size_t len) {
   else snprintf(buf, len, "w%d%sg%d", ci, comp, dir);
 }
 
+/* the main loop loads the vector calls' values (expr_codegen's select 3 and 4) */
+static void vector_select(unsigned char *sel, const int *vlev, int n) {
+  for (int i = 0; i < n; i++)
+    if (vlev[i] && (sel[i] == 1 || sel[i] == 2)) sel[i] = (unsigned char)(sel[i] + 2);
+}
+
 static void emit_table(strbuf *b, const char *name, const double *v, long n) {
   sb_printf(b, "static const double %s[%ld] = {", name, n);
   for (long i = 0; i < n; i++) sb_printf(b, "%s%.17g", i ? (i % 4 ? ", " : ",\n  ") : "", v[i]);
@@ -172,7 +178,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   strbuf b = {0};
   expr_tape tape = {0};
   unsigned char *sel = NULL, *isconst = NULL, *pcls = NULL;
-  int *pslot = NULL;
+  int *pslot = NULL, *vlev = NULL, nvec = 0, maxlev = 0;
   int dim = cell_dim(ct);
   int nf = facet ? cell_nfacets(ct) : 1;
   /* interior facets (facet == 2): the item's code is f+ + nf*(f- + nf*perm), the '-' side's
@@ -203,6 +209,13 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     roots[i] = s->arity == 2 ? s->tab->jac[i] : s->arity == 1 ? s->tab->res[i] : s->integrand;
   if (expr_tape_build(c, nroot, roots, &tape)) { free(roots); KERR("%s", expr_error(c)); }
   free(roots);
+  /* transcendental calls of the coordinates: evaluated for all points of an item at once by
+   * the vector math routine (vmath.c) the JIT hands the kernel as lugal_vmath */
+  vlev = calloc((size_t)tape.n + 1, sizeof(int));
+  if (!vlev) KERR("out of memory");
+  if (!s->scalar_math && (nvec = expr_tape_vector_calls(&tape, vlev)) < 0) KERR("out of memory");
+  for (int i = 0; i < tape.n; i++)
+    if (vlev[i] > maxlev) maxlev = vlev[i];
 
   /* leaves: coefficient functions, coordinates, normals */
   /* per side (0: the cell, or '+'; 1: the '-' cell of an interior facet) and degree */
@@ -312,6 +325,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
                 "double log(double); double sqrt(double); double fabs(double); double tanh(double);\n"
                 "double sinh(double); double cosh(double); double atan(double); double asin(double);\n"
                 "double acos(double); double pow(double, double);\n");
+  if (nvec) sb_printf(&b, "void (*lugal_vmath)(int, double *, int);\n");
   /* weights and reference points (per facet for facet kernels) */
   double *qx = malloc(sizeof(double) * (size_t)nf * (size_t)q.n * 3);
   if (!qx) KERR("out of memory");
@@ -577,9 +591,66 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     free(isconst);
     free(pcls);
     free(pslot);
+    free(vlev);
     expr_tape_free(&tape);
     if (b.failed) { sb_free(&b); snprintf(err, errlen, "out of memory generating a kernel"); return NULL; }
     return b.s;
+  }
+  if (nvec) {
+    /* the vector calls: their arguments at every point, then one call per node. Those that
+     * only the point cache's values need (its cached and inner nodes) are skipped when the
+     * cache is read; the others come first, level by level (a call inside another's
+     * argument has the lower level) */
+    for (int i = 0; i < tape.n; i++)
+      if (vlev[i]) sb_printf(&b, "  double V%d[%d];\n", i, q.n);
+    unsigned char *mk = malloc((size_t)tape.n + 1), *rt = malloc((size_t)tape.n + 1);
+    if (!mk || !rt) { free(mk); free(rt); KERR("out of memory"); }
+    for (int grp = 0; grp < 2; grp++) {
+      int any = 0;
+      for (int i = 0; i < tape.n; i++)
+        any |= vlev[i] && (grp == (k->ncache > 0 && (pcls[i] == PC_CACHED || pcls[i] == PC_INNER)));
+      if (!any) continue;
+      if (grp) sb_printf(&b, "  if (cm != 2) {\n");
+      for (int L = 1; L <= maxlev; L++) {
+        memset(mk, 0, (size_t)tape.n);
+        int n = 0;
+        for (int i = 0; i < tape.n; i++) {
+          rt[i] = vlev[i] == L && grp == (k->ncache > 0 && (pcls[i] == PC_CACHED || pcls[i] == PC_INNER));
+          n += rt[i];
+        }
+        if (!n) continue;
+        if (expr_tape_vector_closure(&tape, rt, vlev, mk)) { free(mk); free(rt); KERR("out of memory"); }
+        sb_printf(&b, "  for (int q = 0; q < %d; ++q) {\n", q.n);
+        sb_printf(&b, facet ? "    const int qq = facet*%d + q;\n" : "    const int qq = q; (void)qq;\n", q.n);
+        for (int d = 0; d < dim; d++) {
+          sb_printf(&b, "    const double x%d = ", d);
+          if (affine) {
+            sb_printf(&b, "X[%d]", d);
+            for (int kk = 0; kk < dim; kk++) sb_printf(&b, " + J%d%d*QX[qq*%d+%d]", d, kk, dim, kk);
+          } else {
+            int nv = cell_nverts(ct);
+            for (int j = 0; j < nv; j++) sb_printf(&b, "%sNQ[qq*%d + %d]*X[%d]", j ? " + " : "", nv, j, j * dim + d);
+          }
+          sb_printf(&b, ";\n");
+        }
+        expr_codegen(&b, &tape, "t", "P", mk, leafname, &lc, "    ");
+        for (int i = 0; i < tape.n; i++) {
+          if (!rt[i]) continue;
+          /* the argument: a node of the tape before the call (or a leaf) */
+          int a0 = i - 1;
+          while (a0 >= 0 && tape.node[a0] != tape.node[i]->ch[0]) a0--;
+          if (a0 < 0) { free(mk); free(rt); KERR("internal error: a call's argument is not on the tape"); }
+          expr_codegen_ref(&tape, a0, "t", leafname, &lc, ref, sizeof ref);
+          sb_printf(&b, "    V%d[q] = %s;\n", i, ref);
+        }
+        sb_printf(&b, "  }\n");
+        for (int i = 0; i < tape.n; i++)
+          if (rt[i]) sb_printf(&b, "  lugal_vmath(%d, V%d, %d);\n", tape.node[i]->i0, i, q.n);
+      }
+      if (grp) sb_printf(&b, "  }\n");
+    }
+    free(mk);
+    free(rt);
   }
   sb_printf(&b, "  for (int q = 0; q < %d; ++q) {\n", q.n);
   if (facet) sb_printf(&b, "    const int qq = facet*%d + q;\n", q.n);
@@ -666,6 +737,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
       if (pcls[i] == PC_CACHED) sb_printf(&b, "%st%d", j++ ? ", " : "", i);
     sb_printf(&b, ";\n");
     for (int i = 0; i < tape.n; i++) sel[i] = (tape.node[i]->dep & DEP_POINT) && pcls[i] == PC_SHARED;
+    vector_select(sel, vlev, tape.n);
     expr_codegen(&b, &tape, "t", "P", sel, leafname, &lc, "    ");
     sb_printf(&b, "    if (cm == 2) {\n");
     for (int i = 0; i < tape.n; i++)
@@ -673,6 +745,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     sb_printf(&b, "    } else {\n");
     for (int i = 0; i < tape.n; i++)
       sel[i] = pcls[i] == PC_CACHED ? 2 : (tape.node[i]->dep & DEP_POINT) && pcls[i] == PC_INNER;
+    vector_select(sel, vlev, tape.n);
     expr_codegen(&b, &tape, "t", "P", sel, leafname, &lc, "      ");
     sb_printf(&b, "      if (cm == 1) {\n");
     for (int i = 0; i < tape.n; i++)
@@ -682,6 +755,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   } else {
     for (int i = 0; i < tape.n; i++) sel[i] = !sel[i];
   }
+  vector_select(sel, vlev, tape.n);
   expr_codegen(&b, &tape, "t", "P", sel, leafname, &lc, "    ");
   /* contraction */
   if (s->arity == 0) {
@@ -748,6 +822,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   free(isconst);
   free(pcls);
   free(pslot);
+  free(vlev);
   expr_tape_free(&tape);
   if (b.failed) { sb_free(&b); snprintf(err, errlen, "out of memory generating a kernel"); return NULL; }
   return b.s;
@@ -756,6 +831,7 @@ fail:
   free(isconst);
   free(pcls);
   free(pslot);
+  free(vlev);
   expr_tape_free(&tape);
   sb_free(&b);
   return NULL;

@@ -112,6 +112,7 @@ typedef struct {
   int arity;
   const coef_table *tab;
   expr *integrand; /* arity 0 */
+  int scalar_math; /* -lugal_vector_math 0: every call per point, through libm */
 } kernel_spec;
 
 /* generate the C source; returns NULL with a message on an unsupported expression */

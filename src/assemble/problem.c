@@ -136,7 +136,7 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
     t->qdeg = lg_quad_degree(env, f, eqn->t[i].order, p->lm->m->type);
     int facet = t->reg.kind == REGION_BOUNDARY ? 1 : t->interior ? 2 : 0;
     if (t->tab.njac > 0) {
-      kernel_spec s = {2, &t->tab, NULL};
+      kernel_spec s = {2, &t->tab, NULL, env->no_vector_math};
       int qd = eqn->t[i].order >= 0 ? t->qdeg : lg_table_degree(env, &t->tab, 2, p->lm->m->type);
       if (kernel_build(env->jit, env->c, p->lm->m->type, facet, qd, &s, &t->rl, &t->cl, &t->kmat, err, sizeof err)) {
         lg_seterr(env, "%s", err);
@@ -147,7 +147,7 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
       env->nkernels += !t->kmat.cached;
     }
     if (t->tab.nres > 0) {
-      kernel_spec s = {1, &t->tab, NULL};
+      kernel_spec s = {1, &t->tab, NULL, env->no_vector_math};
       int qd = eqn->t[i].order >= 0 ? t->qdeg : lg_table_degree(env, &t->tab, 1, p->lm->m->type);
       if (kernel_build(env->jit, env->c, p->lm->m->type, facet, qd, &s, &t->rl, &t->cl, &t->kres, err, sizeof err)) {
         lg_seterr(env, "%s", err);

@@ -258,6 +258,73 @@ int expr_tape_point_cache(const expr_tape *t, unsigned char *cls, int *slot) {
   return nc;
 }
 
+/* ---------------------------------------------------------------- vector calls */
+
+static int vector_fn(int fn) {
+  return fn == FN_SIN || fn == FN_COS || fn == FN_TAN || fn == FN_EXP || fn == FN_LOG || fn == FN_TANH ||
+         fn == FN_SINH || fn == FN_COSH || fn == FN_ATAN || fn == FN_ASIN || fn == FN_ACOS;
+}
+
+int expr_tape_vector_calls(const expr_tape *t, int *level) {
+  tape_index_map m;
+  if (tim_build(t, &m)) return -1;
+  unsigned char *xo = malloc((size_t)t->n + 1);
+  if (!xo) { free(m.kv); return -1; }
+  int nv = 0;
+  for (int k = 0; k < t->n; k++) {
+    const expr *e = t->node[k];
+    int x = e->kind != E_FIELD && e->kind != E_NORMAL;
+    for (int i = 0; i < e->n; i++) x &= xo[tim_get(&m, e->ch[i])];
+    xo[k] = (unsigned char)x;
+    level[k] = 0;
+    if (e->kind == E_FUNC && vector_fn(e->i0) && x && (e->dep & DEP_POINT)) nv++, level[k] = 1;
+  }
+  /* levels: 1 + the highest level of the calls below the argument */
+  int *below = calloc((size_t)t->n + 1, sizeof(int));
+  if (!below) { free(xo); free(m.kv); return -1; }
+  for (int k = 0; k < t->n; k++) {
+    const expr *e = t->node[k];
+    int b = 0;
+    for (int i = 0; i < e->n; i++) {
+      int c = tim_get(&m, e->ch[i]);
+      int bc = level[c] ? level[c] : below[c];
+      if (bc > b) b = bc;
+    }
+    below[k] = b;
+    if (level[k]) level[k] = 1 + b;
+  }
+  /* calls nested deeper than EXPR_VECTOR_LEVELS stay per point (a deep chain of calls
+   * would otherwise get a loop each); so does everything above them */
+  for (int k = 0; k < t->n; k++)
+    if (level[k] > EXPR_VECTOR_LEVELS) { level[k] = 0; nv--; }
+  free(below);
+  free(xo);
+  free(m.kv);
+  return nv;
+}
+
+int expr_tape_vector_closure(const expr_tape *t, const unsigned char *roots, const int *level, unsigned char *mark) {
+  tape_index_map m;
+  if (tim_build(t, &m)) return -1;
+  /* parents come after their children: one backward pass over a "needed" flag */
+  unsigned char *need = calloc((size_t)t->n + 1, 1);
+  if (!need) { free(m.kv); return -1; }
+  for (int j = t->n - 1; j >= 0; j--) {
+    const expr *f = t->node[j];
+    if (roots[j]) {
+      for (int i = 0; i < f->n; i++) need[tim_get(&m, f->ch[i])] = 1;
+      continue;
+    }
+    if (!need[j] || !(f->dep & DEP_POINT)) continue; /* the others are computed before the loops */
+    if (level[j]) { mark[j] = 3; continue; }
+    mark[j] = 1;
+    for (int i = 0; i < f->n; i++) need[tim_get(&m, f->ch[i])] = 1;
+  }
+  free(need);
+  free(m.kv);
+  return 0;
+}
+
 /* ---------------------------------------------------------------- C code */
 
 void expr_codegen_ref(const expr_tape *t, int k, const char *prefix, expr_leaf_name_fn leafname,
@@ -302,6 +369,10 @@ void expr_codegen(strbuf *b, const expr_tape *t, const char *prefix, const char 
       continue;
     if (e->kind == E_PARAM) {
       sb_printf(b, "%sconst double %s%d = %s[%d];\n", indent, prefix, k, param_array, e->i0);
+      continue;
+    }
+    if (select[k] == 3 || select[k] == 4) {
+      sb_printf(b, select[k] == 4 ? "%s%s%d = V%d[q];\n" : "%sconst double %s%d = V%d[q];\n", indent, prefix, k, k);
       continue;
     }
     int ci[2] = {0, 0};

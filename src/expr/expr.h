@@ -216,7 +216,8 @@ void sb_free(strbuf *b);
 /* emit code for nodes with index in [0, t->n) selected by `select` (1 = emit); the caller
  * decides which nodes go before a loop and which inside. Node k is named "<prefix>k". */
 /* select[k]: 0 skip, 1 declare ("const double tN = ..."), 2 assign to a variable declared
- * before ("tN = ...") */
+ * before ("tN = ..."), 3 declare as the value at point q of the array VN ("const double tN =
+ * VN[q];", a call evaluated for all points at once, expr_tape_vector_calls), 4 assign it */
 void expr_codegen(strbuf *b, const expr_tape *t, const char *prefix, const char *param_array,
                   const unsigned char *select, expr_leaf_name_fn leafname, void *ud,
                   const char *indent);
@@ -224,6 +225,18 @@ void expr_codegen(strbuf *b, const expr_tape *t, const char *prefix, const char 
  * subexpressions (see codegen.c); returns the number of cached nodes, -1 out of memory */
 enum { PC_OTHER, PC_CACHED, PC_INNER, PC_SHARED };
 int expr_tape_point_cache(const expr_tape *t, unsigned char *cls /* t->n */, int *slot /* t->n */);
+/* the calls of sin, cos, tan, exp, log, tanh, sinh, cosh, atan, asin and acos whose
+ * argument varies in the cell (DEP_POINT) and depends on the coordinates, constants and
+ * parameters only: a kernel evaluates them for all quadrature points of an item at once (a
+ * vector math routine). level[k] = 1 + the highest level of such calls inside node k's
+ * argument for these calls (up to EXPR_VECTOR_LEVELS; deeper ones get 0), 0 for every other
+ * node; returns their number, -1 out of memory */
+int expr_tape_vector_calls(const expr_tape *t, int *level /* t->n */);
+#define EXPR_VECTOR_LEVELS 4
+/* mark[j] = 1 for the point-varying nodes that the arguments of the calls with roots[k] set
+ * need, computed from the coordinates (stopping at vector calls, marked 3: their values are
+ * loaded); mark is not cleared first */
+int expr_tape_vector_closure(const expr_tape *t, const unsigned char *roots, const int *level, unsigned char *mark);
 /* the C expression naming tape node k (a literal for constants) */
 void expr_codegen_ref(const expr_tape *t, int k, const char *prefix, expr_leaf_name_fn leafname,
                       void *ud, char *buf, size_t len);

@@ -68,6 +68,9 @@ int luaopen_lugal(lua_State *L) {
     PetscBool pcache = PETSC_TRUE;
     PetscOptionsGetBool(NULL, NULL, "-lugal_point_cache", &pcache, NULL);
     ue->env->no_point_cache = !pcache;
+    PetscBool vmath = PETSC_TRUE;
+    PetscOptionsGetBool(NULL, NULL, "-lugal_vector_math", &vmath, NULL);
+    ue->env->no_vector_math = !vmath;
   } else lua_pop(L, 1);
 
   lg_lua_expr_register(L);

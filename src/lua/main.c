@@ -28,6 +28,8 @@ static void usage(FILE *f) {
           "  -lugal_verbose        timings and kernel statistics on stderr\n"
           "  -lugal_point_cache 0  recompute coordinate-only transcendental terms (a target\n"
           "                        sin(pi x)) at every assembly instead of keeping them\n"
+          "  -lugal_vector_math 0  transcendental functions of the coordinates per point\n"
+          "                        through libm instead of libmvec's AVX2 routines\n"
           "  -lugal_traceback      print a Lua traceback with errors\n");
 }
 

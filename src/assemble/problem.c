@@ -556,6 +556,20 @@ static void cell_centre(const mesh *m, int c, char *buf, size_t len) {
 static int check_element_tensors(lg_env *env, lg_problem *p, int term, int first, int n, const double *v, int size,
                                  const char *what) {
   const prob_term *t = &p->t[term];
+  /* first a branch-free pass with four sums of x - x (0 for a finite x, NaN for an infinite
+   * or NaN one; the per-value isfinite branch was 13% of a P1 reassembly), then the search
+   * for the culprit only when needed */
+  double z0 = 0, z1 = 0, z2 = 0, z3 = 0;
+  const size_t nv = (size_t)n * (size_t)size;
+  size_t i = 0;
+  for (; i + 4 <= nv; i += 4) {
+    z0 += v[i] - v[i];
+    z1 += v[i + 1] - v[i + 1];
+    z2 += v[i + 2] - v[i + 2];
+    z3 += v[i + 3] - v[i + 3];
+  }
+  for (; i < nv; i++) z0 += v[i] - v[i];
+  if (z0 + z1 + z2 + z3 == 0) return 0;
   for (int it = 0; it < n; it++)
     for (int k = 0; k < size; k++)
       if (!isfinite(v[(size_t)it * size + k])) {

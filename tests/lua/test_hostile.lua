@@ -68,6 +68,14 @@ fails(function() return lg.lagrange(2^32 + 2) end, "got 4294967298")
 fails(function() return mesh:quality("mean_ratio"):histogram(2^33) end, "q:histogram: argument 2 is too large")
 
 -- non-finite data is an error that says so and where
+do -- a matrix coefficient that is NaN in the cells right of x = 0.75 only (the branch-free
+   -- check of the element matrices, then the search for the first culprit)
+  local bad = lg.linear_problem{mesh = mesh, test = v, unknown = u,
+    eqn = lg.integral(mesh:cells(), (1 + lg.sqrt(0.75 - lg.x))*lg.dot(lg.grad(v), lg.grad(u)) - v),
+    bc = lg.essential_bc(mesh:boundary(), v*u)}
+  fails(function() return bad:solve() end, "problem:solve", "the matrix is not finite", "in cell 7, near (0.916667, 0.0833333)", "from term 1",
+        "log or square root of a negative value")
+end
 fails(function() return lg.interpolate(P1, mesh, lg.log(lg.x)) end, "lg.interpolate", "is not finite (-inf) at (0, 0)")
 local a = lg.parameter("a", 1)
 fails(function() a:set(0 / 0) end, "set: parameter a must be set to a finite number")

@@ -26,3 +26,11 @@ if /usr/bin/python3 -c "import dolfinx" 2>/dev/null; then
   printf 'coldstart fenicsx %s poisson 64x64 P1 (warm JIT cache): median %.3f s over %d runs\n' \
     "$(/usr/bin/python3 -c 'import dolfinx; print(dolfinx.__version__)')" "$(echo "$us" | awk '{print $1/1e6}')" "$runs"
 fi
+# FreeFEM on the same work (bench/poisson_freefem.edp: UMFPACK, L2 and H1 errors, VTU), when
+# installed (Debian freefem++ and libfreefem++; its plugins live in /usr/lib/freefem++)
+if command -v FreeFem++-nw > /dev/null 2>&1; then
+  export FF_LOADPATH=${FF_LOADPATH:-/usr/lib/freefem++}
+  us=$(timeit FreeFem++-nw "$ROOT/bench/poisson_freefem.edp" -n 64)
+  printf 'coldstart freefem %s poisson 64x64 P1: median %.3f s over %d runs\n' \
+    "$(dpkg-query -W -f='${Version}' freefem++ 2>/dev/null)" "$(echo "$us" | awk '{print $1/1e6}')" "$runs"
+fi

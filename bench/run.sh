@@ -5,16 +5,12 @@ ROOT=$(cd "$(dirname "$0")/.." && pwd)
 echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
 echo "machine: $(nproc) cores, $(awk '/MemTotal/ {printf "%.0f GiB", $2/1048576}' /proc/meminfo), $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
 echo "PETSc $(pkg-config --modversion PETSc), $(tcc -v 2>&1 | head -1)"
-sh "$ROOT/bench/coldstart.sh" 10
+# assembly, the 3D Poisson whole process and the 2D demo (issue 11; includes coldstart.sh)
+sh "$ROOT/bench/assembly_all.sh"
 have_fenicsx=0
 /usr/bin/python3 -c "import dolfinx" 2>/dev/null && have_fenicsx=1
 "$ROOT/build/lugal" "$ROOT/bench/quality.lua" 119
 [ $have_fenicsx = 1 ] && /usr/bin/python3 -c "import vtk" 2>/dev/null && /usr/bin/python3 "$ROOT/bench/quality_vtk.py" 119
-for args in "32 1" "64 1" "24 2"; do
-  "$ROOT/build/lugal" "$ROOT/bench/assembly.lua" $args 5
-  "$ROOT/build/lugal" "$ROOT/bench/assembly.lua" $args 5 -lugal_jit cc | sed 's/^lugal/lugal-cc/'
-  [ $have_fenicsx = 1 ] && /usr/bin/python3 "$ROOT/bench/assembly_fenicsx.py" $args 5 2>/dev/null | tail -1
-done
 # untangling (issue 4): tangled meshes at 1k / 10k / 100k vertices, and placement in stage 1
 "$ROOT/build/lugal" "$ROOT/bench/untangle.lua" 3
 "$ROOT/build/lugal" "$ROOT/bench/placement.lua"

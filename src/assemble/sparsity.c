@@ -147,11 +147,18 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
     int rn = t->rl.size / B, cn = t->cl.size / B;
     nitem += (size_t)t->nitems;
     rnod[i] = malloc(sizeof(PetscInt) * ((size_t)t->nitems * (size_t)rn + 1));
-    cnod[i] = malloc(sizeof(PetscInt) * ((size_t)t->nitems * (size_t)cn + 1));
+    /* a square term (the same fields, dof maps and numbering for rows and columns, as a
+     * Laplacian's) shares one list: 25 MB less to write on 1.5 M tetrahedra */
+    int same = t->rl.n == t->cl.n && t->rl.size == t->cl.size && !memcmp(t->rl.nloc, t->cl.nloc, sizeof t->rl.nloc) &&
+               !memcmp(t->rl.off, t->cl.off, sizeof t->rl.off) && !memcmp(t->rl.bs, t->cl.bs, sizeof t->rl.bs) &&
+               p->rows.n == p->cols.n &&
+               !memcmp(p->rdm, p->cdm, sizeof(dofmap *) * (size_t)p->rows.n) &&
+               !memcmp(p->rglob, p->cglob, sizeof(int) * (size_t)(p->rows.n + 1));
+    cnod[i] = same ? rnod[i] : malloc(sizeof(PetscInt) * ((size_t)t->nitems * (size_t)cn + 1));
     if (!rnod[i] || !cnod[i]) { bad = 1; break; }
     for (int it = 0; it < t->nitems; it++) {
       lg_term_nodes(p, t, it, 1, B, rnod[i] + (size_t)it * rn);
-      lg_term_nodes(p, t, it, 0, B, cnod[i] + (size_t)it * cn);
+      if (!same) lg_term_nodes(p, t, it, 0, B, cnod[i] + (size_t)it * cn);
       const PetscInt *rg = rnod[i] + (size_t)it * rn;
       for (int r = 0; r < rn; r++) start[rg[r] + 2]++;
     }
@@ -186,7 +193,7 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   } else p->coo_pos = malloc(sizeof(int) * ((size_t)n + 1));
   p->mbuf = malloc(sizeof(double) * ((size_t)LG_CHUNK * maxsize + 1));
   if (bad || !ia || !ja || (B > 1 ? !p->blk_pos || !p->blk_stride : !p->coo_pos) || !p->mbuf) {
-    for (int i = 0; rnod && cnod && i < p->nterm; i++) { free(rnod[i]); free(cnod[i]); }
+    for (int i = 0; rnod && cnod && i < p->nterm; i++) { if (cnod[i] != rnod[i]) free(cnod[i]); free(rnod[i]); }
     free(rnod); free(cnod); free(erow_off); free(start); free(mark); free(nodes); free(erow); free(ia); free(ja);
     lg_seterr(env, "out of memory for %ld matrix entries", (long)n);
     return 1;
@@ -250,7 +257,7 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
     for (size_t k = 0; k < len; k++) mark[nodes[k]] = R;
   }
 #undef EROW_TERM
-  for (int i = 0; i < p->nterm; i++) { free(rnod[i]); free(cnod[i]); }
+  for (int i = 0; i < p->nterm; i++) { if (cnod[i] != rnod[i]) free(cnod[i]); free(rnod[i]); }
   free(rnod);
   free(cnod);
   free(erow_off);

@@ -463,6 +463,7 @@ static int lmesh_untangle(lua_State *L) {
                               m->ncell, cell_plural(m->type), r.beta, r.invalid_before, r.invalid_after,
                               r.invalid_after ? "FAILED" : "valid", r.moved, r.mean_displacement, r.max_displacement,
                               r.seconds);
+  if (r.passes > 1 && n < sizeof text) n += (size_t)snprintf(text + n, sizeof text - n, ", %d passes", r.passes);
   lua_createtable(L, 0, 12);
   set_num(L, "beta", r.beta);
   set_int(L, "invalid_before", r.invalid_before);
@@ -473,6 +474,7 @@ static int lmesh_untangle(lua_State *L) {
   set_num(L, "mean_displacement", r.mean_displacement);
   set_num(L, "max_displacement", r.max_displacement);
   set_num(L, "seconds", r.seconds);
+  set_int(L, "passes", r.passes);
   lua_createtable(L, r.nstage, 0);
   for (int i = 0; i < r.nstage; i++) {
     untangle_stage *st = &r.stage[i];

@@ -126,14 +126,19 @@ static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, smoo
   ob.qfloor = INFINITY;
   for (int i = 0; i < ncell && !cwinv; i++) ob.qfloor = fmin(ob.qfloor, mesh_cell_quality(m, cells[i], o->measure));
   if (o->energy) ob.qfloor = 0; /* the barrier alone: 1/q is infinite on degenerate cells */
-  if (o->energy && (cwinv || (o->measure == QM_MEAN_RATIO && (m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON)))) {
+  int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON;
+  if (o->energy && (cwinv || (o->measure == QM_MEAN_RATIO && simplex) || (o->measure == QM_CORNER_CONDITION && !simplex))) {
     /* Σ 1/q of the mean ratio is (1/d) Σ |J|²/det(J)^(2/d), J relative to a regular simplex:
      * the untangling energy's shape term at ε = 0 (a strict barrier), with its analytic
-     * gradient instead of 2d star evaluations per vertex */
+     * gradient instead of 2d star evaluations per vertex. On quadrilaterals and hexahedra
+     * the same term over the corners, J relative to a square's or cube's corner: each is the
+     * inverse mean ratio of a corner's map, which the corner condition measures too */
     ob.smooth = 2;
     ob.theta = 0;
     ob.eps = 0;
-    ut_regular_winv(m->dim, 1.0, ob.winv);
+    if (simplex) ut_regular_winv(m->dim, 1.0, ob.winv);
+    else
+      for (int i = 0; i < m->dim; i++) ob.winv[i * m->dim + i] = 1;
   }
   for (int round = 0; round < o->iterations; round++) {
     double f0 = 0;

@@ -42,6 +42,8 @@ typedef struct {
   untangle_stage stage[3];
   int kept_stage;                   /* the state returned: after stage 3, or an earlier better
                                        one (0: the input) when the stages made it worse */
+  int passes;                       /* runs of the three stages: another follows one that
+                                       left fewer but some invalid cells (stage[] is the first's) */
 } untangle_report;
 
 void untangle_defaults(untangle_opts *o);

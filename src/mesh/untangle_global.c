@@ -1,7 +1,8 @@
 /* untangle_global.c — the global untangling stage: all interior vertices of a simplicial
  * mesh together minimize a regularized barrier energy (the "foldover-free maps" approach of
  * Garanzha et al., ACM TOG 2021): per cell, with J the map from a regular reference simplex
- * of the mesh's mean cell size to the cell,
+ * of the mesh's mean cell size to the cell (per corner of a quadrilateral or hexahedron,
+ * from a square's or cube's corner: section 1's "valid if each corner is valid"),
  *     f(J) = (1 - θ) tr(JᵀJ) / χ(det J, ε)^(2/d) + θ (det²J + 1) / χ(det J, ε),
  *     χ(D, ε) = (D + sqrt(ε² + D²)) / 2,
  * which is finite for inverted cells (χ > 0 for every D when ε > 0) and, as ε falls, a
@@ -20,19 +21,22 @@
 static double chi(double D, double eps) { return 0.5 * (D + sqrt(eps * eps + D * D)); }
 static double dchi(double D, double eps) { return 0.5 * (1 + D / sqrt(eps * eps + D * D)); }
 
-/* J = E W⁻¹ of cell c (E: the edge vectors from vertex 0 as columns), its determinant */
-static double cell_map(const ctx *C, const double *x, int c, const double *winv, double J[3][3], const int **vout) {
+/* J = E W⁻¹ of corner k of cell c (E: the edge vectors from the corner vertex to its d
+ * neighbours as columns, C->ct), its determinant; *vout the cell's vertices. A simplex has
+ * one corner, a quadrilateral 4 and a hexahedron 8: their energy sums the corners' */
+static double cell_map(const ctx *C, const double *x, int c, int k, const double *winv, double J[3][3], const int **vout) {
   int d = C->d;
-  const int *v = C->m->cells + (size_t)c * (size_t)C->nvc;
+  const int *v = C->m->cells + (size_t)c * (size_t)C->nvc, *ct = C->ct[k];
   *vout = v;
   double E[3][3];
+  const double *p = x + (size_t)v[ct[0]] * d;
   for (int i = 0; i < d; i++)
-    for (int k = 0; k < d; k++) E[i][k] = x[(size_t)v[k + 1] * d + i] - x[(size_t)v[0] * d + i];
+    for (int j = 0; j < d; j++) E[i][j] = x[(size_t)v[ct[j + 1]] * d + i] - p[i];
   for (int i = 0; i < d; i++)
-    for (int k = 0; k < d; k++) {
+    for (int j = 0; j < d; j++) {
       double s = 0;
-      for (int l = 0; l < d; l++) s += E[i][l] * winv[l * d + k];
-      J[i][k] = s;
+      for (int l = 0; l < d; l++) s += E[i][l] * winv[l * d + j];
+      J[i][j] = s;
     }
   if (d == 2) return J[0][0] * J[1][1] - J[0][1] * J[1][0];
   return J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) - J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0]) +
@@ -108,10 +112,12 @@ void ut_relative_mean_ratio(const mesh *m, const double *cwinv, double *out) {
   C0.m = (mesh *)m;
   C0.d = d;
   C0.nvc = m->nvc;
+  C0.ncorner = 1;
+  for (int i = 0; i <= d; i++) C0.ct[0][i] = i;
   for (int c = 0; c < m->ncell; c++) {
     double J[3][3], A = 0;
     const int *v;
-    double D = cell_map(&C0, m->x, c, cwinv + (size_t)c * d * d, J, &v);
+    double D = cell_map(&C0, m->x, c, 0, cwinv + (size_t)c * d * d, J, &v);
     for (int a = 0; a < d; a++)
       for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
     out[c] = D > 0 && A > 0 ? d * pow(D, 2.0 / d) / A : 0;
@@ -123,12 +129,16 @@ double ut_energy_eval(const objective *o, const double *x, double *grad, int nfr
   int d = C->d;
   double f = 0, theta = o->theta, eps = o->eps;
   if (grad) memset(grad, 0, sizeof(double) * (size_t)nfree * d);
-  for (int i = 0; i < o->ncell; i++) {
+  int simplex = C->ncorner == 1;
+  for (int i = 0; i < o->ncell; i++)
+   for (int kc = 0; kc < C->ncorner; kc++) {
     int c = o->cells[i];
     double J[3][3], K[3][3];
     const int *v;
-    const double *winv = o->cwinv ? o->cwinv + (size_t)c * d * d : o->winv;
-    double D = cell_map(C, x, c, winv, J, &v), A = 0;
+    /* reference shapes are per simplex; a quadrilateral's or hexahedron's corners aim at a
+     * square's or cube's */
+    const double *winv = o->cwinv && simplex ? o->cwinv + (size_t)c * d * d : o->winv;
+    double D = cell_map(C, x, c, kc, winv, J, &v), A = 0;
     for (int a = 0; a < d; a++)
       for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
     if (eps == 0 && !(D > 0)) return INFINITY; /* ε = 0: the pure barrier (smoothing a valid mesh) */
@@ -149,7 +159,7 @@ double ut_energy_eval(const objective *o, const double *x, double *grad, int nfr
         GE[a][k] = s;
       }
     for (int k = 0; k <= d; k++) {
-      int fi = o->fidx[v[k]];
+      int fi = o->fidx[v[C->ct[kc][k]]];
       if (fi < 0) continue;
       for (int a = 0; a < d; a++) {
         double g = 0;
@@ -168,7 +178,8 @@ int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwin
   mesh *m = C->m;
   int d = C->d;
   *iters = 0;
-  if (m->type != CELL_TRIANGLE && m->type != CELL_TETRAHEDRON) return 0;
+  if (m->type == CELL_INTERVAL) return 0;
+  int simplex = C->ncorner == 1;
   int nfree = 0;
   int *freev = malloc(sizeof(int) * ((size_t)m->nvert + 1));
   double *x0 = malloc(sizeof(double) * ((size_t)m->nvert * d + 1));
@@ -178,9 +189,12 @@ int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwin
     if (!C->bnd[v]) { W->fidx[v] = nfree; freev[nfree++] = v; }
   int ncell = ut_cells_around(C, W, freev, nfree);
   /* the reference: a regular simplex whose edge-matrix determinant is the mean of the cells'
-   * (their signed sum does not change when interior vertices move) */
+   * (their signed sum does not change when interior vertices move); for quadrilaterals and
+   * hexahedra a square's or cube's corner of the mean cell measure (whose signed sum does
+   * not change either) */
   double sum = 0;
   for (int c = 0; c < m->ncell; c++) {
+    if (!simplex) { sum += mesh_cell_signed_measure(m, c); continue; }
     const int *v = m->cells + (size_t)c * (size_t)C->nvc;
     double E[3][3];
     for (int i = 0; i < d; i++)
@@ -201,14 +215,20 @@ int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwin
   o.theta = 0.5; /* shape and size alike (0.1 and 0.9 untangled the same spirals) */
   o.cwinv = cwinv; /* reference shapes, or the regular simplex below */
   if (mean > 0 && nfree) {
-    ut_regular_winv(d, mean, o.winv);
+    if (simplex) ut_regular_winv(d, mean, o.winv);
+    else {
+      double h = d == 2 ? sqrt(mean) : cbrt(mean);
+      memset(o.winv, 0, sizeof o.winv);
+      for (int i = 0; i < d; i++) o.winv[i * d + i] = 1 / h;
+    }
     for (int outer = 0; outer < 100; outer++) {
       double dmin = INFINITY, J[3][3];
       const int *v;
-      for (int i = 0; i < ncell; i++) {
-        int c = W->cells[i];
-        dmin = fmin(dmin, cell_map(C, x, c, cwinv ? cwinv + (size_t)c * d * d : o.winv, J, &v));
-      }
+      for (int i = 0; i < ncell; i++)
+        for (int kc = 0; kc < C->ncorner; kc++) {
+          int c = W->cells[i];
+          dmin = fmin(dmin, cell_map(C, x, c, kc, cwinv && simplex ? cwinv + (size_t)c * d * d : o.winv, J, &v));
+        }
       int ninv;
       ut_count_cells(C, x, 0, &ninv, NULL);
       if (!ninv && outer > 0) break;

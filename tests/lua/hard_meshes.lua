@@ -4,11 +4,13 @@
 local lg = require "lugal"
 local M = {}
 
--- a strip of ns x nt squares (two triangles each) along a spiral of `turns` turns,
--- r = 0.3 + 1.2 s + width t; the interior started from the Tutte embedding (each interior
--- vertex the mean of its four grid neighbours, Gauss-Seidel), the boundary at its place
-function M.spiral(ns, nt, width, turns)
+-- a strip of ns x nt squares (two triangles each, or quadrilaterals with cell =
+-- "quadrilateral") along a spiral of `turns` turns, r = 0.3 + 1.2 s + width t; the interior
+-- started from the Tutte embedding (each interior vertex the mean of its four grid
+-- neighbours, Gauss-Seidel), the boundary at its place
+function M.spiral(ns, nt, width, turns, cell)
   turns = turns or 1.5
+  cell = cell or "triangle"
   local function pos(s, t)
     local th, r = 2*math.pi*turns*s, 0.3 + 1.2*s + width*t
     return r*math.cos(th), r*math.sin(th)
@@ -18,11 +20,12 @@ function M.spiral(ns, nt, width, turns)
   for j = 0, nt do for i = 0, ns do local a, b = pos(i/ns, j/nt); verts[#verts + 1] = {a, b} end end
   for j = 0, nt - 1 do for i = 0, ns - 1 do
     local a, b, c, d = id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)
-    cells[#cells + 1] = {a, c, b}; cells[#cells + 1] = {a, d, c}
+    if cell == "quadrilateral" then cells[#cells + 1] = {a, d, c, b}
+    else cells[#cells + 1] = {a, c, b}; cells[#cells + 1] = {a, d, c} end
   end end
   for i = 0, ns - 1 do bnd[#bnd + 1] = {id(i, 0), id(i + 1, 0)}; bnd[#bnd + 1] = {id(i, nt), id(i + 1, nt)} end
   for j = 0, nt - 1 do bnd[#bnd + 1] = {id(0, j), id(0, j + 1)}; bnd[#bnd + 1] = {id(ns, j), id(ns, j + 1)} end
-  local mesh = lg.mesh.new{cell = "triangle", vertices = verts, cells = cells, boundary = {wall = bnd}}
+  local mesh = lg.mesh.new{cell = cell, vertices = verts, cells = cells, boundary = {wall = bnd}}
   local ref = mesh:copy()
   local X = {}
   for k, v in ipairs(verts) do X[k] = {v[1], v[2]} end

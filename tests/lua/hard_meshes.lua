@@ -39,6 +39,32 @@ function M.spiral(ns, nt, width, turns, cell)
   return mesh, ref
 end
 
+-- a star domain r(t) = 1 + 0.4 cos(5 t) (non-convex) meshed in nr rings of nt triangles
+-- around its centre, every interior vertex then placed at random in [-1.4, 1.4]^2 (a
+-- linear congruential generator from seed): half the cells inverted, some vertices
+-- outside the domain
+function M.star(nr, nt, seed)
+  local verts, cells, bnd = {{0, 0}}, {}, {}
+  local function r(t) return 1 + 0.4*math.cos(5*t) end
+  local function id(i, j) return 1 + (i - 1)*nt + (j % nt) + 1 end
+  for i = 1, nr do for j = 0, nt - 1 do
+    local t, s = 2*math.pi*j/nt, i/nr
+    verts[#verts + 1] = {s*r(t)*math.cos(t), s*r(t)*math.sin(t)}
+  end end
+  for j = 0, nt - 1 do cells[#cells + 1] = {1, id(1, j), id(1, j + 1)} end
+  for i = 1, nr - 1 do for j = 0, nt - 1 do
+    local a, b, c, d = id(i, j), id(i, j + 1), id(i + 1, j + 1), id(i + 1, j)
+    cells[#cells + 1] = {a, d, c}; cells[#cells + 1] = {a, c, b}
+  end end
+  for j = 0, nt - 1 do bnd[#bnd + 1] = {id(nr, j), id(nr, j + 1)} end
+  local mesh = lg.mesh.new{cell = "triangle", vertices = verts, cells = cells, boundary = {wall = bnd}}
+  local ref = mesh:copy()
+  local st = seed
+  local function rnd() st = (st*1103515245 + 12345) % 2147483648; return st/2147483648 end
+  for k = 1, #verts - nt do mesh:set_coordinates(k, 2.8*rnd() - 1.4, 2.8*rnd() - 1.4) end
+  return mesh, ref
+end
+
 -- a bar of 3n x n x n cubes (6 tetrahedra each), length L, twisted by `turns` turns about
 -- its axis: boundary vertices at their twisted places, interior vertices left straight
 function M.twisted_bar(n, L, turns)

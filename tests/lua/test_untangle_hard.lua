@@ -4,7 +4,8 @@
 -- feasible set is empty. The default untangle must repair it (the global energy stage),
 -- with the boundary fixed too, and smoothing by the energy method must reach at least 0.9 of
 -- the structured strip's own minimum quality, which the local smoother, never lowering its
--- minimum, cannot. A tetrahedral bar twisted by 360 degrees. Reference shapes.
+-- minimum, cannot. The same in quadrilaterals. Random interior vertices in a star domain. A
+-- tetrahedral bar twisted by 360 degrees. Reference shapes.
 package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
 local T = require "testlib"
 local lg = require "lugal"
@@ -57,6 +58,28 @@ for _, case in ipairs{{30, 10, 0.7}, {40, 16, 0.75}} do
   T.check(se.min_after >= 0.9*qref, "quadrilaterals: energy smoothing reaches 0.9 of the strip's minimum corner condition (%.4f vs %.4f)",
           se.min_after, qref)
   T.check(se.min_after > sl.min_after, "quadrilaterals: energy smoothing beats the local smoother (%.4f vs %.4f)", se.min_after, sl.min_after)
+end
+-- random interior vertices in a star (non-convex) domain: half the cells inverted, some
+-- vertices outside the domain; untangled with the boundary fixed and sliding, then smoothed
+-- above the polar mesh's own minimum (whose cells near the centre are thin)
+for _, case in ipairs{{8, 40, 1}, {12, 60, 7}} do
+  local mesh, ref = H.star(case[1], case[2], case[3])
+  local slide = mesh:copy()
+  local r = mesh:untangle{quiet = true, boundary = "fixed"}
+  T.check(r.success and r.invalid_before > mesh:ncells()/3, "star %dx%d: %d of %d cells inverted, untangled (%d left)",
+          case[1], case[2], r.invalid_before, mesh:ncells(), r.invalid_after)
+  local rs = slide:untangle{quiet = true}
+  T.check(rs.success, "star %dx%d with sliding boundaries: untangled (%d left)", case[1], case[2], rs.invalid_after)
+  local qref = ref:quality("mean_ratio"):min()
+  local se = mesh:smooth{quiet = true, method = "energy", iterations = 50, boundary = "fixed"}
+  T.check(se.min_after >= qref, "star %dx%d: smoothed to %.4f, the polar mesh's own minimum %.4f", case[1], case[2], se.min_after, qref)
+  local bmax = 0
+  for k = ref:nvertices() - case[2] + 1, ref:nvertices() do
+    local x0, y0 = ref:coordinates(k)
+    local x1, y1 = mesh:coordinates(k)
+    bmax = math.max(bmax, math.abs(x1 - x0) + math.abs(y1 - y0))
+  end
+  T.check(bmax == 0, "star: the boundary stayed (moved by %g)", bmax)
 end
 -- a tetrahedral bar (3n x n x n cubes, 4 long) twisted by 360 degrees: boundary vertices at
 -- their twisted places, interior vertices left straight; untangled with the boundary fixed,

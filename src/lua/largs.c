@@ -318,7 +318,7 @@ static const arity arities[] = {
     {"lg", "jit_status", 1, "lg.jit_status"}, {"lg", "stats", 0, "lg.stats"}, {"lg", "wtime", 0, "lg.wtime"},
     {"lg", "control", 4, "lg.control"}, {"lg", "functional", 1, "lg.functional"},
     {"lg", "reduced_functional", 1, "lg.reduced_functional"}, {"lg", "taylor_test", 4, "lg.taylor_test"},
-    {"lg", "minimize", 2, "lg.minimize"}, {"lg", "kkt_problem", 1, "lg.kkt_problem"}, {"lg", "series", 1, "lg.series"},
+    {"lg", "minimize", 2, "lg.minimize"}, {"lg", "kkt_problem", 1, "lg.kkt_problem"}, {"lg", "series", 2, "lg.series"},
     {"lg.mesh", "interval", 1, "lg.mesh.interval"}, {"lg.mesh", "rectangle", 1, "lg.mesh.rectangle"},
     {"lg.mesh", "box", 1, "lg.mesh.box"}, {"lg.mesh", "read", 1, "lg.mesh.read"}, {"lg.mesh", "new", 1, "lg.mesh.new"},
     {MT_MESH, "vertices", 1, "mesh:vertices"}, {MT_MESH, "info", 0, "mesh:info"}, {MT_MESH, "write", 3, "mesh:write"},

@@ -714,7 +714,21 @@ static int mesh_set_coordinates(lua_State *L) {
 
 /* the VTU of a mesh with the fields of the table at tidx; every buffer lives in a table on
  * the stack until the file is written (never under user-named keys in the registry) */
-static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, int tidx, const char *fn, int ascii) {
+/* the options table {format = "binary" | "ascii" | "zlib"} at index idx (argument argno for
+ * messages), or none: a VTU_* */
+static int vtu_format_opt(lua_State *L, int idx, const char *fn, int argno) {
+  if (lua_isnoneornil(L, idx)) return VTU_BINARY;
+  if (!lua_istable(L, idx)) return typeerror(L, fn, argno, "a table of options {format = \"binary\", \"ascii\" or \"zlib\"}");
+  static const char *const keys[] = {"format", NULL};
+  check_keys(L, idx, fn, keys);
+  const char *f = opt_str(L, idx, "format", "binary", fn);
+  if (!strcmp(f, "binary")) return VTU_BINARY;
+  if (!strcmp(f, "ascii")) return VTU_ASCII;
+  if (!strcmp(f, "zlib")) return VTU_ZLIB;
+  return luaL_error(L, "%s: option 'format' must be \"binary\", \"ascii\" or \"zlib\", got \"%s\"", fn, f);
+}
+
+static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, int tidx, const char *fn, int format) {
   int nf = 0;
   if (!lua_isnoneornil(L, tidx)) {
     if (!lua_istable(L, tidx)) return typeerror(L, fn, tidx, "a table {name = function or array}");
@@ -791,7 +805,7 @@ static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, in
       lua_pop(L, 1);
     }
   }
-  int rc = mesh_write_vtu_format(m, path, nf, fl, ascii);
+  int rc = mesh_write_vtu_format(m, path, nf, fl, format);
   lua_pop(L, 2);
   if (rc) return luaL_error(L, "%s: %s", fn, m->err);
   return 0;
@@ -853,18 +867,9 @@ static int mesh_write(lua_State *L) {
   if (l > 4 && !strcmp(path + l - 4, ".svg")) return write_svg(L, u->lm->m, u->lm, path, fn);
   if (!(l > 4 && !strcmp(path + l - 4, ".vtu")))
     return luaL_error(L, "%s: argument 1 must end in .vtu (ParaView), .msh (Gmsh) or .svg (a 2D picture), got \"%s\"", fn, path);
-  int ascii = 0;
-  if (!lua_isnoneornil(L, 4)) {
-    if (!lua_istable(L, 4)) return typeerror(L, fn, 3, "a table of options {format = \"binary\" or \"ascii\"}");
-    static const char *const keys[] = {"format", NULL};
-    check_keys(L, 4, fn, keys);
-    const char *f = opt_str(L, 4, "format", "binary", fn);
-    if (strcmp(f, "binary") && strcmp(f, "ascii"))
-      return luaL_error(L, "%s: option 'format' must be \"binary\" or \"ascii\", got \"%s\"", fn, f);
-    ascii = !strcmp(f, "ascii");
-  }
+  int format = vtu_format_opt(L, 4, fn, 3);
   lua_settop(L, 3);
-  write_fields(L, u->lm->m, u->lm, path, 3, fn, ascii);
+  write_fields(L, u->lm->m, u->lm, path, 3, fn, format);
   return 0;
 }
 
@@ -1124,8 +1129,10 @@ static int l_series(lua_State *L) {
   size_t l = strlen(path);
   if (l < 5 || strcmp(path + l - 4, ".pvd")) return luaL_error(L, "lg.series: argument 1 must be a path ending in .pvd, got \"%s\"", path);
   if (l >= 500) return luaL_error(L, "lg.series: path too long");
+  int format = vtu_format_opt(L, 2, "lg.series", 2);
   ud_series *u = new_ud(L, sizeof *u, MT_SERIES, 0, NULL);
   snprintf(u->path, sizeof u->path, "%s", path);
+  u->format = format;
   return 1;
 }
 
@@ -1146,7 +1153,7 @@ static int series_write(lua_State *L) {
   }
   char file[600];
   snprintf(file, sizeof file, "%.*s_%04d.vtu", (int)(strlen(u->path) - 4), u->path, u->n);
-  write_fields(L, um->lm->m, um->lm, file, 3, fn, 0);
+  write_fields(L, um->lm->m, um->lm, file, 3, fn, u->format);
   u->files[u->n] = strdup(file);
   u->t[u->n] = t;
   if (!u->files[u->n]) return luaL_error(L, "%s: out of memory", fn);

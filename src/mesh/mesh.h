@@ -136,10 +136,12 @@ typedef struct {
   const double *val; /* n*ncomp */
 } mesh_field;
 int mesh_write_vtu(mesh *m, const char *path, int nfield, const mesh_field *f);
-/* the same, binary (VTK's inline base64 with 64-bit headers: values exact, 10.7 characters per
- * double against about 24 for full-precision ascii, and faster to read) unless ascii = 1;
- * mesh_write_vtu writes binary */
-int mesh_write_vtu_format(mesh *m, const char *path, int nfield, const mesh_field *f, int ascii);
+/* the same in a format: VTU_BINARY (VTK's inline base64 with 64-bit headers: values exact,
+ * 10.7 characters per double against about 24 for full-precision ascii, and faster to
+ * read; what mesh_write_vtu writes), VTU_ASCII, or VTU_ZLIB (the binary data in zlib-
+ * compressed blocks, compressor="vtkZLibDataCompressor", as ParaView writes it) */
+enum { VTU_BINARY = 0, VTU_ASCII = 1, VTU_ZLIB = 2 };
+int mesh_write_vtu_format(mesh *m, const char *path, int nfield, const mesh_field *f, int format);
 /* append (time, file) to a .pvd collection, rewriting it; step 0 starts a new file */
 int mesh_write_pvd(const char *pvd, int nstep, const double *times, char **files,
                    char *err);

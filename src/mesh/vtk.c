@@ -3,8 +3,11 @@
 #include "mesh.h"
 #include "outfile.h"
 
+#include "deflate.h"
+
 #include <stdint.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 static void xml_name(FILE *f, const char *s) {
@@ -46,6 +49,64 @@ static void b64_put(b64 *e, const void *p, size_t n) {
 /* one array's values, in ascii or binary: kind 0 doubles, 1 int32, 2 uint8; value i of get */
 typedef double (*value_fn)(const void *ud, long i);
 
+/* the little-endian bytes of value v of a kind into w; their count */
+static int value_bytes(int kind, double v, unsigned char *w) {
+  if (kind == 0) {
+    uint64_t u;
+    memcpy(&u, &v, 8);
+    for (int k = 0; k < 8; k++) w[k] = (unsigned char)(u >> (8 * k));
+    return 8;
+  }
+  if (kind == 1) {
+    uint32_t u = (uint32_t)(int32_t)v;
+    for (int k = 0; k < 4; k++) w[k] = (unsigned char)(u >> (8 * k));
+    return 4;
+  }
+  w[0] = (unsigned char)v;
+  return 1;
+}
+
+static void put_u64(b64 *e, uint64_t x) {
+  unsigned char h[8];
+  for (int k = 0; k < 8; k++) h[k] = (unsigned char)(x >> (8 * k));
+  b64_put(e, h, 8);
+}
+
+/* VTK's zlib-compressed inline binary (compressor="vtkZLibDataCompressor"): the raw bytes in
+ * blocks of VTU_BLOCK, each a zlib stream; the header (blocks, block size, the last block's
+ * size or 0 when full, each compressed size, as UInt64) base64-encoded on its own, then the
+ * streams. Returns 1 out of memory */
+#define VTU_BLOCK 32768
+static int write_array_zlib(FILE *f, int kind, long n, value_fn get, const void *ud) {
+  static const int size[] = {8, 4, 1};
+  size_t bytes = (size_t)n * (size_t)size[kind], nb = bytes ? (bytes + VTU_BLOCK - 1) / VTU_BLOCK : 0;
+  unsigned char *raw = malloc(bytes + 1), *z = malloc(nb * mesh_zlib_bound(VTU_BLOCK) + 1);
+  uint64_t *cs = malloc(sizeof(uint64_t) * (nb + 1));
+  if (!raw || !z || !cs) { free(raw); free(z); free(cs); return 1; }
+  size_t at = 0, zn = 0;
+  for (long i = 0; i < n; i++) at += (size_t)value_bytes(kind, get(ud, i), raw + at);
+  for (size_t b = 0; b < nb; b++) {
+    size_t len = b + 1 < nb ? VTU_BLOCK : bytes - b * VTU_BLOCK;
+    size_t c = mesh_zlib_compress(raw + b * VTU_BLOCK, len, z + zn, mesh_zlib_bound(VTU_BLOCK));
+    if (!c) { free(raw); free(z); free(cs); return 1; }
+    cs[b] = c;
+    zn += c;
+  }
+  b64 e = {f, {0, 0, 0}, 0};
+  put_u64(&e, nb);
+  put_u64(&e, VTU_BLOCK);
+  put_u64(&e, bytes % VTU_BLOCK);
+  for (size_t b = 0; b < nb; b++) put_u64(&e, cs[b]);
+  b64_flush(&e, 1);
+  b64_put(&e, z, zn);
+  b64_flush(&e, 1);
+  fputc('\n', f);
+  free(raw);
+  free(z);
+  free(cs);
+  return 0;
+}
+
 static void write_array(FILE *f, int binary, int kind, long n, int per_line, value_fn get, const void *ud) {
   if (!binary) {
     for (long i = 0; i < n; i++) {
@@ -63,17 +124,8 @@ static void write_array(FILE *f, int binary, int kind, long n, int per_line, val
   for (int k = 0; k < 8; k++) h[k] = (unsigned char)(bytes >> (8 * k));
   b64_put(&e, h, 8);
   for (long i = 0; i < n; i++) {
-    double v = get(ud, i);
     unsigned char w[8];
-    if (kind == 0) {
-      uint64_t u;
-      memcpy(&u, &v, 8);
-      for (int k = 0; k < 8; k++) w[k] = (unsigned char)(u >> (8 * k));
-    } else if (kind == 1) {
-      uint32_t u = (uint32_t)(int32_t)v;
-      for (int k = 0; k < 4; k++) w[k] = (unsigned char)(u >> (8 * k));
-    } else w[0] = (unsigned char)v;
-    b64_put(&e, w, (size_t)size[kind]);
+    b64_put(&e, w, (size_t)value_bytes(kind, get(ud, i), w));
   }
   b64_flush(&e, 1);
   fputc('\n', f);
@@ -94,15 +146,27 @@ static double get_type(const void *ud, long i) {
   return vtk_type[((const mesh *)ud)->type];
 }
 
-int mesh_write_vtu_format(mesh *m, const char *path, int nfield, const mesh_field *fl, int ascii) {
+/* one array in the file's format; 1 out of memory */
+static int put_array(FILE *f, int format, int kind, long n, int per_line, value_fn get, const void *ud) {
+  if (format == VTU_ZLIB) return write_array_zlib(f, kind, n, get, ud);
+  write_array(f, format == VTU_BINARY, kind, n, per_line, get, ud);
+  return 0;
+}
+
+int mesh_write_vtu_format(mesh *m, const char *path, int nfield, const mesh_field *fl, int format) {
   outfile o;
+  if (format != VTU_BINARY && format != VTU_ASCII && format != VTU_ZLIB) {
+    snprintf(m->err, MESH_ERRLEN, "unknown VTU format %d", format);
+    return 1;
+  }
   if (outfile_open(&o, path, m->err, MESH_ERRLEN)) return 1;
   FILE *f = o.f;
-  int bin = !ascii;
+  int bin = format != VTU_ASCII, oom = 0;
   const char *fmt = bin ? "binary" : "ascii";
   fprintf(f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" "
-             "byte_order=\"LittleEndian\"%s>\n<UnstructuredGrid>\n"
-             "<Piece NumberOfPoints=\"%d\" NumberOfCells=\"%d\">\n", bin ? " header_type=\"UInt64\"" : "", m->nvert, m->ncell);
+             "byte_order=\"LittleEndian\"%s%s>\n<UnstructuredGrid>\n"
+             "<Piece NumberOfPoints=\"%d\" NumberOfCells=\"%d\">\n", bin ? " header_type=\"UInt64\"" : "",
+          format == VTU_ZLIB ? " compressor=\"vtkZLibDataCompressor\"" : "", m->nvert, m->ncell);
   for (int pass = 0; pass < 2; pass++) {
     int any = 0;
     for (int i = 0; i < nfield; i++) any |= fl[i].on_cells == pass;
@@ -114,24 +178,31 @@ int mesh_write_vtu_format(mesh *m, const char *path, int nfield, const mesh_fiel
       xml_name(f, fl[i].name);
       fprintf(f, "\" NumberOfComponents=\"%d\" format=\"%s\">\n", fl[i].ncomp, fmt);
       long n = (long)(pass ? m->ncell : m->nvert) * fl[i].ncomp;
-      write_array(f, bin, 0, n, fl[i].ncomp, get_field, &fl[i]);
+      oom |= put_array(f, format, 0, n, fl[i].ncomp, get_field, &fl[i]);
       fprintf(f, "</DataArray>\n");
     }
     fprintf(f, pass ? "</CellData>\n" : "</PointData>\n");
   }
   fprintf(f, "<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"%s\">\n", fmt);
-  write_array(f, bin, 0, 3L * m->nvert, 3, get_point, m);
+  oom |= put_array(f, format, 0, 3L * m->nvert, 3, get_point, m);
   fprintf(f, "</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int32\" Name=\"connectivity\" format=\"%s\">\n", fmt);
-  write_array(f, bin, 1, (long)m->ncell * m->nvc, m->nvc, get_conn, m);
+  oom |= put_array(f, format, 1, (long)m->ncell * m->nvc, m->nvc, get_conn, m);
   fprintf(f, "</DataArray>\n<DataArray type=\"Int32\" Name=\"offsets\" format=\"%s\">\n", fmt);
-  write_array(f, bin, 1, m->ncell, 1, get_offset, m);
+  oom |= put_array(f, format, 1, m->ncell, 1, get_offset, m);
   fprintf(f, "</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"%s\">\n", fmt);
-  write_array(f, bin, 2, m->ncell, 1, get_type, m);
+  oom |= put_array(f, format, 2, m->ncell, 1, get_type, m);
   fprintf(f, "</DataArray>\n</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
+  if (oom) {
+    outfile_abort(&o);
+    snprintf(m->err, MESH_ERRLEN, "out of memory compressing %s", path);
+    return 1;
+  }
   return outfile_commit(&o, m->err, MESH_ERRLEN);
 }
 
-int mesh_write_vtu(mesh *m, const char *path, int nfield, const mesh_field *fl) { return mesh_write_vtu_format(m, path, nfield, fl, 0); }
+int mesh_write_vtu(mesh *m, const char *path, int nfield, const mesh_field *fl) {
+  return mesh_write_vtu_format(m, path, nfield, fl, VTU_BINARY);
+}
 
 int mesh_write_pvd(const char *pvd, int nstep, const double *times, char **files, char *err) {
   outfile o;

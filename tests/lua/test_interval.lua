@@ -53,7 +53,7 @@ do
   T.check(text:find('header_type="UInt64"', 1, true) and text:find('format="binary"', 1, true), "binary VTU by default")
   -- the cell types array: 8 bytes of count (5) then five 3s, base64 "BQAAAAAAAAADAwMDAw=="
   T.check(text:find("BQAAAAAAAAADAwMDAw==", 1, true) ~= nil, "the binary types array of 5 lines")
-  T.fails(function() return mesh:write(vtu, {u = uh}, {format = "hdf5"}) end, "must be \"binary\" or \"ascii\"")
+  T.fails(function() return mesh:write(vtu, {u = uh}, {format = "hdf5"}) end, "must be \"binary\", \"ascii\" or \"zlib\"")
   mesh:write(msh)
   local back = lg.mesh.read(msh)
   T.check(back:dim() == 1 and back:ncells() == 5, "the Gmsh file reads back as 5 intervals")

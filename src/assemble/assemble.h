@@ -32,6 +32,7 @@ typedef struct {
   int nkernels;
   int no_point_cache;   /* -lugal_point_cache 0: kernels recompute their cached values */
   int no_vector_math;   /* -lugal_vector_math 0: transcendental calls per point through libm (vmath.c) */
+  int no_keep_factor;   /* -lugal_keep_factor 0: refactor a linear problem's matrix at every change (solver.h) */
   kernel_pcache_group pcache; /* the point caches' groups (kernel.h): the list's sentinel */
   unsigned long pcache_uses[3]; /* assemblies with a point cache by mode: computed, stored, read */
   char err[LG_ERRLEN];

@@ -511,6 +511,7 @@ void lg_problem_free(lg_problem *p) {
   free(p->bcc_val);
   if (p->b) VecDestroy(&p->b);
   if (p->x) VecDestroy(&p->x);
+  lg_keep_destroy(&p->keep);
   if (p->ksp) KSPDestroy(&p->ksp);
   if (p->snes) SNESDestroy(&p->snes);
   free(p);
@@ -941,6 +942,12 @@ static int keep_bc_columns(lg_env *env, lg_problem *p) {
   return 0;
 }
 
+/* whether a solve with a matrix other than the factored one may iterate with the old factor
+ * (solver.h, lg_keep): linear problems, unless -lugal_keep_factor 0 */
+static int keep_usable(lg_env *env, lg_problem *p) {
+  return !p->nonlinear && !env->no_keep_factor && lg_keep_usable(&p->keep, p->ksp, p->prefix);
+}
+
 static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_info *info) {
   double t0 = now_ms();
   memset(p->state, 0, sizeof(double) * (size_t)p->N);
@@ -976,13 +983,37 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
   t0 = now_ms();
   if (ensure_ksp(env, p)) return 1;
   PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
-  if (!reuse) PCHK(lg_lu_prepare(p->ksp, p->A, p->bc_rows, p->nbc, p->prefix, 1), "the factorization's choice");
-  lg_mumps_detect_null_pivots(p->ksp);
-  while ((rc = linear_solve_checked(env, p, info)) == 2)
-    /* PETSc's LU (no pivoting) found a zero pivot or solved inaccurately: MUMPS, once */
-    PCHK(lg_lu_fallback(p->ksp, p->A), "the switch to MUMPS");
+  int refactor = !reuse || p->keep.stale;
+  PetscBool kept = PETSC_FALSE;
+  if (refactor && keep_usable(env, p)) {
+    /* a new matrix close to the factored one (the next control of an optimization) */
+    PetscInt its;
+    PCHK(lg_keep_solve(&p->keep, p->ksp, p->A, p->b, p->x, 0, !reuse, &kept, &its), "the solve with the kept factorization");
+    if (kept) {
+      info->iterations = info->linear_iterations = (int)its;
+      snprintf(info->reason, sizeof info->reason, "CONVERGED_RTOL");
+      snprintf(info->solver, sizeof info->solver, "cg/cholesky-kept");
+      rc = 0;
+    } else {
+      /* refactored below: back to the essential values as the direct solve's start */
+      PCHK(VecSet(p->x, 0), "VecSet");
+      PCHK(VecSetValues(p->x, p->nbc, p->bc_rows, p->bc_vals, INSERT_VALUES), "VecSetValues");
+      PCHK(VecAssemblyBegin(p->x), "VecAssembly");
+      PCHK(VecAssemblyEnd(p->x), "VecAssembly");
+    }
+  }
+  if (!kept) {
+    if (refactor) PCHK(lg_lu_prepare(p->ksp, p->A, p->bc_rows, p->nbc, p->prefix, 1), "the factorization's choice");
+    lg_mumps_detect_null_pivots(p->ksp);
+    double t1 = now_ms();
+    while ((rc = linear_solve_checked(env, p, info)) == 2)
+      /* PETSc's LU (no pivoting) found a zero pivot or solved inaccurately: MUMPS, once */
+      PCHK(lg_lu_fallback(p->ksp, p->A), "the switch to MUMPS");
+    if (refactor) lg_keep_factored(&p->keep, now_ms() - t1);
+    else lg_keep_direct(&p->keep, now_ms() - t1);
+    lg_solver_name(p->ksp, info->solver, sizeof info->solver);
+  }
   info->solve_ms = now_ms() - t0;
-  lg_solver_name(p->ksp, info->solver, sizeof info->solver);
   if (rc) return 1;
   if (remove_null(env, p)) return 1;
   const PetscScalar *x;
@@ -1382,15 +1413,28 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   VecGetArray(r, &a);
   memcpy(a, rhs, sizeof(double) * (size_t)p->N);
   VecRestoreArray(r, &a);
-  PetscErrorCode ierr;
-  KSPConvergedReason reason;
-  for (;;) {
+  PetscErrorCode ierr = 0;
+  KSPConvergedReason reason = KSP_CONVERGED_ITS;
+  PetscBool kept = PETSC_FALSE;
+  /* a linear problem whose state was solved with a kept factorization: the same, or a
+   * factorization of the state's matrix when the kept one has cost enough */
+  int stale = !p->nonlinear && p->keep.stale;
+  if (stale && keep_usable(env, p)) {
+    PetscInt its;
+    ierr = lg_keep_solve(&p->keep, ksp, p->A, r, l, transpose, 0, &kept, &its);
+  }
+  double t1 = now_ms();
+  while (!ierr && !kept) {
     ierr = transpose ? KSPSolveTranspose(ksp, r, l) : KSPSolve(ksp, r, l);
     reason = KSP_CONVERGED_ITS;
     if (!ierr) KSPGetConvergedReason(ksp, &reason);
     if (ierr || reason >= 0 || !lg_lu_native(ksp, p->prefix)) break;
     /* PETSc's LU (no pivoting) failed: MUMPS, once */
     if ((ierr = lg_lu_fallback(ksp, p->A))) break;
+  }
+  if (!ierr && !kept && !p->nonlinear) {
+    if (stale) lg_keep_factored(&p->keep, now_ms() - t1);
+    else lg_keep_direct(&p->keep, now_ms() - t1);
   }
   if (!ierr && reason >= 0) {
     const PetscScalar *lv;
@@ -1421,6 +1465,7 @@ static int prepare_matrix(lg_env *env, lg_problem *p) {
     if (lg_mesh_check(env, p->lm)) return 1;
     memset(p->state, 0, sizeof(double) * (size_t)p->N);
     p->matrix_fp = 0; /* A no longer holds the last solve's matrix */
+    p->keep.stale = 0; /* its next solve refactors it */
     if (assemble_matrix(env, p, p->state, p->A)) return 1;
     if (compute_bcs(env, p)) return 1;
     PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, NULL, NULL), "MatZeroRows");

@@ -5,6 +5,7 @@
 #define LUGAL_PROBLEM_INT_H
 
 #include "assemble.h"
+#include "solver.h"
 
 #include <petscsnes.h>
 #include <time.h>
@@ -95,6 +96,7 @@ struct lg_problem {
                        * keep the last Jacobian while it contracts the residual (snes_jacobian) */
   int lag_valid;      /* A holds a Jacobian assembled for this solve's data (any iterate) */
   double lag_fnorm;   /* |F| at the last Jacobian evaluation */
+  lg_keep keep;       /* linear problems: the factorization kept while A changes (solver.h) */
   double *elem;       /* element tensor scratch */
   size_t elem_cap;
   int failed;         /* a callback failed: env->err holds why */

@@ -6,6 +6,7 @@
 
 #include <stdio.h>
 #include <string.h>
+#include <time.h>
 
 /* PETSc's LU against MUMPS, one factorization and one solve of the P1 Laplacian
  * (bench/RESULTS.md, "Direct solvers"): PETSc's is faster on 2D systems up to about 10^5
@@ -197,4 +198,97 @@ void lg_solver_name(KSP ksp, char *out, size_t len) {
   int direct = kt && !strcmp(kt, KSPPREONLY);
   if (is_lu(ksp, &pc, &st) && direct) snprintf(out, len, "%s/%s", pt ? pt : "lu", st);
   else snprintf(out, len, "%s/%s", kt ? kt : "?", pt ? pt : "?");
+}
+
+/* ---------------------------------------------------------------- a kept factorization */
+
+/* the solves' relative residual (unpreconditioned, as a direct solve's would be checked)
+ * and the iterations after which CG gives up and the matrix is refactored */
+#define KEEP_RTOL 1e-12
+#define KEEP_MAXIT 60
+#define KEEP_BACKOFF_MAX 16
+
+static double wall_ms(void) {
+  struct timespec t;
+  clock_gettime(CLOCK_MONOTONIC, &t);
+  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
+}
+
+int lg_keep_usable(const lg_keep *kp, KSP ksp, const char *prefix) {
+  PC pc;
+  PetscBool ch = PETSC_FALSE, user = PETSC_FALSE;
+  if (kp->skip > 0 || kp->factor_ms <= 0 || kp->extra_ms >= kp->factor_ms) return 0;
+  if (!lg_lu_native(ksp, prefix) || KSPGetPC(ksp, &pc) || PetscObjectTypeCompare((PetscObject)pc, PCCHOLESKY, &ch) || !ch)
+    return 0;
+  PetscOptionsHasName(NULL, prefix && prefix[0] ? prefix : NULL, "-ksp_type", &user);
+  return !user;
+}
+
+PetscErrorCode lg_keep_solve(lg_keep *kp, KSP ksp, Mat A, Vec b, Vec x, int transpose, int changed, PetscBool *ok,
+                             PetscInt *its) {
+  PC pc;
+  PetscFunctionBeginUser;
+  *ok = PETSC_FALSE;
+  *its = 0;
+  PetscCall(KSPGetPC(ksp, &pc));
+  if (!kp->cg) {
+    const char *prefix = NULL;
+    PetscCall(KSPCreate(PETSC_COMM_SELF, &kp->cg));
+    PetscCall(KSPGetOptionsPrefix(ksp, &prefix));
+    /* its own prefix, so that the direct KSP's options (-ksp_monitor for a direct solve)
+     * do not change it; -lugal_keep_ksp_monitor shows its iterations */
+    PetscCall(KSPSetOptionsPrefix(kp->cg, prefix));
+    PetscCall(KSPAppendOptionsPrefix(kp->cg, "lugal_keep_"));
+    PetscCall(KSPSetType(kp->cg, KSPCG));
+    PetscCall(KSPSetPC(kp->cg, pc));
+    PetscCall(KSPSetNormType(kp->cg, KSP_NORM_UNPRECONDITIONED));
+    PetscCall(KSPSetTolerances(kp->cg, KEEP_RTOL, 0.0, PETSC_DEFAULT, KEEP_MAXIT));
+    PetscCall(KSPSetErrorIfNotConverged(kp->cg, PETSC_FALSE));
+    PetscCall(KSPSetFromOptions(kp->cg));
+  }
+  double t0 = wall_ms();
+  PetscCall(KSPSetOperators(kp->cg, A, A));
+  PetscCall(PCSetReusePreconditioner(pc, PETSC_TRUE));
+  PetscErrorCode ierr = transpose ? KSPSolveTranspose(kp->cg, b, x) : KSPSolve(kp->cg, b, x);
+  PetscCall(PCSetReusePreconditioner(pc, PETSC_FALSE));
+  PetscCall(ierr);
+  KSPConvergedReason reason;
+  PetscCall(KSPGetConvergedReason(kp->cg, &reason));
+  PetscCall(KSPGetIterationNumber(kp->cg, its));
+  double t = wall_ms() - t0;
+  kp->extra_ms += t - kp->solve_ms;
+  kp->cycle_solves++;
+  kp->solves++;
+  kp->iterations += *its;
+  if (reason > 0) {
+    *ok = PETSC_TRUE;
+    if (changed) kp->saved++; /* a new matrix solved without its factorization */
+    kp->stale = 1;
+  } else kp->extra_ms = kp->factor_ms; /* no more tries before a factorization */
+  PetscFunctionReturn(0);
+}
+
+void lg_keep_factored(lg_keep *kp, double ms) {
+  /* did the iterative solves since the last factorization save time? */
+  if (kp->cycle_solves) {
+    if (kp->saved * kp->factor_ms <= kp->extra_ms) {
+      kp->skip = kp->backoff ? kp->backoff : 1;
+      kp->backoff = kp->skip * 2 > KEEP_BACKOFF_MAX ? KEEP_BACKOFF_MAX : kp->skip * 2;
+    } else kp->backoff = 0;
+  } else if (kp->skip > 0) kp->skip--;
+  kp->cycle_solves = 0;
+  double f = ms - kp->solve_ms;
+  kp->factor_ms = f > 0 ? f : ms;
+  kp->extra_ms = 0;
+  kp->saved = 0;
+  kp->stale = 0;
+  kp->factorizations++;
+}
+
+void lg_keep_direct(lg_keep *kp, double ms) {
+  kp->solve_ms = kp->solve_ms > 0 ? 0.5 * (kp->solve_ms + ms) : ms;
+}
+
+void lg_keep_destroy(lg_keep *kp) {
+  if (kp->cg) KSPDestroy(&kp->cg);
 }

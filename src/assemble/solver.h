@@ -30,6 +30,42 @@ void lg_mumps_detect_null_pivots(KSP ksp);
 /* the null pivots of MUMPS's last factorization, or 0 for other solvers */
 PetscInt lg_mumps_null_pivots(KSP ksp);
 
+/* A factorization kept while the matrix changes: the state matrix of an optimization is
+ * reassembled at every new control, and refactoring it was half of an L-BFGS run. While the
+ * matrix stays close to the factored one, conjugate gradients preconditioned by the old
+ * Cholesky factor solve it in a few iterations (each a triangular solve and a product).
+ * The rule is ski rental: iterative solves are taken while what they cost beyond direct ones,
+ * summed since the last factorization, stays below one factorization's time; then the
+ * matrix is refactored. A run of iterative solves that did not save a factorization turns
+ * the keeping off for the next 1, 2, 4, ... 16 factorizations. Only for the native Cholesky
+ * lugal chose (a symmetric matrix, no -ksp_type/-pc_type from the user); -lugal_keep_factor 0
+ * turns it off. */
+typedef struct {
+  KSP cg;            /* CG on the operator, preconditioned by the direct KSP's own PC */
+  int stale;         /* the PC holds the factor of an earlier matrix than the operator */
+  double factor_ms;  /* the last factorization's time (beyond a solve's) */
+  double solve_ms;   /* a direct solve's time with the factor */
+  double extra_ms;   /* what the iterative solves cost beyond direct ones since then */
+  int saved;         /* factorizations the iterative solves replaced since then */
+  int cycle_solves;  /* iterative solves since then */
+  int skip, backoff; /* factorizations to make before keeping again; the next pause */
+  long solves, iterations, factorizations; /* statistics (-lugal_verbose) */
+} lg_keep;
+
+/* 1 if the next solve with a changed (or stale) matrix may iterate with the kept factor */
+int lg_keep_usable(const lg_keep *kp, KSP ksp, const char *prefix);
+
+/* solve A x = b (A^T x = b with transpose) by CG preconditioned with the factor the KSP's PC
+ * holds, without refactoring; *ok = 0 when it did not converge (the caller refactors) */
+PetscErrorCode lg_keep_solve(lg_keep *kp, KSP ksp, Mat A, Vec b, Vec x, int transpose, int changed, PetscBool *ok,
+                             PetscInt *its);
+
+/* after a direct solve that (re)factored the matrix (ms: the whole solve) / that did not */
+void lg_keep_factored(lg_keep *kp, double ms);
+void lg_keep_direct(lg_keep *kp, double ms);
+
+void lg_keep_destroy(lg_keep *kp);
+
 /* what solved: "lu/petsc", "lu/mumps", or "KSP type/PC type" */
 void lg_solver_name(KSP ksp, char *out, size_t len);
 

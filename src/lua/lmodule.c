@@ -71,6 +71,9 @@ int luaopen_lugal(lua_State *L) {
     PetscBool vmath = PETSC_TRUE;
     PetscOptionsGetBool(NULL, NULL, "-lugal_vector_math", &vmath, NULL);
     ue->env->no_vector_math = !vmath;
+    PetscBool keep = PETSC_TRUE;
+    PetscOptionsGetBool(NULL, NULL, "-lugal_keep_factor", &keep, NULL);
+    ue->env->no_keep_factor = !keep;
   } else lua_pop(L, 1);
 
   lg_lua_expr_register(L);

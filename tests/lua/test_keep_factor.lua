@@ -1,0 +1,96 @@
+-- A kept factorization (src/assemble/solver.c, lg_keep): a symmetric linear problem whose
+-- matrix changes (a coefficient, an optimization's control) is solved by CG preconditioned
+-- with its last Cholesky factor while that costs less than refactoring, and refactored when
+-- CG fails. The answers must be those of a new problem factored afresh; the sequence of
+-- choices (direct, kept, fallback, pause, kept) is checked; the adjoint and Hessian solves
+-- with a kept factor must pass Taylor tests; an inversion with the control in the stiffness
+-- must reach the same optimum as with -lugal_keep_factor 0 (this script's child run).
+package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
+local T = require "testlib"
+local lg = require "lugal"
+
+local x, y = lg.x, lg.y
+local mesh = lg.mesh.rectangle{nx = 24}
+local P1 = lg.lagrange(1)
+local u, v = lg.unknown(P1, "u"), lg.test(P1, "v")
+local bc = lg.essential_bc(mesh:boundary(), v*u)
+local child = arg[1] == "child"
+
+local function inversion()
+  local kt = lg.interpolate(P1, mesh, 1 + lg.exp(-40*((x - 0.4)^2 + (y - 0.6)^2)), "k_true")
+  local ut = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), kt*lg.dot(lg.grad(v), lg.grad(u)) - v),
+                               bc = bc, test = v, unknown = u, symmetric = true}:solve()
+  local k = lg.control(P1, mesh, "k", 1 + 0*x)
+  local st = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), k*lg.dot(lg.grad(v), lg.grad(u)) - v),
+                               bc = bc, test = v, unknown = u, symmetric = true}
+  local J = lg.functional(lg.integral(mesh:cells(), 0.5*(u - ut)^2 + 1e-8/2*lg.dot(lg.grad(k), lg.grad(k))))
+  return lg.reduced_functional{problem = st, functional = J, control = k}
+end
+
+if child then
+  local rf = inversion()
+  local _, info = lg.minimize(rf, {method = "blmvm", bounds = {1.0, nil}, gttol = 1e-6, gatol = 0, grtol = 0,
+                                   maxit = 500, monitor = false})
+  print(string.format("J* %.17g iterations %d", info.J, info.iterations))
+  os.exit(0)
+end
+
+-- a coefficient a in the stiffness, changed between solves
+local a = lg.parameter("a", 0.1)
+local function problem()
+  return lg.linear_problem{mesh = mesh, test = v, unknown = u, symmetric = true,
+                           eqn = lg.integral(mesh:cells(), (1 + a*x*y)*lg.dot(lg.grad(v), lg.grad(u)) - (1 + x)*v), bc = bc}
+end
+local p = problem()
+local function solve_and_compare(val, want, what)
+  a:set(val)
+  local uh, info = p:solve()
+  local ref = problem():solve()          -- factored afresh
+  local dmax, umax = 0, 0
+  local rv = ref:values()
+  for i, w in ipairs(uh:values()) do dmax = math.max(dmax, math.abs(w - rv[i])); umax = math.max(umax, math.abs(rv[i])) end
+  T.check(info.solver == want, "%s (a = %g): solved by %s (want %s)", what, val, info.solver, want)
+  T.check(dmax <= 1e-10*umax, "%s (a = %g): max difference %.2e from a new factorization (max |u| %.3g)", what, val, dmax, umax)
+  return info
+end
+solve_and_compare(0.1, "cholesky/petsc", "first solve")
+local ki = solve_and_compare(0.12, "cg/cholesky-kept", "a small change")
+T.check(ki.iterations >= 1 and ki.iterations <= 20, "a small change: %d CG iterations with the old factor", ki.iterations)
+-- a coefficient ratio of 10^7 over the domain: CG with the old factor does not reach the
+-- tolerance within its iterations, and the matrix is refactored at once
+solve_and_compare(1e7, "cholesky/petsc", "a change too large for the old factor")
+-- that attempt did not pay: the next factorization is made without trying
+solve_and_compare(1.01e7, "cholesky/petsc", "the pause after a failed attempt")
+solve_and_compare(1.02e7, "cg/cholesky-kept", "kept again after the pause")
+
+-- gradients and Hessian actions through kept factors: the control is in the stiffness, so
+-- every evaluation of the Taylor test changes the matrix
+local function rates(t, what, order, want)
+  local r = (order == 1 and t.rates1 or t.rates2)
+  r = r[#r]
+  T.check(math.abs(r - want) < 0.1, "%s: Taylor rate %.3f (want %.1f)\n%s", what, r, want, tostring(t))
+end
+local rf = inversion()
+rf:value(1 + 0.3*x*y)
+local t1 = lg.taylor_test(rf, 1 + 0.3*x*y, lg.sin(3*x)*y)
+rates(t1, "gradient with kept factors", 1, 2)
+local t2 = lg.taylor_test(rf, 1 + 0.3*x*y, lg.sin(3*x)*y, {hessian = true, h = 0.1})
+rates(t2, "Hessian action with kept factors", 2, 3)
+
+-- the whole inversion: the same optimum as without keeping factors
+local function run(opts)
+  local h = io.popen(string.format("'%s' '%s' child %s 2>&1", arg[-1], arg[0], opts))
+  local out = h:read("a")
+  h:close()
+  local j, it = out:match("J%* (%S+) iterations (%d+)")
+  T.check(j ~= nil, "child run (%s) printed its optimum: %s", opts, out)
+  return tonumber(j), tonumber(it)
+end
+local jk, ik = run("")
+local jd, id = run("-lugal_keep_factor 0")
+if jk and jd then
+  T.close(jk, jd, 1e-6, "the inversion's optimum with and without kept factors")
+  T.check(math.abs(ik - id) <= 2, "iterations %d with kept factors, %d without", ik, id)
+end
+print(string.format("kept factorizations: answers as new ones to 1e-10, Taylor rates %.2f and %.2f, inversion J* %.6g in %d iterations (%d without)",
+                    t1.rates1[#t1.rates1], t2.rates2[#t2.rates2], jk or 0, ik or 0, id or 0))

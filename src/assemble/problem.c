@@ -988,7 +988,18 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
   if (refactor && keep_usable(env, p)) {
     /* a new matrix close to the factored one (the next control of an optimization) */
     PetscInt its;
-    PCHK(lg_keep_solve(&p->keep, p->ksp, p->A, p->b, p->x, 0, !reuse, &kept, &its), "the solve with the kept factorization");
+    int guess = 0;
+    if (p->have_solution) {
+      /* the last solution with the essential values, the initial guess */
+      PetscScalar *xv;
+      PCHK(VecGetArray(p->x, &xv), "VecGetArray");
+      memcpy(xv, p->solution, sizeof(double) * (size_t)p->N);
+      for (int i = 0; i < p->nbc; i++) xv[p->bc_rows[i]] = p->bc_vals[i];
+      PCHK(VecRestoreArray(p->x, &xv), "VecRestoreArray");
+      guess = 1;
+    }
+    PCHK(lg_keep_solve(&p->keep, p->ksp, p->A, p->b, p->x, 0, !reuse, guess, &kept, &its),
+         "the solve with the kept factorization");
     if (kept) {
       info->iterations = info->linear_iterations = (int)its;
       snprintf(info->reason, sizeof info->reason, "CONVERGED_RTOL");
@@ -1421,7 +1432,8 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   int stale = !p->nonlinear && p->keep.stale;
   if (stale && keep_usable(env, p)) {
     PetscInt its;
-    ierr = lg_keep_solve(&p->keep, ksp, p->A, r, l, transpose, 0, &kept, &its);
+    int guess = lg_keep_guess(&p->keep, transpose, l);
+    ierr = lg_keep_solve(&p->keep, ksp, p->A, r, l, transpose, 0, guess, &kept, &its);
   }
   double t1 = now_ms();
   while (!ierr && !kept) {
@@ -1436,6 +1448,7 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
     if (stale) lg_keep_factored(&p->keep, now_ms() - t1);
     else lg_keep_direct(&p->keep, now_ms() - t1);
   }
+  if (!ierr && !p->nonlinear && !env->no_keep_factor) ierr = lg_keep_remember(&p->keep, transpose, l);
   if (!ierr && reason >= 0) {
     const PetscScalar *lv;
     VecGetArrayRead(l, &lv);

@@ -35,7 +35,7 @@ PetscInt lg_mumps_null_pivots(KSP ksp);
  * matrix stays close to the factored one, conjugate gradients preconditioned by the old
  * Cholesky factor solve it in a few iterations (each a triangular solve and a product).
  * The rule is ski rental: iterative solves are taken while what they cost beyond direct ones,
- * summed since the last factorization, stays below one factorization's time; then the
+ * summed since the last factorization, stays below two factorizations' time; then the
  * matrix is refactored. A run of iterative solves that did not save a factorization turns
  * the keeping off for the next 1, 2, 4, ... 16 factorizations. Only for the native Cholesky
  * lugal chose (a symmetric matrix, no -ksp_type/-pc_type from the user); -lugal_keep_factor 0
@@ -49,16 +49,24 @@ typedef struct {
   int saved;         /* factorizations the iterative solves replaced since then */
   int cycle_solves;  /* iterative solves since then */
   int skip, backoff; /* factorizations to make before keeping again; the next pause */
-  long solves, iterations, factorizations; /* statistics (-lugal_verbose) */
+  long solves, iterations, factorizations; /* statistics */
+  Vec last[2];       /* the last tangent and adjoint solutions (initial guesses) */
 } lg_keep;
 
 /* 1 if the next solve with a changed (or stale) matrix may iterate with the kept factor */
 int lg_keep_usable(const lg_keep *kp, KSP ksp, const char *prefix);
 
 /* solve A x = b (A^T x = b with transpose) by CG preconditioned with the factor the KSP's PC
- * holds, without refactoring; *ok = 0 when it did not converge (the caller refactors) */
-PetscErrorCode lg_keep_solve(lg_keep *kp, KSP ksp, Mat A, Vec b, Vec x, int transpose, int changed, PetscBool *ok,
-                             PetscInt *its);
+ * holds, without refactoring, from x as the initial guess when guess (a last solution: kept
+ * when it leaves a smaller residual than zero does); *ok = 0 when it did not converge (the
+ * caller refactors) */
+PetscErrorCode lg_keep_solve(lg_keep *kp, KSP ksp, Mat A, Vec b, Vec x, int transpose, int changed, int guess,
+                             PetscBool *ok, PetscInt *its);
+
+/* the last tangent (transpose 0) or adjoint (1) solution, the next one's initial guess:
+ * lg_keep_guess copies it into x and returns 1, or returns 0 when there is none */
+PetscErrorCode lg_keep_remember(lg_keep *kp, int transpose, Vec x);
+int lg_keep_guess(const lg_keep *kp, int transpose, Vec x);
 
 /* after a direct solve that (re)factored the matrix (ms: the whole solve) / that did not */
 void lg_keep_factored(lg_keep *kp, double ms);

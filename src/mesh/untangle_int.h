@@ -1,6 +1,7 @@
-/* untangle_int.h — what untangle.c (untangling, mesh motion) and smooth.c (smoothing) share
- * inside src/mesh: the corner and adjacency context, the L-BFGS objective, the unit frame
- * for meshes far from unit size. Not an interface of the mesh layer: see untangle.h. */
+/* untangle_int.h — what untangle.c (untangling's driver and stage 2, mesh motion),
+ * untangle_ctx.c (the context), untangle_place.c (stages 1 and 3), untangle_global.c (the
+ * global stage) and smooth.c (smoothing) share inside src/mesh: the corner and adjacency
+ * context, the L-BFGS objective, the unit frame for meshes far from unit size. Not an interface of the mesh layer: see untangle.h. */
 #ifndef LUGAL_UNTANGLE_INT_H
 #define LUGAL_UNTANGLE_INT_H
 
@@ -64,6 +65,20 @@ typedef struct {
   double c[3];    /* the centre, scaled by 2^-e */
   double *orig;   /* NULL: not active */
 } unit_frame;
+
+static inline const int *cell_of(const ctx *C, int c) { return C->m->cells + (size_t)c * C->nvc; }
+
+/* corner k of cell (global vertex ids) at coordinates x: its Jacobian determinant, and, when
+ * g is given, its gradient with respect to each of the corner's d + 1 vertices */
+double ut_corner_jac(const ctx *C, const double *x, const int *cell, int k, double g[4][3]);
+
+/* stages 1 and 3 (untangle_place.c): passes over the free vertices (of region, when given)
+ * whose corners are violated (J <= jtol, or J < target with stage3), each moved into the
+ * feasible set of its linearized constraints by placement (0 Chebyshev centre, 1 corners);
+ * at most maxpass passes, a pass that moves nothing ends them. Returns the vertices moved
+ * for the first time (marked in moved); *npass the passes made. */
+int ut_feasible_passes(ctx *C, double *x, double target, int stage3, const unsigned char *region, int placement,
+                       int maxpass, unsigned char *moved, int *npass);
 
 double ut_now(void);
 int ut_ctx_init(ctx *C, mesh *m, int slide, char *err);

@@ -1,0 +1,250 @@
+/* untangle_place.c — stages 1 and 3 of the untangler (seed, untangling paper, sections 2–3):
+ * each violated vertex moved into the feasible set of its corners' linearized Jacobian
+ * constraints {δ : J_k + g_k·δ >= target}, at the set's Chebyshev centre or the mean of
+ * its extreme points along the axes, found by small dense linear programs. */
+#include "untangle_int.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+/* ---------------------------------------------------------------- small linear programs */
+
+/* maximize c·z subject to A z <= b, z >= 0, where b >= 0 so that the slack basis is
+ * feasible; dense tableau, Bland's rule (no cycling). m rows, n columns. Returns 0 with the
+ * optimum in z, 1 when unbounded or out of iterations. */
+static int lp_max(int m, int n, const double *A, const double *b, const double *c, double *z) {
+  int W = n + m + 1;
+  double *T = calloc((size_t)(m + 1) * W, sizeof(double));
+  int *basis = malloc(sizeof(int) * (size_t)m);
+  if (!T || !basis) { free(T); free(basis); return 1; }
+  for (int i = 0; i < m; i++) {
+    for (int j = 0; j < n; j++) T[i * W + j] = A[i * n + j];
+    T[i * W + n + i] = 1;
+    T[i * W + W - 1] = b[i];
+    basis[i] = n + i;
+  }
+  for (int j = 0; j < n; j++) T[m * W + j] = -c[j];
+  int status = 1;
+  for (int it = 0; it < 50 * (m + n); it++) {
+    int e = -1;
+    for (int j = 0; j < n + m; j++)
+      if (T[m * W + j] < -1e-12) { e = j; break; }
+    if (e < 0) { status = 0; break; }
+    int r = -1;
+    double best = INFINITY;
+    for (int i = 0; i < m; i++) {
+      double a = T[i * W + e];
+      if (a <= 1e-12) continue;
+      double q = T[i * W + W - 1] / a;
+      if (q < best || (q == best && basis[i] < basis[r])) { best = q; r = i; }
+    }
+    if (r < 0) break; /* unbounded */
+    double pv = T[r * W + e];
+    for (int j = 0; j < W; j++) T[r * W + j] /= pv;
+    for (int i = 0; i <= m; i++) {
+      if (i == r) continue;
+      double f = T[i * W + e];
+      if (f == 0) continue;
+      for (int j = 0; j < W; j++) T[i * W + j] -= f * T[r * W + j];
+    }
+    basis[r] = e;
+  }
+  if (!status) {
+    for (int j = 0; j < n; j++) z[j] = 0;
+    for (int i = 0; i < m; i++)
+      if (basis[i] < n) z[basis[i]] = T[i * W + W - 1];
+  }
+  free(T);
+  free(basis);
+  return status;
+}
+
+/* the constraints of vertex v: every corner of every cell around v that v takes part in,
+ * J_k + g_k·δ >= target. Returns the count (at most cap) and whether one is violated. */
+#define MAXCON 512
+typedef struct {
+  int n;
+  double g[MAXCON][3], J[MAXCON];
+} constraints;
+
+static void vertex_constraints(const ctx *C, const double *x, int v, constraints *K) {
+  K->n = 0;
+  for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++) {
+    const int *cell = cell_of(C, C->vc[p]);
+    for (int k = 0; k < C->ncorner; k++) {
+      int who = -1;
+      for (int i = 0; i <= C->d; i++)
+        if (cell[C->ct[k][i]] == v) who = i;
+      if (who < 0 || K->n >= MAXCON) continue;
+      double g[4][3];
+      K->J[K->n] = ut_corner_jac(C, x, cell, k, g);
+      for (int j = 0; j < C->d; j++) K->g[K->n][j] = g[who][j];
+      K->n++;
+    }
+  }
+}
+
+/* a new position for v inside {δ : J_k + g_k·δ >= target for all k}, or 0 when that set has
+ * no interior. placement 0: the Chebyshev centre (the point farthest from the nearest
+ * constraint, within a box of half-width R); 1: the mean of 2d−1 corners found by linear
+ * objectives (x, −x, y[, −y, z]), as in section 2 of the paper. */
+static int feasible_position(const ctx *C, const double *x, int v, double target, int placement, double *out) {
+  constraints K;
+  vertex_constraints(C, x, v, &K);
+  int d = C->d;
+  const double *p = x + (size_t)d * v;
+  double R = 0;
+  for (int q = C->vc_off[v]; q < C->vc_off[v + 1]; q++) {
+    const int *cell = cell_of(C, C->vc[q]);
+    for (int i = 0; i < C->nvc; i++) {
+      double s = 0;
+      for (int j = 0; j < d; j++) s += (x[(size_t)d * cell[i] + j] - p[j]) * (x[(size_t)d * cell[i] + j] - p[j]);
+      R = fmax(R, sqrt(s));
+    }
+  }
+  R *= 2;
+  if (!(R > 0) || K.n == 0) return 0;
+  int m = K.n + 2 * d + 1, n = 2 * d + 1;
+  double *A = calloc((size_t)m * n, sizeof(double)), *b = malloc(sizeof(double) * m), c[7] = {0}, z[7];
+  if (!A || !b) { free(A); free(b); return 0; }
+  double T0 = 0, ng[MAXCON];
+  for (int k = 0; k < K.n; k++) {
+    double s = 0;
+    for (int j = 0; j < d; j++) s += K.g[k][j] * K.g[k][j];
+    ng[k] = sqrt(s);
+    if (ng[k] == 0) { /* a corner v cannot change: it decides alone */
+      if (!(K.J[k] > target)) { free(A); free(b); return 0; }
+      continue;
+    }
+    T0 = fmax(T0, (target - K.J[k]) / ng[k]);
+  }
+  /* variables δ⁺ (d), δ⁻ (d), s with t = s − T0; rows: −a·δ⁺ + a·δ⁻ + s <= (J − target)/|g| + T0 */
+  for (int k = 0; k < K.n; k++) {
+    if (ng[k] == 0) { b[k] = 1; continue; }
+    for (int j = 0; j < d; j++) {
+      A[k * n + j] = -K.g[k][j] / ng[k];
+      A[k * n + d + j] = K.g[k][j] / ng[k];
+    }
+    A[k * n + 2 * d] = 1;
+    b[k] = fmax(0, (K.J[k] - target) / ng[k] + T0);
+  }
+  for (int j = 0; j < 2 * d; j++) {
+    A[(K.n + j) * n + j] = 1;
+    b[K.n + j] = R;
+  }
+  A[(K.n + 2 * d) * n + 2 * d] = 1;
+  b[K.n + 2 * d] = T0 + R;
+  c[2 * d] = 1;
+  int ok = 0;
+  if (!lp_max(m, n, A, b, c, z)) {
+    double t = z[2 * d] - T0;
+    if (t > 1e-10 * R) {
+      double delta[3];
+      for (int j = 0; j < d; j++) delta[j] = z[j] - z[d + j];
+      ok = 1;
+      if (placement == 1) {
+        /* corners of the feasible set, from the interior point δ: rows −g·δ⁺ + g·δ⁻ <= J + g·δ − target */
+        double mean[3] = {0, 0, 0};
+        int ncorner = 0;
+        for (int o = 0; o < 2 * d - 1; o++) {
+          double *A2 = calloc((size_t)(K.n + 2 * d) * 2 * d, sizeof(double)), *b2 = malloc(sizeof(double) * (K.n + 2 * d));
+          double c2[6] = {0}, z2[6];
+          if (!A2 || !b2) { free(A2); free(b2); break; }
+          for (int k = 0; k < K.n; k++) {
+            double s = K.J[k] - target;
+            for (int j = 0; j < d; j++) {
+              s += K.g[k][j] * delta[j];
+              A2[k * 2 * d + j] = -K.g[k][j];
+              A2[k * 2 * d + d + j] = K.g[k][j];
+            }
+            b2[k] = fmax(0, s);
+          }
+          for (int j = 0; j < 2 * d; j++) {
+            A2[(K.n + j) * 2 * d + j] = 1;
+            b2[K.n + j] = R;
+          }
+          int axis = (o + 1) / 2, sign = o == 0 ? 1 : (o % 2 ? -1 : 1);
+          /* minimize sign·δ_axis: maximize −sign·(δ⁺ − δ⁻) */
+          c2[axis] = -sign;
+          c2[d + axis] = sign;
+          if (!lp_max(K.n + 2 * d, 2 * d, A2, b2, c2, z2)) {
+            for (int j = 0; j < d; j++) mean[j] += delta[j] + z2[j] - z2[d + j];
+            ncorner++;
+          }
+          free(A2);
+          free(b2);
+        }
+        if (ncorner == 2 * d - 1) {
+          /* keep the mean only when it is strictly inside (corners may coincide) */
+          int inside = 1;
+          for (int j = 0; j < d; j++) mean[j] /= ncorner;
+          for (int k = 0; k < K.n && inside; k++) {
+            double s = K.J[k] - target;
+            for (int j = 0; j < d; j++) s += K.g[k][j] * mean[j];
+            inside = s > 1e-10 * R * ng[k];
+          }
+          if (inside)
+            for (int j = 0; j < d; j++) delta[j] = mean[j];
+        }
+      }
+      for (int j = 0; j < d; j++) out[j] = p[j] + delta[j];
+    }
+  }
+  free(A);
+  free(b);
+  return ok;
+}
+
+/* stages 1 and 3: repeated passes over the free vertices of `active` cells whose constraints
+ * are violated (J <= jtol in stage 1, J < β in stage 3); a pass that moves nothing ends it */
+typedef struct {
+  int v, bad;
+} cand;
+static int cand_cmp(const void *a, const void *b) {
+  const cand *x = a, *y = b;
+  return x->bad != y->bad ? y->bad - x->bad : x->v - y->v;
+}
+
+int ut_feasible_passes(ctx *C, double *x, double target, int stage3, const unsigned char *region, int placement,
+                           int maxpass, unsigned char *moved, int *npass) {
+  int d = C->d, total = 0, pass;
+  mesh *m = C->m;
+  cand *list = malloc(sizeof(cand) * ((size_t)m->nvert + 1));
+  if (!list) return 0;
+  for (pass = 0; pass < maxpass; pass++) {
+    /* the vertices with violated corners, the most violated first: a vertex pulled out of
+     * its patch is put back before its neighbours react to it */
+    int n = 0;
+    for (int v = 0; v < m->nvert; v++) {
+      if (C->fixed[v] || C->bnd[v] || (region && !region[v])) continue;
+      constraints K;
+      vertex_constraints(C, x, v, &K);
+      int bad = 0;
+      for (int k = 0; k < K.n; k++) bad += stage3 ? K.J[k] < target : !(K.J[k] > C->jtol);
+      if (bad) list[n++] = (cand){v, bad};
+    }
+    qsort(list, (size_t)n, sizeof(cand), cand_cmp);
+    int changed = 0;
+    for (int i = 0; i < n; i++) {
+      int v = list[i].v;
+      constraints K;
+      vertex_constraints(C, x, v, &K);
+      int bad = 0;
+      for (int k = 0; k < K.n && !bad; k++) bad = stage3 ? K.J[k] < target : !(K.J[k] > C->jtol);
+      if (!bad) continue; /* fixed by an earlier move in this pass */
+      double np[3];
+      if (!feasible_position(C, x, v, stage3 ? target : 0, placement, np)) continue;
+      for (int j = 0; j < d; j++) x[(size_t)d * v + j] = np[j];
+      if (!moved[v]) total++;
+      moved[v] = 1;
+      changed++;
+    }
+    if (!changed) break;
+  }
+  free(list);
+  *npass = pass + 1 > maxpass ? maxpass : pass + 1;
+  return total;
+}

@@ -1,6 +1,7 @@
 -- bench/optimization.lua CASE N — PDE-constrained optimization, the lugal side of the
 -- comparison with pyadjoint on legacy FEniCS (bench/optimization_pyadjoint.py, the same
 -- problems, meshes, controls and stopping rules). CPU time (os.clock), kernels warm.
+-- A third argument (lmvm, blmvm, nls, bnls) runs that optimization alone.
 --   CASE mother:    -lap u = f, u = 0 on the boundary, J = 1/2 |u - d|^2 + alpha/2 |f|^2,
 --                   d = sin(pi x) sin(pi y) / (2 pi^2), alpha = 1e-6, P1 state and control
 --   CASE mother0:   the same with a P0 (piecewise constant) control
@@ -56,19 +57,22 @@ end
 local m = case == "inversion" and 1 + 0.3*x*y or 1 + x
 local dm = lg.sin(pi*x)*lg.sin(pi*y)
 build():value(m)                                   -- compiles every kernel once
+-- a third argument names one method to run alone (for -log_view of the optimization only)
+local only = arg and arg[3]
 local function median(t) table.sort(t); return t[(#t + 1) // 2] end
 local ts, tg, th = {}, {}, {}
-for _ = 1, 3 do
+for _ = 1, only and 0 or 3 do
   local rf = build()
   local c = os.clock(); rf:value(m); ts[#ts + 1] = os.clock() - c
   c = os.clock(); rf:gradient(nil, {riesz = "none"}); tg[#tg + 1] = os.clock() - c
   c = os.clock(); rf:hessian(dm, nil, {riesz = "none"}); th[#th + 1] = os.clock() - c
 end
-local s = median(ts)
-print(string.format("lugal %s %d: state %.4f s, gradient %.4f s (%.2fx state), Hessian action %.4f s (%.2fx state)",
-                    case, N, s, median(tg), median(tg)/s, median(th), median(th)/s))
+local s = only and 0 or median(ts)
+if not only then print(string.format("lugal %s %d: state %.4f s, gradient %.4f s (%.2fx state), Hessian action %.4f s (%.2fx state)",
+                    case, N, s, median(tg), median(tg)/s, median(th), median(th)/s)) end
 
 local methods = case == "inversion" and {"blmvm", "bnls"} or {"lmvm", "nls"}
+if only then methods = {only} end
 for _, method in ipairs(methods) do
   local rf = build()
   local c = os.clock()

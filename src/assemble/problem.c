@@ -1003,7 +1003,7 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
     if (kept) {
       info->iterations = info->linear_iterations = (int)its;
       snprintf(info->reason, sizeof info->reason, "CONVERGED_RTOL");
-      snprintf(info->solver, sizeof info->solver, "cg/cholesky-kept");
+      lg_keep_name(&p->keep, info->solver, sizeof info->solver);
       rc = 0;
     } else {
       /* refactored below: back to the essential values as the direct solve's start */
@@ -1016,12 +1016,10 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
   if (!kept) {
     if (refactor) PCHK(lg_lu_prepare(p->ksp, p->A, p->bc_rows, p->nbc, p->prefix, 1), "the factorization's choice");
     lg_mumps_detect_null_pivots(p->ksp);
-    double t1 = now_ms();
     while ((rc = linear_solve_checked(env, p, info)) == 2)
       /* PETSc's LU (no pivoting) found a zero pivot or solved inaccurately: MUMPS, once */
       PCHK(lg_lu_fallback(p->ksp, p->A), "the switch to MUMPS");
-    if (refactor) lg_keep_factored(&p->keep, now_ms() - t1);
-    else lg_keep_direct(&p->keep, now_ms() - t1);
+    if (refactor && !rc) lg_keep_factored(&p->keep, p->ksp);
     lg_solver_name(p->ksp, info->solver, sizeof info->solver);
   }
   info->solve_ms = now_ms() - t0;
@@ -1435,7 +1433,6 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
     int guess = lg_keep_guess(&p->keep, transpose, l);
     ierr = lg_keep_solve(&p->keep, ksp, p->A, r, l, transpose, 0, guess, &kept, &its);
   }
-  double t1 = now_ms();
   while (!ierr && !kept) {
     ierr = transpose ? KSPSolveTranspose(ksp, r, l) : KSPSolve(ksp, r, l);
     reason = KSP_CONVERGED_ITS;
@@ -1444,10 +1441,7 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
     /* PETSc's LU (no pivoting) failed: MUMPS, once */
     if ((ierr = lg_lu_fallback(ksp, p->A))) break;
   }
-  if (!ierr && !kept && !p->nonlinear) {
-    if (stale) lg_keep_factored(&p->keep, now_ms() - t1);
-    else lg_keep_direct(&p->keep, now_ms() - t1);
-  }
+  if (!ierr && !kept && stale) lg_keep_factored(&p->keep, ksp);
   if (!ierr && !p->nonlinear && !env->no_keep_factor) ierr = lg_keep_remember(&p->keep, transpose, l);
   if (!ierr && reason >= 0) {
     const PetscScalar *lv;

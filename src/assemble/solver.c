@@ -5,8 +5,8 @@
 #include "solver.h"
 
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 /* PETSc's LU against MUMPS, one factorization and one solve of the P1 Laplacian
  * (bench/RESULTS.md, "Direct solvers"): PETSc's is faster on 2D systems up to about 10^5
@@ -213,18 +213,23 @@ void lg_solver_name(KSP ksp, char *out, size_t len) {
  * (64² inversion L-BFGS, factorization and triangular solve times summed: budget 0.5: 0.219 s,
  * 1: 0.182, 2: 0.167, 4: 0.165, 8: 0.180), at a bound of three times */
 #define KEEP_BUDGET 2.0
-
-static double wall_ms(void) {
-  struct timespec t;
-  clock_gettime(CLOCK_MONOTONIC, &t);
-  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
-}
+/* a factorization's speed per multiply-add relative to a triangular solve's, and an
+ * iteration's vector operations in triangular solves (see factor_solves). Measured on P1
+ * Laplacians (PETSc 3.18, -log_view, numeric factorization / MatSolve against the count
+ * Σc²/2Σ(c+1)): 2D 33² 10.3 against 13.7, 65² 14.4 (LU 19.5) against 24.1, 129² 24.2
+ * (34.7) against 42.0, 201² 29.9 (47.9) against 59.9; 3D 11³ 26.2 (20.1) against 50.9, 17³
+ * 58.6 (66.4) against 118, 21³ 87.1 (98.5) against 177: the count over 1.6 is within a
+ * third of both everywhere */
+#define KEEP_FACTOR_SPEED 1.6
+#define KEEP_VECTOR_OPS 0.1
 
 int lg_keep_usable(const lg_keep *kp, KSP ksp, const char *prefix) {
   PC pc;
   PetscBool ch = PETSC_FALSE, user = PETSC_FALSE;
-  if (kp->skip > 0 || kp->factor_ms <= 0 || kp->extra_ms >= KEEP_BUDGET * kp->factor_ms) return 0;
-  if (!lg_lu_native(ksp, prefix) || KSPGetPC(ksp, &pc) || PetscObjectTypeCompare((PetscObject)pc, PCCHOLESKY, &ch) || !ch)
+  if (kp->skip > 0 || kp->factor_cost <= 0 || kp->extra >= KEEP_BUDGET * kp->factor_cost) return 0;
+  PetscBool lu = PETSC_FALSE;
+  if (!lg_lu_native(ksp, prefix) || KSPGetPC(ksp, &pc) || PetscObjectTypeCompare((PetscObject)pc, PCCHOLESKY, &ch) ||
+      PetscObjectTypeCompare((PetscObject)pc, PCLU, &lu) || !(ch || lu))
     return 0;
   PetscOptionsHasName(NULL, prefix && prefix[0] ? prefix : NULL, "-ksp_type", &user);
   return !user;
@@ -245,14 +250,26 @@ PetscErrorCode lg_keep_solve(lg_keep *kp, KSP ksp, Mat A, Vec b, Vec x, int tran
      * do not change it; -lugal_keep_ksp_monitor shows its iterations */
     PetscCall(KSPSetOptionsPrefix(kp->cg, prefix));
     PetscCall(KSPAppendOptionsPrefix(kp->cg, "lugal_keep_"));
-    PetscCall(KSPSetType(kp->cg, KSPCG));
     PetscCall(KSPSetPC(kp->cg, pc));
-    PetscCall(KSPSetNormType(kp->cg, KSP_NORM_UNPRECONDITIONED));
     PetscCall(KSPSetTolerances(kp->cg, KEEP_RTOL, 0.0, PETSC_DEFAULT, KEEP_MAXIT));
     PetscCall(KSPSetErrorIfNotConverged(kp->cg, PETSC_FALSE));
     PetscCall(KSPSetFromOptions(kp->cg));
   }
-  double t0 = wall_ms();
+  /* CG for a Cholesky factor (a symmetric matrix), GMRES preconditioned on the right for
+   * an LU one, so that both test the true residual */
+  PetscBool ch = PETSC_FALSE;
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCCHOLESKY, &ch));
+  PetscCall(KSPSetType(kp->cg, ch ? KSPCG : KSPGMRES));
+  if (!ch) PetscCall(KSPSetPCSide(kp->cg, PC_RIGHT));
+  PetscCall(KSPSetNormType(kp->cg, KSP_NORM_UNPRECONDITIONED));
+  /* an iteration: a triangular solve pair, a product with A (its entries against the
+   * factor's, each touched once per solve pair and twice per product) and a few vector
+   * operations; the residual of a guess one product */
+  PetscInt annz = 0;
+  MatInfo ai;
+  if (!MatGetInfo(A, MAT_LOCAL, &ai)) annz = (PetscInt)ai.nz_used;
+  double prod = kp->factor_nnz > 0 ? 0.5 * (double)annz / (double)kp->factor_nnz : 0.5;
+  double cost = 0;
   if (guess) {
     /* the last solution of a nearby matrix and right side: CG's tolerance is relative to
      * |b|, so a good guess saves iterations; a poor one (another direction's tangent) is
@@ -266,6 +283,7 @@ PetscErrorCode lg_keep_solve(lg_keep *kp, KSP ksp, Mat A, Vec b, Vec x, int tran
     PetscCall(VecNorm(b, NORM_2, &bn));
     PetscCall(VecDestroy(&r));
     if (!(rn < bn)) guess = 0;
+    cost += prod;
   }
   if (!guess) PetscCall(VecSet(x, 0.0));
   PetscCall(KSPSetInitialGuessNonzero(kp->cg, guess ? PETSC_TRUE : PETSC_FALSE));
@@ -277,8 +295,8 @@ PetscErrorCode lg_keep_solve(lg_keep *kp, KSP ksp, Mat A, Vec b, Vec x, int tran
   KSPConvergedReason reason;
   PetscCall(KSPGetConvergedReason(kp->cg, &reason));
   PetscCall(KSPGetIterationNumber(kp->cg, its));
-  double t = wall_ms() - t0;
-  kp->extra_ms += t - kp->solve_ms;
+  cost += (double)*its * (1 + prod + KEEP_VECTOR_OPS);
+  kp->extra += cost - 1; /* beyond the direct solve it replaces */
   kp->cycle_solves++;
   kp->solves++;
   kp->iterations += *its;
@@ -286,29 +304,62 @@ PetscErrorCode lg_keep_solve(lg_keep *kp, KSP ksp, Mat A, Vec b, Vec x, int tran
     *ok = PETSC_TRUE;
     if (changed) kp->saved++; /* a new matrix solved without its factorization */
     kp->stale = 1;
-  } else kp->extra_ms = KEEP_BUDGET * kp->factor_ms; /* no more tries before a factorization */
+  } else kp->extra = KEEP_BUDGET * kp->factor_cost; /* no more tries before a factorization */
   PetscFunctionReturn(0);
 }
 
-void lg_keep_factored(lg_keep *kp, double ms) {
-  /* did the iterative solves since the last factorization save time? */
+/* what a numeric factorization costs in triangular solves (a forward and a backward
+ * substitution), from the factor's structure, so that the choices do not depend on timings
+ * (a run repeats its results to the bit): the factorization does Σ_j c_j² multiply-adds (c_j
+ * the entries below the diagonal in column j of L), the solves 2 Σ_j (c_j + 1); measured
+ * here, a factorization runs at KEEP_FACTOR_SPEED times the solves' rate per operation
+ * (see KEEP_FACTOR_SPEED). Cholesky: PETSc's SBAIJ factor holds U by rows with the
+ * diagonal (row j's length is c_j + 1); LU: L by rows without it (c_j counts column j). */
+static double factor_solves(PC pc, PetscInt *nnz) {
+  Mat F;
+  const PetscInt *ia, *ja;
+  PetscInt n;
+  PetscBool done = PETSC_FALSE, ch = PETSC_FALSE;
+  *nnz = 0;
+  if (PetscObjectTypeCompare((PetscObject)pc, PCCHOLESKY, &ch) || PCFactorGetMatrix(pc, &F) ||
+      MatGetRowIJ(F, 0, PETSC_FALSE, PETSC_FALSE, &n, &ia, &ja, &done) || !done)
+    return 0;
+  double *c = calloc((size_t)n + 1, sizeof(double)), s1 = 0, s2 = 0;
+  if (c) {
+    for (PetscInt i = 0; i < n; i++) {
+      if (ch) c[i] = (double)(ia[i + 1] - ia[i] - 1);
+      else
+        for (PetscInt e = ia[i]; e < ia[i + 1]; e++)
+          if (ja[e] >= 0 && ja[e] < n) c[ja[e]] += 1;
+    }
+    for (PetscInt i = 0; i < n; i++) {
+      s1 += c[i] + 1;
+      s2 += c[i] * c[i];
+    }
+    free(c);
+  }
+  *nnz = (PetscInt)s1;
+  MatRestoreRowIJ(F, 0, PETSC_FALSE, PETSC_FALSE, &n, &ia, &ja, &done);
+  return s1 > 0 ? s2 / (2 * s1) / KEEP_FACTOR_SPEED : 0;
+}
+
+void lg_keep_factored(lg_keep *kp, KSP ksp) {
+  /* did the iterative solves since the last factorization save work? */
   if (kp->cycle_solves) {
-    if (kp->saved * kp->factor_ms <= kp->extra_ms) {
+    if (kp->saved * kp->factor_cost <= kp->extra) {
       kp->skip = kp->backoff ? kp->backoff : 1;
       kp->backoff = kp->skip * 2 > KEEP_BACKOFF_MAX ? KEEP_BACKOFF_MAX : kp->skip * 2;
     } else kp->backoff = 0;
   } else if (kp->skip > 0) kp->skip--;
   kp->cycle_solves = 0;
-  double f = ms - kp->solve_ms;
-  kp->factor_ms = f > 0 ? f : ms;
-  kp->extra_ms = 0;
+  PC pc;
+  PetscInt nnz = 0;
+  kp->factor_cost = KSPGetPC(ksp, &pc) ? 0 : factor_solves(pc, &nnz);
+  kp->factor_nnz = nnz;
+  kp->extra = 0;
   kp->saved = 0;
   kp->stale = 0;
   kp->factorizations++;
-}
-
-void lg_keep_direct(lg_keep *kp, double ms) {
-  kp->solve_ms = kp->solve_ms > 0 ? 0.5 * (kp->solve_ms + ms) : ms;
 }
 
 PetscErrorCode lg_keep_remember(lg_keep *kp, int transpose, Vec x) {
@@ -320,6 +371,14 @@ PetscErrorCode lg_keep_remember(lg_keep *kp, int transpose, Vec x) {
 
 int lg_keep_guess(const lg_keep *kp, int transpose, Vec x) {
   return kp->last[transpose] && VecCopy(kp->last[transpose], x) == 0;
+}
+
+void lg_keep_name(const lg_keep *kp, char *out, size_t len) {
+  KSPType kt = NULL;
+  PC pc = NULL;
+  PCType pt = NULL;
+  if (kp->cg && !KSPGetType(kp->cg, &kt) && !KSPGetPC(kp->cg, &pc)) PCGetType(pc, &pt);
+  snprintf(out, len, "%s/%s-kept", kt ? kt : "?", pt ? pt : "?");
 }
 
 void lg_keep_destroy(lg_keep *kp) {

@@ -33,19 +33,21 @@ PetscInt lg_mumps_null_pivots(KSP ksp);
 /* A factorization kept while the matrix changes: the state matrix of an optimization is
  * reassembled at every new control, and refactoring it was half of an L-BFGS run. While the
  * matrix stays close to the factored one, conjugate gradients preconditioned by the old
- * Cholesky factor solve it in a few iterations (each a triangular solve and a product).
+ * Cholesky factor (GMRES, preconditioned on the right, by an old LU factor) solve it in a
+ * few iterations (each a triangular solve and a product).
  * The rule is ski rental: iterative solves are taken while what they cost beyond direct ones,
- * summed since the last factorization, stays below two factorizations' time; then the
- * matrix is refactored. A run of iterative solves that did not save a factorization turns
+ * summed since the last factorization, stays below two factorizations; then the
+ * matrix is refactored. Costs are counted in operations from the factor's structure and the
+ * iteration counts, never timed, so that a run's choices, and its results, repeat. A run of iterative solves that did not save a factorization turns
  * the keeping off for the next 1, 2, 4, ... 16 factorizations. Only for the native Cholesky
- * lugal chose (a symmetric matrix, no -ksp_type/-pc_type from the user); -lugal_keep_factor 0
- * turns it off. */
+ * or LU lugal chose (no -ksp_type/-pc_type/-pc_factor_mat_solver_type from the user);
+ * -lugal_keep_factor 0 turns it off. */
 typedef struct {
-  KSP cg;            /* CG on the operator, preconditioned by the direct KSP's own PC */
+  KSP cg;            /* CG or GMRES on the operator, preconditioned by the direct KSP's own PC */
   int stale;         /* the PC holds the factor of an earlier matrix than the operator */
-  double factor_ms;  /* the last factorization's time (beyond a solve's) */
-  double solve_ms;   /* a direct solve's time with the factor */
-  double extra_ms;   /* what the iterative solves cost beyond direct ones since then */
+  double factor_cost; /* the last factorization's cost, in triangular solves (from its structure) */
+  PetscInt factor_nnz; /* its entries */
+  double extra;      /* what the iterative solves cost beyond direct ones since then (solves) */
   int saved;         /* factorizations the iterative solves replaced since then */
   int cycle_solves;  /* iterative solves since then */
   int skip, backoff; /* factorizations to make before keeping again; the next pause */
@@ -68,11 +70,13 @@ PetscErrorCode lg_keep_solve(lg_keep *kp, KSP ksp, Mat A, Vec b, Vec x, int tran
 PetscErrorCode lg_keep_remember(lg_keep *kp, int transpose, Vec x);
 int lg_keep_guess(const lg_keep *kp, int transpose, Vec x);
 
-/* after a direct solve that (re)factored the matrix (ms: the whole solve) / that did not */
-void lg_keep_factored(lg_keep *kp, double ms);
-void lg_keep_direct(lg_keep *kp, double ms);
+/* after a direct solve that (re)factored the matrix */
+void lg_keep_factored(lg_keep *kp, KSP ksp);
 
 void lg_keep_destroy(lg_keep *kp);
+
+/* what the last kept solve used: "cg/cholesky-kept" or "gmres/lu-kept" */
+void lg_keep_name(const lg_keep *kp, char *out, size_t len);
 
 /* what solved: "lu/petsc", "lu/mumps", or "KSP type/PC type" */
 void lg_solver_name(KSP ksp, char *out, size_t len);

@@ -31,8 +31,8 @@ static void usage(FILE *f) {
           "  -lugal_vector_math 0  transcendental functions of the coordinates per point\n"
           "                        through libm instead of libmvec's AVX2 routines\n"
           "  -lugal_keep_factor 0  refactor a linear problem's matrix whenever it changes\n"
-          "                        (by default a symmetric one is solved by CG with its\n"
-          "                        last Cholesky factor while that costs less)\n"
+          "                        (by default it is solved by CG or GMRES with its\n"
+          "                        last factorization while that costs less)\n"
           "  -lugal_traceback      print a Lua traceback with errors\n");
 }
 

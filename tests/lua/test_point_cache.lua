@@ -80,26 +80,36 @@ mesh:displace(function(px, py) return 0.05*px*(1 - px)*py, 0 end)
 local j6, g6 = snapshot(lg.y)
 local j7, g7 = fresh(lg.y)
 T.check(j6 ~= j4, "the moved mesh changes J (%.17g)", j6)
-T.check(j6 == j7, "moved mesh: cached J %.17g, fresh %.17g", j6, j7)
+-- (rf's state matrix changed with the mesh: its solve is by the kept factorization, to 1e-12;
+-- the bit-for-bit comparison of these values is the child run's below)
+T.close(j6, j7, 1e-10, "moved mesh: cached J against a new problem's")
 local i4 = lg.integrate(mesh, ig)
 T.check(i4 ~= i1, "lg.integrate on the moved mesh: %.17g (was %.17g)", i4, i1)
-same(g6, g7, "moved mesh: gradient")
+do
+  local gmax, gd = 0, 0
+  for i = 1, #g7 do gmax = math.max(gmax, math.abs(g7[i])); gd = math.max(gd, math.abs(g6[i] - g7[i])) end
+  T.check(#g6 == #g7 and gd <= 1e-9*gmax, "moved mesh: gradient %.2e from a new problem's (max %.2e)", gd, gmax)
+end
 -- and the Taylor test still holds on the moved mesh with the cache in use
 local t = lg.taylor_test(rf, 1 + x*y, lg.sin(2*x))
 T.check(math.abs(t.rates1[#t.rates1] - 2) < 0.05, "Taylor rate %.3f\n%s", t.rates1[#t.rates1], tostring(t))
 local s1c, s2c
 -- a matrix assembled in chunks of items (more cells than one chunk): the cache spans the
--- chunks; a parameter changes between assemblies, so each solve reassembles
+-- chunks; a parameter changes between assemblies (a new problem each time, which shares
+-- the kernels and their cache, so that each solve is a direct one: the same problem would
+-- solve a changed matrix with its kept factorization, to 1e-12 and not to the bit)
 do
   local big = lg.mesh.rectangle{nx = 50, ny = 45}
   local a = lg.parameter("a_pc", 1.0)
-  local pb = lg.linear_problem{mesh = big, test = v, unknown = u,
-    eqn = lg.integral(big:cells(), (1 + a*lg.sin(7*x)^2*lg.exp(y))*lg.dot(lg.grad(v), lg.grad(u)) - lg.cos(3*x*y)*v),
-    bc = lg.essential_bc(big:boundary(), v*u)}
-  local s1 = pb:solve():values()           -- stores
-  a:set(2.0); local s2 = pb:solve():values() -- reads
-  a:set(1.0); local s3 = pb:solve():values()
-  a:set(2.0); local s4 = pb:solve():values()
+  local function pb()
+    return lg.linear_problem{mesh = big, test = v, unknown = u,
+      eqn = lg.integral(big:cells(), (1 + a*lg.sin(7*x)^2*lg.exp(y))*lg.dot(lg.grad(v), lg.grad(u)) - lg.cos(3*x*y)*v),
+      bc = lg.essential_bc(big:boundary(), v*u)}
+  end
+  local s1 = pb():solve():values()           -- stores
+  a:set(2.0); local s2 = pb():solve():values() -- reads
+  a:set(1.0); local s3 = pb():solve():values()
+  a:set(2.0); local s4 = pb():solve():values()
   s1c, s2c = s1, s2
   same(s1, s3, "chunked matrix assembly, read against computed")
   same(s2, s4, "chunked matrix assembly, a = 2")

@@ -209,10 +209,12 @@ void lg_solver_name(KSP ksp, char *out, size_t len) {
 #define KEEP_BACKOFF_MAX 16
 /* the extra cost of iterative solves, in factorizations, after which the matrix is
  * refactored: 1 is ski rental's bound (never more than twice the best choice made knowing
- * the future); a kept factor ages slowly on an optimization's path, and 2 was cheaper there
- * (64² inversion L-BFGS, factorization and triangular solve times summed: budget 0.5: 0.219 s,
- * 1: 0.182, 2: 0.167, 4: 0.165, 8: 0.180), at a bound of three times */
-#define KEEP_BUDGET 2.0
+ * the future); a kept factor ages slowly on an optimization's path, and more was cheaper
+ * there (64² inversion L-BFGS, factorizations and triangular solves at their measured unit
+ * times, 2.9 ms and 0.2 ms: budget 2: 21 factorizations and 624 solves, 186 ms; 3: 16 and
+ * 659, 178 ms; 4: 14 and 698, 180 ms; 6: 15 and 681, 180 ms; LU alike), at a bound of four
+ * times */
+#define KEEP_BUDGET 3.0
 /* a factorization's speed per multiply-add relative to a triangular solve's, and an
  * iteration's vector operations in triangular solves (see factor_solves). Measured on P1
  * Laplacians (PETSc 3.18, -log_view, numeric factorization / MatSolve against the count

@@ -36,7 +36,7 @@ PetscInt lg_mumps_null_pivots(KSP ksp);
  * Cholesky factor (GMRES, preconditioned on the right, by an old LU factor) solve it in a
  * few iterations (each a triangular solve and a product).
  * The rule is ski rental: iterative solves are taken while what they cost beyond direct ones,
- * summed since the last factorization, stays below two factorizations; then the
+ * summed since the last factorization, stays below three factorizations; then the
  * matrix is refactored. Costs are counted in operations from the factor's structure and the
  * iteration counts, never timed, so that a run's choices, and its results, repeat. A run of iterative solves that did not save a factorization turns
  * the keeping off for the next 1, 2, 4, ... 16 factorizations. Only for the native Cholesky

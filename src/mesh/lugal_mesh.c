@@ -17,7 +17,8 @@ static void usage(FILE *f) {
   fprintf(f, "usage: lugal-mesh quality FILE.msh [--measure NAME] [--svg HISTOGRAM.svg]\n"
              "                  [--picture MESH.svg] [--vtu OUT.vtu] [--bins N]\n"
              "       lugal-mesh untangle IN.msh OUT.msh [--beta B] [--boundary slide|fixed]\n"
-             "                  [--placement chebyshev|corners] [--max-iterations N] [--report]\n"
+             "                  [--placement chebyshev|corners] [--max-iterations N] [--reference REST.msh]\n"
+             "                  [--report]\n"
              "       lugal-mesh smooth IN.msh OUT.msh [--measure NAME] [--iterations N]\n"
              "                  [--method local|global|energy] [--reference REST.msh] [--boundary slide|fixed]\n"
              "       lugal-mesh --version | --help\n\n"
@@ -29,15 +30,17 @@ static void usage(FILE *f) {
              "          --vtu every measure as cell data for ParaView.\n"
              "untangle  repairs inverted cells by moving vertices (feasible set, optimization,\n"
              "          feasible set with J >= beta) and writes OUT.msh (MSH 2.2); --report prints\n"
-             "          each stage; exit status 3 when invalid cells remain.\n"
+             "          each stage; exit status 3 when invalid cells remain; --reference REST.msh\n"
+             "          makes the global stage aim at each cell's shape in REST.msh.\n"
              "smooth    raises the quality (default mean_ratio, corner_condition for quads and\n"
              "          hexes) without ever lowering the minimum; the mesh must be valid;\n"
              "          --method local (default) moves one vertex at a time, global all interior\n"
              "          vertices together by L-BFGS on the sum of 1/quality, energy the same\n"
              "          without the floor on the minimum during the descent (only validity), kept\n"
              "          when its minimum beats the input's: for bent and anisotropic meshes;\n"
-             "          --reference REST.msh (triangles, tetrahedra; energy) aims at each cell's shape\n"
-             "          in REST.msh, the same mesh at rest, instead of regular cells.\n");
+             "          --reference REST.msh (energy; the mean ratio on simplices, the corner\n"
+             "          condition on quadrilaterals and hexahedra) aims at each cell's shape in\n"
+             "          REST.msh, the same mesh at rest, instead of regular cells.\n");
 }
 
 /* an integer option in lo..hi, or -1 with a message */
@@ -187,7 +190,7 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
       if ((uo.max_iterations = int_option(cmd, "--max-iterations", argv[++i], 1, 1000000)) < 0) return 2;
     } else if (!strcmp(a, "--iterations") && has) {
       if ((iterations = int_option(cmd, "--iterations", argv[++i], 1, 1000000)) < 0) return 2;
-    } else if (!strcmp(a, "--reference") && has && !strcmp(cmd, "smooth")) {
+    } else if (!strcmp(a, "--reference") && has) {
       refpath = argv[++i];
     } else if (!strcmp(a, "--measure") && has) measure = argv[++i];
     else if (!strcmp(a, "--report")) report = 1;
@@ -201,27 +204,31 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
   mesh *m = mesh_read_gmsh(in, err);
   if (!m) { fprintf(stderr, "lugal-mesh: %s\n", err); return 1; }
   int rc = 0;
+  mesh *ref = NULL;
+  if (refpath) {
+    /* reference shapes: the same mesh in its rest configuration */
+    if (!(ref = mesh_read_gmsh(refpath, err))) { fprintf(stderr, "lugal-mesh: %s\n", err); mesh_free(m); return 1; }
+    if (ref->type != m->type || ref->nvert != m->nvert || ref->ncell != m->ncell ||
+        memcmp(ref->cells, m->cells, sizeof(int) * (size_t)m->ncell * (size_t)m->nvc)) {
+      fprintf(stderr, "lugal-mesh %s: the reference %s must be the same mesh (same cells) as %s\n", cmd, refpath, in);
+      mesh_free(ref); mesh_free(m);
+      return 2;
+    }
+  }
   if (!strcmp(cmd, "untangle")) {
     untangle_report r;
     uo.slide = slide;
     uo.verbose = report;
-    if (mesh_untangle(m, &uo, &r, err)) { fprintf(stderr, "lugal-mesh untangle: %s\n", err); mesh_free(m); return 1; }
+    uo.xref = ref ? ref->x : NULL;
+    int bad = mesh_untangle(m, &uo, &r, err);
+    mesh_free(ref);
+    if (bad) { fprintf(stderr, "lugal-mesh untangle: %s\n", err); mesh_free(m); return 1; }
     if (!report) untangle_report_print(&r, m);
     rc = r.invalid_after ? 3 : 0;
   } else {
     int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON;
-    mesh *ref = NULL;
-    if (refpath) {
-      /* reference shapes: the same mesh in its rest configuration; the energy method's */
-      if (!(ref = mesh_read_gmsh(refpath, err))) { fprintf(stderr, "lugal-mesh: %s\n", err); mesh_free(m); return 1; }
-      if (ref->type != m->type || ref->nvert != m->nvert || ref->ncell != m->ncell ||
-          memcmp(ref->cells, m->cells, sizeof(int) * (size_t)m->ncell * (size_t)m->nvc)) {
-        fprintf(stderr, "lugal-mesh smooth: the reference %s must be the same mesh (same cells) as %s\n", refpath, in);
-        mesh_free(ref); mesh_free(m);
-        return 2;
-      }
-      if (!method_given) global = energy = 1;
-    }
+    /* reference shapes are the energy method's */
+    if (ref && !method_given) global = energy = 1;
     smooth_opts so = {quality_from_name(measure ? measure : simplex ? "mean_ratio" : "corner_condition"), iterations, slide, report, global, energy,
                       ref ? ref->x : NULL};
     if (so.measure < 0) { fprintf(stderr, "lugal-mesh smooth: unknown measure %s\n", measure); mesh_free(ref); mesh_free(m); return 2; }

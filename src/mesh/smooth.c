@@ -189,18 +189,20 @@ static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err
   }
   double *cwinv = NULL;
   if (o->xref) {
-    if (!o->energy || (m->type != CELL_TRIANGLE && m->type != CELL_TETRAHEDRON) || o->measure != QM_MEAN_RATIO) {
-      snprintf(err, MESH_ERRLEN, "reference shapes need method \"energy\" and the mean ratio, on triangles or tetrahedra");
+    int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON;
+    if (!o->energy || m->type == CELL_INTERVAL || o->measure != (simplex ? QM_MEAN_RATIO : QM_CORNER_CONDITION)) {
+      snprintf(err, MESH_ERRLEN, "reference shapes need method \"energy\" and the mean ratio (triangles, tetrahedra) or "
+                                 "the corner condition (quadrilaterals, hexahedra)");
       ut_ctx_free(&C);
       return 1;
     }
-    if (!(cwinv = ut_reference_winv(m, o->xref, err))) { ut_ctx_free(&C); return 1; }
+    if (!(cwinv = ut_reference_winv(&C, o->xref, err))) { ut_ctx_free(&C); return 1; }
   }
   double *q = mesh_big_alloc(sizeof(double) * ((size_t)m->ncell + 1));
   unsigned char *moved = calloc((size_t)m->nvert + 1, 1);
   if (!q || !moved) { mesh_big_free(q); free(moved); free(cwinv); ut_ctx_free(&C); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
   quality_stats st;
-#define QUALITY() (cwinv ? (ut_relative_mean_ratio(m, cwinv, q), 0) : mesh_quality(m, o->measure, NULL, q, err))
+#define QUALITY() (cwinv ? (ut_relative_mean_ratio(&C, cwinv, q), 0) : mesh_quality(m, o->measure, NULL, q, err))
   QUALITY();
   quality_stats_compute(q, m->ncell, &st);
   r->min_before = st.min;

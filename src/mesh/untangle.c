@@ -561,12 +561,12 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
   /* reference shapes for the global stage */
   double *cwinv = NULL;
   if (o->xref) {
-    if (m->type != CELL_TRIANGLE && m->type != CELL_TETRAHEDRON) {
-      snprintf(err, MESH_ERRLEN, "reference shapes are implemented for triangles and tetrahedra");
+    if (m->type == CELL_INTERVAL) {
+      snprintf(err, MESH_ERRLEN, "reference shapes are for 2D and 3D cells");
       free(x0); free(moved); free(region); free(touched); ut_ctx_free(&C);
       return 1;
     }
-    if (!(cwinv = ut_reference_winv(m, o->xref, err))) { free(x0); free(moved); free(region); free(touched); ut_ctx_free(&C); return 1; }
+    if (!(cwinv = ut_reference_winv(&C, o->xref, err))) { free(x0); free(moved); free(region); free(touched); ut_ctx_free(&C); return 1; }
   }
   int maxit = o->max_iterations > 0 ? o->max_iterations : 100;
   ut_count_cells(&C, m->x, beta, &r->invalid_before, NULL);
@@ -680,7 +680,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
     memcpy(save, m->x, sizeof(double) * nx);
     int its = 0, mv = 0, after;
     memset(trial, 0, (size_t)m->nvert);
-    if (ut_untangle_global(&C, &W, m->x, 10 * maxit, cwinv, &its, &mv, trial) == 0) {
+    if (ut_untangle_global(&C, &W, m->x, 10 * maxit, cwinv, NULL, &its, &mv, trial) == 0) {
       ut_count_cells(&C, m->x, beta, &after, NULL);
       if (after < ninv) {
         s->iterations += its;
@@ -742,6 +742,36 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
   }
   stage_end(&C, m->x, beta, s, ts, o->verbose);
   best_offer(&C, m->x, &best, nx, 3);
+  /* reference shapes: the vertices the stages touched, now valid, minimize the energy
+   * towards them (the local stages only aim at validity, and may have repaired the mesh
+   * without the global stage); kept if every cell stays valid and the mean of the cells'
+   * mean ratios relative to their shapes grows */
+  if (cwinv && !s->invalid_after && W.fidx && W.cells && save && trial) {
+    double *q = malloc(sizeof(double) * ((size_t)m->ncell + 1));
+    if (q) {
+      double q0 = 0, q1 = 0;
+      ut_relative_mean_ratio(&C, cwinv, q);
+      for (int c = 0; c < m->ncell; c++) q0 += q[c];
+      memcpy(save, m->x, sizeof(double) * nx);
+      int its = 0, mv = 0, after = 1;
+      memset(trial, 0, (size_t)m->nvert);
+      for (int v = 0; v < m->nvert; v++) touched[v] |= moved[v];
+      if (ut_untangle_global(&C, &W, m->x, 10 * maxit, cwinv, touched, &its, &mv, trial) == 0)
+        ut_count_cells(&C, m->x, beta, &after, NULL);
+      ut_relative_mean_ratio(&C, cwinv, q);
+      for (int c = 0; c < m->ncell; c++) q1 += q[c];
+      if (!after && q1 > q0) {
+        s->iterations += its;
+        for (int v = 0; v < m->nvert; v++)
+          if (trial[v] && !moved[v]) { moved[v] = 1; s->moved++; }
+        if (o->verbose)
+          printf("untangle: towards the reference shapes: mean relative mean ratio %.4f -> %.4f, %d iterations\n",
+                 q0 / m->ncell, q1 / m->ncell, its);
+      } else memcpy(m->x, save, sizeof(double) * nx);
+      memset(trial, 0, (size_t)m->nvert);
+      free(q);
+    }
+  }
   free(W.fidx); free(W.cmark); free(W.cells); free(list); free(off); free(save); free(trial);
   r->nstage = 3;
   r->invalid_after = s->invalid_after;

@@ -19,8 +19,9 @@ typedef struct {
   int placement;       /* stage 1/3 position in the feasible set: 0 Chebyshev centre, 1 mean of
                           three LP corners (the paper) */
   int verbose;         /* stage reports on stdout as they finish */
-  const double *xref;  /* triangles, tetrahedra: the global stage aims at each cell's shape in
-                          this configuration of the same mesh (nvert*dim); NULL: regular cells */
+  const double *xref;  /* the global stage aims at each cell's (each corner's) shape in this
+                          configuration of the same mesh (nvert*dim), and once valid the
+                          touched vertices move towards those shapes; NULL: regular cells */
 } untangle_opts;
 
 typedef struct {
@@ -68,9 +69,10 @@ typedef struct {
   int energy;      /* with global: no floor on the smallest q during the descent, only the
                     * validity barrier of Σ 1/q; the result is kept when its smallest q is
                     * above the input's, else the input is restored */
-  const double *xref; /* energy on simplices: the shapes aimed at are those of this
-                    * configuration of the same mesh (nvert*dim), q the mean ratio of each
-                    * cell's map from its reference shape; NULL: regular simplices */
+  const double *xref; /* energy (mean ratio on simplices, corner condition on quadrilaterals
+                    * and hexahedra): the shapes aimed at are those of this configuration of
+                    * the same mesh (nvert*dim), q the mean ratio of each cell's (worst
+                    * corner's) map from its reference shape; NULL: regular cells */
 } smooth_opts;
 
 typedef struct {

@@ -77,50 +77,59 @@ void ut_regular_winv(int d, double mean, double *w) {
   }
 }
 
-double *ut_reference_winv(const mesh *m, const double *xref, char *err) {
-  int d = m->dim, nv = m->nvc;
-  double *w = malloc(sizeof(double) * (size_t)m->ncell * d * d + 1);
+double *ut_reference_winv(const ctx *C, const double *xref, char *err) {
+  const mesh *m = C->m;
+  int d = C->d, nv = C->nvc, nk = C->ncorner;
+  double *w = malloc(sizeof(double) * (size_t)m->ncell * nk * d * d + 1);
   if (!w) { snprintf(err, MESH_ERRLEN, "out of memory"); return NULL; }
   for (int c = 0; c < m->ncell; c++) {
     const int *v = m->cells + (size_t)c * (size_t)nv;
-    double E[3][3], K[3][3], det;
-    for (int i = 0; i < d; i++)
-      for (int k = 0; k < d; k++) E[i][k] = xref[(size_t)v[k + 1] * d + i] - xref[(size_t)v[0] * d + i];
-    if (d == 2) {
-      det = E[0][0] * E[1][1] - E[0][1] * E[1][0];
-      K[0][0] = E[1][1]; K[0][1] = -E[1][0]; K[1][0] = -E[0][1]; K[1][1] = E[0][0];
-    } else {
-      cofactor(3, E, K);
-      det = E[0][0] * K[0][0] + E[0][1] * K[0][1] + E[0][2] * K[0][2];
+    /* each corner's edge matrix in the reference (a simplex has one corner: its own) */
+    for (int kc = 0; kc < nk; kc++) {
+      const int *ct = C->ct[kc];
+      double E[3][3], K[3][3], det;
+      for (int i = 0; i < d; i++)
+        for (int k = 0; k < d; k++) E[i][k] = xref[(size_t)v[ct[k + 1]] * d + i] - xref[(size_t)v[ct[0]] * d + i];
+      if (d == 2) {
+        det = E[0][0] * E[1][1] - E[0][1] * E[1][0];
+        K[0][0] = E[1][1]; K[0][1] = -E[1][0]; K[1][0] = -E[0][1]; K[1][1] = E[0][0];
+      } else {
+        cofactor(3, E, K);
+        det = E[0][0] * K[0][0] + E[0][1] * K[0][1] + E[0][2] * K[0][2];
+      }
+      if (!(det > 0)) {
+        if (nk == 1)
+          snprintf(err, MESH_ERRLEN, "cell %d of the reference is %s: reference shapes must be valid cells", c + 1,
+                   det < 0 ? "inverted" : "degenerate");
+        else
+          snprintf(err, MESH_ERRLEN, "cell %d of the reference has %s corner (at its vertex %d): reference shapes must be "
+                   "valid cells", c + 1, det < 0 ? "an inverted" : "a degenerate", ct[0] + 1);
+        free(w);
+        return NULL;
+      }
+      double *wc = w + ((size_t)c * nk + kc) * d * d;
+      for (int a = 0; a < d; a++)
+        for (int b = 0; b < d; b++) wc[a * d + b] = K[b][a] / det;
     }
-    if (!(det > 0)) {
-      snprintf(err, MESH_ERRLEN, "cell %d of the reference is %s: reference shapes must be valid cells", c + 1,
-               det < 0 ? "inverted" : "degenerate");
-      free(w);
-      return NULL;
-    }
-    for (int a = 0; a < d; a++)
-      for (int b = 0; b < d; b++) w[(size_t)c * d * d + a * d + b] = K[b][a] / det;
   }
   return w;
 }
 
-void ut_relative_mean_ratio(const mesh *m, const double *cwinv, double *out) {
-  int d = m->dim;
-  ctx C0;
-  memset(&C0, 0, sizeof C0);
-  C0.m = (mesh *)m;
-  C0.d = d;
-  C0.nvc = m->nvc;
-  C0.ncorner = 1;
-  for (int i = 0; i <= d; i++) C0.ct[0][i] = i;
+void ut_relative_mean_ratio(const ctx *C, const double *cwinv, double *out) {
+  const mesh *m = C->m;
+  int d = C->d, nk = C->ncorner;
   for (int c = 0; c < m->ncell; c++) {
-    double J[3][3], A = 0;
-    const int *v;
-    double D = cell_map(&C0, m->x, c, 0, cwinv + (size_t)c * d * d, J, &v);
-    for (int a = 0; a < d; a++)
-      for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
-    out[c] = D > 0 && A > 0 ? d * pow(D, 2.0 / d) / A : 0;
+    /* a quadrilateral's or hexahedron's: the worst of its corners' */
+    double q = INFINITY;
+    for (int kc = 0; kc < nk; kc++) {
+      double J[3][3], A = 0;
+      const int *v;
+      double D = cell_map(C, m->x, c, kc, cwinv + ((size_t)c * nk + kc) * d * d, J, &v);
+      for (int a = 0; a < d; a++)
+        for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
+      q = fmin(q, D > 0 && A > 0 ? d * pow(D, 2.0 / d) / A : 0);
+    }
+    out[c] = q;
   }
 }
 
@@ -129,15 +138,14 @@ double ut_energy_eval(const objective *o, const double *x, double *grad, int nfr
   int d = C->d;
   double f = 0, theta = o->theta, eps = o->eps;
   if (grad) memset(grad, 0, sizeof(double) * (size_t)nfree * d);
-  int simplex = C->ncorner == 1;
   for (int i = 0; i < o->ncell; i++)
    for (int kc = 0; kc < C->ncorner; kc++) {
     int c = o->cells[i];
     double J[3][3], K[3][3];
     const int *v;
-    /* reference shapes are per simplex; a quadrilateral's or hexahedron's corners aim at a
-     * square's or cube's */
-    const double *winv = o->cwinv && simplex ? o->cwinv + (size_t)c * d * d : o->winv;
+    /* reference shapes per corner (a simplex has one); without them a quadrilateral's or
+     * hexahedron's corners aim at a square's or cube's */
+    const double *winv = o->cwinv ? o->cwinv + ((size_t)c * C->ncorner + kc) * d * d : o->winv;
     double D = cell_map(C, x, c, kc, winv, J, &v), A = 0;
     for (int a = 0; a < d; a++)
       for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
@@ -173,8 +181,8 @@ double ut_energy_eval(const objective *o, const double *x, double *grad, int nfr
   return f;
 }
 
-int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwinv, int *iters, int *moved_count,
-                       unsigned char *moved) {
+int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwinv, const unsigned char *only,
+                       int *iters, int *moved_count, unsigned char *moved) {
   mesh *m = C->m;
   int d = C->d;
   *iters = 0;
@@ -186,7 +194,7 @@ int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwin
   if (!freev || !x0) { free(freev); free(x0); return -1; }
   memcpy(x0, x, sizeof(double) * (size_t)m->nvert * d);
   for (int v = 0; v < m->nvert; v++)
-    if (!C->bnd[v]) { W->fidx[v] = nfree; freev[nfree++] = v; }
+    if (!C->bnd[v] && (!only || only[v])) { W->fidx[v] = nfree; freev[nfree++] = v; }
   int ncell = ut_cells_around(C, W, freev, nfree);
   /* the reference: a regular simplex whose edge-matrix determinant is the mean of the cells'
    * (their signed sum does not change when interior vertices move); for quadrilaterals and
@@ -221,17 +229,20 @@ int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwin
       memset(o.winv, 0, sizeof o.winv);
       for (int i = 0; i < d; i++) o.winv[i * d + i] = 1 / h;
     }
+    int valid_rounds = 0;
     for (int outer = 0; outer < 100; outer++) {
       double dmin = INFINITY, J[3][3];
       const int *v;
       for (int i = 0; i < ncell; i++)
         for (int kc = 0; kc < C->ncorner; kc++) {
           int c = W->cells[i];
-          dmin = fmin(dmin, cell_map(C, x, c, kc, cwinv && simplex ? cwinv + (size_t)c * d * d : o.winv, J, &v));
+          dmin = fmin(dmin, cell_map(C, x, c, kc, cwinv ? cwinv + ((size_t)c * C->ncorner + kc) * d * d : o.winv, J, &v));
         }
       int ninv;
       ut_count_cells(C, x, 0, &ninv, NULL);
-      if (!ninv && outer > 0) break;
+      /* valid: done, or with reference shapes one more minimization at the small ε that
+       * validity gives, towards those shapes (the point of giving them) */
+      if (!ninv && outer > 0 && (!cwinv || valid_rounds++)) break;
       o.eps = sqrt(1e-8 + 0.04 * pow(fmin(dmin, 0), 2));
       double f;
       int it = ut_lbfgs(&o, x, freev, nfree, maxit, &f);

@@ -46,7 +46,7 @@ typedef struct {
   const double *hv; /* per free vertex: its shortest edge, for the difference step */
   /* smooth == 2: the global untangling energy (untangle_global.c), analytic gradient */
   double eps, theta, winv[9];
-  const double *cwinv; /* per cell W⁻¹ (ncell*d*d) of its reference shape, or NULL: winv */
+  const double *cwinv; /* per corner W⁻¹ (ncell*ncorner*d*d) of its reference shape, or NULL: winv */
 } objective;
 
 /* reusable per-vertex / per-cell marks, kept at their rest values (-1 / 0) between uses */
@@ -99,14 +99,18 @@ double ut_star_objective(const ctx *C, int v, int q, double *qmin);
 double ut_energy_eval(const objective *o, const double *x, double *grad, int nfree);
 /* W⁻¹ (d×d, row-major) of a regular simplex whose edge matrix has determinant mean > 0 */
 void ut_regular_winv(int d, double mean, double *winv);
-/* per cell W⁻¹ of its shape in the configuration xref (ncell*d*d, malloc'd), NULL with a
- * message in err when a reference cell is degenerate or inverted (or out of memory) */
-double *ut_reference_winv(const mesh *m, const double *xref, char *err);
-/* the mean ratio of each cell's map J = E W⁻¹ from its reference shape: d det(J)^(2/d) / |J|²,
- * 0 when inverted */
-void ut_relative_mean_ratio(const mesh *m, const double *cwinv, double *out);
-int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwinv, int *iters, int *moved_count,
-                       unsigned char *moved);
+/* per corner of each cell W⁻¹ of its shape in the configuration xref (ncell*ncorner*d*d,
+ * malloc'd; a simplex has one corner), NULL with a message in err when a reference corner
+ * is degenerate or inverted (or out of memory) */
+double *ut_reference_winv(const ctx *C, const double *xref, char *err);
+/* the mean ratio of each cell's map J = E W⁻¹ from its reference shape, d det(J)^(2/d) / |J|²
+ * (the smallest over a quadrilateral's or hexahedron's corners) */
+void ut_relative_mean_ratio(const ctx *C, const double *cwinv, double *out);
+/* the global stage: the interior vertices (those marked in only, when given) minimize the
+ * barrier energy together (untangle_global.c); with reference shapes cwinv one more
+ * minimization follows validity. Marks what moved; 0, or -1 out of memory */
+int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwinv, const unsigned char *only,
+                       int *iters, int *moved_count, unsigned char *moved);
 int ut_frame_enter(mesh *m, unit_frame *f, double extra, char *err);
 void ut_frame_leave(mesh *m, unit_frame *f);
 /* every vertex coordinate finite, or a message naming the first that is not */

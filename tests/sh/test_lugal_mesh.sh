@@ -10,11 +10,14 @@ trap 'rm -rf "$T"' EXIT
 cat > "$T/tangle.lua" <<'LUA'
 local lg = require "lugal"
 local m = lg.mesh.rectangle{nx = 6, ny = 6, cell = "quadrilateral"}
+m:write(arg[2])
 local x, y = m:coordinates(24)
+m:set_coordinates(24, x + 0.05, y + 0.04)
+m:write(arg[3])
 m:set_coordinates(24, x + 0.3, y + 0.25)
 m:write(arg[1])
 LUA
-"$BUILD/lugal" "$T/tangle.lua" "$T/tangled.msh"
+"$BUILD/lugal" "$T/tangle.lua" "$T/tangled.msh" "$T/rest.msh" "$T/bumped.msh"
 out=$("$BUILD/lugal-mesh" quality "$T/tangled.msh" --picture "$T/p.svg" --svg "$T/h.svg" --vtu "$T/q.vtu" --bins 8)
 echo "$out"
 echo "$out" | grep -q "36 quadrilaterals, 49 vertices"
@@ -50,8 +53,18 @@ out=$("$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/smooth.msh" --method global)
 echo "$out" | grep -q "smooth (global): corner_condition min"
 out=$("$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/smooth.msh" --method energy)
 echo "$out" | grep -q "smooth (energy): corner_condition min"
-# --reference: quads are refused (reference shapes are for simplices), a different mesh too
-if "$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/x.msh" --reference "$T/fixed.msh" 2> "$T/err"; then exit 1; fi
+# --reference: the rest grid's shapes, per corner: untangling repairs, smoothing a bumped
+# copy towards them reaches them; another mesh or measure is refused
+out=$("$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/x.msh" --reference "$T/rest.msh")
+echo "$out" | grep -q "invalid 3 -> 0,"
+out=$("$BUILD/lugal-mesh" smooth "$T/bumped.msh" "$T/x.msh" --reference "$T/rest.msh")
+echo "$out"
+echo "$out" | grep -Eq "smooth \(energy\): corner_condition relative to the reference min 0\.[0-9]+ -> (1|0\.999[0-9]*),"
+if "$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/x.msh" --reference "$ROOT/examples/domain.msh" 2> "$T/err"; then exit 1; fi
+grep -q "must be the same mesh" "$T/err"
+if "$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/x.msh" --reference "$ROOT/examples/domain.msh" 2> "$T/err"; then exit 1; fi
+grep -q "must be the same mesh" "$T/err"
+if "$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/x.msh" --reference "$T/rest.msh" --measure scaled_jacobian 2> "$T/err"; then exit 1; fi
 grep -q "reference shapes need" "$T/err"
 if "$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/x.msh" --method newton 2> "$T/err"; then exit 1; fi
 grep -q "method must be local, global or energy" "$T/err"

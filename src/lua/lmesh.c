@@ -464,6 +464,10 @@ static int lmesh_untangle(lua_State *L) {
                               r.invalid_after ? "FAILED" : "valid", r.moved, r.mean_displacement, r.max_displacement,
                               r.seconds);
   if (r.passes > 1 && n < sizeof text) n += (size_t)snprintf(text + n, sizeof text - n, ", %d passes", r.passes);
+  if (r.fallback_placement >= 0 && n < sizeof text)
+    n += (size_t)snprintf(text + n, sizeof text - n, ", then placement %s", r.fallback_placement ? "corners" : "chebyshev");
+  else if (r.fallback_tried && n < sizeof text)
+    n += (size_t)snprintf(text + n, sizeof text - n, ", the other placement did not help");
   lua_createtable(L, 0, 12);
   set_num(L, "beta", r.beta);
   set_int(L, "invalid_before", r.invalid_before);
@@ -475,6 +479,12 @@ static int lmesh_untangle(lua_State *L) {
   set_num(L, "max_displacement", r.max_displacement);
   set_num(L, "seconds", r.seconds);
   set_int(L, "passes", r.passes);
+  lua_pushboolean(L, r.fallback_tried);
+  lua_setfield(L, -2, "fallback_tried");
+  if (r.fallback_placement >= 0) {
+    lua_pushstring(L, r.fallback_placement ? "corners" : "chebyshev");
+    lua_setfield(L, -2, "fallback_placement");
+  }
   lua_createtable(L, r.nstage, 0);
   for (int i = 0; i < r.nstage; i++) {
     untangle_stage *st = &r.stage[i];

@@ -816,6 +816,11 @@ void untangle_report_print(const untangle_report *r, const mesh *m) {
          r->mean_displacement, r->max_displacement, r->seconds);
   for (int i = 0; i < r->nstage; i++) stage_print(&r->stage[i]);
   if (r->passes > 1) printf("  (%d passes of the three stages; the stages above are the first's)\n", r->passes);
+  if (r->fallback_placement >= 0)
+    printf("  (the %s placement stalled; passes with the %s placement repaired more)\n",
+           r->fallback_placement ? "chebyshev" : "corners", r->fallback_placement ? "corners" : "chebyshev");
+  else if (r->fallback_tried)
+    printf("  (the other placement was tried from where the passes stalled, and did not repair more)\n");
 }
 
 /* ---------------------------------------------------------------- motion */
@@ -1018,6 +1023,36 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
     r->seconds += r2.seconds;
     r->passes++;
   }
+  /* the passes stalled with invalid cells left: the other placement (the paper's LP corners
+   * after the Chebyshev centre, or the reverse) from where they ended, with its own passes
+   * while they help; kept only when it leaves fewer invalid cells (a tangle of the LIM
+   * armadillo kept one inverted tetrahedron with the Chebyshev centre, none with corners) */
+  r->fallback_placement = -1;
+  if (!rc && r->invalid_after > 0) {
+    double *before = malloc(sizeof(double) * (nx + 1));
+    if (!before) { snprintf(err, MESH_ERRLEN, "out of memory"); rc = 1; }
+    else {
+      memcpy(before, m->x, sizeof(double) * nx);
+      untangle_opts alt = oo;
+      alt.placement = 1 - oo.placement;
+      untangle_report r2;
+      int left = r->invalid_after, npass = 0;
+      double secs = 0;
+      for (int prev = left + 1; !rc && npass < 4 && left > 0 && left < prev; npass++) {
+        prev = left;
+        rc = untangle_run(m, &alt, &r2, err);
+        if (!rc) { left = r2.invalid_after; secs += r2.seconds; }
+      }
+      r->seconds += secs;
+      if (!rc && left < r->invalid_after) {
+        r->invalid_after = left;
+        r->passes += npass;
+        r->fallback_placement = alt.placement;
+      } else if (!rc) memcpy(m->x, before, sizeof(double) * nx);
+      if (!rc) r->fallback_tried = 1;
+      free(before);
+    }
+  }
   if (f.orig) {
     r->beta = ldexp(r->beta, m->dim * f.e);
     r->mean_displacement = ldexp(r->mean_displacement, f.e);
@@ -1026,7 +1061,7 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
   ut_frame_leave(m, &f);
   int back = 0;
   if (!rc && oo.slide) back = restore_boundary(m, keep);
-  if (!rc && (r->passes > 1 || back > 0)) {
+  if (!rc && (r->passes > 1 || back > 0 || r->fallback_tried)) {
     /* the motion of all passes together, from the input */
     double sum = 0;
     r->moved = 0;

@@ -45,6 +45,9 @@ typedef struct {
                                        one (0: the input) when the stages made it worse */
   int passes;                       /* runs of the three stages: another follows one that
                                        left fewer but some invalid cells (stage[] is the first's) */
+  int fallback_tried;               /* the passes stalled with invalid cells: the other
+                                       placement was tried from there */
+  int fallback_placement;           /* and repaired more (0 chebyshev, 1 corners); -1: not used */
 } untangle_report;
 
 void untangle_defaults(untangle_opts *o);

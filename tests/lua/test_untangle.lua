@@ -311,4 +311,32 @@ do
   T.fails(function() q:smooth{measure = "meanratio"} end, "mesh:smooth", "unknown measure 'meanratio'", "mean_ratio")
   T.fails(function() q:smooth{method = "newton"} end, "mesh:smooth", "method", "global")
 end
+-- a tangle with no valid embedding: one interior vertex fanned to a U-shaped boundary
+-- (the star's kernel is empty: x > 2 for one prong, x < 1 for the other). The passes stall,
+-- the other placement is tried from there and, not repairing more, undone; the boundary
+-- stays and the result is no worse than the input
+do
+  local b = {{0, 0}, {3, 0}, {3, 3}, {2, 3}, {2, 1}, {1, 1}, {1, 3}, {0, 3}}
+  local verts, cells = {{1.5, 0.5}}, {}
+  for _, p in ipairs(b) do verts[#verts + 1] = p end
+  for i = 1, 8 do cells[#cells + 1] = {1, i + 1, i % 8 + 2} end
+  for _, pl in ipairs{"chebyshev", "corners"} do
+    local m = lg.mesh.new{vertices = verts, cells = cells, cell = "triangle"}
+    local r = m:untangle{quiet = true, boundary = "fixed", placement = pl}
+    T.check(not r.success and r.invalid_after <= r.invalid_before and r.invalid_before == 2,
+            "U fan (%s): no valid embedding, %d -> %d invalid", pl, r.invalid_before, r.invalid_after)
+    T.check(r.fallback_tried and r.fallback_placement == nil, "U fan (%s): the other placement tried, not kept", pl)
+    T.check(tostring(r):find("the other placement did not help", 1, true), "the report says so: %s", tostring(r))
+    for k = 2, 9 do
+      local x, y = m:coordinates(k)
+      T.check(x == b[k - 1][1] and y == b[k - 1][2], "U fan: boundary vertex %d kept", k)
+    end
+  end
+  -- a repairable tangle does not need it
+  local q = lg.mesh.rectangle{nx = 6}
+  local x, y = q:coordinates(24)
+  q:set_coordinates(24, x + 0.3, y + 0.25)
+  local r = q:untangle{quiet = true}
+  T.check(r.success and not r.fallback_tried, "a repairable tangle: no fallback")
+end
 print("untangle tests passed")

@@ -121,7 +121,8 @@ static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, smoo
   }
   work W = {fidx, cmark, cells};
   int ncell = ut_cells_around(C, &W, freev, nfree), status = 0;
-  objective ob = {C, 0, C->jscale, ncell, cells, fidx, 0, 1, o->measure, 0, freev, hv, 0, 0, {0}, cwinv};
+  objective ob = {C, 0, C->jscale, ncell, cells, fidx, 0, 1, o->measure, 0, freev, hv, 0, 0, {0}, cwinv, NULL};
+  ut_energy_buf eb = {0};
   double fprev = INFINITY;
   ob.qfloor = INFINITY;
   for (int i = 0; i < ncell && !cwinv; i++) ob.qfloor = fmin(ob.qfloor, mesh_cell_quality(m, cells[i], o->measure));
@@ -134,6 +135,7 @@ static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, smoo
      * the same term over the corners, J relative to a square's or cube's corner: each is the
      * inverse mean ratio of a corner's map, which the corner condition measures too */
     ob.smooth = 2;
+    ob.eb = &eb;
     ob.theta = 0;
     ob.eps = 0;
     if (simplex) ut_regular_winv(m->dim, 1.0, ob.winv);
@@ -161,6 +163,7 @@ static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, smoo
                            round + 1, its, f0, f, slid);
     if (!its && !slid) break;
   }
+  ut_energy_release(&ob);
   free(freev); free(fidx); free(cells); free(cmark); free(hv);
   return status;
 }

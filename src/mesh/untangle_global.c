@@ -133,48 +133,143 @@ void ut_relative_mean_ratio(const ctx *C, const double *cwinv, double *out) {
   }
 }
 
+/* One corner's energy (a simplex has one corner), and with gk its gradient in each of the
+ * corner's d + 1 vertices (C->ct[kc] order, d each); +∞ for an invalid corner at ε = 0 */
+static double corner_energy(const objective *o, const double *x, int i, int kc, double *gk) {
+  const ctx *C = o->C;
+  int d = C->d, c = o->cells[i];
+  double theta = o->theta, eps = o->eps;
+  double J[3][3], K[3][3];
+  const int *v;
+  /* reference shapes per corner (a simplex has one); without them a quadrilateral's or
+   * hexahedron's corners aim at a square's or cube's */
+  const double *winv = o->cwinv ? o->cwinv + ((size_t)c * C->ncorner + kc) * d * d : o->winv;
+  double D = cell_map(C, x, c, kc, winv, J, &v), A = 0;
+  for (int a = 0; a < d; a++)
+    for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
+  if (eps == 0 && !(D > 0)) return INFINITY; /* ε = 0: the pure barrier (smoothing a valid mesh) */
+  double ch = chi(D, eps), chp = dchi(D, eps), cs = pow(ch, -2.0 / d);
+  double f = (1 - theta) * A * cs + theta * (D * D + 1) / ch;
+  if (!gk) return f;
+  /* ∂f/∂J = (1-θ)(2 J cs - (2/d) A cs/χ χ' K) + θ (2 D χ - (D² + 1) χ')/χ² K */
+  cofactor(d, J, K);
+  double kd = -(1 - theta) * (2.0 / d) * A * cs / ch * chp + theta * (2 * D * ch - (D * D + 1) * chp) / (ch * ch);
+  double G[3][3], GE[3][3];
+  for (int a = 0; a < d; a++)
+    for (int b = 0; b < d; b++) G[a][b] = (1 - theta) * 2 * J[a][b] * cs + kd * K[a][b];
+  /* ∂f/∂E = G W⁻ᵀ: column k is the gradient in vertex k + 1, minus their sum vertex 0's */
+  for (int a = 0; a < d; a++)
+    for (int k = 0; k < d; k++) {
+      double s2 = 0;
+      for (int l = 0; l < d; l++) s2 += G[a][l] * winv[k * d + l];
+      GE[a][k] = s2;
+    }
+  for (int k = 0; k <= d; k++)
+    for (int a = 0; a < d; a++) {
+      double g = 0;
+      if (k) g = GE[a][k - 1];
+      else
+        for (int l = 0; l < d; l++) g -= GE[a][l];
+      gk[k * d + a] = g;
+    }
+  return f;
+}
+
+/* the buffered evaluation's memory limit: per corner its value and (d + 1) d gradient
+ * entries, per free vertex its slots (a million hexahedra would need 1 GB); above it the
+ * evaluation runs on one thread, accumulating directly, with the same result */
+#define ENERGY_BUF_MAX ((size_t)512 << 20)
+
+/* the per-corner buffers and each free vertex's (cell, corner, vertex) slots, in that order */
+static int energy_prepare(const objective *o, int nfree) {
+  ut_energy_buf *b = o->eb;
+  if (b->ready) return b->ready < 0;
+  const ctx *C = o->C;
+  int d = C->d, nk = C->ncorner;
+  size_t nc = (size_t)o->ncell * nk, ns = nc * (size_t)(d + 1);
+  if (sizeof(double) * (nc + ns * d) + sizeof(int) * ns > ENERGY_BUF_MAX) { b->ready = -1; return 1; }
+  b->fc = malloc(sizeof(double) * (nc + 1));
+  b->gc = malloc(sizeof(double) * (ns * d + 1));
+  b->off = calloc((size_t)nfree + 2, sizeof(int));
+  b->slot = malloc(sizeof(int) * (ns + 1));
+  if (!b->fc || !b->gc || !b->off || !b->slot) {
+    ut_energy_release((objective *)o);
+    b->ready = -1;
+    return 1;
+  }
+  for (int pass = 0; pass < 2; pass++) {
+    for (int i = 0; i < o->ncell; i++) {
+      const int *v = cell_of(C, o->cells[i]);
+      for (int kc = 0; kc < nk; kc++)
+        for (int k = 0; k <= d; k++) {
+          int fi = o->fidx[v[C->ct[kc][k]]];
+          if (fi < 0) continue;
+          if (pass) b->slot[b->off[fi + 1]++] = (int)(((size_t)i * nk + kc) * (d + 1) + k);
+          else b->off[fi + 2]++;
+        }
+    }
+    if (!pass)
+      for (int f = 0; f < nfree; f++) b->off[f + 2] += b->off[f + 1];
+  }
+  b->ready = 1;
+  return 0;
+}
+
+void ut_energy_release(objective *o) {
+  if (!o->eb) return;
+  free(o->eb->fc);
+  free(o->eb->gc);
+  free(o->eb->off);
+  free(o->eb->slot);
+  memset(o->eb, 0, sizeof *o->eb);
+}
+
+/* The energy and its gradient. With OpenMP, threads over the cells: each corner writes its
+ * value and vertex gradients, then the sum and each free vertex's gradient are taken in
+ * (cell, corner, vertex) order, the order of the one-thread loop below, so that the result
+ * is the same to the bit for any number of threads (OMP_NUM_THREADS) and without them. */
 double ut_energy_eval(const objective *o, const double *x, double *grad, int nfree) {
   const ctx *C = o->C;
-  int d = C->d;
-  double f = 0, theta = o->theta, eps = o->eps;
-  if (grad) memset(grad, 0, sizeof(double) * (size_t)nfree * d);
-  for (int i = 0; i < o->ncell; i++)
-   for (int kc = 0; kc < C->ncorner; kc++) {
-    int c = o->cells[i];
-    double J[3][3], K[3][3];
-    const int *v;
-    /* reference shapes per corner (a simplex has one); without them a quadrilateral's or
-     * hexahedron's corners aim at a square's or cube's */
-    const double *winv = o->cwinv ? o->cwinv + ((size_t)c * C->ncorner + kc) * d * d : o->winv;
-    double D = cell_map(C, x, c, kc, winv, J, &v), A = 0;
-    for (int a = 0; a < d; a++)
-      for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
-    if (eps == 0 && !(D > 0)) return INFINITY; /* ε = 0: the pure barrier (smoothing a valid mesh) */
-    double ch = chi(D, eps), chp = dchi(D, eps), cs = pow(ch, -2.0 / d);
-    f += (1 - theta) * A * cs + theta * (D * D + 1) / ch;
-    if (!grad) continue;
-    /* ∂f/∂J = (1-θ)(2 J cs - (2/d) A cs/χ χ' K) + θ (2 D χ - (D² + 1) χ')/χ² K */
-    cofactor(d, J, K);
-    double kd = -(1 - theta) * (2.0 / d) * A * cs / ch * chp + theta * (2 * D * ch - (D * D + 1) * chp) / (ch * ch);
-    double G[3][3], GE[3][3];
-    for (int a = 0; a < d; a++)
-      for (int b = 0; b < d; b++) G[a][b] = (1 - theta) * 2 * J[a][b] * cs + kd * K[a][b];
-    /* ∂f/∂E = G W⁻ᵀ: column k is the gradient in vertex k + 1, minus their sum vertex 0's */
-    for (int a = 0; a < d; a++)
-      for (int k = 0; k < d; k++) {
-        double s = 0;
-        for (int l = 0; l < d; l++) s += G[a][l] * winv[k * d + l];
-        GE[a][k] = s;
+  int d = C->d, nk = C->ncorner, n = o->ncell;
+  if (o->eb && !energy_prepare(o, nfree)) {
+    ut_energy_buf *b = o->eb;
+    int bad = 0;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) reduction(|| : bad) if (n > 2048)
+#endif
+    for (int i = 0; i < n; i++)
+      for (int kc = 0; kc < nk; kc++) {
+        size_t q = (size_t)i * nk + kc;
+        b->fc[q] = corner_energy(o, x, i, kc, grad ? b->gc + q * (size_t)(d + 1) * d : NULL);
+        bad = bad || isinf(b->fc[q]);
       }
-    for (int k = 0; k <= d; k++) {
-      int fi = o->fidx[v[C->ct[kc][k]]];
-      if (fi < 0) continue;
+    if (bad) return INFINITY;
+    double f = 0;
+    for (size_t q = 0; q < (size_t)n * nk; q++) f += b->fc[q];
+    if (!grad) return f;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (nfree > 2048)
+#endif
+    for (int fi = 0; fi < nfree; fi++)
       for (int a = 0; a < d; a++) {
         double g = 0;
-        if (k) g = GE[a][k - 1];
-        else
-          for (int l = 0; l < d; l++) g -= GE[a][l];
-        grad[(size_t)fi * d + a] += g;
+        for (int q = b->off[fi]; q < b->off[fi + 1]; q++) g += b->gc[(size_t)b->slot[q] * d + a];
+        grad[(size_t)fi * d + a] = g;
+      }
+    return f;
+  }
+  double f = 0, gk[12];
+  if (grad) memset(grad, 0, sizeof(double) * (size_t)nfree * d);
+  for (int i = 0; i < n; i++) {
+    const int *v = cell_of(C, o->cells[i]);
+    for (int kc = 0; kc < nk; kc++) {
+      double e = corner_energy(o, x, i, kc, grad ? gk : NULL);
+      if (isinf(e)) return INFINITY;
+      f += e;
+      for (int k = 0; grad && k <= d; k++) {
+        int fi = o->fidx[v[C->ct[kc][k]]];
+        if (fi < 0) continue;
+        for (int a = 0; a < d; a++) grad[(size_t)fi * d + a] += gk[k * d + a];
       }
     }
   }
@@ -220,6 +315,8 @@ int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwin
   o.cells = W->cells;
   o.fidx = W->fidx;
   o.smooth = 2;
+  ut_energy_buf eb = {0};
+  o.eb = &eb;
   o.theta = 0.5; /* shape and size alike (0.1 and 0.9 untangled the same spirals) */
   o.cwinv = cwinv; /* reference shapes, or the regular simplex below */
   if (mean > 0 && nfree) {
@@ -251,6 +348,7 @@ int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwin
       if (!it) break;
     }
   }
+  ut_energy_release(&o);
   int total = 0;
   for (int i = 0; i < nfree; i++) {
     int v = freev[i], ch = 0;

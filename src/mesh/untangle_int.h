@@ -47,7 +47,17 @@ typedef struct {
   /* smooth == 2: the global untangling energy (untangle_global.c), analytic gradient */
   double eps, theta, winv[9];
   const double *cwinv; /* per corner W⁻¹ (ncell*ncorner*d*d) of its reference shape, or NULL: winv */
+  struct ut_energy_buf *eb; /* smooth == 2: the threaded evaluation's buffers (ut_energy_eval) */
 } objective;
+
+/* per cell: its energy and vertex gradients; per free vertex: its (cell, vertex) slots */
+typedef struct ut_energy_buf {
+  int ready;
+  double *fc, *gc;
+  int *off, *slot;
+} ut_energy_buf;
+/* frees what ut_energy_eval allocated in o->eb (the struct itself is the caller's) */
+void ut_energy_release(objective *o);
 
 /* reusable per-vertex / per-cell marks, kept at their rest values (-1 / 0) between uses */
 typedef struct {

@@ -425,8 +425,10 @@ static int lmesh_untangle(lua_State *L) {
   ud_mesh *u = check_mesh(L, 1, fn);
   int t = 0;
   if (!lua_isnoneornil(L, 2)) {
-    if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {beta=, max_iterations=, boundary=, placement=, quiet=}");
-    static const char *const keys[] = {"beta", "max_iterations", "boundary", "placement", "quiet", "reference", NULL};
+    if (!lua_istable(L, 2))
+      return typeerror(L, fn, 2, "an options table {beta=, max_iterations=, boundary=, placement=, reference=, motion_weight=, global=, quiet=}");
+    static const char *const keys[] = {"beta", "max_iterations", "boundary", "placement", "quiet", "reference",
+                                       "motion_weight", "global", NULL};
     check_keys(L, 2, fn, keys);
     t = 2;
   }
@@ -447,11 +449,21 @@ static int lmesh_untangle(lua_State *L) {
     lua_getfield(L, t, "quiet");
     quiet = lua_toboolean(L, -1);
     lua_pop(L, 1);
+    o.motion_weight = opt_num(L, t, "motion_weight", 0, fn);
+    if (!(o.motion_weight >= 0) || !isfinite(o.motion_weight))
+      return luaL_error(L, "%s: option 'motion_weight' must be a finite number >= 0 (the weight of the distance to the input), got %f",
+                        fn, o.motion_weight);
+    int gt = lua_getfield(L, t, "global");
+    if (gt != LUA_TNIL && gt != LUA_TBOOLEAN)
+      return luaL_error(L, "%s: option 'global' must be a boolean (false: no global stage), got %s", fn, luaL_typename(L, -1));
+    o.no_global = gt == LUA_TBOOLEAN && !lua_toboolean(L, -1);
+    lua_pop(L, 1);
   }
   o.slide = opt_boundary(L, t, fn);
   mesh *m = u->lm->m;
   const mesh *ref = opt_reference(L, t, m, fn);
   if (ref) o.xref = ref->x;
+  if (ref && o.no_global) return luaL_error(L, "%s: option 'reference' needs the global stage (global = false was given)", fn);
   untangle_report r;
   char err[MESH_ERRLEN];
   if (mesh_untangle(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);

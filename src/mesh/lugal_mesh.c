@@ -18,7 +18,7 @@ static void usage(FILE *f) {
              "                  [--picture MESH.svg] [--vtu OUT.vtu] [--bins N]\n"
              "       lugal-mesh untangle IN.msh OUT.msh [--beta B] [--boundary slide|fixed]\n"
              "                  [--placement chebyshev|corners] [--max-iterations N] [--reference REST.msh]\n"
-             "                  [--report]\n"
+             "                  [--motion-weight W] [--no-global] [--report]\n"
              "       lugal-mesh smooth IN.msh OUT.msh [--measure NAME] [--iterations N]\n"
              "                  [--method local|global|energy] [--reference REST.msh] [--boundary slide|fixed]\n"
              "       lugal-mesh --version | --help\n\n"
@@ -31,7 +31,9 @@ static void usage(FILE *f) {
              "untangle  repairs inverted cells by moving vertices (feasible set, optimization,\n"
              "          feasible set with J >= beta) and writes OUT.msh (MSH 2.2); --report prints\n"
              "          each stage; exit status 3 when invalid cells remain; --reference REST.msh\n"
-             "          makes the global stage aim at each cell's shape in REST.msh.\n"
+             "          makes the global stage aim at each cell's shape in REST.msh;\n"
+             "          --motion-weight W weighs the distance to the input (smallest motion),\n"
+             "          --no-global keeps to the local stages.\n"
              "smooth    raises the quality (default mean_ratio, corner_condition for quads and\n"
              "          hexes) without ever lowering the minimum; the mesh must be valid;\n"
              "          --method local (default) moves one vertex at a time, global all interior\n"
@@ -172,6 +174,14 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
         fprintf(stderr, "lugal-mesh %s: --beta must be a finite number >= 0, got %s\n", cmd, argv[i]);
         return 2;
       }
+    } else if (!strcmp(a, "--motion-weight") && has && !strcmp(cmd, "untangle")) {
+      uo.motion_weight = strtod(argv[++i], &end);
+      if (end == argv[i] || *end || !(uo.motion_weight >= 0) || !isfinite(uo.motion_weight)) {
+        fprintf(stderr, "lugal-mesh untangle: --motion-weight must be a finite number >= 0, got %s\n", argv[i]);
+        return 2;
+      }
+    } else if (!strcmp(a, "--no-global") && !strcmp(cmd, "untangle")) {
+      uo.no_global = 1;
     } else if (!strcmp(a, "--boundary") && has) {
       if ((slide = parse_boundary(cmd, argv[++i])) < 0) return 2;
     } else if (!strcmp(a, "--placement") && has && !strcmp(cmd, "untangle")) {

@@ -83,9 +83,24 @@ static double smooth_eval(const objective *o, const double *x, double *grad, int
   return f;
 }
 
+/* the untangling objectives (3.3) and the global energy, plus with motion_weight w the
+ * distance to where the run started, w Σ |x_v − x0_v|² / h² over the free vertices (h a
+ * typical edge), for an ALE remap that wants the smallest motion */
 static double eval(const objective *o, const double *x, double *grad, int nfree) {
-  if (o->smooth == 2) return ut_energy_eval(o, x, grad, nfree);
-  return o->smooth ? smooth_eval(o, x, grad, nfree) : obj_eval(o, x, grad, nfree);
+  double f = o->smooth == 2 ? ut_energy_eval(o, x, grad, nfree)
+             : o->smooth   ? smooth_eval(o, x, grad, nfree)
+                           : obj_eval(o, x, grad, nfree);
+  const ctx *C = o->C;
+  if (o->smooth == 1 || !(C->anchor > 0) || !C->x0 || !o->freev || !isfinite(f)) return f;
+  int d = C->d;
+  for (int i = 0; i < nfree; i++)
+    for (int j = 0; j < d; j++) {
+      size_t k = (size_t)o->freev[i] * d + j;
+      double e = x[k] - C->x0[k];
+      f += C->anchor * e * e;
+      if (grad) grad[(size_t)i * d + j] += 2 * C->anchor * e;
+    }
+  return f;
 }
 
 /* L-BFGS (memory 8, Armijo backtracking) on the free vertices' coordinates */
@@ -431,7 +446,7 @@ static int optimize_vertices(ctx *C, work *W, double *x, double beta, int lift, 
     for (int j = 0; j < d; j++) xs[i * d + j] = x[(size_t)freev[i] * d + j];
   }
   int ncell = ut_cells_around(C, W, freev, nfree);
-  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx, lift, 0, 0, 0, NULL, NULL, 0, 0, {0}, NULL, NULL};
+  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx, lift, 0, 0, 0, freev, NULL, 0, 0, {0}, NULL, NULL};
   double f = 0;
   int it = nfree ? ut_lbfgs(&o, x, freev, nfree, maxit, &f) : 0;
   int total = 0;
@@ -493,6 +508,8 @@ void untangle_defaults(untangle_opts *o) {
   o->placement = 0;
   o->verbose = 0;
   o->xref = NULL;
+  o->motion_weight = 0;
+  o->no_global = 0;
 }
 
 static void stage_print(const untangle_stage *s) {
@@ -558,6 +575,12 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
     return 1;
   }
   memcpy(x0, m->x, sizeof(double) * nx);
+  /* motion_weight: the stage 2 and global objectives weigh the distance to x0 (its scale a
+   * typical edge, from the typical corner Jacobian) */
+  if (o->motion_weight > 0) {
+    C.x0 = x0;
+    C.anchor = o->motion_weight / pow(C.jscale, 2.0 / m->dim);
+  }
   /* reference shapes for the global stage */
   double *cwinv = NULL;
   if (o->xref) {
@@ -676,7 +699,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
   }
   /* the local optimization left knots: every interior vertex together on the global
    * barrier energy (untangle_global.c), kept only if it leaves fewer invalid cells */
-  if (ninv > 0 && W.fidx && W.cells && save && m->type != CELL_INTERVAL) {
+  if (ninv > 0 && W.fidx && W.cells && save && m->type != CELL_INTERVAL && !o->no_global) {
     memcpy(save, m->x, sizeof(double) * nx);
     int its = 0, mv = 0, after;
     memset(trial, 0, (size_t)m->nvert);
@@ -746,7 +769,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
    * towards them (the local stages only aim at validity, and may have repaired the mesh
    * without the global stage); kept if every cell stays valid and the mean of the cells'
    * mean ratios relative to their shapes grows */
-  if (cwinv && !s->invalid_after && W.fidx && W.cells && save && trial) {
+  if (cwinv && !s->invalid_after && W.fidx && W.cells && save && trial && !o->no_global) {
     double *q = malloc(sizeof(double) * ((size_t)m->ncell + 1));
     if (q) {
       double q0 = 0, q1 = 0;
@@ -936,6 +959,10 @@ static int check_opts(const untangle_opts *o, char *err) {
     return 1;
   }
   if (o->placement != 0 && o->placement != 1) { snprintf(err, MESH_ERRLEN, "placement must be 0 or 1"); return 1; }
+  if (!(o->motion_weight >= 0) || !isfinite(o->motion_weight)) {
+    snprintf(err, MESH_ERRLEN, "motion_weight must be a finite number >= 0, got %g", o->motion_weight);
+    return 1;
+  }
   return 0;
 }
 

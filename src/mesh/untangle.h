@@ -22,6 +22,10 @@ typedef struct {
   const double *xref;  /* the global stage aims at each cell's (each corner's) shape in this
                           configuration of the same mesh (nvert*dim), and once valid the
                           touched vertices move towards those shapes; NULL: regular cells */
+  double motion_weight; /* >= 0: stage 2 and the global stage add w Σ |x − x_input|² / h²
+                           (h a typical edge), for the smallest motion (ALE remap); 0 none */
+  int no_global;        /* 1: no global stage (only the local stages, which keep the mesh
+                           away from the tangles bit for bit) */
 } untangle_opts;
 
 typedef struct {

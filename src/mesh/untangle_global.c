@@ -315,6 +315,7 @@ int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwin
   o.cells = W->cells;
   o.fidx = W->fidx;
   o.smooth = 2;
+  o.freev = freev;
   ut_energy_buf eb = {0};
   o.eb = &eb;
   o.theta = 0.5; /* shape and size alike (0.1 and 0.9 untangled the same spirals) */

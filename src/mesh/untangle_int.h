@@ -24,6 +24,8 @@ typedef struct {
   double *tan;          /* 3D: those directions, 2 unit vectors per vertex */
   double jtol;          /* corner Jacobians <= jtol count as invalid */
   double jscale;        /* a typical corner Jacobian, to scale the objective */
+  const double *x0;     /* motion_weight: where the run started (nvert*d), or NULL */
+  double anchor;        /* motion_weight / h²: the weight of |x − x0|² in the objectives */
 } ctx;
 
 typedef double (*vertex_penalty)(const ctx *C, int v, const void *arg, int probe); /* probe: for the gradient, no guard */

@@ -198,4 +198,21 @@ do
           "hexahedra smoothed towards reference shapes: %.4f -> %.6f, distance %.1e", sh.min_before, sh.min_after, hmax)
   T.fails(function() return m:smooth{quiet = true, reference = ref, measure = "scaled_jacobian"} end, "mesh:smooth", "corner condition")
 end
+-- the smallest motion (ALE remap): motion_weight weighs the distance to the input in stage 2
+-- and the global stage; global = false keeps to the local stages
+do
+  local m0, m1 = H.spiral(40, 16, 0.75), H.spiral(40, 16, 0.75)
+  local r0, r1 = m0:untangle{quiet = true}, m1:untangle{quiet = true, motion_weight = 1}
+  print(string.format("motion weight 1: mean displacement %.3f against %.3f, %d vertices moved against %d",
+                      r1.mean_displacement, r0.mean_displacement, r1.moved, r0.moved))
+  T.check(r0.success and r1.success and r1.mean_displacement < 0.8*r0.mean_displacement,
+          "motion_weight = 1 untangles the spiral with less motion (mean %.3f against %.3f)", r1.mean_displacement, r0.mean_displacement)
+  local m2 = H.spiral(40, 16, 0.75)
+  local r2 = m2:untangle{quiet = true, global = false}
+  T.check(not r2.success and r2.invalid_after < r2.invalid_before, "global = false: the local stages alone leave knots (%d of %d)",
+          r2.invalid_after, r2.invalid_before)
+  T.fails(function() return m2:untangle{motion_weight = -1} end, "mesh:untangle", "motion_weight", ">= 0")
+  T.fails(function() return m2:untangle{global = "no"} end, "mesh:untangle", "global", "boolean")
+  T.fails(function() return m2:untangle{global = false, reference = m0} end, "mesh:untangle", "needs the global stage")
+end
 print("hard tangles: all checks passed")

@@ -57,6 +57,10 @@ echo "$out" | grep -q "smooth (energy): corner_condition min"
 # copy towards them reaches them; another mesh or measure is refused
 out=$("$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/x.msh" --reference "$T/rest.msh")
 echo "$out" | grep -q "invalid 3 -> 0,"
+out=$("$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/x.msh" --motion-weight 2 --no-global)
+echo "$out" | grep -q "invalid 3 -> 0,"
+if "$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/x.msh" --motion-weight -2 2> "$T/err"; then exit 1; fi
+grep -q "motion-weight must be a finite number" "$T/err"
 out=$("$BUILD/lugal-mesh" smooth "$T/bumped.msh" "$T/x.msh" --reference "$T/rest.msh")
 echo "$out"
 echo "$out" | grep -Eq "smooth \(energy\): corner_condition relative to the reference min 0\.[0-9]+ -> (1|0\.999[0-9]*),"

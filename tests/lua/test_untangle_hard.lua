@@ -98,21 +98,26 @@ end
 -- copy smoothed by the energy method with {reference = graded} comes back to it (every
 -- cell's map from its reference shape a similarity), while smoothing towards regular
 -- triangles does not
-do
-  local ref = lg.mesh.rectangle{nx = 8, ny = 8, x1 = 3}
+-- the graded reference mesh of a cell type, and a copy with its interior vertices perturbed
+local function graded(cell)
+  local ref = lg.mesh.rectangle{nx = 8, ny = 8, x1 = 3, cell = cell}
   for k = 1, ref:nvertices() do local x, y = ref:coordinates(k); ref:set_coordinates(k, 3*(x/3)^2, y^2) end
-  local function perturbed()
-    local m = ref:copy()
-    math.randomseed(7)
-    for k = 1, m:nvertices() do
-      local x, y = m:coordinates(k)
-      if x > 1e-9 and x < 3 - 1e-9 and y > 1e-9 and y < 1 - 1e-9 then
-        m:set_coordinates(k, x + 0.03*x*(math.random() - 0.5), y + 0.03*y*(math.random() - 0.5))
-      end
+  return ref
+end
+local function perturbed(ref)
+  local m = ref:copy()
+  math.randomseed(7)
+  for k = 1, m:nvertices() do
+    local x, y = m:coordinates(k)
+    if x > 1e-9 and x < 3 - 1e-9 and y > 1e-9 and y < 1 - 1e-9 then
+      m:set_coordinates(k, x + 0.03*x*(math.random() - 0.5), y + 0.03*y*(math.random() - 0.5))
     end
-    return m
   end
-  local a, b = perturbed(), perturbed()
+  return m
+end
+do
+  local ref = graded("triangle")
+  local a, b = perturbed(ref), perturbed(ref)
   local q0 = a:quality("deformation_quality", {reference = ref}):min()
   local sa = a:smooth{quiet = true, reference = ref}
   local sb = b:smooth{quiet = true, method = "energy", boundary = "fixed"}
@@ -158,16 +163,8 @@ end
 -- smoothing towards reference shapes on quadrilaterals (the graded mesh above) and
 -- hexahedra (a sheared box): a perturbed copy comes back to its reference
 do
-  local ref = lg.mesh.rectangle{nx = 8, ny = 8, x1 = 3, cell = "quadrilateral"}
-  for k = 1, ref:nvertices() do local x, y = ref:coordinates(k); ref:set_coordinates(k, 3*(x/3)^2, y^2) end
-  local m = ref:copy()
-  math.randomseed(7)
-  for k = 1, m:nvertices() do
-    local x, y = m:coordinates(k)
-    if x > 1e-9 and x < 3 - 1e-9 and y > 1e-9 and y < 1 - 1e-9 then
-      m:set_coordinates(k, x + 0.03*x*(math.random() - 0.5), y + 0.03*y*(math.random() - 0.5))
-    end
-  end
+  local ref = graded("quadrilateral")
+  local m = perturbed(ref)
   local s = m:smooth{quiet = true, reference = ref}
   local dmax = 0
   for k = 1, m:nvertices() do

@@ -72,6 +72,7 @@ struct lg_problem {
   double *mbuf;         /* element matrices of one chunk of items */
   PetscInt nnz;
   double setup_ms[3]; /* lg_problem_setup_matrix's phases: pattern, PETSc matrix, near null space */
+  int pattern_threads; /* the pattern pass's blocks, one per OpenMP thread */
   PetscInt *csr_i, *csr_j; /* the pattern, A's own arrays (MatCreateSeqAIJWithArrays): freed after A */
   PetscScalar *csr_a;
   size_t bcc_n;         /* symmetric elimination: the essential columns' entries (keep_bc_columns) */

@@ -4,6 +4,10 @@
  * The problem's state is problem_int.h's; problem.c assembles into what this builds. */
 #include "problem_int.h"
 
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -40,6 +44,130 @@ static void sort_row(PetscInt *v, size_t n) {
     size_t j = i;
     for (; j > 0 && v[j - 1] > x; j--) v[j] = v[j - 1];
     v[j] = x;
+  }
+}
+
+/* the pattern pass over the node rows R0..R1 of one block (lg_problem_setup_matrix) */
+typedef struct {
+  lg_problem *p;
+  int B, Nn;
+  const size_t *start, *erow, *erow_off;
+  PetscInt *const *cnod;
+  PetscInt *ia;
+} pattern_in;
+
+typedef struct {
+  int R0, R1;
+  PetscInt *ja;          /* the block's columns (block 0: the final array) */
+  size_t nnz, cap, offset; /* its entries, its capacity, the entries before it */
+  int *mark;             /* a marker per node, -1 outside rows */
+  PetscInt *nodes;       /* one node row */
+  int bad;               /* 1 out of memory, 2 more than 2^31 entries */
+} pattern_block;
+
+/* each element row's term (a short scan: problems have few terms) */
+static inline int erow_term(const pattern_in *in, int *last, size_t e) {
+  const size_t *eo = in->erow_off;
+  size_t it = e >> 16;
+  if (!(eo[*last] <= it && it < eo[*last + 1])) *last = find_term(eo, in->p->nterm, it);
+  return *last;
+}
+
+/* each node row: the union of its element rows' column nodes (a marker per node, no global
+ * sort), sorted, the diagonal always; its B rows are laid out one after another, each the
+ * row's nodes times B columns. Then every element entry's place, read from the marker (it
+ * holds the column node's position in the row: no search); places and row starts counted
+ * from the block's first entry */
+static void pattern_rows(const pattern_in *in, pattern_block *bk) {
+  lg_problem *p = in->p;
+  int B = in->B, Nn = in->Nn, last = 0;
+  const size_t *start = in->start, *erow = in->erow, *erow_off = in->erow_off;
+  PetscInt *const *cnod = in->cnod;
+  if (!bk->ja) {
+    bk->cap = (start[bk->R1] - start[bk->R0]) * 4 + 16;
+    bk->ja = malloc(sizeof(PetscInt) * bk->cap);
+    bk->mark = malloc(sizeof(int) * ((size_t)Nn + 1));
+    bk->nodes = malloc(sizeof(PetscInt) * ((size_t)Nn + 1));
+    if (!bk->ja || !bk->mark || !bk->nodes) { bk->bad = 1; return; }
+  }
+  int *mark = bk->mark;
+  PetscInt *nodes = bk->nodes, *ja = bk->ja;
+  for (int r = 0; r < Nn; r++) mark[r] = -1;
+  size_t nnz = 0, cap = bk->cap;
+  for (int R = bk->R0; R < bk->R1; R++) {
+    size_t ne = start[R + 1] - start[R];
+    const size_t *er = erow + start[R];
+    /* the row's nodes */
+    size_t len = 0;
+    nodes[len++] = R;
+    mark[R] = R;
+    for (size_t q = 0; q < ne; q++) {
+      int i = erow_term(in, &last, er[q]);
+      int cn = p->t[i].cl.size / B;
+      const PetscInt *en = cnod[i] + ((er[q] >> 16) - erow_off[i]) * (size_t)cn;
+      for (int k = 0; k < cn; k++) {
+        PetscInt J = en[k];
+        if (mark[J] != R) { mark[J] = R; nodes[len++] = J; }
+      }
+    }
+    sort_row(nodes, len);
+    size_t need = nnz + len * (size_t)B * (size_t)B;
+    if (need > (size_t)INT32_MAX) { bk->bad = 2; break; }
+    if (need > cap) {
+      while (cap < need) cap *= 2;
+      PetscInt *nj = realloc(ja, sizeof(PetscInt) * cap);
+      if (!nj) { bk->bad = 1; break; }
+      ja = nj;
+    }
+    for (int a = 0; a < B; a++) {
+      in->ia[R * B + a] = (PetscInt)nnz;
+      for (size_t k = 0; k < len; k++)
+        for (int b2 = 0; b2 < B; b2++) ja[nnz++] = nodes[k] * B + b2;
+    }
+    /* the marker now holds positions (>= Nn would clash with row numbers: use -2 - position) */
+    for (size_t k = 0; k < len; k++) mark[nodes[k]] = -2 - (int)k;
+    int base = (int)in->ia[R * B];
+    if (B == 1) p->coo_pos[R] = base + (-2 - mark[R]);
+    for (size_t q = 0; q < ne; q++) {
+      int i = erow_term(in, &last, er[q]);
+      const prob_term *t = &p->t[i];
+      int rn = t->rl.size / B, cn = t->cl.size / B;
+      size_t item = (er[q] >> 16) - erow_off[i], le = item * (size_t)rn + (er[q] & 0xffff); /* item * rn + r */
+      const PetscInt *en = cnod[i] + item * (size_t)cn;
+      if (B > 1) {
+        /* one place per B x B block (its first entry) and the row length, the stride */
+        int *bp = p->blk_pos + t->blk_off + le * (size_t)cn;
+        for (int k = 0; k < cn; k++) bp[k] = base + (-2 - mark[en[k]]) * B;
+        p->blk_stride[t->str_off + le] = (int)(len * (size_t)B);
+      } else {
+        int *pos = p->coo_pos + t->coo_off + (PetscCount)le * cn;
+        for (int k = 0; k < cn; k++) pos[k] = base + (-2 - mark[en[k]]);
+      }
+    }
+    /* back to "not in row R" for the columns of the next rows */
+    for (size_t k = 0; k < len; k++) mark[nodes[k]] = R;
+  }
+  bk->ja = ja;
+  bk->cap = cap;
+  bk->nnz = nnz;
+}
+
+/* a block's row starts and element places in its rows R0..R1, moved by the entries before it */
+static void pattern_shift(const pattern_in *in, const pattern_block *bk, int R0, int R1) {
+  lg_problem *p = in->p;
+  int B = in->B, last = 0, off = (int)bk->offset;
+  for (int R = R0; R < R1; R++) {
+    for (int a = 0; a < B; a++) in->ia[R * B + a] += (PetscInt)off;
+    if (B == 1) p->coo_pos[R] += off;
+    for (size_t q = in->start[R]; q < in->start[R + 1]; q++) {
+      size_t e = in->erow[q];
+      int i = erow_term(in, &last, e);
+      const prob_term *t = &p->t[i];
+      int rn = t->rl.size / B, cn = t->cl.size / B;
+      size_t le = ((e >> 16) - in->erow_off[i]) * (size_t)rn + (e & 0xffff);
+      int *pos = B > 1 ? p->blk_pos + t->blk_off + le * (size_t)cn : p->coo_pos + t->coo_off + (PetscCount)le * cn;
+      for (int k = 0; k < cn; k++) pos[k] += off;
+    }
   }
 }
 
@@ -198,65 +326,56 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
     lg_seterr(env, "out of memory for %ld matrix entries", (long)n);
     return 1;
   }
-  for (int r = 0; r < Nn; r++) mark[r] = -1;
-  /* each element row's term (a short scan: problems have few terms), item row, columns */
-  int last_term = 0;
-#define EROW_TERM(e) (last_term = (erow_off[last_term] <= ((e) >> 16) && ((e) >> 16) < erow_off[last_term + 1]) ? last_term \
-                                                                                                              : find_term(erow_off, p->nterm, (e) >> 16))
-  for (int R = 0; R < Nn && !bad; R++) {
-    size_t ne = start[R + 1] - start[R];
-    const size_t *er = erow + start[R];
-    /* the row's nodes */
-    size_t len = 0;
-    nodes[len++] = R;
-    mark[R] = R;
-    for (size_t q = 0; q < ne; q++) {
-      int i = EROW_TERM(er[q]);
-      int cn = p->t[i].cl.size / B;
-      const PetscInt *en = cnod[i] + ((er[q] >> 16) - erow_off[i]) * (size_t)cn;
-      for (int k = 0; k < cn; k++) {
-        PetscInt J = en[k];
-        if (mark[J] != R) { mark[J] = R; nodes[len++] = J; }
-      }
-    }
-    sort_row(nodes, len);
-    size_t need = nnz + len * (size_t)B * (size_t)B;
-    if (need > (size_t)INT32_MAX) { bad = 2; break; }
-    if (need > cap) {
-      while (cap < need) cap *= 2;
-      PetscInt *nj = realloc(ja, sizeof(PetscInt) * cap);
-      if (!nj) { bad = 1; break; }
-      ja = nj;
-    }
-    for (int a = 0; a < B; a++) {
-      ia[R * B + a] = (PetscInt)nnz;
-      for (size_t k = 0; k < len; k++)
-        for (int b2 = 0; b2 < B; b2++) ja[nnz++] = nodes[k] * B + b2;
-    }
-    /* the marker now holds positions (>= Nn would clash with row numbers: use -2 - position) */
-    for (size_t k = 0; k < len; k++) mark[nodes[k]] = -2 - (int)k;
-    int base = (int)ia[R * B];
-    if (B == 1) p->coo_pos[R] = base + (-2 - mark[R]);
-    for (size_t q = 0; q < ne; q++) {
-      int i = EROW_TERM(er[q]);
-      const prob_term *t = &p->t[i];
-      int rn = t->rl.size / B, cn = t->cl.size / B;
-      size_t item = (er[q] >> 16) - erow_off[i], le = item * (size_t)rn + (er[q] & 0xffff); /* item * rn + r */
-      const PetscInt *en = cnod[i] + item * (size_t)cn;
-      if (B > 1) {
-        /* one place per B x B block (its first entry) and the row length, the stride */
-        int *bp = p->blk_pos + t->blk_off + le * (size_t)cn;
-        for (int k = 0; k < cn; k++) bp[k] = base + (-2 - mark[en[k]]) * B;
-        p->blk_stride[t->str_off + le] = (int)(len * (size_t)B);
-      } else {
-        int *pos = p->coo_pos + t->coo_off + (PetscCount)le * cn;
-        for (int k = 0; k < cn; k++) pos[k] = base + (-2 - mark[en[k]]);
-      }
-    }
-    /* back to "not in row R" for the columns of the next rows */
-    for (size_t k = 0; k < len; k++) mark[nodes[k]] = R;
+  /* the rows in contiguous blocks, one per OpenMP thread (balanced by element rows), each
+   * into its own column array with its own marker, then put end to end: each block's
+   * row starts and element places move by the entries before it. The same pattern and
+   * places for any thread count */
+  int nb = 1;
+#ifdef _OPENMP
+  if (nent > 200000) nb = omp_get_max_threads();
+  if (nb > 64) nb = 64;
+#endif
+  p->pattern_threads = nb;
+  pattern_block blk[64];
+  memset(blk, 0, sizeof blk);
+  pattern_in in = {p, B, Nn, start, erow, erow_off, cnod, ia};
+  for (int b = 0, R = 0; b < nb; b++) {
+    blk[b].R0 = R;
+    size_t goal = nent / (size_t)nb * (size_t)(b + 1);
+    while (R < Nn && (b == nb - 1 || start[R] < goal)) R++;
+    blk[b].R1 = b == nb - 1 ? Nn : R;
   }
-#undef EROW_TERM
+  blk[0].ja = ja; /* the first block writes into the final array */
+  blk[0].cap = cap;
+  blk[0].mark = mark;
+  blk[0].nodes = nodes;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static, 1) if (nb > 1)
+#endif
+  for (int b = 0; b < nb; b++) pattern_rows(&in, &blk[b]);
+  for (int b = 0; b < nb; b++) bad = bad ? bad : blk[b].bad;
+  ja = blk[0].ja;
+  nnz = blk[0].nnz;
+  for (int b = 1; b < nb && !bad; b++) {
+    if (nnz + blk[b].nnz > (size_t)INT32_MAX) { bad = 2; break; }
+    PetscInt *nj = realloc(ja, sizeof(PetscInt) * (nnz + blk[b].nnz + 1));
+    if (!nj) { bad = 1; break; }
+    ja = nj;
+    memcpy(ja + nnz, blk[b].ja, sizeof(PetscInt) * blk[b].nnz);
+    blk[b].offset = nnz;
+    nnz += blk[b].nnz;
+  }
+  /* the shift touches every place of the later blocks again: each block's rows in nb parts,
+   * all threads on every block */
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static, 1) if (nb > 1)
+#endif
+  for (int task = nb; task < nb * nb; task++) {
+    const pattern_block *bk = &blk[task / nb];
+    int part = task % nb, nr = bk->R1 - bk->R0;
+    if (!bad) pattern_shift(&in, bk, bk->R0 + (int)((long)nr * part / nb), bk->R0 + (int)((long)nr * (part + 1) / nb));
+  }
+  for (int b = 1; b < nb; b++) { free(blk[b].ja); free(blk[b].mark); free(blk[b].nodes); }
   for (int i = 0; i < p->nterm; i++) { if (cnod[i] != rnod[i]) free(cnod[i]); free(rnod[i]); }
   free(rnod);
   free(cnod);

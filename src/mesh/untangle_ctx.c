@@ -441,8 +441,11 @@ double ut_cell_min_jac(const ctx *C, const double *x, int c) {
 }
 
 void ut_count_cells(const ctx *C, const double *x, double beta, int *ninv, int *nbelow) {
-  int a = 0, b = 0;
-  for (int c = 0; c < C->m->ncell; c++) {
+  int a = 0, b = 0, nc = C->m->ncell;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) reduction(+ : a, b) if (nc > 8192)
+#endif
+  for (int c = 0; c < nc; c++) {
     double j = ut_cell_min_jac(C, x, c);
     a += !(j > C->jtol);
     b += !(j >= beta);

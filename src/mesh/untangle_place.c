@@ -198,6 +198,25 @@ static int feasible_position(const ctx *C, const double *x, int v, double target
   return ok;
 }
 
+/* the violated corners of v (J <= jtol, or J < target in stage 3) among the first MAXCON
+ * that vertex_constraints would take, from the Jacobians alone (no gradients) */
+static int vertex_violations(const ctx *C, const double *x, int v, double target, int stage3) {
+  int n = 0, bad = 0;
+  for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++) {
+    const int *cell = cell_of(C, C->vc[p]);
+    for (int k = 0; k < C->ncorner; k++) {
+      int who = -1;
+      for (int i = 0; i <= C->d; i++)
+        if (cell[C->ct[k][i]] == v) who = i;
+      if (who < 0 || n >= MAXCON) continue;
+      double J = ut_corner_jac(C, x, cell, k, NULL);
+      n++;
+      bad += stage3 ? J < target : !(J > C->jtol);
+    }
+  }
+  return bad;
+}
+
 /* stages 1 and 3: repeated passes over the free vertices of `active` cells whose constraints
  * are violated (J <= jtol in stage 1, J < β in stage 3); a pass that moves nothing ends it */
 typedef struct {
@@ -213,19 +232,20 @@ int ut_feasible_passes(ctx *C, double *x, double target, int stage3, const unsig
   int d = C->d, total = 0, pass;
   mesh *m = C->m;
   cand *list = malloc(sizeof(cand) * ((size_t)m->nvert + 1));
-  if (!list) return 0;
+  int *nbad = malloc(sizeof(int) * ((size_t)m->nvert + 1));
+  if (!list || !nbad) { free(list); free(nbad); return 0; }
   for (pass = 0; pass < maxpass; pass++) {
     /* the vertices with violated corners, the most violated first: a vertex pulled out of
-     * its patch is put back before its neighbours react to it */
-    int n = 0;
-    for (int v = 0; v < m->nvert; v++) {
-      if (C->fixed[v] || C->bnd[v] || (region && !region[v])) continue;
-      constraints K;
-      vertex_constraints(C, x, v, &K);
-      int bad = 0;
-      for (int k = 0; k < K.n; k++) bad += stage3 ? K.J[k] < target : !(K.J[k] > C->jtol);
-      if (bad) list[n++] = (cand){v, bad};
-    }
+     * its patch is put back before its neighbours react to it. The counts read the mesh
+     * only: on OpenMP threads, the list then made in vertex order */
+    int n = 0, nv = m->nvert;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (nv > 4096)
+#endif
+    for (int v = 0; v < nv; v++)
+      nbad[v] = C->fixed[v] || C->bnd[v] || (region && !region[v]) ? 0 : vertex_violations(C, x, v, target, stage3);
+    for (int v = 0; v < nv; v++)
+      if (nbad[v]) list[n++] = (cand){v, nbad[v]};
     qsort(list, (size_t)n, sizeof(cand), cand_cmp);
     int changed = 0;
     for (int i = 0; i < n; i++) {
@@ -245,6 +265,7 @@ int ut_feasible_passes(ctx *C, double *x, double target, int stage3, const unsig
     if (!changed) break;
   }
   free(list);
+  free(nbad);
   *npass = pass + 1 > maxpass ? maxpass : pass + 1;
   return total;
 }

@@ -357,6 +357,47 @@ int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, 
   return lg_assemble_range(env, lm, k, nitems, cells, facets, 0, nitems, nbind, bind, out);
 }
 
+/* what every item of a range reads: the kernel, its items, coefficients and caches */
+typedef struct {
+  const lg_kernel *k;
+  const mesh *m;
+  const int *cells, *cells_m, *facets; /* cells_m: interior facets' '-' cells, or NULL */
+  const coef_binding *bind;
+  const double *P;
+  double *C;                           /* the range's point cache, or NULL */
+  size_t cstride;
+  int cm, size;
+} item_ctx;
+
+/* item it of the range: its vertex coordinates into X (two cells' for an interior facet),
+ * its coefficients into W, and the kernel's tensor into dst (zeroed first) */
+static inline void eval_item(const item_ctx *ic, kernel_fn fn, int it, double *X, double *W, double *dst) {
+  const lg_kernel *k = ic->k;
+  const mesh *m = ic->m;
+  int nvc = m->nvc, d = m->dim;
+  int c = ic->cells[it], cm2 = ic->cells_m ? ic->cells_m[it] : c;
+  const int *v = m->cells + (size_t)c * (size_t)nvc;
+  for (int i = 0; i < nvc; i++)
+    for (int j = 0; j < d; j++) X[i * d + j] = m->x[(size_t)v[i] * d + j];
+  if (ic->cells_m) {
+    const int *vm = m->cells + (size_t)cm2 * (size_t)nvc;
+    for (int i = 0; i < nvc; i++)
+      for (int j = 0; j < d; j++) X[(nvc + i) * d + j] = m->x[(size_t)vm[i] * d + j];
+  }
+  for (int ci = 0; ci < k->ncoef; ci++) {
+    const dofmap *dm = ic->bind[ci].dm;
+    const int *cd = dm->cell_dofs + (size_t)(k->coef_side[ci] ? cm2 : c) * (size_t)dm->nloc;
+    double *w = W + k->coef_off[ci];
+    for (int i = 0; i < dm->nloc; i++) w[i] = ic->bind[ci].vals[cd[i]];
+  }
+  memset(dst, 0, sizeof(double) * (size_t)ic->size);
+  fn(X, W, ic->P, ic->facets ? ic->facets[it] : 0, dst, ic->C ? ic->C + (size_t)it * ic->cstride : NULL, ic->cm);
+}
+
+static double elapsed_ms(const struct timespec *t0, const struct timespec *t1) {
+  return (double)(t1->tv_sec - t0->tv_sec) * 1e3 + (double)(t1->tv_nsec - t0->tv_nsec) * 1e-6;
+}
+
 int lg_assemble_range(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, const int *cells, const int *facets,
                       int first, int nitems, int nbind, const coef_binding *bind, double *out) {
   mesh *m = lm->m;
@@ -371,24 +412,11 @@ int lg_assemble_range(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, c
     cm = k->pc->mode;
     C = k->pc->g->v;
   }
-  /* interior facets: the '-' cells follow the '+' cells (lg_region_items) */
-  const int *cells_m = k->facet == 2 ? cells + total + first : NULL;
-  cells += first;
-  if (facets) facets += first;
   if (C) C += (size_t)first * (size_t)k->nq * (size_t)k->ncache;
-  size_t cstride = (size_t)k->nq * (size_t)k->ncache;
   int size = k->arity == 2 ? k->rows.size * k->cols.size : k->arity == 1 ? k->rows.size : 1;
-  double X[8 * 3], A[FEM_MAXLOC * KER_MAXFIELD * FEM_MAXLOC * KER_MAXFIELD / 4 + 64];
-  double *Ab = NULL;
-  double *W = malloc(sizeof(double) * (size_t)(k->wsize + 1));
-  if (!W) { lg_seterr(env, "out of memory"); return 1; }
-  if ((size_t)size > sizeof A / sizeof A[0]) {
-    Ab = malloc(sizeof(double) * (size_t)size);
-    if (!Ab) { free(W); lg_seterr(env, "out of memory"); return 1; }
-  }
-  double *P = expr_param_values(env->c);
-  int nvc = m->nvc, d = m->dim;
-  double sum = 0;
+  /* interior facets: the '-' cells follow the '+' cells (lg_region_items) */
+  item_ctx ic = {k, m, cells + first, k->facet == 2 ? cells + total + first : NULL, facets ? facets + first : NULL,
+                 bind, expr_param_values(env->c), C, (size_t)k->nq * (size_t)k->ncache, cm, size};
   kernel_fn fn = jit_current(env->jit, k->jid, k->fn);
   struct timespec t0, t1;
   clock_gettime(CLOCK_MONOTONIC, &t0);
@@ -401,77 +429,49 @@ int lg_assemble_range(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, c
     int fail = 0;
 #pragma omp parallel
     {
-      double Xt[8 * 3 * 2];
-      double *Wt = malloc(sizeof(double) * (size_t)(k->wsize + 1));
-      if (!Wt) {
+      double X[8 * 3 * 2];
+      double *W = malloc(sizeof(double) * (size_t)(k->wsize + 1));
+      if (!W) {
 #pragma omp atomic write
         fail = 1;
       }
 #pragma omp for schedule(static)
-      for (int it = 0; it < nitems; it++) {
-        if (!Wt) continue;
-        int c = cells[it], cm2 = cells_m ? cells_m[it] : c;
-        const int *v = m->cells + (size_t)c * (size_t)nvc;
-        for (int i = 0; i < nvc; i++)
-          for (int j = 0; j < d; j++) Xt[i * d + j] = m->x[(size_t)v[i] * d + j];
-        if (cells_m) {
-          const int *vm = m->cells + (size_t)cm2 * (size_t)nvc;
-          for (int i = 0; i < nvc; i++)
-            for (int j = 0; j < d; j++) Xt[(nvc + i) * d + j] = m->x[(size_t)vm[i] * d + j];
-        }
-        for (int ci = 0; ci < k->ncoef; ci++) {
-          const dofmap *dm = bind[ci].dm;
-          const int *cd = dm->cell_dofs + (size_t)(k->coef_side[ci] ? cm2 : c) * (size_t)dm->nloc;
-          double *w = Wt + k->coef_off[ci];
-          for (int i = 0; i < dm->nloc; i++) w[i] = bind[ci].vals[cd[i]];
-        }
-        double *dst = out + (size_t)it * (size_t)size;
-        memset(dst, 0, sizeof(double) * (size_t)size);
-        fn(Xt, Wt, P, facets ? facets[it] : 0, dst, C ? C + (size_t)it * cstride : NULL, cm);
-      }
-      free(Wt);
+      for (int it = 0; it < nitems; it++)
+        if (W) eval_item(&ic, fn, it, X, W, out + (size_t)it * (size_t)size);
+      free(W);
     }
     clock_gettime(CLOCK_MONOTONIC, &t1);
-    jit_account(env->jit, k->jid, (t1.tv_sec - t0.tv_sec) * 1e3 + (t1.tv_nsec - t0.tv_nsec) * 1e-6);
-    free(W);
-    free(Ab);
+    jit_account(env->jit, k->jid, elapsed_ms(&t0, &t1));
     if (fail) { lg_seterr(env, "out of memory"); return 1; }
     if (cm == 1 && first + nitems == total) k->pc->g->valid = 1;
     return 0;
   }
 #endif
+  double X[8 * 3 * 2], A[FEM_MAXLOC * KER_MAXFIELD * FEM_MAXLOC * KER_MAXFIELD / 4 + 64];
+  double *Ab = NULL;
+  double *W = malloc(sizeof(double) * (size_t)(k->wsize + 1));
+  if (!W) { lg_seterr(env, "out of memory"); return 1; }
+  if ((size_t)size > sizeof A / sizeof A[0]) {
+    Ab = malloc(sizeof(double) * (size_t)size);
+    if (!Ab) { free(W); lg_seterr(env, "out of memory"); return 1; }
+  }
+  double sum = 0;
   for (int it = 0; it < nitems; it++) {
     if (it && it % LG_TIER_CHECK == 0) {
       /* a long assembly moves to the system compiler's code as soon as it is built: the
        * time so far is accounted (which may start the build) and the kernel looked up
        * again (a right-hand side on 1.5 M tetrahedra ran 2.5 s in libtcc's code) */
       clock_gettime(CLOCK_MONOTONIC, &t1);
-      jit_account(env->jit, k->jid, (t1.tv_sec - t0.tv_sec) * 1e3 + (t1.tv_nsec - t0.tv_nsec) * 1e-6);
+      jit_account(env->jit, k->jid, elapsed_ms(&t0, &t1));
       t0 = t1;
       fn = jit_current(env->jit, k->jid, k->fn);
     }
-    int c = cells[it], cm2 = cells_m ? cells_m[it] : c;
-    const int *v = m->cells + (size_t)c * (size_t)nvc;
-    for (int i = 0; i < nvc; i++)
-      for (int j = 0; j < d; j++) X[i * d + j] = m->x[(size_t)v[i] * d + j];
-    if (cells_m) {
-      const int *vm = m->cells + (size_t)cm2 * (size_t)nvc;
-      for (int i = 0; i < nvc; i++)
-        for (int j = 0; j < d; j++) X[(nvc + i) * d + j] = m->x[(size_t)vm[i] * d + j];
-    }
-    for (int ci = 0; ci < k->ncoef; ci++) {
-      const dofmap *dm = bind[ci].dm;
-      const int *cd = dm->cell_dofs + (size_t)(k->coef_side[ci] ? cm2 : c) * (size_t)dm->nloc;
-      double *w = W + k->coef_off[ci];
-      for (int i = 0; i < dm->nloc; i++) w[i] = bind[ci].vals[cd[i]];
-    }
     double *dst = k->arity == 0 ? (Ab ? Ab : A) : out + (size_t)it * (size_t)size;
-    memset(dst, 0, sizeof(double) * (size_t)size);
-    fn(X, W, P, facets ? facets[it] : 0, dst, C ? C + (size_t)it * cstride : NULL, cm);
+    eval_item(&ic, fn, it, X, W, dst);
     if (k->arity == 0) sum += dst[0];
   }
   clock_gettime(CLOCK_MONOTONIC, &t1);
-  jit_account(env->jit, k->jid, (t1.tv_sec - t0.tv_sec) * 1e3 + (t1.tv_nsec - t0.tv_nsec) * 1e-6);
+  jit_account(env->jit, k->jid, elapsed_ms(&t0, &t1));
   if (cm == 1 && first + nitems == total) k->pc->g->valid = 1;
   if (k->arity == 0) out[0] += sum;
   free(W);

@@ -1005,13 +1005,7 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
       snprintf(info->reason, sizeof info->reason, "CONVERGED_RTOL");
       lg_keep_name(&p->keep, info->solver, sizeof info->solver);
       rc = 0;
-    } else {
-      /* refactored below: back to the essential values as the direct solve's start */
-      PCHK(VecSet(p->x, 0), "VecSet");
-      PCHK(VecSetValues(p->x, p->nbc, p->bc_rows, p->bc_vals, INSERT_VALUES), "VecSetValues");
-      PCHK(VecAssemblyBegin(p->x), "VecAssembly");
-      PCHK(VecAssemblyEnd(p->x), "VecAssembly");
-    }
+    } /* else refactored below: the direct solve (preonly) overwrites x */
   }
   if (!kept) {
     if (refactor) PCHK(lg_lu_prepare(p->ksp, p->A, p->bc_rows, p->nbc, p->prefix, 1), "the factorization's choice");
@@ -1442,7 +1436,9 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
     if ((ierr = lg_lu_fallback(ksp, p->A))) break;
   }
   if (!ierr && !kept && stale) lg_keep_factored(&p->keep, ksp);
-  if (!ierr && !p->nonlinear && !env->no_keep_factor) ierr = lg_keep_remember(&p->keep, transpose, l);
+  /* the next solve's initial guess, where a factor may be kept */
+  if (!ierr && !p->nonlinear && !env->no_keep_factor && lg_keep_applies(ksp, p->prefix))
+    ierr = lg_keep_remember(&p->keep, transpose, l);
   if (!ierr && reason >= 0) {
     const PetscScalar *lv;
     VecGetArrayRead(l, &lv);

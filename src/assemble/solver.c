@@ -225,16 +225,21 @@ void lg_solver_name(KSP ksp, char *out, size_t len) {
 #define KEEP_FACTOR_SPEED 1.6
 #define KEEP_VECTOR_OPS 0.1
 
-int lg_keep_usable(const lg_keep *kp, KSP ksp, const char *prefix) {
+int lg_keep_applies(KSP ksp, const char *prefix) {
   PC pc;
-  PetscBool ch = PETSC_FALSE, user = PETSC_FALSE;
-  if (kp->skip > 0 || kp->factor_cost <= 0 || kp->extra >= KEEP_BUDGET * kp->factor_cost) return 0;
-  PetscBool lu = PETSC_FALSE;
+  PetscBool ch = PETSC_FALSE, lu = PETSC_FALSE, kt = PETSC_FALSE, pt = PETSC_FALSE;
   if (!lg_lu_native(ksp, prefix) || KSPGetPC(ksp, &pc) || PetscObjectTypeCompare((PetscObject)pc, PCCHOLESKY, &ch) ||
       PetscObjectTypeCompare((PetscObject)pc, PCLU, &lu) || !(ch || lu))
     return 0;
-  PetscOptionsHasName(NULL, prefix && prefix[0] ? prefix : NULL, "-ksp_type", &user);
-  return !user;
+  const char *pre = prefix && prefix[0] ? prefix : NULL;
+  PetscOptionsHasName(NULL, pre, "-ksp_type", &kt);
+  PetscOptionsHasName(NULL, pre, "-pc_type", &pt);
+  return !kt && !pt;
+}
+
+int lg_keep_usable(const lg_keep *kp, KSP ksp, const char *prefix) {
+  if (kp->skip > 0 || kp->factor_cost <= 0 || kp->extra >= KEEP_BUDGET * kp->factor_cost) return 0;
+  return lg_keep_applies(ksp, prefix);
 }
 
 PetscErrorCode lg_keep_solve(lg_keep *kp, KSP ksp, Mat A, Vec b, Vec x, int transpose, int changed, int guess,
@@ -300,8 +305,6 @@ PetscErrorCode lg_keep_solve(lg_keep *kp, KSP ksp, Mat A, Vec b, Vec x, int tran
   cost += (double)*its * (1 + prod + KEEP_VECTOR_OPS);
   kp->extra += cost - 1; /* beyond the direct solve it replaces */
   kp->cycle_solves++;
-  kp->solves++;
-  kp->iterations += *its;
   if (reason > 0) {
     *ok = PETSC_TRUE;
     if (changed) kp->saved++; /* a new matrix solved without its factorization */
@@ -361,7 +364,6 @@ void lg_keep_factored(lg_keep *kp, KSP ksp) {
   kp->extra = 0;
   kp->saved = 0;
   kp->stale = 0;
-  kp->factorizations++;
 }
 
 PetscErrorCode lg_keep_remember(lg_keep *kp, int transpose, Vec x) {

@@ -38,10 +38,10 @@ PetscInt lg_mumps_null_pivots(KSP ksp);
  * The rule is ski rental: iterative solves are taken while what they cost beyond direct ones,
  * summed since the last factorization, stays below three factorizations; then the
  * matrix is refactored. Costs are counted in operations from the factor's structure and the
- * iteration counts, never timed, so that a run's choices, and its results, repeat. A run of iterative solves that did not save a factorization turns
- * the keeping off for the next 1, 2, 4, ... 16 factorizations. Only for the native Cholesky
- * or LU lugal chose (no -ksp_type/-pc_type/-pc_factor_mat_solver_type from the user);
- * -lugal_keep_factor 0 turns it off. */
+ * iteration counts, never timed, so that a run's choices, and its results, repeat. A run
+ * of iterative solves that did not save a factorization turns the keeping off for the next
+ * 1, 2, 4, ... 16 factorizations. Only for the native Cholesky or LU lugal chose
+ * (lg_keep_applies); -lugal_keep_factor 0 turns it off. */
 typedef struct {
   KSP cg;            /* CG or GMRES on the operator, preconditioned by the direct KSP's own PC */
   int stale;         /* the PC holds the factor of an earlier matrix than the operator */
@@ -51,11 +51,14 @@ typedef struct {
   int saved;         /* factorizations the iterative solves replaced since then */
   int cycle_solves;  /* iterative solves since then */
   int skip, backoff; /* factorizations to make before keeping again; the next pause */
-  long solves, iterations, factorizations; /* statistics */
   Vec last[2];       /* the last tangent and adjoint solutions (initial guesses) */
 } lg_keep;
 
-/* 1 if the next solve with a changed (or stale) matrix may iterate with the kept factor */
+/* 1 if the KSP's solver is one a factor may be kept for: lugal's native Cholesky or LU,
+ * with no -ksp_type, -pc_type or -pc_factor_mat_solver_type from the user */
+int lg_keep_applies(KSP ksp, const char *prefix);
+/* 1 if, besides, the next solve with a changed (or stale) matrix may iterate with the kept
+ * factor (the budget since the last factorization is not spent, no pause) */
 int lg_keep_usable(const lg_keep *kp, KSP ksp, const char *prefix);
 
 /* solve A x = b (A^T x = b with transpose) by CG preconditioned with the factor the KSP's PC

@@ -163,7 +163,7 @@ static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, smoo
                            round + 1, its, f0, f, slid);
     if (!its && !slid) break;
   }
-  ut_energy_release(&ob);
+  ut_energy_release(&eb);
   free(freev); free(fidx); free(cells); free(cmark); free(hv);
   return status;
 }

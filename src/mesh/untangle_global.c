@@ -197,7 +197,7 @@ static int energy_prepare(const objective *o, int nfree) {
   b->off = calloc((size_t)nfree + 2, sizeof(int));
   b->slot = malloc(sizeof(int) * (ns + 1));
   if (!b->fc || !b->gc || !b->off || !b->slot) {
-    ut_energy_release((objective *)o);
+    ut_energy_release(b);
     b->ready = -1;
     return 1;
   }
@@ -219,13 +219,13 @@ static int energy_prepare(const objective *o, int nfree) {
   return 0;
 }
 
-void ut_energy_release(objective *o) {
-  if (!o->eb) return;
-  free(o->eb->fc);
-  free(o->eb->gc);
-  free(o->eb->off);
-  free(o->eb->slot);
-  memset(o->eb, 0, sizeof *o->eb);
+void ut_energy_release(ut_energy_buf *b) {
+  if (!b) return;
+  free(b->fc);
+  free(b->gc);
+  free(b->off);
+  free(b->slot);
+  memset(b, 0, sizeof *b);
 }
 
 /* The energy and its gradient. With OpenMP, threads over the cells: each corner writes its
@@ -358,7 +358,7 @@ int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwin
       if (!it) break;
     }
   }
-  ut_energy_release(&o);
+  ut_energy_release(&eb);
   int total = 0;
   for (int i = 0; i < nfree; i++) {
     int v = freev[i], ch = 0;

@@ -58,8 +58,8 @@ typedef struct ut_energy_buf {
   double *fc, *gc;
   int *off, *slot;
 } ut_energy_buf;
-/* frees what ut_energy_eval allocated in o->eb (the struct itself is the caller's) */
-void ut_energy_release(objective *o);
+/* frees what ut_energy_eval allocated in b (the struct itself is the caller's) */
+void ut_energy_release(ut_energy_buf *b);
 
 /* reusable per-vertex / per-cell marks, kept at their rest values (-1 / 0) between uses */
 typedef struct {

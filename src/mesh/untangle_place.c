@@ -63,14 +63,15 @@ static int lp_max(int m, int n, const double *A, const double *b, const double *
 }
 
 /* the constraints of vertex v: every corner of every cell around v that v takes part in,
- * J_k + g_k·δ >= target. Returns the count (at most cap) and whether one is violated. */
+ * J_k + g_k·δ >= target (at most MAXCON); without grad the Jacobians J_k alone (a scan for
+ * violated corners needs no gradients) */
 #define MAXCON 512
 typedef struct {
   int n;
   double g[MAXCON][3], J[MAXCON];
 } constraints;
 
-static void vertex_constraints(const ctx *C, const double *x, int v, constraints *K) {
+static void vertex_constraints(const ctx *C, const double *x, int v, int grad, constraints *K) {
   K->n = 0;
   for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++) {
     const int *cell = cell_of(C, C->vc[p]);
@@ -80,11 +81,20 @@ static void vertex_constraints(const ctx *C, const double *x, int v, constraints
         if (cell[C->ct[k][i]] == v) who = i;
       if (who < 0 || K->n >= MAXCON) continue;
       double g[4][3];
-      K->J[K->n] = ut_corner_jac(C, x, cell, k, g);
-      for (int j = 0; j < C->d; j++) K->g[K->n][j] = g[who][j];
+      K->J[K->n] = ut_corner_jac(C, x, cell, k, grad ? g : NULL);
+      for (int j = 0; grad && j < C->d; j++) K->g[K->n][j] = g[who][j];
       K->n++;
     }
   }
+}
+
+/* the violated corners of v: J <= jtol, or J < target in stage 3 */
+static int vertex_violations(const ctx *C, const double *x, int v, double target, int stage3) {
+  constraints K;
+  vertex_constraints(C, x, v, 0, &K);
+  int bad = 0;
+  for (int k = 0; k < K.n; k++) bad += stage3 ? K.J[k] < target : !(K.J[k] > C->jtol);
+  return bad;
 }
 
 /* a new position for v inside {δ : J_k + g_k·δ >= target for all k}, or 0 when that set has
@@ -93,7 +103,7 @@ static void vertex_constraints(const ctx *C, const double *x, int v, constraints
  * objectives (x, −x, y[, −y, z]), as in section 2 of the paper. */
 static int feasible_position(const ctx *C, const double *x, int v, double target, int placement, double *out) {
   constraints K;
-  vertex_constraints(C, x, v, &K);
+  vertex_constraints(C, x, v, 1, &K);
   int d = C->d;
   const double *p = x + (size_t)d * v;
   double R = 0;
@@ -198,25 +208,6 @@ static int feasible_position(const ctx *C, const double *x, int v, double target
   return ok;
 }
 
-/* the violated corners of v (J <= jtol, or J < target in stage 3) among the first MAXCON
- * that vertex_constraints would take, from the Jacobians alone (no gradients) */
-static int vertex_violations(const ctx *C, const double *x, int v, double target, int stage3) {
-  int n = 0, bad = 0;
-  for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++) {
-    const int *cell = cell_of(C, C->vc[p]);
-    for (int k = 0; k < C->ncorner; k++) {
-      int who = -1;
-      for (int i = 0; i <= C->d; i++)
-        if (cell[C->ct[k][i]] == v) who = i;
-      if (who < 0 || n >= MAXCON) continue;
-      double J = ut_corner_jac(C, x, cell, k, NULL);
-      n++;
-      bad += stage3 ? J < target : !(J > C->jtol);
-    }
-  }
-  return bad;
-}
-
 /* stages 1 and 3: repeated passes over the free vertices of `active` cells whose constraints
  * are violated (J <= jtol in stage 1, J < β in stage 3); a pass that moves nothing ends it */
 typedef struct {
@@ -250,11 +241,7 @@ int ut_feasible_passes(ctx *C, double *x, double target, int stage3, const unsig
     int changed = 0;
     for (int i = 0; i < n; i++) {
       int v = list[i].v;
-      constraints K;
-      vertex_constraints(C, x, v, &K);
-      int bad = 0;
-      for (int k = 0; k < K.n && !bad; k++) bad = stage3 ? K.J[k] < target : !(K.J[k] > C->jtol);
-      if (!bad) continue; /* fixed by an earlier move in this pass */
+      if (!vertex_violations(C, x, v, target, stage3)) continue; /* fixed by an earlier move in this pass */
       double np[3];
       if (!feasible_position(C, x, v, stage3 ? target : 0, placement, np)) continue;
       for (int j = 0; j < d; j++) x[(size_t)d * v + j] = np[j];

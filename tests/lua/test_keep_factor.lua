@@ -92,9 +92,7 @@ rates(lg.taylor_test(rfu, 1 + 0.3*x*y, lg.sin(3*x)*y, {hessian = true, h = 0.1})
 
 -- the whole inversion: the same optimum as without keeping factors
 local function run(opts)
-  local h = io.popen(string.format("'%s' '%s' child %s 2>&1", arg[-1], arg[0], opts))
-  local out = h:read("a")
-  h:close()
+  local out = T.child("child " .. opts)
   local j, it = out:match("J%* (%S+) iterations (%d+)")
   T.check(j ~= nil, "child run (%s) printed its optimum: %s", opts, out)
   return tonumber(j), tonumber(it)

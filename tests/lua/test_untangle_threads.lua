@@ -38,12 +38,7 @@ if arg[1] == "child" then
   os.exit(0)
 end
 
-local function run(threads)
-  local h = io.popen(string.format("OMP_NUM_THREADS=%d '%s' '%s' child 2>&1", threads, arg[-1], arg[0]))
-  local out = h:read("a")
-  h:close()
-  return out
-end
+local function run(threads) return T.child("child", "OMP_NUM_THREADS=" .. threads) end
 local one, two, three = run(1), run(2), run(3)
 T.check(one:find("spiral\ttrue", 1, true), "the spiral is untangled:\n%s", one)
 local qmin = {}

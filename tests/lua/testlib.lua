@@ -29,4 +29,13 @@ end
 
 function T.rate(e1, e2, h1, h2) return math.log(e1 / e2) / math.log(h1 / h2) end
 
+-- the output (stdout and stderr) of this test script run again by the same lugal with the
+-- given arguments, before them environment assignments ("OMP_NUM_THREADS=2") if given
+function T.child(args, env)
+  local h = io.popen(string.format("%s'%s' '%s' %s 2>&1", env and env .. " " or "", arg[-1], arg[0], args or ""))
+  local out = h:read("a")
+  h:close()
+  return out
+end
+
 return T

@@ -1,4 +1,4 @@
-/* main.c — the `lugal` runner: initializes PETSc (with fast single-process MPI defaults),
+/* main.c — the runner (lugal-core, started by the `lugal` command of launch.c): initializes PETSc (with fast single-process MPI defaults),
  * exposes script arguments as `arg`, makes `require "lugal"` available, runs the script,
  * and reports a Lua error as "script.lua:LINE: message" with exit status 1. */
 #include "../assemble/assemble.h"
@@ -33,7 +33,9 @@ static void usage(FILE *f) {
           "  -lugal_keep_factor 0  refactor a linear problem's matrix whenever it changes\n"
           "                        (by default it is solved by CG or GMRES with its\n"
           "                        last factorization while that costs less)\n"
-          "  -lugal_traceback      print a Lua traceback with errors\n");
+          "  -lugal_traceback      print a Lua traceback with errors\n"
+          "  -lugal_hugepages 0    leave glibc's malloc on 4 KiB pages (by default the\n"
+          "                        `lugal` command lets it use transparent huge pages)\n");
 }
 
 static int traceback(lua_State *L) {
@@ -57,6 +59,8 @@ int main(int argc, char **argv) {
   if (lg_petsc_init(&pargc, &pargv)) { fprintf(stderr, "lugal: PETSc failed to initialize\n"); return 1; }
   PetscBool want_tb = PETSC_FALSE;
   PetscOptionsHasName(NULL, NULL, "-lugal_traceback", &want_tb);
+  PetscBool seen; /* read by the launcher (launch.c): used, not a misspelling */
+  PetscOptionsHasName(NULL, NULL, "-lugal_hugepages", &seen);
   if (lg_petsc_size() > 1) {
     /* every rank would redo the whole serial run: refuse rather than mislead */
     fprintf(stderr, "lugal: parallel runs are not supported yet (this is %d processes); run "

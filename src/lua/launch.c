@@ -1,0 +1,72 @@
+/* launch.c — the `lugal` command: sets the process environment that must be in place
+ * before the runner (lugal-core: PETSc, MPI, Lua) is loaded, then executes the runner in
+ * its place (same process, same arguments, so mpiexec, signals and exit codes are the
+ * runner's).
+ *
+ * What it sets: glibc's malloc tunable glibc.malloc.hugetlb=1, so that the large arrays of
+ * a run (sparsity patterns, matrix values, element places, PETSc's vectors and factors)
+ * are backed by transparent huge pages where the kernel offers them (THP in "madvise"
+ * mode, Debian's default). glibc reads its tunables once, when the process starts, so the
+ * runner cannot set it for itself. A first touch of a 4 KiB page costs a page fault; on
+ * virtual machines that is expensive (12-20 us per page measured on this project's
+ * machines, against 0.3-1.5 us per 4 KiB with huge pages), and the setup of a large
+ * problem is mostly first touches (bench/RESULTS.md, "Huge pages").
+ *
+ * The user keeps control: an existing glibc.malloc.hugetlb in GLIBC_TUNABLES is left as it
+ * is, and -lugal_hugepages 0 among the arguments leaves the environment untouched. Links
+ * libc only: this costs one exec of a small program (about a millisecond). */
+#include <errno.h>
+#include <limits.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+/* the runner beside this program (the build tree), or in PREFIX/libexec/lugal (installed) */
+static int find_core(char *out, size_t n) {
+  char self[PATH_MAX];
+  ssize_t len = readlink("/proc/self/exe", self, sizeof self - 1);
+  if (len <= 0) return 1;
+  self[len] = 0;
+  char *slash = strrchr(self, '/');
+  if (!slash) return 1;
+  *slash = 0;
+  static const char *const rel[] = {"/lugal-core", "/../libexec/lugal/lugal-core"};
+  for (size_t i = 0; i < sizeof rel / sizeof rel[0]; i++) {
+    if ((size_t)snprintf(out, n, "%s%s", self, rel[i]) >= n) continue;
+    if (access(out, X_OK) == 0) return 0;
+  }
+  return 1;
+}
+
+static int hugepages_wanted(int argc, char **argv) {
+  for (int i = 1; i + 1 < argc; i++)
+    if (!strcmp(argv[i], "-lugal_hugepages"))
+      return !(!strcmp(argv[i + 1], "0") || !strcmp(argv[i + 1], "false") || !strcmp(argv[i + 1], "no"));
+  return 1;
+}
+
+int main(int argc, char **argv) {
+  char core[PATH_MAX + 64];
+  if (find_core(core, sizeof core)) {
+    fprintf(stderr, "lugal: cannot find the runner lugal-core beside %s or in ../libexec/lugal (a broken "
+                    "installation?)\n", argc > 0 ? argv[0] : "lugal");
+    return 127;
+  }
+  if (hugepages_wanted(argc, argv)) {
+    const char *old = getenv("GLIBC_TUNABLES");
+    if (!old || !*old) setenv("GLIBC_TUNABLES", "glibc.malloc.hugetlb=1", 1);
+    else if (!strstr(old, "glibc.malloc.hugetlb=")) {
+      size_t n = strlen(old) + sizeof ":glibc.malloc.hugetlb=1";
+      char *v = malloc(n);
+      if (v) {
+        snprintf(v, n, "%s:glibc.malloc.hugetlb=1", old);
+        setenv("GLIBC_TUNABLES", v, 1);
+        free(v);
+      }
+    }
+  }
+  execv(core, argv);
+  fprintf(stderr, "lugal: cannot run %s: %s\n", core, strerror(errno));
+  return 127;
+}

@@ -1,0 +1,53 @@
+#!/bin/sh
+# test_launcher.sh BUILD — the `lugal` command (src/lua/launch.c) hands the run to
+# lugal-core with glibc's huge-page tunable set: added to the user's other tunables, never
+# overriding a glibc.malloc.hugetlb the user chose, left out with -lugal_hugepages 0; the
+# core's exit status and arguments pass through; where the kernel offers transparent huge
+# pages, a problem's large arrays land on them (AnonHugePages in /proc/self/smaps_rollup).
+BUILD=$1
+T=$(mktemp -d)
+trap 'rm -rf "$T"' EXIT
+fail() { echo "FAIL: $*"; exit 1; }
+printf 'print(os.getenv("GLIBC_TUNABLES") or "(unset)")\nprint(arg[1], arg[2], arg[3])\n' > "$T/env.lua"
+
+out=$(env -u GLIBC_TUNABLES "$BUILD/lugal" "$T/env.lua" a b 2>&1) || fail "status $?: $out"
+[ "$(echo "$out" | sed -n 1p)" = "glibc.malloc.hugetlb=1" ] || fail "unset: got '$out'"
+[ "$(echo "$out" | sed -n 2p)" = "a	b	nil" ] || fail "arguments: got '$(echo "$out" | sed -n 2p)'"
+
+out=$(GLIBC_TUNABLES=glibc.malloc.arena_max=2 "$BUILD/lugal" "$T/env.lua" | sed -n 1p)
+[ "$out" = "glibc.malloc.arena_max=2:glibc.malloc.hugetlb=1" ] || fail "appended: got '$out'"
+
+out=$(GLIBC_TUNABLES=glibc.malloc.hugetlb=0 "$BUILD/lugal" "$T/env.lua" | sed -n 1p)
+[ "$out" = "glibc.malloc.hugetlb=0" ] || fail "the user's choice: got '$out'"
+
+out=$(env -u GLIBC_TUNABLES "$BUILD/lugal" "$T/env.lua" -lugal_hugepages 0 2>&1)
+[ "$(echo "$out" | sed -n 1p)" = "(unset)" ] || fail "-lugal_hugepages 0: got '$out'"
+echo "$out" | grep -q "was not used" && fail "-lugal_hugepages reported as unused: $out"
+
+printf 'error("boom")\n' > "$T/err.lua"
+"$BUILD/lugal" "$T/err.lua" > /dev/null 2>&1
+rc=$?
+[ $rc = 1 ] || fail "a script error exits $rc, expected 1"
+
+# a problem of 270 000 unknowns allocates arrays of tens of MB: on huge pages when offered
+cat > "$T/thp.lua" <<'LUA'
+local lg = require "lugal"
+local mesh = lg.mesh.box{nx = 48, ny = 48, nz = 48}
+local P1 = lg.lagrange(1)
+local u, v = lg.unknown(P1, "u"), lg.test(P1, "v")
+local prob = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u))), test = v, unknown = u}
+prob:assemble()
+local f = io.open("/proc/self/smaps_rollup")
+local kb = f and tonumber(f:read("a"):match("AnonHugePages:%s*(%d+)")) or -1
+print(kb)
+LUA
+thp=$(cat /sys/kernel/mm/transparent_hugepage/enabled 2>/dev/null)
+case "$thp" in
+  *"[always]"*|*"[madvise]"*)
+    kb=$("$BUILD/lugal" "$T/thp.lua") || fail "the huge-page run failed"
+    [ "$kb" -ge 20480 ] || fail "AnonHugePages $kb kB with huge pages on, expected >= 20 MB"
+    kb0=$("$BUILD/lugal" "$T/thp.lua" -lugal_hugepages 0)
+    case "$thp" in *"[madvise]"*) [ "$kb0" -lt "$kb" ] || fail "AnonHugePages $kb0 kB with -lugal_hugepages 0, not below $kb";; esac
+    echo "launcher: tunables passed; AnonHugePages $kb kB (off: $kb0 kB)" ;;
+  *) echo "launcher: tunables passed; transparent huge pages not offered here ($thp)" ;;
+esac

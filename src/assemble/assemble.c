@@ -352,19 +352,14 @@ static int pcache_mode(lg_env *env, const lg_kernel *k, const mesh *m, int nitem
 
 #define LG_TIER_CHECK 2048 /* items between two looks at the JIT's tiers */
 
-int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells,
-                      const int *facets, int nbind, const coef_binding *bind, double *out) {
-  return lg_assemble_range(env, lm, k, nitems, cells, facets, 0, nitems, nbind, bind, out);
-}
-
-/* what every item of a range reads: the kernel, its items, coefficients and caches */
+/* what every item of a list reads: the kernel, its items, coefficients and caches */
 typedef struct {
   const lg_kernel *k;
   const mesh *m;
   const int *cells, *cells_m, *facets; /* cells_m: interior facets' '-' cells, or NULL */
   const coef_binding *bind;
   const double *P;
-  double *C;                           /* the range's point cache, or NULL */
+  double *C;                           /* the list's point cache, or NULL */
   size_t cstride;
   int cm, size;
 } item_ctx;
@@ -398,85 +393,117 @@ static double elapsed_ms(const struct timespec *t0, const struct timespec *t1) {
   return (double)(t1->tv_sec - t0->tv_sec) * 1e3 + (double)(t1->tv_nsec - t0->tv_nsec) * 1e-6;
 }
 
-int lg_assemble_range(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, const int *cells, const int *facets,
-                      int first, int nitems, int nbind, const coef_binding *bind, double *out) {
+int lg_chunk_items(int size) {
+  int n = LG_CHUNK_VALUES / (size > 0 ? size : 1);
+  return n < 16 ? 16 : n > 4096 ? 4096 : n;
+}
+
+/* The element loop. Items go a chunk at a time; the items of a chunk are spread over the
+ * OpenMP threads (arity 1 and 2; each item writes only its own tensor and its own point
+ * cache slice, so every tensor is that of one thread to the bit). With a consumer, chunk c
+ * goes into buf[c % 2] and, while the threads compute chunk c + 1, one of them hands chunk
+ * c to use() — item order, one thread — and then joins the others (dynamic schedule): the
+ * scatter into a matrix no longer leaves the other threads waiting (a P1 Laplacian's
+ * scatter is as long as its kernels). Without one, chunk c goes to buf[0] at its items'
+ * place. Between chunks the time is accounted to the JIT's tiers and the kernel looked up
+ * again, so a long assembly moves to the system compiler's code as soon as it is built.
+ * Functionals (arity 0, a sum) run on one thread in item order. */
+int lg_assemble_chunks(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, const int *cells, const int *facets,
+                       const coef_binding *bind, int chunk, double *const buf[2], lg_chunk_use use, void *ud) {
   mesh *m = lm->m;
-  (void)nbind;
   double *C = NULL;
-  /* the point cache belongs to the whole item list: its mode is decided at the first range */
-  int cm = 0;
-  if (first == 0) {
-    cm = pcache_mode(env, k, m, total, cells, facets, &C);
-    if (k->pc) { k->pc->mode = cm; env->pcache_uses[cm]++; }
-  } else if (k->pc && k->pc->mode) {
-    cm = k->pc->mode;
-    C = k->pc->g->v;
-  }
-  if (C) C += (size_t)first * (size_t)k->nq * (size_t)k->ncache;
+  int cm = pcache_mode(env, k, m, total, cells, facets, &C);
+  if (k->pc) { k->pc->mode = cm; env->pcache_uses[cm]++; }
   int size = k->arity == 2 ? k->rows.size * k->cols.size : k->arity == 1 ? k->rows.size : 1;
   /* interior facets: the '-' cells follow the '+' cells (lg_region_items) */
-  item_ctx ic = {k, m, cells + first, k->facet == 2 ? cells + total + first : NULL, facets ? facets + first : NULL,
-                 bind, expr_param_values(env->c), C, (size_t)k->nq * (size_t)k->ncache, cm, size};
+  item_ctx ic = {k, m, cells, k->facet == 2 ? cells + total : NULL, facets, bind, expr_param_values(env->c), C,
+                 (size_t)k->nq * (size_t)k->ncache, cm, size};
   kernel_fn fn = jit_current(env->jit, k->jid, k->fn);
+  if (chunk < 1) chunk = 1;
+  int nchunk = total ? (total - 1) / chunk + 1 : 0, stop = 0, fail = 0;
   struct timespec t0, t1;
   clock_gettime(CLOCK_MONOTONIC, &t0);
+  if (k->arity == 0) {
+    double X[8 * 3 * 2], A[FEM_MAXLOC * KER_MAXFIELD * FEM_MAXLOC * KER_MAXFIELD / 4 + 64];
+    double *W = malloc(sizeof(double) * (size_t)(k->wsize + 1)), sum = 0;
+    if (!W) { lg_seterr(env, "out of memory"); return 1; }
+    for (int it = 0; it < total; it++) {
+      if (it && it % chunk == 0) {
+        clock_gettime(CLOCK_MONOTONIC, &t1);
+        jit_account(env->jit, k->jid, elapsed_ms(&t0, &t1));
+        t0 = t1;
+        fn = jit_current(env->jit, k->jid, k->fn);
+      }
+      eval_item(&ic, fn, it, X, W, A);
+      sum += A[0];
+    }
+    free(W);
+    buf[0][0] += sum;
+  } else {
+    int par = 0;
 #ifdef _OPENMP
-  /* element vectors and matrices on OpenMP threads: each item writes only its own tensor
-   * (and its own point cache slice), so the results are those of one thread to the bit;
-   * the caller adds them in item order. Functionals (a sum) stay on one thread. The tier
-   * is looked up once for the range (the callers' chunks are 4096 items) */
-  if (k->arity > 0 && nitems >= 256 && omp_get_max_threads() > 1) {
-    int fail = 0;
-#pragma omp parallel
+    par = total >= 256 && omp_get_max_threads() > 1;
+#endif
+    int grain = chunk / 16 > 1 ? chunk / 16 : 1;
+    (void)grain;
+#ifdef _OPENMP
+#pragma omp parallel if (par)
+#endif
     {
       double X[8 * 3 * 2];
       double *W = malloc(sizeof(double) * (size_t)(k->wsize + 1));
       if (!W) {
+#ifdef _OPENMP
 #pragma omp atomic write
+#endif
         fail = 1;
       }
-#pragma omp for schedule(static)
-      for (int it = 0; it < nitems; it++)
-        if (W) eval_item(&ic, fn, it, X, W, out + (size_t)it * (size_t)size);
+      for (int c = 0; c <= nchunk; c++) {
+        if (use && c > 0) {
+#ifdef _OPENMP
+#pragma omp single nowait
+#endif
+          {
+            int f = (c - 1) * chunk;
+            if (!fail && use(ud, f, total - f < chunk ? total - f : chunk, buf[(c - 1) & 1])) stop = 1;
+          }
+        }
+        if (c < nchunk) {
+          int f = c * chunk, n = total - f < chunk ? total - f : chunk;
+#ifdef _OPENMP
+#pragma omp for schedule(dynamic, grain) nowait
+#endif
+          for (int it = f; it < f + n; it++)
+            if (W) eval_item(&ic, fn, it, X, W, use ? buf[c & 1] + (size_t)(it - f) * (size_t)size : buf[0] + (size_t)it * (size_t)size);
+        }
+#ifdef _OPENMP
+#pragma omp barrier
+#pragma omp single
+#endif
+        {
+          clock_gettime(CLOCK_MONOTONIC, &t1);
+          jit_account(env->jit, k->jid, elapsed_ms(&t0, &t1));
+          t0 = t1;
+          fn = jit_current(env->jit, k->jid, k->fn);
+        }
+        if (stop || fail) break;
+      }
       free(W);
     }
-    clock_gettime(CLOCK_MONOTONIC, &t1);
-    jit_account(env->jit, k->jid, elapsed_ms(&t0, &t1));
-    if (fail) { lg_seterr(env, "out of memory"); return 1; }
-    if (cm == 1 && first + nitems == total) k->pc->g->valid = 1;
-    return 0;
-  }
-#endif
-  double X[8 * 3 * 2], A[FEM_MAXLOC * KER_MAXFIELD * FEM_MAXLOC * KER_MAXFIELD / 4 + 64];
-  double *Ab = NULL;
-  double *W = malloc(sizeof(double) * (size_t)(k->wsize + 1));
-  if (!W) { lg_seterr(env, "out of memory"); return 1; }
-  if ((size_t)size > sizeof A / sizeof A[0]) {
-    Ab = malloc(sizeof(double) * (size_t)size);
-    if (!Ab) { free(W); lg_seterr(env, "out of memory"); return 1; }
-  }
-  double sum = 0;
-  for (int it = 0; it < nitems; it++) {
-    if (it && it % LG_TIER_CHECK == 0) {
-      /* a long assembly moves to the system compiler's code as soon as it is built: the
-       * time so far is accounted (which may start the build) and the kernel looked up
-       * again (a right-hand side on 1.5 M tetrahedra ran 2.5 s in libtcc's code) */
-      clock_gettime(CLOCK_MONOTONIC, &t1);
-      jit_account(env->jit, k->jid, elapsed_ms(&t0, &t1));
-      t0 = t1;
-      fn = jit_current(env->jit, k->jid, k->fn);
-    }
-    double *dst = k->arity == 0 ? (Ab ? Ab : A) : out + (size_t)it * (size_t)size;
-    eval_item(&ic, fn, it, X, W, dst);
-    if (k->arity == 0) sum += dst[0];
   }
   clock_gettime(CLOCK_MONOTONIC, &t1);
   jit_account(env->jit, k->jid, elapsed_ms(&t0, &t1));
-  if (cm == 1 && first + nitems == total) k->pc->g->valid = 1;
-  if (k->arity == 0) out[0] += sum;
-  free(W);
-  free(Ab);
+  if (fail) { lg_seterr(env, "out of memory"); return 1; }
+  if (stop) return 1;
+  if (cm == 1) k->pc->g->valid = 1;
   return 0;
+}
+
+int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells,
+                      const int *facets, int nbind, const coef_binding *bind, double *out) {
+  (void)nbind;
+  double *const buf[2] = {out, out};
+  return lg_assemble_chunks(env, lm, k, nitems, cells, facets, bind, LG_TIER_CHECK, buf, NULL, NULL);
 }
 
 /* ---------------------------------------------------------------- point evaluation */

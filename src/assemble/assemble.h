@@ -88,10 +88,17 @@ typedef struct {
  * and 2, nitems*size values) or summing into out[0] (arity 0) */
 int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells,
                       const int *facets, int nbind, const coef_binding *bind, double *out);
-/* the same for items first .. first + nitems - 1 of a list of total (out: their tensors);
- * the ranges of one assembly must come in order from first = 0 */
-int lg_assemble_range(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, const int *cells, const int *facets,
-                      int first, int nitems, int nbind, const coef_binding *bind, double *out);
+/* the same a chunk of items at a time into two buffers: chunk c (items c*chunk ..) goes
+ * into buf[c % 2] and is handed to use(ud, first, n, tensors) in item order on one thread
+ * while the other OpenMP threads compute chunk c + 1. A non-zero return from use stops the
+ * loop (its message in env). Arity 1 and 2. */
+typedef int (*lg_chunk_use)(void *ud, int first, int n, const double *tensors);
+int lg_assemble_chunks(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, const int *cells, const int *facets,
+                       const coef_binding *bind, int chunk, double *const buf[2], lg_chunk_use use, void *ud);
+/* items per chunk for element tensors of size values: buffers of LG_CHUNK_VALUES doubles
+ * (256 KiB, in the cache while one thread adds them into the matrix) */
+#define LG_CHUNK_VALUES 32768
+int lg_chunk_items(int size);
 /* bindings for every discrete function the kernel uses (unknowns need extra bindings) */
 int lg_bind_discrete(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nextra,
                      const coef_binding *extra, coef_binding *out);

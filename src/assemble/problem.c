@@ -493,7 +493,8 @@ void lg_problem_free(lg_problem *p) {
   free(p->bc_rows);
   free(p->bc_vals);
   free(p->bc_org);
-  free(p->mbuf);
+  free(p->mbuf[0]);
+  free(p->mbuf[1]);
   free(p->coo_pos);
   free(p->blk_pos);
   free(p->blk_stride);
@@ -584,11 +585,69 @@ static int check_element_tensors(lg_env *env, lg_problem *p, int term, int first
   return 0;
 }
 
+/* one chunk of element matrices of a term, checked and added in place into the value array
+ * (lg_assemble_chunks calls it in item order on one thread while the others compute the
+ * next chunk) */
+typedef struct {
+  lg_env *env;
+  lg_problem *p;
+  int term;
+  PetscScalar *a;
+} scatter_ctx;
+
+static int scatter_chunk(void *ud, int first, int n, const double *v) {
+  scatter_ctx *sc = ud;
+  lg_problem *p = sc->p;
+  const prob_term *t = &p->t[sc->term];
+  int size = t->rl.size * t->cl.size;
+  if (check_element_tensors(sc->env, p, sc->term, first, n, v, size, p->nonlinear ? "Jacobian" : "matrix")) return 1;
+  PetscScalar *a = sc->a;
+  if (p->blk_pos) {
+    /* B x B blocks: a node pair's entries from its block's first place and the row length */
+    int B = p->cdm[0]->bs, rn = t->rl.size / B, cn = t->cl.size / B, cs = t->cl.size;
+    for (int e = 0; e < n; e++) {
+      const double *ve = v + (size_t)e * size;
+      const int *bp = p->blk_pos + t->blk_off + (size_t)(first + e) * rn * cn;
+      const int *st = p->blk_stride + t->str_off + (size_t)(first + e) * rn;
+      for (int i = 0; i < rn; i++)
+        for (int r = 0; r < B; r++) {
+          const double *row = ve + (size_t)(i * B + r) * cs;
+          const int *bpi = bp + i * cn, off = r * st[i];
+          if (B == 3)
+            for (int j = 0; j < cn; j++) {
+              double *dst = a + bpi[j] + off;
+              dst[0] += row[3 * j]; dst[1] += row[3 * j + 1]; dst[2] += row[3 * j + 2];
+            }
+          else
+            for (int j = 0; j < cn; j++) {
+              double *dst = a + bpi[j] + off;
+              for (int c = 0; c < B; c++) dst[c] += row[j * B + c];
+            }
+        }
+    }
+  } else {
+    const int *pos = p->coo_pos + t->coo_off + (size_t)first * size;
+    for (size_t e = 0, ne2 = (size_t)n * size; e < ne2; e++) a[pos[e]] += v[e];
+  }
+  return 0;
+}
+
+/* the two chunk buffers of matrix assembly, for element matrices of up to maxsize values */
+int lg_problem_chunk_buffers(lg_problem *p, size_t maxsize) {
+  size_t n = (size_t)lg_chunk_items((int)maxsize) * maxsize + 1;
+  for (int b = 0; b < 2; b++) {
+    free(p->mbuf[b]);
+    p->mbuf[b] = malloc(sizeof(double) * n);
+    if (!p->mbuf[b]) return 1;
+  }
+  return 0;
+}
+
 static int assemble_matrix(lg_env *env, lg_problem *p, const double *state, Mat A) {
   coef_binding extra[2 * KER_MAXFIELD], bind[KER_MAXCOEF];
   int ne = bind_unknowns(p, state, extra);
   /* element matrices a chunk of items at a time, added in place into the value array (no
-   * per-entry buffer beyond one chunk) */
+   * per-entry buffer beyond two chunks) */
   PetscScalar *a;
   PCHK(MatSeqAIJGetArray(A, &a), "matrix assembly");
   memset(a, 0, sizeof(PetscScalar) * (size_t)p->nnz);
@@ -596,42 +655,10 @@ static int assemble_matrix(lg_env *env, lg_problem *p, const double *state, Mat 
   for (int i = 0; i < p->nterm && !rc; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
-    int size = t->rl.size * t->cl.size;
-    if (lg_bind_discrete(env, p->lm, &t->kmat, ne, extra, bind)) { rc = 1; break; }
-    for (int first = 0; first < t->nitems && !rc; first += LG_CHUNK) {
-      int n = t->nitems - first < LG_CHUNK ? t->nitems - first : LG_CHUNK;
-      rc = lg_assemble_range(env, p->lm, &t->kmat, t->nitems, t->cells, t->facets, first, n, t->kmat.ncoef, bind, p->mbuf) ||
-           check_element_tensors(env, p, i, first, n, p->mbuf, size, p->nonlinear ? "Jacobian" : "matrix");
-      if (rc) break;
-      const double *v = p->mbuf;
-      if (p->blk_pos) {
-        /* B x B blocks: a node pair's entries from its block's first place and the row length */
-        int B = p->cdm[0]->bs, rn = t->rl.size / B, cn = t->cl.size / B, cs = t->cl.size;
-        for (int e = 0; e < n; e++) {
-          const double *ve = v + (size_t)e * size;
-          const int *bp = p->blk_pos + t->blk_off + (size_t)(first + e) * rn * cn;
-          const int *st = p->blk_stride + t->str_off + (size_t)(first + e) * rn;
-          for (int i = 0; i < rn; i++)
-            for (int r = 0; r < B; r++) {
-              const double *row = ve + (size_t)(i * B + r) * cs;
-              const int *bpi = bp + i * cn, off = r * st[i];
-              if (B == 3)
-                for (int j = 0; j < cn; j++) {
-                  double *dst = a + bpi[j] + off;
-                  dst[0] += row[3 * j]; dst[1] += row[3 * j + 1]; dst[2] += row[3 * j + 2];
-                }
-              else
-                for (int j = 0; j < cn; j++) {
-                  double *dst = a + bpi[j] + off;
-                  for (int c = 0; c < B; c++) dst[c] += row[j * B + c];
-                }
-            }
-        }
-      } else {
-        const int *pos = p->coo_pos + t->coo_off + (size_t)first * size;
-        for (size_t e = 0, ne2 = (size_t)n * size; e < ne2; e++) a[pos[e]] += v[e];
-      }
-    }
+    scatter_ctx sc = {env, p, i, a};
+    rc = lg_bind_discrete(env, p->lm, &t->kmat, ne, extra, bind) ||
+         lg_assemble_chunks(env, p->lm, &t->kmat, t->nitems, t->cells, t->facets, bind,
+                            lg_chunk_items(t->rl.size * t->cl.size), p->mbuf, scatter_chunk, &sc);
   }
   PCHK(MatSeqAIJRestoreArray(A, &a), "matrix assembly");
   return rc;

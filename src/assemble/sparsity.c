@@ -47,22 +47,21 @@ static void sort_row(PetscInt *v, size_t n) {
   }
 }
 
-/* the pattern pass over the node rows R0..R1 of one block (lg_problem_setup_matrix) */
+/* the pattern passes over the node rows R0..R1 of one block (lg_problem_setup_matrix) */
 typedef struct {
   lg_problem *p;
   int B, Nn;
   const size_t *start, *erow, *erow_off;
   PetscInt *const *cnod;
-  PetscInt *ia;
+  PetscInt *ia, *ja;     /* row starts (after the count pass), the final column array */
 } pattern_in;
 
 typedef struct {
   int R0, R1;
-  PetscInt *ja;          /* the block's columns (block 0: the final array) */
-  size_t nnz, cap, offset; /* its entries, its capacity, the entries before it */
+  size_t nnz;            /* the count pass: the block's entries */
   int *mark;             /* a marker per node, -1 outside rows */
   PetscInt *nodes;       /* one node row */
-  int bad;               /* 1 out of memory, 2 more than 2^31 entries */
+  int bad;               /* 1 out of memory */
 } pattern_block;
 
 /* each element row's term (a short scan: problems have few terms) */
@@ -73,67 +72,75 @@ static inline int erow_term(const pattern_in *in, int *last, size_t e) {
   return *last;
 }
 
-/* each node row: the union of its element rows' column nodes (a marker per node, no global
- * sort), sorted, the diagonal always; its B rows are laid out one after another, each the
- * row's nodes times B columns. Then every element entry's place, read from the marker (it
- * holds the column node's position in the row: no search); places and row starts counted
- * from the block's first entry */
-static void pattern_rows(const pattern_in *in, pattern_block *bk) {
-  lg_problem *p = in->p;
-  int B = in->B, Nn = in->Nn, last = 0;
-  const size_t *start = in->start, *erow = in->erow, *erow_off = in->erow_off;
-  PetscInt *const *cnod = in->cnod;
-  if (!bk->ja) {
-    bk->cap = (start[bk->R1] - start[bk->R0]) * 4 + 16;
-    bk->ja = malloc(sizeof(PetscInt) * bk->cap);
-    bk->mark = malloc(sizeof(int) * ((size_t)Nn + 1));
-    bk->nodes = malloc(sizeof(PetscInt) * ((size_t)Nn + 1));
-    if (!bk->ja || !bk->mark || !bk->nodes) { bk->bad = 1; return; }
+/* node row R: the union of its element rows' column nodes, the diagonal first (a marker
+ * per node, which holds R for the nodes already in the row: no global sort) */
+static size_t row_nodes(const pattern_in *in, int R, int *last, int *mark, PetscInt *nodes) {
+  const size_t *er = in->erow + in->start[R];
+  size_t ne = in->start[R + 1] - in->start[R], len = 0;
+  nodes[len++] = R;
+  mark[R] = R;
+  for (size_t q = 0; q < ne; q++) {
+    int i = erow_term(in, last, er[q]);
+    int cn = in->p->t[i].cl.size / in->B;
+    const PetscInt *en = in->cnod[i] + ((er[q] >> 16) - in->erow_off[i]) * (size_t)cn;
+    for (int k = 0; k < cn; k++) {
+      PetscInt J = en[k];
+      if (mark[J] != R) { mark[J] = R; nodes[len++] = J; }
+    }
   }
-  int *mark = bk->mark;
-  PetscInt *nodes = bk->nodes, *ja = bk->ja;
-  for (int r = 0; r < Nn; r++) mark[r] = -1;
-  size_t nnz = 0, cap = bk->cap;
+  return len;
+}
+
+static void block_marks(const pattern_in *in, pattern_block *bk) {
+  if (!bk->mark) {
+    bk->mark = malloc(sizeof(int) * ((size_t)in->Nn + 1));
+    bk->nodes = malloc(sizeof(PetscInt) * ((size_t)in->Nn + 1));
+    if (!bk->mark || !bk->nodes) { bk->bad = 1; return; }
+  }
+  for (int r = 0; r < in->Nn; r++) bk->mark[r] = -1;
+}
+
+/* the count pass: each node row's length, its B rows' entries in ia[R * B] */
+static void pattern_count(const pattern_in *in, pattern_block *bk) {
+  block_marks(in, bk);
+  if (bk->bad) return;
+  int B = in->B, last = 0;
+  size_t nnz = 0;
   for (int R = bk->R0; R < bk->R1; R++) {
-    size_t ne = start[R + 1] - start[R];
-    const size_t *er = erow + start[R];
-    /* the row's nodes */
-    size_t len = 0;
-    nodes[len++] = R;
-    mark[R] = R;
-    for (size_t q = 0; q < ne; q++) {
-      int i = erow_term(in, &last, er[q]);
-      int cn = p->t[i].cl.size / B;
-      const PetscInt *en = cnod[i] + ((er[q] >> 16) - erow_off[i]) * (size_t)cn;
-      for (int k = 0; k < cn; k++) {
-        PetscInt J = en[k];
-        if (mark[J] != R) { mark[J] = R; nodes[len++] = J; }
-      }
-    }
+    size_t len = row_nodes(in, R, &last, bk->mark, bk->nodes);
+    in->ia[(size_t)R * B] = (PetscInt)(len * (size_t)B);
+    nnz += len * (size_t)B * (size_t)B;
+  }
+  bk->nnz = nnz;
+}
+
+/* the fill pass: each node row's nodes again, sorted; its B rows written at their final
+ * places in ja, each the row's nodes times B columns; then every element entry's place,
+ * read from the marker (it holds the column node's position in the row: no search) */
+static void pattern_fill(const pattern_in *in, pattern_block *bk) {
+  for (int r = 0; r < in->Nn; r++) bk->mark[r] = -1;
+  lg_problem *p = in->p;
+  int B = in->B, last = 0;
+  int *mark = bk->mark;
+  PetscInt *nodes = bk->nodes, *ja = in->ja;
+  for (int R = bk->R0; R < bk->R1; R++) {
+    size_t len = row_nodes(in, R, &last, mark, nodes);
     sort_row(nodes, len);
-    size_t need = nnz + len * (size_t)B * (size_t)B;
-    if (need > (size_t)INT32_MAX) { bk->bad = 2; break; }
-    if (need > cap) {
-      while (cap < need) cap *= 2;
-      PetscInt *nj = realloc(ja, sizeof(PetscInt) * cap);
-      if (!nj) { bk->bad = 1; break; }
-      ja = nj;
-    }
-    for (int a = 0; a < B; a++) {
-      in->ia[R * B + a] = (PetscInt)nnz;
+    size_t nz = (size_t)in->ia[(size_t)R * B];
+    for (int a = 0; a < B; a++)
       for (size_t k = 0; k < len; k++)
-        for (int b2 = 0; b2 < B; b2++) ja[nnz++] = nodes[k] * B + b2;
-    }
+        for (int b2 = 0; b2 < B; b2++) ja[nz++] = nodes[k] * B + b2;
     /* the marker now holds positions (>= Nn would clash with row numbers: use -2 - position) */
     for (size_t k = 0; k < len; k++) mark[nodes[k]] = -2 - (int)k;
-    int base = (int)in->ia[R * B];
+    int base = (int)in->ia[(size_t)R * B];
     if (B == 1) p->coo_pos[R] = base + (-2 - mark[R]);
-    for (size_t q = 0; q < ne; q++) {
+    const size_t *er = in->erow + in->start[R];
+    for (size_t q = 0, ne = in->start[R + 1] - in->start[R]; q < ne; q++) {
       int i = erow_term(in, &last, er[q]);
       const prob_term *t = &p->t[i];
       int rn = t->rl.size / B, cn = t->cl.size / B;
-      size_t item = (er[q] >> 16) - erow_off[i], le = item * (size_t)rn + (er[q] & 0xffff); /* item * rn + r */
-      const PetscInt *en = cnod[i] + item * (size_t)cn;
+      size_t item = (er[q] >> 16) - in->erow_off[i], le = item * (size_t)rn + (er[q] & 0xffff); /* item * rn + r */
+      const PetscInt *en = in->cnod[i] + item * (size_t)cn;
       if (B > 1) {
         /* one place per B x B block (its first entry) and the row length, the stride */
         int *bp = p->blk_pos + t->blk_off + le * (size_t)cn;
@@ -146,28 +153,6 @@ static void pattern_rows(const pattern_in *in, pattern_block *bk) {
     }
     /* back to "not in row R" for the columns of the next rows */
     for (size_t k = 0; k < len; k++) mark[nodes[k]] = R;
-  }
-  bk->ja = ja;
-  bk->cap = cap;
-  bk->nnz = nnz;
-}
-
-/* a block's row starts and element places in its rows R0..R1, moved by the entries before it */
-static void pattern_shift(const pattern_in *in, const pattern_block *bk, int R0, int R1) {
-  lg_problem *p = in->p;
-  int B = in->B, last = 0, off = (int)bk->offset;
-  for (int R = R0; R < R1; R++) {
-    for (int a = 0; a < B; a++) in->ia[R * B + a] += (PetscInt)off;
-    if (B == 1) p->coo_pos[R] += off;
-    for (size_t q = in->start[R]; q < in->start[R + 1]; q++) {
-      size_t e = in->erow[q];
-      int i = erow_term(in, &last, e);
-      const prob_term *t = &p->t[i];
-      int rn = t->rl.size / B, cn = t->cl.size / B;
-      size_t le = ((e >> 16) - in->erow_off[i]) * (size_t)rn + (e & 0xffff);
-      int *pos = B > 1 ? p->blk_pos + t->blk_off + le * (size_t)cn : p->coo_pos + t->coo_off + (PetscCount)le * cn;
-      for (int k = 0; k < cn; k++) pos[k] += off;
-    }
   }
 }
 
@@ -310,26 +295,24 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   }
   /* each node row: the union of its element rows' column nodes (a marker per node, no
    * global sort), sorted, the diagonal always; its B rows are laid out one after another,
-   * each the row's nodes times B columns. Then every element entry's place, read from the
-   * marker (it holds the column node's position in the row: no search) */
+   * each the row's nodes times B columns. Two passes: the first counts each row, so that the
+   * column array is allocated once at its size and the second writes every column and
+   * element place at its final position (no growing array, no copies: on the virtual
+   * machines this runs on, every new page of memory is expensive) */
   PetscInt *ia = malloc(sizeof(PetscInt) * ((size_t)N + 1)), *ja = NULL;
-  size_t nnz = 0, cap = (size_t)N * 8 + 16;
-  ja = malloc(sizeof(PetscInt) * cap);
+  size_t nnz = 0;
   if (B > 1) {
     p->blk_pos = malloc(sizeof(int) * (nblk + 1));
     p->blk_stride = malloc(sizeof(int) * (nstr + 1));
   } else p->coo_pos = malloc(sizeof(int) * ((size_t)n + 1));
-  p->mbuf = malloc(sizeof(double) * ((size_t)LG_CHUNK * maxsize + 1));
-  if (bad || !ia || !ja || (B > 1 ? !p->blk_pos || !p->blk_stride : !p->coo_pos) || !p->mbuf) {
+  if (bad || !ia || (B > 1 ? !p->blk_pos || !p->blk_stride : !p->coo_pos) || lg_problem_chunk_buffers(p, maxsize)) {
     for (int i = 0; rnod && cnod && i < p->nterm; i++) { if (cnod[i] != rnod[i]) free(cnod[i]); free(rnod[i]); }
-    free(rnod); free(cnod); free(erow_off); free(start); free(mark); free(nodes); free(erow); free(ia); free(ja);
+    free(rnod); free(cnod); free(erow_off); free(start); free(mark); free(nodes); free(erow); free(ia);
     lg_seterr(env, "out of memory for %ld matrix entries", (long)n);
     return 1;
   }
   /* the rows in contiguous blocks, one per OpenMP thread (balanced by element rows), each
-   * into its own column array with its own marker, then put end to end: each block's
-   * row starts and element places move by the entries before it. The same pattern and
-   * places for any thread count */
+   * with its own marker. The same pattern and places for any thread count */
   int nb = 1;
 #ifdef _OPENMP
   if (nent > 200000) nb = omp_get_max_threads();
@@ -338,44 +321,42 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   p->pattern_threads = nb;
   pattern_block blk[64];
   memset(blk, 0, sizeof blk);
-  pattern_in in = {p, B, Nn, start, erow, erow_off, cnod, ia};
+  pattern_in in = {p, B, Nn, start, erow, erow_off, cnod, ia, NULL};
   for (int b = 0, R = 0; b < nb; b++) {
     blk[b].R0 = R;
     size_t goal = nent / (size_t)nb * (size_t)(b + 1);
     while (R < Nn && (b == nb - 1 || start[R] < goal)) R++;
     blk[b].R1 = b == nb - 1 ? Nn : R;
   }
-  blk[0].ja = ja; /* the first block writes into the final array */
-  blk[0].cap = cap;
   blk[0].mark = mark;
   blk[0].nodes = nodes;
 #ifdef _OPENMP
 #pragma omp parallel for schedule(static, 1) if (nb > 1)
 #endif
-  for (int b = 0; b < nb; b++) pattern_rows(&in, &blk[b]);
-  for (int b = 0; b < nb; b++) bad = bad ? bad : blk[b].bad;
-  ja = blk[0].ja;
-  nnz = blk[0].nnz;
-  for (int b = 1; b < nb && !bad; b++) {
-    if (nnz + blk[b].nnz > (size_t)INT32_MAX) { bad = 2; break; }
-    PetscInt *nj = realloc(ja, sizeof(PetscInt) * (nnz + blk[b].nnz + 1));
-    if (!nj) { bad = 1; break; }
-    ja = nj;
-    memcpy(ja + nnz, blk[b].ja, sizeof(PetscInt) * blk[b].nnz);
-    blk[b].offset = nnz;
+  for (int b = 0; b < nb; b++) pattern_count(&in, &blk[b]);
+  for (int b = 0; b < nb; b++) {
+    bad = bad ? bad : blk[b].bad;
     nnz += blk[b].nnz;
   }
-  /* the shift touches every place of the later blocks again: each block's rows in nb parts,
-   * all threads on every block */
+  if (!bad && nnz > (size_t)INT32_MAX) bad = 2;
+  if (!bad) {
+    /* row starts from the counts (ia[R * B] holds each of the node row's B rows' length) */
+    size_t at = 0;
+    for (int R = 0; R < Nn; R++) {
+      PetscInt len = ia[(size_t)R * B];
+      for (int a = 0; a < B; a++, at += (size_t)len) ia[(size_t)R * B + a] = (PetscInt)at;
+    }
+    ja = malloc(sizeof(PetscInt) * (nnz ? nnz : 1));
+    if (!ja) bad = 1;
+    in.ja = ja;
+  }
+  if (!bad) {
 #ifdef _OPENMP
 #pragma omp parallel for schedule(static, 1) if (nb > 1)
 #endif
-  for (int task = nb; task < nb * nb; task++) {
-    const pattern_block *bk = &blk[task / nb];
-    int part = task % nb, nr = bk->R1 - bk->R0;
-    if (!bad) pattern_shift(&in, bk, bk->R0 + (int)((long)nr * part / nb), bk->R0 + (int)((long)nr * (part + 1) / nb));
+    for (int b = 0; b < nb; b++) pattern_fill(&in, &blk[b]);
   }
-  for (int b = 1; b < nb; b++) { free(blk[b].ja); free(blk[b].mark); free(blk[b].nodes); }
+  for (int b = 1; b < nb; b++) { free(blk[b].mark); free(blk[b].nodes); }
   for (int i = 0; i < p->nterm; i++) { if (cnod[i] != rnod[i]) free(cnod[i]); free(rnod[i]); }
   free(rnod);
   free(cnod);
@@ -396,8 +377,6 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
    * CSR pattern inserts every entry through MatSetValues (a third of the setup of a vector
    * P2 matrix) and holds a second pattern while ours is alive. The values start as zero
    * pages, touched first by the first assembly */
-  PetscInt *jt = realloc(ja, sizeof(PetscInt) * (nnz ? nnz : 1));
-  if (jt) ja = jt;
   p->csr_i = ia;
   p->csr_j = ja;
   p->csr_a = calloc(nnz ? nnz : 1, sizeof(PetscScalar));

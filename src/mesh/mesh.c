@@ -602,17 +602,22 @@ static int fast_simplex_valid(const mesh *m, int c) {
   return -1;
 }
 
+static int cell_valid(const mesh *m, int simplex, int c) {
+  int ok = simplex ? fast_simplex_valid(m, c) : -1;
+  return ok < 0 ? mesh_cell_relative_validity(m, c) > 1e-13 : ok;
+}
+
+/* the count on OpenMP threads (every assembly's first check of a mesh: 1.57 M tetrahedra),
+ * the first invalid cells, in cell order, by a second pass only when there are some */
 int mesh_count_invalid(const mesh *m, int maxids, int *ids, int *ninv) {
-  int n = 0;
+  int n = 0, nc = m->ncell;
   int simplex = (m->type == CELL_TRIANGLE && m->dim == 2) || (m->type == CELL_TETRAHEDRON && m->dim == 3);
-  for (int c = 0; c < m->ncell; c++) {
-    int ok = simplex ? fast_simplex_valid(m, c) : -1;
-    if (ok < 0) ok = mesh_cell_relative_validity(m, c) > 1e-13;
-    if (!ok) {
-      if (n < maxids && ids) ids[n] = c;
-      n++;
-    }
-  }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) reduction(+ : n) if (nc > 100000)
+#endif
+  for (int c = 0; c < nc; c++) n += !cell_valid(m, simplex, c);
+  for (int c = 0, k = 0; ids && n && k < maxids && c < nc; c++)
+    if (!cell_valid(m, simplex, c)) ids[k++] = c;
   *ninv = n;
   return 0;
 }

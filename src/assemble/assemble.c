@@ -398,6 +398,25 @@ int lg_chunk_items(int size) {
   return n < 16 ? 16 : n > 4096 ? 4096 : n;
 }
 
+int lg_chunk_bufs_reserve(lg_env *env, lg_chunk_bufs *cb, int size) {
+  size_t n = (size_t)lg_chunk_items(size) * (size_t)size + 1;
+  if (n <= cb->cap) return 0;
+  for (int b = 0; b < 2; b++) {
+    free(cb->b[b]);
+    cb->b[b] = malloc(sizeof(double) * n);
+  }
+  cb->cap = cb->b[0] && cb->b[1] ? n : 0;
+  if (!cb->cap) { lg_seterr(env, "out of memory"); return 1; }
+  return 0;
+}
+
+void lg_chunk_bufs_free(lg_chunk_bufs *cb) {
+  free(cb->b[0]);
+  free(cb->b[1]);
+  cb->b[0] = cb->b[1] = NULL;
+  cb->cap = 0;
+}
+
 /* The element loop. Items go a chunk at a time; the items of a chunk are spread over the
  * OpenMP threads (arity 1 and 2; each item writes only its own tensor and its own point
  * cache slice, so every tensor is that of one thread to the bit). With a consumer, chunk c

@@ -99,6 +99,13 @@ int lg_assemble_chunks(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, 
  * (256 KiB, in the cache while one thread adds them into the matrix) */
 #define LG_CHUNK_VALUES 32768
 int lg_chunk_items(int size);
+/* the two chunk buffers of a loop, kept between assemblies and grown for larger tensors */
+typedef struct {
+  double *b[2];
+  size_t cap;
+} lg_chunk_bufs;
+int lg_chunk_bufs_reserve(lg_env *env, lg_chunk_bufs *cb, int size);
+void lg_chunk_bufs_free(lg_chunk_bufs *cb);
 /* bindings for every discrete function the kernel uses (unknowns need extra bindings) */
 int lg_bind_discrete(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nextra,
                      const coef_binding *extra, coef_binding *out);

@@ -33,8 +33,7 @@ struct lg_form_kernels {
   const dofmap *dm;
   int n;
   fk_term *t;
-  double *elem;
-  size_t elem_cap;
+  lg_chunk_bufs chunks; /* element vectors of two chunks of items */
 };
 
 void lg_form_kernels_free(lg_form_kernels *K) {
@@ -46,7 +45,7 @@ void lg_form_kernels_free(lg_form_kernels *K) {
     free(K->t[i].facets);
   }
   free(K->t);
-  free(K->elem);
+  lg_chunk_bufs_free(&K->chunks);
   free(K);
 }
 
@@ -164,6 +163,26 @@ lg_form_kernels *lg_form_kernels_new(lg_env *env, lg_mesh *lm, const form *F, in
 
 int lg_form_kernels_empty(const lg_form_kernels *K) { return K->n == 0; }
 
+/* one chunk of element vectors added into out (lg_assemble_chunks' consumer, item order) */
+typedef struct {
+  const lg_form_kernels *K;
+  const fk_term *t;
+  double *out;
+} vec_ctx;
+
+static int add_vector_chunk(void *ud, int first, int n, const double *v) {
+  const vec_ctx *vc = ud;
+  const fk_term *t = vc->t;
+  int nl = vc->K->dm->nloc, sides = t->interior ? 2 : 1;
+  for (int it = first; it < first + n; it++)
+    for (int sd = 0; sd < sides; sd++) {
+      const int *cd = vc->K->dm->cell_dofs + (size_t)t->cells[sd * t->nitems + it] * nl;
+      const double *ev = v + ((size_t)(it - first) * sides + sd) * nl;
+      for (int k = 0; k < nl; k++) vc->out[cd[k]] += ev[k];
+    }
+  return 0;
+}
+
 int lg_form_kernels_eval(lg_env *env, lg_mesh *lm, lg_form_kernels *K, int nextra, const coef_binding *extra, double *out) {
   coef_binding bind[KER_MAXCOEF];
   if (K->arity == 0) *out = 0;
@@ -175,21 +194,12 @@ int lg_form_kernels_eval(lg_env *env, lg_mesh *lm, lg_form_kernels *K, int nextr
       if (lg_assemble_items(env, lm, &t->k, t->nitems, t->cells, t->facets, t->k.ncoef, bind, out)) return 1;
       continue;
     }
-    int nl = K->dm->nloc, sides = t->interior ? 2 : 1;
-    size_t need = (size_t)t->nitems * (size_t)(sides * nl) + 1;
-    if (need > K->elem_cap) {
-      double *e = realloc(K->elem, sizeof(double) * need);
-      if (!e) { lg_seterr(env, "out of memory"); return 1; }
-      K->elem = e;
-      K->elem_cap = need;
-    }
-    if (lg_assemble_items(env, lm, &t->k, t->nitems, t->cells, t->facets, t->k.ncoef, bind, K->elem)) return 1;
-    for (int it = 0; it < t->nitems; it++)
-      for (int sd = 0; sd < sides; sd++) {
-        const int *cd = K->dm->cell_dofs + (size_t)t->cells[sd * t->nitems + it] * nl;
-        const double *ev = K->elem + ((size_t)it * sides + sd) * nl;
-        for (int k = 0; k < nl; k++) out[cd[k]] += ev[k];
-      }
+    int nl = K->dm->nloc, size = (t->interior ? 2 : 1) * nl;
+    vec_ctx vc = {K, t, out};
+    if (lg_chunk_bufs_reserve(env, &K->chunks, size) ||
+        lg_assemble_chunks(env, lm, &t->k, t->nitems, t->cells, t->facets, bind, lg_chunk_items(size), K->chunks.b,
+                           add_vector_chunk, &vc))
+      return 1;
   }
   size_t n = K->arity ? (size_t)K->dm->ndof : 1;
   for (size_t i = 0; i < n; i++)

@@ -493,8 +493,7 @@ void lg_problem_free(lg_problem *p) {
   free(p->bc_rows);
   free(p->bc_vals);
   free(p->bc_org);
-  free(p->mbuf[0]);
-  free(p->mbuf[1]);
+  lg_chunk_bufs_free(&p->chunks);
   free(p->coo_pos);
   free(p->blk_pos);
   free(p->blk_stride);
@@ -502,7 +501,6 @@ void lg_problem_free(lg_problem *p) {
   free(p->solution);
   form_free(p->eqn);
   form_free(p->bcf);
-  free(p->elem);
   if (p->A) MatDestroy(&p->A);
   free(p->csr_i);
   free(p->csr_j);
@@ -585,17 +583,18 @@ static int check_element_tensors(lg_env *env, lg_problem *p, int term, int first
   return 0;
 }
 
-/* one chunk of element matrices of a term, checked and added in place into the value array
- * (lg_assemble_chunks calls it in item order on one thread while the others compute the
- * next chunk) */
+/* one chunk of element tensors of a term, checked and added in place into the matrix's
+ * value array or the vector (lg_assemble_chunks calls it in item order on one thread while
+ * the others compute the next chunk) */
 typedef struct {
   lg_env *env;
   lg_problem *p;
   int term;
-  PetscScalar *a;
+  PetscScalar *a; /* matrices */
+  double *r;      /* vectors */
 } scatter_ctx;
 
-static int scatter_chunk(void *ud, int first, int n, const double *v) {
+static int scatter_matrix_chunk(void *ud, int first, int n, const double *v) {
   scatter_ctx *sc = ud;
   lg_problem *p = sc->p;
   const prob_term *t = &p->t[sc->term];
@@ -632,13 +631,17 @@ static int scatter_chunk(void *ud, int first, int n, const double *v) {
   return 0;
 }
 
-/* the two chunk buffers of matrix assembly, for element matrices of up to maxsize values */
-int lg_problem_chunk_buffers(lg_problem *p, size_t maxsize) {
-  size_t n = (size_t)lg_chunk_items((int)maxsize) * maxsize + 1;
-  for (int b = 0; b < 2; b++) {
-    free(p->mbuf[b]);
-    p->mbuf[b] = malloc(sizeof(double) * n);
-    if (!p->mbuf[b]) return 1;
+static int scatter_vector_chunk(void *ud, int first, int n, const double *v) {
+  scatter_ctx *sc = ud;
+  lg_problem *p = sc->p;
+  const prob_term *t = &p->t[sc->term];
+  int size = t->rl.size;
+  if (check_element_tensors(sc->env, p, sc->term, first, n, v, size, p->nonlinear ? "residual" : "right-hand side")) return 1;
+  PetscInt rg[2 * KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS];
+  for (int e = 0; e < n; e++) {
+    const double *ev = v + (size_t)e * size;
+    lg_term_nodes(p, t, first + e, 1, 1, rg);
+    for (int k = 0; k < size; k++) sc->r[rg[k]] += ev[k];
   }
   return 0;
 }
@@ -655,10 +658,11 @@ static int assemble_matrix(lg_env *env, lg_problem *p, const double *state, Mat 
   for (int i = 0; i < p->nterm && !rc; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
-    scatter_ctx sc = {env, p, i, a};
-    rc = lg_bind_discrete(env, p->lm, &t->kmat, ne, extra, bind) ||
-         lg_assemble_chunks(env, p->lm, &t->kmat, t->nitems, t->cells, t->facets, bind,
-                            lg_chunk_items(t->rl.size * t->cl.size), p->mbuf, scatter_chunk, &sc);
+    scatter_ctx sc = {env, p, i, a, NULL};
+    int size = t->rl.size * t->cl.size;
+    rc = lg_chunk_bufs_reserve(env, &p->chunks, size) || lg_bind_discrete(env, p->lm, &t->kmat, ne, extra, bind) ||
+         lg_assemble_chunks(env, p->lm, &t->kmat, t->nitems, t->cells, t->facets, bind, lg_chunk_items(size),
+                            p->chunks.b, scatter_matrix_chunk, &sc);
   }
   PCHK(MatSeqAIJRestoreArray(A, &a), "matrix assembly");
   return rc;
@@ -672,24 +676,11 @@ static int assemble_residual(lg_env *env, lg_problem *p, const double *state, do
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_res) continue;
-    size_t need = (size_t)t->nitems * (size_t)t->rl.size + 1;
-    if (need > p->elem_cap) {
-      double *ne2 = realloc(p->elem, sizeof(double) * need);
-      if (!ne2) { lg_seterr(env, "out of memory"); return 1; }
-      p->elem = ne2;
-      p->elem_cap = need;
-    }
-    if (lg_bind_discrete(env, p->lm, &t->kres, ne, extra, bind)) return 1;
-    if (lg_assemble_items(env, p->lm, &t->kres, t->nitems, t->cells, t->facets, t->kres.ncoef, bind, p->elem))
+    scatter_ctx sc = {env, p, i, NULL, r};
+    if (lg_chunk_bufs_reserve(env, &p->chunks, t->rl.size) || lg_bind_discrete(env, p->lm, &t->kres, ne, extra, bind) ||
+        lg_assemble_chunks(env, p->lm, &t->kres, t->nitems, t->cells, t->facets, bind, lg_chunk_items(t->rl.size),
+                           p->chunks.b, scatter_vector_chunk, &sc))
       return 1;
-    if (check_element_tensors(env, p, i, 0, t->nitems, p->elem, t->rl.size, p->nonlinear ? "residual" : "right-hand side"))
-      return 1;
-    PetscInt rg[2 * KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS];
-    for (int it = 0; it < t->nitems; it++) {
-      const double *ev = p->elem + (size_t)it * t->rl.size;
-      lg_term_nodes(p, t, it, 1, 1, rg);
-      for (int k = 0; k < t->rl.size; k++) r[rg[k]] += ev[k];
-    }
   }
   return 0;
 }

@@ -68,7 +68,7 @@ struct lg_problem {
    * first entry, per element node row the length of its matrix rows (entry (a, b) of the
    * block is at pos + a*stride + b): B^2 fewer positions */
   int *blk_pos, *blk_stride;
-  double *mbuf[2];      /* element matrices of two chunks of items (lg_assemble_chunks) */
+  lg_chunk_bufs chunks; /* element tensors of two chunks of items (lg_assemble_chunks) */
   PetscInt nnz;
   double setup_ms[3]; /* lg_problem_setup_matrix's phases: pattern, PETSc matrix, near null space */
   int pattern_threads; /* the pattern pass's blocks, one per OpenMP thread */
@@ -97,8 +97,6 @@ struct lg_problem {
   int lag_valid;      /* A holds a Jacobian assembled for this solve's data (any iterate) */
   double lag_fnorm;   /* |F| at the last Jacobian evaluation */
   lg_keep keep;       /* linear problems: the factorization kept while A changes (solver.h) */
-  double *elem;       /* element tensor scratch */
-  size_t elem_cap;
   int failed;         /* a callback failed: env->err holds why */
   int nnull;          /* dimension of the null space given with nullspace= (0: none) */
   MatNullSpace null;  /* that null space (constants of some fields, rigid body modes) */
@@ -118,8 +116,6 @@ void lg_term_nodes(const lg_problem *p, const prob_term *t, int it, int rows, in
 int lg_matrix_block_size(const lg_problem *p);
 /* the pattern, the element entries' places, the matrix and its vectors, the near null space */
 int lg_problem_setup_matrix(lg_env *env, lg_problem *p);
-/* problem.c: the chunk buffers of matrix assembly for element matrices of maxsize values */
-int lg_problem_chunk_buffers(lg_problem *p, size_t maxsize);
 /* nullspace= */
 int lg_problem_setup_nullspace(lg_env *env, lg_problem *p, const lg_problem_spec *s);
 

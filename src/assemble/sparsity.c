@@ -217,13 +217,11 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   double t0 = now_ms();
   int N = p->N;
   PetscCount n = N;
-  size_t maxsize = 1;
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
     t->coo_off = n;
     n += (PetscCount)t->nitems * t->rl.size * t->cl.size;
-    if ((size_t)t->rl.size * (size_t)t->cl.size > maxsize) maxsize = (size_t)t->rl.size * (size_t)t->cl.size;
   }
   p->ncoo = n;
   /* the pattern of nodes: with B components per node everywhere (a vector field, B = bs) the
@@ -305,7 +303,7 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
     p->blk_pos = malloc(sizeof(int) * (nblk + 1));
     p->blk_stride = malloc(sizeof(int) * (nstr + 1));
   } else p->coo_pos = malloc(sizeof(int) * ((size_t)n + 1));
-  if (bad || !ia || (B > 1 ? !p->blk_pos || !p->blk_stride : !p->coo_pos) || lg_problem_chunk_buffers(p, maxsize)) {
+  if (bad || !ia || (B > 1 ? !p->blk_pos || !p->blk_stride : !p->coo_pos)) {
     for (int i = 0; rnod && cnod && i < p->nterm; i++) { if (cnod[i] != rnod[i]) free(cnod[i]); free(rnod[i]); }
     free(rnod); free(cnod); free(erow_off); free(start); free(mark); free(nodes); free(erow); free(ia);
     lg_seterr(env, "out of memory for %ld matrix entries", (long)n);

@@ -494,9 +494,8 @@ void lg_problem_free(lg_problem *p) {
   free(p->bc_vals);
   free(p->bc_org);
   lg_chunk_bufs_free(&p->chunks);
-  free(p->coo_pos);
-  free(p->blk_pos);
-  free(p->blk_stride);
+  free(p->rank);
+  free(p->row_start);
   free(p->state);
   free(p->solution);
   form_free(p->eqn);
@@ -594,6 +593,51 @@ typedef struct {
   double *r;      /* vectors */
 } scatter_ctx;
 
+/* the element matrices of items first .. first + n - 1 into the value array a: each entry
+ * at its row's start plus its rank (times B) (T: the ranks' type). B = 1: the element rows'
+ * starts read one after another; B > 1: a node row's start and length from its node */
+#define SCATTER_RANKS(T)                                                                            \
+  do {                                                                                              \
+    const T *rk = (const T *)p->rank + t->rank_off + (size_t)first * (size_t)(rn * cn);            \
+    if (B == 1) {                                                                                   \
+      const PetscInt *rs = p->row_start + t->erow_first + (size_t)first * (size_t)rn;              \
+      const double *vr = v;                                                                         \
+      if (cn == 4) /* P1 tetrahedra, Q1 quadrilaterals: straight-line code */                     \
+        for (size_t er = 0, ner = (size_t)n * rn; er < ner; er++, rk += 4, vr += 4) {               \
+          PetscScalar *row0 = a + rs[er];                                                           \
+          row0[rk[0]] += vr[0]; row0[rk[1]] += vr[1]; row0[rk[2]] += vr[2]; row0[rk[3]] += vr[3];   \
+        }                                                                                           \
+      else                                                                                          \
+        for (size_t er = 0, ner = (size_t)n * rn; er < ner; er++, rk += cn, vr += cn) {             \
+          PetscScalar *row0 = a + rs[er];                                                           \
+          for (int j = 0; j < cn; j++) row0[rk[j]] += vr[j];                                        \
+        }                                                                                           \
+      break;                                                                                        \
+    }                                                                                               \
+    PetscInt R[KER_MAXFIELD * FEM_MAXLOC * 2];                                                      \
+    for (int e = 0; e < n; e++, rk += rn * cn) {                                                    \
+      const double *ve = v + (size_t)e * size;                                                      \
+      lg_term_nodes(p, t, first + e, 1, B, R);                                                      \
+      for (int i = 0; i < rn; i++) {                                                                \
+        const T *ri = rk + i * cn;                                                                  \
+        PetscScalar *row0 = a + ia[(size_t)R[i] * B];                                              \
+        PetscInt stride = ia[(size_t)R[i] * B + 1] - ia[(size_t)R[i] * B];                          \
+        for (int r = 0; r < B; r++) {                                                               \
+          const double *vr = ve + (size_t)(i * B + r) * cs;                                         \
+          PetscScalar *dr = row0 + r * stride;                                                      \
+          if (B == 3)                                                                               \
+            for (int j = 0; j < cn; j++) {                                                          \
+              PetscScalar *dst = dr + 3 * (size_t)ri[j];                                            \
+              dst[0] += vr[3 * j]; dst[1] += vr[3 * j + 1]; dst[2] += vr[3 * j + 2];                \
+            }                                                                                       \
+          else                                                                                      \
+            for (int j = 0; j < cn; j++)                                                            \
+              for (int c = 0; c < B; c++) dr[(size_t)ri[j] * B + c] += vr[j * B + c];               \
+        }                                                                                           \
+      }                                                                                             \
+    }                                                                                               \
+  } while (0)
+
 static int scatter_matrix_chunk(void *ud, int first, int n, const double *v) {
   scatter_ctx *sc = ud;
   lg_problem *p = sc->p;
@@ -601,35 +645,14 @@ static int scatter_matrix_chunk(void *ud, int first, int n, const double *v) {
   int size = t->rl.size * t->cl.size;
   if (check_element_tensors(sc->env, p, sc->term, first, n, v, size, p->nonlinear ? "Jacobian" : "matrix")) return 1;
   PetscScalar *a = sc->a;
-  if (p->blk_pos) {
-    /* B x B blocks: a node pair's entries from its block's first place and the row length */
-    int B = p->cdm[0]->bs, rn = t->rl.size / B, cn = t->cl.size / B, cs = t->cl.size;
-    for (int e = 0; e < n; e++) {
-      const double *ve = v + (size_t)e * size;
-      const int *bp = p->blk_pos + t->blk_off + (size_t)(first + e) * rn * cn;
-      const int *st = p->blk_stride + t->str_off + (size_t)(first + e) * rn;
-      for (int i = 0; i < rn; i++)
-        for (int r = 0; r < B; r++) {
-          const double *row = ve + (size_t)(i * B + r) * cs;
-          const int *bpi = bp + i * cn, off = r * st[i];
-          if (B == 3)
-            for (int j = 0; j < cn; j++) {
-              double *dst = a + bpi[j] + off;
-              dst[0] += row[3 * j]; dst[1] += row[3 * j + 1]; dst[2] += row[3 * j + 2];
-            }
-          else
-            for (int j = 0; j < cn; j++) {
-              double *dst = a + bpi[j] + off;
-              for (int c = 0; c < B; c++) dst[c] += row[j * B + c];
-            }
-        }
-    }
-  } else {
-    const int *pos = p->coo_pos + t->coo_off + (size_t)first * size;
-    for (size_t e = 0, ne2 = (size_t)n * size; e < ne2; e++) a[pos[e]] += v[e];
-  }
+  const PetscInt *ia = p->csr_i;
+  int B = lg_matrix_block_size(p), rn = t->rl.size / B, cn = t->cl.size / B, cs = t->cl.size;
+  if (p->rank_w == 1) SCATTER_RANKS(uint8_t);
+  else if (p->rank_w == 2) SCATTER_RANKS(uint16_t);
+  else SCATTER_RANKS(uint32_t);
   return 0;
 }
+#undef SCATTER_RANKS
 
 static int scatter_vector_chunk(void *ud, int first, int n, const double *v) {
   scatter_ctx *sc = ud;

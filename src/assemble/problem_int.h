@@ -27,8 +27,8 @@ typedef struct {
   int interior;        /* an interior facet term: its element rows and columns are the
                         * problem's fields on the '+' cell, then on the '-' cell */
   field_layout rl, cl; /* the element tensor's rows and columns (the problem's layout, or it twice) */
-  PetscCount coo_off;
-  size_t blk_off, str_off; /* block layout (B > 1): its first node pair and node row */
+  size_t rank_off;     /* its first element entry (node pair) in the problem's ranks */
+  size_t erow_first;   /* B = 1: its first element row in row_start */
 } prob_term;
 
 typedef struct {
@@ -62,12 +62,15 @@ struct lg_problem {
   int *bc_org;        /* per essential row: the bc term, cell and local node it came from */
   struct { int fid, param, n; expr_tape *tape; } bcd[LG_BCD_CACHE]; /* d g / d control, per bc term */
   int nbcd;
-  PetscCount ncoo;      /* element matrix entries (the diagonal first) */
-  int *coo_pos;         /* where each goes in the CSR value array of A (B = 1) */
-  /* B > 1 (every field a B-vector): per element node pair the place of its B x B block's
-   * first entry, per element node row the length of its matrix rows (entry (a, b) of the
-   * block is at pos + a*stride + b): B^2 fewer positions */
-  int *blk_pos, *blk_stride;
+  PetscCount ncoo;      /* element matrix entries */
+  /* per element entry (per node pair where every field is a B-vector: B^2 fewer), the rank
+   * of its column node in its row node's row: the entry (a, b) of the B x B block is at
+   * csr_i[R*B] + a*(csr_i[R*B+1] - csr_i[R*B]) + rank*B + b, R the row node */
+  void *rank;
+  int rank_w;           /* bytes per rank: 1 (rows of up to 256 nodes), 2 or 4 */
+  PetscInt *row_start;  /* B = 1: per element row (item, row) its row's csr_i, so that the
+                         * scatter reads no dof map (the loads of cell, dof and row start
+                         * one after another made the P1 scatter latency-bound) */
   lg_chunk_bufs chunks; /* element tensors of two chunks of items (lg_assemble_chunks) */
   PetscInt nnz;
   double setup_ms[3]; /* lg_problem_setup_matrix's phases: pattern, PETSc matrix, near null space */

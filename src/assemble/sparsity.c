@@ -26,8 +26,28 @@ void lg_term_nodes(const lg_problem *p, const prob_term *t, int it, int rows, in
     int f = a % nf, c = t->interior && a >= nf ? t->cells[t->nitems + it] : t->cells[it];
     const int nl = l->nloc[a], *cd = dm[f]->cell_dofs + (size_t)c * nl;
     PetscInt *o = out + l->off[a] / B, g = glob[f];
-    for (int k = 0, i = 0; k < nl; k += B, i++) o[i] = (g + cd[k]) / B;
+    if (B == 1)
+      for (int k = 0; k < nl; k++) o[k] = g + cd[k];
+    else
+      for (int k = 0, i = 0; k < nl; k += B, i++) o[i] = (g + cd[k]) / B;
   }
+}
+
+/* every item's row (or column) nodes of term t, one after another: the dof map's own cell
+ * list where that is what they are (one field numbered from 0 over every cell in order,
+ * B = 1: a Laplacian's, 25 MB not copied on 1.57 M tetrahedra), *owned = 0; else gathered */
+static const PetscInt *term_node_lists(const lg_problem *p, const prob_term *t, int rows, int B, int *owned) {
+  const field_layout *l = rows ? &t->rl : &t->cl;
+  const dofmap *dm = (rows ? p->rdm : p->cdm)[0];
+  int direct = sizeof(PetscInt) == sizeof(int) && B == 1 && l->n == 1 && !t->interior &&
+               (rows ? p->rglob : p->cglob)[0] == 0 && l->nloc[0] == dm->nloc && t->nitems == dm->m->ncell;
+  for (int it = 0; direct && it < t->nitems; it++) direct = t->cells[it] == it;
+  *owned = !direct;
+  if (direct) return (const PetscInt *)dm->cell_dofs;
+  int n = l->size / B;
+  PetscInt *o = malloc(sizeof(PetscInt) * ((size_t)t->nitems * (size_t)n + 1));
+  for (int it = 0; o && it < t->nitems; it++) lg_term_nodes(p, t, it, rows, B, o + (size_t)it * n);
+  return o;
 }
 
 /* the matrix term that holds item e (erow_off: each term's first, numbered across terms) */
@@ -51,38 +71,37 @@ static void sort_row(PetscInt *v, size_t n) {
 typedef struct {
   lg_problem *p;
   int B, Nn;
-  const size_t *start, *erow, *erow_off;
-  PetscInt *const *cnod;
+  const size_t *start, *erow_off;
+  const uint32_t *erow;  /* each node row's element rows: their items, numbered across terms */
+  const PetscInt *const *rnod, *const *cnod;
   PetscInt *ia, *ja;     /* row starts (after the count pass), the final column array */
 } pattern_in;
 
 typedef struct {
   int R0, R1;
-  size_t nnz;            /* the count pass: the block's entries */
+  size_t nnz, maxlen;    /* the count pass: the block's entries, its longest node row */
   int *mark;             /* a marker per node, -1 outside rows */
   PetscInt *nodes;       /* one node row */
   int bad;               /* 1 out of memory */
 } pattern_block;
 
 /* each element row's term (a short scan: problems have few terms) */
-static inline int erow_term(const pattern_in *in, int *last, size_t e) {
+static inline int erow_term(const pattern_in *in, int *last, size_t item) {
   const size_t *eo = in->erow_off;
-  size_t it = e >> 16;
-  if (!(eo[*last] <= it && it < eo[*last + 1])) *last = find_term(eo, in->p->nterm, it);
+  if (!(eo[*last] <= item && item < eo[*last + 1])) *last = find_term(eo, in->p->nterm, item);
   return *last;
 }
 
 /* node row R: the union of its element rows' column nodes, the diagonal first (a marker
  * per node, which holds R for the nodes already in the row: no global sort) */
 static size_t row_nodes(const pattern_in *in, int R, int *last, int *mark, PetscInt *nodes) {
-  const size_t *er = in->erow + in->start[R];
-  size_t ne = in->start[R + 1] - in->start[R], len = 0;
+  size_t len = 0;
   nodes[len++] = R;
   mark[R] = R;
-  for (size_t q = 0; q < ne; q++) {
-    int i = erow_term(in, last, er[q]);
+  for (size_t q = in->start[R]; q < in->start[R + 1]; q++) {
+    int i = erow_term(in, last, in->erow[q]);
     int cn = in->p->t[i].cl.size / in->B;
-    const PetscInt *en = in->cnod[i] + ((er[q] >> 16) - in->erow_off[i]) * (size_t)cn;
+    const PetscInt *en = in->cnod[i] + (in->erow[q] - in->erow_off[i]) * (size_t)cn;
     for (int k = 0; k < cn; k++) {
       PetscInt J = en[k];
       if (mark[J] != R) { mark[J] = R; nodes[len++] = J; }
@@ -105,22 +124,27 @@ static void pattern_count(const pattern_in *in, pattern_block *bk) {
   block_marks(in, bk);
   if (bk->bad) return;
   int B = in->B, last = 0;
-  size_t nnz = 0;
+  size_t nnz = 0, maxlen = 0;
   for (int R = bk->R0; R < bk->R1; R++) {
     size_t len = row_nodes(in, R, &last, bk->mark, bk->nodes);
     in->ia[(size_t)R * B] = (PetscInt)(len * (size_t)B);
     nnz += len * (size_t)B * (size_t)B;
+    if (len > maxlen) maxlen = len;
   }
   bk->nnz = nnz;
+  bk->maxlen = maxlen;
 }
 
 /* the fill pass: each node row's nodes again, sorted; its B rows written at their final
- * places in ja, each the row's nodes times B columns; then every element entry's place,
- * read from the marker (it holds the column node's position in the row: no search) */
+ * places in ja, each the row's nodes times B columns; then every element entry's rank in
+ * its node row, read from the marker (it holds the column node's position in the row: no
+ * search), and for B = 1 each element row's row start. An item that has node R in several
+ * of its rows (an interior facet's shared nodes) is listed once per such row, one after
+ * another: the k-th listing is the k-th such row */
 static void pattern_fill(const pattern_in *in, pattern_block *bk) {
   for (int r = 0; r < in->Nn; r++) bk->mark[r] = -1;
   lg_problem *p = in->p;
-  int B = in->B, last = 0;
+  int B = in->B, last = 0, w = p->rank_w;
   int *mark = bk->mark;
   PetscInt *nodes = bk->nodes, *ja = in->ja;
   for (int R = bk->R0; R < bk->R1; R++) {
@@ -132,24 +156,24 @@ static void pattern_fill(const pattern_in *in, pattern_block *bk) {
         for (int b2 = 0; b2 < B; b2++) ja[nz++] = nodes[k] * B + b2;
     /* the marker now holds positions (>= Nn would clash with row numbers: use -2 - position) */
     for (size_t k = 0; k < len; k++) mark[nodes[k]] = -2 - (int)k;
-    int base = (int)in->ia[(size_t)R * B];
-    if (B == 1) p->coo_pos[R] = base + (-2 - mark[R]);
-    const size_t *er = in->erow + in->start[R];
-    for (size_t q = 0, ne = in->start[R + 1] - in->start[R]; q < ne; q++) {
-      int i = erow_term(in, &last, er[q]);
+    int r = -1;
+    for (size_t q = in->start[R]; q < in->start[R + 1]; q++) {
+      size_t item = in->erow[q];
+      int i = erow_term(in, &last, item);
       const prob_term *t = &p->t[i];
       int rn = t->rl.size / B, cn = t->cl.size / B;
-      size_t item = (er[q] >> 16) - in->erow_off[i], le = item * (size_t)rn + (er[q] & 0xffff); /* item * rn + r */
-      const PetscInt *en = in->cnod[i] + item * (size_t)cn;
-      if (B > 1) {
-        /* one place per B x B block (its first entry) and the row length, the stride */
-        int *bp = p->blk_pos + t->blk_off + le * (size_t)cn;
-        for (int k = 0; k < cn; k++) bp[k] = base + (-2 - mark[en[k]]) * B;
-        p->blk_stride[t->str_off + le] = (int)(len * (size_t)B);
-      } else {
-        int *pos = p->coo_pos + t->coo_off + (PetscCount)le * cn;
-        for (int k = 0; k < cn; k++) pos[k] = base + (-2 - mark[en[k]]);
-      }
+      size_t local = item - in->erow_off[i];
+      const PetscInt *rg = in->rnod[i] + local * (size_t)rn, *en = in->cnod[i] + local * (size_t)cn;
+      r = q > in->start[R] && in->erow[q - 1] == item ? r + 1 : 0;
+      while (rg[r] != R) r++;
+      size_t at = t->rank_off + (local * (size_t)rn + (size_t)r) * (size_t)cn;
+      if (B == 1) p->row_start[t->erow_first + local * (size_t)rn + (size_t)r] = in->ia[R];
+      if (w == 1)
+        for (int k = 0; k < cn; k++) ((uint8_t *)p->rank)[at + k] = (uint8_t)(-2 - mark[en[k]]);
+      else if (w == 2)
+        for (int k = 0; k < cn; k++) ((uint16_t *)p->rank)[at + k] = (uint16_t)(-2 - mark[en[k]]);
+      else
+        for (int k = 0; k < cn; k++) ((uint32_t *)p->rank)[at + k] = (uint32_t)(-2 - mark[en[k]]);
     }
     /* back to "not in row R" for the columns of the next rows */
     for (size_t k = 0; k < len; k++) mark[nodes[k]] = R;
@@ -216,71 +240,66 @@ static int set_near_nullspace(lg_env *env, lg_problem *p) {
 int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   double t0 = now_ms();
   int N = p->N;
-  PetscCount n = N;
+  PetscCount n = 0;
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
-    if (!t->have_mat) continue;
-    t->coo_off = n;
-    n += (PetscCount)t->nitems * t->rl.size * t->cl.size;
+    if (t->have_mat) n += (PetscCount)t->nitems * t->rl.size * t->cl.size;
   }
   p->ncoo = n;
   /* the pattern of nodes: with B components per node everywhere (a vector field, B = bs) the
    * rows and columns come in blocks of B, and the pattern is that of the node graph, each
    * entry a B x B block (9x less work for 3D elasticity, whose rows hold about 250 entries);
-   * B = 1 otherwise */
+   * B = 1 otherwise. Each element entry (node pair) keeps its column node's rank in its row
+   * node's row: 1 byte where rows have at most 256 nodes (4 bytes per entry before), and for
+   * B = 1 each element row its row's start (P1 on 1.57 M tetrahedra: 50 MB instead of 102) */
   int B = lg_matrix_block_size(p), Nn = N / B;
-  size_t nblk = 0, nstr = 0;
-  for (int i = 0; B > 1 && i < p->nterm; i++) {
+  size_t nrank = 0, nerow = 0;
+  for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
-    t->blk_off = nblk;
-    t->str_off = nstr;
-    nblk += (size_t)t->nitems * (size_t)(t->rl.size / B) * (size_t)(t->cl.size / B);
-    nstr += (size_t)t->nitems * (size_t)(t->rl.size / B);
+    t->rank_off = nrank;
+    t->erow_first = nerow;
+    nrank += (size_t)t->nitems * (size_t)(t->rl.size / B) * (size_t)(t->cl.size / B);
+    nerow += (size_t)t->nitems * (size_t)t->rl.size;
   }
-  /* every item's row and column nodes, gathered once per term (the passes below read them
-   * for each element row: 6.3 M reads on 1.5 M tetrahedra, which lg_term_nodes computed
-   * each time); an element row is named by its item, numbered across terms (item_off), and
-   * its row in the item: (item << 16) | row (a division by the row count was a third of
-   * this pass) */
+  /* every item's row and column nodes, once per term (the dof map's own list where it is
+   * that); an element row is named by its item, numbered across terms (erow_off) */
   size_t *erow_off = calloc((size_t)p->nterm + 1, sizeof(size_t)); /* each term's first item */
-  PetscInt **rnod = calloc((size_t)p->nterm + 1, sizeof(PetscInt *)), **cnod = calloc((size_t)p->nterm + 1, sizeof(PetscInt *));
+  const PetscInt **rnod = calloc((size_t)p->nterm + 1, sizeof(PetscInt *)), **cnod = calloc((size_t)p->nterm + 1, sizeof(PetscInt *));
+  int *rown = calloc((size_t)p->nterm + 1, sizeof(int)), *cown = calloc((size_t)p->nterm + 1, sizeof(int));
   size_t *start = calloc((size_t)Nn + 2, sizeof(size_t));
   int *mark = malloc(sizeof(int) * ((size_t)Nn + 1));
   PetscInt *nodes = malloc(sizeof(PetscInt) * ((size_t)Nn + 1)); /* one node row */
-  int bad = !erow_off || !rnod || !cnod || !start || !mark || !nodes;
-  _Static_assert(2 * KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS <= 0xffff, "an element row's index fits in 16 bits");
+  int bad = !erow_off || !rnod || !cnod || !rown || !cown || !start || !mark || !nodes;
   size_t nitem = 0;
   for (int i = 0; i < p->nterm && !bad; i++) {
     prob_term *t = &p->t[i];
     erow_off[i] = nitem;
     if (!t->have_mat) continue;
-    int rn = t->rl.size / B, cn = t->cl.size / B;
+    int rn = t->rl.size / B;
     nitem += (size_t)t->nitems;
-    rnod[i] = malloc(sizeof(PetscInt) * ((size_t)t->nitems * (size_t)rn + 1));
+    rnod[i] = term_node_lists(p, t, 1, B, &rown[i]);
     /* a square term (the same fields, dof maps and numbering for rows and columns, as a
-     * Laplacian's) shares one list: 25 MB less to write on 1.5 M tetrahedra */
+     * Laplacian's) shares one list */
     int same = t->rl.n == t->cl.n && t->rl.size == t->cl.size && !memcmp(t->rl.nloc, t->cl.nloc, sizeof t->rl.nloc) &&
                !memcmp(t->rl.off, t->cl.off, sizeof t->rl.off) && !memcmp(t->rl.bs, t->cl.bs, sizeof t->rl.bs) &&
                p->rows.n == p->cols.n &&
                !memcmp(p->rdm, p->cdm, sizeof(dofmap *) * (size_t)p->rows.n) &&
                !memcmp(p->rglob, p->cglob, sizeof(int) * (size_t)(p->rows.n + 1));
-    cnod[i] = same ? rnod[i] : malloc(sizeof(PetscInt) * ((size_t)t->nitems * (size_t)cn + 1));
+    cnod[i] = same ? rnod[i] : term_node_lists(p, t, 0, B, &cown[i]);
     if (!rnod[i] || !cnod[i]) { bad = 1; break; }
-    for (int it = 0; it < t->nitems; it++) {
-      lg_term_nodes(p, t, it, 1, B, rnod[i] + (size_t)it * rn);
-      if (!same) lg_term_nodes(p, t, it, 0, B, cnod[i] + (size_t)it * cn);
-      const PetscInt *rg = rnod[i] + (size_t)it * rn;
-      for (int r = 0; r < rn; r++) start[rg[r] + 2]++;
-    }
+    const PetscInt *rg = rnod[i];
+    for (size_t e = 0, ne = (size_t)t->nitems * (size_t)rn; e < ne; e++) start[rg[e] + 2]++;
   }
   erow_off[p->nterm] = nitem;
-  /* the element rows of each node row, by their number */
-  size_t nent = 0, *erow = NULL;
+  if (nitem > UINT32_MAX) bad = 2;
+  /* the element rows of each node row, by their items */
+  size_t nent = 0;
+  uint32_t *erow = NULL;
   if (!bad) {
     for (int r = 0; r < Nn; r++) start[r + 2] += start[r + 1];
     nent = start[Nn + 1];
-    erow = malloc(sizeof(size_t) * (nent + 1));
+    erow = malloc(sizeof(uint32_t) * (nent + 1));
     bad = !erow;
   }
   for (int i = 0; i < p->nterm && !bad; i++) {
@@ -289,28 +308,19 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
     int rn = t->rl.size / B;
     const PetscInt *rg = rnod[i];
     for (int it = 0; it < t->nitems; it++, rg += rn)
-      for (int r = 0; r < rn; r++) erow[start[rg[r] + 1]++] = ((erow_off[i] + (size_t)it) << 16) | (size_t)r;
+      for (int r = 0; r < rn; r++) erow[start[rg[r] + 1]++] = (uint32_t)(erow_off[i] + (size_t)it);
   }
   /* each node row: the union of its element rows' column nodes (a marker per node, no
    * global sort), sorted, the diagonal always; its B rows are laid out one after another,
    * each the row's nodes times B columns. Two passes: the first counts each row, so that the
    * column array is allocated once at its size and the second writes every column and
-   * element place at its final position (no growing array, no copies: on the virtual
+   * element rank at its final position (no growing array, no copies: on the virtual
    * machines this runs on, every new page of memory is expensive) */
   PetscInt *ia = malloc(sizeof(PetscInt) * ((size_t)N + 1)), *ja = NULL;
-  size_t nnz = 0;
-  if (B > 1) {
-    p->blk_pos = malloc(sizeof(int) * (nblk + 1));
-    p->blk_stride = malloc(sizeof(int) * (nstr + 1));
-  } else p->coo_pos = malloc(sizeof(int) * ((size_t)n + 1));
-  if (bad || !ia || (B > 1 ? !p->blk_pos || !p->blk_stride : !p->coo_pos)) {
-    for (int i = 0; rnod && cnod && i < p->nterm; i++) { if (cnod[i] != rnod[i]) free(cnod[i]); free(rnod[i]); }
-    free(rnod); free(cnod); free(erow_off); free(start); free(mark); free(nodes); free(erow); free(ia);
-    lg_seterr(env, "out of memory for %ld matrix entries", (long)n);
-    return 1;
-  }
+  size_t nnz = 0, maxlen = 0;
+  if (!ia) bad = 1;
   /* the rows in contiguous blocks, one per OpenMP thread (balanced by element rows), each
-   * with its own marker. The same pattern and places for any thread count */
+   * with its own marker. The same pattern and ranks for any thread count */
   int nb = 1;
 #ifdef _OPENMP
   if (nent > 200000) nb = omp_get_max_threads();
@@ -319,7 +329,7 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   p->pattern_threads = nb;
   pattern_block blk[64];
   memset(blk, 0, sizeof blk);
-  pattern_in in = {p, B, Nn, start, erow, erow_off, cnod, ia, NULL};
+  pattern_in in = {p, B, Nn, start, erow_off, erow, rnod, cnod, ia, NULL};
   for (int b = 0, R = 0; b < nb; b++) {
     blk[b].R0 = R;
     size_t goal = nent / (size_t)nb * (size_t)(b + 1);
@@ -328,15 +338,18 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   }
   blk[0].mark = mark;
   blk[0].nodes = nodes;
+  if (!bad) {
 #ifdef _OPENMP
 #pragma omp parallel for schedule(static, 1) if (nb > 1)
 #endif
-  for (int b = 0; b < nb; b++) pattern_count(&in, &blk[b]);
-  for (int b = 0; b < nb; b++) {
-    bad = bad ? bad : blk[b].bad;
-    nnz += blk[b].nnz;
+    for (int b = 0; b < nb; b++) pattern_count(&in, &blk[b]);
   }
-  if (!bad && nnz > (size_t)INT32_MAX) bad = 2;
+  for (int b = 0; b < nb && !bad; b++) {
+    bad = blk[b].bad;
+    nnz += blk[b].nnz;
+    if (blk[b].maxlen > maxlen) maxlen = blk[b].maxlen;
+  }
+  if (!bad && nnz > (size_t)INT32_MAX) bad = 3;
   if (!bad) {
     /* row starts from the counts (ia[R * B] holds each of the node row's B rows' length) */
     size_t at = 0;
@@ -344,8 +357,11 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
       PetscInt len = ia[(size_t)R * B];
       for (int a = 0; a < B; a++, at += (size_t)len) ia[(size_t)R * B + a] = (PetscInt)at;
     }
+    p->rank_w = maxlen <= 256 ? 1 : maxlen <= 65536 ? 2 : 4;
     ja = malloc(sizeof(PetscInt) * (nnz ? nnz : 1));
-    if (!ja) bad = 1;
+    p->rank = malloc((size_t)p->rank_w * (nrank + 1));
+    if (B == 1) p->row_start = malloc(sizeof(PetscInt) * (nerow + 1));
+    if (!ja || !p->rank || (B == 1 && !p->row_start)) bad = 1;
     in.ja = ja;
   }
   if (!bad) {
@@ -355,9 +371,11 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
     for (int b = 0; b < nb; b++) pattern_fill(&in, &blk[b]);
   }
   for (int b = 1; b < nb; b++) { free(blk[b].mark); free(blk[b].nodes); }
-  for (int i = 0; i < p->nterm; i++) { if (cnod[i] != rnod[i]) free(cnod[i]); free(rnod[i]); }
-  free(rnod);
-  free(cnod);
+  for (int i = 0; rnod && cnod && rown && cown && i < p->nterm; i++) {
+    if (cown[i]) free((void *)cnod[i]);
+    if (rown[i]) free((void *)rnod[i]);
+  }
+  free(rnod); free(cnod); free(rown); free(cown);
   free(erow_off);
   free(erow);
   free(nodes);
@@ -365,8 +383,9 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   free(mark);
   if (bad) {
     free(ia); free(ja);
-    if (bad == 2) lg_seterr(env, "the matrix has more than 2^31 nonzeros: more than lugal indexes");
-    else lg_seterr(env, "out of memory for the sparsity pattern");
+    if (bad == 3) lg_seterr(env, "the matrix has more than 2^31 nonzeros: more than lugal indexes");
+    else if (bad == 2) lg_seterr(env, "more than 2^32 items in the matrix terms: more than lugal indexes");
+    else lg_seterr(env, "out of memory for the sparsity pattern (%ld element matrix entries)", (long)n);
     return 1;
   }
   ia[N] = (PetscInt)nnz;

@@ -599,6 +599,15 @@ dofmap *dofmap_new(mesh *m, int degree, int disc, char *err) {
   nd += (long)m->ncell * cell_per;
   if (nd > 2000000000L) { snprintf(err, 256, "too many dofs"); free(dm); return NULL; }
   dm->ndof = (int)nd;
+  /* continuous P1 / Q1: the dofs are the vertices in the cells' own order, so the dof map is
+   * the mesh's cell list (not a copy: 25 MB on 1.57 M tetrahedra); the mesh outlives it */
+  int vertices = !disc && nper[0] == nloc && nloc == m->nvc;
+  for (int k = 0; vertices && k < nloc; k++) vertices = dm->el.ent_dim[k] == 0 && dm->el.ent_id[k] == k;
+  if (vertices) {
+    dm->cell_dofs = m->cells;
+    dm->alias = 1;
+    return dm;
+  }
   dm->cell_dofs = malloc(sizeof(int) * (size_t)m->ncell * (size_t)nloc);
   if (!dm->cell_dofs) { snprintf(err, 256, "out of memory"); free(dm); return NULL; }
   for (int c = 0; c < m->ncell; c++) {
@@ -629,6 +638,7 @@ dofmap *dofmap_block(const dofmap *s, int bs, char *err) {
   dofmap *dm = malloc(sizeof *dm);
   if (!dm) { snprintf(err, 256, "out of memory"); return NULL; }
   *dm = *s;
+  dm->alias = 0;
   dm->bs = bs;
   dm->nloc = s->nloc * bs;
   dm->ndof = s->ndof * bs;
@@ -642,6 +652,6 @@ dofmap *dofmap_block(const dofmap *s, int bs, char *err) {
 
 void dofmap_free(dofmap *d) {
   if (!d) return;
-  free(d->cell_dofs);
+  if (!d->alias) free(d->cell_dofs);
   free(d);
 }

@@ -79,6 +79,7 @@ typedef struct {
   int disc;       /* discontinuous: every cell owns its nodes (dof c*nloc + k) */
   lagrange_element el;
   int *cell_dofs; /* ncell*nloc */
+  int alias;      /* cell_dofs is the mesh's own cell list (continuous P1/Q1: dof = vertex) */
 } dofmap;
 
 /* the space of Lagrange degree `degree`, continuous, or discontinuous (disc = 1: the same

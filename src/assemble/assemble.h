@@ -215,6 +215,9 @@ int lg_problem_solve_vector(lg_env *env, lg_problem *p, const double *rhs, doubl
 void *lg_problem_matrix(lg_env *env, lg_problem *p);
 /* y = A x with that matrix (N values each), and its Frobenius norm */
 int lg_problem_matrix_mult(lg_env *env, lg_problem *p, const double *x, double *y);
+/* the diagonal and the row sums of the problem's matrix (assembled at u = 0, essential rows
+ * identity), N values each */
+int lg_problem_matrix_diagonal(lg_env *env, lg_problem *p, double *diag, double *rowsum);
 int lg_problem_matrix_norm(lg_env *env, lg_problem *p, double *norm);
 
 /* assembled operators for tests and benchmarks: the matrix (values into a dense n*n array
@@ -313,5 +316,18 @@ void lg_petsc_finalize(void);
 int lg_petsc_report_unused_options(void);
 /* number of MPI processes */
 int lg_petsc_size(void);
+
+/* parallel.c: the ranks of a run (1 and 0 before MPI starts or after it ends) */
+int lg_mpi_size(void);
+int lg_mpi_rank(void);
+typedef enum { LG_SUM, LG_MAX, LG_MIN } lg_reduce_op;
+/* x[0..n) reduced over the ranks, the result on every rank */
+int lg_allreduce(double *x, int n, lg_reduce_op op);
+/* rank 0's rc (and, when it is non-zero, its message in msg) on every rank: the outcome of
+ * work that rank 0 alone does for all (file output) */
+int lg_root_result(int rc, char *msg, size_t len);
+/* the end of the whole run from one rank: the message, with the rank, on stderr, then
+ * MPI_Abort so that no rank waits for this one (a single process only prints) */
+void lg_abort_run(const char *msg);
 
 #endif

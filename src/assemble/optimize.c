@@ -238,12 +238,15 @@ static int write_step(opt_ctx *C, int it) {
   if (nf2) C->files = nf2;
   if (!file || !nt || !nf2) { free(file); lg_seterr(C->env, "out of memory"); return 1; }
   snprintf(file, l + 32, "%.*s_%04d.vtu", (int)(l > 4 ? l - 4 : l), C->o->series, it);
-  if (mesh_write_vtu(m, file, nf, fl)) { lg_seterr(C->env, "%s", m->err); free(file); return 1; }
+  /* every rank holds the same controls: rank 0 writes */
+  int rc = lg_mpi_rank() == 0 ? mesh_write_vtu(m, file, nf, fl) : 0;
+  if (lg_root_result(rc, m->err, sizeof m->err)) { lg_seterr(C->env, "%s", m->err); free(file); return 1; }
   C->files[C->nstep] = file;
   C->times[C->nstep] = it;
   C->nstep++;
-  char err[MESH_ERRLEN];
-  if (mesh_write_pvd(C->o->series, C->nstep, C->times, C->files, err)) { lg_seterr(C->env, "%s", err); return 1; }
+  char err[MESH_ERRLEN] = "";
+  rc = lg_mpi_rank() == 0 ? mesh_write_pvd(C->o->series, C->nstep, C->times, C->files, err) : 0;
+  if (lg_root_result(rc, err, sizeof err)) { lg_seterr(C->env, "%s", err); return 1; }
   return 0;
 }
 
@@ -254,11 +257,12 @@ static PetscErrorCode monitor(Tao tao, void *ud) {
   TaoConvergedReason reason;
   if (C->outer && tao != C->outer) return 0;
   PetscCall(TaoGetSolutionStatus(tao, &it, &f, &gnorm, &cnorm, &step, &reason));
-  if (C->o->monitor && C->o->ncons) {
+  int show = C->o->monitor && lg_mpi_rank() == 0; /* every rank runs the same iterations */
+  if (show && C->o->ncons) {
     printf("  iteration %3d: J = %.10e  |g| = %.3e  |c| = %.3e  evaluations %d\n", (int)it, (double)f * C->fs,
            (double)gnorm, (double)cnorm, C->evals);
     fflush(stdout);
-  } else if (C->o->monitor) {
+  } else if (show) {
     printf("  iteration %3d: J = %.10e  |g| = %.3e  step = %.3e\n", (int)it, (double)f, (double)gnorm, (double)step);
     fflush(stdout);
   }
@@ -345,22 +349,19 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
       continue;
     }
     lg_problem *G = lg_reduced_gram(env, rf, i, 0);
-    Mat A = G ? lg_problem_matrix(env, G) : NULL;
-    if (!A) { rc = 1; goto done; }
+    double *rs = malloc(sizeof(double) * ((size_t)ni + 1));
+    if (!G || !rs || lg_problem_matrix_diagonal(env, G, q, rs)) {
+      if (!rs) lg_seterr(env, "out of memory");
+      free(rs);
+      rc = 1;
+      goto done;
+    }
     double total = 0, diag = 0;
     for (PetscInt r = 0; r < ni; r++) {
-      PetscInt nc;
-      const PetscInt *cols;
-      const PetscScalar *vals;
-      TCHK(MatGetRow(A, r, &nc, &cols, &vals), "MatGetRow");
-      q[r] = 0;
-      for (PetscInt j = 0; j < nc; j++) {
-        total += vals[j];
-        if (cols[j] == r) q[r] = vals[j];
-      }
+      total += rs[r];
       diag += q[r];
-      MatRestoreRow(A, r, &nc, &cols, &vals);
     }
+    free(rs);
     for (int k = 0; k < ni; k++) {
       q[k] = sqrt(q[k] * total / diag);
       if (!(q[k] > 0)) { lg_seterr(env, "the mass matrix of control %d is not positive", i + 1); rc = 1; goto done; }

@@ -239,6 +239,8 @@ static int setup_bcs(lg_env *env, lg_problem *p, const form *bc, const int *test
   return 0;
 }
 
+static int own_bcs(lg_env *env, lg_problem *p);
+
 /* evaluate the boundary values at the boundary nodes: rows and values, deduplicated */
 typedef struct {
   lg_env *env;
@@ -395,6 +397,40 @@ static int compute_bcs(lg_env *env, lg_problem *p) {
     if (bad >= 0) { free(src); return 1; }
   }
   free(src);
+  return own_bcs(env, p);
+}
+
+/* the rows this rank owns: whole nodes (B rows each), the nodes split evenly over the ranks
+ * in their global order (a serial run owns them all) */
+static void set_ownership(lg_problem *p) {
+  int size = lg_mpi_size(), rank = lg_mpi_rank(), B = lg_matrix_block_size(p), Nn = p->N / B;
+  p->par = size > 1;
+  long first = (long)Nn * rank / size, last = (long)Nn * (rank + 1) / size;
+  p->lo = (int)first * B;
+  p->hi = (int)last * B;
+}
+
+/* a parallel run: each term keeps the items that touch an owned row (in their order, so
+ * that each matrix entry sums its contributions in the serial run's order) */
+static int restrict_items(lg_env *env, lg_problem *p) {
+  PetscInt rg[2 * KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS];
+  for (int i = 0; i < p->nterm; i++) {
+    prob_term *t = &p->t[i];
+    int n = 0, two = t->interior;
+    for (int it = 0; it < t->nitems; it++) {
+      lg_term_nodes(p, t, it, 1, 1, rg);
+      int mine = 0;
+      for (int k = 0; k < t->rl.size && !mine; k++) mine = rg[k] >= p->lo && rg[k] < p->hi;
+      if (!mine) continue;
+      t->cells[n] = t->cells[it];
+      if (t->facets) t->facets[n] = t->facets[it];
+      if (two) t->cells[t->nitems + n] = t->cells[t->nitems + it]; /* the '-' cells, compacted below */
+      n++;
+    }
+    if (two) memmove(t->cells + n, t->cells + t->nitems, sizeof(int) * (size_t)n);
+    t->nitems = n;
+  }
+  (void)env;
   return 0;
 }
 
@@ -441,7 +477,9 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
   p->N = p->rglob[s->nfield];
   if (!s->eqn || s->eqn->n == 0) { lg_seterr(env, "the equation has no integrals"); goto fail; }
   ph[1] = now_ms();
+  set_ownership(p);
   if (setup_terms(env, p, s->eqn, s->test, s->unknown, s->nfield)) goto fail;
+  if (p->par && restrict_items(env, p)) goto fail;
   ph[2] = now_ms();
   if (setup_bcs(env, p, s->bc, s->test, s->unknown, s->nfield)) goto fail;
   ph[3] = now_ms();
@@ -450,6 +488,7 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
   ph[4] = now_ms();
   p->state = calloc((size_t)p->N + 1, sizeof(double));
   p->solution = calloc((size_t)p->N + 1, sizeof(double));
+  if (p->par && !(p->rwhole = calloc((size_t)p->N + 1, sizeof(double)))) { lg_seterr(env, "out of memory"); goto fail; }
   p->eqn = form_copy(s->eqn);
   p->bcf = s->bc ? form_copy(s->bc) : form_new();
   if (!p->state || !p->solution || !p->eqn || !p->bcf) { lg_seterr(env, "out of memory"); goto fail; }
@@ -490,14 +529,19 @@ void lg_problem_free(lg_problem *p) {
     free(p->bcd[k].tape);
   }
   free(p->bct);
+  if (p->own_rows != p->bc_rows) free(p->own_rows);
+  if (p->own_vals != p->bc_vals) free(p->own_vals);
   free(p->bc_rows);
   free(p->bc_vals);
   free(p->bc_org);
+  if (p->to_all) VecScatterDestroy(&p->to_all);
+  if (p->whole) VecDestroy(&p->whole);
   lg_chunk_bufs_free(&p->chunks);
   free(p->rank);
   free(p->row_start);
   free(p->state);
   free(p->solution);
+  free(p->rwhole);
   form_free(p->eqn);
   form_free(p->bcf);
   if (p->A) MatDestroy(&p->A);
@@ -519,8 +563,57 @@ int lg_problem_size(const lg_problem *p) { return p->N; }
 
 long lg_problem_nnz(const lg_problem *p) {
   MatInfo info;
-  if (!p->A || MatGetInfo(p->A, MAT_LOCAL, &info)) return -1;
+  if (!p->A || MatGetInfo(p->A, MAT_GLOBAL_SUM, &info)) return -1;
   return (long)info.nz_used;
+}
+
+/* ---------------------------------------------------------------- distributed vectors */
+
+int lg_problem_vec_set(lg_env *env, lg_problem *p, Vec v, const double *whole) {
+  PetscScalar *a;
+  PCHK(VecGetArray(v, &a), "VecGetArray");
+  memcpy(a, whole + p->lo, sizeof(double) * (size_t)(p->hi - p->lo));
+  PCHK(VecRestoreArray(v, &a), "VecRestoreArray");
+  return 0;
+}
+
+int lg_problem_vec_get(lg_env *env, lg_problem *p, Vec v, double *whole) {
+  const PetscScalar *a;
+  if (!p->par) {
+    PCHK(VecGetArrayRead(v, &a), "VecGetArrayRead");
+    memcpy(whole, a, sizeof(double) * (size_t)p->N);
+    PCHK(VecRestoreArrayRead(v, &a), "VecRestoreArrayRead");
+    return 0;
+  }
+  if (!p->to_all) PCHK(VecScatterCreateToAll(v, &p->to_all, &p->whole), "VecScatterCreateToAll");
+  PCHK(VecScatterBegin(p->to_all, v, p->whole, INSERT_VALUES, SCATTER_FORWARD), "VecScatterBegin");
+  PCHK(VecScatterEnd(p->to_all, v, p->whole, INSERT_VALUES, SCATTER_FORWARD), "VecScatterEnd");
+  PCHK(VecGetArrayRead(p->whole, &a), "VecGetArrayRead");
+  memcpy(whole, a, sizeof(double) * (size_t)p->N);
+  PCHK(VecRestoreArrayRead(p->whole, &a), "VecRestoreArrayRead");
+  return 0;
+}
+
+/* the owned essential rows and values (after compute_bcs) */
+static int own_bcs(lg_env *env, lg_problem *p) {
+  if (!p->par) {
+    p->nown = p->nbc;
+    p->own_rows = p->bc_rows;
+    p->own_vals = p->bc_vals;
+    return 0;
+  }
+  if (!p->own_rows || p->own_rows == p->bc_rows) {
+    p->own_rows = malloc(sizeof(PetscInt) * (size_t)(p->bc_cap + 1));
+    p->own_vals = malloc(sizeof(PetscScalar) * (size_t)(p->bc_cap + 1));
+    if (!p->own_rows || !p->own_vals) { lg_seterr(env, "out of memory"); return 1; }
+  }
+  p->nown = 0;
+  for (int i = 0; i < p->nbc; i++)
+    if (p->bc_rows[i] >= p->lo && p->bc_rows[i] < p->hi) {
+      p->own_rows[p->nown] = p->bc_rows[i];
+      p->own_vals[p->nown++] = p->bc_vals[i];
+    }
+  return 0;
 }
 
 /* ---------------------------------------------------------------- assembly */
@@ -604,11 +697,13 @@ typedef struct {
       const double *vr = v;                                                                         \
       if (cn == 4) /* P1 tetrahedra, Q1 quadrilaterals: straight-line code */                     \
         for (size_t er = 0, ner = (size_t)n * rn; er < ner; er++, rk += 4, vr += 4) {               \
+          if (rs[er] < 0) continue; /* another rank's row */                                       \
           PetscScalar *row0 = a + rs[er];                                                           \
           row0[rk[0]] += vr[0]; row0[rk[1]] += vr[1]; row0[rk[2]] += vr[2]; row0[rk[3]] += vr[3];   \
         }                                                                                           \
       else                                                                                          \
         for (size_t er = 0, ner = (size_t)n * rn; er < ner; er++, rk += cn, vr += cn) {             \
+          if (rs[er] < 0) continue;                                                                 \
           PetscScalar *row0 = a + rs[er];                                                           \
           for (int j = 0; j < cn; j++) row0[rk[j]] += vr[j];                                        \
         }                                                                                           \
@@ -619,9 +714,11 @@ typedef struct {
       const double *ve = v + (size_t)e * size;                                                      \
       lg_term_nodes(p, t, first + e, 1, B, R);                                                      \
       for (int i = 0; i < rn; i++) {                                                                \
+        if (R[i] < R0 || R[i] >= R1) continue; /* another rank's row */                             \
         const T *ri = rk + i * cn;                                                                  \
-        PetscScalar *row0 = a + ia[(size_t)R[i] * B];                                              \
-        PetscInt stride = ia[(size_t)R[i] * B + 1] - ia[(size_t)R[i] * B];                          \
+        const PetscInt *ir = ia + (size_t)(R[i] - R0) * B;                                         \
+        PetscScalar *row0 = a + ir[0];                                                              \
+        PetscInt stride = ir[1] - ir[0];                                                            \
         for (int r = 0; r < B; r++) {                                                               \
           const double *vr = ve + (size_t)(i * B + r) * cs;                                         \
           PetscScalar *dr = row0 + r * stride;                                                      \
@@ -647,6 +744,7 @@ static int scatter_matrix_chunk(void *ud, int first, int n, const double *v) {
   PetscScalar *a = sc->a;
   const PetscInt *ia = p->csr_i;
   int B = lg_matrix_block_size(p), rn = t->rl.size / B, cn = t->cl.size / B, cs = t->cl.size;
+  int R0 = p->lo / B, R1 = p->hi / B; /* the owned node rows */
   if (p->rank_w == 1) SCATTER_RANKS(uint8_t);
   else if (p->rank_w == 2) SCATTER_RANKS(uint16_t);
   else SCATTER_RANKS(uint32_t);
@@ -674,8 +772,10 @@ static int assemble_matrix(lg_env *env, lg_problem *p, const double *state, Mat 
   int ne = bind_unknowns(p, state, extra);
   /* element matrices a chunk of items at a time, added in place into the value array (no
    * per-entry buffer beyond two chunks) */
-  PetscScalar *a;
-  PCHK(MatSeqAIJGetArray(A, &a), "matrix assembly");
+  /* a serial run adds into the matrix's own value array; a parallel one into csr_a, which
+   * PETSc then copies into its diagonal and off-diagonal blocks */
+  PetscScalar *a = p->csr_a;
+  if (!p->par) PCHK(MatSeqAIJGetArray(A, &a), "matrix assembly");
   memset(a, 0, sizeof(PetscScalar) * (size_t)p->nnz);
   int rc = 0;
   for (int i = 0; i < p->nterm && !rc; i++) {
@@ -687,7 +787,8 @@ static int assemble_matrix(lg_env *env, lg_problem *p, const double *state, Mat 
          lg_assemble_chunks(env, p->lm, &t->kmat, t->nitems, t->cells, t->facets, bind, lg_chunk_items(size),
                             p->chunks.b, scatter_matrix_chunk, &sc);
   }
-  PCHK(MatSeqAIJRestoreArray(A, &a), "matrix assembly");
+  if (!p->par) PCHK(MatSeqAIJRestoreArray(A, &a), "matrix assembly");
+  else if (!rc) PCHK(MatUpdateMPIAIJWithArray(A, a), "matrix assembly");
   return rc;
 }
 
@@ -722,15 +823,21 @@ int lg_problem_dense_matrix(lg_env *env, lg_problem *p, double *dense, int n) {
   p->matrix_fp = 0;
   p->adj_stale = 1;
   if (assemble_matrix(env, p, p->state, p->A)) return 1;
-  for (PetscInt i = 0; i < n; i++) {
+  memset(dense, 0, sizeof(double) * (size_t)n * (size_t)n);
+  for (PetscInt i = p->lo; i < p->hi; i++) {
     PetscInt nc;
     const PetscInt *cols;
     const PetscScalar *vals;
     PCHK(MatGetRow(p->A, i, &nc, &cols, &vals), "MatGetRow");
-    for (int j = 0; j < n; j++) dense[(size_t)i * n + j] = 0;
     for (PetscInt k = 0; k < nc; k++) dense[(size_t)i * n + cols[k]] = vals[k];
     PCHK(MatRestoreRow(p->A, i, &nc, &cols, &vals), "MatRestoreRow");
   }
+  /* every rank its rows: the whole matrix on every rank */
+  for (size_t at = 0, all = (size_t)n * (size_t)n; p->par && at < all; at += 1 << 24)
+    if (lg_allreduce(dense + at, (int)(all - at < (1u << 24) ? all - at : 1u << 24), LG_SUM)) {
+      lg_seterr(env, "the reduction of the dense matrix failed");
+      return 1;
+    }
   return 0;
 }
 
@@ -861,7 +968,7 @@ static uint64_t matrix_fingerprint(lg_env *env, lg_problem *p) {
  * -pc_* option (with the problem's prefix) applied once */
 static int ensure_ksp(lg_env *env, lg_problem *p) {
   if (p->ksp) return 0;
-  PCHK(KSPCreate(PETSC_COMM_SELF, &p->ksp), "KSPCreate");
+  PCHK(KSPCreate(PetscObjectComm((PetscObject)p->A), &p->ksp), "KSPCreate");
   if (p->prefix[0]) PCHK(KSPSetOptionsPrefix(p->ksp, p->prefix), "KSPSetOptionsPrefix");
   PC pc;
   PCHK(KSPSetType(p->ksp, KSPPREONLY), "KSPSetType");
@@ -877,6 +984,11 @@ static int remove_null(lg_env *env, lg_problem *p) {
   if (p->null_rigid) {
     PCHK(MatNullSpaceRemove(p->null, p->x), "MatNullSpaceRemove");
     return 0;
+  }
+  if (p->par) { /* the mean over the whole mesh, on the whole vector */
+    if (lg_problem_vec_get(env, p, p->x, p->rwhole)) return 1;
+    null_mean_zero(env, p, p->rwhole);
+    return lg_problem_vec_set(env, p, p->x, p->rwhole);
   }
   PetscScalar *x;
   PCHK(VecGetArray(p->x, &x), "VecGetArray");
@@ -950,8 +1062,9 @@ static int keep_bc_columns(lg_env *env, lg_problem *p) {
   for (int i = 0; i < p->N; i++) at[i] = -1;
   for (int k = 0; k < p->nbc; k++) at[p->bc_rows[k]] = k;
   size_t n = 0;
-  const PetscScalar *av;
-  if (MatSeqAIJGetArrayRead(p->A, &av)) { free(at); lg_seterr(env, "MatSeqAIJGetArrayRead failed"); return 1; }
+  /* the assembled values, before the elimination: the matrix's own array in a serial run,
+   * the array PETSc copied them from in a parallel one; the owned rows, global columns */
+  const PetscScalar *av = p->csr_a;
   for (int pass = 0; pass < 2; pass++) {
     if (pass) {
       free(p->bcc_row); free(p->bcc_col); free(p->bcc_val);
@@ -959,7 +1072,6 @@ static int keep_bc_columns(lg_env *env, lg_problem *p) {
       p->bcc_col = malloc(sizeof(int) * (n + 1));
       p->bcc_val = malloc(sizeof(double) * (n + 1));
       if (!p->bcc_row || !p->bcc_col || !p->bcc_val) {
-        MatSeqAIJRestoreArrayRead(p->A, &av);
         free(at);
         p->bcc_n = 0;
         lg_seterr(env, "out of memory");
@@ -967,9 +1079,9 @@ static int keep_bc_columns(lg_env *env, lg_problem *p) {
       }
       n = 0;
     }
-    for (int i = 0; i < p->N; i++) {
+    for (int i = p->lo; i < p->hi; i++) {
       if (at[i] >= 0) continue;
-      for (PetscInt e = p->csr_i[i]; e < p->csr_i[i + 1]; e++) {
+      for (PetscInt e = p->csr_i[i - p->lo]; e < p->csr_i[i - p->lo + 1]; e++) {
         int k = at[p->csr_j[e]];
         if (k < 0 || av[e] == 0) continue;
         if (pass) { p->bcc_row[n] = i; p->bcc_col[n] = k; p->bcc_val[n] = av[e]; }
@@ -977,7 +1089,6 @@ static int keep_bc_columns(lg_env *env, lg_problem *p) {
       }
     }
   }
-  MatSeqAIJRestoreArrayRead(p->A, &av);
   p->bcc_n = n;
   free(at);
   return 0;
@@ -987,6 +1098,25 @@ static int keep_bc_columns(lg_env *env, lg_problem *p) {
  * (solver.h, lg_keep): linear problems, unless -lugal_keep_factor 0 */
 static int keep_usable(lg_env *env, lg_problem *p) {
   return !p->nonlinear && !env->no_keep_factor && lg_keep_usable(&p->keep, p->ksp, p->prefix);
+}
+
+/* b = -R(0): the right-hand side's owned part (a parallel run assembles the whole-length
+ * residual, its own rows complete, and keeps those) */
+static int assemble_rhs(lg_env *env, lg_problem *p) {
+  PetscScalar *b;
+  int n = p->hi - p->lo, rc;
+  if (p->par) {
+    rc = assemble_residual(env, p, p->state, p->rwhole);
+    if (rc) return 1;
+    PCHK(VecGetArray(p->b, &b), "VecGetArray");
+    for (int i = 0; i < n; i++) b[i] = -p->rwhole[p->lo + i];
+  } else {
+    PCHK(VecGetArray(p->b, &b), "VecGetArray");
+    rc = assemble_residual(env, p, p->state, b);
+    for (int i = 0; i < n; i++) b[i] = -b[i];
+  }
+  PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
+  return rc;
 }
 
 static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_info *info) {
@@ -1000,26 +1130,23 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
     if (assemble_matrix(env, p, p->state, p->A)) return 1;
   }
   PetscScalar *b;
-  PCHK(VecGetArray(p->b, &b), "VecGetArray");
-  int rc = assemble_residual(env, p, p->state, b);
-  for (int i = 0; i < p->N; i++) b[i] = -b[i];
-  PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
+  int rc = assemble_rhs(env, p);
   if (rc) return 1;
   if (compute_bcs(env, p)) return 1;
   PCHK(VecSet(p->x, 0), "VecSet");
-  PCHK(VecSetValues(p->x, p->nbc, p->bc_rows, p->bc_vals, INSERT_VALUES), "VecSetValues");
+  PCHK(VecSetValues(p->x, p->nown, p->own_rows, p->own_vals, INSERT_VALUES), "VecSetValues");
   PCHK(VecAssemblyBegin(p->x), "VecAssembly");
   PCHK(VecAssemblyEnd(p->x), "VecAssembly");
   if (reuse) { /* the rows are identity rows already: only the right-hand side's, and with
                 * symmetric elimination the eliminated columns times the values */
     PCHK(VecGetArray(p->b, &b), "VecGetArray");
-    for (size_t i = 0; i < p->bcc_n; i++) b[p->bcc_row[i]] -= p->bcc_val[i] * p->bc_vals[p->bcc_col[i]];
-    for (int i = 0; i < p->nbc; i++) b[p->bc_rows[i]] = p->bc_vals[i];
+    for (size_t i = 0; i < p->bcc_n; i++) b[p->bcc_row[i] - p->lo] -= p->bcc_val[i] * p->bc_vals[p->bcc_col[i]];
+    for (int i = 0; i < p->nown; i++) b[p->own_rows[i] - p->lo] = p->own_vals[i];
     PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
   } else if (p->bc_symmetric) {
     if (keep_bc_columns(env, p)) return 1;
-    PCHK(MatZeroRowsColumns(p->A, p->nbc, p->bc_rows, 1.0, p->x, p->b), "MatZeroRowsColumns");
-  } else PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, p->x, p->b), "MatZeroRows");
+    PCHK(MatZeroRowsColumns(p->A, p->nown, p->own_rows, 1.0, p->x, p->b), "MatZeroRowsColumns");
+  } else PCHK(MatZeroRows(p->A, p->nown, p->own_rows, 1.0, p->x, p->b), "MatZeroRows");
   info->assemble_ms = now_ms() - t0;
   t0 = now_ms();
   if (ensure_ksp(env, p)) return 1;
@@ -1032,10 +1159,10 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
     int guess = 0;
     if (p->have_solution) {
       /* the last solution with the essential values, the initial guess */
+      if (lg_problem_vec_set(env, p, p->x, p->solution)) return 1;
       PetscScalar *xv;
       PCHK(VecGetArray(p->x, &xv), "VecGetArray");
-      memcpy(xv, p->solution, sizeof(double) * (size_t)p->N);
-      for (int i = 0; i < p->nbc; i++) xv[p->bc_rows[i]] = p->bc_vals[i];
+      for (int i = 0; i < p->nown; i++) xv[p->own_rows[i] - p->lo] = p->own_vals[i];
       PCHK(VecRestoreArray(p->x, &xv), "VecRestoreArray");
       guess = 1;
     }
@@ -1049,7 +1176,7 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
     } /* else refactored below: the direct solve (preonly) overwrites x */
   }
   if (!kept) {
-    if (refactor) PCHK(lg_lu_prepare(p->ksp, p->A, p->bc_rows, p->nbc, p->prefix, 1), "the factorization's choice");
+    if (refactor) PCHK(lg_lu_prepare(p->ksp, p->A, p->own_rows, p->nown, p->prefix, 1), "the factorization's choice");
     lg_mumps_detect_null_pivots(p->ksp);
     while ((rc = linear_solve_checked(env, p, info)) == 2)
       /* PETSc's LU (no pivoting) found a zero pivot or solved inaccurately: MUMPS, once */
@@ -1060,20 +1187,15 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
   info->solve_ms = now_ms() - t0;
   if (rc) return 1;
   if (remove_null(env, p)) return 1;
-  const PetscScalar *x;
-  PCHK(VecGetArrayRead(p->x, &x), "VecGetArrayRead");
+  if (lg_problem_vec_get(env, p, p->x, p->solution)) return 1;
   for (int i = 0; i < p->N; i++)
-    if (!isfinite(x[i])) {
-      VecRestoreArrayRead(p->x, &x);
+    if (!isfinite(p->solution[i])) {
       lg_seterr(env, "the linear solve produced non-finite values (the system is singular or the data is not finite)");
       return 1;
     }
-  memcpy(p->solution, x, sizeof(double) * (size_t)p->N);
   p->have_solution = 1;
   p->matrix_fp = fp;
-  rc = out ? make_outputs(env, p, x, out) : 0;
-  VecRestoreArrayRead(p->x, &x);
-  return rc;
+  return out ? make_outputs(env, p, p->solution, out) : 0;
 }
 
 static PetscErrorCode snes_function(SNES snes, Vec X, Vec F, void *ctx) {
@@ -1081,14 +1203,19 @@ static PetscErrorCode snes_function(SNES snes, Vec X, Vec F, void *ctx) {
   (void)snes;
   const PetscScalar *x;
   PetscScalar *f;
-  PetscCall(VecGetArrayRead(X, &x));
+  if (lg_problem_vec_get(p->env, p, X, p->state)) {
+    p->failed = 1;
+    PetscCall(SNESSetFunctionDomainError(snes));
+    return 0;
+  }
   PetscCall(VecGetArray(F, &f));
-  memcpy(p->state, x, sizeof(double) * (size_t)p->N);
-  int rc = assemble_residual(p->env, p, p->state, f);
+  int rc = assemble_residual(p->env, p, p->state, p->par ? p->rwhole : f);
+  if (!rc && p->par)
+    for (int i = p->lo; i < p->hi; i++) f[i - p->lo] = p->rwhole[i];
   if (!rc)
-    for (int i = 0; i < p->nbc; i++) f[p->bc_rows[i]] = x[p->bc_rows[i]] - p->bc_vals[i];
+    for (int i = 0; i < p->nown; i++) f[p->own_rows[i] - p->lo] = p->state[p->own_rows[i]] - p->own_vals[i];
   PetscCall(VecRestoreArray(F, &f));
-  PetscCall(VecRestoreArrayRead(X, &x));
+  (void)x;
   if (rc) {
     p->failed = 1;
     PetscCall(SNESSetFunctionDomainError(snes));
@@ -1102,10 +1229,11 @@ static PetscErrorCode snes_function(SNES snes, Vec X, Vec F, void *ctx) {
 static PetscErrorCode snes_jacobian(SNES snes, Vec X, Mat J, Mat P, void *ctx) {
   lg_problem *p = ctx;
   (void)J;
-  const PetscScalar *x;
-  PetscCall(VecGetArrayRead(X, &x));
-  memcpy(p->state, x, sizeof(double) * (size_t)p->N);
-  PetscCall(VecRestoreArrayRead(X, &x));
+  if (lg_problem_vec_get(p->env, p, X, p->state)) {
+    p->failed = 1;
+    PetscCall(SNESSetJacobianDomainError(snes));
+    return 0;
+  }
   /* a warm start at the last solution, whose Jacobian the adjoint assembled and factored:
    * leave the matrix alone, so that the solver's factorization is reused, unless what else
    * the Jacobian reads changed (a control in the stiffness, as the SIMP density: the step
@@ -1136,10 +1264,10 @@ static PetscErrorCode snes_jacobian(SNES snes, Vec X, Mat J, Mat P, void *ctx) {
     PetscCall(SNESSetJacobianDomainError(snes));
     return 0;
   }
-  PetscCall(MatZeroRows(P, p->nbc, p->bc_rows, 1.0, NULL, NULL));
+  PetscCall(MatZeroRows(P, p->nown, p->own_rows, 1.0, NULL, NULL));
   KSP ksp;
   PetscCall(SNESGetKSP(snes, &ksp));
-  PetscCall(lg_lu_prepare(ksp, P, p->bc_rows, p->nbc, p->prefix, 0));
+  PetscCall(lg_lu_prepare(ksp, P, p->own_rows, p->nown, p->prefix, 0));
   return 0;
 }
 
@@ -1147,14 +1275,12 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
                            lg_solve_info *info, int warm) {
   double t0 = now_ms();
   if (compute_bcs(env, p)) return 1;
-  PetscScalar *x;
-  PCHK(VecGetArray(p->x, &x), "VecGetArray");
+  double *x = p->state; /* the whole initial guess, then its owned part into p->x */
   for (int i = 0; i < p->N; i++) x[i] = warm && p->have_solution ? p->solution[i] : 0;
   for (int a = 0; a < p->cols.n; a++) {
     lg_function *g = initial ? initial[a] : NULL;
     if (!g) continue;
     if (g->dm != p->cdm[a]) {
-      VecRestoreArray(p->x, &x);
       lg_seterr(env, "the initial guess for unknown %d must be a discrete function of the unknown's space (degree %d, %d "
                      "component%s) on the problem's mesh", a + 1, p->cols.degree[a], p->cdm[a]->bs, p->cdm[a]->bs == 1 ? "" : "s");
       return 1;
@@ -1162,13 +1288,13 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
     expr_func_info *fi = expr_func_get(env->c, p->cols.func[a]);
     char what[96];
     snprintf(what, sizeof what, "the initial guess for %.60s", fi ? fi->name : "the unknown");
-    if (lg_check_finite(env, p->cdm[a], g->x, what)) { VecRestoreArray(p->x, &x); return 1; }
+    if (lg_check_finite(env, p->cdm[a], g->x, what)) return 1;
     memcpy(x + p->cglob[a], g->x, sizeof(double) * (size_t)p->cdm[a]->ndof);
   }
   for (int i = 0; i < p->nbc; i++) x[p->bc_rows[i]] = p->bc_vals[i];
-  PCHK(VecRestoreArray(p->x, &x), "VecRestoreArray");
+  if (lg_problem_vec_set(env, p, p->x, x)) return 1;
   if (!p->snes) {
-    PCHK(SNESCreate(PETSC_COMM_SELF, &p->snes), "SNESCreate");
+    PCHK(SNESCreate(PetscObjectComm((PetscObject)p->A), &p->snes), "SNESCreate");
     if (p->prefix[0]) PCHK(SNESSetOptionsPrefix(p->snes, p->prefix), "SNESSetOptionsPrefix");
     PCHK(SNESSetFunction(p->snes, p->b, snes_function, p), "SNESSetFunction");
     PCHK(SNESSetJacobian(p->snes, p->A, p->A, snes_jacobian, p), "SNESSetJacobian");
@@ -1235,14 +1361,10 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
               info->reason, info->iterations, info->nres ? info->res[info->nres - 1] : NAN);
     return 1;
   }
-  const PetscScalar *xr;
-  PCHK(VecGetArrayRead(p->x, &xr), "VecGetArrayRead");
-  memcpy(p->solution, xr, sizeof(double) * (size_t)p->N);
+  if (lg_problem_vec_get(env, p, p->x, p->solution)) return 1;
   p->have_solution = 1;
   p->adj_stale = 1;
-  int rc = out ? make_outputs(env, p, xr, out) : 0;
-  VecRestoreArrayRead(p->x, &xr);
-  return rc;
+  return out ? make_outputs(env, p, p->solution, out) : 0;
 }
 
 int lg_problem_solve(lg_env *env, lg_problem *p, lg_function **initial, lg_function **out,
@@ -1430,9 +1552,9 @@ static int jacobian_solver(lg_env *env, lg_problem *p, KSP *out) {
     if (p->adj_stale) {
       memcpy(p->state, p->solution, sizeof(double) * (size_t)p->N);
       if (assemble_matrix(env, p, p->state, p->A)) return 1;
-      PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, NULL, NULL), "MatZeroRows");
+      PCHK(MatZeroRows(p->A, p->nown, p->own_rows, 1.0, NULL, NULL), "MatZeroRows");
       PCHK(KSPSetOperators(ksp, p->A, p->A), "KSPSetOperators");
-      PCHK(lg_lu_prepare(ksp, p->A, p->bc_rows, p->nbc, p->prefix, 0), "the factorization's choice");
+      PCHK(lg_lu_prepare(ksp, p->A, p->own_rows, p->nown, p->prefix, 0), "the factorization's choice");
       p->adj_stale = 0;
       p->adj_fp = matrix_fingerprint(env, p);
     }
@@ -1453,10 +1575,7 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   Vec r, l;
   PCHK(VecDuplicate(p->b, &r), "VecDuplicate");
   PCHK(VecDuplicate(p->b, &l), "VecDuplicate");
-  PetscScalar *a;
-  VecGetArray(r, &a);
-  memcpy(a, rhs, sizeof(double) * (size_t)p->N);
-  VecRestoreArray(r, &a);
+  if (lg_problem_vec_set(env, p, r, rhs)) { VecDestroy(&r); VecDestroy(&l); return 1; }
   PetscErrorCode ierr = 0;
   KSPConvergedReason reason = KSP_CONVERGED_ITS;
   PetscBool kept = PETSC_FALSE;
@@ -1480,12 +1599,7 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   /* the next solve's initial guess, where a factor may be kept */
   if (!ierr && !p->nonlinear && !env->no_keep_factor && lg_keep_applies(ksp, p->prefix))
     ierr = lg_keep_remember(&p->keep, transpose, l);
-  if (!ierr && reason >= 0) {
-    const PetscScalar *lv;
-    VecGetArrayRead(l, &lv);
-    memcpy(lam, lv, sizeof(double) * (size_t)p->N);
-    VecRestoreArrayRead(l, &lv);
-  }
+  if (!ierr && reason >= 0 && lg_problem_vec_get(env, p, l, lam)) ierr = PETSC_ERR_LIB;
   VecDestroy(&r);
   VecDestroy(&l);
   const char *what = transpose ? "the adjoint solve" : "the sensitivity solve";
@@ -1512,10 +1626,10 @@ static int prepare_matrix(lg_env *env, lg_problem *p) {
     p->keep.stale = 0; /* its next solve refactors it */
     if (assemble_matrix(env, p, p->state, p->A)) return 1;
     if (compute_bcs(env, p)) return 1;
-    PCHK(MatZeroRows(p->A, p->nbc, p->bc_rows, 1.0, NULL, NULL), "MatZeroRows");
+    PCHK(MatZeroRows(p->A, p->nown, p->own_rows, 1.0, NULL, NULL), "MatZeroRows");
     if (ensure_ksp(env, p)) return 1;
     PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
-    PCHK(lg_lu_prepare(p->ksp, p->A, p->bc_rows, p->nbc, p->prefix, !p->nonlinear), "the factorization's choice");
+    PCHK(lg_lu_prepare(p->ksp, p->A, p->own_rows, p->nown, p->prefix, !p->nonlinear), "the factorization's choice");
     p->matrix_ready = 1;
     p->adj_stale = 1; /* a nonlinear problem's A no longer holds its Jacobian */
   }
@@ -1526,16 +1640,17 @@ void *lg_problem_matrix(lg_env *env, lg_problem *p) { return prepare_matrix(env,
 
 int lg_problem_matrix_mult(lg_env *env, lg_problem *p, const double *x, double *y) {
   if (prepare_matrix(env, p)) return 1;
-  PetscScalar *b;
-  PCHK(VecGetArray(p->b, &b), "VecGetArray");
-  memcpy(b, x, sizeof(double) * (size_t)p->N);
-  PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
+  if (lg_problem_vec_set(env, p, p->b, x)) return 1;
   PCHK(MatMult(p->A, p->b, p->x), "MatMult");
-  const PetscScalar *r;
-  PCHK(VecGetArrayRead(p->x, &r), "VecGetArrayRead");
-  memcpy(y, r, sizeof(double) * (size_t)p->N);
-  PCHK(VecRestoreArrayRead(p->x, &r), "VecRestoreArrayRead");
-  return 0;
+  return lg_problem_vec_get(env, p, p->x, y);
+}
+
+int lg_problem_matrix_diagonal(lg_env *env, lg_problem *p, double *diag, double *rowsum) {
+  if (prepare_matrix(env, p)) return 1;
+  PCHK(MatGetDiagonal(p->A, p->x), "MatGetDiagonal");
+  if (lg_problem_vec_get(env, p, p->x, diag)) return 1;
+  PCHK(MatGetRowSum(p->A, p->x), "MatGetRowSum");
+  return lg_problem_vec_get(env, p, p->x, rowsum);
 }
 
 int lg_problem_matrix_norm(lg_env *env, lg_problem *p, double *norm) {
@@ -1550,10 +1665,10 @@ int lg_problem_matrix_norm(lg_env *env, lg_problem *p, double *norm) {
  * right-hand side: the Riesz maps of gradients (a mass or H1 matrix) */
 int lg_problem_solve_vector(lg_env *env, lg_problem *p, const double *rhs, double *x) {
   if (prepare_matrix(env, p)) return 1;
+  if (lg_problem_vec_set(env, p, p->b, rhs)) return 1;
   PetscScalar *b;
   PCHK(VecGetArray(p->b, &b), "VecGetArray");
-  memcpy(b, rhs, sizeof(double) * (size_t)p->N);
-  for (int i = 0; i < p->nbc; i++) b[p->bc_rows[i]] = 0;
+  for (int i = 0; i < p->nown; i++) b[p->own_rows[i] - p->lo] = 0;
   PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
   PetscErrorCode ierr;
   KSPConvergedReason reason;
@@ -1565,51 +1680,5 @@ int lg_problem_solve_vector(lg_env *env, lg_problem *p, const double *rhs, doubl
     PCHK(lg_lu_fallback(p->ksp, p->A), "the switch to MUMPS"); /* PETSc's LU failed: MUMPS, once */
   }
   if (reason < 0) { lg_seterr(env, "a solve with the problem's matrix failed: %s", ksp_reason_name(reason)); return 1; }
-  const PetscScalar *xv;
-  PCHK(VecGetArrayRead(p->x, &xv), "VecGetArrayRead");
-  memcpy(x, xv, sizeof(double) * (size_t)p->N);
-  VecRestoreArrayRead(p->x, &xv);
-  return 0;
-}
-/* ---------------------------------------------------------------- PETSc start-up */
-
-int lg_petsc_init(int *argc, char ***argv) {
-  /* OpenMPI singleton start-up is slow (a helper daemon); when not started by mpiexec,
-   * default to the in-process settings unless the user set them (PERFORMANCE-NOTES) */
-  if (!getenv("OMPI_COMM_WORLD_SIZE") && !getenv("PMI_RANK") && !getenv("PMIX_RANK")) {
-    static const char *kv[][2] = {{"OMPI_MCA_ess_singleton_isolated", "1"}, {"OMPI_MCA_btl", "self"},
-                                  {"OMPI_MCA_pml", "ob1"}, {"OMPI_MCA_mtl", "^ofi,psm2"},
-                                  {"OMPI_MCA_osc", "^ucx"}, {"OMPI_MCA_coll", "^hcoll"}};
-    for (size_t i = 0; i < sizeof kv / sizeof kv[0]; i++) setenv(kv[i][0], kv[i][1], 0);
-  }
-  PetscErrorCode ierr = PetscInitialize(argc, argv, NULL, NULL);
-  if (ierr) return 1;
-  /* errors come back as codes with messages; lugal reports them, PETSc does not print */
-  PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
-  /* output into a closed pipe (lugal run.lua | head) ends the run quietly, as any Unix
-   * tool's does, not with PETSc's signal report and an MPI_ABORT */
-  signal(SIGPIPE, SIG_DFL);
-  return 0;
-}
-
-void lg_petsc_finalize(void) {
-  PetscPopErrorHandler();
-  PetscFinalize();
-}
-
-int lg_petsc_report_unused_options(void) {
-  PetscInt n = 0;
-  char **names = NULL, **values = NULL;
-  if (PetscOptionsLeftGet(NULL, &n, &names, &values)) return 0;
-  for (PetscInt i = 0; i < n; i++)
-    fprintf(stderr, "lugal: warning: the option -%s%s%s was not used (misspelt? -help lists the options of the solvers the "
-                    "script creates)\n", names[i], values[i] ? " " : "", values[i] ? values[i] : "");
-  PetscOptionsLeftRestore(NULL, &n, &names, &values);
-  return (int)n;
-}
-
-int lg_petsc_size(void) {
-  PetscMPIInt size = 1;
-  MPI_Comm_size(PETSC_COMM_WORLD, &size);
-  return (int)size;
+  return lg_problem_vec_get(env, p, p->x, x);
 }

@@ -51,6 +51,16 @@ struct lg_problem {
   dofmap *rdm[KER_MAXFIELD], *cdm[KER_MAXFIELD];
   int rglob[KER_MAXFIELD + 1], cglob[KER_MAXFIELD + 1];
   int N;
+  /* a run of several processes (mpiexec): every rank holds the mesh, the dof maps and the
+   * discrete functions whole, and owns the rows [lo, hi) of the matrix and the vectors
+   * (MPIAIJ on PETSC_COMM_WORLD). It computes the element tensors of the items that touch
+   * its rows and adds only into them (no communication in assembly, each entry summed in
+   * the serial run's item order); solutions are gathered back to every rank's whole copy */
+  int par;
+  int lo, hi;
+  VecScatter to_all;    /* a distributed vector to every rank's whole copy */
+  Vec whole;            /* that copy */
+  double *rwhole;       /* a whole-length residual (parallel runs) */
   int nterm;
   prob_term *t;
   int nbct;
@@ -59,6 +69,11 @@ struct lg_problem {
   long bc_cap;
   PetscInt *bc_rows;
   PetscScalar *bc_vals;
+  /* the essential rows this rank owns (all of them in a serial run, where these point to
+   * bc_rows and bc_vals): what MatZeroRows and the vectors' owned parts take */
+  int nown;
+  PetscInt *own_rows;
+  PetscScalar *own_vals;
   int *bc_org;        /* per essential row: the bc term, cell and local node it came from */
   struct { int fid, param, n; expr_tape *tape; } bcd[LG_BCD_CACHE]; /* d g / d control, per bc term */
   int nbcd;
@@ -75,7 +90,10 @@ struct lg_problem {
   PetscInt nnz;
   double setup_ms[3]; /* lg_problem_setup_matrix's phases: pattern, PETSc matrix, near null space */
   int pattern_threads; /* the pattern pass's blocks, one per OpenMP thread */
-  PetscInt *csr_i, *csr_j; /* the pattern, A's own arrays (MatCreateSeqAIJWithArrays): freed after A */
+  PetscInt *csr_i, *csr_j; /* the pattern of the owned rows: A's own arrays in a serial run
+                            * (MatCreateSeqAIJWithArrays: freed after A); in a parallel one
+                            * PETSc copies them and takes csr_a after each assembly
+                            * (MatUpdateMPIAIJWithArray). Columns are global */
   PetscScalar *csr_a;
   size_t bcc_n;         /* symmetric elimination: the essential columns' entries (keep_bc_columns) */
   int *bcc_row, *bcc_col;
@@ -107,6 +125,11 @@ struct lg_problem {
   int null_rigid;     /* it is the rigid body modes */
   char prefix[64];
 };
+
+/* problem.c: the owned part of a whole vector (N values) into v, and every rank's whole
+ * copy of v (a gather in a parallel run, a copy in a serial one) */
+int lg_problem_vec_set(lg_env *env, lg_problem *p, Vec v, const double *whole);
+int lg_problem_vec_get(lg_env *env, lg_problem *p, Vec v, double *whole);
 
 /* PETSc calls inside functions that return int: on error, record PETSc's message */
 int lg_petsc_fail(lg_env *env, PetscErrorCode ierr, const char *what);

@@ -20,11 +20,13 @@
 PetscErrorCode lg_lu_default(PC pc, Mat A, PetscInt n, int dim, int nfields, int nnull) {
   PetscFunctionBeginUser;
   PetscCall(PCSetType(pc, PCLU));
-  PetscBool have = PETSC_FALSE;
+  PetscBool have = PETSC_FALSE, own = PETSC_FALSE;
   PetscCall(MatGetFactorAvailable(A, MATSOLVERMUMPS, MAT_FACTOR_LU, &have));
+  /* PETSc's own LU factors sequential matrices only (a parallel run's MPIAIJ goes to MUMPS) */
+  PetscCall(MatGetFactorAvailable(A, MATSOLVERPETSC, MAT_FACTOR_LU, &own));
   /* PETSc's LU does not pivot: a mixed system (a saddle point's zero block) needs MUMPS,
    * and so does a singular one with its null space given (MUMPS solves past null pivots) */
-  int native = !have || (nfields == 1 && nnull == 0 && n <= (dim >= 3 ? LU_NATIVE_MAX_3D : LU_NATIVE_MAX_2D));
+  int native = own && (!have || (nfields == 1 && nnull == 0 && n <= (dim >= 3 ? LU_NATIVE_MAX_3D : LU_NATIVE_MAX_2D)));
   /* no ordering is set: PETSc's LU prefers nested dissection by itself, and an ordering set
    * on the PC would be handed to MUMPS too after a switch (40 s instead of 0.3 s for one
    * factorization at 66 049 dofs, against MUMPS's own ordering) */

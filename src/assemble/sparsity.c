@@ -70,7 +70,7 @@ static void sort_row(PetscInt *v, size_t n) {
 /* the pattern passes over the node rows R0..R1 of one block (lg_problem_setup_matrix) */
 typedef struct {
   lg_problem *p;
-  int B, Nn;
+  int B, Nn, R0;         /* R0: the first owned node row; ia counts from it */
   const size_t *start, *erow_off;
   const uint32_t *erow;  /* each node row's element rows: their items, numbered across terms */
   const PetscInt *const *rnod, *const *cnod;
@@ -127,7 +127,7 @@ static void pattern_count(const pattern_in *in, pattern_block *bk) {
   size_t nnz = 0, maxlen = 0;
   for (int R = bk->R0; R < bk->R1; R++) {
     size_t len = row_nodes(in, R, &last, bk->mark, bk->nodes);
-    in->ia[(size_t)R * B] = (PetscInt)(len * (size_t)B);
+    in->ia[(size_t)(R - in->R0) * B] = (PetscInt)(len * (size_t)B);
     nnz += len * (size_t)B * (size_t)B;
     if (len > maxlen) maxlen = len;
   }
@@ -150,7 +150,8 @@ static void pattern_fill(const pattern_in *in, pattern_block *bk) {
   for (int R = bk->R0; R < bk->R1; R++) {
     size_t len = row_nodes(in, R, &last, mark, nodes);
     sort_row(nodes, len);
-    size_t nz = (size_t)in->ia[(size_t)R * B];
+    const PetscInt *iar = in->ia + (size_t)(R - in->R0) * B;
+    size_t nz = (size_t)iar[0];
     for (int a = 0; a < B; a++)
       for (size_t k = 0; k < len; k++)
         for (int b2 = 0; b2 < B; b2++) ja[nz++] = nodes[k] * B + b2;
@@ -167,7 +168,7 @@ static void pattern_fill(const pattern_in *in, pattern_block *bk) {
       r = q > in->start[R] && in->erow[q - 1] == item ? r + 1 : 0;
       while (rg[r] != R) r++;
       size_t at = t->rank_off + (local * (size_t)rn + (size_t)r) * (size_t)cn;
-      if (B == 1) p->row_start[t->erow_first + local * (size_t)rn + (size_t)r] = in->ia[R];
+      if (B == 1) p->row_start[t->erow_first + local * (size_t)rn + (size_t)r] = iar[0];
       if (w == 1)
         for (int k = 0; k < cn; k++) ((uint8_t *)p->rank)[at + k] = (uint8_t)(-2 - mark[en[k]]);
       else if (w == 2)
@@ -205,17 +206,22 @@ static int node_coordinates(lg_env *env, lg_problem *p, Vec *out) {
   int dim = p->lm->m->dim;
   const dofmap *dm = p->cdm[0];
   Vec X;
-  PCHK(VecCreateSeq(PETSC_COMM_SELF, p->N, &X), "VecCreateSeq");
-  PCHK(VecSetBlockSize(X, dim), "VecSetBlockSize");
+  PCHK(MatCreateVecs(p->A, &X, NULL), "MatCreateVecs"); /* the matrix's layout and block size */
   PetscScalar *x;
   PCHK(VecGetArray(X, &x), "VecGetArray");
   mesh *m = p->lm->m;
   for (int c = 0; c < m->ncell; c++) {
     const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
+    if (p->par) { /* a cell with none of the owned nodes */
+      int mine = 0;
+      for (int k = 0; k < dm->el.nloc; k++) mine |= cd[k * dim] >= p->lo && cd[k * dim] < p->hi;
+      if (!mine) continue;
+    }
     for (int k = 0; k < dm->el.nloc; k++) {
+      if (cd[k * dim] < p->lo || cd[k * dim] >= p->hi) continue;
       double xyz[3];
       dofmap_node_coords(dm, c, k * dim, xyz);
-      for (int j = 0; j < dim; j++) x[cd[k * dim + j]] = xyz[j];
+      for (int j = 0; j < dim; j++) x[cd[k * dim + j] - p->lo] = xyz[j];
     }
   }
   PCHK(VecRestoreArray(X, &x), "VecRestoreArray");
@@ -240,12 +246,12 @@ static int set_near_nullspace(lg_env *env, lg_problem *p) {
 int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   double t0 = now_ms();
   int N = p->N;
-  PetscCount n = 0;
+  PetscCount nentry = 0;
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
-    if (t->have_mat) n += (PetscCount)t->nitems * t->rl.size * t->cl.size;
+    if (t->have_mat) nentry += (PetscCount)t->nitems * t->rl.size * t->cl.size;
   }
-  p->ncoo = n;
+  p->ncoo = nentry;
   /* the pattern of nodes: with B components per node everywhere (a vector field, B = bs) the
    * rows and columns come in blocks of B, and the pattern is that of the node graph, each
    * entry a B x B block (9x less work for 3D elasticity, whose rows hold about 250 entries);
@@ -316,25 +322,28 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
    * column array is allocated once at its size and the second writes every column and
    * element rank at its final position (no growing array, no copies: on the virtual
    * machines this runs on, every new page of memory is expensive) */
-  PetscInt *ia = malloc(sizeof(PetscInt) * ((size_t)N + 1)), *ja = NULL;
+  /* the owned rows only (all of them in a serial run): node rows R0 .. R1 - 1 */
+  int n = p->hi - p->lo, R0 = p->lo / B, R1 = p->hi / B;
+  PetscInt *ia = malloc(sizeof(PetscInt) * ((size_t)n + 1)), *ja = NULL;
   size_t nnz = 0, maxlen = 0;
   if (!ia) bad = 1;
   /* the rows in contiguous blocks, one per OpenMP thread (balanced by element rows), each
    * with its own marker. The same pattern and ranks for any thread count */
+  size_t nown = start[R1] - start[R0];
   int nb = 1;
 #ifdef _OPENMP
-  if (nent > 200000) nb = omp_get_max_threads();
+  if (nown > 200000) nb = omp_get_max_threads();
   if (nb > 64) nb = 64;
 #endif
   p->pattern_threads = nb;
   pattern_block blk[64];
   memset(blk, 0, sizeof blk);
-  pattern_in in = {p, B, Nn, start, erow_off, erow, rnod, cnod, ia, NULL};
-  for (int b = 0, R = 0; b < nb; b++) {
+  pattern_in in = {p, B, Nn, R0, start, erow_off, erow, rnod, cnod, ia, NULL};
+  for (int b = 0, R = R0; b < nb; b++) {
     blk[b].R0 = R;
-    size_t goal = nent / (size_t)nb * (size_t)(b + 1);
-    while (R < Nn && (b == nb - 1 || start[R] < goal)) R++;
-    blk[b].R1 = b == nb - 1 ? Nn : R;
+    size_t goal = start[R0] + nown / (size_t)nb * (size_t)(b + 1);
+    while (R < R1 && (b == nb - 1 || start[R] < goal)) R++;
+    blk[b].R1 = b == nb - 1 ? R1 : R;
   }
   blk[0].mark = mark;
   blk[0].nodes = nodes;
@@ -353,15 +362,17 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   if (!bad) {
     /* row starts from the counts (ia[R * B] holds each of the node row's B rows' length) */
     size_t at = 0;
-    for (int R = 0; R < Nn; R++) {
-      PetscInt len = ia[(size_t)R * B];
-      for (int a = 0; a < B; a++, at += (size_t)len) ia[(size_t)R * B + a] = (PetscInt)at;
+    for (int R = R0; R < R1; R++) {
+      PetscInt *r = ia + (size_t)(R - R0) * B, len = r[0];
+      for (int a = 0; a < B; a++, at += (size_t)len) r[a] = (PetscInt)at;
     }
     p->rank_w = maxlen <= 256 ? 1 : maxlen <= 65536 ? 2 : 4;
     ja = malloc(sizeof(PetscInt) * (nnz ? nnz : 1));
     p->rank = malloc((size_t)p->rank_w * (nrank + 1));
     if (B == 1) p->row_start = malloc(sizeof(PetscInt) * (nerow + 1));
     if (!ja || !p->rank || (B == 1 && !p->row_start)) bad = 1;
+    /* element rows of rows another rank owns: -1, skipped by the scatter */
+    else if (B == 1 && p->par) memset(p->row_start, 0xff, sizeof(PetscInt) * (nerow + 1));
     in.ja = ja;
   }
   if (!bad) {
@@ -385,10 +396,10 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
     free(ia); free(ja);
     if (bad == 3) lg_seterr(env, "the matrix has more than 2^31 nonzeros: more than lugal indexes");
     else if (bad == 2) lg_seterr(env, "more than 2^32 items in the matrix terms: more than lugal indexes");
-    else lg_seterr(env, "out of memory for the sparsity pattern (%ld element matrix entries)", (long)n);
+    else lg_seterr(env, "out of memory for the sparsity pattern (%ld element matrix entries)", (long)nentry);
     return 1;
   }
-  ia[N] = (PetscInt)nnz;
+  ia[n] = (PetscInt)nnz;
   p->nnz = (PetscInt)nnz;
   /* the matrix is made on these arrays, not a copy of them: PETSc's own preallocation from a
    * CSR pattern inserts every entry through MatSetValues (a third of the setup of a vector
@@ -400,7 +411,8 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   if (!p->csr_a) { lg_seterr(env, "out of memory for %ld matrix values", (long)nnz); return 1; }
   int bs = lg_matrix_block_size(p);
   double t1 = now_ms();
-  PCHK(MatCreateSeqAIJWithArrays(PETSC_COMM_SELF, N, N, ia, ja, p->csr_a, &p->A), "matrix creation");
+  if (p->par) PCHK(MatCreateMPIAIJWithArrays(PETSC_COMM_WORLD, n, n, N, N, ia, ja, p->csr_a, &p->A), "matrix creation");
+  else PCHK(MatCreateSeqAIJWithArrays(PETSC_COMM_SELF, N, N, ia, ja, p->csr_a, &p->A), "matrix creation");
   if (p->prefix[0]) PCHK(MatSetOptionsPrefix(p->A, p->prefix), "MatSetOptionsPrefix");
   if (bs > 1) PCHK(MatSetBlockSize(p->A, bs), "MatSetBlockSize");
   /* row replacement must keep the pattern: the element places are reused every assembly */
@@ -461,18 +473,19 @@ int lg_problem_setup_nullspace(lg_env *env, lg_problem *p, const lg_problem_spec
       p->null_const[a] = 1;
       int bs = p->cdm[a]->bs;
       for (int j = 0; j < bs && !ierr; j++) {
-        ierr = VecCreateSeq(PETSC_COMM_SELF, p->N, &v[nv]);
+        ierr = MatCreateVecs(p->A, &v[nv], NULL);
         PetscScalar *x;
         if (!ierr) ierr = VecSet(v[nv], 0);
         if (!ierr) ierr = VecGetArray(v[nv], &x);
         if (ierr) break;
-        for (int i = j; i < p->cdm[a]->ndof; i += bs) x[p->cglob[a] + i] = 1;
+        for (int i = j; i < p->cdm[a]->ndof; i += bs)
+          if (p->cglob[a] + i >= p->lo && p->cglob[a] + i < p->hi) x[p->cglob[a] + i - p->lo] = 1;
         VecRestoreArray(v[nv], &x);
         ierr = VecNormalize(v[nv], NULL);
         nv++;
       }
     }
-    if (!ierr) ierr = MatNullSpaceCreate(PETSC_COMM_SELF, PETSC_FALSE, nv, v, &ns);
+    if (!ierr) ierr = MatNullSpaceCreate(PetscObjectComm((PetscObject)p->A), PETSC_FALSE, nv, v, &ns);
     for (int i = 0; i < nv; i++) VecDestroy(&v[i]);
     p->nnull = nv;
   }

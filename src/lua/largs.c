@@ -268,7 +268,7 @@ int finish_report(lua_State *L, const char *text, int quiet) {
   lua_pushstring(L, text);
   lua_setfield(L, -2, "text");
   push_report_meta(L);
-  if (!quiet) printf("%s\n", text);
+  if (!quiet && lg_mpi_rank() == 0) printf("%s\n", text); /* every rank made the same */
   return 1;
 }
 
@@ -316,6 +316,7 @@ static const arity arities[] = {
      {"lg", "linear_problem", 1, "lg.linear_problem"},
     {"lg", "nonlinear_problem", 1, "lg.nonlinear_problem"}, {"lg", "options", 1, "lg.options"}, {"lg", "jit", 2, "lg.jit"},
     {"lg", "jit_status", 1, "lg.jit_status"}, {"lg", "stats", 0, "lg.stats"}, {"lg", "wtime", 0, "lg.wtime"},
+    {"lg", "rank", 0, "lg.rank"}, {"lg", "size", 0, "lg.size"}, {"lg", "allreduce", 2, "lg.allreduce"},
     {"lg", "control", 4, "lg.control"}, {"lg", "functional", 1, "lg.functional"},
     {"lg", "reduced_functional", 1, "lg.reduced_functional"}, {"lg", "taylor_test", 4, "lg.taylor_test"},
     {"lg", "minimize", 2, "lg.minimize"}, {"lg", "kkt_problem", 1, "lg.kkt_problem"}, {"lg", "series", 2, "lg.series"},

@@ -97,6 +97,8 @@ extern const luaL_Reg lg_problem_lib[];
 void lg_lua_opt_register(lua_State *L);
 extern const luaL_Reg lg_opt_lib[];
 void lg_lua_operator_register(lua_State *L);
+extern const luaL_Reg lg_parallel_lib[]; /* lg.rank, lg.size, lg.allreduce */
+void lg_lua_parallel_register(lua_State *L); /* print on rank 0 under mpiexec (lg on top) */
 extern const luaL_Reg lg_operator_lib[]; /* lg.assemble */     /* lg.control, lg.functional, lg.reduced_functional, lg.taylor_test */
 
 #endif

@@ -827,7 +827,9 @@ static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, in
       lua_pop(L, 1);
     }
   }
-  int rc = mesh_write_vtu_format(m, path, nf, fl, format);
+  /* every rank holds the same mesh and fields: rank 0 writes, all learn how it went */
+  int rc = lg_mpi_rank() == 0 ? mesh_write_vtu_format(m, path, nf, fl, format) : 0;
+  rc = lg_root_result(rc, m->err, sizeof m->err);
   lua_pop(L, 2);
   if (rc) return luaL_error(L, "%s: %s", fn, m->err);
   return 0;
@@ -872,8 +874,9 @@ static int write_svg(lua_State *L, mesh *m, lg_mesh *lm, const char *path, const
   for (int i = 0; i < m->ncell; i++)
     if (isfinite(v[i])) { lo = fmin(lo, v[i]); hi = fmax(hi, v[i]); }
   if (!(lo <= hi)) lo = 0, hi = 1;
-  char err[MESH_ERRLEN];
-  if (mesh_write_svg(m, path, v, lo, hi, name, err)) return luaL_error(L, "%s: %s", fn, err);
+  char err[MESH_ERRLEN] = "";
+  int rc = lg_mpi_rank() == 0 ? mesh_write_svg(m, path, v, lo, hi, name, err) : 0;
+  if (lg_root_result(rc, err, sizeof err)) return luaL_error(L, "%s: %s", fn, err);
   return 0;
 }
 
@@ -883,7 +886,8 @@ static int mesh_write(lua_State *L) {
   const char *path = luaL_checkstring(L, 2);
   size_t l = strlen(path);
   if (l > 4 && !strcmp(path + l - 4, ".msh")) {
-    if (mesh_write_gmsh(u->lm->m, path)) return luaL_error(L, "%s: %s", fn, u->lm->m->err);
+    int rc = lg_mpi_rank() == 0 ? mesh_write_gmsh(u->lm->m, path) : 0;
+    if (lg_root_result(rc, u->lm->m->err, sizeof u->lm->m->err)) return luaL_error(L, "%s: %s", fn, u->lm->m->err);
     return 0;
   }
   if (l > 4 && !strcmp(path + l - 4, ".svg")) return write_svg(L, u->lm->m, u->lm, path, fn);
@@ -1091,7 +1095,7 @@ static int mesh_quality_report(lua_State *L) {
   const char *fn = "mesh:quality_report";
   ud_mesh *um = check_mesh(L, 1, fn);
   mesh *m = um->lm->m;
-  int quiet = lua_toboolean(L, 2);
+  int quiet = lua_toboolean(L, 2) || lg_mpi_rank() != 0; /* every rank has the same report */
   /* split the invalid cells: inverted (clearly negative) and degenerate (about zero),
    * relative to each cell's size */
   int ninverted = 0, ndegenerate = 0;
@@ -1180,8 +1184,9 @@ static int series_write(lua_State *L) {
   u->t[u->n] = t;
   if (!u->files[u->n]) return luaL_error(L, "%s: out of memory", fn);
   u->n++;
-  char err[MESH_ERRLEN];
-  if (mesh_write_pvd(u->path, u->n, u->t, u->files, err)) return luaL_error(L, "%s: %s", fn, err);
+  char err[MESH_ERRLEN] = "";
+  int rc = lg_mpi_rank() == 0 ? mesh_write_pvd(u->path, u->n, u->t, u->files, err) : 0;
+  if (lg_root_result(rc, err, sizeof err)) return luaL_error(L, "%s: %s", fn, err);
   lua_pushstring(L, file);
   return 1;
 }

@@ -87,6 +87,8 @@ int luaopen_lugal(lua_State *L) {
   set_funcs_checked(L, lg_output_lib, "lg");
   set_funcs_checked(L, lg_opt_lib, "lg");
   set_funcs_checked(L, lg_operator_lib, "lg");
+  set_funcs_checked(L, lg_parallel_lib, "lg");
+  lg_lua_parallel_register(L);
   lua_newtable(L);
   set_funcs_checked(L, lg_mesh_lib, "lg.mesh");
   lua_setfield(L, -2, "mesh");

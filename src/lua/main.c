@@ -61,13 +61,6 @@ int main(int argc, char **argv) {
   PetscOptionsHasName(NULL, NULL, "-lugal_traceback", &want_tb);
   PetscBool seen; /* read by the launcher (launch.c): used, not a misspelling */
   PetscOptionsHasName(NULL, NULL, "-lugal_hugepages", &seen);
-  if (lg_petsc_size() > 1) {
-    /* every rank would redo the whole serial run: refuse rather than mislead */
-    fprintf(stderr, "lugal: parallel runs are not supported yet (this is %d processes); run "
-                    "lugal without mpiexec\n", lg_petsc_size());
-    lg_petsc_finalize();
-    return 1;
-  }
   lua_State *L = luaL_newstate();
   if (!L) { fprintf(stderr, "lugal: cannot create a Lua state\n"); lg_petsc_finalize(); return 1; }
   luaL_openlibs(L);
@@ -88,14 +81,17 @@ int main(int argc, char **argv) {
   lua_pushcfunction(L, traceback);
   int msgh = lua_gettop(L);
   if (luaL_loadfile(L, script) != LUA_OK) {
-    fprintf(stderr, "lugal: %s\n", lua_tostring(L, -1));
+    char msg[1024];
+    snprintf(msg, sizeof msg, "lugal: %s", lua_tostring(L, -1));
+    lg_abort_run(msg);
     status = 1;
   } else {
     for (int i = 2; i < argc; i++) lua_pushstring(L, argv[i]);
     int rc = lua_pcall(L, argc - 2, 0, want_tb ? msgh : 0);
     if (rc != LUA_OK) {
       const char *msg = lua_tostring(L, -1);
-      fprintf(stderr, "%s\n", msg ? msg : "(error object is not a string)");
+      /* under mpiexec the other ranks may be waiting for this one: end them all */
+      lg_abort_run(msg ? msg : "(error object is not a string)");
       status = 1;
     }
   }

@@ -1,0 +1,111 @@
+/* parallel.c — the process layout of a run: PETSc and MPI start-up and shutdown (with fast
+ * single-process defaults), the OpenMP threads per rank, the rank and size, reductions of
+ * numbers over the ranks, results of rank-0 work (file output) shared with every rank, and
+ * ending the whole run from one rank (a Lua error on rank 1 must not leave rank 0 waiting
+ * in a collective). Data that every rank holds whole (meshes, dof maps, discrete functions)
+ * stays identical on all ranks; what is distributed lives in the problems (problem.c). */
+#include "assemble.h"
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+#include <petscsys.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+int lg_petsc_init(int *argc, char ***argv) {
+  /* OpenMPI singleton start-up is slow (a helper daemon); when not started by mpiexec,
+   * default to the in-process settings unless the user set them (PERFORMANCE-NOTES) */
+  const char *local = getenv("OMPI_COMM_WORLD_LOCAL_SIZE");
+  if (!getenv("OMPI_COMM_WORLD_SIZE") && !getenv("PMI_RANK") && !getenv("PMIX_RANK")) {
+    static const char *kv[][2] = {{"OMPI_MCA_ess_singleton_isolated", "1"}, {"OMPI_MCA_btl", "self"},
+                                  {"OMPI_MCA_pml", "ob1"}, {"OMPI_MCA_mtl", "^ofi,psm2"},
+                                  {"OMPI_MCA_osc", "^ucx"}, {"OMPI_MCA_coll", "^hcoll"}};
+    for (size_t i = 0; i < sizeof kv / sizeof kv[0]; i++) setenv(kv[i][0], kv[i][1], 0);
+  }
+#ifdef _OPENMP
+  /* ranks on one machine share its cores: each takes its share of OpenMP threads (two ranks
+   * on two cores with two threads each spin against each other), unless OMP_NUM_THREADS
+   * says otherwise */
+  if (local && atoi(local) > 1 && !getenv("OMP_NUM_THREADS")) {
+    long cores = sysconf(_SC_NPROCESSORS_ONLN);
+    int per = (int)(cores / atoi(local));
+    omp_set_num_threads(per > 1 ? per : 1);
+  }
+#else
+  (void)local;
+#endif
+  PetscErrorCode ierr = PetscInitialize(argc, argv, NULL, NULL);
+  if (ierr) return 1;
+  /* errors come back as codes with messages; lugal reports them, PETSc does not print */
+  PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
+  /* output into a closed pipe (lugal run.lua | head) ends the run quietly, as any Unix
+   * tool's does, not with PETSc's signal report and an MPI_ABORT */
+  signal(SIGPIPE, SIG_DFL);
+  return 0;
+}
+
+void lg_petsc_finalize(void) {
+  PetscPopErrorHandler();
+  PetscFinalize();
+}
+
+int lg_petsc_report_unused_options(void) {
+  PetscInt n = 0;
+  char **names = NULL, **values = NULL;
+  if (PetscOptionsLeftGet(NULL, &n, &names, &values)) return 0;
+  for (PetscInt i = 0; i < n && lg_mpi_rank() == 0; i++)
+    fprintf(stderr, "lugal: warning: the option -%s%s%s was not used (misspelt? -help lists the options of the solvers the "
+                    "script creates)\n", names[i], values[i] ? " " : "", values[i] ? values[i] : "");
+  PetscOptionsLeftRestore(NULL, &n, &names, &values);
+  return (int)n;
+}
+
+static int mpi_up(void) {
+  int up = 0, down = 0;
+  MPI_Initialized(&up);
+  if (up) MPI_Finalized(&down);
+  return up && !down;
+}
+
+int lg_petsc_size(void) { return lg_mpi_size(); }
+
+int lg_mpi_size(void) {
+  int size = 1;
+  if (mpi_up()) MPI_Comm_size(PETSC_COMM_WORLD, &size);
+  return size;
+}
+
+int lg_mpi_rank(void) {
+  int rank = 0;
+  if (mpi_up()) MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
+  return rank;
+}
+
+int lg_allreduce(double *x, int n, lg_reduce_op op) {
+  if (lg_mpi_size() == 1) return 0;
+  MPI_Op o = op == LG_SUM ? MPI_SUM : op == LG_MAX ? MPI_MAX : MPI_MIN;
+  return MPI_Allreduce(MPI_IN_PLACE, x, n, MPI_DOUBLE, o, PETSC_COMM_WORLD) != MPI_SUCCESS;
+}
+
+int lg_root_result(int rc, char *msg, size_t len) {
+  if (lg_mpi_size() == 1) return rc;
+  int v = rc;
+  if (MPI_Bcast(&v, 1, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) return 1;
+  if (v && msg && len) {
+    msg[len - 1] = 0;
+    if (MPI_Bcast(msg, (int)len, MPI_CHAR, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) return 1;
+  }
+  return v;
+}
+
+void lg_abort_run(const char *msg) {
+  int size = lg_mpi_size();
+  if (size > 1) fprintf(stderr, "lugal: rank %d of %d: %s\n", lg_mpi_rank(), size, msg);
+  else fprintf(stderr, "%s\n", msg);
+  fflush(stderr);
+  if (size > 1) MPI_Abort(PETSC_COMM_WORLD, 1);
+}

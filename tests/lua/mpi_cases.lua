@@ -1,0 +1,131 @@
+-- mpi_cases.lua — quantities that a run on any number of ranks must give as the serial run
+-- does; tests/sh/test_mpi.sh runs it serially and under mpiexec -n 2 and -n 3 and compares.
+-- Each line: name, tolerance class (direct: 1e-10 relative; iter: iterative solvers and
+-- optimization, 1e-8; count: integers within 1), value (%.17g).
+local lg = require "lugal"
+local x, y, pi = lg.x, lg.y, math.pi
+local function out(name, class, v) print(string.format("%s %s %.17g", name, class, v)) end
+
+-- the 2D Poisson demo: P1 and P2, direct solves, error norms
+for _, p in ipairs{1, 2} do
+  local mesh = lg.mesh.rectangle{nx = 24}
+  local V = lg.lagrange(p)
+  local u, v = lg.unknown(V, "u"), lg.test(V, "v")
+  local exact = lg.sin(pi*x)*lg.sin(pi*y)
+  local uh = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) - 2*pi^2*exact*v),
+                               bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}:solve()
+  local e = uh - exact
+  out("poisson_P" .. p .. "_L2", "direct", math.sqrt(lg.integrate(mesh, e^2)))
+  out("poisson_P" .. p .. "_H1", "direct", math.sqrt(lg.integrate(mesh, lg.dot(lg.grad(e), lg.grad(e)))))
+  if p == 1 then mesh:write(arg[1] .. "/poisson.vtu", {u = uh}) end
+end
+
+-- Stokes (Taylor-Hood, a mixed system with the pressure's constant as null space)
+do
+  local mesh = lg.mesh.rectangle{nx = 12}
+  local V, Q = lg.vector(lg.lagrange(2)), lg.lagrange(1)
+  local u, p = lg.unknown(V, "us"), lg.unknown(Q, "ps")
+  local v, q = lg.test(V, "vs"), lg.test(Q, "qs")
+  local eqn = lg.integral(mesh:cells(), lg.inner(lg.grad(u), lg.grad(v)) - p*lg.div(v) - q*lg.div(u))
+  local bc = {lg.essential_bc(mesh:boundary("left", "right", "bottom"), lg.dot(v, u)),
+              lg.essential_bc(mesh:boundary("top"), lg.dot(v, u - {16*x^2*(1 - x)^2, 0}))}
+  local uh, ph = lg.linear_problem{mesh = mesh, eqn = eqn, bc = bc, test = {v, q}, unknown = {u, p}, nullspace = p}:solve()
+  out("stokes_energy", "direct", 0.5*lg.integrate(mesh, lg.dot(uh, uh)))
+  out("stokes_pressure2", "direct", lg.integrate(mesh, ph*ph))
+end
+
+-- Bratu, Newton to a tight tolerance
+do
+  local mesh = lg.mesh.rectangle{nx = 16}
+  local P1 = lg.lagrange(1)
+  local u, v = lg.unknown(P1, "ub"), lg.test(P1, "vb")
+  local prob = lg.nonlinear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(u), lg.grad(v)) - 3*lg.exp(u)*v),
+                                    bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u, prefix = "bratu_"}
+  lg.options("-bratu_snes_rtol 1e-14 -bratu_snes_atol 1e-13")
+  local uh, info = prob:solve()
+  out("bratu_norm", "iter", math.sqrt(lg.integrate(mesh, uh*uh)))
+  out("bratu_newton", "count", info.iterations)
+end
+
+-- heat: a backward Euler loop, the previous step as a discrete function
+do
+  local mesh = lg.mesh.rectangle{nx = 16}
+  local P1 = lg.lagrange(1)
+  local u, v = lg.unknown(P1, "uh_"), lg.test(P1, "vh_")
+  local uold = lg.interpolate(P1, mesh, lg.sin(pi*x)*lg.sin(pi*y), "uold")
+  local dt = 0.01
+  local prob = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), (u - uold)*v + dt*lg.dot(lg.grad(u), lg.grad(v))),
+                                 bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}
+  for _ = 1, 5 do local s = prob:solve(); uold:assign(s) end
+  out("heat_norm", "direct", math.sqrt(lg.integrate(mesh, uold*uold)))
+end
+
+-- vector P2 elasticity on tetrahedra with CG + GAMG (the rigid body modes), a tight tolerance
+do
+  local mesh = lg.mesh.box{nx = 4, ny = 2, nz = 2, x1 = 2}
+  local V = lg.vector(lg.lagrange(2), 3)
+  local u, v = lg.unknown(V, "ue"), lg.test(V, "ve")
+  local function eps(w) return lg.sym(lg.grad(w)) end
+  local a = lg.integral(mesh:cells(), 2*lg.inner(eps(u), eps(v)) + lg.div(u)*lg.div(v) - lg.dot({0, 0, -0.01}, v))
+  local prob = lg.linear_problem{mesh = mesh, eqn = a, bc = lg.essential_bc(mesh:boundary("left"), lg.dot(v, u)),
+                                 test = v, unknown = u, prefix = "el_", symmetric = true}
+  lg.options("-el_ksp_type cg -el_pc_type gamg -el_ksp_rtol 1e-11")
+  local uh = prob:solve()
+  out("elasticity_norm", "iter", math.sqrt(lg.integrate(mesh, lg.dot(uh, uh))))
+end
+
+-- discontinuous Galerkin (SIPG) with interior facets
+do
+  local mesh = lg.mesh.rectangle{nx = 8}
+  local D = lg.discontinuous(1)
+  local u, v = lg.unknown(D, "ud"), lg.test(D, "vd")
+  local n, h, s = lg.normal(), 1/8, 10
+  local ue = lg.sin(pi*x)*lg.sin(pi*y)
+  local F, B = mesh:interior_facets(), mesh:boundary()
+  local eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(u), lg.grad(v)) - 2*pi^2*ue*v)
+    + lg.integral(F, -lg.dot(lg.avg(lg.grad(u)), lg.jump(v, n)) - lg.dot(lg.avg(lg.grad(v)), lg.jump(u, n)) + s/h*lg.dot(lg.jump(u, n), lg.jump(v, n)))
+    + lg.integral(B, -lg.dot(lg.grad(u), n)*v - lg.dot(lg.grad(v), n)*u + s/h*u*v)
+  local uh = lg.linear_problem{mesh = mesh, eqn = eqn, test = v, unknown = u}:solve()
+  out("dg_L2", "direct", math.sqrt(lg.integrate(mesh, (uh - ue)^2)))
+end
+
+-- an assembled operator
+do
+  local mesh = lg.mesh.rectangle{nx = 10}
+  local P2 = lg.lagrange(2)
+  local u, v = lg.unknown(P2, "ua"), lg.test(P2, "va")
+  local A = lg.assemble(lg.integral(mesh:cells(), lg.dot(lg.grad(u), lg.grad(v)) + x*u*v))
+  local w = lg.interpolate(P2, mesh, lg.sin(x + 2*y), "wa")
+  out("operator_norm", "direct", A:norm())
+  out("operator_dot", "direct", A:dot(w, w))
+  out("operator_mult", "direct", A:mult(w):norm())
+  out("operator_nnz", "count", A:nnz())
+end
+
+-- PDE-constrained optimization: the mother problem, its Taylor test and L-BFGS
+do
+  local mesh = lg.mesh.rectangle{nx = 12}
+  local P1 = lg.lagrange(1)
+  local u, v = lg.unknown(P1, "uo"), lg.test(P1, "vo")
+  local f = lg.control(P1, mesh, "fo")
+  local d = lg.sin(pi*x)*lg.sin(pi*y) / (2*pi^2)
+  local state = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) - f*v),
+                                  bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}
+  local J = lg.functional(lg.integral(mesh:cells(), 0.5*(u - d)^2 + 1e-6/2*f^2))
+  local rf = lg.reduced_functional{problem = state, functional = J, control = f}
+  local t = lg.taylor_test(rf, x*y, lg.sin(2*pi*x))
+  out("taylor_rate", "iter", t.rates1[#t.rates1])
+  -- L-BFGS's path over ~190 iterations follows rounding (the parallel direct solver's
+  -- differs in the last bits): its optimum is compared; Newton-CG's few steps are counted
+  f:assign(0*x)
+  local _, info = lg.minimize(rf, {method = "lmvm", gttol = 1e-8, gatol = 0, grtol = 0, monitor = false})
+  out("lbfgs_J", "iter", info.J)
+  f:assign(0*x)
+  _, info = lg.minimize(rf, {method = "nls", gttol = 1e-8, gatol = 0, grtol = 0, monitor = false})
+  out("newton_J", "iter", info.J)
+  out("newton_steps", "count", info.iterations)
+end
+
+-- reductions
+out("allreduce_sum", "direct", lg.allreduce(1) / lg.size())
+out("allreduce_max", "direct", lg.allreduce(lg.rank(), "max") - (lg.size() - 1))

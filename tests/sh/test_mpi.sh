@@ -1,0 +1,102 @@
+#!/bin/sh
+# test_mpi.sh BUILD — the same script on 1, 2 and 3 processes (mpiexec, as root too):
+# tests/lua/mpi_cases.lua's quantities (error norms of direct solves to 1e-10 relative;
+# iterative solves, Newton and optimization to 1e-8; iteration counts within 1), the
+# VTU it writes (rank 0 writes, the same file as the serial run's), print on rank 0 only,
+# lg.rank / lg.size / lg.allreduce, a rank with no rows (more ranks than nodes), and a Lua
+# error or a tangled mesh on one rank ending the whole run with its message and status 1
+# within seconds.
+BUILD=$1
+T=$(mktemp -d)
+trap 'rm -rf "$T"' EXIT
+fail() { echo "FAIL: $*"; exit 1; }
+command -v mpiexec > /dev/null 2>&1 || fail "mpiexec not found (Debian's openmpi-bin comes with petsc-dev)"
+# Open MPI refuses root unless told, and a 2-core machine has 2 slots
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
+ROOT=$(cd "$(dirname "$0")/../.." && pwd)
+case "$BUILD" in /*) LUGAL=$BUILD/lugal ;; *) LUGAL=$ROOT/$BUILD/lugal ;; esac
+run() { n=$1; shift; if [ "$n" = 1 ]; then "$LUGAL" "$@"; else timeout 300 mpiexec -n "$n" "$LUGAL" "$@"; fi; }
+
+for n in 1 2 3; do
+  mkdir -p "$T/$n"
+  run $n "$ROOT/tests/lua/mpi_cases.lua" "$T/$n" > "$T/out$n" 2> "$T/err$n" || { cat "$T/err$n"; fail "mpi_cases on $n ranks"; }
+done
+for n in 2 3; do
+  [ "$(wc -l < "$T/out1")" = "$(wc -l < "$T/out$n")" ] || fail "$n ranks printed $(wc -l < "$T/out$n") lines, 1 rank $(wc -l < "$T/out1") (print on rank 0 only)"
+  paste "$T/out1" "$T/out$n" | awk -v n=$n '
+    { if ($1 != $4) { print "FAIL: line " NR ": " $1 " against " $4; bad = 1; next }
+      a = $3 + 0; b = $6 + 0; d = a - b; if (d < 0) d = -d; s = a < 0 ? -a : a
+      tol = $2 == "direct" ? 1e-10 : $2 == "iter" ? 1e-8 : 1
+      ok = $2 == "count" ? d <= 1 : d <= tol * (s > 1e-300 ? s : 1)
+      if (!ok) { print "FAIL: " $1 " on " n " ranks: " b " against " a " (" $2 ")"; bad = 1 }
+      else if ($2 != "count" && d > worst) worst = d / (s > 1e-300 ? s : 1) }
+    END { if (bad) exit 1; printf "%d ranks: %d quantities as on one (largest relative difference %.1e)\n", n, NR, worst }' || exit 1
+  # rank 0 wrote it: the serial file's size (the values may differ in their last bits)
+  [ -s "$T/$n/poisson.vtu" ] || fail "no VTU written on $n ranks"
+  [ "$(wc -c < "$T/1/poisson.vtu")" = "$(wc -c < "$T/$n/poisson.vtu")" ] || fail "the VTU of $n ranks differs in size"
+done
+
+# rank, size and reductions; print on rank 0 only, lg.print_all on every rank
+cat > "$T/ranks.lua" <<'LUA'
+local lg = require "lugal"
+print("size", lg.size(), "sum", lg.allreduce(lg.rank() + 1), "min", lg.allreduce(lg.rank(), "min"),
+      "table", table.concat(lg.allreduce({1, lg.rank()}, "max"), ","))
+lg.print_all("rank", lg.rank())
+LUA
+out=$(run 3 "$T/ranks.lua") || fail "ranks.lua"
+echo "$out" | grep -q "^size	3	sum	6	min	0	table	1,2$" || fail "lg.size / lg.allreduce: $out"
+[ "$(echo "$out" | grep -c '^rank')" = 3 ] || fail "lg.print_all prints on every rank: $out"
+[ "$(echo "$out" | grep -c '^size')" = 1 ] || fail "print prints on rank 0 only: $out"
+
+# more ranks than nodes: a 1D mesh of 2 cells (3 P1 nodes) on 3 ranks... and 4
+cat > "$T/tiny.lua" <<'LUA'
+local lg = require "lugal"
+local mesh = lg.mesh.interval{n = 2}
+local P1 = lg.lagrange(1)
+local u, v = lg.unknown(P1, "u"), lg.test(P1, "v")
+local uh = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dx(u, 1)*lg.dx(v, 1) - v),
+                             bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}:solve()
+print(string.format("%.15f", uh(0.5)))
+LUA
+for n in 1 4; do
+  out=$(run $n "$T/tiny.lua") || fail "a rank without rows ($n ranks)"
+  [ "$out" = "0.125000000000000" ] || fail "u(1/2) = $out on $n ranks, expected 1/8"
+done
+
+# a Lua error on rank 1 only: the run ends with its message and status 1, no rank waits
+cat > "$T/err.lua" <<'LUA'
+local lg = require "lugal"
+if lg.rank() == 1 then error("rank one gives up") end
+local mesh = lg.mesh.rectangle{nx = 8}
+local P1 = lg.lagrange(1)
+local u, v = lg.unknown(P1, "u"), lg.test(P1, "v")
+lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(u), lg.grad(v)) - v),
+                  bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}:solve()
+LUA
+start=$(date +%s)
+run 2 "$T/err.lua" > "$T/o" 2> "$T/e"
+rc=$?
+[ $rc != 0 ] || fail "a Lua error on rank 1 exited 0"
+grep -q "rank 1 of 2: .*err.lua:2: rank one gives up" "$T/e" || { cat "$T/e"; fail "the message of rank 1"; }
+[ $(( $(date +%s) - start )) -lt 60 ] || fail "the run took more than a minute to end"
+
+# an inverted cell: every rank finds it, the run ends with the message
+cat > "$T/tangle.lua" <<'LUA'
+local lg = require "lugal"
+local mesh = lg.mesh.new{cell = "triangle", vertices = {{0, 0}, {1, 0}, {0, 1}, {1, 1}},
+                         cells = {{1, 2, 3}, {2, 3, 4}}, boundary = {all = {{1, 2}, {2, 4}, {4, 3}, {3, 1}}}}
+local P1 = lg.lagrange(1)
+local u, v = lg.unknown(P1, "u"), lg.test(P1, "v")
+lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(u), lg.grad(v)) - v),
+                  test = v, unknown = u}:solve()
+LUA
+run 2 "$T/tangle.lua" > "$T/o" 2> "$T/e" && fail "a tangled mesh ran to the end"
+grep -q "inverted or zero-size cell" "$T/e" || { cat "$T/e"; fail "the tangled mesh's message"; }
+# every example on 2 ranks (their own checks: convergence rates, reference values, Taylor
+# rates), the convergence tests on 3
+mkdir -p "$T/ex"
+for e in "$ROOT"/examples/*.lua; do
+  (cd "$T/ex" && run 2 "$e" > "$T/ex.out" 2>&1) || { tail -n 15 "$T/ex.out"; fail "example $(basename "$e") on 2 ranks"; }
+done
+(cd "$T/ex" && run 3 "$ROOT/tests/lua/test_convergence.lua" > "$T/conv.out" 2>&1) || { tail -n 15 "$T/conv.out"; fail "test_convergence on 3 ranks"; }
+echo "mpi: ranks, reductions, empty ranks, errors on one rank, every example on 2 ranks, convergence on 3: as expected"

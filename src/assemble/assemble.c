@@ -518,6 +518,45 @@ int lg_assemble_chunks(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, 
   return 0;
 }
 
+/* A parallel run's share of a list of items for a sum over the ranks (functionals and their
+ * derivatives): a contiguous slice of the items, or (interior facets, whose '-' cells follow
+ * all the '+' ones) the whole list on rank 0 and nothing elsewhere */
+static void rank_slice(int n, int interior, int *f0, int *f1) {
+  int size = lg_mpi_size(), rank = lg_mpi_rank();
+  if (interior) { *f0 = 0; *f1 = rank == 0 ? n : 0; return; }
+  *f0 = (int)((long)n * rank / size);
+  *f1 = (int)((long)n * (rank + 1) / size);
+}
+
+int lg_assemble_share(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells, const int *facets,
+                      const coef_binding *bind, double *out, lg_chunk_bufs *cb, lg_chunk_use use, void *ud, int *first) {
+  int f0 = 0, f1 = nitems, interior = k->facet == 2;
+  if (lg_mpi_size() > 1) rank_slice(nitems, interior, &f0, &f1);
+  *first = f0;
+  if (f1 <= f0) return 0;
+  /* a slice of a plain list starts at its first item; an interior list is whole or empty */
+  const int *c = cells + f0, *f = facets ? facets + f0 : NULL;
+  if (k->arity == 0) {
+    double *const buf[2] = {out, out};
+    return lg_assemble_chunks(env, lm, k, f1 - f0, c, f, bind, LG_TIER_CHECK, buf, NULL, NULL);
+  }
+  int size = k->rows.size;
+  return lg_chunk_bufs_reserve(env, cb, size) ||
+         lg_assemble_chunks(env, lm, k, f1 - f0, c, f, bind, lg_chunk_items(size), cb->b, use, ud);
+}
+
+int lg_sum_ranks(lg_env *env, double *out, size_t n, int rc) {
+  if (lg_mpi_size() == 1) return rc;
+  /* every rank reduces, failed or not, so that none waits; the message is the failed rank's */
+  double flag = rc;
+  int bad = lg_allreduce(&flag, 1, LG_MAX);
+  for (size_t at = 0; !bad && !flag && at < n; at += 1u << 26)
+    bad = lg_allreduce(out + at, (int)(n - at < (1u << 26) ? n - at : 1u << 26), LG_SUM);
+  if (bad) { lg_seterr(env, "the sum over the ranks failed"); return 1; }
+  if (flag && !rc) { lg_seterr(env, "another rank failed to evaluate the integral (its message is on stderr)"); return 1; }
+  return rc;
+}
+
 int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells,
                       const int *facets, int nbind, const coef_binding *bind, double *out) {
   (void)nbind;
@@ -750,7 +789,9 @@ int lg_integrate(lg_env *env, lg_mesh *lm, const region *r, expr *e, int order, 
   int n, *cells, *facets;
   if (lg_region_items(env, lm, r, &n, &cells, &facets)) return 1;
   *result = 0;
-  int rc = lg_assemble_items(env, lm, &kk->k, n, cells, facets, k.ncoef, bind, result);
+  int first;
+  int rc = lg_assemble_share(env, lm, &kk->k, n, cells, facets, bind, result, NULL, NULL, NULL, &first);
+  rc = lg_sum_ranks(env, result, 1, rc);
   free(cells);
   free(facets);
   if (!rc && !isfinite(*result)) {

@@ -106,6 +106,14 @@ typedef struct {
 } lg_chunk_bufs;
 int lg_chunk_bufs_reserve(lg_env *env, lg_chunk_bufs *cb, int size);
 void lg_chunk_bufs_free(lg_chunk_bufs *cb);
+/* the terms of a sum over the ranks of a parallel run (functionals, arity 0, into out[0];
+ * their derivatives, arity 1, through use): each rank runs its share of the items, a
+ * contiguous slice from *first (interior facet terms: all of them on rank 0, none elsewhere);
+ * a serial run all of them. lg_sum_ranks then sums out[0..n) over the ranks, once for all
+ * the terms, with the error of any rank */
+int lg_assemble_share(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells, const int *facets,
+                      const coef_binding *bind, double *out, lg_chunk_bufs *cb, lg_chunk_use use, void *ud, int *first);
+int lg_sum_ranks(lg_env *env, double *out, size_t n, int rc);
 /* bindings for every discrete function the kernel uses (unknowns need extra bindings) */
 int lg_bind_discrete(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nextra,
                      const coef_binding *extra, coef_binding *out);

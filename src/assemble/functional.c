@@ -168,6 +168,7 @@ typedef struct {
   const lg_form_kernels *K;
   const fk_term *t;
   double *out;
+  int first; /* the rank's first item (lg_assemble_share) */
 } vec_ctx;
 
 static int add_vector_chunk(void *ud, int first, int n, const double *v) {
@@ -176,7 +177,7 @@ static int add_vector_chunk(void *ud, int first, int n, const double *v) {
   int nl = vc->K->dm->nloc, sides = t->interior ? 2 : 1;
   for (int it = first; it < first + n; it++)
     for (int sd = 0; sd < sides; sd++) {
-      const int *cd = vc->K->dm->cell_dofs + (size_t)t->cells[sd * t->nitems + it] * nl;
+      const int *cd = vc->K->dm->cell_dofs + (size_t)t->cells[sd * t->nitems + vc->first + it] * nl;
       const double *ev = v + ((size_t)(it - first) * sides + sd) * nl;
       for (int k = 0; k < nl; k++) vc->out[cd[k]] += ev[k];
     }
@@ -187,21 +188,17 @@ int lg_form_kernels_eval(lg_env *env, lg_mesh *lm, lg_form_kernels *K, int nextr
   coef_binding bind[KER_MAXCOEF];
   if (K->arity == 0) *out = 0;
   else memset(out, 0, sizeof(double) * (size_t)K->dm->ndof);
-  for (int i = 0; i < K->n; i++) {
+  /* a parallel run: each rank its share of the items, then the sum over the ranks */
+  int rc = 0;
+  for (int i = 0; i < K->n && !rc; i++) {
     fk_term *t = &K->t[i];
-    if (lg_bind_discrete(env, lm, &t->k, nextra, extra, bind)) return 1;
-    if (K->arity == 0) {
-      if (lg_assemble_items(env, lm, &t->k, t->nitems, t->cells, t->facets, t->k.ncoef, bind, out)) return 1;
-      continue;
-    }
-    int nl = K->dm->nloc, size = (t->interior ? 2 : 1) * nl;
-    vec_ctx vc = {K, t, out};
-    if (lg_chunk_bufs_reserve(env, &K->chunks, size) ||
-        lg_assemble_chunks(env, lm, &t->k, t->nitems, t->cells, t->facets, bind, lg_chunk_items(size), K->chunks.b,
-                           add_vector_chunk, &vc))
-      return 1;
+    vec_ctx vc = {K, t, out, 0};
+    rc = lg_bind_discrete(env, lm, &t->k, nextra, extra, bind) ||
+         lg_assemble_share(env, lm, &t->k, t->nitems, t->cells, t->facets, bind, out, &K->chunks, add_vector_chunk, &vc,
+                           &vc.first);
   }
   size_t n = K->arity ? (size_t)K->dm->ndof : 1;
+  if (lg_sum_ranks(env, out, n, rc)) return 1;
   for (size_t i = 0; i < n; i++)
     if (!isfinite(out[i])) {
       lg_seterr(env, "a functional or its derivative is not finite (%g): its integrand is not finite somewhere "

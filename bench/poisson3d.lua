@@ -16,4 +16,11 @@ local prob = lg.linear_problem{mesh = mesh, test = v, unknown = u, symmetric = t
                                bc = lg.essential_bc(mesh:boundary(), v*u)}
 local uh, info = prob:solve()
 local l2 = math.sqrt(lg.integrate(mesh, (uh - exact)^2, {order = 6}))
-print(string.format("lugal poisson3d N=%d P1 dofs=%d iterations=%d L2=%.6e", N, uh:ndof(), info and info.iterations or -1, l2))
+-- the peak resident memory of the largest rank (VmHWM), and the matrix and right-hand side
+-- assembly time (its slowest rank)
+local f = io.open("/proc/self/status")
+local hwm = f and tonumber(f:read("a"):match("VmHWM:%s*(%d+)")) or 0
+if f then f:close() end
+print(string.format("lugal poisson3d N=%d P1 dofs=%d iterations=%d L2=%.6e ranks=%d assemble_s=%.3f peak_rss_mb_rank=%.0f",
+                    N, uh:ndof(), info and info.iterations or -1, l2, lg.size(),
+                    lg.allreduce(info.assemble_ms / 1000, "max"), lg.allreduce(hwm / 1024, "max")))

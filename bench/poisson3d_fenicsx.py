@@ -27,4 +27,8 @@ uh = problem.solve()
 its = problem.solver.getIterationNumber()
 e = uh - exact
 l2 = np.sqrt(mesh.comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(e**2 * ufl.dx(metadata={"quadrature_degree": 6}))), op=MPI.SUM))
-print("fenicsx poisson3d N=%d P1 dofs=%d iterations=%d L2=%.6e" % (N, V.dofmap.index_map.size_global, its, l2))
+import resource
+hwm = mesh.comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, op=MPI.MAX)
+if mesh.comm.rank == 0:
+    print("fenicsx poisson3d N=%d P1 dofs=%d iterations=%d L2=%.6e ranks=%d peak_rss_mb_rank=%.0f" % (
+        N, V.dofmap.index_map.size_global, its, l2, mesh.comm.size, hwm))

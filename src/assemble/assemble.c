@@ -463,8 +463,9 @@ int lg_assemble_chunks(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, 
 #ifdef _OPENMP
     par = total >= 256 && omp_get_max_threads() > 1;
 #endif
-    int grain = chunk / 16 > 1 ? chunk / 16 : 1;
-    (void)grain;
+#ifdef _OPENMP
+    int grain = chunk / 16 > 1 ? chunk / 16 : 1; /* items a thread takes at a time */
+#endif
 #ifdef _OPENMP
 #pragma omp parallel if (par)
 #endif

@@ -1201,7 +1201,6 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
 static PetscErrorCode snes_function(SNES snes, Vec X, Vec F, void *ctx) {
   lg_problem *p = ctx;
   (void)snes;
-  const PetscScalar *x;
   PetscScalar *f;
   if (lg_problem_vec_get(p->env, p, X, p->state)) {
     p->failed = 1;
@@ -1215,7 +1214,6 @@ static PetscErrorCode snes_function(SNES snes, Vec X, Vec F, void *ctx) {
   if (!rc)
     for (int i = 0; i < p->nown; i++) f[p->own_rows[i] - p->lo] = p->state[p->own_rows[i]] - p->own_vals[i];
   PetscCall(VecRestoreArray(F, &f));
-  (void)x;
   if (rc) {
     p->failed = 1;
     PetscCall(SNESSetFunctionDomainError(snes));

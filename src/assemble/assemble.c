@@ -465,8 +465,6 @@ int lg_assemble_chunks(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, 
 #endif
 #ifdef _OPENMP
     int grain = chunk / 16 > 1 ? chunk / 16 : 1; /* items a thread takes at a time */
-#endif
-#ifdef _OPENMP
 #pragma omp parallel if (par)
 #endif
     {
@@ -556,13 +554,6 @@ int lg_sum_ranks(lg_env *env, double *out, size_t n, int rc) {
   if (bad) { lg_seterr(env, "the sum over the ranks failed"); return 1; }
   if (flag && !rc) { lg_seterr(env, "another rank failed to evaluate the integral (its message is on stderr)"); return 1; }
   return rc;
-}
-
-int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells,
-                      const int *facets, int nbind, const coef_binding *bind, double *out) {
-  (void)nbind;
-  double *const buf[2] = {out, out};
-  return lg_assemble_chunks(env, lm, k, nitems, cells, facets, bind, LG_TIER_CHECK, buf, NULL, NULL);
 }
 
 /* ---------------------------------------------------------------- point evaluation */

@@ -84,11 +84,7 @@ typedef struct {
   const double *vals;
 } coef_binding;
 
-/* run kernel k over items, writing element tensors one after another into out (arity 1
- * and 2, nitems*size values) or summing into out[0] (arity 0) */
-int lg_assemble_items(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells,
-                      const int *facets, int nbind, const coef_binding *bind, double *out);
-/* the same a chunk of items at a time into two buffers: chunk c (items c*chunk ..) goes
+/* run kernel k over items a chunk at a time into two buffers: chunk c (items c*chunk ..) goes
  * into buf[c % 2] and is handed to use(ud, first, n, tensors) in item order on one thread
  * while the other OpenMP threads compute chunk c + 1. A non-zero return from use stops the
  * loop (its message in env). Arity 1 and 2. */
@@ -219,8 +215,6 @@ int lg_problem_tangent(lg_env *env, lg_problem *p, const double *rhs, double *du
 /* x = A^-1 rhs for the problem's matrix at u = 0 with homogeneous essential rows (Riesz
  * maps); the factorization is kept */
 int lg_problem_solve_vector(lg_env *env, lg_problem *p, const double *rhs, double *x);
-/* that matrix (a PETSc Mat, assembled), NULL with a message on failure */
-void *lg_problem_matrix(lg_env *env, lg_problem *p);
 /* y = A x with that matrix (N values each), and its Frobenius norm */
 int lg_problem_matrix_mult(lg_env *env, lg_problem *p, const double *x, double *y);
 /* the diagonal and the row sums of the problem's matrix (assembled at u = 0, essential rows
@@ -322,8 +316,6 @@ void lg_petsc_finalize(void);
 /* PETSc options that nothing used (a mistyped -ksp_tpye), one warning each on stderr, as
  * -options_left does; returns how many */
 int lg_petsc_report_unused_options(void);
-/* number of MPI processes */
-int lg_petsc_size(void);
 
 /* parallel.c: the ranks of a run (1 and 0 before MPI starts or after it ends) */
 int lg_mpi_size(void);

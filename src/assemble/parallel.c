@@ -71,8 +71,6 @@ static int mpi_up(void) {
   return up && !down;
 }
 
-int lg_petsc_size(void) { return lg_mpi_size(); }
-
 int lg_mpi_size(void) {
   int size = 1;
   if (mpi_up()) MPI_Comm_size(PETSC_COMM_WORLD, &size);

@@ -412,7 +412,7 @@ static void set_ownership(lg_problem *p) {
 
 /* a parallel run: each term keeps the items that touch an owned row (in their order, so
  * that each matrix entry sums its contributions in the serial run's order) */
-static int restrict_items(lg_env *env, lg_problem *p) {
+static void restrict_items(lg_problem *p) {
   PetscInt rg[2 * KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS];
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
@@ -430,8 +430,6 @@ static int restrict_items(lg_env *env, lg_problem *p) {
     if (two) memmove(t->cells + n, t->cells + t->nitems, sizeof(int) * (size_t)n);
     t->nitems = n;
   }
-  (void)env;
-  return 0;
 }
 
 lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
@@ -479,7 +477,7 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
   ph[1] = now_ms();
   set_ownership(p);
   if (setup_terms(env, p, s->eqn, s->test, s->unknown, s->nfield)) goto fail;
-  if (p->par && restrict_items(env, p)) goto fail;
+  if (p->par) restrict_items(p);
   ph[2] = now_ms();
   if (setup_bcs(env, p, s->bc, s->test, s->unknown, s->nfield)) goto fail;
   ph[3] = now_ms();
@@ -578,19 +576,17 @@ int lg_problem_vec_set(lg_env *env, lg_problem *p, Vec v, const double *whole) {
 }
 
 int lg_problem_vec_get(lg_env *env, lg_problem *p, Vec v, double *whole) {
-  const PetscScalar *a;
-  if (!p->par) {
-    PCHK(VecGetArrayRead(v, &a), "VecGetArrayRead");
-    memcpy(whole, a, sizeof(double) * (size_t)p->N);
-    PCHK(VecRestoreArrayRead(v, &a), "VecRestoreArrayRead");
-    return 0;
+  Vec src = v; /* a serial run's vector is whole already */
+  if (p->par) {
+    if (!p->to_all) PCHK(VecScatterCreateToAll(v, &p->to_all, &p->whole), "VecScatterCreateToAll");
+    PCHK(VecScatterBegin(p->to_all, v, p->whole, INSERT_VALUES, SCATTER_FORWARD), "VecScatterBegin");
+    PCHK(VecScatterEnd(p->to_all, v, p->whole, INSERT_VALUES, SCATTER_FORWARD), "VecScatterEnd");
+    src = p->whole;
   }
-  if (!p->to_all) PCHK(VecScatterCreateToAll(v, &p->to_all, &p->whole), "VecScatterCreateToAll");
-  PCHK(VecScatterBegin(p->to_all, v, p->whole, INSERT_VALUES, SCATTER_FORWARD), "VecScatterBegin");
-  PCHK(VecScatterEnd(p->to_all, v, p->whole, INSERT_VALUES, SCATTER_FORWARD), "VecScatterEnd");
-  PCHK(VecGetArrayRead(p->whole, &a), "VecGetArrayRead");
+  const PetscScalar *a;
+  PCHK(VecGetArrayRead(src, &a), "VecGetArrayRead");
   memcpy(whole, a, sizeof(double) * (size_t)p->N);
-  PCHK(VecRestoreArrayRead(p->whole, &a), "VecRestoreArrayRead");
+  PCHK(VecRestoreArrayRead(src, &a), "VecRestoreArrayRead");
   return 0;
 }
 
@@ -1634,7 +1630,6 @@ static int prepare_matrix(lg_env *env, lg_problem *p) {
   return 0;
 }
 
-void *lg_problem_matrix(lg_env *env, lg_problem *p) { return prepare_matrix(env, p) ? NULL : (void *)p->A; }
 
 int lg_problem_matrix_mult(lg_env *env, lg_problem *p, const double *x, double *y) {
   if (prepare_matrix(env, p)) return 1;

@@ -1,5 +1,5 @@
 /* problem_int.h — the state of a linear or nonlinear problem, shared by problem.c
- * (setup, assembly, solves, derived operators) and sparsity.c (the matrix pattern and null
+ * (setup, assembly, derived operators), problem_solve.c (solves) and sparsity.c (the matrix pattern and null
  * spaces). Internal to the assembly layer: the interface is assemble.h. */
 #ifndef LUGAL_PROBLEM_INT_H
 #define LUGAL_PROBLEM_INT_H
@@ -130,6 +130,14 @@ struct lg_problem {
  * copy of v (a gather in a parallel run, a copy in a serial one) */
 int lg_problem_vec_set(lg_env *env, lg_problem *p, Vec v, const double *whole);
 int lg_problem_vec_get(lg_env *env, lg_problem *p, Vec v, double *whole);
+
+/* problem.c, for problem_solve.c: the unknowns' coefficients bound to state (their count);
+ * the matrix at state assembled into A (before boundary conditions), the residual at
+ * state into r (N values, before boundary conditions); the essential values and rows */
+int lg_problem_bind_unknowns(lg_problem *p, const double *state, coef_binding *extra);
+int lg_problem_assemble_into(lg_env *env, lg_problem *p, const double *state, Mat A);
+int lg_problem_residual_into(lg_env *env, lg_problem *p, const double *state, double *r);
+int lg_problem_compute_bcs(lg_env *env, lg_problem *p);
 
 /* PETSc calls inside functions that return int: on error, record PETSc's message */
 int lg_petsc_fail(lg_env *env, PetscErrorCode ierr, const char *what);

@@ -1,0 +1,700 @@
+/* problem_solve.c — solving a problem on PETSc: the KSP of a linear problem (direct by
+ * default, null spaces, kept factorizations), Newton's method on SNES for a nonlinear one,
+ * the solves with the Jacobian at the solution (adjoint, tangent) and the products with the
+ * assembled matrix; every failure reported, never ignored. problem.c builds and assembles
+ * what this solves. */
+#include "problem_int.h"
+#include "solver.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <petscsnes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ---------------------------------------------------------------- solving */
+
+static const char *ksp_reason_name(KSPConvergedReason r) {
+  const char *s = KSPConvergedReasons[r];
+  return s ? s : "UNKNOWN";
+}
+
+static int make_outputs(lg_env *env, lg_problem *p, const double *x, lg_function **out) {
+  for (int a = 0; a < p->cols.n; a++) {
+    expr_func_info *fi = expr_func_get(env->c, p->cols.func[a]);
+    char nm[80];
+    snprintf(nm, sizeof nm, "%sh", fi->name);
+    out[a] = lg_function_new(env, p->lm, p->cdm[a], nm);
+    if (!out[a]) {
+      for (int b = 0; b < a; b++) lg_function_free(out[b]);
+      return 1;
+    }
+    memcpy(out[a]->x, x + p->cglob[a], sizeof(double) * (size_t)p->cdm[a]->ndof);
+  }
+  return 0;
+}
+
+/* the default solver: a direct LU factorization (solver.c chooses PETSc's or MUMPS);
+ * -ksp_type / -pc_type / -pc_factor_mat_solver_type override it */
+static int default_lu(lg_env *env, lg_problem *p, PC pc) {
+  PCHK(lg_lu_default(pc, p->A, p->N, p->lm->m->dim, p->cols.n, p->nnull), "the default LU");
+  return 0;
+}
+
+/* 0, or 1 with a message when the last factorization found more null pivots than the null
+ * space given */
+static int check_null_pivots(lg_env *env, lg_problem *p, KSP ksp) {
+  PetscInt n = lg_mumps_null_pivots(ksp);
+  if (n <= p->nnull) return 0;
+  if (p->nnull)
+    lg_seterr(env, "the matrix is singular: %d null pivots, more than the %d null space vectors given with nullspace=", (int)n,
+              p->nnull);
+  else
+    lg_seterr(env, "the matrix is singular (%d null pivot%s in the factorization): are boundary conditions missing? A "
+                   "problem determined only up to a constant (pure Neumann, an enclosed flow's pressure) takes "
+                   "nullspace = that unknown", (int)n, n == 1 ? "" : "s");
+  return 1;
+}
+
+/* a constant null space field: shift it to mean zero (Lagrange bases hold the constants:
+ * subtracting c from every dof subtracts c) */
+static void null_mean_zero(lg_env *env, lg_problem *p, double *x) {
+  for (int a = 0; a < p->cols.n; a++) {
+    if (!p->null_const[a]) continue;
+    const dofmap *dm = p->cdm[a];
+    int bs = dm->bs;
+    for (int j = 0; j < bs; j++) {
+      /* the mean of component j: the integral of the interpolant over the mesh's measure */
+      double num = 0, vol = 0;
+      mesh *m = p->lm->m;
+      if (cell_is_simplex(m->type)) {
+        for (int c = 0; c < m->ncell; c++) {
+          double J[3][3], K[3][3], det = fabs(simplex_jacobian(m, c, J, K));
+          double s = 0;
+          const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
+          for (int k = 0; k < dm->el.nloc; k++) s += x[p->cglob[a] + cd[k * bs + j]] * dm->el.mean[k];
+          num += s * det;
+          vol += det;
+        }
+      } else {
+        /* a quadrilateral's or hexahedron's Jacobian varies: a rule of the basis degree + 1 */
+        quad_rule q;
+        quad_cell(m->type, 0, dm->degree + 1, &q);
+        for (int c = 0; c < m->ncell; c++) {
+          const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
+          for (int i = 0; i < q.n; i++) {
+            double J[3][3], K[3][3], val[FEM_MAXLOC], grad[FEM_MAXLOC * 3];
+            double w = q.w[i] * fabs(cell_jacobian(m, c, q.x + m->dim * i, J, K)), s = 0;
+            lagrange_eval(&dm->el, q.x + m->dim * i, val, grad);
+            for (int k = 0; k < dm->el.nloc; k++) s += x[p->cglob[a] + cd[k * bs + j]] * val[k];
+            num += w * s;
+            vol += w;
+          }
+        }
+      }
+      double mean = vol > 0 ? num / vol : 0;
+      for (int i = j; i < dm->ndof; i += bs) x[p->cglob[a] + i] -= mean;
+    }
+  }
+  (void)env;
+}
+
+/* what a linear problem's matrix depends on: the values of the discrete functions and the
+ * parameters its kernels read, and the mesh's geometry. Equal fingerprints: the matrix, its
+ * essential rows and its factorization are still valid (a control that enters only the
+ * right-hand side costs no reassembly and no refactorization). 0 when it cannot tell. */
+static uint64_t matrix_fingerprint(lg_env *env, lg_problem *p) {
+  uint64_t h = 1469598103934665603ull;
+#define MIX(ptr, bytes)                                                          \
+  do {                                                                           \
+    const unsigned char *b_ = (const unsigned char *)(ptr);                      \
+    for (size_t i_ = 0; i_ < (bytes); i_++) h = (h ^ b_[i_]) * 1099511628211ull; \
+  } while (0)
+  MIX(&p->lm->geometry, sizeof p->lm->geometry);
+  const double *pv = expr_param_values(env->c);
+  MIX(pv, sizeof(double) * (size_t)expr_param_count(env->c));
+  coef_binding extra[2 * KER_MAXFIELD], bind[KER_MAXCOEF];
+  int ne = lg_problem_bind_unknowns(p, p->state, extra);
+  for (int i = 0; i < p->nterm; i++) {
+    prob_term *t = &p->t[i];
+    if (!t->have_mat) continue;
+    char keep[LG_ERRLEN];
+    memcpy(keep, env->err, sizeof keep);
+    int rc = lg_bind_discrete(env, p->lm, &t->kmat, ne, extra, bind);
+    memcpy(env->err, keep, sizeof keep);
+    if (rc) return 0;
+    for (int k = 0; k < t->kmat.ncoef; k++) {
+      int unknown = 0;
+      for (int a = 0; a < ne; a++) unknown |= bind[k].func == extra[a].func;
+      if (unknown) continue; /* zero in a linear problem */
+      MIX(&bind[k].vals, sizeof bind[k].vals);
+      MIX(bind[k].vals, sizeof(double) * (size_t)bind[k].dm->ndof);
+    }
+  }
+#undef MIX
+  return h | 1;
+}
+
+/* the linear solver of a linear problem: direct LU by default (default_lu), every -ksp_* and
+ * -pc_* option (with the problem's prefix) applied once */
+static int ensure_ksp(lg_env *env, lg_problem *p) {
+  if (p->ksp) return 0;
+  PCHK(KSPCreate(PetscObjectComm((PetscObject)p->A), &p->ksp), "KSPCreate");
+  if (p->prefix[0]) PCHK(KSPSetOptionsPrefix(p->ksp, p->prefix), "KSPSetOptionsPrefix");
+  PC pc;
+  PCHK(KSPSetType(p->ksp, KSPPREONLY), "KSPSetType");
+  PCHK(KSPGetPC(p->ksp, &pc), "KSPGetPC");
+  if (default_lu(env, p, pc)) return 1;
+  PCHK(KSPSetFromOptions(p->ksp), "KSPSetFromOptions");
+  return 0;
+}
+
+/* the solution's null space part: constants to mean zero, rigid motions projected out */
+static int remove_null(lg_env *env, lg_problem *p) {
+  if (!p->null) return 0;
+  if (p->null_rigid) {
+    PCHK(MatNullSpaceRemove(p->null, p->x), "MatNullSpaceRemove");
+    return 0;
+  }
+  if (p->par) { /* the mean over the whole mesh, on the whole vector */
+    if (lg_problem_vec_get(env, p, p->x, p->rwhole)) return 1;
+    null_mean_zero(env, p, p->rwhole);
+    return lg_problem_vec_set(env, p, p->x, p->rwhole);
+  }
+  PetscScalar *x;
+  PCHK(VecGetArray(p->x, &x), "VecGetArray");
+  null_mean_zero(env, p, x);
+  PCHK(VecRestoreArray(p->x, &x), "VecRestoreArray");
+  return 0;
+}
+
+/* one KSPSolve of a linear problem with its checks: 0, 1 with a message, or 2 when the
+ * default PETSc LU failed and MUMPS should try (lg_lu_fallback) */
+static int linear_solve_checked(lg_env *env, lg_problem *p, lg_solve_info *info) {
+  int native = lg_lu_native(p->ksp, p->prefix);
+  PetscErrorCode ierr = KSPSolve(p->ksp, p->b, p->x);
+  if (ierr) return lg_petsc_fail(env, ierr, "the linear solve");
+  if (check_null_pivots(env, p, p->ksp)) return 1;
+  KSPConvergedReason reason;
+  PCHK(KSPGetConvergedReason(p->ksp, &reason), "KSPGetConvergedReason");
+  PetscInt its;
+  KSPGetIterationNumber(p->ksp, &its);
+  info->iterations = info->linear_iterations = (int)its;
+  snprintf(info->reason, sizeof info->reason, "%s", ksp_reason_name(reason));
+  if (reason < 0 && native) return 2;
+  if (reason < 0) {
+    const char *hint = "";
+    if (reason == KSP_DIVERGED_PC_FAILED) {
+      PC pc;
+      PCFailedReason pr = PC_NOERROR;
+      KSPGetPC(p->ksp, &pc);
+      PCGetFailedReason(pc, &pr);
+      if (pr == PC_FACTOR_NUMERIC_ZEROPIVOT || pr == PC_FACTOR_STRUCT_ZEROPIVOT)
+        hint = " (zero pivot in the factorization: the system is singular; are boundary conditions missing?)";
+    }
+    lg_seterr(env, "the linear solve failed: %s after %d iterations%s", info->reason, info->iterations, hint);
+    return 1;
+  }
+  /* a direct solver may return garbage for a singular matrix without failing: check the
+   * residual of what it returned */
+  KSPType kt;
+  KSPGetType(p->ksp, &kt);
+  if (kt && !strcmp(kt, KSPPREONLY)) {
+    Vec r;
+    PetscReal rn, bn;
+    PCHK(VecDuplicate(p->b, &r), "VecDuplicate");
+    PCHK(MatMult(p->A, p->x, r), "MatMult");
+    PCHK(VecAXPY(r, -1.0, p->b), "VecAXPY");
+    VecNorm(r, NORM_2, &rn);
+    VecNorm(p->b, NORM_2, &bn);
+    VecDestroy(&r);
+    if (!(rn <= 1e-8 * (bn > 0 ? bn : 1))) {
+      if (native) return 2;
+      if (p->nnull)
+        lg_seterr(env, "the linear solve failed: the right side is not compatible with the null space given (the residual "
+                       "is %.2e relative to it): the data must be orthogonal to the null space (for a pure Neumann "
+                       "problem, the sources must balance the boundary fluxes)", bn > 0 ? rn / bn : rn);
+      else
+        lg_seterr(env, "the linear solve failed: the matrix is singular (the direct solver's residual is "
+                       "%.2e relative to the right side); are boundary conditions missing?", bn > 0 ? rn / bn : rn);
+      return 1;
+    }
+  }
+  return 0;
+}
+
+/* symmetric elimination zeroes the essential columns too, moving a_ij g_j to the right
+ * side; their entries (rows outside the essential set) are kept so that a solve with the
+ * same matrix and new data (an optimization's next evaluation, other essential values)
+ * reuses the factorization */
+static int keep_bc_columns(lg_env *env, lg_problem *p) {
+  int *at = malloc(sizeof(int) * ((size_t)p->N + 1));
+  if (!at) { lg_seterr(env, "out of memory"); return 1; }
+  for (int i = 0; i < p->N; i++) at[i] = -1;
+  for (int k = 0; k < p->nbc; k++) at[p->bc_rows[k]] = k;
+  size_t n = 0;
+  /* the assembled values, before the elimination: the matrix's own array in a serial run,
+   * the array PETSc copied them from in a parallel one; the owned rows, global columns */
+  const PetscScalar *av = p->csr_a;
+  for (int pass = 0; pass < 2; pass++) {
+    if (pass) {
+      free(p->bcc_row); free(p->bcc_col); free(p->bcc_val);
+      p->bcc_row = malloc(sizeof(int) * (n + 1));
+      p->bcc_col = malloc(sizeof(int) * (n + 1));
+      p->bcc_val = malloc(sizeof(double) * (n + 1));
+      if (!p->bcc_row || !p->bcc_col || !p->bcc_val) {
+        free(at);
+        p->bcc_n = 0;
+        lg_seterr(env, "out of memory");
+        return 1;
+      }
+      n = 0;
+    }
+    for (int i = p->lo; i < p->hi; i++) {
+      if (at[i] >= 0) continue;
+      for (PetscInt e = p->csr_i[i - p->lo]; e < p->csr_i[i - p->lo + 1]; e++) {
+        int k = at[p->csr_j[e]];
+        if (k < 0 || av[e] == 0) continue;
+        if (pass) { p->bcc_row[n] = i; p->bcc_col[n] = k; p->bcc_val[n] = av[e]; }
+        n++;
+      }
+    }
+  }
+  p->bcc_n = n;
+  free(at);
+  return 0;
+}
+
+/* whether a solve with a matrix other than the factored one may iterate with the old factor
+ * (solver.h, lg_keep): linear problems, unless -lugal_keep_factor 0 */
+static int keep_usable(lg_env *env, lg_problem *p) {
+  return !p->nonlinear && !env->no_keep_factor && lg_keep_usable(&p->keep, p->ksp, p->prefix);
+}
+
+/* b = -R(0): the right-hand side's owned part (a parallel run assembles the whole-length
+ * residual, its own rows complete, and keeps those) */
+static int assemble_rhs(lg_env *env, lg_problem *p) {
+  PetscScalar *b;
+  int n = p->hi - p->lo, rc;
+  if (p->par) {
+    rc = lg_problem_residual_into(env, p, p->state, p->rwhole);
+    if (rc) return 1;
+    PCHK(VecGetArray(p->b, &b), "VecGetArray");
+    for (int i = 0; i < n; i++) b[i] = -p->rwhole[p->lo + i];
+  } else {
+    PCHK(VecGetArray(p->b, &b), "VecGetArray");
+    rc = lg_problem_residual_into(env, p, p->state, b);
+    for (int i = 0; i < n; i++) b[i] = -b[i];
+  }
+  PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
+  return rc;
+}
+
+static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_info *info) {
+  double t0 = now_ms();
+  memset(p->state, 0, sizeof(double) * (size_t)p->N);
+  uint64_t fp = matrix_fingerprint(env, p);
+  int reuse = fp && fp == p->matrix_fp && p->ksp;
+  p->matrix_fp = 0;
+  if (!reuse) {
+    p->matrix_ready = 0;
+    if (lg_problem_assemble_into(env, p, p->state, p->A)) return 1;
+  }
+  PetscScalar *b;
+  int rc = assemble_rhs(env, p);
+  if (rc) return 1;
+  if (lg_problem_compute_bcs(env, p)) return 1;
+  PCHK(VecSet(p->x, 0), "VecSet");
+  PCHK(VecSetValues(p->x, p->nown, p->own_rows, p->own_vals, INSERT_VALUES), "VecSetValues");
+  PCHK(VecAssemblyBegin(p->x), "VecAssembly");
+  PCHK(VecAssemblyEnd(p->x), "VecAssembly");
+  if (reuse) { /* the rows are identity rows already: only the right-hand side's, and with
+                * symmetric elimination the eliminated columns times the values */
+    PCHK(VecGetArray(p->b, &b), "VecGetArray");
+    for (size_t i = 0; i < p->bcc_n; i++) b[p->bcc_row[i] - p->lo] -= p->bcc_val[i] * p->bc_vals[p->bcc_col[i]];
+    for (int i = 0; i < p->nown; i++) b[p->own_rows[i] - p->lo] = p->own_vals[i];
+    PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
+  } else if (p->bc_symmetric) {
+    if (keep_bc_columns(env, p)) return 1;
+    PCHK(MatZeroRowsColumns(p->A, p->nown, p->own_rows, 1.0, p->x, p->b), "MatZeroRowsColumns");
+  } else PCHK(MatZeroRows(p->A, p->nown, p->own_rows, 1.0, p->x, p->b), "MatZeroRows");
+  info->assemble_ms = now_ms() - t0;
+  t0 = now_ms();
+  if (ensure_ksp(env, p)) return 1;
+  PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
+  int refactor = !reuse || p->keep.stale;
+  PetscBool kept = PETSC_FALSE;
+  if (refactor && keep_usable(env, p)) {
+    /* a new matrix close to the factored one (the next control of an optimization) */
+    PetscInt its;
+    int guess = 0;
+    if (p->have_solution) {
+      /* the last solution with the essential values, the initial guess */
+      if (lg_problem_vec_set(env, p, p->x, p->solution)) return 1;
+      PetscScalar *xv;
+      PCHK(VecGetArray(p->x, &xv), "VecGetArray");
+      for (int i = 0; i < p->nown; i++) xv[p->own_rows[i] - p->lo] = p->own_vals[i];
+      PCHK(VecRestoreArray(p->x, &xv), "VecRestoreArray");
+      guess = 1;
+    }
+    PCHK(lg_keep_solve(&p->keep, p->ksp, p->A, p->b, p->x, 0, !reuse, guess, &kept, &its),
+         "the solve with the kept factorization");
+    if (kept) {
+      info->iterations = info->linear_iterations = (int)its;
+      snprintf(info->reason, sizeof info->reason, "CONVERGED_RTOL");
+      lg_keep_name(&p->keep, info->solver, sizeof info->solver);
+      rc = 0;
+    } /* else refactored below: the direct solve (preonly) overwrites x */
+  }
+  if (!kept) {
+    if (refactor) PCHK(lg_lu_prepare(p->ksp, p->A, p->own_rows, p->nown, p->prefix, 1), "the factorization's choice");
+    lg_mumps_detect_null_pivots(p->ksp);
+    while ((rc = linear_solve_checked(env, p, info)) == 2)
+      /* PETSc's LU (no pivoting) found a zero pivot or solved inaccurately: MUMPS, once */
+      PCHK(lg_lu_fallback(p->ksp, p->A), "the switch to MUMPS");
+    if (refactor && !rc) lg_keep_factored(&p->keep, p->ksp);
+    lg_solver_name(p->ksp, info->solver, sizeof info->solver);
+  }
+  info->solve_ms = now_ms() - t0;
+  if (rc) return 1;
+  if (remove_null(env, p)) return 1;
+  if (lg_problem_vec_get(env, p, p->x, p->solution)) return 1;
+  for (int i = 0; i < p->N; i++)
+    if (!isfinite(p->solution[i])) {
+      lg_seterr(env, "the linear solve produced non-finite values (the system is singular or the data is not finite)");
+      return 1;
+    }
+  p->have_solution = 1;
+  p->matrix_fp = fp;
+  return out ? make_outputs(env, p, p->solution, out) : 0;
+}
+
+static PetscErrorCode snes_function(SNES snes, Vec X, Vec F, void *ctx) {
+  lg_problem *p = ctx;
+  (void)snes;
+  PetscScalar *f;
+  if (lg_problem_vec_get(p->env, p, X, p->state)) {
+    p->failed = 1;
+    PetscCall(SNESSetFunctionDomainError(snes));
+    return 0;
+  }
+  PetscCall(VecGetArray(F, &f));
+  int rc = lg_problem_residual_into(p->env, p, p->state, p->par ? p->rwhole : f);
+  if (!rc && p->par)
+    for (int i = p->lo; i < p->hi; i++) f[i - p->lo] = p->rwhole[i];
+  if (!rc)
+    for (int i = 0; i < p->nown; i++) f[p->own_rows[i] - p->lo] = p->state[p->own_rows[i]] - p->own_vals[i];
+  PetscCall(VecRestoreArray(F, &f));
+  if (rc) {
+    p->failed = 1;
+    PetscCall(SNESSetFunctionDomainError(snes));
+  }
+  return 0;
+}
+
+/* the residual reduction of a step with a kept Jacobian that keeps it for the next step */
+#define LAG_CONTRACTION 0.1
+
+static PetscErrorCode snes_jacobian(SNES snes, Vec X, Mat J, Mat P, void *ctx) {
+  lg_problem *p = ctx;
+  (void)J;
+  if (lg_problem_vec_get(p->env, p, X, p->state)) {
+    p->failed = 1;
+    PetscCall(SNESSetJacobianDomainError(snes));
+    return 0;
+  }
+  /* a warm start at the last solution, whose Jacobian the adjoint assembled and factored:
+   * leave the matrix alone, so that the solver's factorization is reused, unless what else
+   * the Jacobian reads changed (a control in the stiffness, as the SIMP density: the step
+   * would be taken with the last control's Jacobian) */
+  PetscInt k = 0;
+  PetscReal fn = 0;
+  PetscCall(SNESGetIterationNumber(snes, &k));
+  PetscCall(SNESGetFunctionNorm(snes, &fn));
+  int keep = 0;
+  if (k == 0)
+    keep = p->have_solution && !p->adj_stale && P == p->A &&
+           !memcmp(p->state, p->solution, sizeof(double) * (size_t)p->N) && p->adj_fp &&
+           p->adj_fp == matrix_fingerprint(p->env, p);
+  else
+    /* a resolve near the last solution: the last Jacobian stays (its factorization too) for
+     * as long as a step with it cut |F| tenfold (chord steps, each a residual and a
+     * triangular solve instead of a factorization); a poorer step refreshes it */
+    keep = p->chord && p->lag_valid && P == p->A && fn <= LAG_CONTRACTION * p->lag_fnorm;
+  p->lag_fnorm = fn;
+  if (keep) {
+    p->lag_valid = 1;
+    return 0;
+  }
+  p->adj_stale = 1; /* A no longer holds the Jacobian at the solution */
+  p->lag_valid = 1;
+  if (lg_problem_assemble_into(p->env, p, p->state, P)) {
+    p->failed = 1;
+    PetscCall(SNESSetJacobianDomainError(snes));
+    return 0;
+  }
+  PetscCall(MatZeroRows(P, p->nown, p->own_rows, 1.0, NULL, NULL));
+  KSP ksp;
+  PetscCall(SNESGetKSP(snes, &ksp));
+  PetscCall(lg_lu_prepare(ksp, P, p->own_rows, p->nown, p->prefix, 0));
+  return 0;
+}
+
+static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg_function **out,
+                           lg_solve_info *info, int warm) {
+  double t0 = now_ms();
+  if (lg_problem_compute_bcs(env, p)) return 1;
+  double *x = p->state; /* the whole initial guess, then its owned part into p->x */
+  for (int i = 0; i < p->N; i++) x[i] = warm && p->have_solution ? p->solution[i] : 0;
+  for (int a = 0; a < p->cols.n; a++) {
+    lg_function *g = initial ? initial[a] : NULL;
+    if (!g) continue;
+    if (g->dm != p->cdm[a]) {
+      lg_seterr(env, "the initial guess for unknown %d must be a discrete function of the unknown's space (degree %d, %d "
+                     "component%s) on the problem's mesh", a + 1, p->cols.degree[a], p->cdm[a]->bs, p->cdm[a]->bs == 1 ? "" : "s");
+      return 1;
+    }
+    expr_func_info *fi = expr_func_get(env->c, p->cols.func[a]);
+    char what[96];
+    snprintf(what, sizeof what, "the initial guess for %.60s", fi ? fi->name : "the unknown");
+    if (lg_check_finite(env, p->cdm[a], g->x, what)) return 1;
+    memcpy(x + p->cglob[a], g->x, sizeof(double) * (size_t)p->cdm[a]->ndof);
+  }
+  for (int i = 0; i < p->nbc; i++) x[p->bc_rows[i]] = p->bc_vals[i];
+  if (lg_problem_vec_set(env, p, p->x, x)) return 1;
+  if (!p->snes) {
+    PCHK(SNESCreate(PetscObjectComm((PetscObject)p->A), &p->snes), "SNESCreate");
+    if (p->prefix[0]) PCHK(SNESSetOptionsPrefix(p->snes, p->prefix), "SNESSetOptionsPrefix");
+    PCHK(SNESSetFunction(p->snes, p->b, snes_function, p), "SNESSetFunction");
+    PCHK(SNESSetJacobian(p->snes, p->A, p->A, snes_jacobian, p), "SNESSetJacobian");
+    KSP ksp;
+    PC pc;
+    PCHK(SNESGetKSP(p->snes, &ksp), "SNESGetKSP");
+    PCHK(KSPSetType(ksp, KSPPREONLY), "KSPSetType");
+    PCHK(KSPGetPC(ksp, &pc), "KSPGetPC");
+    if (default_lu(env, p, pc)) return 1;
+    /* full Newton steps by default, as FEniCS and FEniCSx take (-snes_linesearch_type bt
+     * restores PETSc's backtracking): on a Neo-Hookean beam the backtracking search cut
+     * every step to a tenth after the first full step raised |F| (47 iterations instead of 3) */
+    SNESLineSearch ls;
+    PCHK(SNESGetLineSearch(p->snes, &ls), "SNESGetLineSearch");
+    PCHK(SNESLineSearchSetType(ls, SNESLINESEARCHBASIC), "SNESLineSearchSetType");
+    PCHK(SNESSetFromOptions(p->snes), "SNESSetFromOptions");
+  }
+  static PetscReal hist[128];
+  static PetscInt hits[128];
+  PCHK(SNESSetConvergenceHistory(p->snes, hist, hits, 128, PETSC_TRUE), "SNESSetConvergenceHistory");
+  p->failed = 0;
+  p->chord = warm && p->have_solution;
+  p->lag_valid = 0;
+  info->setup_ms = now_ms() - t0;
+  t0 = now_ms();
+  PetscErrorCode ierr = SNESSolve(p->snes, NULL, p->x);
+  p->chord = 0;
+  info->solve_ms = now_ms() - t0;
+  if (p->failed) {
+    /* a callback failed: at the initial guess that is the data's fault; later, Newton diverged */
+    PetscInt its = 0;
+    SNESGetIterationNumber(p->snes, &its);
+    char why[LG_ERRLEN];
+    snprintf(why, sizeof why, "%s", env->err);
+    if (its == 0) lg_seterr(env, "at the initial guess: %s", why);
+    else lg_seterr(env, "the nonlinear solve did not converge: after %d Newton iterations %s", (int)its, why);
+    return 1;
+  }
+  if (ierr) return lg_petsc_fail(env, ierr, "the nonlinear solve");
+  SNESConvergedReason reason;
+  PetscInt its, lits, nh;
+  SNESGetConvergedReason(p->snes, &reason);
+  SNESGetIterationNumber(p->snes, &its);
+  SNESGetLinearSolveIterations(p->snes, &lits);
+  PetscReal *h;
+  PetscInt *hi;
+  SNESGetConvergenceHistory(p->snes, &h, &hi, &nh);
+  info->iterations = (int)its;
+  info->linear_iterations = (int)lits;
+  info->nres = (int)(nh < 128 ? nh : 128);
+  for (int i = 0; i < info->nres; i++) info->res[i] = h[i];
+  snprintf(info->reason, sizeof info->reason, "%s", SNESConvergedReasons[reason]);
+  KSP sksp;
+  PCHK(SNESGetKSP(p->snes, &sksp), "SNESGetKSP");
+  lg_solver_name(sksp, info->solver, sizeof info->solver);
+  if (reason < 0 && lg_lu_native(sksp, p->prefix)) {
+    /* PETSc's LU (no pivoting) may be what failed: again with MUMPS, once */
+    PCHK(lg_lu_fallback(sksp, p->A), "the switch to MUMPS");
+    p->adj_stale = 1;
+    return solve_nonlinear(env, p, initial, out, info, warm);
+  }
+  if (reason < 0) {
+    lg_seterr(env, "the nonlinear solve did not converge: %s after %d Newton iterations (residual %.3e)",
+              info->reason, info->iterations, info->nres ? info->res[info->nres - 1] : NAN);
+    return 1;
+  }
+  if (lg_problem_vec_get(env, p, p->x, p->solution)) return 1;
+  p->have_solution = 1;
+  p->adj_stale = 1;
+  return out ? make_outputs(env, p, p->solution, out) : 0;
+}
+
+int lg_problem_solve(lg_env *env, lg_problem *p, lg_function **initial, lg_function **out,
+                     lg_solve_info *info) {
+  memset(info, 0, sizeof *info);
+  if (lg_mesh_check(env, p->lm)) return 1;
+  return p->nonlinear ? solve_nonlinear(env, p, initial, out, info, 0) : solve_linear(env, p, out, info);
+}
+
+int lg_problem_resolve(lg_env *env, lg_problem *p, lg_solve_info *info) {
+  memset(info, 0, sizeof *info);
+  if (lg_mesh_check(env, p->lm)) return 1;
+  return p->nonlinear ? solve_nonlinear(env, p, NULL, NULL, info, 1) : solve_linear(env, p, NULL, info);
+}
+
+
+/* the transposed Jacobian solve of the adjoint: (dR/du)^T lam = rhs at the last solution,
+ * where R is the discrete residual with the essential rows u_i - g_i. A linear problem
+ * reuses its factorization (KSPSolveTranspose); a nonlinear one assembles its Jacobian at
+ * the solution and factors it once per solution. */
+/* a solver of dR/du at the last solution: a linear problem's own (its factorization), a
+ * nonlinear problem's Jacobian assembled at the solution and factored once per solution */
+static int jacobian_solver(lg_env *env, lg_problem *p, KSP *out) {
+  if (!p->have_solution) { lg_seterr(env, "the adjoint or sensitivity needs a solved state: solve the problem first"); return 1; }
+  KSP ksp = p->ksp;
+  if (p->nonlinear) {
+    /* the SNES's own solver, so that the next Newton solve, warm-started at this solution,
+     * finds the matrix and its factorization unchanged (snes_jacobian): one factorization
+     * less per evaluation of an optimization (three were two Newton steps and this one) */
+    if (!p->snes) { lg_seterr(env, "the adjoint needs a solved state: solve the problem first"); return 1; }
+    PCHK(SNESGetKSP(p->snes, &ksp), "SNESGetKSP");
+    if (p->adj_stale) {
+      memcpy(p->state, p->solution, sizeof(double) * (size_t)p->N);
+      if (lg_problem_assemble_into(env, p, p->state, p->A)) return 1;
+      PCHK(MatZeroRows(p->A, p->nown, p->own_rows, 1.0, NULL, NULL), "MatZeroRows");
+      PCHK(KSPSetOperators(ksp, p->A, p->A), "KSPSetOperators");
+      PCHK(lg_lu_prepare(ksp, p->A, p->own_rows, p->nown, p->prefix, 0), "the factorization's choice");
+      p->adj_stale = 0;
+      p->adj_fp = matrix_fingerprint(env, p);
+    }
+  }
+  if (!ksp || (!p->nonlinear && !p->matrix_fp && !p->bc_symmetric)) {
+    /* a linear problem's matrix was reassembled since its solve (problem:assemble) */
+    lg_seterr(env, "the problem's matrix changed since its last solve: solve it again first");
+    return 1;
+  }
+  *out = ksp;
+  return 0;
+}
+
+static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, double *sol, int transpose) {
+  KSP ksp;
+  if (jacobian_solver(env, p, &ksp)) return 1;
+  double *lam = sol;
+  Vec r, l;
+  PCHK(VecDuplicate(p->b, &r), "VecDuplicate");
+  PCHK(VecDuplicate(p->b, &l), "VecDuplicate");
+  if (lg_problem_vec_set(env, p, r, rhs)) { VecDestroy(&r); VecDestroy(&l); return 1; }
+  PetscErrorCode ierr = 0;
+  KSPConvergedReason reason = KSP_CONVERGED_ITS;
+  PetscBool kept = PETSC_FALSE;
+  /* a linear problem whose state was solved with a kept factorization: the same, or a
+   * factorization of the state's matrix when the kept one has cost enough */
+  int stale = !p->nonlinear && p->keep.stale;
+  if (stale && keep_usable(env, p)) {
+    PetscInt its;
+    int guess = lg_keep_guess(&p->keep, transpose, l);
+    ierr = lg_keep_solve(&p->keep, ksp, p->A, r, l, transpose, 0, guess, &kept, &its);
+  }
+  while (!ierr && !kept) {
+    ierr = transpose ? KSPSolveTranspose(ksp, r, l) : KSPSolve(ksp, r, l);
+    reason = KSP_CONVERGED_ITS;
+    if (!ierr) KSPGetConvergedReason(ksp, &reason);
+    if (ierr || reason >= 0 || !lg_lu_native(ksp, p->prefix)) break;
+    /* PETSc's LU (no pivoting) failed: MUMPS, once */
+    if ((ierr = lg_lu_fallback(ksp, p->A))) break;
+  }
+  if (!ierr && !kept && stale) lg_keep_factored(&p->keep, ksp);
+  /* the next solve's initial guess, where a factor may be kept */
+  if (!ierr && !p->nonlinear && !env->no_keep_factor && lg_keep_applies(ksp, p->prefix))
+    ierr = lg_keep_remember(&p->keep, transpose, l);
+  if (!ierr && reason >= 0 && lg_problem_vec_get(env, p, l, lam)) ierr = PETSC_ERR_LIB;
+  VecDestroy(&r);
+  VecDestroy(&l);
+  const char *what = transpose ? "the adjoint solve" : "the sensitivity solve";
+  if (ierr) return lg_petsc_fail(env, ierr, what);
+  if (reason < 0) { lg_seterr(env, "%s failed: %s", what, ksp_reason_name(reason)); return 1; }
+  for (int i = 0; i < p->N; i++)
+    if (!isfinite(lam[i])) { lg_seterr(env, "%s produced non-finite values", what); return 1; }
+  return 0;
+}
+
+int lg_problem_adjoint(lg_env *env, lg_problem *p, const double *rhs, double *lam) {
+  return solve_with_jacobian(env, p, rhs, lam, 1);
+}
+
+int lg_problem_tangent(lg_env *env, lg_problem *p, const double *rhs, double *du) {
+  return solve_with_jacobian(env, p, rhs, du, 0);
+}
+
+static int prepare_matrix(lg_env *env, lg_problem *p) {
+  if (!p->matrix_ready) {
+    if (lg_mesh_check(env, p->lm)) return 1;
+    memset(p->state, 0, sizeof(double) * (size_t)p->N);
+    p->matrix_fp = 0; /* A no longer holds the last solve's matrix */
+    p->keep.stale = 0; /* its next solve refactors it */
+    if (lg_problem_assemble_into(env, p, p->state, p->A)) return 1;
+    if (lg_problem_compute_bcs(env, p)) return 1;
+    PCHK(MatZeroRows(p->A, p->nown, p->own_rows, 1.0, NULL, NULL), "MatZeroRows");
+    if (ensure_ksp(env, p)) return 1;
+    PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
+    PCHK(lg_lu_prepare(p->ksp, p->A, p->own_rows, p->nown, p->prefix, !p->nonlinear), "the factorization's choice");
+    p->matrix_ready = 1;
+    p->adj_stale = 1; /* a nonlinear problem's A no longer holds its Jacobian */
+  }
+  return 0;
+}
+
+
+int lg_problem_matrix_mult(lg_env *env, lg_problem *p, const double *x, double *y) {
+  if (prepare_matrix(env, p)) return 1;
+  if (lg_problem_vec_set(env, p, p->b, x)) return 1;
+  PCHK(MatMult(p->A, p->b, p->x), "MatMult");
+  return lg_problem_vec_get(env, p, p->x, y);
+}
+
+int lg_problem_matrix_diagonal(lg_env *env, lg_problem *p, double *diag, double *rowsum) {
+  if (prepare_matrix(env, p)) return 1;
+  PCHK(MatGetDiagonal(p->A, p->x), "MatGetDiagonal");
+  if (lg_problem_vec_get(env, p, p->x, diag)) return 1;
+  PCHK(MatGetRowSum(p->A, p->x), "MatGetRowSum");
+  return lg_problem_vec_get(env, p, p->x, rowsum);
+}
+
+int lg_problem_matrix_norm(lg_env *env, lg_problem *p, double *norm) {
+  if (prepare_matrix(env, p)) return 1;
+  PetscReal n;
+  PCHK(MatNorm(p->A, NORM_FROBENIUS, &n), "MatNorm");
+  *norm = n;
+  return 0;
+}
+
+/* solve the problem's matrix (assembled at u = 0, essential rows homogeneous) with a given
+ * right-hand side: the Riesz maps of gradients (a mass or H1 matrix) */
+int lg_problem_solve_vector(lg_env *env, lg_problem *p, const double *rhs, double *x) {
+  if (prepare_matrix(env, p)) return 1;
+  if (lg_problem_vec_set(env, p, p->b, rhs)) return 1;
+  PetscScalar *b;
+  PCHK(VecGetArray(p->b, &b), "VecGetArray");
+  for (int i = 0; i < p->nown; i++) b[p->own_rows[i] - p->lo] = 0;
+  PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
+  PetscErrorCode ierr;
+  KSPConvergedReason reason;
+  for (;;) {
+    ierr = KSPSolve(p->ksp, p->b, p->x);
+    if (ierr) return lg_petsc_fail(env, ierr, "a solve with the problem's matrix");
+    KSPGetConvergedReason(p->ksp, &reason);
+    if (reason >= 0 || !lg_lu_native(p->ksp, p->prefix)) break;
+    PCHK(lg_lu_fallback(p->ksp, p->A), "the switch to MUMPS"); /* PETSc's LU failed: MUMPS, once */
+  }
+  if (reason < 0) { lg_seterr(env, "a solve with the problem's matrix failed: %s", ksp_reason_name(reason)); return 1; }
+  return lg_problem_vec_get(env, p, p->x, x);
+}

@@ -496,8 +496,8 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
             p->N, (long)p->ncoo, env->nkernels, env->kernel_ms, now_ms() - t0, ph[1] - ph[0], ph[2] - ph[1],
             ph[3] - ph[2], ph[4] - ph[3]);
   if (env->verbose)
-    fprintf(stderr, "[lugal] sparsity and matrix: pattern %.2f ms (%ld nonzeros, %d thread%s), PETSc matrix %.2f ms, near null space %.2f ms\n",
-            p->setup_ms[0], (long)p->nnz, p->pattern_threads, p->pattern_threads == 1 ? "" : "s", p->setup_ms[1], p->setup_ms[2]);
+    fprintf(stderr, "[lugal] sparsity and matrix: pattern %.2f ms (%ld nonzeros, %d thread%s), PETSc matrix %.2f ms\n",
+            p->setup_ms[0], (long)p->nnz, p->pattern_threads, p->pattern_threads == 1 ? "" : "s", p->setup_ms[1]);
   return p;
 fail:
   lg_problem_free(p);

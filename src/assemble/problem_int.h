@@ -88,7 +88,7 @@ struct lg_problem {
                          * one after another made the P1 scatter latency-bound) */
   lg_chunk_bufs chunks; /* element tensors of two chunks of items (lg_assemble_chunks) */
   PetscInt nnz;
-  double setup_ms[3]; /* lg_problem_setup_matrix's phases: pattern, PETSc matrix, near null space */
+  double setup_ms[2]; /* lg_problem_setup_matrix's phases: pattern, PETSc matrix */
   int pattern_threads; /* the pattern pass's blocks, one per OpenMP thread */
   PetscInt *csr_i, *csr_j; /* the pattern of the owned rows: A's own arrays in a serial run
                             * (MatCreateSeqAIJWithArrays: freed after A); in a parallel one
@@ -123,6 +123,7 @@ struct lg_problem {
   MatNullSpace null;  /* that null space (constants of some fields, rigid body modes) */
   int null_const[KER_MAXFIELD]; /* fields whose constants are in it: their mean is set to 0 */
   int null_rigid;     /* it is the rigid body modes */
+  int near_done;      /* the rigid body modes are the matrix's near null space */
   char prefix[64];
 };
 
@@ -148,8 +149,12 @@ int lg_petsc_fail(lg_env *env, PetscErrorCode ierr, const char *what);
 void lg_term_nodes(const lg_problem *p, const prob_term *t, int it, int rows, int B, PetscInt *out);
 /* the number of components when every field has the same, else 1 */
 int lg_matrix_block_size(const lg_problem *p);
-/* the pattern, the element entries' places, the matrix and its vectors, the near null space */
+/* the pattern, the element entries' places, the matrix and its vectors */
 int lg_problem_setup_matrix(lg_env *env, lg_problem *p);
+/* a single vector field of the mesh's dimension (elasticity): the rigid body modes as the
+ * near null space, which GAMG needs to coarsen it well; set once, before the first solve
+ * with ksp, unless ksp's preconditioner is a factorization (LU, Cholesky), which ignores it */
+int lg_problem_near_nullspace(lg_env *env, lg_problem *p, KSP ksp);
 /* nullspace= */
 int lg_problem_setup_nullspace(lg_env *env, lg_problem *p, const lg_problem_spec *s);
 

@@ -147,7 +147,7 @@ static int ensure_ksp(lg_env *env, lg_problem *p) {
   PCHK(KSPGetPC(p->ksp, &pc), "KSPGetPC");
   if (default_lu(env, p, pc)) return 1;
   PCHK(KSPSetFromOptions(p->ksp), "KSPSetFromOptions");
-  return 0;
+  return lg_problem_near_nullspace(env, p, p->ksp);
 }
 
 /* the solution's null space part: constants to mean zero, rigid motions projected out */
@@ -481,6 +481,7 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
     PCHK(SNESGetLineSearch(p->snes, &ls), "SNESGetLineSearch");
     PCHK(SNESLineSearchSetType(ls, SNESLINESEARCHBASIC), "SNESLineSearchSetType");
     PCHK(SNESSetFromOptions(p->snes), "SNESSetFromOptions");
+    if (lg_problem_near_nullspace(env, p, ksp)) return 1;
   }
   static PetscReal hist[128];
   static PetscInt hits[128];

@@ -121,7 +121,7 @@ static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, smoo
   }
   work W = {fidx, cmark, cells};
   int ncell = ut_cells_around(C, &W, freev, nfree), status = 0;
-  objective ob = {C, 0, C->jscale, ncell, cells, fidx, 0, 1, o->measure, 0, freev, hv, 0, 0, {0}, cwinv, NULL};
+  objective ob = {C, 0, C->jscale, ncell, cells, fidx, 0, 1, o->measure, 0, freev, hv, 0, 0, {0}, cwinv, NULL, 0};
   ut_energy_buf eb = {0};
   double fprev = INFINITY;
   ob.qfloor = INFINITY;
@@ -135,6 +135,7 @@ static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, smoo
      * the same term over the corners, J relative to a square's or cube's corner: each is the
      * inverse mean ratio of a corner's map, which the corner condition measures too */
     ob.smooth = 2;
+    ob.stall = 1;
     ob.eb = &eb;
     ob.theta = 0;
     ob.eps = 0;
@@ -237,8 +238,10 @@ static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err
   }
   QUALITY();
   quality_stats_compute(q, m->ncell, &st);
-  if (o->global && o->energy && !(st.min > r->min_before)) {
-    /* the energy's descent lowered the minimum: the input stays (never worse than it) */
+  if (o->global && o->energy && !(st.min > r->min_before || (st.min == r->min_before && st.mean > r->mean_before))) {
+    /* the energy's descent lowered the minimum, or kept it and not raised the mean: the
+     * input stays (never worse than it). A minimum the smoother cannot move (a cell with
+     * every vertex on a fixed boundary, as in a twisted bar) keeps the mean's gain */
     memcpy(m->x, x0, sizeof(double) * (size_t)m->nvert * d);
     QUALITY();
     quality_stats_compute(q, m->ncell, &st);

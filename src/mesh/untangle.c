@@ -114,7 +114,7 @@ int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int max
     return -1;
   }
   int mem = 0, head = 0, best_bad = o->smooth ? 0 : obj_bad(o, x), start_bad = best_bad, stale = 0, worse = 0;
-  double f = eval(o, x, g, nfree), h0 = pow(o->S, 1.0 / d);
+  double f = eval(o, x, g, nfree), h0 = pow(o->S, 1.0 / d), fmark = f;
   for (it = 0; it < maxit && f > 0; it++) {
     /* two-loop recursion */
     for (int i = 0; i < n; i++) p[i] = -g[i];
@@ -185,6 +185,13 @@ int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int max
     f = fn;
     if (o->smooth) {
       if (fprev - f <= 1e-9 * fprev) break;
+      /* the energy smoother: 20 iterations that gained less than 1e-4 of it end the round
+       * (its rounds stop at a 1e-3 gain; a mesh the untangler's global energy left near
+       * the smoother's optimum otherwise spends a round of 100 iterations on nothing) */
+      if (o->stall) {
+        if (it % 20 == 0) fmark = fprev;
+        else if (it % 20 == 19 && fmark - f < 1e-4 * fmark) { it++; break; }
+      }
       continue;
     }
     if (it % 10 == 9) { /* every cell valid (stage 2) or at least β (stage 3): stop here */
@@ -446,7 +453,7 @@ static int optimize_vertices(ctx *C, work *W, double *x, double beta, int lift, 
     for (int j = 0; j < d; j++) xs[i * d + j] = x[(size_t)freev[i] * d + j];
   }
   int ncell = ut_cells_around(C, W, freev, nfree);
-  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx, lift, 0, 0, 0, freev, NULL, 0, 0, {0}, NULL, NULL};
+  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx, lift, 0, 0, 0, freev, NULL, 0, 0, {0}, NULL, NULL, 0};
   double f = 0;
   int it = nfree ? ut_lbfgs(&o, x, freev, nfree, maxit, &f) : 0;
   int total = 0;

@@ -50,6 +50,7 @@ typedef struct {
   double eps, theta, winv[9];
   const double *cwinv; /* per corner W⁻¹ (ncell*ncorner*d*d) of its reference shape, or NULL: winv */
   struct ut_energy_buf *eb; /* smooth == 2: the threaded evaluation's buffers (ut_energy_eval) */
+  int stall;        /* smooth == 2 (the energy smoother): 20 iterations that gain less than 1e-4 end the run */
 } objective;
 
 /* per cell: its energy and vertex gradients; per free vertex: its (cell, vertex) slots */

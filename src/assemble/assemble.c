@@ -65,6 +65,7 @@ void lg_mesh_free(lg_mesh *lm) {
     for (int i = 0; i < 4; i++)
       for (int j = 0; j < FEM_MAXBS; j++) dofmap_free(lm->dm[d][i][j]);
   lg_locator_free(lm->locator);
+  free(lm->part);
   mesh_free(lm->m);
   free(lm);
 }

@@ -46,6 +46,7 @@ typedef struct {
   dofmap *dm[2][4][FEM_MAXBS]; /* by continuity (0 Lagrange, 1 discontinuous), degree and number of components - 1 */
   int validated;        /* the validity check passed for the current geometry */
   unsigned long geometry; /* counts geometry changes (lg_mesh_changed) */
+  int *part, nparts;    /* the cells' parts for a run of nparts ranks (partition.c), or NULL */
 } lg_mesh;
 
 typedef struct {
@@ -67,6 +68,11 @@ void lg_mesh_changed(lg_mesh *lm);
 /* the dof map of Lagrange degree `degree` (0..3) with ncomp components (1..3), continuous or
  * discontinuous (disc = 1: every cell owns its nodes) */
 dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree, int ncomp, int disc);
+/* partition.c: the part (0 .. nparts - 1) of every cell for a run of nparts ranks, kept with
+ * the mesh (its topology does not change): by -lugal_partitioner (a MatPartitioningType,
+ * PTScotch by default, or "natural"), rank 0's result on every rank. *part is NULL when the
+ * cells stay in their order (natural, one part, or fewer than 8 cells per part) */
+int lg_mesh_partition(lg_env *env, lg_mesh *lm, int nparts, const int **part);
 /* the validity check run before assembly */
 int lg_mesh_check(lg_env *env, lg_mesh *lm);
 
@@ -174,6 +180,9 @@ typedef struct {
 int lg_problem_solve(lg_env *env, lg_problem *p, lg_function **initial, lg_function **out,
                      lg_solve_info *info);
 int lg_problem_size(const lg_problem *p);
+/* this rank's share of the problem's matrix: its rows, and the columns its rows read that
+ * other ranks own (the values a product with the matrix receives), -1 before the matrix */
+void lg_problem_ownership(const lg_problem *p, int *rows, long *ghosts);
 /* out[i] may be NULL: the solution is kept in the problem (lg_problem_solution) either way */
 
 /* ---- what derived operators (adjoints, sensitivities) need of a problem */
@@ -326,6 +335,17 @@ int lg_allreduce(double *x, int n, lg_reduce_op op);
 /* rank 0's rc (and, when it is non-zero, its message in msg) on every rank: the outcome of
  * work that rank 0 alone does for all (file output) */
 int lg_root_result(int rc, char *msg, size_t len);
+/* the outcome of work every rank does for its part (each rank's rc, its message in msg):
+ * non-zero on every rank when any failed, with the message of the lowest failing rank */
+int lg_any_result(int rc, char *msg, size_t len);
+/* the fields on a mesh that every rank holds whole, written for ParaView: npiece 0, a .vtu
+ * that rank 0 writes; else a .pvtu of npiece pieces <stem>_p<k>.vtu beside it (k = 0 ..
+ * npiece - 1: the parts of the mesh's partition into npiece, lg_mesh_partition, or when it
+ * keeps the numbering's order the cells by their lowest vertex, the vertices split into
+ * npiece runs), rank r writing the
+ * pieces k = r mod size and rank 0 the collection. Every rank gets the outcome, and the
+ * message (MESH_ERRLEN) in err */
+int lg_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_field *fl, int format, int npiece, char *err);
 /* the end of the whole run from one rank: the message, with the rank, on stderr, then
  * MPI_Abort so that no rank waits for this one (a single process only prints) */
 void lg_abort_run(const char *msg);

@@ -221,7 +221,6 @@ static int write_step(opt_ctx *C, int it) {
   for (int i = 0; i < C->nc && !c; i++)
     if (lg_reduced_control(C->rf, i)->kind == LG_CONTROL_FIELD) c = lg_reduced_control(C->rf, i);
   if (!c) return 0;
-  mesh *m = c->f->mesh->m;
   mesh_field fl[LG_MAXCONTROL];
   int nf = 0;
   for (int i = 0; i < C->nc; i++) {
@@ -237,15 +236,16 @@ static int write_step(opt_ctx *C, int it) {
   char **nf2 = realloc(C->files, sizeof(char *) * (size_t)(C->nstep + 1));
   if (nf2) C->files = nf2;
   if (!file || !nt || !nf2) { free(file); lg_seterr(C->env, "out of memory"); return 1; }
-  snprintf(file, l + 32, "%.*s_%04d.vtu", (int)(l > 4 ? l - 4 : l), C->o->series, it);
-  /* every rank holds the same controls: rank 0 writes */
-  int rc = lg_mpi_rank() == 0 ? mesh_write_vtu(m, file, nf, fl) : 0;
-  if (lg_root_result(rc, m->err, sizeof m->err)) { lg_seterr(C->env, "%s", m->err); free(file); return 1; }
+  /* every rank holds the same controls: a .vtu by rank 0, or under mpiexec a .pvtu of a
+   * piece per rank */
+  int size = lg_mpi_size();
+  snprintf(file, l + 32, "%.*s_%04d.%s", (int)(l > 4 ? l - 4 : l), C->o->series, it, size > 1 ? "pvtu" : "vtu");
+  char err[MESH_ERRLEN] = "";
+  if (lg_write_vtu(C->env, c->f->mesh, file, nf, fl, VTU_BINARY, size > 1 ? size : 0, err)) { lg_seterr(C->env, "%s", err); free(file); return 1; }
   C->files[C->nstep] = file;
   C->times[C->nstep] = it;
   C->nstep++;
-  char err[MESH_ERRLEN] = "";
-  rc = lg_mpi_rank() == 0 ? mesh_write_pvd(C->o->series, C->nstep, C->times, C->files, err) : 0;
+  int rc = lg_mpi_rank() == 0 ? mesh_write_pvd(C->o->series, C->nstep, C->times, C->files, err) : 0;
   if (lg_root_result(rc, err, sizeof err)) { lg_seterr(C->env, "%s", err); return 1; }
   return 0;
 }

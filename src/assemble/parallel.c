@@ -1,7 +1,8 @@
 /* parallel.c — the process layout of a run: PETSc and MPI start-up and shutdown (with fast
  * single-process defaults), the OpenMP threads per rank, the rank and size, reductions of
- * numbers over the ranks, results of rank-0 work (file output) shared with every rank, and
- * ending the whole run from one rank (a Lua error on rank 1 must not leave rank 0 waiting
+ * numbers over the ranks, the outcome of rank-0 work or of every rank's part of it shared
+ * with every rank, ParaView output written so (a .vtu by rank 0, the pieces of a .pvtu by
+ * every rank), and ending the whole run from one rank (a Lua error on rank 1 must not leave rank 0 waiting
  * in a collective). Data that every rank holds whole (meshes, dof maps, discrete functions)
  * stays identical on all ranks; what is distributed lives in the problems (problem.c). */
 #include "assemble.h"
@@ -98,6 +99,64 @@ int lg_root_result(int rc, char *msg, size_t len) {
     if (MPI_Bcast(msg, (int)len, MPI_CHAR, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) return 1;
   }
   return v;
+}
+
+int lg_any_result(int rc, char *msg, size_t len) {
+  int size = lg_mpi_size();
+  if (size == 1) return rc;
+  int mine = rc ? lg_mpi_rank() : size, first = size;
+  if (MPI_Allreduce(&mine, &first, 1, MPI_INT, MPI_MIN, PETSC_COMM_WORLD) != MPI_SUCCESS) return 1;
+  if (first == size) return 0;
+  if (msg && len) {
+    msg[len - 1] = 0;
+    if (MPI_Bcast(msg, (int)len, MPI_CHAR, first, PETSC_COMM_WORLD) != MPI_SUCCESS) return 1;
+  }
+  return 1;
+}
+
+int lg_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_field *fl, int format, int npiece, char *err) {
+  mesh *m = lm->m;
+  if (!npiece) {
+    int rc = lg_mpi_rank() == 0 ? mesh_write_vtu_format(m, path, nf, fl, format) : 0;
+    if (rc) snprintf(err, MESH_ERRLEN, "%s", m->err);
+    return lg_root_result(rc, err, MESH_ERRLEN);
+  }
+  const int *part = NULL;
+  if (lg_mesh_partition(env, lm, npiece, &part)) {
+    snprintf(err, MESH_ERRLEN, "%.*s", MESH_ERRLEN - 1, env->err);
+    return 1;
+  }
+  size_t len = strlen(path) + 24;
+  int rank = lg_mpi_rank(), size = lg_mpi_size(), rc = 0;
+  char **names = calloc((size_t)npiece, sizeof(char *));
+  int *cells = malloc(sizeof(int) * ((size_t)m->ncell + 1));
+  if (!names || !cells) rc = 1, snprintf(err, MESH_ERRLEN, "out of memory for %d pieces", npiece);
+  for (int k = 0; k < npiece && !rc; k++) {
+    if (!(names[k] = malloc(len))) {
+      rc = 1, snprintf(err, MESH_ERRLEN, "out of memory for %d piece names", npiece);
+      break;
+    }
+    snprintf(names[k], len, "%.*s_p%d.vtu", (int)(strlen(path) - 5), path, k);
+  }
+  for (int k = rank; k < npiece && !rc; k += size) {
+    int nc = 0;
+    if (part) {
+      for (int c = 0; c < m->ncell; c++)
+        if (part[c] == k) cells[nc++] = c;
+    } else /* the numbering's order: the cells by their lowest vertex, the vertices in runs */
+      for (int c = 0; c < m->ncell; c++) {
+        int lo = m->cells[(size_t)c * (size_t)m->nvc];
+        for (int j = 1; j < m->nvc; j++) lo = m->cells[(size_t)c * (size_t)m->nvc + (size_t)j] < lo ? m->cells[(size_t)c * (size_t)m->nvc + (size_t)j] : lo;
+        if ((long)lo * npiece / m->nvert == k) cells[nc++] = c;
+      }
+    if ((rc = mesh_write_vtu_piece(m, names[k], nf, fl, format, cells, nc))) snprintf(err, MESH_ERRLEN, "%s", m->err);
+  }
+  free(cells);
+  rc = lg_any_result(rc, err, MESH_ERRLEN);
+  if (!rc) rc = lg_root_result(rank == 0 ? mesh_write_pvtu(path, nf, fl, npiece, names, err) : 0, err, MESH_ERRLEN);
+  for (int k = 0; names && k < npiece; k++) free(names[k]);
+  free(names);
+  return rc;
 }
 
 void lg_abort_run(const char *msg) {

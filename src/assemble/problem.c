@@ -398,14 +398,54 @@ int lg_problem_compute_bcs(lg_env *env, lg_problem *p) {
   return own_bcs(env, p);
 }
 
-/* the rows this rank owns: whole nodes (B rows each), the nodes split evenly over the ranks
- * in their global order (a serial run owns them all) */
-static void set_ownership(lg_problem *p) {
+/* the rows this rank owns: whole nodes (B rows each). A serial run owns them all; a
+ * parallel one the nodes of its part of the mesh's cells (lg_mesh_partition; a node of
+ * cells in several parts goes to the lowest), numbered part after part in PETSc (perm),
+ * or with the cells in their order the nodes split evenly in the problem's order */
+static int set_ownership(lg_env *env, lg_problem *p) {
   int size = lg_mpi_size(), rank = lg_mpi_rank(), B = lg_matrix_block_size(p), Nn = p->N / B;
   p->par = size > 1;
-  long first = (long)Nn * rank / size, last = (long)Nn * (rank + 1) / size;
-  p->lo = (int)first * B;
-  p->hi = (int)last * B;
+  p->pB = B;
+  const int *part = NULL;
+  if (p->par && lg_mesh_partition(env, p->lm, size, &part)) return 1;
+  if (!part) {
+    long first = (long)Nn * rank / size, last = (long)Nn * (rank + 1) / size;
+    p->lo = (int)first * B;
+    p->hi = (int)last * B;
+    return 0;
+  }
+  int *owner = malloc(sizeof(int) * ((size_t)Nn + 1)), *start = calloc((size_t)size + 1, sizeof(int));
+  p->perm = malloc(sizeof(int) * ((size_t)Nn + 1));
+  p->iperm = malloc(sizeof(int) * ((size_t)Nn + 1));
+  if (!owner || !start || !p->perm || !p->iperm) {
+    free(owner); free(start);
+    lg_seterr(env, "out of memory for the rows' order of %d nodes", Nn);
+    return 1;
+  }
+  for (int i = 0; i < Nn; i++) owner[i] = size;
+  const mesh *m = p->lm->m;
+  for (int a = 0; a < p->cols.n; a++) {
+    const dofmap *dm = p->cdm[a];
+    for (int c = 0; c < m->ncell; c++)
+      for (int k = 0; k < dm->nloc; k++) {
+        int node = (p->cglob[a] + dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k]) / B;
+        if (part[c] < owner[node]) owner[node] = part[c];
+      }
+  }
+  for (int i = 0; i < Nn; i++) {
+    if (owner[i] == size) owner[i] = 0; /* in no cell (cannot happen with these dof maps) */
+    start[owner[i] + 1]++;
+  }
+  for (int r = 0; r < size; r++) start[r + 1] += start[r];
+  p->lo = start[rank] * B;
+  p->hi = start[rank + 1] * B;
+  for (int i = 0; i < Nn; i++) {
+    p->perm[i] = start[owner[i]]++;
+    p->iperm[p->perm[i]] = i;
+  }
+  free(owner);
+  free(start);
+  return 0;
 }
 
 /* a parallel run: each term keeps the items that touch an owned row (in their order, so
@@ -416,7 +456,7 @@ static void restrict_items(lg_problem *p) {
     prob_term *t = &p->t[i];
     int n = 0, two = t->interior;
     for (int it = 0; it < t->nitems; it++) {
-      lg_term_nodes(p, t, it, 1, 1, rg);
+      lg_term_nodes(p, t, it, 1, 1, 1, rg);
       int mine = 0;
       for (int k = 0; k < t->rl.size && !mine; k++) mine = rg[k] >= p->lo && rg[k] < p->hi;
       if (!mine) continue;
@@ -473,7 +513,7 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
   p->N = p->rglob[s->nfield];
   if (!s->eqn || s->eqn->n == 0) { lg_seterr(env, "the equation has no integrals"); goto fail; }
   ph[1] = now_ms();
-  set_ownership(p);
+  if (set_ownership(env, p)) goto fail;
   if (setup_terms(env, p, s->eqn, s->test, s->unknown, s->nfield)) goto fail;
   if (p->par) restrict_items(p);
   ph[2] = now_ms();
@@ -525,6 +565,8 @@ void lg_problem_free(lg_problem *p) {
     free(p->bcd[k].tape);
   }
   free(p->bct);
+  free(p->perm);
+  free(p->iperm);
   if (p->own_rows != p->bc_rows) free(p->own_rows);
   if (p->own_vals != p->bc_vals) free(p->own_vals);
   free(p->bc_rows);
@@ -557,6 +599,23 @@ void lg_problem_free(lg_problem *p) {
 
 int lg_problem_size(const lg_problem *p) { return p->N; }
 
+void lg_problem_ownership(const lg_problem *p, int *rows, long *ghosts) {
+  *rows = p->hi - p->lo;
+  *ghosts = -1;
+  int B = p->pB, Nn = p->N / B, R0 = p->lo / B, R1 = p->hi / B;
+  char *seen = p->csr_i ? calloc((size_t)Nn + 1, 1) : NULL;
+  if (!seen) return;
+  /* the pattern's columns are nodes (B > 1: every B-th entry of a row is a node's first) */
+  long n = 0;
+  for (int R = R0; R < R1; R++)
+    for (PetscInt e = p->csr_i[(size_t)(R - R0) * B]; e < p->csr_i[(size_t)(R - R0) * B + 1]; e += B) {
+      PetscInt c = p->csr_j[e] / B;
+      if ((c < R0 || c >= R1) && !seen[c]) { seen[c] = 1; n++; }
+    }
+  free(seen);
+  *ghosts = n * B;
+}
+
 long lg_problem_nnz(const lg_problem *p) {
   MatInfo info;
   if (!p->A || MatGetInfo(p->A, MAT_GLOBAL_SUM, &info)) return -1;
@@ -568,7 +627,9 @@ long lg_problem_nnz(const lg_problem *p) {
 int lg_problem_vec_set(lg_env *env, lg_problem *p, Vec v, const double *whole) {
   PetscScalar *a;
   PCHK(VecGetArray(v, &a), "VecGetArray");
-  memcpy(a, whole + p->lo, sizeof(double) * (size_t)(p->hi - p->lo));
+  if (p->perm)
+    for (int r = p->lo; r < p->hi; r++) a[r - p->lo] = whole[lg_problem_row(p, r)];
+  else memcpy(a, whole + p->lo, sizeof(double) * (size_t)(p->hi - p->lo));
   PCHK(VecRestoreArray(v, &a), "VecRestoreArray");
   return 0;
 }
@@ -583,7 +644,9 @@ int lg_problem_vec_get(lg_env *env, lg_problem *p, Vec v, double *whole) {
   }
   const PetscScalar *a;
   PCHK(VecGetArrayRead(src, &a), "VecGetArrayRead");
-  memcpy(whole, a, sizeof(double) * (size_t)p->N);
+  if (p->perm)
+    for (int r = 0; r < p->N; r++) whole[lg_problem_row(p, r)] = a[r];
+  else memcpy(whole, a, sizeof(double) * (size_t)p->N);
   PCHK(VecRestoreArrayRead(src, &a), "VecRestoreArrayRead");
   return 0;
 }
@@ -602,11 +665,13 @@ static int own_bcs(lg_env *env, lg_problem *p) {
     if (!p->own_rows || !p->own_vals) { lg_seterr(env, "out of memory"); return 1; }
   }
   p->nown = 0;
-  for (int i = 0; i < p->nbc; i++)
-    if (p->bc_rows[i] >= p->lo && p->bc_rows[i] < p->hi) {
-      p->own_rows[p->nown] = p->bc_rows[i];
+  for (int i = 0; i < p->nbc; i++) {
+    PetscInt r = lg_petsc_row(p, p->bc_rows[i]);
+    if (r >= p->lo && r < p->hi) {
+      p->own_rows[p->nown] = r;
       p->own_vals[p->nown++] = p->bc_vals[i];
     }
+  }
   return 0;
 }
 
@@ -706,7 +771,7 @@ typedef struct {
     PetscInt R[KER_MAXFIELD * FEM_MAXLOC * 2];                                                      \
     for (int e = 0; e < n; e++, rk += rn * cn) {                                                    \
       const double *ve = v + (size_t)e * size;                                                      \
-      lg_term_nodes(p, t, first + e, 1, B, R);                                                      \
+      lg_term_nodes(p, t, first + e, 1, B, 1, R);                                                   \
       for (int i = 0; i < rn; i++) {                                                                \
         if (R[i] < R0 || R[i] >= R1) continue; /* another rank's row */                             \
         const T *ri = rk + i * cn;                                                                  \
@@ -755,7 +820,7 @@ static int scatter_vector_chunk(void *ud, int first, int n, const double *v) {
   PetscInt rg[2 * KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS];
   for (int e = 0; e < n; e++) {
     const double *ev = v + (size_t)e * size;
-    lg_term_nodes(p, t, first + e, 1, 1, rg);
+    lg_term_nodes(p, t, first + e, 1, 1, 0, rg);
     for (int k = 0; k < size; k++) sc->r[rg[k]] += ev[k];
   }
   return 0;
@@ -823,7 +888,7 @@ int lg_problem_dense_matrix(lg_env *env, lg_problem *p, double *dense, int n) {
     const PetscInt *cols;
     const PetscScalar *vals;
     PCHK(MatGetRow(p->A, i, &nc, &cols, &vals), "MatGetRow");
-    for (PetscInt k = 0; k < nc; k++) dense[(size_t)i * n + cols[k]] = vals[k];
+    for (PetscInt k = 0; k < nc; k++) dense[(size_t)lg_problem_row(p, i) * n + lg_problem_row(p, cols[k])] = vals[k];
     PCHK(MatRestoreRow(p->A, i, &nc, &cols, &vals), "MatRestoreRow");
   }
   /* every rank its rows: the whole matrix on every rank */

@@ -58,6 +58,14 @@ struct lg_problem {
    * the serial run's item order); solutions are gathered back to every rank's whole copy */
   int par;
   int lo, hi;
+  /* the rows' order in PETSc: the nodes (pB rows each) of every part of the mesh's partition
+   * (partition.c) one part after another, each in the problem's own order, so that a rank
+   * owns its cells' nodes (a node of cells in several parts goes to the lowest). perm: the
+   * problem's node -> PETSc's, iperm its inverse; NULL where the orders are the same (a
+   * serial run, or -lugal_partitioner natural). The whole-length arrays (state, solution,
+   * rwhole, bc_rows) stay in the problem's order; the matrix's pattern, own_rows and the
+   * PETSc vectors are in PETSc's */
+  int *perm, *iperm, pB;
   VecScatter to_all;    /* a distributed vector to every rank's whole copy */
   Vec whole;            /* that copy */
   double *rwhole;       /* a whole-length residual (parallel runs) */
@@ -127,6 +135,14 @@ struct lg_problem {
   char prefix[64];
 };
 
+/* row i of the problem's order in PETSc's, and back (problem_int.h, perm) */
+static inline PetscInt lg_petsc_row(const lg_problem *p, PetscInt i) {
+  return p->perm ? (PetscInt)p->perm[i / p->pB] * p->pB + i % p->pB : i;
+}
+static inline PetscInt lg_problem_row(const lg_problem *p, PetscInt r) {
+  return p->iperm ? (PetscInt)p->iperm[r / p->pB] * p->pB + r % p->pB : r;
+}
+
 /* problem.c: the owned part of a whole vector (N values) into v, and every rank's whole
  * copy of v (a gather in a parallel run, a copy in a serial one) */
 int lg_problem_vec_set(lg_env *env, lg_problem *p, Vec v, const double *whole);
@@ -145,8 +161,9 @@ int lg_petsc_fail(lg_env *env, PetscErrorCode ierr, const char *what);
 #define PCHK(call, what) do { PetscErrorCode ierr_ = (call); if (ierr_) { lg_petsc_fail(env, ierr_, what); return 1; } } while (0)
 
 /* sparsity.c */
-/* the global nodes (B components per node) of item it of term t, rows or columns */
-void lg_term_nodes(const lg_problem *p, const prob_term *t, int it, int rows, int B, PetscInt *out);
+/* the global nodes (B components per node) of item it of term t, rows or columns, in the
+ * problem's order (petsc = 0: the whole-length arrays') or PETSc's (1: the matrix's) */
+void lg_term_nodes(const lg_problem *p, const prob_term *t, int it, int rows, int B, int petsc, PetscInt *out);
 /* the number of components when every field has the same, else 1 */
 int lg_matrix_block_size(const lg_problem *p);
 /* the pattern, the element entries' places, the matrix and its vectors */

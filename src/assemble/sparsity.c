@@ -15,9 +15,10 @@
 
 /* the global nodes of item it of term t for the rows (or the columns) of its element
  * matrix, in its order: with B components per node (every field a B-vector) the dof / B of
- * every B-th local dof, with B = 1 the global dofs. An interior facet term's second half of
- * fields are the problem's fields again, on the '-' cell */
-void lg_term_nodes(const lg_problem *p, const prob_term *t, int it, int rows, int B, PetscInt *out) {
+ * every B-th local dof, with B = 1 the global dofs; numbered in PETSc's order when petsc is
+ * set. An interior facet term's second half of fields are the problem's fields again, on
+ * the '-' cell */
+void lg_term_nodes(const lg_problem *p, const prob_term *t, int it, int rows, int B, int petsc, PetscInt *out) {
   const field_layout *l = rows ? &t->rl : &t->cl;
   dofmap *const *dm = rows ? p->rdm : p->cdm;
   const int *glob = rows ? p->rglob : p->cglob;
@@ -26,27 +27,33 @@ void lg_term_nodes(const lg_problem *p, const prob_term *t, int it, int rows, in
     int f = a % nf, c = t->interior && a >= nf ? t->cells[t->nitems + it] : t->cells[it];
     const int nl = l->nloc[a], *cd = dm[f]->cell_dofs + (size_t)c * nl;
     PetscInt *o = out + l->off[a] / B, g = glob[f];
-    if (B == 1)
+    if (petsc && p->perm) { /* B is the matrix's block size or 1 */
+      if (B == 1)
+        for (int k = 0; k < nl; k++) o[k] = lg_petsc_row(p, g + cd[k]);
+      else
+        for (int k = 0, i = 0; k < nl; k += B, i++) o[i] = p->perm[(g + cd[k]) / B];
+    } else if (B == 1)
       for (int k = 0; k < nl; k++) o[k] = g + cd[k];
     else
       for (int k = 0, i = 0; k < nl; k += B, i++) o[i] = (g + cd[k]) / B;
   }
 }
 
-/* every item's row (or column) nodes of term t, one after another: the dof map's own cell
- * list where that is what they are (one field numbered from 0 over every cell in order,
- * B = 1: a Laplacian's, 25 MB not copied on 1.57 M tetrahedra), *owned = 0; else gathered */
+/* every item's row (or column) nodes of term t in PETSc's order, one after another: the dof
+ * map's own cell list where that is what they are (one field numbered from 0 over every
+ * cell in order, B = 1, no reordering: a Laplacian's, 25 MB not copied on 1.57 M
+ * tetrahedra), *owned = 0; else gathered */
 static const PetscInt *term_node_lists(const lg_problem *p, const prob_term *t, int rows, int B, int *owned) {
   const field_layout *l = rows ? &t->rl : &t->cl;
   const dofmap *dm = (rows ? p->rdm : p->cdm)[0];
-  int direct = sizeof(PetscInt) == sizeof(int) && B == 1 && l->n == 1 && !t->interior &&
+  int direct = sizeof(PetscInt) == sizeof(int) && B == 1 && l->n == 1 && !t->interior && !p->perm &&
                (rows ? p->rglob : p->cglob)[0] == 0 && l->nloc[0] == dm->nloc && t->nitems == dm->m->ncell;
   for (int it = 0; direct && it < t->nitems; it++) direct = t->cells[it] == it;
   *owned = !direct;
   if (direct) return (const PetscInt *)dm->cell_dofs;
   int n = l->size / B;
   PetscInt *o = malloc(sizeof(PetscInt) * ((size_t)t->nitems * (size_t)n + 1));
-  for (int it = 0; o && it < t->nitems; it++) lg_term_nodes(p, t, it, rows, B, o + (size_t)it * n);
+  for (int it = 0; o && it < t->nitems; it++) lg_term_nodes(p, t, it, rows, B, 1, o + (size_t)it * n);
   return o;
 }
 
@@ -211,14 +218,18 @@ static int node_coordinates(lg_env *env, lg_problem *p, Vec *out) {
     const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
     if (p->par) { /* a cell with none of the owned nodes */
       int mine = 0;
-      for (int k = 0; k < dm->el.nloc; k++) mine |= cd[k * dim] >= p->lo && cd[k * dim] < p->hi;
+      for (int k = 0; k < dm->el.nloc; k++) {
+        PetscInt r = lg_petsc_row(p, cd[k * dim]);
+        mine |= r >= p->lo && r < p->hi;
+      }
       if (!mine) continue;
     }
     for (int k = 0; k < dm->el.nloc; k++) {
-      if (cd[k * dim] < p->lo || cd[k * dim] >= p->hi) continue;
+      PetscInt r = lg_petsc_row(p, cd[k * dim]); /* the node's first row, in the matrix's order */
+      if (r < p->lo || r >= p->hi) continue;
       double xyz[3];
       dofmap_node_coords(dm, c, k * dim, xyz);
-      for (int j = 0; j < dim; j++) x[cd[k * dim + j] - p->lo] = xyz[j];
+      for (int j = 0; j < dim; j++) x[r + j - p->lo] = xyz[j];
     }
   }
   PCHK(VecRestoreArray(X, &x), "VecRestoreArray");
@@ -482,8 +493,10 @@ int lg_problem_setup_nullspace(lg_env *env, lg_problem *p, const lg_problem_spec
         if (!ierr) ierr = VecSet(v[nv], 0);
         if (!ierr) ierr = VecGetArray(v[nv], &x);
         if (ierr) break;
-        for (int i = j; i < p->cdm[a]->ndof; i += bs)
-          if (p->cglob[a] + i >= p->lo && p->cglob[a] + i < p->hi) x[p->cglob[a] + i - p->lo] = 1;
+        for (int i = j; i < p->cdm[a]->ndof; i += bs) {
+          PetscInt r = lg_petsc_row(p, p->cglob[a] + i);
+          if (r >= p->lo && r < p->hi) x[r - p->lo] = 1;
+        }
         VecRestoreArray(v[nv], &x);
         ierr = VecNormalize(v[nv], NULL);
         nv++;

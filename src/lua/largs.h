@@ -32,7 +32,8 @@ typedef struct { expr *e; } ud_expr;
 typedef struct { lg_function *f; } ud_func;
 typedef struct { form *f; } ud_form;
 typedef struct { lg_problem *p; int nfield; int nonlinear; } ud_prob;
-typedef struct { char path[512]; int n, cap; double *t; char **files; int format; } ud_series; /* format: VTU_* */
+/* format: VTU_*; pieces: 0 for .vtu steps, else .pvtu steps of so many pieces */
+typedef struct { char path[512]; int n, cap; double *t; char **files; int format, pieces; } ud_series;
 typedef struct { lg_env *env; int owns_petsc; } ud_env;
 typedef struct { int n; int measure; double *v; } ud_qarray; /* v from mesh_big_alloc */
 

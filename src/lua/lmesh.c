@@ -734,15 +734,24 @@ static int mesh_set_coordinates(lua_State *L) {
   return 0;
 }
 
-/* the VTU of a mesh with the fields of the table at tidx; every buffer lives in a table on
- * the stack until the file is written (never under user-named keys in the registry) */
-/* the options table {format = "binary" | "ascii" | "zlib"} at index idx (argument argno for
- * messages), or none: a VTU_* */
-static int vtu_format_opt(lua_State *L, int idx, const char *fn, int argno) {
+/* the options table {format = "binary" | "ascii" | "zlib", pieces = n} at index idx
+ * (argument argno for messages), or none: a VTU_*, and n in *pieces (0 when not given) */
+static int vtu_format_opt(lua_State *L, int idx, const char *fn, int argno, int *pieces) {
+  *pieces = 0;
   if (lua_isnoneornil(L, idx)) return VTU_BINARY;
-  if (!lua_istable(L, idx)) return typeerror(L, fn, argno, "a table of options {format = \"binary\", \"ascii\" or \"zlib\"}");
-  static const char *const keys[] = {"format", NULL};
+  if (!lua_istable(L, idx))
+    return typeerror(L, fn, argno, "a table of options {format = \"binary\", \"ascii\" or \"zlib\", pieces = n}");
+  static const char *const keys[] = {"format", "pieces", NULL};
   check_keys(L, idx, fn, keys);
+  if (lua_getfield(L, idx, "pieces") != LUA_TNIL) {
+    int isnum;
+    lua_Integer n = lua_tointegerx(L, -1, &isnum);
+    if (!isnum || n < 1 || n > 1000000)
+      return luaL_error(L, "%s: option 'pieces' must be a whole number from 1 to 1000000, got %s", fn,
+                        isnum ? lua_tostring(L, -1) : luaL_typename(L, -1));
+    *pieces = (int)n;
+  }
+  lua_pop(L, 1);
   const char *f = opt_str(L, idx, "format", "binary", fn);
   if (!strcmp(f, "binary")) return VTU_BINARY;
   if (!strcmp(f, "ascii")) return VTU_ASCII;
@@ -750,7 +759,10 @@ static int vtu_format_opt(lua_State *L, int idx, const char *fn, int argno) {
   return luaL_error(L, "%s: option 'format' must be \"binary\", \"ascii\" or \"zlib\", got \"%s\"", fn, f);
 }
 
-static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, int tidx, const char *fn, int format) {
+/* the fields of the table at tidx on the mesh into a .vtu (npiece 0: rank 0 writes the
+ * whole mesh) or a .pvtu of npiece pieces; every buffer lives in a table on the stack until
+ * the files are written (never under user-named keys in the registry) */
+static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, int tidx, const char *fn, int format, int npiece) {
   int nf = 0;
   if (!lua_isnoneornil(L, tidx)) {
     if (!lua_istable(L, tidx)) return typeerror(L, fn, tidx, "a table {name = function or array}");
@@ -827,11 +839,10 @@ static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, in
       lua_pop(L, 1);
     }
   }
-  /* every rank holds the same mesh and fields: rank 0 writes, all learn how it went */
-  int rc = lg_mpi_rank() == 0 ? mesh_write_vtu_format(m, path, nf, fl, format) : 0;
-  rc = lg_root_result(rc, m->err, sizeof m->err);
+  char err[MESH_ERRLEN] = "";
+  int rc = lg_write_vtu(get_env(L), lm, path, nf, fl, format, npiece, err);
   lua_pop(L, 2);
-  if (rc) return luaL_error(L, "%s: %s", fn, m->err);
+  if (rc) return luaL_error(L, "%s: %s", fn, err);
   return 0;
 }
 
@@ -891,11 +902,14 @@ static int mesh_write(lua_State *L) {
     return 0;
   }
   if (l > 4 && !strcmp(path + l - 4, ".svg")) return write_svg(L, u->lm->m, u->lm, path, fn);
-  if (!(l > 4 && !strcmp(path + l - 4, ".vtu")))
-    return luaL_error(L, "%s: argument 1 must end in .vtu (ParaView), .msh (Gmsh) or .svg (a 2D picture), got \"%s\"", fn, path);
-  int format = vtu_format_opt(L, 4, fn, 3);
+  int pvtu = l > 5 && !strcmp(path + l - 5, ".pvtu");
+  if (!pvtu && !(l > 4 && !strcmp(path + l - 4, ".vtu")))
+    return luaL_error(L, "%s: argument 1 must end in .vtu or .pvtu (ParaView), .msh (Gmsh) or .svg (a 2D picture), got \"%s\"",
+                      fn, path);
+  int pieces, format = vtu_format_opt(L, 4, fn, 3, &pieces);
+  if (pieces && !pvtu) return luaL_error(L, "%s: option 'pieces' is for a .pvtu, got \"%s\"", fn, path);
   lua_settop(L, 3);
-  write_fields(L, u->lm->m, u->lm, path, 3, fn, format);
+  write_fields(L, u->lm->m, u->lm, path, 3, fn, format, pvtu ? (pieces ? pieces : lg_mpi_size()) : 0);
   return 0;
 }
 
@@ -1155,10 +1169,12 @@ static int l_series(lua_State *L) {
   size_t l = strlen(path);
   if (l < 5 || strcmp(path + l - 4, ".pvd")) return luaL_error(L, "lg.series: argument 1 must be a path ending in .pvd, got \"%s\"", path);
   if (l >= 500) return luaL_error(L, "lg.series: path too long");
-  int format = vtu_format_opt(L, 2, "lg.series", 2);
+  int pieces, format = vtu_format_opt(L, 2, "lg.series", 2, &pieces);
   ud_series *u = new_ud(L, sizeof *u, MT_SERIES, 0, NULL);
   snprintf(u->path, sizeof u->path, "%s", path);
   u->format = format;
+  /* under mpiexec each step is a .pvtu of a piece per rank */
+  u->pieces = pieces ? pieces : lg_mpi_size() > 1 ? lg_mpi_size() : 0;
   return 1;
 }
 
@@ -1178,8 +1194,8 @@ static int series_write(lua_State *L) {
     u->cap = cap;
   }
   char file[600];
-  snprintf(file, sizeof file, "%.*s_%04d.vtu", (int)(strlen(u->path) - 4), u->path, u->n);
-  write_fields(L, um->lm->m, um->lm, file, 3, fn, u->format);
+  snprintf(file, sizeof file, "%.*s_%04d.%s", (int)(strlen(u->path) - 4), u->path, u->n, u->pieces ? "pvtu" : "vtu");
+  write_fields(L, um->lm->m, um->lm, file, 3, fn, u->format, u->pieces);
   u->files[u->n] = strdup(file);
   u->t[u->n] = t;
   if (!u->files[u->n]) return luaL_error(L, "%s: out of memory", fn);

@@ -449,6 +449,18 @@ static int prob_size(lua_State *L) {
   return 1;
 }
 
+/* problem:ownership(): {rows = this rank's rows, ghosts = the other ranks' columns they read} */
+static int prob_ownership(lua_State *L) {
+  ud_prob *u = luaL_checkudata(L, 1, MT_PROB);
+  int rows;
+  long ghosts;
+  lg_problem_ownership(u->p, &rows, &ghosts);
+  lua_createtable(L, 0, 2);
+  lua_pushinteger(L, rows); lua_setfield(L, -2, "rows");
+  lua_pushinteger(L, ghosts); lua_setfield(L, -2, "ghosts");
+  return 1;
+}
+
 static int l_options(lua_State *L) {
   const char *s = luaL_checkstring(L, 1);
   if (PetscOptionsInsertString(NULL, s)) return luaL_error(L, "lg.options: PETSc could not parse \"%s\"", s);
@@ -540,7 +552,8 @@ void lg_lua_problem_register(lua_State *L) {
   lua_pop(L, 1);
   static const luaL_Reg prob_mm[] = {{"__gc", prob_gc}, {NULL, NULL}};
   static const luaL_Reg prob_methods[] = {{"solve", prob_solve}, {"matrix", prob_matrix}, {"assemble", prob_assemble},
-                                          {"size", prob_size}, {"sensitivity", prob_sensitivity}, {NULL, NULL}};
+                                          {"size", prob_size}, {"sensitivity", prob_sensitivity},
+                                          {"ownership", prob_ownership}, {NULL, NULL}};
   new_mt(L, MT_PROB, prob_mm, prob_methods);
 }
 

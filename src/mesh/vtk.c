@@ -1,5 +1,6 @@
 /* vtk.c — output for ParaView: the VTK XML unstructured-grid (.vtu) writer with point and
- * cell data, and .pvd collections for time series. Written through outfile.h. */
+ * cell data, of a whole mesh or of a piece of its cells, the parallel collections of pieces
+ * (.pvtu), and .pvd collections for time series. Written through outfile.h. */
 #include "mesh.h"
 #include "outfile.h"
 
@@ -131,19 +132,39 @@ static void write_array(FILE *f, int binary, int kind, long n, int per_line, val
   fputc('\n', f);
 }
 
-static double get_field(const void *ud, long i) { return ((const mesh_field *)ud)->val[i]; }
-static double get_point(const void *ud, long i) {
-  const mesh *m = ud;
-  long v = i / 3;
-  int d = (int)(i % 3);
-  return d < m->dim ? m->x[(size_t)v * (size_t)m->dim + (size_t)d] : 0.0;
+/* what the value functions read: nc cells of a mesh (cl: their ids, NULL for every cell)
+ * and the vertices they use (pv: the piece's nv vertices in increasing order, NULL for
+ * every vertex; lv: each vertex's place in pv), and one field */
+typedef struct {
+  const mesh *m;
+  int nc, nv;
+  const int *cl, *pv, *lv;
+  const mesh_field *fl;
+} piece;
+
+static double get_field(const void *ud, long i) {
+  const piece *p = ud;
+  long nc = p->fl->ncomp, e = i / nc, j = i % nc;
+  long at = p->fl->on_cells ? (p->cl ? p->cl[e] : e) : p->pv ? p->pv[e] : e;
+  return p->fl->val[at * nc + j];
 }
-static double get_conn(const void *ud, long i) { return ((const mesh *)ud)->cells[i]; }
-static double get_offset(const void *ud, long i) { return (double)((i + 1) * ((const mesh *)ud)->nvc); }
+static double get_point(const void *ud, long i) {
+  const piece *p = ud;
+  long v = p->pv ? p->pv[i / 3] : i / 3;
+  int d = (int)(i % 3);
+  return d < p->m->dim ? p->m->x[(size_t)v * (size_t)p->m->dim + (size_t)d] : 0.0;
+}
+static double get_conn(const void *ud, long i) {
+  const piece *p = ud;
+  size_t nvc = (size_t)p->m->nvc, c = p->cl ? (size_t)p->cl[i / (long)nvc] : (size_t)i / nvc;
+  int v = p->m->cells[c * nvc + (size_t)i % nvc];
+  return p->lv ? p->lv[v] : v;
+}
+static double get_offset(const void *ud, long i) { return (double)((i + 1) * ((const piece *)ud)->m->nvc); }
 static double get_type(const void *ud, long i) {
   static const int vtk_type[] = {5, 9, 10, 12, 3};
   (void)i;
-  return vtk_type[((const mesh *)ud)->type];
+  return vtk_type[((const piece *)ud)->m->type];
 }
 
 /* one array in the file's format; 1 out of memory */
@@ -153,7 +174,7 @@ static int put_array(FILE *f, int format, int kind, long n, int per_line, value_
   return 0;
 }
 
-int mesh_write_vtu_format(mesh *m, const char *path, int nfield, const mesh_field *fl, int format) {
+static int write_piece(mesh *m, const char *path, int nfield, const mesh_field *fl, int format, piece *pc) {
   outfile o;
   if (format != VTU_BINARY && format != VTU_ASCII && format != VTU_ZLIB) {
     snprintf(m->err, MESH_ERRLEN, "unknown VTU format %d", format);
@@ -166,7 +187,7 @@ int mesh_write_vtu_format(mesh *m, const char *path, int nfield, const mesh_fiel
   fprintf(f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" "
              "byte_order=\"LittleEndian\"%s%s>\n<UnstructuredGrid>\n"
              "<Piece NumberOfPoints=\"%d\" NumberOfCells=\"%d\">\n", bin ? " header_type=\"UInt64\"" : "",
-          format == VTU_ZLIB ? " compressor=\"vtkZLibDataCompressor\"" : "", m->nvert, m->ncell);
+          format == VTU_ZLIB ? " compressor=\"vtkZLibDataCompressor\"" : "", pc->nv, pc->nc);
   for (int pass = 0; pass < 2; pass++) {
     int any = 0;
     for (int i = 0; i < nfield; i++) any |= fl[i].on_cells == pass;
@@ -177,20 +198,21 @@ int mesh_write_vtu_format(mesh *m, const char *path, int nfield, const mesh_fiel
       fprintf(f, "<DataArray type=\"Float64\" Name=\"");
       xml_name(f, fl[i].name);
       fprintf(f, "\" NumberOfComponents=\"%d\" format=\"%s\">\n", fl[i].ncomp, fmt);
-      long n = (long)(pass ? m->ncell : m->nvert) * fl[i].ncomp;
-      oom |= put_array(f, format, 0, n, fl[i].ncomp, get_field, &fl[i]);
+      long n = (long)(pass ? pc->nc : pc->nv) * fl[i].ncomp;
+      pc->fl = &fl[i];
+      oom |= put_array(f, format, 0, n, fl[i].ncomp, get_field, pc);
       fprintf(f, "</DataArray>\n");
     }
     fprintf(f, pass ? "</CellData>\n" : "</PointData>\n");
   }
   fprintf(f, "<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"%s\">\n", fmt);
-  oom |= put_array(f, format, 0, 3L * m->nvert, 3, get_point, m);
+  oom |= put_array(f, format, 0, 3L * pc->nv, 3, get_point, pc);
   fprintf(f, "</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int32\" Name=\"connectivity\" format=\"%s\">\n", fmt);
-  oom |= put_array(f, format, 1, (long)m->ncell * m->nvc, m->nvc, get_conn, m);
+  oom |= put_array(f, format, 1, (long)pc->nc * m->nvc, m->nvc, get_conn, pc);
   fprintf(f, "</DataArray>\n<DataArray type=\"Int32\" Name=\"offsets\" format=\"%s\">\n", fmt);
-  oom |= put_array(f, format, 1, m->ncell, 1, get_offset, m);
+  oom |= put_array(f, format, 1, pc->nc, 1, get_offset, pc);
   fprintf(f, "</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"%s\">\n", fmt);
-  oom |= put_array(f, format, 2, m->ncell, 1, get_type, m);
+  oom |= put_array(f, format, 2, pc->nc, 1, get_type, pc);
   fprintf(f, "</DataArray>\n</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
   if (oom) {
     outfile_abort(&o);
@@ -198,6 +220,70 @@ int mesh_write_vtu_format(mesh *m, const char *path, int nfield, const mesh_fiel
     return 1;
   }
   return outfile_commit(&o, m->err, MESH_ERRLEN);
+}
+
+int mesh_write_vtu_format(mesh *m, const char *path, int nfield, const mesh_field *fl, int format) {
+  piece pc = {m, m->ncell, m->nvert, NULL, NULL, NULL, NULL};
+  return write_piece(m, path, nfield, fl, format, &pc);
+}
+
+int mesh_write_vtu_piece(mesh *m, const char *path, int nfield, const mesh_field *fl, int format, const int *cells, int nc) {
+  for (int i = 0; i < nc; i++)
+    if (cells[i] < 0 || cells[i] >= m->ncell) {
+      snprintf(m->err, MESH_ERRLEN, "cell %d of a piece is not a cell of a mesh of %d", cells[i] + 1, m->ncell);
+      return 1;
+    }
+  int *lv = malloc(sizeof(int) * ((size_t)m->nvert + 1)), *pv = malloc(sizeof(int) * ((size_t)m->nvert + 1)), nv = 0;
+  if (!lv || !pv) {
+    free(lv); free(pv);
+    snprintf(m->err, MESH_ERRLEN, "out of memory for a piece of %d cells", nc);
+    return 1;
+  }
+  for (int v = 0; v < m->nvert; v++) lv[v] = -1;
+  for (int i = 0; i < nc; i++)
+    for (int k = 0; k < m->nvc; k++) lv[m->cells[(size_t)cells[i] * (size_t)m->nvc + (size_t)k]] = 0;
+  for (int v = 0; v < m->nvert; v++)
+    if (!lv[v]) { lv[v] = nv; pv[nv++] = v; }
+  piece pc = {m, nc, nv, cells, pv, lv, NULL};
+  int rc = write_piece(m, path, nfield, fl, format, &pc);
+  free(lv);
+  free(pv);
+  return rc;
+}
+
+/* the file name of a path: what a collection names its parts by (relative to its folder) */
+static const char *base_name(const char *path) {
+  const char *slash = strrchr(path, '/');
+  return slash ? slash + 1 : path;
+}
+
+int mesh_write_pvtu(const char *path, int nfield, const mesh_field *fl, int npiece, char **pieces, char *err) {
+  outfile o;
+  if (outfile_open(&o, path, err, MESH_ERRLEN)) return 1;
+  FILE *f = o.f;
+  fprintf(f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"PUnstructuredGrid\" version=\"0.1\" "
+             "byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<PUnstructuredGrid GhostLevel=\"0\">\n");
+  for (int pass = 0; pass < 2; pass++) {
+    int any = 0;
+    for (int i = 0; i < nfield; i++) any |= fl[i].on_cells == pass;
+    if (!any) continue;
+    fprintf(f, pass ? "<PCellData>\n" : "<PPointData>\n");
+    for (int i = 0; i < nfield; i++) {
+      if (fl[i].on_cells != pass) continue;
+      fprintf(f, "<PDataArray type=\"Float64\" Name=\"");
+      xml_name(f, fl[i].name);
+      fprintf(f, "\" NumberOfComponents=\"%d\"/>\n", fl[i].ncomp);
+    }
+    fprintf(f, pass ? "</PCellData>\n" : "</PPointData>\n");
+  }
+  fprintf(f, "<PPoints>\n<PDataArray type=\"Float64\" NumberOfComponents=\"3\"/>\n</PPoints>\n");
+  for (int r = 0; r < npiece; r++) {
+    fprintf(f, "<Piece Source=\"");
+    xml_name(f, base_name(pieces[r]));
+    fprintf(f, "\"/>\n");
+  }
+  fprintf(f, "</PUnstructuredGrid>\n</VTKFile>\n");
+  return outfile_commit(&o, err, MESH_ERRLEN);
 }
 
 int mesh_write_vtu(mesh *m, const char *path, int nfield, const mesh_field *fl) {
@@ -211,9 +297,8 @@ int mesh_write_pvd(const char *pvd, int nstep, const double *times, char **files
   fprintf(f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n<Collection>\n");
   for (int i = 0; i < nstep; i++) {
     /* the data set path is relative to the .pvd's folder */
-    const char *slash = strrchr(files[i], '/');
     fprintf(f, "<DataSet timestep=\"%.17g\" part=\"0\" file=\"", times[i]);
-    xml_name(f, slash ? slash + 1 : files[i]);
+    xml_name(f, base_name(files[i]));
     fprintf(f, "\"/>\n");
   }
   fprintf(f, "</Collection>\n</VTKFile>\n");

@@ -17,7 +17,13 @@ for _, p in ipairs{1, 2} do
   local e = uh - exact
   out("poisson_P" .. p .. "_L2", "direct", math.sqrt(lg.integrate(mesh, e^2)))
   out("poisson_P" .. p .. "_H1", "direct", math.sqrt(lg.integrate(mesh, lg.dot(lg.grad(e), lg.grad(e)))))
-  if p == 1 then mesh:write(arg[1] .. "/poisson.vtu", {u = uh}) end
+  if p == 1 then
+    mesh:write(arg[1] .. "/poisson.vtu", {u = uh})
+    -- a piece per rank (the parts of the partition), with each cell's number
+    local id = {}
+    for i = 1, mesh:ncells() do id[i] = i end
+    mesh:write(arg[1] .. "/poisson.pvtu", {u = uh, q = mesh:quality("mean_ratio"), id = id}, {format = "ascii"})
+  end
 end
 
 -- Stokes (Taylor-Hood, a mixed system with the pressure's constant as null space)
@@ -121,7 +127,7 @@ do
   local _, info = lg.minimize(rf, {method = "lmvm", gttol = 1e-8, gatol = 0, grtol = 0, monitor = false})
   out("lbfgs_J", "iter", info.J)
   f:assign(0*x)
-  _, info = lg.minimize(rf, {method = "nls", gttol = 1e-8, gatol = 0, grtol = 0, monitor = false})
+  _, info = lg.minimize(rf, {method = "nls", gttol = 1e-8, gatol = 0, grtol = 0, monitor = false, series = arg[1] .. "/opt.pvd"})
   out("newton_J", "iter", info.J)
   out("newton_steps", "count", info.iterations)
 end

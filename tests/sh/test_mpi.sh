@@ -2,7 +2,9 @@
 # test_mpi.sh BUILD — the same script on 1, 2 and 3 processes (mpiexec, as root too):
 # tests/lua/mpi_cases.lua's quantities (error norms of direct solves to 1e-10 relative;
 # iterative solves, Newton and optimization to 1e-8; iteration counts within 1), the
-# VTU it writes (rank 0 writes, the same file as the serial run's), print on rank 0 only,
+# VTU it writes (rank 0 writes, the same file as the serial run's), the .pvtu (a piece per
+# rank, reassembling cell by cell into the serial mesh and field), rows that follow a
+# partition of the cells (few ghost columns on a shuffled numbering), print on rank 0 only,
 # lg.rank / lg.size / lg.allreduce, a rank with no rows (more ranks than nodes), and a Lua
 # error or a tangled mesh on one rank ending the whole run with its message and status 1
 # within seconds.
@@ -15,13 +17,16 @@ command -v mpiexec > /dev/null 2>&1 || fail "mpiexec not found (Debian's openmpi
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 case "$BUILD" in /*) LUGAL=$BUILD/lugal ;; *) LUGAL=$ROOT/$BUILD/lugal ;; esac
-run() { n=$1; shift; if [ "$n" = 1 ]; then "$LUGAL" "$@"; else timeout 300 mpiexec -n "$n" "$LUGAL" "$@"; fi; }
+run() { rn=$1; shift; if [ "$rn" = 1 ]; then "$LUGAL" "$@"; else timeout 300 mpiexec -n "$rn" "$LUGAL" "$@"; fi; }
 
-for n in 1 2 3; do
+# n = 2p, 3p: the rows by PTScotch's partition of the cells (the generated meshes keep the
+# numbering's order by default), every kind of problem with its rows reordered
+for n in 1 2 3 2p 3p; do
   mkdir -p "$T/$n"
-  run $n "$ROOT/tests/lua/mpi_cases.lua" "$T/$n" > "$T/out$n" 2> "$T/err$n" || { cat "$T/err$n"; fail "mpi_cases on $n ranks"; }
+  case $n in *p) opt="-lugal_partitioner ptscotch" ;; *) opt= ;; esac
+  run ${n%p} "$ROOT/tests/lua/mpi_cases.lua" "$T/$n" $opt > "$T/out$n" 2> "$T/err$n" || { cat "$T/err$n"; fail "mpi_cases on $n ranks"; }
 done
-for n in 2 3; do
+for n in 2 3 2p 3p; do
   [ "$(wc -l < "$T/out1")" = "$(wc -l < "$T/out$n")" ] || fail "$n ranks printed $(wc -l < "$T/out$n") lines, 1 rank $(wc -l < "$T/out1") (print on rank 0 only)"
   paste "$T/out1" "$T/out$n" | awk -v n=$n '
     { if ($1 != $4) { print "FAIL: line " NR ": " $1 " against " $4; bad = 1; next }
@@ -30,10 +35,48 @@ for n in 2 3; do
       ok = $2 == "count" ? d <= 1 : d <= tol * (s > 1e-300 ? s : 1)
       if (!ok) { print "FAIL: " $1 " on " n " ranks: " b " against " a " (" $2 ")"; bad = 1 }
       else if ($2 != "count" && d > worst) worst = d / (s > 1e-300 ? s : 1) }
-    END { if (bad) exit 1; printf "%d ranks: %d quantities as on one (largest relative difference %.1e)\n", n, NR, worst }' || exit 1
+    END { if (bad) exit 1; printf "%s ranks: %d quantities as on one (largest relative difference %.1e)\n", n, NR, worst }' || exit 1
   # rank 0 wrote it: the serial file's size (the values may differ in their last bits)
   [ -s "$T/$n/poisson.vtu" ] || fail "no VTU written on $n ranks"
   [ "$(wc -c < "$T/1/poisson.vtu")" = "$(wc -c < "$T/$n/poisson.vtu")" ] || fail "the VTU of $n ranks differs in size"
+done
+# the .pvtu of n ranks: n pieces whose cells (found by their number, the "id" cell value)
+# are the serial run's with the same coordinates and values (to the direct solves' 1e-10)
+cat > "$T/pieces.lua" <<LUA
+package.path = "$ROOT/tests/lua/?.lua;" .. package.path
+local T = require "testlib"
+local whole = T.read_pvtu(arg[1]).pieces[1]
+local pv = T.read_pvtu(arg[2])
+T.check(#pv.pieces == tonumber(arg[3]), "%d pieces, expected %s", #pv.pieces, arg[3])
+T.check(#pv.pieces[1].cells < #whole.cells, "piece 1 holds %d of %d cells", #pv.pieces[1].cells, #whole.cells)
+print(T.same_pieces(whole, pv, 1e-10))
+LUA
+for n in 2 3 2p 3p; do
+  out=$("$LUGAL" "$T/pieces.lua" "$T/1/poisson.pvtu" "$T/$n/poisson.pvtu" ${n%p} 2> "$T/pieces.err") ||
+    fail "the .pvtu of $n ranks: $out $(cat "$T/pieces.err")"
+  [ "$out" = 1152 ] || fail "the .pvtu of $n ranks: $out cells compared, expected 1152"
+  # a minimization's series: a .pvtu of n pieces per iteration
+  steps=$(grep -c 'file="opt_[0-9]*.vtu"' "$T/1/opt.pvd")
+  [ "$steps" -gt 1 ] && [ "$(grep -c 'file="opt_[0-9]*.pvtu"' "$T/$n/opt.pvd")" = "$steps" ] ||
+    fail "lg.minimize's series on $n ranks: $(cat "$T/$n/opt.pvd")"
+  [ -s "$T/$n/opt_0000_p$((${n%p} - 1)).vtu" ] || fail "the pieces of a minimization's series on $n ranks"
+done
+
+# the rows follow a partition of the cells (PTScotch): on a grid numbered in a shuffled
+# order, the other ranks' columns a rank reads are a border's, not most of the mesh as when
+# the rows are split in the numbering's order (-lugal_partitioner natural); same solution
+"$LUGAL" "$ROOT/tests/lua/mpi_partition.lua" > "$T/part1" 2> "$T/err" || { cat "$T/part1" "$T/err"; fail "mpi_partition serially"; }
+for n in 2 3; do
+  run $n "$ROOT/tests/lua/mpi_partition.lua" > "$T/part$n" 2> "$T/err" || { cat "$T/part$n" "$T/err"; fail "mpi_partition on $n ranks"; }
+  run $n "$ROOT/tests/lua/mpi_partition.lua" -lugal_partitioner natural > "$T/nat$n" 2> "$T/err" ||
+    { cat "$T/nat$n" "$T/err"; fail "natural on $n ranks"; }
+  cat "$T/part1" "$T/part$n" "$T/nat$n" | awk -v n=$n '
+    /^norm/ { v[++k] = $2 } /^rows/ { r[++j] = $2; g[j] = $4 }
+    END { for (i = 2; i <= 3; i++) { d = v[i] - v[1]; if (d < 0) d = -d
+            if (k != 3 || d > 1e-10 * v[1]) { print "FAIL: the norm on " n " ranks: " v[i] " against " v[1]; exit 1 } }
+          if (r[2] != 4225 || r[3] != 4225) { print "FAIL: rows " r[2] ", " r[3] " of 4225 on " n " ranks"; exit 1 }
+          if (!(g[2] > 0 && g[2] * 10 < g[3])) { print "FAIL: " g[2] " ghost columns with PTScotch against " g[3] " in the numbering order on " n " ranks"; exit 1 }
+          printf "%d ranks: %d ghost columns with PTScotch, %d in the numbering order\n", n, g[2], g[3] }' || exit 1
 done
 
 # rank, size and reductions; print on rank 0 only, lg.print_all on every rank

@@ -1,6 +1,6 @@
 /* partition.c — a mesh's cells split into parts, one per rank of a parallel run: PETSc's
- * MatPartitioning (PTScotch, which Debian's PETSc has) on the dual graph, cells adjacent
- * through a facet, or the numbering's order ("natural": the rows split in the problem's
+ * MatPartitioning (PTScotch, which Debian's PETSc has) on the vertex graph, vertices
+ * adjacent through a cell, each cell then in its vertices' part, or the numbering's order ("natural": the rows split in the problem's
  * order); "auto" (the default) takes the numbering's order where its split is nearly as good
  * as flat cuts (generated meshes) and PTScotch elsewhere. Rank 0 partitions and every rank
  * receives its result, so that all hold the same partition. The problems number their rows
@@ -12,71 +12,69 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* the facet ids of every cell (nf per cell): vertices in 1D, edges in 2D, faces in 3D */
-static const int *cell_facet_ids(mesh *m, int *nf) {
-  switch (cell_dim(m->type)) {
-  case 1: *nf = 2; return m->cells;
-  case 2: *nf = cell_nedges(m->type); return mesh_build_edges(m) ? NULL : m->cell_edges;
-  default: *nf = cell_nfacets(m->type); return mesh_build_faces(m) ? NULL : m->cell_faces;
-  }
-}
-
-/* the dual graph in CSR (PetscMalloc'ed: MatCreateMPIAdj takes them): cells sharing a facet */
-static int dual_graph(lg_env *env, mesh *m, PetscInt **ia_out, PetscInt **ja_out) {
-  int nf;
-  const int *cf = cell_facet_ids(m, &nf);
-  if (!cf) { lg_seterr(env, "the partition: %s", m->err); return 1; }
-  int nfacet = 0;
-  for (size_t k = 0; k < (size_t)m->ncell * (size_t)nf; k++) nfacet = cf[k] + 1 > nfacet ? cf[k] + 1 : nfacet;
-  /* each facet's first two cells (a third would be a non-manifold facet: left out) */
-  int *fc = malloc(sizeof(int) * 2 * ((size_t)nfacet + 1));
+/* the vertex graph in CSR (PetscMalloc'ed: MatCreateMPIAdj takes them), vertices adjacent
+ * when they share a cell: a P1 matrix's graph, 5.6 times fewer nodes than the dual graph's
+ * on tetrahedra and built from the cells alone (the dual graph's facet numbering took 0.8 s
+ * of a 1.3 s partition on 663 552 tetrahedra) */
+static int vertex_graph(lg_env *env, const mesh *m, PetscInt **ia_out, PetscInt **ja_out) {
+  int nv = m->nvert, nvc = m->nvc;
+  size_t nk = (size_t)m->ncell * (size_t)nvc;
+  int *vs = calloc((size_t)nv + 2, sizeof(int)), *vc = malloc(sizeof(int) * (nk + 1)), *mark = malloc(sizeof(int) * ((size_t)nv + 1));
   PetscInt *ia = NULL, *ja = NULL;
-  if (!fc || PetscMalloc1(m->ncell + 1, &ia)) goto oom;
-  for (int f = 0; f < 2 * nfacet; f++) fc[f] = -1;
+  if (!vs || !vc || !mark || PetscMalloc1(nv + 1, &ia)) goto oom;
+  /* each vertex's cells */
+  for (size_t k = 0; k < nk; k++) vs[m->cells[k] + 2]++;
+  for (int v = 0; v < nv; v++) vs[v + 2] += vs[v + 1];
   for (int c = 0; c < m->ncell; c++)
-    for (int k = 0; k < nf; k++) {
-      int f = cf[(size_t)c * nf + k];
-      if (fc[2 * f] < 0) fc[2 * f] = c;
-      else if (fc[2 * f + 1] < 0 && fc[2 * f] != c) fc[2 * f + 1] = c;
+    for (int j = 0; j < nvc; j++) vc[vs[m->cells[(size_t)c * nvc + j] + 1]++] = c;
+  /* each vertex's neighbours: counted, then listed (vs[v] .. vs[v + 1] are v's cells) */
+  for (int pass = 0; pass < 2; pass++) {
+    for (int v = 0; v < nv; v++) mark[v] = -1;
+    PetscInt n = 0;
+    for (int v = 0; v < nv; v++) {
+      if (!pass) ia[v] = n;
+      mark[v] = v;
+      for (int i = vs[v]; i < vs[v + 1]; i++)
+        for (int j = 0; j < nvc; j++) {
+          int w = m->cells[(size_t)vc[i] * nvc + j];
+          if (mark[w] == v) continue;
+          mark[w] = v;
+          if (pass) ja[n] = w;
+          n++;
+        }
+      if (pass) /* MPIAdj wants each row's columns sorted */
+        for (PetscInt a = ia[v] + 1; a < n; a++)
+          for (PetscInt b = a; b > ia[v] && ja[b - 1] > ja[b]; b--) { PetscInt t = ja[b]; ja[b] = ja[b - 1]; ja[b - 1] = t; }
     }
-  memset(ia, 0, sizeof(PetscInt) * ((size_t)m->ncell + 1));
-  for (int f = 0; f < nfacet; f++)
-    if (fc[2 * f + 1] >= 0) { ia[fc[2 * f] + 1]++; ia[fc[2 * f + 1] + 1]++; }
-  for (int c = 0; c < m->ncell; c++) ia[c + 1] += ia[c];
-  if (PetscMalloc1(ia[m->ncell] + 1, &ja)) goto oom;
-  PetscInt *at = malloc(sizeof(PetscInt) * ((size_t)m->ncell + 1));
-  if (!at) goto oom;
-  memcpy(at, ia, sizeof(PetscInt) * (size_t)m->ncell);
-  for (int f = 0; f < nfacet; f++)
-    if (fc[2 * f + 1] >= 0) { ja[at[fc[2 * f]]++] = fc[2 * f + 1]; ja[at[fc[2 * f + 1]]++] = fc[2 * f]; }
-  free(at);
-  free(fc);
-  /* MPIAdj wants each row's columns sorted */
-  for (int c = 0; c < m->ncell; c++)
-    for (PetscInt i = ia[c] + 1; i < ia[c + 1]; i++)
-      for (PetscInt j = i; j > ia[c] && ja[j - 1] > ja[j]; j--) { PetscInt t = ja[j]; ja[j] = ja[j - 1]; ja[j - 1] = t; }
+    if (!pass) {
+      ia[nv] = n;
+      if (PetscMalloc1(n + 1, &ja)) goto oom;
+    }
+  }
+  free(vs); free(vc); free(mark);
   *ia_out = ia;
   *ja_out = ja;
   return 0;
 oom:
-  free(fc);
+  free(vs); free(vc); free(mark);
   PetscFree(ia);
   PetscFree(ja);
-  lg_seterr(env, "out of memory for the partition's graph of %d cells", m->ncell);
+  lg_seterr(env, "out of memory for the partition's graph of %d vertices", m->nvert);
   return 1;
 }
 
 /* rank 0's part of the work: the partition of m into nparts by the method (a
- * MatPartitioningType) into part */
+ * MatPartitioningType) into part: its vertices are partitioned, and each cell goes to the
+ * part that holds most of its vertices (the lowest of those that tie) */
 static int partition_cells(lg_env *env, mesh *m, int nparts, const char *method, int *part) {
   PetscInt *ia, *ja;
   double tg = now_ms();
-  if (dual_graph(env, m, &ia, &ja)) return 1;
-  if (env->verbose) fprintf(stderr, "[lugal] partition: the dual graph in %.1f ms\n", now_ms() - tg);
+  if (vertex_graph(env, m, &ia, &ja)) return 1;
+  if (env->verbose) fprintf(stderr, "[lugal] partition: the vertex graph in %.1f ms\n", now_ms() - tg);
   Mat adj = NULL;
   MatPartitioning mp = NULL;
   IS is = NULL;
-  PetscErrorCode ierr = MatCreateMPIAdj(PETSC_COMM_SELF, m->ncell, m->ncell, ia, ja, NULL, &adj);
+  PetscErrorCode ierr = MatCreateMPIAdj(PETSC_COMM_SELF, m->nvert, m->nvert, ia, ja, NULL, &adj);
   if (ierr) { PetscFree(ia); PetscFree(ja); }
   if (!ierr) ierr = MatPartitioningCreate(PETSC_COMM_SELF, &mp);
   if (!ierr) ierr = MatPartitioningSetAdjacency(mp, adj);
@@ -85,19 +83,30 @@ static int partition_cells(lg_env *env, mesh *m, int nparts, const char *method,
   if (!ierr) ierr = MatPartitioningApply(mp, &is);
   const PetscInt *pv = NULL;
   if (!ierr) ierr = ISGetIndices(is, &pv);
+  int bad = 0;
   if (!ierr) {
-    for (int c = 0; c < m->ncell; c++) part[c] = (int)pv[c];
+    for (int v = 0; v < m->nvert && !bad; v++)
+      if (pv[v] < 0 || pv[v] >= nparts) {
+        lg_seterr(env, "the partitioner %s put vertex %d in part %d of %d", method, v + 1, (int)pv[v], nparts);
+        bad = 1;
+      }
+    for (int c = 0; !bad && c < m->ncell; c++) {
+      const int *cv = m->cells + (size_t)c * (size_t)m->nvc;
+      int best = (int)pv[cv[0]], nb = 0;
+      for (int j = 0; j < m->nvc; j++) {
+        int pj = (int)pv[cv[j]], n = 0;
+        for (int k = 0; k < m->nvc; k++) n += pv[cv[k]] == pj;
+        if (n > nb || (n == nb && pj < best)) { best = pj; nb = n; }
+      }
+      part[c] = best;
+    }
     ISRestoreIndices(is, &pv);
   }
   ISDestroy(&is);
   MatPartitioningDestroy(&mp);
   MatDestroy(&adj);
+  if (bad) return 1;
   if (ierr) return lg_petsc_fail(env, ierr, "the partition of the mesh (-lugal_partitioner)");
-  for (int c = 0; c < m->ncell; c++)
-    if (part[c] < 0 || part[c] >= nparts) {
-      lg_seterr(env, "the partitioner %s put cell %d in part %d of %d", method, c + 1, part[c], nparts);
-      return 1;
-    }
   return 0;
 }
 

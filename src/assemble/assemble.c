@@ -519,11 +519,9 @@ int lg_assemble_chunks(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, 
 }
 
 /* A parallel run's share of a list of items for a sum over the ranks (functionals and their
- * derivatives): a contiguous slice of the items, or (interior facets, whose '-' cells follow
- * all the '+' ones) the whole list on rank 0 and nothing elsewhere */
-static void rank_slice(int n, int interior, int *f0, int *f1) {
+ * derivatives): a contiguous slice of the items */
+static void rank_slice(int n, int *f0, int *f1) {
   int size = lg_mpi_size(), rank = lg_mpi_rank();
-  if (interior) { *f0 = 0; *f1 = rank == 0 ? n : 0; return; }
   *f0 = (int)((long)n * rank / size);
   *f1 = (int)((long)n * (rank + 1) / size);
 }
@@ -531,18 +529,31 @@ static void rank_slice(int n, int interior, int *f0, int *f1) {
 int lg_assemble_share(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells, const int *facets,
                       const coef_binding *bind, double *out, lg_chunk_bufs *cb, lg_chunk_use use, void *ud, int *first) {
   int f0 = 0, f1 = nitems, interior = k->facet == 2;
-  if (lg_mpi_size() > 1) rank_slice(nitems, interior, &f0, &f1);
+  if (lg_mpi_size() > 1) rank_slice(nitems, &f0, &f1);
   *first = f0;
   if (f1 <= f0) return 0;
-  /* a slice of a plain list starts at its first item; an interior list is whole or empty */
+  /* a slice of a plain list starts at its first item; an interior list's '-' cells follow
+   * all its '+' cells, so a slice of it is a copy of both parts (the consumer indexes the
+   * whole list from *first) */
   const int *c = cells + f0, *f = facets ? facets + f0 : NULL;
+  int *part = NULL, n = f1 - f0;
+  if (interior && n < nitems) {
+    if (!(part = malloc(sizeof(int) * 2 * (size_t)n))) { lg_seterr(env, "out of memory"); return 1; }
+    memcpy(part, cells + f0, sizeof(int) * (size_t)n);
+    memcpy(part + n, cells + nitems + f0, sizeof(int) * (size_t)n);
+    c = part;
+  }
+  int rc;
   if (k->arity == 0) {
     double *const buf[2] = {out, out};
-    return lg_assemble_chunks(env, lm, k, f1 - f0, c, f, bind, LG_TIER_CHECK, buf, NULL, NULL);
+    rc = lg_assemble_chunks(env, lm, k, n, c, f, bind, LG_TIER_CHECK, buf, NULL, NULL);
+  } else {
+    int size = k->rows.size;
+    rc = lg_chunk_bufs_reserve(env, cb, size) ||
+         lg_assemble_chunks(env, lm, k, n, c, f, bind, lg_chunk_items(size), cb->b, use, ud);
   }
-  int size = k->rows.size;
-  return lg_chunk_bufs_reserve(env, cb, size) ||
-         lg_assemble_chunks(env, lm, k, f1 - f0, c, f, bind, lg_chunk_items(size), cb->b, use, ud);
+  free(part);
+  return rc;
 }
 
 int lg_sum_ranks(lg_env *env, double *out, size_t n, int rc) {

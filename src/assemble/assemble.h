@@ -338,6 +338,9 @@ int lg_root_result(int rc, char *msg, size_t len);
 /* the outcome of work every rank does for its part (each rank's rc, its message in msg):
  * non-zero on every rank when any failed, with the message of the lowest failing rank */
 int lg_any_result(int rc, char *msg, size_t len);
+/* rank 0's *len bytes at *buf to every rank: the others get a malloc'ed copy in *buf (free
+ * it); 1 when out of memory or the broadcast failed (on every rank) */
+int lg_bcast_bytes(char **buf, size_t *len);
 /* the fields on a mesh that every rank holds whole, written for ParaView: npiece 0, a .vtu
  * that rank 0 writes; else a .pvtu of npiece pieces <stem>_p<k>.vtu beside it (k = 0 ..
  * npiece - 1: the parts of the mesh's partition into npiece, lg_mesh_partition, or when it

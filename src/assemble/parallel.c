@@ -114,6 +114,27 @@ int lg_any_result(int rc, char *msg, size_t len) {
   return 1;
 }
 
+int lg_bcast_bytes(char **buf, size_t *len) {
+  if (lg_mpi_size() == 1) return 0;
+  int root = lg_mpi_rank() == 0;
+  unsigned long long n = root ? *len : 0;
+  if (MPI_Bcast(&n, 1, MPI_UNSIGNED_LONG_LONG, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) return 1;
+  if (!root) {
+    *len = (size_t)n;
+    *buf = malloc((size_t)n + 1);
+  }
+  double ok = *buf ? 0 : 1; /* every rank must have room before any sends */
+  if (lg_allreduce(&ok, 1, LG_MAX) || ok) {
+    if (!root) { free(*buf); *buf = NULL; }
+    return 1;
+  }
+  for (size_t at = 0; at < (size_t)n; at += 1u << 30) {
+    int part = (int)((size_t)n - at < (1u << 30) ? (size_t)n - at : 1u << 30);
+    if (MPI_Bcast(*buf + at, part, MPI_CHAR, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) return 1;
+  }
+  return 0;
+}
+
 int lg_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_field *fl, int format, int npiece, char *err) {
   mesh *m = lm->m;
   if (!npiece) {

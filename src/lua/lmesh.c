@@ -95,10 +95,27 @@ static int l_box(lua_State *L) {
   return 1;
 }
 
+/* lg.mesh.read(path); under mpiexec rank 0 parses the file and sends the mesh to the
+ * others (mesh_pack), which neither read nor parse it */
 static int l_read(lua_State *L) {
   const char *path = luaL_checkstring(L, 1);
-  char err[MESH_ERRLEN];
-  mesh *m = mesh_read_gmsh(path, err);
+  char err[MESH_ERRLEN] = "";
+  int root = lg_mpi_rank() == 0;
+  mesh *m = root ? mesh_read_gmsh(path, err) : NULL;
+  if (lg_mpi_size() > 1) {
+    char *buf = NULL;
+    size_t len = 0;
+    int rc = root && (!m || mesh_pack(m, &buf, &len));
+    if (root && m && rc) snprintf(err, sizeof err, "out of memory packing the mesh for the other ranks");
+    if (lg_root_result(rc, err, sizeof err)) { mesh_free(m); return luaL_error(L, "lg.mesh.read: %s", err); }
+    rc = lg_bcast_bytes(&buf, &len);
+    if (!rc && !root && !(m = mesh_unpack(buf, len, err))) rc = 1;
+    free(buf);
+    if (lg_any_result(rc, err, sizeof err)) {
+      mesh_free(m);
+      return luaL_error(L, "lg.mesh.read: sending the mesh to every rank failed: %s", err[0] ? err : "out of memory");
+    }
+  }
   if (!m) return luaL_error(L, "lg.mesh.read: %s", err);
   push_mesh(L, m);
   return 1;

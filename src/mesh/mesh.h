@@ -87,6 +87,11 @@ mesh *mesh_create(cell_type t, int nvert, const double *x, int ncell, const int 
                   char *err);
 void mesh_free(mesh *m);
 mesh *mesh_copy(const mesh *m);
+/* pack.c: the mesh (coordinates, cells, tags, boundary facets, names) as one malloc'ed byte
+ * buffer, for another process of the same build, and a mesh from such a buffer (every
+ * length checked; NULL and a reason in err) */
+int mesh_pack(const mesh *m, char **buf, size_t *len);
+mesh *mesh_unpack(const char *buf, size_t len, char *err);
 int mesh_add_boundary_facets(mesh *m, int n, const int *verts, int tag, const char *name);
 int mesh_set_boundary_name(mesh *m, int tag, const char *name);
 int mesh_set_region_name(mesh *m, int tag, const char *name);

@@ -1,7 +1,8 @@
 /* test_mesh.c — generators (counts, areas, boundary tags), Gmsh 2.2 and 4.1 reading of the
  * same mesh, uniform refinement (counts, measure, orientation), the validity check, and
  * the Gmsh writer round trip, folders and pipes as input, escaped names, and writes that
- * fail (with the reason, leaving the old file). argv[1] is tests/data. */
+ * fail (with the reason, leaving the old file), packing into bytes and back. argv[1] is
+ * tests/data. */
 #include "../../src/mesh/mesh.h"
 #include "check.h"
 
@@ -23,6 +24,43 @@ static double total(const mesh *m) {
 /* the first tag of a name, -1 when unknown */
 static int btag(const mesh *m, const char *n) { int t; return mesh_boundary_tags(m, n, &t, 1) ? t : -1; }
 static int rtag(const mesh *m, const char *n) { int t; return mesh_region_tags(m, n, &t, 1) ? t : -1; }
+
+/* a mesh packed into bytes (pack.c) and unpacked is the same mesh: coordinates, cells,
+ * tags, boundary facets and names; every cut of the buffer and a bad header are refused
+ * with a reason */
+static void pack(const char *data) {
+  char err[MESH_ERRLEN], path[600];
+  snprintf(path, sizeof path, "%s/square_unstructured.msh", data);
+  mesh *m = mesh_read_gmsh(path, err);
+  CHECK(m != NULL, "%s", err);
+  CHECK(mesh_set_region_name(m, 7, "a region") == 0, "%s", m->err);
+  m->cell_tag[3] = 7;
+  char *buf;
+  size_t len;
+  CHECK(mesh_pack(m, &buf, &len) == 0, "pack");
+  mesh *u = mesh_unpack(buf, len, err);
+  CHECK(u != NULL, "unpack: %s", err);
+  CHECK(u->type == m->type && u->nvert == m->nvert && u->ncell == m->ncell && u->nbf == m->nbf &&
+        u->nbname == m->nbname && u->ncname == m->ncname, "the sizes");
+  CHECK(!memcmp(u->x, m->x, sizeof(double) * (size_t)m->nvert * (size_t)m->dim) &&
+        !memcmp(u->cells, m->cells, sizeof(int) * (size_t)m->ncell * (size_t)m->nvc) &&
+        !memcmp(u->cell_tag, m->cell_tag, sizeof(int) * (size_t)m->ncell) &&
+        !memcmp(u->bf_verts, m->bf_verts, sizeof(int) * (size_t)m->nbf * (size_t)m->nvf) &&
+        !memcmp(u->bf_tag, m->bf_tag, sizeof(int) * (size_t)m->nbf), "the arrays");
+  CHECK(rtag(u, "a region") == 7 && btag(u, m->bnames[0].name) == m->bnames[0].tag, "the names");
+  mesh_free(u);
+  int refused = 0;
+  for (size_t cut = 0; cut < len; cut += cut < 100 ? 1 : 97) {
+    mesh *c = mesh_unpack(buf, cut, err);
+    refused += c == NULL && err[0];
+    mesh_free(c);
+  }
+  CHECK(refused == (int)((len - 100 + 96) / 97) + 100, "every cut buffer refused (%d)", refused);
+  buf[0] ^= 1;
+  CHECK(mesh_unpack(buf, len, err) == NULL && strstr(err, "not a packed mesh"), "a bad header: %s", err);
+  free(buf);
+  mesh_free(m);
+}
 
 /* reading from folders and pipes, writing names with quotes, and writes that fail */
 static void files(const char *data) {
@@ -81,6 +119,7 @@ static void files(const char *data) {
 
 int main(int argc, char **argv) {
   const char *data = argc > 1 ? argv[1] : "tests/data";
+  pack(data);
   char err[MESH_ERRLEN], path[1024];
   mesh_box_opts o = {3, 2, 2, 0, 2, 0, 1, 0, 1, CELL_TRIANGLE, 0};
   for (int dg = 0; dg < 3; dg++) {

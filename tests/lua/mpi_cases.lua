@@ -93,6 +93,8 @@ do
     + lg.integral(B, -lg.dot(lg.grad(u), n)*v - lg.dot(lg.grad(v), n)*u + s/h*u*v)
   local uh = lg.linear_problem{mesh = mesh, eqn = eqn, test = v, unknown = u}:solve()
   out("dg_L2", "direct", math.sqrt(lg.integrate(mesh, (uh - ue)^2)))
+  -- an integral over the interior facets, shared by the ranks
+  out("dg_jumps", "direct", lg.integrate(F, lg.dot(lg.jump(uh, n), lg.jump(uh, n))))
 end
 
 -- an assembled operator

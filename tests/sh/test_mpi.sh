@@ -4,7 +4,8 @@
 # iterative solves, Newton and optimization to 1e-8; iteration counts within 1), the
 # VTU it writes (rank 0 writes, the same file as the serial run's), the .pvtu (a piece per
 # rank, reassembling cell by cell into the serial mesh and field), rows that follow a
-# partition of the cells (few ghost columns on a shuffled numbering), print on rank 0 only,
+# partition of the cells (few ghost columns on a shuffled numbering), a mesh read on rank 0
+# and sent to the others, print on rank 0 only,
 # lg.rank / lg.size / lg.allreduce, a rank with no rows (more ranks than nodes), and a Lua
 # error or a tangled mesh on one rank ending the whole run with its message and status 1
 # within seconds.
@@ -78,6 +79,27 @@ for n in 2 3; do
           if (!(g[2] > 0 && g[2] * 10 < g[3])) { print "FAIL: " g[2] " ghost columns with PTScotch against " g[3] " in the numbering order on " n " ranks"; exit 1 }
           printf "%d ranks: %d ghost columns with PTScotch, %d in the numbering order\n", n, g[2], g[3] }' || exit 1
 done
+
+# lg.mesh.read on 3 ranks: rank 0 parses, the others receive the same mesh (sizes, a
+# checksum of the coordinates and cells equal on every rank, names and tags kept); a file
+# that cannot be read gives rank 0's message on every rank
+cat > "$T/read.lua" <<LUA
+local lg = require "lugal"
+local m = lg.mesh.read("$ROOT/examples/domain.msh")
+local s = 0
+for i = 1, m:nvertices() do local x, y = m:coordinates(i); s = s + i * x + y end
+local info = m:info()
+local v = {m:nvertices(), m:ncells(), info.boundary_facets, s}
+local lo, hi = lg.allreduce(v, "min"), lg.allreduce(v, "max")
+for i = 1, #v do assert(lo[i] == hi[i], "entry " .. i .. " differs between the ranks") end
+print("read", m:nvertices(), m:ncells(), table.concat(info.boundaries, ","))
+local ok, err = pcall(lg.mesh.read, "$T/nonexistent.msh")
+lg.print_all("error", lg.rank(), err)
+LUA
+out=$(run 3 "$T/read.lua" 2> "$T/err") || { cat "$T/err"; fail "lg.mesh.read on 3 ranks: $out"; }
+serial=$("$LUGAL" "$T/read.lua" 2> "$T/err" | grep "^read") || fail "lg.mesh.read serially"
+[ "$(echo "$out" | grep "^read")" = "$serial" ] || fail "lg.mesh.read on 3 ranks: $out, serially: $serial"
+[ "$(echo "$out" | grep -c "^error.*nonexistent.msh: No such file")" = 3 ] || fail "a missing file on 3 ranks: $out"
 
 # rank, size and reductions; print on rank 0 only, lg.print_all on every rank
 cat > "$T/ranks.lua" <<'LUA'

@@ -47,6 +47,7 @@ typedef struct {
   int validated;        /* the validity check passed for the current geometry */
   unsigned long geometry; /* counts geometry changes (lg_mesh_changed) */
   int *part, nparts;    /* the cells' parts for a run of nparts ranks (partition.c), or NULL */
+  int part_runs;        /* they are the numbering's runs (the vertex order splits well) */
 } lg_mesh;
 
 typedef struct {
@@ -70,8 +71,9 @@ void lg_mesh_changed(lg_mesh *lm);
 dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree, int ncomp, int disc);
 /* partition.c: the part (0 .. nparts - 1) of every cell for a run of nparts ranks, kept with
  * the mesh (its topology does not change): by -lugal_partitioner (a MatPartitioningType,
- * PTScotch by default, or "natural"), rank 0's result on every rank. *part is NULL when the
- * cells stay in their order (natural, one part, or fewer than 8 cells per part) */
+ * "auto" by default: the numbering's runs where they split well, else PTScotch; or
+ * "natural"), rank 0's result on every rank. *part is NULL when the rows stay in the
+ * problems' order (natural, one part, or fewer than 8 cells per part) */
 int lg_mesh_partition(lg_env *env, lg_mesh *lm, int nparts, const int **part);
 /* the validity check run before assembly */
 int lg_mesh_check(lg_env *env, lg_mesh *lm);

@@ -151,9 +151,22 @@ int lg_mesh_partition(lg_env *env, lg_mesh *lm, int nparts, const int **part) {
       fprintf(stderr, "[lugal] partition: the numbering's split into %d has %ld vertices on its cuts (flat cuts: %.0f): %s\n",
               nparts, have, flat, keep ? "kept" : "PTScotch");
     if (keep) {
-      lm->nparts = nparts;
+      /* the numbering's split of the cells: each with its lowest vertex, the vertices in
+       * nparts runs (problems of P1 fields keep their rows in their own order, the others
+       * number theirs by these parts: see set_ownership) */
+      int *pt = malloc(sizeof(int) * ((size_t)m->ncell + 1));
+      if (!pt) { lg_seterr(env, "out of memory for the partition of %d cells", m->ncell); return 1; }
+      for (int c = 0; c < m->ncell; c++) {
+        const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+        int lo = v[0];
+        for (int k = 1; k < m->nvc; k++) lo = v[k] < lo ? v[k] : lo;
+        pt[c] = (int)((long)lo * nparts / m->nvert);
+      }
       free(lm->part);
-      lm->part = NULL;
+      lm->part = pt;
+      lm->nparts = nparts;
+      lm->part_runs = 1;
+      *part = pt;
       return 0;
     }
 #ifdef PETSC_HAVE_PTSCOTCH
@@ -177,6 +190,7 @@ int lg_mesh_partition(lg_env *env, lg_mesh *lm, int nparts, const int **part) {
   free(lm->part);
   lm->part = pt;
   lm->nparts = nparts;
+  lm->part_runs = 0;
   *part = pt;
   return 0;
 }

@@ -408,6 +408,11 @@ static int set_ownership(lg_env *env, lg_problem *p) {
   p->pB = B;
   const int *part = NULL;
   if (p->par && lg_mesh_partition(env, p->lm, size, &part)) return 1;
+  /* where the parts are the numbering's runs, one continuous P1 field (nodes = vertices)
+   * splits as well in its own order, which keeps the pattern on the dof map's own list;
+   * several fields, or P2 and up (vertex nodes first, then edges...), would give a rank
+   * rows from all over the mesh */
+  if (part && p->lm->part_runs && p->cols.n == 1 && p->cdm[0]->degree == 1 && !p->cdm[0]->disc) part = NULL;
   if (!part) {
     long first = (long)Nn * rank / size, last = (long)Nn * (rank + 1) / size;
     p->lo = (int)first * B;

@@ -71,13 +71,16 @@ for n in 2 3; do
   run $n "$ROOT/tests/lua/mpi_partition.lua" > "$T/part$n" 2> "$T/err" || { cat "$T/part$n" "$T/err"; fail "mpi_partition on $n ranks"; }
   run $n "$ROOT/tests/lua/mpi_partition.lua" -lugal_partitioner natural > "$T/nat$n" 2> "$T/err" ||
     { cat "$T/nat$n" "$T/err"; fail "natural on $n ranks"; }
-  cat "$T/part1" "$T/part$n" "$T/nat$n" | awk -v n=$n '
-    /^norm/ { v[++k] = $2 } /^rows/ { r[++j] = $2; g[j] = $4 }
-    END { for (i = 2; i <= 3; i++) { d = v[i] - v[1]; if (d < 0) d = -d
-            if (k != 3 || d > 1e-10 * v[1]) { print "FAIL: the norm on " n " ranks: " v[i] " against " v[1]; exit 1 } }
-          if (r[2] != 4225 || r[3] != 4225) { print "FAIL: rows " r[2] ", " r[3] " of 4225 on " n " ranks"; exit 1 }
-          if (!(g[2] > 0 && g[2] * 10 < g[3])) { print "FAIL: " g[2] " ghost columns with PTScotch against " g[3] " in the numbering order on " n " ranks"; exit 1 }
-          printf "%d ranks: %d ghost columns with PTScotch, %d in the numbering order\n", n, g[2], g[3] }' || exit 1
+  for grid in "" "grid "; do
+    cat "$T/part1" "$T/part$n" "$T/nat$n" | awk -v n=$n -v p="$grid" '
+      substr($0, 1, length(p) + 4) == p "norm" && (p != "" || $1 == "norm") { v[++k] = $NF }
+      substr($0, 1, length(p) + 4) == p "rows" && (p != "" || $1 == "rows") { r[++j] = $(NF - 2); g[j] = $NF }
+      END { for (i = 2; i <= 3; i++) { d = v[i] - v[1]; if (d < 0) d = -d
+              if (k != 3 || d > 1e-10 * v[1]) { print "FAIL: " p "the norm on " n " ranks: " v[i] " against " v[1]; exit 1 } }
+            if (r[2] != 4225 || r[3] != 4225) { print "FAIL: " p "rows " r[2] ", " r[3] " of 4225 on " n " ranks"; exit 1 }
+            if (!(g[2] > 0 && g[2] * 10 < g[3])) { print "FAIL: " p g[2] " ghost columns partitioned against " g[3] " in the dof order on " n " ranks"; exit 1 }
+            printf "%d ranks, %s: %d ghost columns partitioned, %d in the dof order\n", n, p == "" ? "shuffled grid" : "generated grid", g[2], g[3] }' || exit 1
+  done
 done
 
 # lg.mesh.read on 3 ranks: rank 0 parses, the others receive the same mesh (sizes, a

@@ -60,7 +60,8 @@ struct lg_problem {
   int lo, hi;
   /* the rows' order in PETSc: the nodes (pB rows each) of every part of the mesh's partition
    * (partition.c) one part after another, each in the problem's own order, so that a rank
-   * owns its cells' nodes (a node of cells in several parts goes to the lowest). perm: the
+   * owns its cells' nodes (a node of cells in several parts goes to the part of most of
+   * them). perm: the
    * problem's node -> PETSc's, iperm its inverse; NULL where the orders are the same (a
    * serial run, or -lugal_partitioner natural). The whole-length arrays (state, solution,
    * rwhole, bc_rows) stay in the problem's order; the matrix's pattern, own_rows and the

@@ -1,10 +1,12 @@
 /* partition.c — a mesh's cells split into parts, one per rank of a parallel run: PETSc's
  * MatPartitioning (PTScotch, which Debian's PETSc has) on the vertex graph, vertices
- * adjacent through a cell, each cell then in its vertices' part, or the numbering's order ("natural": the rows split in the problem's
- * order); "auto" (the default) takes the numbering's order where its split is nearly as good
- * as flat cuts (generated meshes) and PTScotch elsewhere. Rank 0 partitions and every rank
- * receives its result, so that all hold the same partition. The problems number their rows
- * part by part (problem.c), so that a rank owns the rows of its cells. */
+ * adjacent through a cell, each cell then in the part of most of its vertices; or the
+ * vertex numbering's runs, each cell with its lowest vertex; or none ("natural": the rows
+ * split in the problems' order). "auto" (the default) takes the numbering's runs where they
+ * cut about as little as compact parts would (a generator's numbering, a few parts) and
+ * PTScotch elsewhere. Rank 0 partitions and every rank receives its result, so that all
+ * hold the same partition. The problems number their rows part by part (problem.c), so that
+ * a rank owns the rows of its cells. */
 #include "problem_int.h"
 
 #include <math.h>

@@ -600,6 +600,9 @@ void lg_problem_free(lg_problem *p) {
   form_free(p->eqn);
   form_free(p->bcf);
   if (p->A) MatDestroy(&p->A);
+  free(p->sd_i); free(p->sd_j); free(p->sd_a);
+  free(p->so_i); free(p->so_j); free(p->so_a);
+  free(p->s_left);
   free(p->csr_i);
   free(p->csr_j);
   free(p->csr_a);
@@ -848,8 +851,8 @@ int lg_problem_assemble_into(lg_env *env, lg_problem *p, const double *state, Ma
   int ne = lg_problem_bind_unknowns(p, state, extra);
   /* element matrices a chunk of items at a time, added in place into the value array (no
    * per-entry buffer beyond two chunks) */
-  /* a serial run adds into the matrix's own value array; a parallel one into csr_a, which
-   * PETSc then copies into its diagonal and off-diagonal blocks */
+  /* a serial run adds into the matrix's own value array; a parallel one into csr_a, whose
+   * rows are then copied into the diagonal and off-diagonal blocks (split arrays) */
   PetscScalar *a = p->csr_a;
   if (!p->par) PCHK(MatSeqAIJGetArray(A, &a), "matrix assembly");
   memset(a, 0, sizeof(PetscScalar) * (size_t)p->nnz);
@@ -864,7 +867,10 @@ int lg_problem_assemble_into(lg_env *env, lg_problem *p, const double *state, Ma
                             p->chunks.b, scatter_matrix_chunk, &sc);
   }
   if (!p->par) PCHK(MatSeqAIJRestoreArray(A, &a), "matrix assembly");
-  else if (!rc) PCHK(MatUpdateMPIAIJWithArray(A, a), "matrix assembly");
+  else if (!rc) {
+    if (A != p->A) { lg_seterr(env, "the matrix assembly: a parallel run assembles only the problem's own matrix"); return 1; }
+    rc = lg_problem_split_values(env, p);
+  }
   return rc;
 }
 

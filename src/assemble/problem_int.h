@@ -101,9 +101,17 @@ struct lg_problem {
   int pattern_threads; /* the pattern pass's blocks, one per OpenMP thread */
   PetscInt *csr_i, *csr_j; /* the pattern of the owned rows: A's own arrays in a serial run
                             * (MatCreateSeqAIJWithArrays: freed after A); in a parallel one
-                            * PETSc copies them and takes csr_a after each assembly
-                            * (MatUpdateMPIAIJWithArray). Columns are global */
+                            * csr_a's rows are copied into the split blocks below after each
+                            * assembly (lg_problem_split_values). Columns are global */
   PetscScalar *csr_a;
+  /* a parallel run's matrix is made on split arrays of ours (MatCreateMPIAIJWithSplitArrays:
+   * no copy, no CSR preallocation through MatSetValues): the diagonal block (columns lo ..
+   * hi - 1, local) and the off-diagonal block (the others, global; PETSc compacts them in
+   * place), and per owned row the number of its columns left of the diagonal block; each
+   * assembly copies csr_a's rows into the blocks' values */
+  PetscInt *sd_i, *sd_j, *so_i, *so_j;
+  PetscScalar *sd_a, *so_a;
+  int *s_left;
   size_t bcc_n;         /* symmetric elimination: the essential columns' entries (keep_bc_columns) */
   int *bcc_row, *bcc_col;
   double *bcc_val;
@@ -135,6 +143,10 @@ struct lg_problem {
   int near_done;      /* the rigid body modes are the matrix's near null space */
   char prefix[64];
 };
+
+/* sparsity.c: a parallel run's assembled values (csr_a) into the matrix's diagonal and
+ * off-diagonal blocks */
+int lg_problem_split_values(lg_env *env, lg_problem *p);
 
 /* row i of the problem's order in PETSc's, and back (problem_int.h, perm) */
 static inline PetscInt lg_petsc_row(const lg_problem *p, PetscInt i) {

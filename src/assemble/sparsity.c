@@ -261,6 +261,45 @@ int lg_problem_near_nullspace(lg_env *env, lg_problem *p, KSP ksp) {
   return 0;
 }
 
+/* a parallel run: the owned rows' pattern (csr_i, csr_j, n rows) split into the diagonal
+ * block, columns lo .. hi - 1 numbered from 0, and the off-diagonal block, global columns,
+ * each row's order kept (problem_int.h, sd_* and so_*) */
+static int split_blocks(lg_env *env, lg_problem *p, int n) {
+  const PetscInt *ia = p->csr_i, *ja = p->csr_j;
+  size_t nd = 0, no = 0;
+  for (PetscInt e = 0; e < ia[n]; e++) {
+    if (ja[e] >= p->lo && ja[e] < p->hi) nd++;
+    else no++;
+  }
+  p->sd_i = malloc(sizeof(PetscInt) * ((size_t)n + 1));
+  p->so_i = malloc(sizeof(PetscInt) * ((size_t)n + 1));
+  p->sd_j = malloc(sizeof(PetscInt) * (nd + 1));
+  p->so_j = malloc(sizeof(PetscInt) * (no + 1));
+  p->sd_a = calloc(nd + 1, sizeof(PetscScalar));
+  p->so_a = calloc(no + 1, sizeof(PetscScalar));
+  p->s_left = malloc(sizeof(int) * ((size_t)n + 1));
+  if (!p->sd_i || !p->so_i || !p->sd_j || !p->so_j || !p->sd_a || !p->so_a || !p->s_left) {
+    lg_seterr(env, "out of memory for the matrix's diagonal and off-diagonal blocks (%ld values)", (long)ia[n]);
+    return 1;
+  }
+  p->sd_i[0] = p->so_i[0] = 0;
+  for (int r = 0; r < n; r++) {
+    PetscInt d = p->sd_i[r], o = p->so_i[r];
+    int left = 0;
+    for (PetscInt e = ia[r]; e < ia[r + 1]; e++) {
+      if (ja[e] >= p->lo && ja[e] < p->hi) p->sd_j[d++] = ja[e] - p->lo;
+      else {
+        left += ja[e] < p->lo;
+        p->so_j[o++] = ja[e];
+      }
+    }
+    p->sd_i[r + 1] = d;
+    p->so_i[r + 1] = o;
+    p->s_left[r] = left;
+  }
+  return 0;
+}
+
 int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   double t0 = now_ms();
   int N = p->N;
@@ -429,8 +468,11 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   if (!p->csr_a) { lg_seterr(env, "out of memory for %ld matrix values", (long)nnz); return 1; }
   int bs = lg_matrix_block_size(p);
   double t1 = now_ms();
-  if (p->par) PCHK(MatCreateMPIAIJWithArrays(PETSC_COMM_WORLD, n, n, N, N, ia, ja, p->csr_a, &p->A), "matrix creation");
-  else PCHK(MatCreateSeqAIJWithArrays(PETSC_COMM_SELF, N, N, ia, ja, p->csr_a, &p->A), "matrix creation");
+  if (p->par) {
+    if (split_blocks(env, p, n)) return 1;
+    PCHK(MatCreateMPIAIJWithSplitArrays(PETSC_COMM_WORLD, n, n, N, N, p->sd_i, p->sd_j, p->sd_a, p->so_i, p->so_j, p->so_a,
+                                        &p->A), "matrix creation");
+  } else PCHK(MatCreateSeqAIJWithArrays(PETSC_COMM_SELF, N, N, ia, ja, p->csr_a, &p->A), "matrix creation");
   if (p->prefix[0]) PCHK(MatSetOptionsPrefix(p->A, p->prefix), "MatSetOptionsPrefix");
   if (bs > 1) PCHK(MatSetBlockSize(p->A, bs), "MatSetBlockSize");
   /* row replacement must keep the pattern: the element places are reused every assembly */
@@ -439,6 +481,29 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   PCHK(MatCreateVecs(p->A, &p->x, &p->b), "vector creation");
   p->setup_ms[0] = t1 - t0;
   p->setup_ms[1] = now_ms() - t1;
+  return 0;
+}
+
+int lg_problem_split_values(lg_env *env, lg_problem *p) {
+  Mat Ad, Ao;
+  const PetscInt *garray;
+  PetscScalar *da, *oa;
+  PCHK(MatMPIAIJGetSeqAIJ(p->A, &Ad, &Ao, &garray), "MatMPIAIJGetSeqAIJ");
+  PCHK(MatSeqAIJGetArray(Ad, &da), "MatSeqAIJGetArray");
+  PCHK(MatSeqAIJGetArray(Ao, &oa), "MatSeqAIJGetArray");
+  int n = p->hi - p->lo;
+  for (int r = 0; r < n; r++) {
+    const PetscScalar *row = p->csr_a + p->csr_i[r];
+    PetscInt left = p->s_left[r], nd = p->sd_i[r + 1] - p->sd_i[r], no = p->so_i[r + 1] - p->so_i[r];
+    memcpy(oa + p->so_i[r], row, sizeof(PetscScalar) * (size_t)left);
+    memcpy(da + p->sd_i[r], row + left, sizeof(PetscScalar) * (size_t)nd);
+    memcpy(oa + p->so_i[r] + left, row + left + nd, sizeof(PetscScalar) * (size_t)(no - left));
+  }
+  PCHK(MatSeqAIJRestoreArray(Ao, &oa), "MatSeqAIJRestoreArray");
+  PCHK(MatSeqAIJRestoreArray(Ad, &da), "MatSeqAIJRestoreArray");
+  /* the matrix's state moves on, so that solvers refactor or set up again */
+  PCHK(MatAssemblyBegin(p->A, MAT_FINAL_ASSEMBLY), "MatAssemblyBegin");
+  PCHK(MatAssemblyEnd(p->A, MAT_FINAL_ASSEMBLY), "MatAssemblyEnd");
   return 0;
 }
 

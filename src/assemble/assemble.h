@@ -75,6 +75,8 @@ dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree, int ncomp, int disc
  * "natural"), rank 0's result on every rank. *part is NULL when the rows stay in the
  * problems' order (natural, one part, or fewer than 8 cells per part) */
 int lg_mesh_partition(lg_env *env, lg_mesh *lm, int nparts, const int **part);
+/* the vertex numbering's split into nparts: each cell in the run of its lowest vertex */
+void lg_mesh_vertex_runs(const mesh *m, int nparts, int *part);
 /* the validity check run before assembly */
 int lg_mesh_check(lg_env *env, lg_mesh *lm);
 
@@ -345,11 +347,10 @@ int lg_any_result(int rc, char *msg, size_t len);
 int lg_bcast_bytes(char **buf, size_t *len);
 /* the fields on a mesh that every rank holds whole, written for ParaView: npiece 0, a .vtu
  * that rank 0 writes; else a .pvtu of npiece pieces <stem>_p<k>.vtu beside it (k = 0 ..
- * npiece - 1: the parts of the mesh's partition into npiece, lg_mesh_partition, or when it
- * keeps the numbering's order the cells by their lowest vertex, the vertices split into
- * npiece runs), rank r writing the
- * pieces k = r mod size and rank 0 the collection. Every rank gets the outcome, and the
- * message (MESH_ERRLEN) in err */
+ * npiece - 1: the parts of the mesh's partition into npiece, lg_mesh_partition, or where it
+ * keeps the problems' order lg_mesh_vertex_runs), rank r writing the pieces k = r mod size
+ * and rank 0 the collection. Every rank gets the outcome, and the message (MESH_ERRLEN) in
+ * err */
 int lg_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_field *fl, int format, int npiece, char *err);
 /* the end of the whole run from one rank: the message, with the rank, on stderr, then
  * MPI_Abort so that no rank waits for this one (a single process only prints) */

@@ -2,8 +2,8 @@
  * single-process defaults), the OpenMP threads per rank, the rank and size, reductions of
  * numbers over the ranks, the outcome of rank-0 work or of every rank's part of it shared
  * with every rank, ParaView output written so (a .vtu by rank 0, the pieces of a .pvtu by
- * every rank), and ending the whole run from one rank (a Lua error on rank 1 must not leave rank 0 waiting
- * in a collective). Data that every rank holds whole (meshes, dof maps, discrete functions)
+ * every rank), and ending the whole run from one rank (a Lua error on rank 1 must not leave
+ * rank 0 waiting in a collective). Data that every rank holds whole (meshes, dof maps, discrete functions)
  * stays identical on all ranks; what is distributed lives in the problems (problem.c). */
 #include "assemble.h"
 
@@ -150,8 +150,18 @@ int lg_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_
   size_t len = strlen(path) + 24;
   int rank = lg_mpi_rank(), size = lg_mpi_size(), rc = 0;
   char **names = calloc((size_t)npiece, sizeof(char *));
-  int *cells = malloc(sizeof(int) * ((size_t)m->ncell + 1));
-  if (!names || !cells) rc = 1, snprintf(err, MESH_ERRLEN, "out of memory for %d pieces", npiece);
+  /* the cells piece by piece (a counting sort by part): cells[start[k] .. start[k + 1]) */
+  int *cells = malloc(sizeof(int) * ((size_t)m->ncell + 1)), *start = calloc((size_t)npiece + 2, sizeof(int));
+  int *runs = part ? NULL : malloc(sizeof(int) * ((size_t)m->ncell + 1));
+  if (!names || !cells || !start || (!part && !runs)) rc = 1, snprintf(err, MESH_ERRLEN, "out of memory for %d pieces", npiece);
+  if (!rc) {
+    if (!part) lg_mesh_vertex_runs(m, npiece, runs);
+    const int *pc = part ? part : runs;
+    for (int c = 0; c < m->ncell; c++) start[pc[c] + 2]++;
+    for (int k = 0; k < npiece; k++) start[k + 2] += start[k + 1];
+    for (int c = 0; c < m->ncell; c++) cells[start[pc[c] + 1]++] = c;
+  }
+  free(runs);
   for (int k = 0; k < npiece && !rc; k++) {
     if (!(names[k] = malloc(len))) {
       rc = 1, snprintf(err, MESH_ERRLEN, "out of memory for %d piece names", npiece);
@@ -159,20 +169,11 @@ int lg_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_
     }
     snprintf(names[k], len, "%.*s_p%d.vtu", (int)(strlen(path) - 5), path, k);
   }
-  for (int k = rank; k < npiece && !rc; k += size) {
-    int nc = 0;
-    if (part) {
-      for (int c = 0; c < m->ncell; c++)
-        if (part[c] == k) cells[nc++] = c;
-    } else /* the numbering's order: the cells by their lowest vertex, the vertices in runs */
-      for (int c = 0; c < m->ncell; c++) {
-        int lo = m->cells[(size_t)c * (size_t)m->nvc];
-        for (int j = 1; j < m->nvc; j++) lo = m->cells[(size_t)c * (size_t)m->nvc + (size_t)j] < lo ? m->cells[(size_t)c * (size_t)m->nvc + (size_t)j] : lo;
-        if ((long)lo * npiece / m->nvert == k) cells[nc++] = c;
-      }
-    if ((rc = mesh_write_vtu_piece(m, names[k], nf, fl, format, cells, nc))) snprintf(err, MESH_ERRLEN, "%s", m->err);
-  }
+  for (int k = rank; k < npiece && !rc; k += size)
+    if ((rc = mesh_write_vtu_piece(m, names[k], nf, fl, format, cells + start[k], start[k + 1] - start[k])))
+      snprintf(err, MESH_ERRLEN, "%s", m->err);
   free(cells);
+  free(start);
   rc = lg_any_result(rc, err, MESH_ERRLEN);
   if (!rc) rc = lg_root_result(rank == 0 ? mesh_write_pvtu(path, nf, fl, npiece, names, err) : 0, err, MESH_ERRLEN);
   for (int k = 0; names && k < npiece; k++) free(names[k]);

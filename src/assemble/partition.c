@@ -131,6 +131,15 @@ static long natural_interface(const mesh *m, int nparts) {
   return n;
 }
 
+void lg_mesh_vertex_runs(const mesh *m, int nparts, int *part) {
+  for (int c = 0; c < m->ncell; c++) {
+    const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+    int lo = v[0];
+    for (int k = 1; k < m->nvc; k++) lo = v[k] < lo ? v[k] : lo;
+    part[c] = (int)((long)lo * nparts / m->nvert);
+  }
+}
+
 int lg_mesh_partition(lg_env *env, lg_mesh *lm, int nparts, const int **part) {
   *part = NULL;
   if (lm->nparts == nparts) { *part = lm->part; return 0; }
@@ -163,12 +172,7 @@ int lg_mesh_partition(lg_env *env, lg_mesh *lm, int nparts, const int **part) {
        * number theirs by these parts: see set_ownership) */
       int *pt = malloc(sizeof(int) * ((size_t)m->ncell + 1));
       if (!pt) { lg_seterr(env, "out of memory for the partition of %d cells", m->ncell); return 1; }
-      for (int c = 0; c < m->ncell; c++) {
-        const int *v = m->cells + (size_t)c * (size_t)m->nvc;
-        int lo = v[0];
-        for (int k = 1; k < m->nvc; k++) lo = v[k] < lo ? v[k] : lo;
-        pt[c] = (int)((long)lo * nparts / m->nvert);
-      }
+      lg_mesh_vertex_runs(m, nparts, pt);
       free(lm->part);
       lm->part = pt;
       lm->nparts = nparts;

@@ -400,8 +400,9 @@ int lg_problem_compute_bcs(lg_env *env, lg_problem *p) {
 
 /* the rows this rank owns: whole nodes (B rows each). A serial run owns them all; a
  * parallel one the nodes of its part of the mesh's cells (lg_mesh_partition; a node of
- * cells in several parts goes to the part of most of them), numbered part after part in PETSc (perm),
- * or with the cells in their order the nodes split evenly in the problem's order */
+ * cells in several parts goes to the part of most of them), numbered part after part in
+ * PETSc (perm), or with the cells in their order the nodes split evenly in the problem's
+ * order */
 static int set_ownership(lg_env *env, lg_problem *p) {
   int size = lg_mpi_size(), rank = lg_mpi_rank(), B = lg_matrix_block_size(p), Nn = p->N / B;
   p->par = size > 1;
@@ -420,10 +421,11 @@ static int set_ownership(lg_env *env, lg_problem *p) {
     return 0;
   }
   int *owner = malloc(sizeof(int) * ((size_t)Nn + 1)), *start = calloc((size_t)size + 1, sizeof(int));
+  int *cnt = calloc((size_t)Nn + 1, sizeof(int));
   p->perm = malloc(sizeof(int) * ((size_t)Nn + 1));
   p->iperm = malloc(sizeof(int) * ((size_t)Nn + 1));
-  if (!owner || !start || !p->perm || !p->iperm) {
-    free(owner); free(start);
+  if (!owner || !start || !cnt || !p->perm || !p->iperm) {
+    free(owner); free(start); free(cnt);
     lg_seterr(env, "out of memory for the rows' order of %d nodes", Nn);
     return 1;
   }
@@ -431,13 +433,7 @@ static int set_ownership(lg_env *env, lg_problem *p) {
    * majority where there is one): a node of a part's border goes to the side that holds it
    * most, which keeps the parts' row counts near their cell counts (the lowest part took
    * every shared node before: +20% rows on 16 parts) */
-  int *cnt = calloc((size_t)Nn + 1, sizeof(int));
-  if (!cnt) {
-    free(owner); free(start);
-    lg_seterr(env, "out of memory for the rows' order of %d nodes", Nn);
-    return 1;
-  }
-  for (int i = 0; i < Nn; i++) owner[i] = size;
+  for (int i = 0; i < Nn; i++) owner[i] = 0; /* every node is in some cell: each gets a vote */
   const mesh *m = p->lm->m;
   for (int a = 0; a < p->cols.n; a++) {
     const dofmap *dm = p->cdm[a];
@@ -449,10 +445,7 @@ static int set_ownership(lg_env *env, lg_problem *p) {
       }
   }
   free(cnt);
-  for (int i = 0; i < Nn; i++) {
-    if (owner[i] == size) owner[i] = 0; /* in no cell (cannot happen with these dof maps) */
-    start[owner[i] + 1]++;
-  }
+  for (int i = 0; i < Nn; i++) start[owner[i] + 1]++;
   for (int r = 0; r < size; r++) start[r + 1] += start[r];
   p->lo = start[rank] * B;
   p->hi = start[rank + 1] * B;
@@ -644,12 +637,24 @@ long lg_problem_nnz(const lg_problem *p) {
 
 /* ---------------------------------------------------------------- distributed vectors */
 
+void lg_problem_owned_part(const lg_problem *p, const double *whole, double sign, double *owned) {
+  int B = p->pB;
+  if (!p->iperm) {
+    for (int r = p->lo; r < p->hi; r++) owned[r - p->lo] = sign * whole[r];
+    return;
+  }
+  /* node by node: PETSc's node R holds the problem's node iperm[R] */
+  for (int R = p->lo / B; R < p->hi / B; R++) {
+    const double *w = whole + (size_t)p->iperm[R] * B;
+    double *o = owned + ((size_t)R * B - (size_t)p->lo);
+    for (int j = 0; j < B; j++) o[j] = sign * w[j];
+  }
+}
+
 int lg_problem_vec_set(lg_env *env, lg_problem *p, Vec v, const double *whole) {
   PetscScalar *a;
   PCHK(VecGetArray(v, &a), "VecGetArray");
-  if (p->perm)
-    for (int r = p->lo; r < p->hi; r++) a[r - p->lo] = whole[lg_problem_row(p, r)];
-  else memcpy(a, whole + p->lo, sizeof(double) * (size_t)(p->hi - p->lo));
+  lg_problem_owned_part(p, whole, 1.0, a);
   PCHK(VecRestoreArray(v, &a), "VecRestoreArray");
   return 0;
 }
@@ -664,8 +669,8 @@ int lg_problem_vec_get(lg_env *env, lg_problem *p, Vec v, double *whole) {
   }
   const PetscScalar *a;
   PCHK(VecGetArrayRead(src, &a), "VecGetArrayRead");
-  if (p->perm)
-    for (int r = 0; r < p->N; r++) whole[lg_problem_row(p, r)] = a[r];
+  if (p->iperm) /* node by node, as lg_problem_owned_part */
+    for (int R = 0, B = p->pB; R < p->N / B; R++) memcpy(whole + (size_t)p->iperm[R] * B, a + (size_t)R * B, sizeof(double) * (size_t)B);
   else memcpy(whole, a, sizeof(double) * (size_t)p->N);
   PCHK(VecRestoreArrayRead(src, &a), "VecRestoreArrayRead");
   return 0;

@@ -61,11 +61,10 @@ struct lg_problem {
   /* the rows' order in PETSc: the nodes (pB rows each) of every part of the mesh's partition
    * (partition.c) one part after another, each in the problem's own order, so that a rank
    * owns its cells' nodes (a node of cells in several parts goes to the part of most of
-   * them). perm: the
-   * problem's node -> PETSc's, iperm its inverse; NULL where the orders are the same (a
-   * serial run, or -lugal_partitioner natural). The whole-length arrays (state, solution,
-   * rwhole, bc_rows) stay in the problem's order; the matrix's pattern, own_rows and the
-   * PETSc vectors are in PETSc's */
+   * them). perm: the problem's node -> PETSc's, iperm its inverse; NULL where the orders
+   * are the same (a serial run, or rows split in the problem's order). The whole-length
+   * arrays (state, solution, rwhole, bc_rows) stay in the problem's order; the matrix's
+   * pattern, own_rows and the PETSc vectors are in PETSc's */
   int *perm, *iperm, pB;
   VecScatter to_all;    /* a distributed vector to every rank's whole copy */
   Vec whole;            /* that copy */
@@ -156,6 +155,9 @@ static inline PetscInt lg_problem_row(const lg_problem *p, PetscInt r) {
   return p->iperm ? (PetscInt)p->iperm[r / p->pB] * p->pB + r % p->pB : r;
 }
 
+/* problem.c: the owned rows of a whole-length array (the problem's order) times sign into
+ * owned (PETSc's order, hi - lo values) */
+void lg_problem_owned_part(const lg_problem *p, const double *whole, double sign, double *owned);
 /* problem.c: the owned part of a whole vector (N values) into v, and every rank's whole
  * copy of v (a gather in a parallel run, a copy in a serial one) */
 int lg_problem_vec_set(lg_env *env, lg_problem *p, Vec v, const double *whole);

@@ -235,7 +235,7 @@ static int keep_bc_columns(lg_env *env, lg_problem *p) {
   for (int k = 0; k < p->nbc; k++) at[lg_petsc_row(p, p->bc_rows[k])] = k; /* the matrix's order */
   size_t n = 0;
   /* the assembled values, before the elimination: the matrix's own array in a serial run,
-   * the array PETSc copied them from in a parallel one; the owned rows, global columns */
+   * the one its blocks are copied from in a parallel one; the owned rows, global columns */
   const PetscScalar *av = p->csr_a;
   for (int pass = 0; pass < 2; pass++) {
     if (pass) {
@@ -281,7 +281,7 @@ static int assemble_rhs(lg_env *env, lg_problem *p) {
     rc = lg_problem_residual_into(env, p, p->state, p->rwhole);
     if (rc) return 1;
     PCHK(VecGetArray(p->b, &b), "VecGetArray");
-    for (int i = 0; i < n; i++) b[i] = -p->rwhole[lg_problem_row(p, p->lo + i)];
+    lg_problem_owned_part(p, p->rwhole, -1.0, b);
   } else {
     PCHK(VecGetArray(p->b, &b), "VecGetArray");
     rc = lg_problem_residual_into(env, p, p->state, b);
@@ -381,8 +381,7 @@ static PetscErrorCode snes_function(SNES snes, Vec X, Vec F, void *ctx) {
   }
   PetscCall(VecGetArray(F, &f));
   int rc = lg_problem_residual_into(p->env, p, p->state, p->par ? p->rwhole : f);
-  if (!rc && p->par)
-    for (int i = p->lo; i < p->hi; i++) f[i - p->lo] = p->rwhole[lg_problem_row(p, i)];
+  if (!rc && p->par) lg_problem_owned_part(p, p->rwhole, 1.0, f);
   if (!rc)
     for (int i = 0; i < p->nown; i++) f[p->own_rows[i] - p->lo] = p->state[lg_problem_row(p, p->own_rows[i])] - p->own_vals[i];
   PetscCall(VecRestoreArray(F, &f));

@@ -765,7 +765,7 @@ static int vtu_format_opt(lua_State *L, int idx, const char *fn, int argno, int 
     lua_Integer n = lua_tointegerx(L, -1, &isnum);
     if (!isnum || n < 1 || n > 1000000)
       return luaL_error(L, "%s: option 'pieces' must be a whole number from 1 to 1000000, got %s", fn,
-                        isnum ? lua_tostring(L, -1) : luaL_typename(L, -1));
+                        lua_type(L, -1) == LUA_TNUMBER ? lua_tostring(L, -1) : luaL_typename(L, -1));
     *pieces = (int)n;
   }
   lua_pop(L, 1);

@@ -174,6 +174,13 @@ static int put_array(FILE *f, int format, int kind, long n, int per_line, value_
   return 0;
 }
 
+/* whether some field is on the cells (on_cells 1) or on the points (0): its section is written */
+static int any_field_on(int nfield, const mesh_field *fl, int on_cells) {
+  for (int i = 0; i < nfield; i++)
+    if (fl[i].on_cells == on_cells) return 1;
+  return 0;
+}
+
 static int write_piece(mesh *m, const char *path, int nfield, const mesh_field *fl, int format, piece *pc) {
   outfile o;
   if (format != VTU_BINARY && format != VTU_ASCII && format != VTU_ZLIB) {
@@ -189,9 +196,7 @@ static int write_piece(mesh *m, const char *path, int nfield, const mesh_field *
              "<Piece NumberOfPoints=\"%d\" NumberOfCells=\"%d\">\n", bin ? " header_type=\"UInt64\"" : "",
           format == VTU_ZLIB ? " compressor=\"vtkZLibDataCompressor\"" : "", pc->nv, pc->nc);
   for (int pass = 0; pass < 2; pass++) {
-    int any = 0;
-    for (int i = 0; i < nfield; i++) any |= fl[i].on_cells == pass;
-    if (!any) continue;
+    if (!any_field_on(nfield, fl, pass)) continue;
     fprintf(f, pass ? "<CellData>\n" : "<PointData>\n");
     for (int i = 0; i < nfield; i++) {
       if (fl[i].on_cells != pass) continue;
@@ -264,9 +269,7 @@ int mesh_write_pvtu(const char *path, int nfield, const mesh_field *fl, int npie
   fprintf(f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"PUnstructuredGrid\" version=\"0.1\" "
              "byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<PUnstructuredGrid GhostLevel=\"0\">\n");
   for (int pass = 0; pass < 2; pass++) {
-    int any = 0;
-    for (int i = 0; i < nfield; i++) any |= fl[i].on_cells == pass;
-    if (!any) continue;
+    if (!any_field_on(nfield, fl, pass)) continue;
     fprintf(f, pass ? "<PCellData>\n" : "<PPointData>\n");
     for (int i = 0; i < nfield; i++) {
       if (fl[i].on_cells != pass) continue;

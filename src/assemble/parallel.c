@@ -19,12 +19,20 @@
 
 int lg_petsc_init(int *argc, char ***argv) {
   /* OpenMPI singleton start-up is slow (a helper daemon); when not started by mpiexec,
-   * default to the in-process settings unless the user set them (PERFORMANCE-NOTES) */
+   * default to the in-process settings unless the user set them (PERFORMANCE-NOTES). A
+   * single process talks to no one: no network reachability (netlink), only the collectives
+   * and one-sided components a communicator of one uses, and hwloc maps the cores and memory
+   * but not the PCI devices, whose configuration space costs 2.5 ms a device to read in a
+   * virtual machine, nor its OpenCL, GL and libxml plugins (MPI_Init 40 -> 17 ms here;
+   * bench/RESULTS.md "Start-up") */
   const char *local = getenv("OMPI_COMM_WORLD_LOCAL_SIZE");
   if (!getenv("OMPI_COMM_WORLD_SIZE") && !getenv("PMI_RANK") && !getenv("PMIX_RANK")) {
     static const char *kv[][2] = {{"OMPI_MCA_ess_singleton_isolated", "1"}, {"OMPI_MCA_btl", "self"},
                                   {"OMPI_MCA_pml", "ob1"}, {"OMPI_MCA_mtl", "^ofi,psm2"},
-                                  {"OMPI_MCA_osc", "^ucx"}, {"OMPI_MCA_coll", "^hcoll"}};
+                                  {"OMPI_MCA_osc", "sm,pt2pt"}, {"OMPI_MCA_coll", "basic,self,libnbc"},
+                                  {"OMPI_MCA_reachable", "weighted"}, {"OMPI_MCA_errmgr", "default_app"},
+                                  {"HWLOC_COMPONENTS", "-linuxio"},
+                                  {"HWLOC_PLUGINS_BLACKLIST", "hwloc_pci,hwloc_opencl,hwloc_gl,hwloc_xml_libxml"}};
     for (size_t i = 0; i < sizeof kv / sizeof kv[0]; i++) setenv(kv[i][0], kv[i][1], 0);
   }
 #ifdef _OPENMP

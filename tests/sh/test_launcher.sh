@@ -3,7 +3,8 @@
 # lugal-core with glibc's huge-page tunable set: added to the user's other tunables, never
 # overriding a glibc.malloc.hugetlb the user chose, left out with -lugal_hugepages 0; the
 # core's exit status and arguments pass through; where the kernel offers transparent huge
-# pages, a problem's large arrays land on them (AnonHugePages in /proc/self/smaps_rollup).
+# pages, a problem's large arrays land on them (AnonHugePages in /proc/self/smaps_rollup);
+# the single-process MPI settings are made unless the user made them.
 BUILD=$1
 T=$(mktemp -d)
 trap 'rm -rf "$T"' EXIT
@@ -23,6 +24,14 @@ out=$(GLIBC_TUNABLES=glibc.malloc.hugetlb=0 "$BUILD/lugal" "$T/env.lua" | sed -n
 out=$(env -u GLIBC_TUNABLES "$BUILD/lugal" "$T/env.lua" -lugal_hugepages 0 2>&1)
 [ "$(echo "$out" | sed -n 1p)" = "(unset)" ] || fail "-lugal_hugepages 0: got '$out'"
 echo "$out" | grep -q "was not used" && fail "-lugal_hugepages reported as unused: $out"
+
+# a single process sets Open MPI's and hwloc's in-process settings before PETSc starts
+# (src/assemble/parallel.c), keeping the user's own
+printf 'print(os.getenv("HWLOC_COMPONENTS"), os.getenv("OMPI_MCA_coll"))\n' > "$T/mpienv.lua"
+out=$(env -u HWLOC_COMPONENTS -u OMPI_MCA_coll "$BUILD/lugal" "$T/mpienv.lua" 2>&1)
+[ "$out" = "-linuxio	basic,self,libnbc" ] || fail "single-process settings: got '$out'"
+out=$(HWLOC_COMPONENTS=linux OMPI_MCA_coll=^hcoll "$BUILD/lugal" "$T/mpienv.lua" 2>&1)
+[ "$out" = "linux	^hcoll" ] || fail "the user's settings: got '$out'"
 
 printf 'error("boom")\n' > "$T/err.lua"
 "$BUILD/lugal" "$T/err.lua" > /dev/null 2>&1

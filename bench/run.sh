@@ -7,6 +7,9 @@ echo "machine: $(nproc) cores, $(awk '/MemTotal/ {printf "%.0f GiB", $2/1048576}
 echo "PETSc $(pkg-config --modversion PETSc), $(tcc -v 2>&1 | head -1)"
 # assembly, the 3D Poisson whole process and the 2D demo (issue 11; includes coldstart.sh)
 sh "$ROOT/bench/assembly_all.sh"
+# nanoseconds per element of each kernel shape, libtcc's code and the system compiler's
+"$ROOT/build/lugal" "$ROOT/bench/kernels.lua" 5 -lugal_jit tcc
+"$ROOT/build/lugal" "$ROOT/bench/kernels.lua" 5 -lugal_jit cc
 have_fenicsx=0
 /usr/bin/python3 -c "import dolfinx" 2>/dev/null && have_fenicsx=1
 "$ROOT/build/lugal" "$ROOT/bench/quality.lua" 119

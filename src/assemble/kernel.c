@@ -44,10 +44,56 @@ static void vector_select(unsigned char *sel, const int *vlev, int n) {
     if (vlev[i] && (sel[i] == 1 || sel[i] == 2)) sel[i] = (unsigned char)(sel[i] + 2);
 }
 
+/* the quadrature loop emits only the live nodes (expr_tape_live) */
+static void keep_live(unsigned char *sel, const unsigned char *live, int n) {
+  for (int i = 0; i < n; i++)
+    if (!live[i]) sel[i] = 0;
+}
+
 static void emit_table(strbuf *b, const char *name, const double *v, long n) {
   sb_printf(b, "static const double %s[%ld] = {", name, n);
   for (long i = 0; i < n; i++) sb_printf(b, "%s%.17g", i ? (i % 4 ? ", " : ",\n  ") : "", v[i]);
   sb_printf(b, "};\n");
+}
+
+/* straight-line code for loops of at most this many trips: libtcc keeps every value on the
+ * stack and computes every index, so an unrolled loop of constant indices runs about twice
+ * as fast as the loop (bench/RESULTS.md "Kernels that libtcc runs well"); the sums keep
+ * their order, so the values are the same to the bit */
+#define KER_UNROLL 10
+
+/* 1 if the n rows of len values each are all equal to the first: a P1 or P0 basis's
+ * reference gradients, the same at every quadrature point */
+static int rows_equal(const double *t, long n, int len) {
+  for (long r = 1; r < n; r++)
+    if (memcmp(t, t + r * len, sizeof(double) * (size_t)len)) return 0;
+  return 1;
+}
+
+/* the physical gradients g<m><p>_<d>[i] of the nl basis functions of degree p (side m: ""
+ * or "m"; tables and map suffixed M on the '-' side) at reference row `row` of table
+ * G<M><p>: K^T times the reference gradients, unrolled for short bases */
+static void emit_grads(strbuf *b, int dim, int nl, int p, const char *m, const char *M, const char *row, const char *ind) {
+  sb_printf(b, "%sdouble ", ind);
+  for (int d = 0; d < dim; d++) sb_printf(b, "%sg%s%d_%d[%d]", d ? ", " : "", m, p, d, nl);
+  sb_printf(b, ";\n");
+  if (nl <= KER_UNROLL) {
+    sb_printf(b, "%sconst double *gr%s%d = G%s%d + %s*%d;\n", ind, m, p, M, p, row, nl * dim);
+    for (int i = 0; i < nl; i++)
+      for (int d = 0; d < dim; d++) {
+        sb_printf(b, "%sg%s%d_%d[%d] = ", ind, m, p, d, i);
+        for (int kk = 0; kk < dim; kk++) sb_printf(b, "%sgr%s%d[%d]*K%s%d%d", kk ? " + " : "", m, p, i * dim + kk, M, kk, d);
+        sb_printf(b, ";\n");
+      }
+    return;
+  }
+  sb_printf(b, "%sfor (int i = 0; i < %d; ++i) {\n%s  const double *gr = G%s%d + (%s*%d + i)*%d;\n", ind, nl, ind, M, p, row, nl, dim);
+  for (int d = 0; d < dim; d++) {
+    sb_printf(b, "%s  g%s%d_%d[i] = ", ind, m, p, d);
+    for (int kk = 0; kk < dim; kk++) sb_printf(b, "%sgr[%d]*K%s%d%d", kk ? " + " : "", kk, M, kk, d);
+    sb_printf(b, ";\n");
+  }
+  sb_printf(b, "%s}\n", ind);
 }
 
 static int leaf_dir(const expr *e) {
@@ -170,6 +216,31 @@ static int block_used(unsigned char used[4][4]) {
   return any;
 }
 
+/* a coefficient's derivative whose basis gradients are the same at every point: it is too,
+ * and is computed once per item */
+static int coef_hoisted(const lg_kernel *k, expr_ctx *c, const expr *e, int cgrad[2][4]) {
+  return leaf_dir(e) >= 0 && cgrad[func_side(c, e->i0)][k->coef_degree[coef_index(k, e->i0)]];
+}
+
+/* a coefficient's value or derivative at the point: its element values times the basis
+ * values or gradients */
+static void emit_coef(strbuf *b, const lg_kernel *k, expr_ctx *c, leafctx *lc, const expr *e, const lagrange_element *el,
+                      const char *ind) {
+  int ci = coef_index(k, e->i0), p = k->coef_degree[ci], nl = el[p].nloc, nc = k->coef_ncomp[ci];
+  int off = k->coef_off[ci] + (nc > 1 ? e->i1 : 0);
+  char nm[32], bn[32];
+  leafname(lc, e, nm, sizeof nm);
+  basis_name(c, e, p, bn, sizeof bn);
+  if (nl <= KER_UNROLL) {
+    sb_printf(b, "%sconst double %s = ", ind, nm);
+    for (int i = 0; i < nl; i++) sb_printf(b, "%sW[%d]*%s[%d]", i ? " + " : "", off + i * nc, bn, i);
+    sb_printf(b, ";\n");
+  } else if (nc == 1)
+    sb_printf(b, "%sdouble %s = 0.0;\n%sfor (int i = 0; i < %d; ++i) %s += W[%d + i]*%s[i];\n", ind, nm, ind, nl, nm, off, bn);
+  else
+    sb_printf(b, "%sdouble %s = 0.0;\n%sfor (int i = 0; i < %d; ++i) %s += W[%d + i*%d]*%s[i];\n", ind, nm, ind, nl, nm, off, nc, bn);
+}
+
 #define KERR(...) do { snprintf(err, errlen, __VA_ARGS__); goto fail; } while (0)
 
 char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel_spec *s,
@@ -177,7 +248,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
                     char *err, size_t errlen) {
   strbuf b = {0};
   expr_tape tape = {0};
-  unsigned char *sel = NULL, *isconst = NULL, *pcls = NULL;
+  unsigned char *sel = NULL, *isconst = NULL, *pcls = NULL, *live = NULL, *need = NULL;
   int *pslot = NULL, *vlev = NULL, nvec = 0, maxlev = 0;
   int dim = cell_dim(ct);
   int nf = facet ? cell_nfacets(ct) : 1;
@@ -220,6 +291,9 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   /* leaves: coefficient functions, coordinates, normals */
   /* per side (0: the cell, or '+'; 1: the '-' cell of an interior facet) and degree */
   int need_val[2][4] = {{0}}, need_grad[2][4] = {{0}}, need_x = 0, need_n = 0;
+  /* cgrad[side][p]: the physical gradients of degree p are the same at every point (an
+   * affine cell and reference gradients equal at every point): computed once per item */
+  int cgrad[2][4] = {{0}};
   for (int i = 0; i < tape.n; i++) {
     const expr *e = tape.node[i];
     if (e->kind == E_COORD) {
@@ -376,6 +450,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     char nm[16];
     if (need_val[0][p]) { snprintf(nm, sizeof nm, "B%d", p); emit_table(&b, nm, bv, (long)nf * q.n * nl); }
     if (need_grad[0][p]) { snprintf(nm, sizeof nm, "G%d", p); emit_table(&b, nm, bg, (long)nf * q.n * nl * dim); }
+    cgrad[0][p] = need_grad[0][p] && affine && rows_equal(bg, (long)nf * q.n, nl * dim);
     free(bv);
     free(bg);
   }
@@ -422,6 +497,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
       char nm[16];
       if (need_val[1][p]) { snprintf(nm, sizeof nm, "BM%d", p); emit_table(&b, nm, bv, (long)(nm_pts * nl)); }
       if (need_grad[1][p]) { snprintf(nm, sizeof nm, "GM%d", p); emit_table(&b, nm, bg, (long)(nm_pts * nl * dim)); }
+      cgrad[1][p] = need_grad[1][p] && affine && rows_equal(bg, (long)nm_pts, nl * dim);
       free(bv);
       free(bg);
     }
@@ -572,16 +648,24 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
       int na = vr.nloc[a], nb = vc.nloc[bb];
       sb_printf(&b, "  for (int i = 0; i < %d; ++i) {\n    double *Ai = A + (%d + i*%d)*%d + %d;\n", na, vr.off[a], vr.stride[a],
                 vc.size, vc.off[bb]);
-      sb_printf(&b, "    for (int j = 0; j < %d; ++j) Ai[j*%d] += scale*(", nb, vc.stride[bb]);
-      int first = 1;
-      for (int kk = 0; kk <= dim; kk++)
-        for (int ll = 0; ll <= dim; ll++) {
-          if (!rused[a][bb][kk][ll]) continue;
-          sb_printf(&b, "%sG%d_%d_%d%d*R%d%d_%d%d[i*%d + j]", first ? "" : " + ", a, bb, kk, ll, vr.degree[a], vc.degree[bb], kk, ll,
-                    nb);
-          first = 0;
-        }
-      sb_printf(&b, ");\n  }\n");
+      int unroll = nb <= KER_UNROLL;
+      for (int jj = 0; jj < (unroll ? nb : 1); jj++) {
+        char jx[16] = "j";
+        if (unroll) {
+          snprintf(jx, sizeof jx, "%d", jj);
+          sb_printf(&b, "    Ai[%d] += scale*(", jj * vc.stride[bb]);
+        } else sb_printf(&b, "    for (int j = 0; j < %d; ++j) Ai[j*%d] += scale*(", nb, vc.stride[bb]);
+        int first = 1;
+        for (int kk = 0; kk <= dim; kk++)
+          for (int ll = 0; ll <= dim; ll++) {
+            if (!rused[a][bb][kk][ll]) continue;
+            sb_printf(&b, "%sG%d_%d_%d%d*R%d%d_%d%d[i*%d + %s]", first ? "" : " + ", a, bb, kk, ll, vr.degree[a], vc.degree[bb], kk,
+                      ll, nb, jx);
+            first = 0;
+          }
+        sb_printf(&b, ");\n");
+      }
+      sb_printf(&b, "  }\n");
     }
   if (s->arity == 2 && nvar == 0) {
     /* everything was exact on the reference cell */
@@ -592,10 +676,30 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     free(pcls);
     free(pslot);
     free(vlev);
+    free(live);
+    free(need);
     expr_tape_free(&tape);
     if (b.failed) { sb_free(&b); snprintf(err, errlen, "out of memory generating a kernel"); return NULL; }
     return b.s;
   }
+  /* what the quadrature loop needs: the contraction's integrands and the cached values, and
+   * what they are computed from there (libtcc does not drop dead code) */
+  live = calloc((size_t)tape.n + 1, 1);
+  need = calloc((size_t)tape.n + 1, 1);
+  if (!live || !need) KERR("out of memory");
+  for (int i = 0; i < tape.nroot; i++) need[tape.root[i]] = s->arity < 2 || !isconst[i];
+  for (int i = 0; i < tape.n; i++) need[i] |= k->ncache > 0 && pcls[i] == PC_CACHED;
+  if (expr_tape_live(&tape, need, vlev, live)) KERR("out of memory");
+  int xlive[3] = {0, 0, 0};
+  for (int i = 0; i < tape.n; i++)
+    if (live[i] && tape.node[i]->kind == E_COORD) xlive[tape.node[i]->i0] = 1;
+  /* constant gradients: the bases' and the coefficients' derivatives, once per item */
+  for (int sd = 0; sd < 2; sd++)
+    for (int p = 0; p <= 3; p++)
+      if (cgrad[sd][p]) emit_grads(&b, dim, el[p].nloc, p, sd ? "m" : "", sd ? "M" : "", "0", "  ");
+  for (int i = 0; i < tape.n; i++)
+    if (live[i] && tape.node[i]->kind == E_FIELD && coef_hoisted(k, c, tape.node[i], cgrad))
+      emit_coef(&b, k, c, &lc, tape.node[i], el, "  ");
   if (nvec) {
     /* the vector calls: their arguments at every point, then one call per node. Those that
      * only the point cache's values need (its cached and inner nodes) are skipped when the
@@ -684,6 +788,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     }
     if (need_x)
       for (int d = 0; d < dim; d++) {
+        if (!xlive[d]) continue;
         sb_printf(&b, "    const double x%d = ", d);
         for (int j = 0; j < nv; j++) sb_printf(&b, "%sNQ[qq*%d + %d]*X[%d]", j ? " + " : "", nv, j, j * dim + d);
         sb_printf(&b, ";\n");
@@ -692,6 +797,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   sb_printf(&b, "    const double wq = QW[q]*scale;\n");
   if (need_x && affine) {
     for (int d = 0; d < dim; d++) {
+      if (!xlive[d]) continue;
       sb_printf(&b, "    const double x%d = X[%d]", d, d);
       for (int kk = 0; kk < dim; kk++) sb_printf(&b, " + J%d%d*QX[qq*%d+%d]", d, kk, dim, kk);
       sb_printf(&b, ";\n");
@@ -702,33 +808,12 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
       int nl = el[p].nloc;
       const char *m = sd ? "m" : "", *M = sd ? "M" : "", *qi = sd ? "qm" : "qq";
       if (need_val[sd][p]) sb_printf(&b, "    const double *b%s%d = B%s%d + %s*%d;\n", m, p, M, p, qi, nl);
-      if (need_grad[sd][p]) {
-        sb_printf(&b, "    double ");
-        for (int d = 0; d < dim; d++) sb_printf(&b, "%sg%s%d_%d[%d]", d ? ", " : "", m, p, d, nl);
-        sb_printf(&b, ";\n    for (int i = 0; i < %d; ++i) {\n      const double *gr = G%s%d + (%s*%d + i)*%d;\n", nl, M, p, qi, nl, dim);
-        for (int d = 0; d < dim; d++) {
-          sb_printf(&b, "      g%s%d_%d[i] = ", m, p, d);
-          for (int kk = 0; kk < dim; kk++) sb_printf(&b, "%sgr[%d]*K%s%d%d", kk ? " + " : "", kk, M, kk, d);
-          sb_printf(&b, ";\n");
-        }
-        sb_printf(&b, "    }\n");
-      }
+      if (need_grad[sd][p] && !cgrad[sd][p]) emit_grads(&b, dim, nl, p, m, M, qi, "    ");
     }
-  /* coefficient values and gradients */
-  for (int i = 0; i < tape.n; i++) {
-    const expr *e = tape.node[i];
-    if (e->kind != E_FIELD) continue;
-    int ci = coef_index(k, e->i0), p = k->coef_degree[ci], nl = el[p].nloc, nc = k->coef_ncomp[ci];
-    char nm[32], bn[32];
-    leafname(&lc, e, nm, sizeof nm);
-    basis_name(c, e, p, bn, sizeof bn);
-    if (nc == 1)
-      sb_printf(&b, "    double %s = 0.0;\n    for (int i = 0; i < %d; ++i) %s += W[%d + i]*%s[i];\n", nm, nl, nm,
-                k->coef_off[ci], bn);
-    else
-      sb_printf(&b, "    double %s = 0.0;\n    for (int i = 0; i < %d; ++i) %s += W[%d + i*%d]*%s[i];\n", nm, nl, nm,
-                k->coef_off[ci] + e->i1, nc, bn);
-  }
+  /* coefficient values and gradients (those of constant gradients are computed above) */
+  for (int i = 0; i < tape.n; i++)
+    if (live[i] && tape.node[i]->kind == E_FIELD && !coef_hoisted(k, c, tape.node[i], cgrad))
+      emit_coef(&b, k, c, &lc, tape.node[i], el, "    ");
   if (k->ncache > 0) {
     /* cached coordinate-only values: read them, or compute (and store) them */
     int nc = k->ncache;
@@ -738,6 +823,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     sb_printf(&b, ";\n");
     for (int i = 0; i < tape.n; i++) sel[i] = (tape.node[i]->dep & DEP_POINT) && pcls[i] == PC_SHARED;
     vector_select(sel, vlev, tape.n);
+    keep_live(sel, live, tape.n);
     expr_codegen(&b, &tape, "t", "P", sel, leafname, &lc, "    ");
     sb_printf(&b, "    if (cm == 2) {\n");
     for (int i = 0; i < tape.n; i++)
@@ -746,6 +832,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     for (int i = 0; i < tape.n; i++)
       sel[i] = pcls[i] == PC_CACHED ? 2 : (tape.node[i]->dep & DEP_POINT) && pcls[i] == PC_INNER;
     vector_select(sel, vlev, tape.n);
+    keep_live(sel, live, tape.n);
     expr_codegen(&b, &tape, "t", "P", sel, leafname, &lc, "      ");
     sb_printf(&b, "      if (cm == 1) {\n");
     for (int i = 0; i < tape.n; i++)
@@ -756,6 +843,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     for (int i = 0; i < tape.n; i++) sel[i] = !sel[i];
   }
   vector_select(sel, vlev, tape.n);
+  keep_live(sel, live, tape.n);
   expr_codegen(&b, &tape, "t", "P", sel, leafname, &lc, "    ");
   /* contraction */
   if (s->arity == 0) {
@@ -766,18 +854,25 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
       int any = 0;
       for (int i = 0; i < s->tab->nres; i++) any |= same_block(&vr, a, s->tab->res_leaf[i]);
       if (!any) continue;
-      sb_printf(&b, "    for (int i = 0; i < %d; ++i) A[%d + i*%d] += wq*(", vr.nloc[a], vr.off[a], vr.stride[a]);
-      int first = 1;
-      for (int i = 0; i < s->tab->nres; i++) {
-        const expr *tl = s->tab->res_leaf[i];
-        if (!same_block(&vr, a, tl)) continue;
-        char bn[32];
-        basis_name(c, tl, vr.degree[a], bn, sizeof bn);
-        expr_codegen_ref(&tape, tape.root[i], "t", leafname, &lc, ref, sizeof ref);
-        sb_printf(&b, "%s%s*%s[i]", first ? "" : " + ", ref, bn);
-        first = 0;
+      int unroll = vr.nloc[a] <= KER_UNROLL;
+      for (int ii = 0; ii < (unroll ? vr.nloc[a] : 1); ii++) {
+        char ix[16] = "i";
+        if (unroll) {
+          snprintf(ix, sizeof ix, "%d", ii);
+          sb_printf(&b, "    A[%d] += wq*(", vr.off[a] + ii * vr.stride[a]);
+        } else sb_printf(&b, "    for (int i = 0; i < %d; ++i) A[%d + i*%d] += wq*(", vr.nloc[a], vr.off[a], vr.stride[a]);
+        int first = 1;
+        for (int i = 0; i < s->tab->nres; i++) {
+          const expr *tl = s->tab->res_leaf[i];
+          if (!same_block(&vr, a, tl)) continue;
+          char bn[32];
+          basis_name(c, tl, vr.degree[a], bn, sizeof bn);
+          expr_codegen_ref(&tape, tape.root[i], "t", leafname, &lc, ref, sizeof ref);
+          sb_printf(&b, "%s%s*%s[%s]", first ? "" : " + ", ref, bn, ix);
+          first = 0;
+        }
+        sb_printf(&b, ");\n");
       }
-      sb_printf(&b, ");\n");
     }
   } else {
     for (int a = 0; a < vr.n; a++)
@@ -808,13 +903,22 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
           sb_printf(&b, ");\n");
         }
         sb_printf(&b, "      double *Aj = A + %d + j*%d;\n", vc.off[bb], vc.stride[bb]);
-        sb_printf(&b, "      for (int i = 0; i < %d; ++i) Aj[(%d + i*%d)*%d] += ", vr.nloc[a], vr.off[a], vr.stride[a], vc.size);
-        for (int t = 0; t < nt; t++) {
-          char bn[32];
-          basis_name(c, tls[t], vr.degree[a], bn, sizeof bn);
-          sb_printf(&b, "%s%s[i]*u%d", t ? " + " : "", bn, t);
+        int unroll = vr.nloc[a] <= KER_UNROLL;
+        for (int ii = 0; ii < (unroll ? vr.nloc[a] : 1); ii++) {
+          char ix[16] = "i";
+          if (unroll) {
+            snprintf(ix, sizeof ix, "%d", ii);
+            sb_printf(&b, "      Aj[%d] += ", (vr.off[a] + ii * vr.stride[a]) * vc.size);
+          } else
+            sb_printf(&b, "      for (int i = 0; i < %d; ++i) Aj[(%d + i*%d)*%d] += ", vr.nloc[a], vr.off[a], vr.stride[a], vc.size);
+          for (int t = 0; t < nt; t++) {
+            char bn[32];
+            basis_name(c, tls[t], vr.degree[a], bn, sizeof bn);
+            sb_printf(&b, "%s%s[%s]*u%d", t ? " + " : "", bn, ix, t);
+          }
+          sb_printf(&b, ";\n");
         }
-        sb_printf(&b, ";\n    }\n");
+        sb_printf(&b, "    }\n");
       }
   }
   sb_printf(&b, "  }\n}\n");
@@ -823,6 +927,8 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   free(pcls);
   free(pslot);
   free(vlev);
+  free(live);
+  free(need);
   expr_tape_free(&tape);
   if (b.failed) { sb_free(&b); snprintf(err, errlen, "out of memory generating a kernel"); return NULL; }
   return b.s;
@@ -832,6 +938,8 @@ fail:
   free(pcls);
   free(pslot);
   free(vlev);
+  free(live);
+  free(need);
   expr_tape_free(&tape);
   sb_free(&b);
   return NULL;

@@ -325,6 +325,20 @@ int expr_tape_vector_closure(const expr_tape *t, const unsigned char *roots, con
   return 0;
 }
 
+int expr_tape_live(const expr_tape *t, const unsigned char *need, const int *level, unsigned char *live) {
+  tape_index_map m;
+  if (tim_build(t, &m)) return -1;
+  /* parents come after their children: one backward pass */
+  for (int j = t->n - 1; j >= 0; j--) {
+    const expr *f = t->node[j];
+    if (need[j]) live[j] = 1;
+    if (!live[j] || !(f->dep & DEP_POINT) || level[j]) continue;
+    for (int i = 0; i < f->n; i++) live[tim_get(&m, f->ch[i])] = 1;
+  }
+  free(m.kv);
+  return 0;
+}
+
 /* ---------------------------------------------------------------- C code */
 
 void expr_codegen_ref(const expr_tape *t, int k, const char *prefix, expr_leaf_name_fn leafname,

@@ -237,6 +237,11 @@ int expr_tape_vector_calls(const expr_tape *t, int *level /* t->n */);
  * need, computed from the coordinates (stopping at vector calls, marked 3: their values are
  * loaded); mark is not cleared first */
 int expr_tape_vector_closure(const expr_tape *t, const unsigned char *roots, const int *level, unsigned char *mark);
+/* live[j] = 1 for the nodes that the nodes with need[j] set are computed from inside the
+ * quadrature loop: through point-varying nodes, stopping at vector calls (level[j] > 0,
+ * their values are loaded) and at the nodes computed before the loop; live is not cleared
+ * first. Generated code keeps only these (libtcc keeps dead code). -1 out of memory */
+int expr_tape_live(const expr_tape *t, const unsigned char *need, const int *level, unsigned char *live);
 /* the C expression naming tape node k (a literal for constants) */
 void expr_codegen_ref(const expr_tape *t, int k, const char *prefix, expr_leaf_name_fn leafname,
                       void *ud, char *buf, size_t len);

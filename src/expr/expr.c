@@ -1,7 +1,7 @@
 /* expr.c — nodes, hash-consing, simplification at construction, vector calculus on
- * lists, differentiation (with respect to leaves and in space), substitution, degree
- * estimates and printing. Tapes, code generation and forms are in codegen.c / form.c. */
-#include "expr.h"
+ * lists, traversal, degree estimates and printing. Differentiation and substitution are in
+ * diff.c; tapes, code generation and forms in codegen.c / form.c. */
+#include "expr_int.h"
 
 #include <limits.h>
 #include <math.h>
@@ -11,35 +11,7 @@
 
 /* ---------------------------------------------------------------- memo map */
 
-typedef struct {
-  int64_t key;
-  expr *val;
-} memo_entry;
-typedef struct {
-  size_t cap, n;
-  memo_entry *e; /* val == NULL: empty */
-} memo_map;
-
-static uint64_t mix64(uint64_t h) {
-  h ^= h >> 33;
-  h *= 0xff51afd7ed558ccdull;
-  h ^= h >> 33;
-  h *= 0xc4ceb9fe1a85ec53ull;
-  h ^= h >> 33;
-  return h;
-}
-
-static expr *memo_get(memo_map *m, int64_t key) {
-  if (!m->cap) return NULL;
-  size_t h = mix64((uint64_t)key) & (m->cap - 1);
-  while (m->e[h].val) {
-    if (m->e[h].key == key) return m->e[h].val;
-    h = (h + 1) & (m->cap - 1);
-  }
-  return NULL;
-}
-
-static int memo_put(memo_map *m, int64_t key, expr *val) {
+int expr_memo_put(memo_map *m, int64_t key, expr *val) {
   if (2 * (m->n + 1) > m->cap) {
     size_t cap = m->cap ? 2 * m->cap : 256;
     memo_entry *ne = calloc(cap, sizeof *ne);
@@ -64,8 +36,6 @@ static int memo_put(memo_map *m, int64_t key, expr *val) {
   m->n++;
   return 0;
 }
-
-static void memo_free(memo_map *m) { free(m->e); m->e = NULL; m->cap = m->n = 0; }
 
 /* ---------------------------------------------------------------- context */
 
@@ -123,6 +93,7 @@ void expr_set_error(expr_ctx *c, const char *fmt, ...) {
 void expr_set_dim(expr_ctx *c, int dim) { c->dim = dim; }
 int expr_dim(const expr_ctx *c) { return c->dim; }
 size_t expr_node_count(const expr_ctx *c) { return c->nnodes; }
+memo_map *expr_ctx_dmemo(expr_ctx *c) { return &c->dmemo; }
 void expr_set_budget(expr_ctx *c, size_t slots) { c->budget = slots; }
 
 int expr_param_new(expr_ctx *c, const char *name, double value) {
@@ -338,7 +309,6 @@ expr *expr_field(expr_ctx *c, int func, int comp, const unsigned char *alpha) {
   return intern(c, E_FIELD, 0, func, comp, alpha, 0, NULL);
 }
 
-static int is_const(const expr *e, double v) { return e && e->kind == E_CONST && e->value == v; }
 
 /* ---------------------------------------------------------------- shapes */
 
@@ -983,24 +953,20 @@ expr *expr_div_op(expr_ctx *c, expr *a) {
 
 /* ---------------------------------------------------------------- traversal */
 
-/* post-order over the DAG under root with an explicit stack (no depth recursion): visit(e)
- * runs once per node after all its children, in the order a recursive walk would; a child
- * for which skip(ud, child) is true is neither entered nor visited */
-typedef int (*post_visit)(void *ud, expr *e);
-static int post_order(expr_ctx *c, expr *root, memo_map *seen, post_visit visit, post_visit skip, void *ud) {
+int expr_post_order(expr_ctx *c, expr *root, memo_map *seen, post_visit visit, post_visit skip, void *ud) {
   typedef struct { expr *e; int next; } frame;
   if (memo_get(seen, root->id)) return 0;
   int cap = 64, sp = 0;
   frame *st = malloc(sizeof(frame) * (size_t)cap);
   if (!st) { expr_set_error(c, "out of memory"); return 1; }
   st[sp++] = (frame){root, 0};
-  if (memo_put(seen, root->id, root)) { free(st); expr_set_error(c, "out of memory"); return 1; }
+  if (expr_memo_put(seen, root->id, root)) { free(st); expr_set_error(c, "out of memory"); return 1; }
   while (sp) {
     frame *f = &st[sp - 1];
     if (f->next < f->e->n) {
       expr *ch = f->e->ch[f->next++];
       if (memo_get(seen, ch->id) || (skip && skip(ud, ch))) continue;
-      if (memo_put(seen, ch->id, ch)) { free(st); expr_set_error(c, "out of memory"); return 1; }
+      if (expr_memo_put(seen, ch->id, ch)) { free(st); expr_set_error(c, "out of memory"); return 1; }
       if (sp == cap) {
         frame *ns = realloc(st, sizeof(frame) * (size_t)(cap *= 2));
         if (!ns) { free(st); expr_set_error(c, "out of memory"); return 1; }
@@ -1015,251 +981,6 @@ static int post_order(expr_ctx *c, expr *root, memo_map *seen, post_visit visit,
   }
   free(st);
   return 0;
-}
-
-/* ---------------------------------------------------------------- differentiation */
-
-/* mode: leaf != NULL: d/d(leaf); else spatial derivative in direction dir */
-static expr *deriv(expr_ctx *c, expr *e, expr *leaf, int dir);
-
-static expr *deriv_fn(expr_ctx *c, expr_fn fn, expr *a) {
-  switch (fn) {
-  case FN_SIN: return expr_apply(c, FN_COS, a);
-  case FN_COS: return expr_neg(c, expr_apply(c, FN_SIN, a));
-  case FN_TAN: { expr *t = expr_apply(c, FN_TAN, a); return expr_add(c, expr_num(c, 1), expr_mul(c, t, t)); }
-  case FN_EXP: return expr_apply(c, FN_EXP, a);
-  case FN_LOG: return expr_pow(c, a, expr_num(c, -1));
-  case FN_ABS: return expr_apply(c, FN_SIGN, a);
-  case FN_TANH: { expr *t = expr_apply(c, FN_TANH, a); return expr_sub(c, expr_num(c, 1), expr_mul(c, t, t)); }
-  case FN_SINH: return expr_apply(c, FN_COSH, a);
-  case FN_COSH: return expr_apply(c, FN_SINH, a);
-  case FN_ATAN: return expr_pow(c, expr_add(c, expr_num(c, 1), expr_mul(c, a, a)), expr_num(c, -1));
-  case FN_ASIN: return expr_pow(c, expr_sub(c, expr_num(c, 1), expr_mul(c, a, a)), expr_num(c, -0.5));
-  case FN_ACOS: return expr_neg(c, expr_pow(c, expr_sub(c, expr_num(c, 1), expr_mul(c, a, a)), expr_num(c, -0.5)));
-  case FN_SIGN: return expr_num(c, 0);
-  default: return NULL;
-  }
-}
-
-/* the product rule on a flat product of n factors that all depend on the variable makes n
- * terms of n - 1 factors: past this many, an error instead of gigabytes */
-#define PROD_RULE_MAX 4096
-static int deriv_zero(const expr *e, const expr *leaf);
-
-static expr *deriv_uncached(expr_ctx *c, expr *e, expr *leaf, int dir) {
-  switch (e->kind) {
-  case E_CONST: case E_PARAM: case E_NORMAL:
-    return expr_num(c, leaf && e == leaf ? 1 : 0);
-  case E_COORD:
-    if (leaf) return expr_num(c, e == leaf ? 1 : 0);
-    return expr_num(c, e->i0 == dir ? 1 : 0);
-  case E_FIELD:
-    if (leaf) return expr_num(c, e == leaf ? 1 : 0);
-    {
-      unsigned char al[EXPR_MAXDIM];
-      memcpy(al, e->alpha, EXPR_MAXDIM);
-      if (al[dir] >= 250) { expr_set_error(c, "derivative order too high"); return NULL; }
-      al[dir]++;
-      return expr_field(c, e->i0, e->i1, al);
-    }
-  case E_LIST: {
-    expr **t = malloc(sizeof(expr *) * (size_t)e->n);
-    if (!t) return NULL;
-    for (int i = 0; i < e->n; i++) t[i] = deriv(c, e->ch[i], leaf, dir);
-    expr *r = expr_list(c, e->n, t);
-    free(t);
-    return r;
-  }
-  case E_LAZY_SUM: case E_LAZY_PROD: /* never memoized unresolved: deriv resolves first */
-    return deriv(c, expr_canon(c, e), leaf, dir);
-  case E_SUM: {
-    /* one term that depends on the variable (g + 0.001): its derivative as it is, still
-     * pending, so that a chain through such sums stays linear in size */
-    int k = 0, last = -1;
-    for (int i = 0; i < e->n; i++)
-      if (!deriv_zero(e->ch[i], leaf)) { k++; last = i; }
-    if (k == 0) return expr_num(c, 0);
-    if (k == 1) return deriv(c, e->ch[last], leaf, dir);
-    expr **t = malloc(sizeof(expr *) * (size_t)e->n);
-    if (!t) return NULL;
-    for (int i = 0; i < e->n; i++) t[i] = deriv(c, e->ch[i], leaf, dir);
-    expr *r = expr_sum_n(c, e->n, t);
-    free(t);
-    return r;
-  }
-  case E_PROD: {
-    /* product rule: (the other factors) * d(factor i), the derivative kept pending so that
-     * a chain of products does not flatten into quadratically many factors */
-    int ndep = 0;
-    for (int i = 0; i < e->n; i++) ndep += !deriv_zero(e->ch[i], leaf);
-    if (ndep > PROD_RULE_MAX) { /* the result would hold ndep^2 factors */
-      expr_set_error(c, "differentiating a product of %d factors that all depend on the variable would make %d terms "
-                        "of %d factors each (at most %d such factors)", ndep, ndep, ndep - 1, PROD_RULE_MAX);
-      return NULL;
-    }
-    expr **t = malloc(sizeof(expr *) * (size_t)e->n);
-    expr **f = malloc(sizeof(expr *) * (size_t)e->n);
-    if (!t || !f) { free(t); free(f); return NULL; }
-    int k = 0;
-    for (int i = 0; i < e->n; i++) {
-      expr *d = deriv(c, e->ch[i], leaf, dir);
-      if (!d) { free(t); free(f); return NULL; }
-      if (is_const(d, 0)) continue;
-      int m = 0;
-      for (int j = 0; j < e->n; j++)
-        if (j != i) f[m++] = e->ch[j];
-      t[k] = expr_mul_lazy(c, m == 1 ? f[0] : expr_prod_n(c, m, f), d);
-      if (!t[k++]) { free(t); free(f); return NULL; }
-    }
-    expr *r = k == 1 ? t[0] : expr_sum_n(c, k, t);
-    free(t);
-    free(f);
-    return r;
-  }
-  case E_POW: {
-    expr *a = e->ch[0], *b = e->ch[1];
-    expr *da = deriv(c, a, leaf, dir), *db = deriv(c, b, leaf, dir);
-    if (!da || !db) return NULL;
-    expr *r1 = NULL, *r2 = NULL;
-    if (!is_const(da, 0)) /* b a^(b-1) a' */
-      r1 = expr_mul_lazy(c, expr_mul(c, b, expr_pow(c, a, expr_sub(c, b, expr_num(c, 1)))), da);
-    if (!is_const(db, 0)) /* a^b log(a) b' */
-      r2 = expr_mul_lazy(c, expr_mul(c, e, expr_apply(c, FN_LOG, a)), db);
-    if (r1 && r2) return expr_add(c, r1, r2);
-    if (r1 || r2) return r1 ? r1 : r2;
-    return is_const(da, 0) && is_const(db, 0) ? expr_num(c, 0) : NULL;
-  }
-  case E_FUNC: {
-    expr *a = e->ch[0];
-    expr *da = deriv(c, a, leaf, dir);
-    if (!da) return NULL;
-    if (is_const(da, 0)) return da;
-    return expr_mul_lazy(c, deriv_fn(c, (expr_fn)e->i0, a), da);
-  }
-  }
-  return NULL;
-}
-
-/* d e / d leaf (leaf != NULL) or d e / d x_dir: zero when e cannot depend on it */
-static int deriv_zero(const expr *e, const expr *leaf) {
-  if (leaf) return !(e->dep & leaf->dep) && e != leaf;
-  return !(e->dep & DEP_POINT);
-}
-
-static int64_t deriv_key(const expr *e, const expr *leaf, int dir) {
-  return ((int64_t)e->id << 32) | (leaf ? (int64_t)leaf->id : (int64_t)0x80000000 + dir);
-}
-
-/* the derivatives of the nodes under e, children before parents (post_order): then
- * deriv_uncached(e) finds every child's derivative memoized, and no depth of expression (a
- * chain of 100 000 functions) recurses on the C stack */
-typedef struct {
-  expr_ctx *c;
-  expr *root, *leaf;
-  int dir;
-} deriv_walk;
-
-static int deriv_skip(void *ud, expr *ch) {
-  deriv_walk *D = ud;
-  return ch->n == 0 || deriv_zero(ch, D->leaf) || memo_get(&D->c->dmemo, deriv_key(ch, D->leaf, D->dir));
-}
-
-static int deriv_visit(void *ud, expr *e) {
-  deriv_walk *D = ud;
-  if (e == D->root) return 0; /* the caller's */
-  expr *r = deriv_uncached(D->c, e, D->leaf, D->dir);
-  return !r || memo_put(&D->c->dmemo, deriv_key(e, D->leaf, D->dir), r);
-}
-
-static int deriv_below(expr_ctx *c, expr *e, expr *leaf, int dir) {
-  deriv_walk D = {c, e, leaf, dir};
-  memo_map seen = {0, 0, NULL};
-  int rc = post_order(c, e, &seen, deriv_visit, deriv_skip, &D);
-  memo_free(&seen);
-  return rc;
-}
-
-static expr *deriv(expr_ctx *c, expr *e, expr *leaf, int dir) {
-  if (!e) return NULL;
-  if (deriv_zero(e, leaf)) return expr_num(c, 0);
-  if (e->n == 0) return deriv_uncached(c, e, leaf, dir);
-  int64_t key = deriv_key(e, leaf, dir);
-  expr *m = memo_get(&c->dmemo, key);
-  if (m) return m;
-  if (deriv_below(c, e, leaf, dir)) return NULL;
-  expr *r = deriv_uncached(c, e, leaf, dir);
-  if (r && memo_put(&c->dmemo, key, r)) return NULL;
-  return r;
-}
-
-expr *expr_diff(expr_ctx *c, expr *e, expr *leaf) {
-  e = expr_canon(c, e);
-  if (!e || !leaf) return NULL;
-  if (leaf->kind != E_FIELD && leaf->kind != E_PARAM && leaf->kind != E_COORD && leaf->kind != E_NORMAL) {
-    expr_set_error(c, "can only differentiate with respect to a field, parameter or coordinate");
-    return NULL;
-  }
-  return expr_canon(c, deriv(c, expr_canon(c, e), leaf, -1));
-}
-
-expr *expr_dx(expr_ctx *c, expr *e, int dir) {
-  if (!e) return NULL;
-  if (dir < 0 || dir >= EXPR_MAXDIM) { expr_set_error(c, "direction %d out of range 1..3", dir + 1); return NULL; }
-  return expr_canon(c, deriv(c, expr_canon(c, e), NULL, dir));
-}
-
-/* ---------------------------------------------------------------- rebuild / subs */
-
-static expr *rebuild(expr_ctx *c, const expr *e, expr **ch) {
-  switch (e->kind) {
-  case E_SUM: return expr_sum_n(c, e->n, ch);
-  case E_PROD: return expr_prod_n(c, e->n, ch);
-  case E_POW: return expr_pow(c, ch[0], ch[1]);
-  case E_FUNC: return expr_apply(c, (expr_fn)e->i0, ch[0]);
-  case E_LIST: return expr_list(c, e->n, ch);
-  default: return (expr *)e;
-  }
-}
-
-typedef struct {
-  expr_ctx *c;
-  int n;
-  expr **from, **to;
-  memo_map out; /* node id -> its image */
-} subs_ctx;
-
-static int subs_visit(void *ud, expr *e) {
-  subs_ctx *S = ud;
-  for (int i = 0; i < S->n; i++)
-    if (e == S->from[i]) return memo_put(&S->out, e->id, S->to[i]);
-  if (e->n == 0) return memo_put(&S->out, e->id, e);
-  expr *tmp[8];
-  expr **ch = e->n <= 8 ? tmp : malloc(sizeof(expr *) * (size_t)e->n);
-  if (!ch) return 1;
-  int changed = 0;
-  for (int i = 0; i < e->n; i++) {
-    ch[i] = memo_get(&S->out, e->ch[i]->id);
-    changed |= ch[i] != e->ch[i];
-  }
-  expr *r = changed ? rebuild(S->c, e, ch) : e;
-  if (ch != tmp) free(ch);
-  return !r || memo_put(&S->out, e->id, r);
-}
-
-expr *expr_subs(expr_ctx *c, expr *e, int n, expr **from, expr **to) {
-  e = expr_canon(c, e);
-  if (!e) return NULL;
-  for (int i = 0; i < n; i++) {
-    to[i] = expr_canon(c, to[i]);
-    if (!to[i]) return NULL;
-  }
-  memo_map seen = {0, 0, NULL};
-  subs_ctx S = {c, n, from, to, {0, 0, NULL}};
-  expr *r = NULL;
-  if (!post_order(c, e, &seen, subs_visit, NULL, &S)) r = memo_get(&S.out, e->id);
-  memo_free(&seen);
-  memo_free(&S.out);
-  return r;
 }
 
 /* ---------------------------------------------------------------- queries */
@@ -1285,7 +1006,7 @@ int expr_collect_fields(expr_ctx *c, int nroot, expr **roots, int func, int max,
   query_ctx Q = {func, max, 0, out, E_FIELD, 0, NULL};
   for (int i = 0; i < nroot; i++) {
     expr *r = expr_canon(c, roots[i]);
-    if (r && post_order(c, r, &seen, collect_visit, NULL, &Q)) break;
+    if (r && expr_post_order(c, r, &seen, collect_visit, NULL, &Q)) break;
   }
   memo_free(&seen);
   int n = Q.n;
@@ -1317,7 +1038,7 @@ int expr_uses(expr_ctx *c, expr *e, expr_kind kind, int *maxcomp) {
   memo_map seen = {0, 0, NULL};
   query_ctx Q = {-1, 0, 0, NULL, kind, 0, maxcomp};
   e = expr_canon(c, e);
-  if (e) post_order(c, e, &seen, uses_visit, NULL, &Q);
+  if (e) expr_post_order(c, e, &seen, uses_visit, NULL, &Q);
   memo_free(&seen);
   return Q.found;
 }
@@ -1340,14 +1061,14 @@ static int kink_visit(void *ud, expr *e) {
   for (int i = 0; i < e->n && !d; i++) d = memo_get(&K->dep, e->ch[i]->id) != NULL;
   if (!d) return 0;
   if (!K->found && e->kind == E_FUNC && (e->i0 == FN_ABS || e->i0 == FN_SIGN)) K->found = e;
-  return memo_put(&K->dep, e->id, e);
+  return expr_memo_put(&K->dep, e->id, e);
 }
 
 expr *expr_find_kink(expr_ctx *c, expr *e, int nf, const int *fids, int np, const int *pids) {
   memo_map seen = {0, 0, NULL};
   kink_ctx K = {{0, 0, NULL}, nf, np, fids, pids, NULL};
   e = expr_canon(c, e);
-  if (e) post_order(c, e, &seen, kink_visit, NULL, &K);
+  if (e) expr_post_order(c, e, &seen, kink_visit, NULL, &K);
   memo_free(&seen);
   memo_free(&K.dep);
   return K.found;
@@ -1403,7 +1124,7 @@ static int degree_visit(void *ud, expr *e) {
   }
   }
   if (d > 1000) d = 1000; /* far above any quadrature the caller will take */
-  return memo_put(&D->deg, e->id, (expr *)(intptr_t)(d + 1));
+  return expr_memo_put(&D->deg, e->id, (expr *)(intptr_t)(d + 1));
 }
 
 int expr_degree_exact(expr_ctx *c, expr *e, int cd, int *exact) { return expr_degree_cell(c, e, cd, 1, exact); }
@@ -1415,7 +1136,7 @@ int expr_degree_cell(expr_ctx *c, expr *e, int cd, int simplex, int *exact) {
   memo_map seen = {0, 0, NULL};
   degree_ctx D = {c, cd, simplex, 0, {0, 0, NULL}};
   int d = 0;
-  if (!post_order(c, e, &seen, degree_visit, NULL, &D)) d = deg_of(&D, e);
+  if (!expr_post_order(c, e, &seen, degree_visit, NULL, &D)) d = deg_of(&D, e);
   else D.inexact = 1;
   memo_free(&seen);
   memo_free(&D.deg);

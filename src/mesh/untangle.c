@@ -184,7 +184,7 @@ int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int max
     double fprev = f;
     f = fn;
     if (o->smooth) {
-      if (fprev - f <= 1e-9 * fprev) break;
+      if (fprev - f <= (o->ftol > 0 ? o->ftol : 1e-9) * fprev) break;
       /* the energy smoother: 20 iterations that gained less than 1e-4 of it end the round
        * (its rounds stop at a 1e-3 gain; a mesh the untangler's global energy left near
        * the smoother's optimum otherwise spends a round of 100 iterations on nothing) */
@@ -453,7 +453,7 @@ static int optimize_vertices(ctx *C, work *W, double *x, double beta, int lift, 
     for (int j = 0; j < d; j++) xs[i * d + j] = x[(size_t)freev[i] * d + j];
   }
   int ncell = ut_cells_around(C, W, freev, nfree);
-  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx, lift, 0, 0, 0, freev, NULL, 0, 0, {0}, NULL, NULL, 0};
+  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx, lift, 0, 0, 0, freev, NULL, 0, 0, {0}, NULL, NULL, 0, 0};
   double f = 0;
   int it = nfree ? ut_lbfgs(&o, x, freev, nfree, maxit, &f) : 0;
   int total = 0;

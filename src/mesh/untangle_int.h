@@ -51,6 +51,7 @@ typedef struct {
   const double *cwinv; /* per corner W⁻¹ (ncell*ncorner*d*d) of its reference shape, or NULL: winv */
   struct ut_energy_buf *eb; /* smooth == 2: the threaded evaluation's buffers (ut_energy_eval) */
   int stall;        /* smooth == 2 (the energy smoother): 20 iterations that gain less than 1e-4 end the run */
+  double ftol;      /* smooth: a step that lowers f by at most ftol·f ends the run (0: 1e-9) */
 } objective;
 
 /* per cell: its energy and vertex gradients; per free vertex: its (cell, vertex) slots */

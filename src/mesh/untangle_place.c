@@ -209,7 +209,11 @@ static int feasible_position(const ctx *C, const double *x, int v, double target
 }
 
 /* stages 1 and 3: repeated passes over the free vertices of `active` cells whose constraints
- * are violated (J <= jtol in stage 1, J < β in stage 3); a pass that moves nothing ends it */
+ * are violated (J <= jtol in stage 1, J < β in stage 3); a pass that moves nothing ends them,
+ * and so do PASS_PATIENCE passes without fewer violated corners than the best pass before
+ * (moves that trade one violation for another: a twisted bar of 1 152 tetrahedra spent 100
+ * passes, 32 ms, going from 212 inverted cells to 193, which stage 2 then repaired in 2 ms) */
+#define PASS_PATIENCE 5
 typedef struct {
   int v, bad;
 } cand;
@@ -225,6 +229,8 @@ int ut_feasible_passes(ctx *C, double *x, double target, int stage3, const unsig
   cand *list = malloc(sizeof(cand) * ((size_t)m->nvert + 1));
   int *nbad = malloc(sizeof(int) * ((size_t)m->nvert + 1));
   if (!list || !nbad) { free(list); free(nbad); return 0; }
+  long best = -1;
+  int since = 0;
   for (pass = 0; pass < maxpass; pass++) {
     /* the vertices with violated corners, the most violated first: a vertex pulled out of
      * its patch is put back before its neighbours react to it. The counts read the mesh
@@ -237,6 +243,10 @@ int ut_feasible_passes(ctx *C, double *x, double target, int stage3, const unsig
       nbad[v] = C->fixed[v] || C->bnd[v] || (region && !region[v]) ? 0 : vertex_violations(C, x, v, target, stage3);
     for (int v = 0; v < nv; v++)
       if (nbad[v]) list[n++] = (cand){v, nbad[v]};
+    long violated = 0;
+    for (int i = 0; i < n; i++) violated += list[i].bad;
+    if (best < 0 || violated < best) { best = violated; since = 0; }
+    else if (++since >= PASS_PATIENCE) break;
     qsort(list, (size_t)n, sizeof(cand), cand_cmp);
     int changed = 0;
     for (int i = 0; i < n; i++) {

@@ -7,41 +7,12 @@
 -- temporary folder by default). Per case: inverted cells, then for each untangler success,
 -- time, and the minimum and mean mean ratio of the result, and the rest mesh's own.
 -- Run: lugal bench/untangle_anchor2d.lua /path/to/untangle2d
-package.path = arg[0]:match("(.*/)") .. "../tests/lua/?.lua;" .. package.path
-local H = require "hard_meshes"
+package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
+local A = require "anchor_cases"
 local lg = require "lugal"
 local anchor = assert(arg[1], "usage: lugal bench/untangle_anchor2d.lua /path/to/untangle2d [dir]")
 local dir = arg[2] or os.tmpname() .. ".d"
 os.execute("mkdir -p '" .. dir .. "'")
-
-local cases = {
-  {"spiral 30x10", function() return H.spiral(30, 10, 0.7) end},
-  {"spiral 40x16", function() return H.spiral(40, 16, 0.75) end},
-  {"spiral 100x20", function() return H.spiral(100, 20, 0.7) end},
-  {"spiral 200x30", function() return H.spiral(200, 30, 0.75) end},
-  {"star 12x60, random interior", function() return H.star(12, 60, 7) end},
-  {"star 20x100, random interior", function() return H.star(20, 100, 3) end},
-  {"star 40x200, random interior", function() return H.star(40, 200, 5) end},
-}
-
--- the triangles of a mesh, 1-based, from its Gmsh file (mesh:write writes MSH 2.2: element
--- type 2, then the tag count, the tags and the three vertices)
-local function triangles(mesh, path)
-  mesh:write(path)
-  local tris, f = {}, assert(io.open(path))
-  local inside = false
-  for line in f:lines() do
-    if line == "$Elements" then inside = true
-    elseif line == "$EndElements" then inside = false
-    elseif inside then
-      local w = {}
-      for t in line:gmatch("%S+") do w[#w + 1] = tonumber(t) end
-      if #w > 2 and w[2] == 2 then local k = 3 + w[3]; tris[#tris + 1] = {w[k + 1], w[k + 2], w[k + 3]} end
-    end
-  end
-  f:close()
-  return tris
-end
 
 local function write_obj(path, tangled, rest, tris)
   local f = assert(io.open(path, "w"))
@@ -67,7 +38,7 @@ end
 
 print("| case | cells | inverted | lugal | s | min q | mean q | anchor | s | min q | mean q | rest mesh min q |")
 print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-for k, c in ipairs(cases) do
+for k, c in ipairs(A.cases2d) do
   local tangled, rest = c[2]()
   local inv = tangled:check()
   -- lugal: untangle with the boundary fixed, then the energy smoother
@@ -79,7 +50,7 @@ for k, c in ipairs(cases) do
   local ql = m:quality("mean_ratio")
   -- the anchor
   local input, output = string.format("%s/case%d.obj", dir, k), string.format("%s/case%d-result.obj", dir, k)
-  write_obj(input, tangled, rest, triangles(rest, string.format("%s/case%d.msh", dir, k)))
+  write_obj(input, tangled, rest, A.simplices(rest, string.format("%s/case%d.msh", dir, k)))
   os.remove(output)
   local a = tangled:copy()
   t0 = lg.wtime()

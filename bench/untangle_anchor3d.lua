@@ -8,40 +8,12 @@
 -- cells, then for each untangler success, time, and the minimum and mean mean ratio of the
 -- result, and the rest mesh's own.
 -- Run: lugal bench/untangle_anchor3d.lua /path/to/untangle3d
-package.path = arg[0]:match("(.*/)") .. "../tests/lua/?.lua;" .. package.path
-local H = require "hard_meshes"
+package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
+local A = require "anchor_cases"
 local lg = require "lugal"
 local anchor = assert(arg[1], "usage: lugal bench/untangle_anchor3d.lua /path/to/untangle3d [dir]")
 local dir = arg[2] or os.tmpname() .. ".d"
 os.execute("mkdir -p '" .. dir .. "'")
-
-local cases = {
-  {"bar 4, 1 turn", function() return H.twisted_bar(4, 6, 1) end},
-  {"bar 6, 1 turn", function() return H.twisted_bar(6, 6, 1) end},
-  {"bar 8, 1 turn", function() return H.twisted_bar(8, 6, 1) end},
-  {"bar 12, 1 turn", function() return H.twisted_bar(12, 6, 1) end},
-  {"bar 6, 1.5 turns", function() return H.twisted_bar(6, 6, 1.5) end},
-  {"bar 16, 1 turn", function() return H.twisted_bar(16, 6, 1) end},
-}
-
--- the tetrahedra of a mesh, 1-based, from its Gmsh file (mesh:write writes MSH 2.2: element
--- type 4, then the tag count, the tags and the four vertices)
-local function tetrahedra(mesh, path)
-  mesh:write(path)
-  local tets, f = {}, assert(io.open(path))
-  local inside = false
-  for line in f:lines() do
-    if line == "$Elements" then inside = true
-    elseif line == "$EndElements" then inside = false
-    elseif inside then
-      local w = {}
-      for t in line:gmatch("%S+") do w[#w + 1] = tonumber(t) end
-      if #w > 2 and w[2] == 4 then local k = 3 + w[3]; tets[#tets + 1] = {w[k + 1], w[k + 2], w[k + 3], w[k + 4]} end
-    end
-  end
-  f:close()
-  return tets
-end
 
 local function write_medit(path, mesh, tets)
   local f = assert(io.open(path, "w"))
@@ -76,7 +48,7 @@ end
 
 print("| case | cells | inverted | lugal | s | min q | mean q | anchor | s | min q | mean q | rest mesh min q |")
 print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-for k, c in ipairs(cases) do
+for k, c in ipairs(A.cases3d) do
   local tangled, rest = c[2]()
   local inv = tangled:check()
   -- lugal: untangle with the boundary fixed, then the energy smoother
@@ -88,7 +60,7 @@ for k, c in ipairs(cases) do
   local ql = m:quality("mean_ratio")
   local linv = m:check()
   -- the anchor
-  local tets = tetrahedra(rest, string.format("%s/case%d.msh", dir, k))
+  local tets = A.simplices(rest, string.format("%s/case%d.msh", dir, k))
   local init, ref, output = string.format("%s/case%d-init.mesh", dir, k), string.format("%s/case%d-rest.mesh", dir, k),
                             string.format("%s/case%d-result.mesh", dir, k)
   write_medit(init, tangled, tets)

@@ -9,51 +9,13 @@
 -- comparison; untangle + smooth{method = "energy"} is shown too. DIR holds the files (a
 -- temporary folder by default). Quality: the mean ratio, measured by lugal on both results.
 -- Run: lugal bench/untangle_tlc.lua /path/to/findInjective [dir] [seconds per TLC run, 600]
-package.path = arg[0]:match("(.*/)") .. "../tests/lua/?.lua;" .. package.path
-local H = require "hard_meshes"
+package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
+local A = require "anchor_cases"
 local lg = require "lugal"
 local tlc = assert(arg[1], "usage: lugal bench/untangle_tlc.lua /path/to/findInjective [dir]")
 local dir = arg[2] or os.tmpname() .. ".d"
 local limit = tonumber(arg[3]) or 600 -- seconds per TLC run
 os.execute("mkdir -p '" .. dir .. "'")
-
-local cases = {
-  {"spiral 30x10", function() return H.spiral(30, 10, 0.7) end},
-  {"spiral 40x16", function() return H.spiral(40, 16, 0.75) end},
-  {"spiral 100x20", function() return H.spiral(100, 20, 0.7) end},
-  {"spiral 200x30", function() return H.spiral(200, 30, 0.75) end},
-  {"star 12x60, random interior", function() return H.star(12, 60, 7) end},
-  {"star 20x100, random interior", function() return H.star(20, 100, 3) end},
-  {"star 40x200, random interior", function() return H.star(40, 200, 5) end},
-  {"bar 4, 1 turn", function() return H.twisted_bar(4, 6, 1) end},
-  {"bar 8, 1 turn", function() return H.twisted_bar(8, 6, 1) end},
-  {"bar 12, 1 turn", function() return H.twisted_bar(12, 6, 1) end},
-  {"bar 6, 1.5 turns", function() return H.twisted_bar(6, 6, 1.5) end},
-  {"bar 16, 1 turn", function() return H.twisted_bar(16, 6, 1) end},
-}
-
--- the simplices of a mesh, 1-based, from its Gmsh file (MSH 2.2: element type 2 triangles,
--- 4 tetrahedra, then the tag count, the tags and the vertices)
-local function simplices(mesh, path)
-  mesh:write(path)
-  local cells, f = {}, assert(io.open(path))
-  local inside, want, nv = false, mesh:dim() == 2 and 2 or 4, mesh:dim() + 1
-  for line in f:lines() do
-    if line == "$Elements" then inside = true
-    elseif line == "$EndElements" then inside = false
-    elseif inside then
-      local w = {}
-      for t in line:gmatch("%S+") do w[#w + 1] = tonumber(t) end
-      if #w > 2 and w[2] == want then
-        local k, c = 3 + w[3], {}
-        for j = 1, nv do c[j] = w[k + j] end
-        cells[#cells + 1] = c
-      end
-    end
-  end
-  f:close()
-  return cells
-end
 
 -- the boundary vertices: those of the facets in one simplex only
 local function boundary_vertices(cells, dim)
@@ -135,6 +97,9 @@ local options = dir .. "/solver_options"
 write_options(options)
 print("| case | cells | inverted | lugal untangle s | min q | + smooth s | min q | TLC | s | min q | mean q | rest mesh min q |")
 print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+local cases = {}
+for _, c in ipairs(A.cases2d) do cases[#cases + 1] = c end
+for _, c in ipairs(A.cases3d) do cases[#cases + 1] = c end
 for k, c in ipairs(cases) do
   local tangled, rest = c[2]()
   local inv = tangled:check()
@@ -147,7 +112,7 @@ for k, c in ipairs(cases) do
   local ts = lg.wtime() - t0
   local qs = m:quality("mean_ratio")
   local input, output = string.format("%s/case%d.in", dir, k), string.format("%s/case%d.result", dir, k)
-  write_input(input, tangled, rest, simplices(rest, string.format("%s/case%d.msh", dir, k)))
+  write_input(input, tangled, rest, A.simplices(rest, string.format("%s/case%d.msh", dir, k)))
   os.remove(output)
   local a = tangled:copy()
   t0 = lg.wtime()

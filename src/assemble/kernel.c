@@ -888,37 +888,46 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
           if (!found && nt < 64) tls[nt++] = tl;
         }
         if (!nt) continue;
-        sb_printf(&b, "    for (int j = 0; j < %d; ++j) {\n", vc.nloc[bb]);
-        for (int t = 0; t < nt; t++) {
-          sb_printf(&b, "      const double u%d = wq*(", t);
-          int first = 1;
-          for (int i = 0; i < s->tab->njac; i++) {
-            if (isconst[i] || s->tab->jac_test[i] != tls[t] || !same_block(&vc, bb, s->tab->jac_trial[i])) continue;
-            char bn[32];
-            basis_name(c, s->tab->jac_trial[i], vc.degree[bb], bn, sizeof bn);
-            expr_codegen_ref(&tape, tape.root[i], "t", leafname, &lc, ref, sizeof ref);
-            sb_printf(&b, "%s%s*%s[j]", first ? "" : " + ", ref, bn);
-            first = 0;
-          }
-          sb_printf(&b, ");\n");
-        }
-        sb_printf(&b, "      double *Aj = A + %d + j*%d;\n", vc.off[bb], vc.stride[bb]);
-        int unroll = vr.nloc[a] <= KER_UNROLL;
-        for (int ii = 0; ii < (unroll ? vr.nloc[a] : 1); ii++) {
-          char ix[16] = "i";
-          if (unroll) {
-            snprintf(ix, sizeof ix, "%d", ii);
-            sb_printf(&b, "      Aj[%d] += ", (vr.off[a] + ii * vr.stride[a]) * vc.size);
-          } else
-            sb_printf(&b, "      for (int i = 0; i < %d; ++i) Aj[(%d + i*%d)*%d] += ", vr.nloc[a], vr.off[a], vr.stride[a], vc.size);
+        /* the trial loop written out too for the smallest bases (P1, Q1: 3 or 4 trips) */
+        int jun = vc.nloc[bb] <= 4;
+        for (int jj = 0; jj < (jun ? vc.nloc[bb] : 1); jj++) {
+          char jx[16] = "j";
+          if (jun) {
+            snprintf(jx, sizeof jx, "%d", jj);
+            sb_printf(&b, "    {\n");
+          } else sb_printf(&b, "    for (int j = 0; j < %d; ++j) {\n", vc.nloc[bb]);
           for (int t = 0; t < nt; t++) {
-            char bn[32];
-            basis_name(c, tls[t], vr.degree[a], bn, sizeof bn);
-            sb_printf(&b, "%s%s[%s]*u%d", t ? " + " : "", bn, ix, t);
+            sb_printf(&b, "      const double u%d = wq*(", t);
+            int first = 1;
+            for (int i = 0; i < s->tab->njac; i++) {
+              if (isconst[i] || s->tab->jac_test[i] != tls[t] || !same_block(&vc, bb, s->tab->jac_trial[i])) continue;
+              char bn[32];
+              basis_name(c, s->tab->jac_trial[i], vc.degree[bb], bn, sizeof bn);
+              expr_codegen_ref(&tape, tape.root[i], "t", leafname, &lc, ref, sizeof ref);
+              sb_printf(&b, "%s%s*%s[%s]", first ? "" : " + ", ref, bn, jx);
+              first = 0;
+            }
+            sb_printf(&b, ");\n");
           }
-          sb_printf(&b, ";\n");
+          if (jun) sb_printf(&b, "      double *Aj = A + %d;\n", vc.off[bb] + jj * vc.stride[bb]);
+          else sb_printf(&b, "      double *Aj = A + %d + j*%d;\n", vc.off[bb], vc.stride[bb]);
+          int unroll = vr.nloc[a] <= KER_UNROLL;
+          for (int ii = 0; ii < (unroll ? vr.nloc[a] : 1); ii++) {
+            char ix[16] = "i";
+            if (unroll) {
+              snprintf(ix, sizeof ix, "%d", ii);
+              sb_printf(&b, "      Aj[%d] += ", (vr.off[a] + ii * vr.stride[a]) * vc.size);
+            } else
+              sb_printf(&b, "      for (int i = 0; i < %d; ++i) Aj[(%d + i*%d)*%d] += ", vr.nloc[a], vr.off[a], vr.stride[a], vc.size);
+            for (int t = 0; t < nt; t++) {
+              char bn[32];
+              basis_name(c, tls[t], vr.degree[a], bn, sizeof bn);
+              sb_printf(&b, "%s%s[%s]*u%d", t ? " + " : "", bn, ix, t);
+            }
+            sb_printf(&b, ";\n");
+          }
+          sb_printf(&b, "    }\n");
         }
-        sb_printf(&b, "    }\n");
       }
   }
   sb_printf(&b, "  }\n}\n");

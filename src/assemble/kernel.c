@@ -248,7 +248,7 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
                     char *err, size_t errlen) {
   strbuf b = {0};
   expr_tape tape = {0};
-  unsigned char *sel = NULL, *isconst = NULL, *pcls = NULL, *live = NULL, *need = NULL;
+  unsigned char *sel = NULL, *isconst = NULL, *pcls = NULL, *live = NULL;
   int *pslot = NULL, *vlev = NULL, nvec = 0, maxlev = 0;
   int dim = cell_dim(ct);
   int nf = facet ? cell_nfacets(ct) : 1;
@@ -677,7 +677,6 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
     free(pslot);
     free(vlev);
     free(live);
-    free(need);
     expr_tape_free(&tape);
     if (b.failed) { sb_free(&b); snprintf(err, errlen, "out of memory generating a kernel"); return NULL; }
     return b.s;
@@ -685,11 +684,13 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   /* what the quadrature loop needs: the contraction's integrands and the cached values, and
    * what they are computed from there (libtcc does not drop dead code) */
   live = calloc((size_t)tape.n + 1, 1);
-  need = calloc((size_t)tape.n + 1, 1);
-  if (!live || !need) KERR("out of memory");
+  unsigned char *need = calloc((size_t)tape.n + 1, 1);
+  if (!live || !need) { free(need); KERR("out of memory"); }
   for (int i = 0; i < tape.nroot; i++) need[tape.root[i]] = s->arity < 2 || !isconst[i];
   for (int i = 0; i < tape.n; i++) need[i] |= k->ncache > 0 && pcls[i] == PC_CACHED;
-  if (expr_tape_live(&tape, need, vlev, live)) KERR("out of memory");
+  int lrc = expr_tape_live(&tape, need, vlev, live);
+  free(need);
+  if (lrc) KERR("out of memory");
   int xlive[3] = {0, 0, 0};
   for (int i = 0; i < tape.n; i++)
     if (live[i] && tape.node[i]->kind == E_COORD) xlive[tape.node[i]->i0] = 1;
@@ -937,7 +938,6 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
   free(pslot);
   free(vlev);
   free(live);
-  free(need);
   expr_tape_free(&tape);
   if (b.failed) { sb_free(&b); snprintf(err, errlen, "out of memory generating a kernel"); return NULL; }
   return b.s;
@@ -948,7 +948,6 @@ fail:
   free(pslot);
   free(vlev);
   free(live);
-  free(need);
   expr_tape_free(&tape);
   sb_free(&b);
   return NULL;

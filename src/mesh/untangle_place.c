@@ -230,7 +230,7 @@ int ut_feasible_passes(ctx *C, double *x, double target, int stage3, const unsig
   int *nbad = malloc(sizeof(int) * ((size_t)m->nvert + 1));
   if (!list || !nbad) { free(list); free(nbad); return 0; }
   long best = -1;
-  int since = 0;
+  int since = 0, ran = 0; /* ran: the passes that tried moves */
   for (pass = 0; pass < maxpass; pass++) {
     /* the vertices with violated corners, the most violated first: a vertex pulled out of
      * its patch is put back before its neighbours react to it. The counts read the mesh
@@ -241,12 +241,12 @@ int ut_feasible_passes(ctx *C, double *x, double target, int stage3, const unsig
 #endif
     for (int v = 0; v < nv; v++)
       nbad[v] = C->fixed[v] || C->bnd[v] || (region && !region[v]) ? 0 : vertex_violations(C, x, v, target, stage3);
-    for (int v = 0; v < nv; v++)
-      if (nbad[v]) list[n++] = (cand){v, nbad[v]};
     long violated = 0;
-    for (int i = 0; i < n; i++) violated += list[i].bad;
+    for (int v = 0; v < nv; v++)
+      if (nbad[v]) list[n++] = (cand){v, nbad[v]}, violated += nbad[v];
     if (best < 0 || violated < best) { best = violated; since = 0; }
     else if (++since >= PASS_PATIENCE) break;
+    ran++;
     qsort(list, (size_t)n, sizeof(cand), cand_cmp);
     int changed = 0;
     for (int i = 0; i < n; i++) {
@@ -263,6 +263,6 @@ int ut_feasible_passes(ctx *C, double *x, double target, int stage3, const unsig
   }
   free(list);
   free(nbad);
-  *npass = pass + 1 > maxpass ? maxpass : pass + 1;
+  *npass = ran;
   return total;
 }

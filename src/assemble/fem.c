@@ -3,48 +3,14 @@
  * globally consistent edge orientation. */
 #include "fem.h"
 
+#include "../mesh/dense.h"
+
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 /* ---------------------------------------------------------------- Gauss–Jacobi */
-
-/* cyclic Jacobi eigenvalue method for a small symmetric matrix (n <= 64); a becomes
- * diagonal, v holds the eigenvectors as columns */
-static void sym_eig(int n, double *a, double *v) {
-  for (int i = 0; i < n; i++)
-    for (int j = 0; j < n; j++) v[i * n + j] = i == j;
-  for (int sweep = 0; sweep < 100; sweep++) {
-    double off = 0;
-    for (int i = 0; i < n; i++)
-      for (int j = i + 1; j < n; j++) off += a[i * n + j] * a[i * n + j];
-    if (off < 1e-32) break;
-    for (int p = 0; p < n; p++)
-      for (int q = p + 1; q < n; q++) {
-        double apq = a[p * n + q];
-        if (fabs(apq) < 1e-300) continue;
-        double theta = (a[q * n + q] - a[p * n + p]) / (2 * apq);
-        double t = (theta >= 0 ? 1 : -1) / (fabs(theta) + sqrt(theta * theta + 1));
-        double c = 1 / sqrt(t * t + 1), s = t * c;
-        for (int k = 0; k < n; k++) {
-          double akp = a[k * n + p], akq = a[k * n + q];
-          a[k * n + p] = c * akp - s * akq;
-          a[k * n + q] = s * akp + c * akq;
-        }
-        for (int k = 0; k < n; k++) {
-          double apk = a[p * n + k], aqk = a[q * n + k];
-          a[p * n + k] = c * apk - s * aqk;
-          a[q * n + k] = s * apk + c * aqk;
-        }
-        for (int k = 0; k < n; k++) {
-          double vkp = v[k * n + p], vkq = v[k * n + q];
-          v[k * n + p] = c * vkp - s * vkq;
-          v[k * n + q] = s * vkp + c * vkq;
-        }
-      }
-  }
-}
 
 int gauss_jacobi(int n, double a, double b, double *x, double *w) {
   if (n < 1 || n > 64) return 1;
@@ -60,7 +26,7 @@ int gauss_jacobi(int n, double a, double b, double *x, double *w) {
       T[k * n + j] = T[j * n + k] = sqrt(bj);
     }
   }
-  sym_eig(n, T, V);
+  dense_sym_eigen(n, T, V, 1e-32, 0); /* Golub–Welsch */
   double mu0 = pow(2, a + b + 1) * tgamma(a + 1) * tgamma(b + 1) / tgamma(a + b + 2);
   for (int i = 0; i < n; i++) {
     x[i] = T[i * n + i];

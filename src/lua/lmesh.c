@@ -543,13 +543,15 @@ static int lmesh_smooth(lua_State *L) {
   mesh *m = u->lm->m;
   int t = 0;
   if (!lua_isnoneornil(L, 2)) {
-    if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {measure=, method=, iterations=, boundary=, quiet=}");
-    static const char *const keys[] = {"measure", "method", "iterations", "boundary", "quiet", "reference", NULL};
+    if (!lua_istable(L, 2))
+      return typeerror(L, fn, 2, "an options table {measure=, method=, iterations=, boundary=, quiet=, reference=, optimizer=}");
+    static const char *const keys[] = {"measure", "method", "iterations", "boundary", "quiet", "reference", "optimizer", NULL};
     check_keys(L, 2, fn, keys);
     t = 2;
   }
   const mesh *ref = opt_reference(L, t, m, fn);
-  smooth_opts o = {m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 20, 1, 0, 0, 0, NULL};
+  smooth_opts o = {m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 20, 1, 0, 0, 0, NULL,
+                   SMOOTH_AUTO};
   int quiet = 0;
   if (t) {
     const char *name = opt_str(L, t, "measure", NULL, fn);
@@ -582,13 +584,21 @@ static int lmesh_smooth(lua_State *L) {
       if (!given) o.global = o.energy = 1; /* reference shapes are the energy method's */
     }
   }
+  const char *opt = t ? opt_str(L, t, "optimizer", NULL, fn) : NULL;
+  if (opt) {
+    if (!strcmp(opt, "newton")) o.optimizer = SMOOTH_NEWTON;
+    else if (!strcmp(opt, "lbfgs")) o.optimizer = SMOOTH_LBFGS;
+    else if (strcmp(opt, "auto"))
+      return luaL_error(L, "%s: option 'optimizer' must be \"auto\", \"newton\" or \"lbfgs\", got '%s'", fn, opt);
+    if (!o.energy) return luaL_error(L, "%s: option 'optimizer' needs method = \"energy\" (or reference shapes)", fn);
+  }
   smooth_report r;
   char err[MESH_ERRLEN];
   if (mesh_smooth(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
   lg_mesh_changed(u->lm);
   char text[512];
   snprintf(text, sizeof text, "smooth (%s): %s%s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s",
-           o.energy ? "energy" : o.global ? "global" : "local", quality_name(o.measure), ref ? " relative to the reference" : "",
+           o.energy ? (r.optimizer == SMOOTH_NEWTON ? "energy, Newton" : "energy, L-BFGS") : o.global ? "global" : "local", quality_name(o.measure), ref ? " relative to the reference" : "",
            r.min_before, r.min_after, r.mean_before,
            r.mean_after, r.moved, r.sweeps, o.global ? "rounds" : "sweeps", r.seconds);
   lua_createtable(L, 0, 10);
@@ -602,6 +612,11 @@ static int lmesh_smooth(lua_State *L) {
   set_num(L, "mean_after", r.mean_after);
   set_int(L, "moved", r.moved);
   set_int(L, "sweeps", r.sweeps);
+  if (o.energy) {
+    lua_pushstring(L, r.optimizer == SMOOTH_NEWTON ? "newton" : "lbfgs");
+    lua_setfield(L, -2, "optimizer");
+    set_int(L, "iterations", r.iterations);
+  }
   set_num(L, "seconds", r.seconds);
   return finish_report(L, text, quiet);
 }

@@ -21,6 +21,7 @@ static void usage(FILE *f) {
              "                  [--motion-weight W] [--no-global] [--report]\n"
              "       lugal-mesh smooth IN.msh OUT.msh [--measure NAME] [--iterations N]\n"
              "                  [--method local|global|energy] [--reference REST.msh] [--boundary slide|fixed]\n"
+             "                  [--optimizer auto|newton|lbfgs]\n"
              "       lugal-mesh --version | --help\n\n"
              "quality   prints min, mean, max and the worst cell of every measure that applies to\n"
              "          the mesh's cells, and the number of inverted or degenerate cells;\n"
@@ -40,6 +41,8 @@ static void usage(FILE *f) {
              "          vertices together by L-BFGS on the sum of 1/quality, energy the same\n"
              "          without the floor on the minimum during the descent (only validity), kept\n"
              "          when its minimum beats the input's: for bent and anisotropic meshes;\n"
+             "          --optimizer (energy) newton takes projected Newton steps, lbfgs L-BFGS\n"
+             "          ones, auto (default) Newton in 2D and L-BFGS in 3D;\n"
              "          --reference REST.msh (energy; the mean ratio on simplices, the corner\n"
              "          condition on quadrilaterals and hexahedra) aims at each cell's shape in\n"
              "          REST.msh, the same mesh at rest, instead of regular cells.\n");
@@ -163,7 +166,7 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
   const char *in = NULL, *out = NULL, *measure = NULL, *refpath = NULL;
   untangle_opts uo;
   untangle_defaults(&uo);
-  int report = 0, iterations = 20, slide = 1, global = 0, energy = 0, method_given = 0;
+  int report = 0, iterations = 20, slide = 1, global = 0, energy = 0, method_given = 0, optimizer = SMOOTH_AUTO;
   for (int i = 0; i < argc; i++) {
     const char *a = argv[i];
     int has = i + 1 < argc;
@@ -196,6 +199,12 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
       else if (!strcmp(v, "global")) global = 1;
       else if (!strcmp(v, "energy")) global = energy = 1;
       else { fprintf(stderr, "lugal-mesh smooth: --method must be local, global or energy\n"); return 2; }
+    } else if (!strcmp(a, "--optimizer") && has && !strcmp(cmd, "smooth")) {
+      const char *v = argv[++i];
+      if (!strcmp(v, "auto")) optimizer = SMOOTH_AUTO;
+      else if (!strcmp(v, "newton")) optimizer = SMOOTH_NEWTON;
+      else if (!strcmp(v, "lbfgs")) optimizer = SMOOTH_LBFGS;
+      else { fprintf(stderr, "lugal-mesh smooth: --optimizer must be auto, newton or lbfgs\n"); return 2; }
     } else if (!strcmp(a, "--max-iterations") && has) {
       if ((uo.max_iterations = int_option(cmd, "--max-iterations", argv[++i], 1, 1000000)) < 0) return 2;
     } else if (!strcmp(a, "--iterations") && has) {
@@ -239,15 +248,21 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
     int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON;
     /* reference shapes are the energy method's */
     if (ref && !method_given) global = energy = 1;
+    if (optimizer != SMOOTH_AUTO && !energy) {
+      fprintf(stderr, "lugal-mesh smooth: --optimizer needs --method energy (or --reference)\n");
+      mesh_free(ref); mesh_free(m);
+      return 2;
+    }
     smooth_opts so = {quality_from_name(measure ? measure : simplex ? "mean_ratio" : "corner_condition"), iterations, slide, report, global, energy,
-                      ref ? ref->x : NULL};
+                      ref ? ref->x : NULL, optimizer};
     if (so.measure < 0) { fprintf(stderr, "lugal-mesh smooth: unknown measure %s\n", measure); mesh_free(ref); mesh_free(m); return 2; }
     smooth_report r;
     int bad = mesh_smooth(m, &so, &r, err);
     mesh_free(ref);
     if (bad) { fprintf(stderr, "lugal-mesh smooth: %s\n", err); mesh_free(m); return 1; }
     printf("smooth (%s): %s%s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s\n",
-           energy ? "energy" : global ? "global" : "local", quality_name(so.measure), refpath ? " relative to the reference" : "",
+           energy ? (r.optimizer == SMOOTH_NEWTON ? "energy, Newton" : "energy, L-BFGS") : global ? "global" : "local",
+           quality_name(so.measure), refpath ? " relative to the reference" : "",
            r.min_before, r.min_after, r.mean_before, r.mean_after,
            r.moved, r.sweeps, global ? "rounds" : "sweeps", r.seconds);
   }

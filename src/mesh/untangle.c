@@ -86,7 +86,7 @@ static double smooth_eval(const objective *o, const double *x, double *grad, int
 /* the untangling objectives (3.3) and the global energy, plus with motion_weight w the
  * distance to where the run started, w Σ |x_v − x0_v|² / h² over the free vertices (h a
  * typical edge), for an ALE remap that wants the smallest motion */
-static double eval(const objective *o, const double *x, double *grad, int nfree) {
+double ut_eval(const objective *o, const double *x, double *grad, int nfree) {
   double f = o->smooth == 2 ? ut_energy_eval(o, x, grad, nfree)
              : o->smooth   ? smooth_eval(o, x, grad, nfree)
                            : obj_eval(o, x, grad, nfree);
@@ -114,7 +114,7 @@ int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int max
     return -1;
   }
   int mem = 0, head = 0, best_bad = o->smooth ? 0 : obj_bad(o, x), start_bad = best_bad, stale = 0, worse = 0;
-  double f = eval(o, x, g, nfree), h0 = pow(o->S, 1.0 / d), fmark = f;
+  double f = ut_eval(o, x, g, nfree), h0 = pow(o->S, 1.0 / d), fmark = f;
   for (it = 0; it < maxit && f > 0; it++) {
     /* two-loop recursion */
     for (int i = 0; i < n; i++) p[i] = -g[i];
@@ -160,7 +160,7 @@ int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int max
     for (ls = 0; ls < 50; ls++) {
       for (int i = 0; i < nfree; i++)
         for (int j = 0; j < d; j++) x[(size_t)freev[i] * d + j] = x0[i * d + j] + t * p[i * d + j];
-      fn = eval(o, x, gn, nfree); /* with the gradient: the first step is usually taken */
+      fn = ut_eval(o, x, gn, nfree); /* with the gradient: the first step is usually taken */
       if (fn <= f + 1e-4 * t * gp) break;
       t *= 0.5;
     }
@@ -453,7 +453,7 @@ static int optimize_vertices(ctx *C, work *W, double *x, double beta, int lift, 
     for (int j = 0; j < d; j++) xs[i * d + j] = x[(size_t)freev[i] * d + j];
   }
   int ncell = ut_cells_around(C, W, freev, nfree);
-  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx, lift, 0, 0, 0, freev, NULL, 0, 0, {0}, NULL, NULL, 0, 0};
+  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx, lift, 0, 0, 0, freev, NULL, 0, 0, {0}, NULL, NULL, 0, 0, 0};
   double f = 0;
   int it = nfree ? ut_lbfgs(&o, x, freev, nfree, maxit, &f) : 0;
   int total = 0;

@@ -80,10 +80,16 @@ typedef struct {
                     * and hexahedra): the shapes aimed at are those of this configuration of
                     * the same mesh (nvert*dim), q the mean ratio of each cell's (worst
                     * corner's) map from its reference shape; NULL: regular cells */
+  int optimizer;   /* energy: SMOOTH_AUTO (projected Newton in 2D, L-BFGS in 3D), SMOOTH_NEWTON
+                    * or SMOOTH_LBFGS */
 } smooth_opts;
+
+enum { SMOOTH_AUTO, SMOOTH_NEWTON, SMOOTH_LBFGS };
 
 typedef struct {
   int measure, sweeps, moved;
+  int optimizer;    /* energy: SMOOTH_NEWTON or SMOOTH_LBFGS, the one that ran */
+  int iterations;   /* energy: the optimizer's iterations over all rounds */
   double min_before, min_after, mean_before, mean_after, seconds;
 } smooth_report;
 

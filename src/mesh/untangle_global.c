@@ -13,6 +13,8 @@
  * cofactor matrix. See untangle_int.h. */
 #include "untangle_int.h"
 
+#include "dense.h"
+
 #include <limits.h>
 #include <math.h>
 #include <stdio.h>
@@ -179,6 +181,204 @@ static double corner_energy(const objective *o, const double *x, int i, int kc, 
   return f;
 }
 
+/* ---------------------------------------------------------------- second derivatives */
+
+/* a symmetric n×n matrix (n ≤ 9, row-major) is positive definite: its Cholesky pivots */
+static int sym_pd(int n, const double *a) {
+  double L[81];
+  for (int j = 0; j < n; j++) {
+    double s = a[j * n + j];
+    for (int k = 0; k < j; k++) s -= L[j * n + k] * L[j * n + k];
+    if (!(s > 0)) return 0;
+    L[j * n + j] = sqrt(s);
+    for (int i = j + 1; i < n; i++) {
+      double t = a[i * n + j];
+      for (int k = 0; k < j; k++) t -= L[i * n + k] * L[j * n + k];
+      L[i * n + j] = t / L[j * n + j];
+    }
+  }
+  return 1;
+}
+
+/* the eigenvalues w and eigenvectors (the columns of v) of a symmetric n×n matrix a (n ≤ 9,
+ * destroyed) */
+static void sym_eigen(int n, double *a, double *w, double *v) {
+  dense_sym_eigen(n, a, v, 0, 1e-30);
+  for (int i = 0; i < n; i++) w[i] = a[i * n + i];
+}
+
+/* a symmetric n×n matrix (n ≤ 9) replaced by its nearest positive semidefinite one: the
+ * negative eigenvalues set to 0 */
+static void sym_project_psd(int n, double *a) {
+  if (sym_pd(n, a)) return;
+  double v[81], w[9];
+  sym_eigen(n, a, w, v);
+  for (int i = 0; i < n; i++) w[i] = fmax(w[i], 0);
+  for (int i = 0; i < n; i++)
+    for (int j = 0; j <= i; j++) {
+      double s = 0;
+      for (int k = 0; k < n; k++) s += v[i * n + k] * w[k] * v[j * n + k];
+      a[i * n + j] = a[j * n + i] = s;
+    }
+}
+
+/* H += w vec(M) vec(M)ᵀ for an n-entry vec(M) */
+static void add_mode(int n, double w, const double *m, double *H) {
+  if (!(w > 0)) return;
+  for (int i = 0; i < n; i++)
+    for (int j = 0; j < n; j++) H[i * n + j] += w * m[i] * m[j];
+}
+
+/* 3D: the projected Hessian in J of an energy F(A, D), A = |J|², D = det J > 0, in closed
+ * form from J's singular value decomposition J = U Σ Vᵀ (Smith, de Goes and Kim, ACM TOG
+ * 2019): the twist and flip modes (u_i v_jᵀ ∓ u_j v_iᵀ)/√2 have the eigenvalues 2F_A ± F_D σ_k
+ * ({i, j, k} = {1, 2, 3}); the scaling modes Σ c_i u_i v_iᵀ are the eigenvectors c of the 3×3
+ * Hessian in (σ1, σ2, σ3). 1 when J is too close to singular for U = J V Σ⁻¹: the caller
+ * projects the 9×9 Hessian numerically. */
+static int hessian_3d_psd(double J[3][3], double fA, double fD, double fAD, double fDD, double *H) {
+  double S[9], V[9], w[3], sg[3], U[3][3];
+  for (int i = 0; i < 3; i++)
+    for (int j = 0; j < 3; j++) S[i * 3 + j] = J[0][i] * J[0][j] + J[1][i] * J[1][j] + J[2][i] * J[2][j];
+  sym_eigen(3, S, w, V);
+  double smax = 0;
+  for (int i = 0; i < 3; i++) { sg[i] = sqrt(fmax(w[i], 0)); smax = fmax(smax, sg[i]); }
+  for (int i = 0; i < 3; i++)
+    if (!(sg[i] > 1e-6 * smax)) return 1;
+  for (int r = 0; r < 3; r++)
+    for (int i = 0; i < 3; i++) U[r][i] = (J[r][0] * V[0 * 3 + i] + J[r][1] * V[1 * 3 + i] + J[r][2] * V[2 * 3 + i]) / sg[i];
+  double kk[3] = {sg[1] * sg[2], sg[0] * sg[2], sg[0] * sg[1]}, Hs[9], ws[3], cs[9], m[9];
+  for (int i = 0; i < 3; i++)
+    for (int j = 0; j < 3; j++)
+      Hs[i * 3 + j] = (i == j ? 2 * fA : fD * sg[3 - i - j]) + 2 * fAD * (sg[i] * kk[j] + kk[i] * sg[j]) + fDD * kk[i] * kk[j];
+  sym_eigen(3, Hs, ws, cs);
+  memset(H, 0, sizeof(double) * 81);
+  for (int e = 0; e < 3; e++) {
+    for (int a = 0; a < 3; a++)
+      for (int b = 0; b < 3; b++)
+        m[a * 3 + b] = cs[0 * 3 + e] * U[a][0] * V[b * 3 + 0] + cs[1 * 3 + e] * U[a][1] * V[b * 3 + 1] +
+                       cs[2 * 3 + e] * U[a][2] * V[b * 3 + 2];
+    add_mode(9, ws[e], m, H);
+  }
+  for (int i = 0; i < 3; i++)
+    for (int j = i + 1; j < 3; j++) {
+      int k = 3 - i - j;
+      for (int sgn = -1; sgn <= 1; sgn += 2) { /* twist (−), flip (+) */
+        for (int a = 0; a < 3; a++)
+          for (int b = 0; b < 3; b++) m[a * 3 + b] = (U[a][i] * V[b * 3 + j] + sgn * U[a][j] * V[b * 3 + i]) * M_SQRT1_2;
+        add_mode(9, 2 * fA - sgn * fD * sg[k], m, H);
+      }
+    }
+  return 0;
+}
+
+/* 2D: the projected Hessian in J = [a b; c e] of an energy F(A, D), A = |J|², D = det J,
+ * in closed form. With J = α + β, α = ((a + e)/2, (c − b)/2) its conformal and
+ * β = ((a − e)/2, (b + c)/2) its anticonformal part, A = 2(r² + s²) and D = r² − s² for
+ * r = |α|, s = |β|: F depends on r and s alone, so its Hessian in (α, β) has the eigenvectors
+ * α⊥ and β⊥ (eigenvalues F_r/r = 4F_A + 2F_D and F_s/s = 4F_A − 2F_D) and two in the plane
+ * of α̂ and β̂ (the 2×2 Hessian in (r, s)), as in Smith, de Goes and Kim's analytic
+ * eigensystems (ACM TOG 2019). Each eigenvector e with eigenvalue λ > 0 adds λ/4 (Me)(Me)ᵀ,
+ * M = ∂vec J/∂(α, β). */
+static void hessian_2d_psd(double J[3][3], double fA, double fD, double fAD, double fDD, double *H) {
+  double a1 = 0.5 * (J[0][0] + J[1][1]), a2 = 0.5 * (J[1][0] - J[0][1]);
+  double b1 = 0.5 * (J[0][0] - J[1][1]), b2 = 0.5 * (J[0][1] + J[1][0]);
+  double r = sqrt(a1 * a1 + a2 * a2), s = sqrt(b1 * b1 + b2 * b2);
+  double ah[2] = {1, 0}, bh[2] = {1, 0}; /* the unit directions (any, where a part is 0) */
+  if (r > 0) { ah[0] = a1 / r; ah[1] = a2 / r; }
+  if (s > 0) { bh[0] = b1 / s; bh[1] = b2 / s; }
+  double frr = 4 * fA + 2 * fD + 16 * r * r * fAD + 4 * r * r * fDD, fss = 4 * fA - 2 * fD - 16 * s * s * fAD + 4 * s * s * fDD,
+         frs = -4 * r * s * fDD;
+  /* the 2×2 [frr frs; frs fss]: eigenvalues m ± rad, (cp, sp) the eigenvector of m + rad */
+  double m = 0.5 * (frr + fss), h = 0.5 * (frr - fss), rad = sqrt(h * h + frs * frs);
+  double vx = h >= 0 ? h + rad : frs, vy = h >= 0 ? frs : rad - h, nv = sqrt(vx * vx + vy * vy);
+  double cp = nv > 0 ? vx / nv : 1, sp = nv > 0 ? vy / nv : 0;
+  double lam[4] = {4 * fA + 2 * fD, 4 * fA - 2 * fD, m + rad, m - rad};
+  double e[4][4] = {{-ah[1], ah[0], 0, 0}, {0, 0, -bh[1], bh[0]},
+                    {cp * ah[0], cp * ah[1], sp * bh[0], sp * bh[1]}, {-sp * ah[0], -sp * ah[1], cp * bh[0], cp * bh[1]}};
+  memset(H, 0, sizeof(double) * 16);
+  for (int k = 0; k < 4; k++) {
+    if (!(lam[k] > 0)) continue;
+    const double *u = e[k];
+    double me[4] = {u[0] + u[2], -u[1] + u[3], u[1] + u[3], u[0] - u[2]}, w = 0.25 * lam[k];
+    for (int i = 0; i < 4; i++)
+      for (int j = 0; j < 4; j++) H[i * 4 + j] += w * me[i] * me[j];
+  }
+}
+
+/* 3D, numerically: the 9×9 Hessian in J of F(A, D),
+ *     ∂²F/∂J² = 2 F_A I + 2 F_AD (J⊗K + K⊗J) + F_DD K⊗K + F_D ∂²D/∂J²,  K = ∂D/∂J,
+ * with its negative eigenvalues set to 0 (for an inverted corner, or one too close to
+ * singular for the closed form) */
+static void hessian_3d_numeric(double J[3][3], double fA, double fD, double fAD, double fDD, double *H) {
+  double K[3][3];
+  cofactor(3, J, K);
+  for (int a = 0; a < 9; a++)
+    for (int b = 0; b < 9; b++) {
+      double ja = J[a / 3][a % 3], jb = J[b / 3][b % 3], ka = K[a / 3][a % 3], kb = K[b / 3][b % 3];
+      H[a * 9 + b] = (a == b ? 2 * fA : 0) + 2 * fAD * (ja * kb + ka * jb) + fDD * ka * kb;
+    }
+  for (int a = 0; a < 3; a++) /* ∂K_ab/∂J: K_ab = J_a1b1 J_a2b2 − J_a1b2 J_a2b1 (indices + 1, + 2 mod 3) */
+    for (int b = 0; b < 3; b++) {
+      int a1 = (a + 1) % 3, a2 = (a + 2) % 3, b1 = (b + 1) % 3, b2 = (b + 2) % 3, row = (a * 3 + b) * 9;
+      H[row + a1 * 3 + b1] += fD * J[a2][b2];
+      H[row + a2 * 3 + b2] += fD * J[a1][b1];
+      H[row + a1 * 3 + b2] -= fD * J[a2][b1];
+      H[row + a2 * 3 + b1] -= fD * J[a1][b2];
+    }
+  sym_project_psd(9, H);
+}
+
+/* One corner's Hessian in its d + 1 vertices, hk ((d+1)d square, row (k d + a) for
+ * coordinate a of the corner's vertex k, C->ct[kc] order), projected to be positive
+ * semidefinite: the Hessian in J (d² square) with its negative eigenvalues set to 0, then
+ * mapped through the linear J(x) ("projected Newton", Teran et al., SCA 2005). The energy
+ * f = (1 − θ) A s(D) + θ t(D), A = |J|², D = det J, s = χ^(−2/d), t = (D² + 1)/χ, is a
+ * function F(A, D): its derivatives F_A, F_D, F_AD, F_DD (F_AA = 0) are all the eigensystems
+ * above need. 1 for a corner where the energy is infinite (ε = 0 and det J ≤ 0). */
+static int corner_hessian(const objective *o, const double *x, int i, int kc, double *hk) {
+  const ctx *C = o->C;
+  int d = C->d, c = o->cells[i], n = d * d, nx = (d + 1) * d;
+  double theta = o->theta, eps = o->eps;
+  double J[3][3];
+  const int *v;
+  const double *winv = o->cwinv ? o->cwinv + ((size_t)c * C->ncorner + kc) * d * d : o->winv;
+  double D = cell_map(C, x, c, kc, winv, J, &v), A = 0;
+  for (int a = 0; a < d; a++)
+    for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
+  if (eps == 0 && !(D > 0)) return 1;
+  /* χ and its derivatives in D; s, t and theirs */
+  double r = sqrt(eps * eps + D * D), ch = 0.5 * (D + r), c1 = 0.5 * (1 + D / r), c2 = 0.5 * eps * eps / (r * r * r);
+  double p = 2.0 / d, s = d == 2 ? 1 / ch : 1 / (cbrt(ch) * cbrt(ch)), s1 = -p * s / ch * c1, s2 = p * (p + 1) * s / (ch * ch) * c1 * c1 - p * s / ch * c2;
+  double N = D * D + 1, t1 = 2 * D / ch - N * c1 / (ch * ch),
+         t2 = 2 / ch - 4 * D * c1 / (ch * ch) - N * c2 / (ch * ch) + 2 * N * c1 * c1 / (ch * ch * ch);
+  double fA = (1 - theta) * s, fD = (1 - theta) * A * s1 + theta * t1, fAD = (1 - theta) * s1,
+         fDD = (1 - theta) * A * s2 + theta * t2;
+  double H[81];
+  if (d == 2) hessian_2d_psd(J, fA, fD, fAD, fDD, H);
+  else if (D <= 0 || hessian_3d_psd(J, fA, fD, fAD, fDD, H)) hessian_3d_numeric(J, fA, fD, fAD, fDD, H);
+  /* ∂J_ab/∂x_kc = δ_ac w_k[b]: w_k row k − 1 of W⁻¹, w_0 minus their sum */
+  double w[4][3], T[9][12];
+  for (int b = 0; b < d; b++) {
+    w[0][b] = 0;
+    for (int k = 1; k <= d; k++) { w[k][b] = winv[(k - 1) * d + b]; w[0][b] -= w[k][b]; }
+  }
+  for (int ab = 0; ab < n; ab++) /* T = H (∂J/∂x): row (a, b), column (m, e) */
+    for (int m = 0; m <= d; m++)
+      for (int e = 0; e < d; e++) {
+        double t = 0;
+        for (int b2 = 0; b2 < d; b2++) t += H[ab * n + e * d + b2] * w[m][b2];
+        T[ab][m * d + e] = t;
+      }
+  for (int k = 0; k <= d; k++)
+    for (int a = 0; a < d; a++)
+      for (int col = 0; col < nx; col++) {
+        double t = 0;
+        for (int b = 0; b < d; b++) t += w[k][b] * T[a * d + b][col];
+        hk[(k * d + a) * nx + col] = t;
+      }
+  return 0;
+}
+
 /* the buffered evaluation's memory limit: per corner its value and (d + 1) d gradient
  * entries, per free vertex its slots (a million hexahedra would need 1 GB); above it the
  * evaluation runs on one thread, accumulating directly, with the same result */
@@ -221,6 +421,7 @@ static int energy_prepare(const objective *o, int nfree) {
 
 void ut_energy_release(ut_energy_buf *b) {
   if (!b) return;
+  free(b->hc);
   free(b->fc);
   free(b->gc);
   free(b->off);
@@ -278,6 +479,105 @@ double ut_energy_eval(const objective *o, const double *x, double *grad, int nfr
     }
   }
   return f;
+}
+
+double ut_energy_qmin(const objective *o, const double *x) {
+  const ctx *C = o->C;
+  int d = C->d, nk = C->ncorner, n = o->ncell;
+  double qmin = INFINITY;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) reduction(min : qmin) if (n > 2048)
+#endif
+  for (int i = 0; i < n; i++)
+    for (int kc = 0; kc < nk; kc++) {
+      int c = o->cells[i];
+      double J[3][3], A = 0;
+      const int *v;
+      double D = cell_map(C, x, c, kc, o->cwinv ? o->cwinv + ((size_t)c * nk + kc) * d * d : o->winv, J, &v);
+      for (int a = 0; a < d; a++)
+        for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
+      double q = D > 0 && A > 0 ? d * pow(D, 2.0 / d) / A : 0;
+      if (q < qmin) qmin = q;
+    }
+  return qmin;
+}
+
+/* the corner Hessians' buffer limit (a hexahedron's eight corners take 9 KB): above it they
+ * are computed and added on one thread, in the same order and with the same result */
+#define HESS_BUF_MAX ((size_t)512 << 20)
+
+/* the block of (row, col) in the pattern (present: the pattern holds every pair of free
+ * vertices that share a cell) */
+static size_t bsr_find(const ut_bsr *P, int row, int col) {
+  int lo = P->off[row], hi = P->off[row + 1] - 1;
+  while (lo < hi) {
+    int mid = (lo + hi) / 2;
+    if (P->col[mid] < col) lo = mid + 1;
+    else hi = mid;
+  }
+  return (size_t)lo;
+}
+
+/* row fk (the free vertex at corner kc's vertex k of cell vertices v) of the corner Hessian
+ * h added into its blocks */
+static void add_row_blocks(const objective *o, const ut_bsr *P, double *val, const int *v, int kc, int k, int fk,
+                           const double *h) {
+  const ctx *C = o->C;
+  int d = C->d, nx = (d + 1) * d;
+  for (int m = 0; m <= d; m++) {
+    int fm = o->fidx[v[C->ct[kc][m]]];
+    if (fm < 0) continue;
+    double *blk = val + bsr_find(P, fk, fm) * (size_t)(d * d);
+    for (int a = 0; a < d; a++)
+      for (int e = 0; e < d; e++) blk[a * d + e] += h[(k * d + a) * nx + m * d + e];
+  }
+}
+
+/* The projected Hessian of the energy in the free vertices' coordinates, d×d blocks on
+ * pattern P. With OpenMP the corners' Hessians are computed on threads, then each free
+ * vertex's row gathers them in (cell, corner, vertex) order, the order of the one-thread
+ * loop, so that the result does not depend on the number of threads. 1 where the energy
+ * is infinite. */
+int ut_energy_hessian(const objective *o, const double *x, const ut_bsr *P, double *val, int nfree) {
+  const ctx *C = o->C;
+  int d = C->d, nk = C->ncorner, n = o->ncell, nx = (d + 1) * d, dd = d * d;
+  size_t hs = (size_t)nx * nx, nc = (size_t)n * nk;
+  memset(val, 0, sizeof(double) * (size_t)P->off[nfree] * dd);
+  ut_energy_buf *b = o->eb;
+  if (b && !energy_prepare(o, nfree) && (b->hc || sizeof(double) * nc * hs <= HESS_BUF_MAX) &&
+      (b->hc || (b->hc = malloc(sizeof(double) * nc * hs + 1)))) {
+    int bad = 0;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) reduction(|| : bad) if (n > 1024)
+#endif
+    for (int i = 0; i < n; i++)
+      for (int kc = 0; kc < nk; kc++) bad = corner_hessian(o, x, i, kc, b->hc + ((size_t)i * nk + kc) * hs) || bad;
+    if (bad) return 1;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (nfree > 1024)
+#endif
+    for (int fi = 0; fi < nfree; fi++)
+      for (int q = b->off[fi]; q < b->off[fi + 1]; q++) {
+        size_t sl = (size_t)b->slot[q], cq = sl / (size_t)(d + 1);
+        int k = (int)(sl % (size_t)(d + 1)), i = (int)(cq / (size_t)nk), kc = (int)(cq % (size_t)nk);
+        const int *v = cell_of(C, o->cells[i]);
+        const double *h = b->hc + cq * hs;
+        add_row_blocks(o, P, val, v, kc, k, fi, h);
+      }
+    return 0;
+  }
+  double h[144];
+  for (int i = 0; i < n; i++) {
+    const int *v = cell_of(C, o->cells[i]);
+    for (int kc = 0; kc < nk; kc++) {
+      if (corner_hessian(o, x, i, kc, h)) return 1;
+      for (int k = 0; k <= d; k++) {
+        int fk = o->fidx[v[C->ct[kc][k]]];
+        if (fk >= 0) add_row_blocks(o, P, val, v, kc, k, fk, h);
+      }
+    }
+  }
+  return 0;
 }
 
 int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwinv, const unsigned char *only,

@@ -1,7 +1,8 @@
 /* untangle_int.h — what untangle.c (untangling's driver and stage 2, mesh motion),
  * untangle_ctx.c (the context), untangle_place.c (stages 1 and 3), untangle_global.c (the
- * global stage) and smooth.c (smoothing) share inside src/mesh: the corner and adjacency
- * context, the L-BFGS objective, the unit frame for meshes far from unit size. Not an interface of the mesh layer: see untangle.h. */
+ * global stage's energy, its gradient and projected Hessian), untangle_newton.c (projected
+ * Newton on it) and smooth.c (smoothing) share inside src/mesh: the corner and adjacency
+ * context, the L-BFGS and Newton objective, the unit frame for meshes far from unit size. Not an interface of the mesh layer: see untangle.h. */
 #ifndef LUGAL_UNTANGLE_INT_H
 #define LUGAL_UNTANGLE_INT_H
 
@@ -52,16 +53,38 @@ typedef struct {
   struct ut_energy_buf *eb; /* smooth == 2: the threaded evaluation's buffers (ut_energy_eval) */
   int stall;        /* smooth == 2 (the energy smoother): 20 iterations that gain less than 1e-4 end the run */
   double ftol;      /* smooth: a step that lowers f by at most ftol·f ends the run (0: 1e-9) */
+  double keepq;     /* ut_newton: an end whose smallest corner quality is below keepq gives way to
+                     * the last iterate that was not (the smoother never lowers the minimum) */
 } objective;
 
 /* per cell: its energy and vertex gradients; per free vertex: its (cell, vertex) slots */
 typedef struct ut_energy_buf {
   int ready;
   double *fc, *gc;
+  double *hc; /* the corners' projected Hessians (ut_energy_hessian), or NULL */
   int *off, *slot;
 } ut_energy_buf;
 /* frees what ut_energy_eval allocated in b (the struct itself is the caller's) */
 void ut_energy_release(ut_energy_buf *b);
+
+/* the block pattern of the energy's Hessian: row i (free vertex i) has d×d blocks in the
+ * columns col[off[i] .. off[i+1]), sorted: the free vertices that share a cell with it */
+typedef struct {
+  int *off, *col;
+} ut_bsr;
+/* the energy's Hessian (smooth == 2 objectives) at x with each corner's part projected to
+ * be positive semidefinite, into val (off[nfree] blocks of d×d, row-major); 1 where the
+ * energy is infinite (untangle_global.c) */
+int ut_energy_hessian(const objective *o, const double *x, const ut_bsr *P, double *val, int nfree);
+/* the smallest corner quality d det(J)^(2/d) / |J|² of a smooth == 2 objective's cells
+ * (0 where a corner is invalid): the mean ratio, relative to the reference shapes if any */
+double ut_energy_qmin(const objective *o, const double *x);
+/* projected Newton on a smooth == 2 objective (untangle_newton.c): as ut_lbfgs, each step
+ * from the preconditioned conjugate gradients on the projected Hessian, Armijo backtracking;
+ * stops when a step lowers f by at most ftol·f (0: 1e-9). Iterations, or -1 out of memory */
+int ut_newton(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout);
+/* the objective that ut_lbfgs and ut_newton minimize, with the motion weight's term */
+double ut_eval(const objective *o, const double *x, double *grad, int nfree);
 
 /* reusable per-vertex / per-cell marks, kept at their rest values (-1 / 0) between uses */
 typedef struct {

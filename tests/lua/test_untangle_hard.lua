@@ -82,6 +82,39 @@ for _, case in ipairs{{8, 40, 1}, {12, 60, 7}} do
   end
   T.check(bmax == 0, "star: the boundary stayed (moved by %g)", bmax)
 end
+-- the energy smoother's optimizers: projected Newton (2D's default) converges in a few
+-- steps where L-BFGS needs 160 iterations (the random star), to as low an energy; in 3D
+-- L-BFGS is the default, and Newton reaches the same mesh on a twisted bar
+do
+  local function inv(m)
+    local q, s = m:quality("mean_ratio"), 0
+    for i = 1, #q do s = s + 1 / q[i] end
+    return s
+  end
+  local mesh, ref = H.star(12, 60, 7)
+  mesh:untangle{quiet = true, boundary = "fixed"}
+  local m2 = mesh:copy()
+  local a = mesh:smooth{quiet = true, method = "energy", iterations = 50, boundary = "fixed"}
+  local b = m2:smooth{quiet = true, method = "energy", iterations = 50, boundary = "fixed", optimizer = "lbfgs"}
+  print(string.format("star 12x60 smoothed: Newton %d steps, sum 1/q %.4f, min %.4f; L-BFGS %d iterations, sum 1/q %.4f, min %.4f",
+                      a.iterations, inv(mesh), a.min_after, b.iterations, inv(m2), b.min_after))
+  T.check(a.optimizer == "newton" and b.optimizer == "lbfgs", "2D: Newton by default (%s), L-BFGS on request (%s)", a.optimizer, b.optimizer)
+  T.check(a.iterations <= 20 and 4 * a.iterations <= b.iterations,
+          "Newton converges in %d steps (at most 20, a quarter of L-BFGS's %d)", a.iterations, b.iterations)
+  T.check(inv(mesh) <= inv(m2) * (1 + 1e-6) and a.min_after >= ref:quality("mean_ratio"):min(),
+          "Newton's sum of 1/q %.6f at most L-BFGS's %.6f, its minimum %.4f above the polar mesh's", inv(mesh), inv(m2), a.min_after)
+  local bar = H.twisted_bar(4, 6, 1)
+  bar:untangle{quiet = true, boundary = "fixed"}
+  local bar2 = bar:copy()
+  local c = bar:smooth{quiet = true, method = "energy", boundary = "fixed"}
+  local d = bar2:smooth{quiet = true, method = "energy", boundary = "fixed", optimizer = "newton"}
+  T.check(c.optimizer == "lbfgs" and d.optimizer == "newton" and math.abs(c.min_after - d.min_after) < 1e-6 and
+          math.abs(c.mean_after - d.mean_after) < 1e-4 and d.mean_after >= d.mean_before,
+          "3D: L-BFGS by default; Newton reaches the same minimum (%.6f, %.6f) and mean (%.5f, %.5f)", c.min_after, d.min_after,
+          c.mean_after, d.mean_after)
+  T.fails(function() return m2:smooth{method = "energy", optimizer = "bfgs"} end, "mesh:smooth", "optimizer", "newton")
+  T.fails(function() return m2:smooth{optimizer = "newton"} end, "mesh:smooth", "optimizer", "needs method")
+end
 -- a tetrahedral bar (3n x n x n cubes, 4 long) twisted by 360 degrees: boundary vertices at
 -- their twisted places, interior vertices left straight; untangled with the boundary fixed,
 -- then smoothed to the twisted bar's own minimum quality. Half its interior vertices are

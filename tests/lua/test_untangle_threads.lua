@@ -19,22 +19,43 @@ local function digest(m)
   return string.format("%a %a", s1, s2)
 end
 
+-- the interior vertices of a unit-square mesh moved at random by up to amp/2 per coordinate
+local function perturb(m, amp, seed)
+  math.randomseed(seed)
+  for k = 1, m:nvertices() do
+    local x, y = m:coordinates(k)
+    if x > 1e-9 and x < 1 - 1e-9 and y > 1e-9 and y < 1 - 1e-9 then
+      m:set_coordinates(k, x + amp*(math.random() - 0.5), y + amp*(math.random() - 0.5))
+    end
+  end
+end
+
 if arg[1] == "child" then
   local sp = H.spiral(100, 20, 0.7)
   local r = sp:untangle{quiet = true}
   print("spiral", tostring(r.success), r.invalid_before, digest(sp))
   for _, cell in ipairs{"triangle", "quadrilateral"} do
     local m = lg.mesh.rectangle{nx = 40, cell = cell}
-    math.randomseed(3)
-    for k = 1, m:nvertices() do
-      local x, y = m:coordinates(k)
-      if x > 1e-9 and x < 1 - 1e-9 and y > 1e-9 and y < 1 - 1e-9 then
-        m:set_coordinates(k, x + 0.008*(math.random() - 0.5), y + 0.008*(math.random() - 0.5))
-      end
-    end
+    perturb(m, 0.008, 3)
     local s = m:smooth{quiet = true, method = "energy", iterations = 3}
     print(cell, string.format("%.6f %.6f", s.min_before, s.min_after), digest(m))
   end
+  -- projected Newton (2D's default) with the matrix products and dot products on threads
+  -- (above 2048 free vertices and 16384 unknowns), and on tetrahedra when asked for
+  local big = lg.mesh.rectangle{nx = 100}
+  perturb(big, 0.003, 5)
+  local s = big:smooth{quiet = true, method = "energy", iterations = 2}
+  print("newton", s.optimizer, string.format("%.6f %.6f", s.min_before, s.min_after), digest(big))
+  local box = lg.mesh.box{nx = 6}
+  for k = 1, box:nvertices() do
+    local p = {box:coordinates(k)}
+    for j = 1, 3 do if p[j] > 1e-9 and p[j] < 1 - 1e-9 then p[j] = p[j] + 0.02*(math.random() - 0.5) end end
+    box:set_coordinates(k, table.unpack(p))
+  end
+  s = box:smooth{quiet = true, method = "energy", optimizer = "newton"}
+  local z = 0
+  for k = 1, box:nvertices() do local _, _, c = box:coordinates(k); z = z + c*k end
+  print("tetrahedra", s.optimizer, string.format("%.6f %.6f", s.min_before, s.min_after), digest(box), string.format("%a", z))
   os.exit(0)
 end
 
@@ -45,6 +66,7 @@ local qmin = {}
 for cell, before, after in one:gmatch("(%a+)\t(%d%.%d+) (%d%.%d+)") do qmin[cell] = {tonumber(before), tonumber(after)} end
 T.check(qmin.triangle and qmin.triangle[2] > qmin.triangle[1] and qmin.quadrilateral and
         qmin.quadrilateral[2] > qmin.quadrilateral[1], "energy smoothing raised the minimum quality:\n%s", one)
+T.check(one:find("newton\tnewton", 1, true) and one:find("tetrahedra\tnewton", 1, true), "Newton smoothed both:\n%s", one)
 T.check(one == two, "1 and 2 threads give the same meshes to the bit:\n%s\n%s", one, two)
 T.check(one == three, "1 and 3 threads give the same meshes to the bit:\n%s\n%s", one, three)
 print("threads: untangling and energy smoothing identical with 1, 2 and 3 threads")

@@ -52,7 +52,13 @@ echo "$out" | grep -q "smooth (local): corner_condition min"
 out=$("$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/smooth.msh" --method global)
 echo "$out" | grep -q "smooth (global): corner_condition min"
 out=$("$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/smooth.msh" --method energy)
-echo "$out" | grep -q "smooth (energy): corner_condition min"
+echo "$out" | grep -q "smooth (energy, Newton): corner_condition min"
+out=$("$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/smooth.msh" --method energy --optimizer lbfgs)
+echo "$out" | grep -q "smooth (energy, L-BFGS): corner_condition min"
+if "$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/x.msh" --method energy --optimizer bfgs 2> "$T/err"; then exit 1; fi
+grep -q "optimizer must be auto, newton or lbfgs" "$T/err"
+if "$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/x.msh" --optimizer newton 2> "$T/err"; then exit 1; fi
+grep -q "optimizer needs --method energy" "$T/err"
 # --reference: the rest grid's shapes, per corner: untangling repairs, smoothing a bumped
 # copy towards them reaches them; another mesh or measure is refused
 out=$("$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/x.msh" --reference "$T/rest.msh")
@@ -63,7 +69,9 @@ if "$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/x.msh" --motion-weight -2 2
 grep -q "motion-weight must be a finite number" "$T/err"
 out=$("$BUILD/lugal-mesh" smooth "$T/bumped.msh" "$T/x.msh" --reference "$T/rest.msh")
 echo "$out"
-echo "$out" | grep -Eq "smooth \(energy\): corner_condition relative to the reference min 0\.[0-9]+ -> (1|0\.999[0-9]*),"
+echo "$out" | grep -Eq "smooth \(energy, Newton\): corner_condition relative to the reference min 0\.[0-9]+ -> (1|0\.999[0-9]*),"
+out=$("$BUILD/lugal-mesh" smooth "$T/bumped.msh" "$T/x.msh" --reference "$T/rest.msh" --optimizer lbfgs)
+echo "$out" | grep -Eq "smooth \(energy, L-BFGS\): corner_condition relative to the reference min 0\.[0-9]+ -> (1|0\.999[0-9]*),"
 if "$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/x.msh" --reference "$ROOT/examples/domain.msh" 2> "$T/err"; then exit 1; fi
 grep -q "must be the same mesh" "$T/err"
 if "$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/x.msh" --reference "$ROOT/examples/domain.msh" 2> "$T/err"; then exit 1; fi

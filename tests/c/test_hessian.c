@@ -1,0 +1,121 @@
+/* test_hessian.c — the projected corner Hessians of the untangling energy (untangle_global.c,
+ * included here to reach its static functions): on one simplex whose W⁻¹ is the identity and
+ * whose vertex 0 is the origin, J's columns are vertices 1..d, so the block of the vertex
+ * Hessian in vertices 1..d is the Hessian in J. It must equal the finite-difference Hessian of
+ * the analytic gradient (corner_energy) with its negative eigenvalues set to 0 — for the
+ * closed forms (2D conformal/anticonformal, 3D SVD modes) and the numeric 3D fallback alike —
+ * and be positive semidefinite, for the smoother's energy (θ = 0, ε = 0) and the untangler's
+ * (θ = 1/2, ε > 0, inverted corners too). */
+#include "../../src/mesh/untangle_global.c"
+
+#include "check.h"
+
+static unsigned rng = 12345;
+static double rnd(void) { /* in [-1, 1) */
+  rng = rng * 1103515245u + 12345u;
+  return (double)((rng >> 8) & 0xffffff) / 8388608.0 - 1;
+}
+
+/* the objective of one simplex with vertices x (d + 1 of them) */
+static void setup(int d, double *x, mesh *m, ctx *C, objective *o, int *cellv, int *cells) {
+  memset(m, 0, sizeof *m);
+  m->type = d == 2 ? CELL_TRIANGLE : CELL_TETRAHEDRON;
+  m->dim = d;
+  m->nvc = d + 1;
+  m->nvert = d + 1;
+  m->x = x;
+  m->ncell = 1;
+  for (int k = 0; k <= d; k++) cellv[k] = k;
+  m->cells = cellv;
+  memset(C, 0, sizeof *C);
+  C->m = m;
+  C->d = d;
+  C->nvc = d + 1;
+  C->ncorner = 1;
+  for (int k = 0; k <= d; k++) C->ct[0][k] = k;
+  memset(o, 0, sizeof *o);
+  o->C = C;
+  cells[0] = 0;
+  o->cells = cells;
+  for (int a = 0; a < d; a++) o->winv[a * d + a] = 1;
+}
+
+/* one case: J given (columns = vertices 1..d), energy parameters θ, ε */
+static void check_case(int d, double J[3][3], double theta, double eps, const char *what) {
+  double x[12] = {0}, hk[144], g1[12], g2[12];
+  int cellv[4], cells[1];
+  mesh m;
+  ctx C;
+  objective o;
+  for (int k = 1; k <= d; k++)
+    for (int a = 0; a < d; a++) x[k * d + a] = J[a][k - 1];
+  setup(d, x, &m, &C, &o, cellv, cells);
+  o.theta = theta;
+  o.eps = eps;
+  int nx = (d + 1) * d, n = d * d;
+  CHECK(!corner_hessian(&o, x, 0, 0, hk), "%s: a finite energy", what);
+  /* the finite-difference Hessian in J, from the analytic gradient in vertices 1..d */
+  double H[81], scale = 0;
+  for (int e = 0; e < d; e++)
+    for (int m2 = 0; m2 < d; m2++) { /* J entry (e, m2) = x of vertex m2 + 1, coordinate e */
+      double *p = x + (m2 + 1) * d + e, p0 = *p, h = 1e-6 * (1 + fabs(p0));
+      *p = p0 + h;
+      corner_energy(&o, x, 0, 0, g1);
+      *p = p0 - h;
+      corner_energy(&o, x, 0, 0, g2);
+      *p = p0;
+      for (int a = 0; a < d; a++)
+        for (int b = 0; b < d; b++) /* row (a, b): ∂f/∂J_ab is the gradient in vertex b + 1 */
+          H[(a * d + b) * n + e * d + m2] = (g1[(b + 1) * d + a] - g2[(b + 1) * d + a]) / (2 * h);
+    }
+  for (int i = 0; i < n; i++)
+    for (int j = 0; j < i; j++) H[i * n + j] = H[j * n + i] = 0.5 * (H[i * n + j] + H[j * n + i]);
+  for (int i = 0; i < n * n; i++) scale = fmax(scale, fabs(H[i]));
+  sym_project_psd(n, H);
+  double err = 0;
+  for (int a = 0; a < d; a++)
+    for (int b = 0; b < d; b++)
+      for (int e = 0; e < d; e++)
+        for (int m2 = 0; m2 < d; m2++)
+          err = fmax(err, fabs(hk[((b + 1) * d + a) * nx + (m2 + 1) * d + e] - H[(a * d + b) * n + e * d + m2]));
+  CHECK(err <= 1e-5 * scale, "%s: projected Hessian off by %.3g (scale %.3g)", what, err, scale);
+  /* positive semidefinite over all d + 1 vertices, and symmetric */
+  double w[12], v[144], hc[144], asym = 0;
+  memcpy(hc, hk, sizeof(double) * nx * nx);
+  for (int i = 0; i < nx; i++)
+    for (int j = 0; j < nx; j++) asym = fmax(asym, fabs(hk[i * nx + j] - hk[j * nx + i]));
+  CHECK(asym <= 1e-12 * scale, "%s: symmetric (%.3g)", what, asym);
+  /* sym_eigen takes n ≤ 9: check vᵀ H v ≥ 0 on random directions instead */
+  (void)w; (void)v;
+  for (int t = 0; t < 50; t++) {
+    double u[12], s = 0;
+    for (int i = 0; i < nx; i++) u[i] = rnd();
+    for (int i = 0; i < nx; i++)
+      for (int j = 0; j < nx; j++) s += u[i] * hc[i * nx + j] * u[j];
+    CHECK(s >= -1e-10 * scale * nx, "%s: uᵀHu = %.3g < 0", what, s);
+  }
+}
+
+int main(void) {
+  char what[128];
+  for (int d = 2; d <= 3; d++)
+    for (int t = 0; t < 40; t++) {
+      double J[3][3];
+      for (int a = 0; a < d; a++)
+        for (int b = 0; b < d; b++) J[a][b] = (a == b) + 0.6 * rnd();
+      double D = d == 2 ? J[0][0] * J[1][1] - J[0][1] * J[1][0]
+                        : J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) - J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0]) +
+                              J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
+      if (D > 0) {
+        snprintf(what, sizeof what, "%dD case %d, smoother (theta 0, eps 0)", d, t);
+        check_case(d, J, 0, 0, what);
+      }
+      snprintf(what, sizeof what, "%dD case %d, untangler (theta 0.5, eps 0.05), det %.3g", d, t, D);
+      check_case(d, J, 0.5, 0.05, what);
+    }
+  /* a conformal 2D map (s = 0) and an isotropic 3D one (repeated singular values) */
+  double Jc[3][3] = {{0.8, -0.6, 0}, {0.6, 0.8, 0}, {0, 0, 0}}, Ji[3][3] = {{2, 0, 0}, {0, 2, 0}, {0, 0, 2}};
+  check_case(2, Jc, 0, 0, "2D conformal");
+  check_case(3, Ji, 0, 0, "3D isotropic");
+  return CHECK_DONE();
+}

@@ -33,7 +33,7 @@ static double dot(const double *a, const double *b, long n, double *part) {
   return s;
 }
 
-/* the pattern: each free vertex's row holds the free vertices of its cells, sorted */
+/* the pattern: each free vertex's row holds itself and the free vertices of its cells, sorted */
 static int build_pattern(const ctx *C, const int *fidx, const int *freev, int nfree, ut_bsr *P) {
   int *mark = malloc(sizeof(int) * ((size_t)nfree + 1));
   P->off = calloc((size_t)nfree + 1, sizeof(int));
@@ -42,7 +42,9 @@ static int build_pattern(const ctx *C, const int *fidx, const int *freev, int nf
   for (int pass = 0; pass < 2; pass++) {
     for (int f = 0; f < nfree; f++) mark[f] = -1;
     for (int fi = 0; fi < nfree; fi++) {
-      int v = freev[fi], cnt = 0, *row = pass ? P->col + P->off[fi] : NULL;
+      int v = freev[fi], cnt = 1, *row = pass ? P->col + P->off[fi] : NULL;
+      mark[fi] = fi;
+      if (pass) row[0] = fi;
       for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++) {
         const int *cell = cell_of(C, C->vc[p]);
         for (int k = 0; k < C->nvc; k++) {
@@ -89,7 +91,7 @@ static void bsr_mult(const ut_bsr *P, const double *val, int nfree, int d, const
 
 /* the inverse of each diagonal block, made positive definite by a relative shift of 1e-10
  * of its trace (a projected Hessian may be singular) */
-static void block_jacobi(const ut_bsr *P, double *val, const int *dpos, int nfree, int d, double *dinv) {
+static void block_jacobi(double *val, const int *dpos, int nfree, int d, double *dinv) {
   int dd = d * d;
   for (int fi = 0; fi < nfree; fi++) {
     double *b = val + (size_t)dpos[fi] * dd, *w = dinv + (size_t)fi * dd, tr = 0;
@@ -111,7 +113,6 @@ static void block_jacobi(const ut_bsr *P, double *val, const int *dpos, int nfre
       memset(w, 0, sizeof(double) * dd);
       for (int a = 0; a < d; a++) w[a * d + a] = tr > 0 ? d / tr : 1;
     }
-    (void)P;
   }
 }
 
@@ -146,7 +147,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
   if (!ok) { it = -1; goto done; }
   for (int fi = 0; fi < nfree; fi++) {
     int lo = P.off[fi];
-    while (P.col[lo] != fi) lo++; /* a free vertex shares its own cells */
+    while (P.col[lo] != fi) lo++; /* every row holds its own vertex */
     dpos[fi] = lo;
   }
   f = ut_eval(o, x, g, nfree);
@@ -161,7 +162,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     if (C->anchor > 0 && C->x0) /* the motion weight's w |x − x0|² */
       for (int fi = 0; fi < nfree; fi++)
         for (int a = 0; a < d; a++) val[(size_t)dpos[fi] * dd + a * d + a] += 2 * C->anchor;
-    block_jacobi(&P, val, dpos, nfree, d, dinv);
+    block_jacobi(val, dpos, nfree, d, dinv);
     /* preconditioned conjugate gradients for H s = −g, from s = 0 */
     /* the forcing term: at least 0.1 (0.01 cost the star 40x200 twice the CG iterations for
      * the same Newton steps) */
@@ -208,8 +209,9 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     double fprev = f;
     f = fn;
     memcpy(g, gn, sizeof(double) * n);
-    if (xkeep) { /* the last iterate that keeps the smallest quality */
-      below = ut_energy_qmin(o, x) < o->keepq;
+    if (xkeep) { /* the last iterate that keeps the smallest quality (to rounding: a minimum
+                  * no vertex can move, measured by the caller in other arithmetic, is kept) */
+      below = ut_energy_qmin(o, x) < o->keepq * (1 - 1e-12);
       if (!below)
         for (int i = 0; i < nfree; i++)
           for (int a = 0; a < d; a++) xkeep[(size_t)i * d + a] = x[(size_t)freev[i] * d + a];

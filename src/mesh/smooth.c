@@ -1,8 +1,8 @@
 /* smooth.c — quality-guarded smoothing (seed, simplex and quadrilateral shape measures):
  * local, a vertex at a time, never lowering the smallest quality of its star, or global,
  * L-BFGS on the sum of 1/q with a floor, or the energy method: the same sum as a barrier
- * alone, by projected Newton (untangle_newton.c, 2D) or L-BFGS (3D). The corner context and L-BFGS are untangle.c's
- * (untangle_int.h). See untangle.h. */
+ * alone, by projected Newton (untangle_newton.c, 2D) or L-BFGS (3D). The corner context
+ * and L-BFGS are untangle.c's (untangle_int.h). See untangle.h. */
 #include "untangle_int.h"
 
 #include "quality.h"
@@ -157,6 +157,14 @@ static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, smoo
     if (simplex) ut_regular_winv(m->dim, 1.0, ob.winv);
     else
       for (int i = 0; i < m->dim; i++) ob.winv[i * m->dim + i] = 1;
+  } else if (o->energy) { /* another measure: Σ 1/q from central differences, by L-BFGS */
+    if (o->optimizer == SMOOTH_NEWTON) {
+      snprintf(err, MESH_ERRLEN, "the Newton optimizer needs the energy's measure: %s",
+               simplex ? "mean_ratio on simplices" : "corner_condition on quadrilaterals and hexahedra");
+      free(freev); free(fidx); free(cells); free(cmark); free(hv);
+      return 1;
+    }
+    r->optimizer = SMOOTH_LBFGS;
   }
   for (int round = 0; round < o->iterations; round++) {
     double f0 = 0;

@@ -124,6 +124,8 @@ do
   end
   T.fails(function() return m2:smooth{method = "energy", optimizer = "bfgs"} end, "mesh:smooth", "optimizer", "newton")
   T.fails(function() return m2:smooth{optimizer = "newton"} end, "mesh:smooth", "optimizer", "needs method")
+  T.fails(function() return m2:smooth{method = "energy", measure = "scaled_jacobian", optimizer = "newton"} end, "mesh:smooth",
+          "Newton optimizer needs the energy's measure", "mean_ratio")
 end
 -- a tetrahedral bar (3n x n x n cubes, 4 long) twisted by 360 degrees: boundary vertices at
 -- their twisted places, interior vertices left straight; untangled with the boundary fixed,

@@ -16,6 +16,12 @@ A.cases2d = {
   {"star 40x200, random interior", function() return H.star(40, 200, 5) end},
 }
 
+-- larger ones (bench/untangle_anchor2d.lua ... large): how the ratios scale
+A.cases2d_large = {
+  {"spiral 400x60", function() return H.spiral(400, 60, 0.75) end},
+  {"star 80x400, random interior", function() return H.star(80, 400, 5) end},
+}
+
 A.cases3d = {
   {"bar 4, 1 turn", function() return H.twisted_bar(4, 6, 1) end},
   {"bar 6, 1 turn", function() return H.twisted_bar(6, 6, 1) end},

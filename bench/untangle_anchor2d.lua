@@ -6,12 +6,13 @@
 -- Garanzha et al. 2021), built beside lugal, never part of it. DIR holds the files (a
 -- temporary folder by default). Per case: inverted cells, then for each untangler success,
 -- time, and the minimum and mean mean ratio of the result, and the rest mesh's own.
--- Run: lugal bench/untangle_anchor2d.lua /path/to/untangle2d
+-- Run: lugal bench/untangle_anchor2d.lua /path/to/untangle2d [dir] [large]   ("large": a 48 000-cell spiral and a 63 600-cell star)
 package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
 local A = require "anchor_cases"
 local lg = require "lugal"
 local anchor = assert(arg[1], "usage: lugal bench/untangle_anchor2d.lua /path/to/untangle2d [dir]")
 local dir = arg[2] or os.tmpname() .. ".d"
+local cases = arg[3] == "large" and A.cases2d_large or A.cases2d
 os.execute("mkdir -p '" .. dir .. "'")
 
 local function write_obj(path, tangled, rest, tris)
@@ -28,17 +29,22 @@ local function read_result(path, mesh)
   local f = io.open(path)
   if not f then return false end
   local i = 0
+  local finite = true
   for line in f:lines() do
     local x, y = line:match("^v%s+(%S+)%s+(%S+)")
-    if x then i = i + 1; mesh:set_coordinates(i, tonumber(x), tonumber(y)) end
+    if x then
+      i = i + 1
+      x, y = tonumber(x), tonumber(y) -- nil for "nan" or "-nan"
+      if x and y then mesh:set_coordinates(i, x, y) else finite = false end
+    end
   end
   f:close()
-  return i == mesh:nvertices()
+  return i == mesh:nvertices() and finite
 end
 
 print("| case | cells | inverted | lugal | s | min q | mean q | anchor | s | min q | mean q | rest mesh min q |")
 print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-for k, c in ipairs(A.cases2d) do
+for k, c in ipairs(cases) do
   local tangled, rest = c[2]()
   local inv = tangled:check()
   -- lugal: untangle with the boundary fixed, then the energy smoother
@@ -61,7 +67,7 @@ for k, c in ipairs(A.cases2d) do
   local qa = ok and a:quality("mean_ratio")
   print(string.format("| %s | %d | %d | %s | %.3f | %.4f | %.4f | %s | %.3f | %s | %s | %.4f |", c[1], tangled:ncells(), inv,
                       r.success and "yes" or "no", tl, ql:min(), ql:mean(),
-                      ok and (ainv == 0 and "yes" or (ainv .. " inverted")) or "no result", ta,
+                      ok and (ainv == 0 and "yes" or (ainv .. " inverted")) or "no finite result", ta,
                       ok and string.format("%.4f", qa:min()) or "—", ok and string.format("%.4f", qa:mean()) or "—",
                       rest:quality("mean_ratio"):min()))
 end

@@ -121,20 +121,29 @@ double *ut_reference_winv(const ctx *C, const double *xref, char *err) {
   return w;
 }
 
+/* corner kc of cell c: W⁻¹ of its reference shape (cwinv, per corner), or the common one */
+static const double *corner_winv(const ctx *C, const double *cwinv, const double *winv, int c, int kc) {
+  return cwinv ? cwinv + ((size_t)c * C->ncorner + kc) * C->d * C->d : winv;
+}
+
+/* the mean ratio d det(J)^(2/d) / |J|² of corner kc of cell c's map J = E W⁻¹ (0 if invalid) */
+static double corner_mean_ratio(const ctx *C, const double *x, int c, int kc, const double *winv) {
+  int d = C->d;
+  double J[3][3], A = 0;
+  const int *v;
+  double D = cell_map(C, x, c, kc, winv, J, &v);
+  for (int a = 0; a < d; a++)
+    for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
+  return D > 0 && A > 0 ? d * pow(D, 2.0 / d) / A : 0;
+}
+
 void ut_relative_mean_ratio(const ctx *C, const double *cwinv, double *out) {
   const mesh *m = C->m;
-  int d = C->d, nk = C->ncorner;
   for (int c = 0; c < m->ncell; c++) {
     /* a quadrilateral's or hexahedron's: the worst of its corners' */
     double q = INFINITY;
-    for (int kc = 0; kc < nk; kc++) {
-      double J[3][3], A = 0;
-      const int *v;
-      double D = cell_map(C, m->x, c, kc, cwinv + ((size_t)c * nk + kc) * d * d, J, &v);
-      for (int a = 0; a < d; a++)
-        for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
-      q = fmin(q, D > 0 && A > 0 ? d * pow(D, 2.0 / d) / A : 0);
-    }
+    for (int kc = 0; kc < C->ncorner; kc++)
+      q = fmin(q, corner_mean_ratio(C, m->x, c, kc, corner_winv(C, cwinv, NULL, c, kc)));
     out[c] = q;
   }
 }
@@ -149,7 +158,7 @@ static double corner_energy(const objective *o, const double *x, int i, int kc, 
   const int *v;
   /* reference shapes per corner (a simplex has one); without them a quadrilateral's or
    * hexahedron's corners aim at a square's or cube's */
-  const double *winv = o->cwinv ? o->cwinv + ((size_t)c * C->ncorner + kc) * d * d : o->winv;
+  const double *winv = corner_winv(C, o->cwinv, o->winv, c, kc);
   double D = cell_map(C, x, c, kc, winv, J, &v), A = 0;
   for (int a = 0; a < d; a++)
     for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
@@ -341,7 +350,7 @@ static int corner_hessian(const objective *o, const double *x, int i, int kc, do
   double theta = o->theta, eps = o->eps;
   double J[3][3];
   const int *v;
-  const double *winv = o->cwinv ? o->cwinv + ((size_t)c * C->ncorner + kc) * d * d : o->winv;
+  const double *winv = corner_winv(C, o->cwinv, o->winv, c, kc);
   double D = cell_map(C, x, c, kc, winv, J, &v), A = 0;
   for (int a = 0; a < d; a++)
     for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
@@ -483,7 +492,7 @@ double ut_energy_eval(const objective *o, const double *x, double *grad, int nfr
 
 double ut_energy_qmin(const objective *o, const double *x) {
   const ctx *C = o->C;
-  int d = C->d, nk = C->ncorner, n = o->ncell;
+  int nk = C->ncorner, n = o->ncell;
   double qmin = INFINITY;
 #ifdef _OPENMP
 #pragma omp parallel for schedule(static) reduction(min : qmin) if (n > 2048)
@@ -491,12 +500,7 @@ double ut_energy_qmin(const objective *o, const double *x) {
   for (int i = 0; i < n; i++)
     for (int kc = 0; kc < nk; kc++) {
       int c = o->cells[i];
-      double J[3][3], A = 0;
-      const int *v;
-      double D = cell_map(C, x, c, kc, o->cwinv ? o->cwinv + ((size_t)c * nk + kc) * d * d : o->winv, J, &v);
-      for (int a = 0; a < d; a++)
-        for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
-      double q = D > 0 && A > 0 ? d * pow(D, 2.0 / d) / A : 0;
+      double q = corner_mean_ratio(C, x, c, kc, corner_winv(C, o->cwinv, o->winv, c, kc));
       if (q < qmin) qmin = q;
     }
   return qmin;
@@ -505,18 +509,6 @@ double ut_energy_qmin(const objective *o, const double *x) {
 /* the corner Hessians' buffer limit (a hexahedron's eight corners take 9 KB): above it they
  * are computed and added on one thread, in the same order and with the same result */
 #define HESS_BUF_MAX ((size_t)512 << 20)
-
-/* the block of (row, col) in the pattern (present: the pattern holds every pair of free
- * vertices that share a cell) */
-static size_t bsr_find(const ut_bsr *P, int row, int col) {
-  int lo = P->off[row], hi = P->off[row + 1] - 1;
-  while (lo < hi) {
-    int mid = (lo + hi) / 2;
-    if (P->col[mid] < col) lo = mid + 1;
-    else hi = mid;
-  }
-  return (size_t)lo;
-}
 
 /* row fk (the free vertex at corner kc's vertex k of cell vertices v) of the corner Hessian
  * h added into its blocks */
@@ -527,7 +519,7 @@ static void add_row_blocks(const objective *o, const ut_bsr *P, double *val, con
   for (int m = 0; m <= d; m++) {
     int fm = o->fidx[v[C->ct[kc][m]]];
     if (fm < 0) continue;
-    double *blk = val + bsr_find(P, fk, fm) * (size_t)(d * d);
+    double *blk = val + ut_bsr_find(P, fk, fm) * (size_t)(d * d);
     for (int a = 0; a < d; a++)
       for (int e = 0; e < d; e++) blk[a * d + e] += h[(k * d + a) * nx + m * d + e];
   }
@@ -638,7 +630,7 @@ int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwin
       for (int i = 0; i < ncell; i++)
         for (int kc = 0; kc < C->ncorner; kc++) {
           int c = W->cells[i];
-          dmin = fmin(dmin, cell_map(C, x, c, kc, cwinv ? cwinv + ((size_t)c * C->ncorner + kc) * d * d : o.winv, J, &v));
+          dmin = fmin(dmin, cell_map(C, x, c, kc, corner_winv(C, cwinv, o.winv, c, kc), J, &v));
         }
       int ninv;
       ut_count_cells(C, x, 0, &ninv, NULL);

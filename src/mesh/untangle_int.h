@@ -2,7 +2,8 @@
  * untangle_ctx.c (the context), untangle_place.c (stages 1 and 3), untangle_global.c (the
  * global stage's energy, its gradient and projected Hessian), untangle_newton.c (projected
  * Newton on it) and smooth.c (smoothing) share inside src/mesh: the corner and adjacency
- * context, the L-BFGS and Newton objective, the unit frame for meshes far from unit size. Not an interface of the mesh layer: see untangle.h. */
+ * context, the L-BFGS and Newton objective, the unit frame for meshes far from unit size.
+ * Not an interface of the mesh layer: see untangle.h. */
 #ifndef LUGAL_UNTANGLE_INT_H
 #define LUGAL_UNTANGLE_INT_H
 
@@ -72,6 +73,16 @@ void ut_energy_release(ut_energy_buf *b);
 typedef struct {
   int *off, *col;
 } ut_bsr;
+/* the block of (row, col), which the pattern holds (every pair of free vertices sharing a cell) */
+static inline size_t ut_bsr_find(const ut_bsr *P, int row, int col) {
+  int lo = P->off[row], hi = P->off[row + 1] - 1;
+  while (lo < hi) {
+    int mid = (lo + hi) / 2;
+    if (P->col[mid] < col) lo = mid + 1;
+    else hi = mid;
+  }
+  return (size_t)lo;
+}
 /* the energy's Hessian (smooth == 2 objectives) at x with each corner's part projected to
  * be positive semidefinite, into val (off[nfree] blocks of d×d, row-major); 1 where the
  * energy is infinite (untangle_global.c) */

@@ -208,7 +208,9 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     }
     double fprev = f;
     f = fn;
-    memcpy(g, gn, sizeof(double) * n);
+    double *gt = g; /* the accepted point's gradient becomes the current one */
+    g = gn;
+    gn = gt;
     if (xkeep) { /* the last iterate that keeps the smallest quality (to rounding: a minimum
                   * no vertex can move, measured by the caller in other arithmetic, is kept) */
       below = ut_energy_qmin(o, x) < o->keepq * (1 - 1e-12);

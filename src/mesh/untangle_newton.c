@@ -72,20 +72,41 @@ static int build_pattern(const ctx *C, const int *fidx, const int *freev, int nf
   return 0;
 }
 
-/* y = H x on the pattern, rows on threads */
+/* y = H x on the pattern, rows on threads; d = 2 and 3 written out (the general loop's
+ * accumulator went through memcpy: a fifth of the smoother's time on a 24 000-vertex strip) */
 static void bsr_mult(const ut_bsr *P, const double *val, int nfree, int d, const double *x, double *y) {
-  int dd = d * d;
+  if (d == 2) {
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (nfree > 2048)
+#endif
+    for (int fi = 0; fi < nfree; fi++) {
+      double s0 = 0, s1 = 0;
+      for (int q = P->off[fi]; q < P->off[fi + 1]; q++) {
+        const double *b = val + (size_t)q * 4, *xc = x + (size_t)P->col[q] * 2;
+        s0 += b[0] * xc[0]; /* one product at a time: the general loop's order and bits */
+        s0 += b[1] * xc[1];
+        s1 += b[2] * xc[0];
+        s1 += b[3] * xc[1];
+      }
+      y[(size_t)fi * 2] = s0;
+      y[(size_t)fi * 2 + 1] = s1;
+    }
+    return;
+  }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(static) if (nfree > 2048)
 #endif
   for (int fi = 0; fi < nfree; fi++) {
-    double s[3] = {0, 0, 0};
+    double s0 = 0, s1 = 0, s2 = 0;
     for (int q = P->off[fi]; q < P->off[fi + 1]; q++) {
-      const double *b = val + (size_t)q * dd, *xc = x + (size_t)P->col[q] * d;
-      for (int a = 0; a < d; a++)
-        for (int e = 0; e < d; e++) s[a] += b[a * d + e] * xc[e];
+      const double *b = val + (size_t)q * 9, *xc = x + (size_t)P->col[q] * 3;
+      s0 += b[0] * xc[0]; s0 += b[1] * xc[1]; s0 += b[2] * xc[2];
+      s1 += b[3] * xc[0]; s1 += b[4] * xc[1]; s1 += b[5] * xc[2];
+      s2 += b[6] * xc[0]; s2 += b[7] * xc[1]; s2 += b[8] * xc[2];
     }
-    for (int a = 0; a < d; a++) y[(size_t)fi * d + a] = s[a];
+    y[(size_t)fi * 3] = s0;
+    y[(size_t)fi * 3 + 1] = s1;
+    y[(size_t)fi * 3 + 2] = s2;
   }
 }
 

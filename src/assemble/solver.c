@@ -91,8 +91,14 @@ static PetscErrorCode symmetric(Mat A, PetscBool *sym) {
   PetscFunctionReturn(0);
 }
 
-/* Cholesky (half the work of LU) for a matrix that is symmetric, LU otherwise, unless the
- * user chose the preconditioner */
+/* LU, and for a symmetric matrix that this PC has factored before Cholesky, unless the user
+ * chose the preconditioner. PETSc's Cholesky ignores the ordering (its factor of the 128²
+ * P1 Laplacian fills 8.26 times A whatever the ordering) and its symbolic phase is slow,
+ * 3-6 times LU's, while its numeric phase takes 0.75-0.9 of LU's: a single factorization is
+ * 1.4-2.2 times faster by LU (3D P1 16³: 0.068 against 0.148 s), repeated ones of the same
+ * pattern (an optimization's state matrix) by Cholesky, which pays for its symbolic phase
+ * from about the 5th (bench/RESULTS.md, "Orderings of PETSc's LU"). So the first
+ * factorization is LU and the second and later Cholesky. */
 static PetscErrorCode choose_factorization(KSP ksp, Mat A, const char *prefix) {
   PetscBool user = PETSC_FALSE, sym = PETSC_FALSE, ch = PETSC_FALSE;
   PC pc;
@@ -103,6 +109,11 @@ static PetscErrorCode choose_factorization(KSP ksp, Mat A, const char *prefix) {
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCCHOLESKY, &ch));
   PetscCall(symmetric(A, &sym));
   if ((sym != PETSC_FALSE) == (ch != PETSC_FALSE)) PetscFunctionReturn(0);
+  if (sym) { /* an LU PC: Cholesky once it holds a factor (PETSc's error when it does not
+              * is returned to the caller silently: lugal's error handler prints nothing) */
+    Mat F = NULL;
+    if (PCFactorGetMatrix(pc, &F) || !F) PetscFunctionReturn(0);
+  }
   PetscCall(PCReset(pc));
   PetscCall(PCSetType(pc, sym ? PCCHOLESKY : PCLU));
   PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERPETSC));
@@ -306,7 +317,9 @@ PetscErrorCode lg_keep_solve(lg_keep *kp, KSP ksp, Mat A, Vec b, Vec x, int tran
   PetscBool ch = PETSC_FALSE;
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCCHOLESKY, &ch));
   PetscCall(KSPSetType(kp->cg, ch ? KSPCG : KSPGMRES));
-  if (!ch) PetscCall(KSPSetPCSide(kp->cg, PC_RIGHT));
+  /* both sides set: a problem's PC turns from LU to Cholesky at its second factorization
+   * (choose_factorization), and CG refuses GMRES's right side */
+  PetscCall(KSPSetPCSide(kp->cg, ch ? PC_LEFT : PC_RIGHT));
   PetscCall(KSPSetNormType(kp->cg, KSP_NORM_UNPRECONDITIONED));
   /* an iteration: a triangular solve pair, a product with A (its entries against the
    * factor's, each touched once per solve pair and twice per product) and a few vector

@@ -71,7 +71,8 @@ local u1, us = poisson(1), poisson(1e-20)
 T.close(us(0.5, 0.5), u1(0.5, 0.5), 1e-12, "scaled stiffness: u(1/2, 1/2) as at scale 1")
 T.check(u1(0.5, 0.5) > 0.07 and u1(0.5, 0.5) < 0.075, "u(1/2, 1/2) = %.6f (0.0737 exact)", u1(0.5, 0.5))
 
--- symmetric elimination of a symmetric form: Cholesky; a second solve with other essential
+-- symmetric elimination of a symmetric form: LU first (Cholesky from its second
+-- factorization on: test_keep_factor.lua); a second solve with other essential
 -- values and the same matrix reuses the factorization, its right side corrected with the
 -- eliminated columns kept from the first: the same solution as a new problem
 local g = lg.interpolate(P1, sq, x + 2*y, "g")
@@ -82,7 +83,7 @@ local function dirichlet()
 end
 local ds = dirichlet()
 local _, di = ds:solve()
-T.check(di.solver == "cholesky/petsc", "symmetric = true on a symmetric form: Cholesky (%s)", di.solver)
+T.check(di.solver == "lu/petsc", "symmetric = true on a symmetric form, first factorization: LU (%s)", di.solver)
 g:assign(3*(x + 2*y))
 local ua = ds:solve()
 local ub = dirichlet():solve()

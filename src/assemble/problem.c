@@ -55,6 +55,26 @@ static int contains_funcs(lg_env *env, expr *e, int n, const int *funcs, expr **
   return 0;
 }
 
+/* p->matpar: the parameters the matrix terms' Jacobian tables read. A parameter of the
+ * right-hand side only (the time of a source term, a load) then leaves the matrix and its
+ * factorization alone when it changes (heat.lua: before, each step reassembled the matrix
+ * and solved by the kept factor's iterations) */
+static int matrix_params(lg_env *env, lg_problem *p) {
+  int nroot = 0;
+  for (int i = 0; i < p->nterm; i++) nroot += p->t[i].tab.njac;
+  expr **roots = malloc(sizeof(expr *) * ((size_t)nroot + 1));
+  int np = expr_param_count(env->c);
+  p->matpar = malloc(sizeof(int) * ((size_t)np + 1));
+  if (!roots || !p->matpar) { free(roots); lg_seterr(env, "out of memory"); return 1; }
+  nroot = 0;
+  for (int i = 0; i < p->nterm; i++)
+    for (int j = 0; j < p->t[i].tab.njac; j++) roots[nroot++] = p->t[i].tab.jac[j];
+  p->nmatpar = expr_collect_params(env->c, nroot, roots, np, p->matpar);
+  free(roots);
+  if (p->nmatpar < 0) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
+  return 0;
+}
+
 static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *test, const int *unk, int nf) {
   p->nterm = eqn->n;
   p->t = calloc((size_t)eqn->n + 1, sizeof(prob_term));
@@ -525,6 +545,7 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
   ph[1] = now_ms();
   if (set_ownership(env, p)) goto fail;
   if (setup_terms(env, p, s->eqn, s->test, s->unknown, s->nfield)) goto fail;
+  if (matrix_params(env, p)) goto fail;
   if (p->par) restrict_items(p);
   ph[2] = now_ms();
   if (setup_bcs(env, p, s->bc, s->test, s->unknown, s->nfield)) goto fail;
@@ -576,6 +597,7 @@ void lg_problem_free(lg_problem *p) {
   }
   free(p->bct);
   free(p->perm);
+  free(p->matpar);
   free(p->iperm);
   if (p->own_rows != p->bc_rows) free(p->own_rows);
   if (p->own_vals != p->bc_vals) free(p->own_vals);

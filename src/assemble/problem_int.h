@@ -129,6 +129,8 @@ struct lg_problem {
                        * Newton solve warm-started at the solution then reuses it) */
   uint64_t matrix_fp; /* linear problems: what the assembled, factored matrix was made from */
   uint64_t adj_fp;    /* nonlinear problems: what the adjoint's Jacobian was made from (besides the state) */
+  int nmatpar, *matpar; /* the parameters the matrix terms read (their Jacobian tables): the
+                         * only ones matrix_fingerprint mixes in */
   int chord;          /* a warm-started resolve (an optimization's next evaluation): steps may
                        * keep the last Jacobian while it contracts the residual (snes_jacobian) */
   int lag_valid;      /* A holds a Jacobian assembled for this solve's data (any iterate) */

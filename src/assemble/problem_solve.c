@@ -112,8 +112,8 @@ static uint64_t matrix_fingerprint(lg_env *env, lg_problem *p) {
     for (size_t i_ = 0; i_ < (bytes); i_++) h = (h ^ b_[i_]) * 1099511628211ull; \
   } while (0)
   MIX(&p->lm->geometry, sizeof p->lm->geometry);
-  const double *pv = expr_param_values(env->c);
-  MIX(pv, sizeof(double) * (size_t)expr_param_count(env->c));
+  const double *pv = expr_param_values(env->c); /* the parameters the matrix reads */
+  for (int i = 0; i < p->nmatpar; i++) MIX(&pv[p->matpar[i]], sizeof(double));
   coef_binding extra[2 * KER_MAXFIELD], bind[KER_MAXCOEF];
   int ne = lg_problem_bind_unknowns(p, p->state, extra);
   for (int i = 0; i < p->nterm; i++) {

@@ -172,6 +172,9 @@ expr *expr_subs(expr_ctx *c, expr *e, int n, expr **from, expr **to);
 /* every FIELD leaf of function func (or any function when func < 0) in e, deduplicated */
 int expr_collect_fields(expr_ctx *c, int nroot, expr **roots, int func, int max, expr **out);
 int expr_uses(expr_ctx *c, expr *e, expr_kind kind, int *maxcomp);
+/* the parameters the roots read, their indices increasing and each once, up to max of
+ * them written into out; returns how many there are (-1: out of memory) */
+int expr_collect_params(expr_ctx *c, int nroot, expr **roots, int max, int *out);
 /* the first abs or sign node of e whose argument depends on one of the functions fids or the
  * parameters pids (a kink: not twice differentiable there), NULL when there is none */
 expr *expr_find_kink(expr_ctx *c, expr *e, int nf, const int *fids, int np, const int *pids);

@@ -66,6 +66,26 @@ solve_and_compare(1e7, "cholesky/petsc", "a change too large for the old factor"
 -- that attempt did not pay: the next factorization is made without trying
 solve_and_compare(1.01e7, "cholesky/petsc", "the pause after a failed attempt")
 solve_and_compare(1.02e7, "cg/cholesky-kept", "kept again after the pause")
+-- a parameter of the right-hand side only (a source's time): the matrix and its factor stay
+-- (matrix_fingerprint mixes in the parameters the matrix reads, not every parameter): the
+-- direct solve again, no kept-factor iterations, and u scales with the source
+local src = lg.parameter("src", 1)
+local pr = lg.linear_problem{mesh = mesh, test = v, unknown = u,
+                             eqn = lg.integral(mesh:cells(), (1 + a*x*y)*lg.dot(lg.grad(v), lg.grad(u)) - src*(1 + x)*v), bc = bc}
+a:set(0.5)
+local u1, i1 = pr:solve()
+local v1 = u1:values()
+src:set(3)
+local u3, i3 = pr:solve()
+T.check(i1.solver == "lu/petsc" and i3.solver == "lu/petsc", "a source parameter changed: the factor reused directly (%s, then %s)",
+        i1.solver, i3.solver)
+local smax = 0
+for i, w in ipairs(u3:values()) do smax = math.max(smax, math.abs(w - 3*v1[i])) end
+T.check(smax < 1e-12, "a source parameter changed: u three times the first (max difference %.2e)", smax)
+a:set(0.6) -- a parameter of the matrix: the matrix changed, solved with the kept factor
+local _, i6 = pr:solve()
+T.check(i6.solver == "gmres/lu-kept", "a matrix parameter changed: the kept factor (%s)", i6.solver)
+
 -- row elimination (an unsymmetric matrix): LU, kept by GMRES; an advection term too
 pu = problem(false)
 p = pu

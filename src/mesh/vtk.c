@@ -22,20 +22,31 @@ static void xml_name(FILE *f, const char *s) {
 }
 
 /* VTK's inline binary: base64 of a 64-bit byte count followed by the raw little-endian data
- * (header_type="UInt64"), streamed three bytes at a time */
+ * (header_type="UInt64"), streamed three bytes at a time into a buffer that goes to the file
+ * a block at a time (an fwrite per four characters was a tenth of heat.lua's run) */
 typedef struct {
   FILE *f;
   unsigned char buf[3];
   int n;
+  int on;
+  char out[4096];
 } b64;
 
 static void b64_flush(b64 *e, int final) {
   static const char al[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
   if (e->n == 3 || (final && e->n)) {
     unsigned v = (unsigned)e->buf[0] << 16 | (unsigned)(e->n > 1 ? e->buf[1] : 0) << 8 | (e->n > 2 ? e->buf[2] : 0);
-    char out[4] = {al[v >> 18 & 63], al[v >> 12 & 63], e->n > 1 ? al[v >> 6 & 63] : '=', e->n > 2 ? al[v & 63] : '='};
-    fwrite(out, 1, 4, e->f);
+    char *o = e->out + e->on;
+    o[0] = al[v >> 18 & 63];
+    o[1] = al[v >> 12 & 63];
+    o[2] = e->n > 1 ? al[v >> 6 & 63] : '=';
+    o[3] = e->n > 2 ? al[v & 63] : '=';
+    e->on += 4;
     e->n = 0;
+  }
+  if (e->on && (final || e->on + 4 > (int)sizeof e->out)) {
+    fwrite(e->out, 1, (size_t)e->on, e->f);
+    e->on = 0;
   }
 }
 
@@ -93,7 +104,7 @@ static int write_array_zlib(FILE *f, int kind, long n, value_fn get, const void 
     cs[b] = c;
     zn += c;
   }
-  b64 e = {f, {0, 0, 0}, 0};
+  b64 e = {f, {0, 0, 0}, 0, 0, {0}};
   put_u64(&e, nb);
   put_u64(&e, VTU_BLOCK);
   put_u64(&e, bytes % VTU_BLOCK);
@@ -120,7 +131,7 @@ static void write_array(FILE *f, int binary, int kind, long n, int per_line, val
   }
   static const int size[] = {8, 4, 1};
   uint64_t bytes = (uint64_t)n * (uint64_t)size[kind];
-  b64 e = {f, {0, 0, 0}, 0};
+  b64 e = {f, {0, 0, 0}, 0, 0, {0}};
   unsigned char h[8];
   for (int k = 0; k < 8; k++) h[k] = (unsigned char)(bytes >> (8 * k));
   b64_put(&e, h, 8);

@@ -46,13 +46,18 @@ static int is_lu(KSP ksp, PC *pc, MatSolverType *st) {
   return 1;
 }
 
+/* whether the user gave option name (with the problem's prefix): lugal's choices stand back */
+static int user_set(const char *prefix, const char *name) {
+  PetscBool set = PETSC_FALSE;
+  PetscOptionsHasName(NULL, prefix && prefix[0] ? prefix : NULL, name, &set);
+  return set != PETSC_FALSE;
+}
+
 int lg_lu_native(KSP ksp, const char *prefix) {
   PC pc;
   MatSolverType st;
   if (!is_lu(ksp, &pc, &st) || strcmp(st, MATSOLVERPETSC)) return 0;
-  PetscBool user = PETSC_FALSE;
-  PetscOptionsHasName(NULL, prefix && prefix[0] ? prefix : NULL, "-pc_factor_mat_solver_type", &user);
-  return !user;
+  return !user_set(prefix, "-pc_factor_mat_solver_type");
 }
 
 /* whether A is symmetric to rounding, entry by entry: |a_ij − a_ji| ≤ 1e-12 m, m the larger
@@ -75,7 +80,7 @@ static PetscErrorCode symmetric(Mat A, PetscBool *sym) {
   PetscCall(MatSeqAIJGetArrayRead(A, &a));
   double *dg = malloc(sizeof(double) * ((size_t)n + 1));
   int ok = dg != NULL;
-  for (PetscInt i = 0; i < n && ok; i++) {
+  for (PetscInt i = 0; ok && i < n; i++) { /* |a_ii|, 0 where the row has no diagonal */
     dg[i] = 0;
     for (PetscInt k = ia[i]; k < ia[i + 1]; k++)
       if (ja[k] == i) dg[i] = PetscAbsScalar(a[k]);
@@ -111,11 +116,10 @@ static PetscErrorCode symmetric(Mat A, PetscBool *sym) {
  * from about the 5th (bench/RESULTS.md, "Orderings of PETSc's LU"). So the first
  * factorization is LU and the second and later Cholesky. */
 static PetscErrorCode choose_factorization(KSP ksp, Mat A, const char *prefix) {
-  PetscBool user = PETSC_FALSE, sym = PETSC_FALSE, ch = PETSC_FALSE;
+  PetscBool sym = PETSC_FALSE, ch = PETSC_FALSE;
   PC pc;
   PetscFunctionBeginUser;
-  PetscCall(PetscOptionsHasName(NULL, prefix && prefix[0] ? prefix : NULL, "-pc_type", &user));
-  if (user) PetscFunctionReturn(0);
+  if (user_set(prefix, "-pc_type")) PetscFunctionReturn(0);
   PetscCall(KSPGetPC(ksp, &pc));
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCCHOLESKY, &ch));
   PetscCall(symmetric(A, &sym));
@@ -141,13 +145,12 @@ static PetscErrorCode choose_factorization(KSP ksp, Mat A, const char *prefix) {
  * factorization ignores the ordering, nor when the user chose one. */
 static PetscErrorCode choose_ordering(KSP ksp, Mat A, const char *prefix) {
   PC pc;
-  PetscBool lu = PETSC_FALSE, user = PETSC_FALSE;
+  PetscBool lu = PETSC_FALSE;
   void (*amd)(void) = NULL;
   PetscFunctionBeginUser;
   PetscCall(KSPGetPC(ksp, &pc));
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCLU, &lu));
-  PetscCall(PetscOptionsHasName(NULL, prefix && prefix[0] ? prefix : NULL, "-pc_factor_mat_ordering_type", &user));
-  if (!lu || user) PetscFunctionReturn(0);
+  if (!lu || user_set(prefix, "-pc_factor_mat_ordering_type")) PetscFunctionReturn(0);
   PetscCall(PetscFunctionListFind(MatOrderingList, MATORDERINGAMD, &amd)); /* PETSc built with SuiteSparse */
   if (!amd) PetscFunctionReturn(0);
   MatInfo info;
@@ -165,9 +168,7 @@ PetscErrorCode lg_lu_prepare(KSP ksp, Mat A, const PetscInt *bc_rows, int nbc, c
   if (!lg_lu_native(ksp, prefix)) PetscFunctionReturn(0);
   if (may_cholesky) PetscCall(choose_factorization(ksp, A, prefix));
   PetscCall(choose_ordering(ksp, A, prefix));
-  PetscBool user = PETSC_FALSE;
-  PetscCall(PetscOptionsHasName(NULL, prefix && prefix[0] ? prefix : NULL, "-pc_factor_zeropivot", &user));
-  if (user) PetscFunctionReturn(0);
+  if (user_set(prefix, "-pc_factor_zeropivot")) PetscFunctionReturn(0);
   /* PETSc compares pivots with an absolute threshold (1e-12 by default), which a matrix in
    * small units fails and a large one passes when singular: take 1e-12 of the mean
    * diagonal outside the essential rows (whose diagonal is 1), the rule lugal gives MUMPS */
@@ -206,11 +207,9 @@ PetscErrorCode lg_lu_fallback(KSP ksp, Mat A) {
   PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
   /* MUMPS orders by itself: an ordering lugal chose for PETSc's LU (choose_ordering) would
    * be computed by PETSc and handed to it (see lg_lu_default) */
-  PetscBool user = PETSC_FALSE;
   const char *pre = NULL;
   PetscCall(PCGetOptionsPrefix(pc, &pre));
-  PetscCall(PetscOptionsHasName(NULL, pre, "-pc_factor_mat_ordering_type", &user));
-  if (!user) PetscCall(PCFactorSetMatOrderingType(pc, MATORDERINGEXTERNAL));
+  if (!user_set(pre, "-pc_factor_mat_ordering_type")) PetscCall(PCFactorSetMatOrderingType(pc, MATORDERINGEXTERNAL));
   PetscCall(KSPSetOperators(ksp, A, A));
   lg_mumps_detect_null_pivots(ksp);
   PetscCall(PetscInfo(ksp, "lugal: PETSc's LU failed; refactoring with MUMPS\n"));
@@ -288,14 +287,11 @@ void lg_solver_name(KSP ksp, char *out, size_t len) {
 
 int lg_keep_applies(KSP ksp, const char *prefix) {
   PC pc;
-  PetscBool ch = PETSC_FALSE, lu = PETSC_FALSE, kt = PETSC_FALSE, pt = PETSC_FALSE;
+  PetscBool ch = PETSC_FALSE, lu = PETSC_FALSE;
   if (!lg_lu_native(ksp, prefix) || KSPGetPC(ksp, &pc) || PetscObjectTypeCompare((PetscObject)pc, PCCHOLESKY, &ch) ||
       PetscObjectTypeCompare((PetscObject)pc, PCLU, &lu) || !(ch || lu))
     return 0;
-  const char *pre = prefix && prefix[0] ? prefix : NULL;
-  PetscOptionsHasName(NULL, pre, "-ksp_type", &kt);
-  PetscOptionsHasName(NULL, pre, "-pc_type", &pt);
-  return !kt && !pt;
+  return !user_set(prefix, "-ksp_type") && !user_set(prefix, "-pc_type");
 }
 
 int lg_keep_usable(const lg_keep *kp, KSP ksp, const char *prefix) {

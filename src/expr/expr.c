@@ -1043,35 +1043,28 @@ int expr_uses(expr_ctx *c, expr *e, expr_kind kind, int *maxcomp) {
   return Q.found;
 }
 
-typedef struct {
-  int max, n, *out;
-  unsigned char *seen; /* per parameter index */
-} param_query;
-
 static int param_visit(void *ud, expr *e) {
-  param_query *Q = ud;
-  if (e->kind == E_PARAM && !Q->seen[e->i0]) Q->seen[e->i0] = 1;
+  if (e->kind == E_PARAM) ((unsigned char *)ud)[e->i0] = 1;
   return 0;
 }
 
 int expr_collect_params(expr_ctx *c, int nroot, expr **roots, int max, int *out) {
-  int np = expr_param_count(c);
-  param_query Q = {max, 0, out, calloc((size_t)np + 1, 1)};
-  if (!Q.seen) { expr_set_error(c, "out of memory"); return -1; }
+  int np = expr_param_count(c), n = 0, rc = 0;
+  unsigned char *used = calloc((size_t)np + 1, 1); /* per parameter index */
+  if (!used) { expr_set_error(c, "out of memory"); return -1; }
   memo_map seen = {0, 0, NULL};
-  int rc = 0;
   for (int i = 0; i < nroot && !rc; i++) {
     expr *r = expr_canon(c, roots[i]);
-    if (r) rc = expr_post_order(c, r, &seen, param_visit, NULL, &Q);
+    if (r) rc = expr_post_order(c, r, &seen, param_visit, NULL, used);
   }
   memo_free(&seen);
-  for (int k = 0; k < np && !rc; k++)
-    if (Q.seen[k]) {
-      if (Q.n < max) out[Q.n] = k;
-      Q.n++;
+  for (int k = 0; k < np; k++)
+    if (used[k]) {
+      if (n < max) out[n] = k;
+      n++;
     }
-  free(Q.seen);
-  return rc ? -1 : Q.n;
+  free(used);
+  return rc ? -1 : n;
 }
 
 /* kinks: abs and sign of something that depends on given functions or parameters */

@@ -73,7 +73,8 @@ static int build_pattern(const ctx *C, const int *fidx, const int *freev, int nf
 }
 
 /* y = H x on the pattern, rows on threads; d = 2 and 3 written out (the general loop's
- * accumulator went through memcpy: a fifth of the smoother's time on a 24 000-vertex strip) */
+ * accumulator went through memcpy: a fifth of the smoother's time on a 24 000-vertex strip).
+ * d is 2 or 3: smoothing refuses intervals (smooth.c) */
 static void bsr_mult(const ut_bsr *P, const double *val, int nfree, int d, const double *x, double *y) {
   if (d == 2) {
 #ifdef _OPENMP

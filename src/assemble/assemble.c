@@ -66,7 +66,8 @@ void lg_mesh_free(lg_mesh *lm) {
       for (int j = 0; j < FEM_MAXBS; j++) dofmap_free(lm->dm[d][i][j]);
   lg_locator_free(lm->locator);
   free(lm->part);
-  mesh_free(lm->m);
+  if (lm->dist) mesh_part_free(lm->dist); /* its mesh is lm->m */
+  else mesh_free(lm->m);
   free(lm);
 }
 
@@ -529,6 +530,33 @@ static void rank_slice(int n, int *f0, int *f1) {
 int lg_assemble_share(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells, const int *facets,
                       const coef_binding *bind, double *out, lg_chunk_bufs *cb, lg_chunk_use use, void *ud, int *first) {
   int f0 = 0, f1 = nitems, interior = k->facet == 2;
+  if (lm->dist) {
+    /* a distributed mesh: each rank the items of its owned cells (an interior facet's '+'
+     * cell), every item of the whole mesh once */
+    if (k->arity != 0) {
+      lg_seterr(env, "derivatives of functionals on a distributed mesh (-lugal_distribute) are not offered yet: run "
+                     "without -lugal_distribute");
+      return 1;
+    }
+    *first = 0;
+    int rank = lg_mpi_rank(), n = 0, *own = malloc(sizeof(int) * (2 * (size_t)nitems + 1)), *of = NULL;
+    if (own && facets) of = malloc(sizeof(int) * ((size_t)nitems + 1));
+    if (!own || (facets && !of)) { free(own); lg_seterr(env, "out of memory"); return 1; }
+    for (int i = 0; i < nitems; i++)
+      if (lm->dist->cowner[cells[i]] == rank) {
+        if (of) of[n] = facets[i];
+        own[n++] = i;
+      }
+    for (int i = 0; i < n; i++) { /* item numbers into cells: '+' cells, then the '-' ones */
+      if (interior) own[n + i] = cells[nitems + own[i]];
+      own[i] = cells[own[i]];
+    }
+    double *const buf[2] = {out, out};
+    int rc = lg_assemble_chunks(env, lm, k, n, own, of, bind, LG_TIER_CHECK, buf, NULL, NULL);
+    free(own);
+    free(of);
+    return rc;
+  }
   if (lg_mpi_size() > 1) rank_slice(nitems, &f0, &f1);
   *first = f0;
   if (f1 <= f0) return 0;

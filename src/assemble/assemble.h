@@ -48,6 +48,9 @@ typedef struct {
   unsigned long geometry; /* counts geometry changes (lg_mesh_changed) */
   int *part, nparts;    /* the cells' parts for a run of nparts ranks (partition.c), or NULL */
   int part_runs;        /* they are the numbering's runs (the vertex order splits well) */
+  /* a distributed mesh (distribute.c, -lugal_distribute): this rank's part, its owned cells
+   * and their ghost layer, whose local mesh m is; NULL when every rank holds the whole */
+  mesh_part *dist;
 } lg_mesh;
 
 typedef struct {
@@ -75,10 +78,35 @@ dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree, int ncomp, int disc
  * "natural"), rank 0's result on every rank. *part is NULL when the rows stay in the
  * problems' order (natural, one part, or fewer than 8 cells per part) */
 int lg_mesh_partition(lg_env *env, lg_mesh *lm, int nparts, const int **part);
+/* the same on the calling rank alone, into pt (ncell values), *runs = 1 where they are the
+ * numbering's runs; returns -1 where the cells' order is kept (no partition), 1 on error */
+int lg_partition_cells(lg_env *env, mesh *m, int nparts, int *pt, int *runs);
 /* the vertex numbering's split into nparts: each cell in the run of its lowest vertex */
 void lg_mesh_vertex_runs(const mesh *m, int nparts, int *part);
 /* the validity check run before assembly */
 int lg_mesh_check(lg_env *env, lg_mesh *lm);
+
+/* distribute.c: distributed meshes. Is -lugal_distribute set in a run of several ranks */
+int lg_distribute_wanted(void);
+/* the mesh `whole` (rank 0's; other ranks pass NULL, or their own copy, which is freed)
+ * cut into one part per rank (the partition of lg_partition_cells, rank 0's work), each
+ * rank getting its part with one layer of ghost cells (mesh_part); collective. NULL and the
+ * reason in env->err on every rank when any failed */
+lg_mesh *lg_mesh_distribute(lg_env *env, mesh *whole);
+/* the whole mesh and the fields' whole arrays (point or cell data of fl) on rank 0, from
+ * every rank's owned cells and vertices (for output); other ranks get NULLs; collective */
+int lg_dist_gather(lg_env *env, lg_mesh *lm, int nf, const mesh_field *fl, mesh **whole, double ***vals);
+/* a discrete function's dofs in all (its dof map's on a whole mesh); -1 on failure */
+long lg_function_global_ndof(lg_env *env, const lg_function *f);
+/* a distributed function's values (coords = 0) or its dofs' coordinates (coords = 1: dim
+ * per dof) over the whole mesh, on every rank, in one order for any number of ranks: by
+ * the entity holding each node (vertices by their global number first, then edges, faces,
+ * cells by their sorted global vertices), the node's place there, the component. For P1
+ * and Q1 fields that is the whole mesh's own dof order. Collective; *out malloc'ed */
+int lg_function_gather(lg_env *env, const lg_function *f, int coords, double **out, long *n);
+/* the number of owned cells / vertices summed over the ranks (the whole mesh's counts) */
+long lg_mesh_global_cells(const lg_mesh *lm);
+long lg_mesh_global_vertices(const lg_mesh *lm);
 
 /* a discrete function on the dof map dm of lm (lg_mesh_dofmap), all zero */
 lg_function *lg_function_new(lg_env *env, lg_mesh *lm, dofmap *dm, const char *name);
@@ -183,7 +211,10 @@ typedef struct {
 } lg_solve_info;
 int lg_problem_solve(lg_env *env, lg_problem *p, lg_function **initial, lg_function **out,
                      lg_solve_info *info);
+/* the length of the problem's arrays (its dofs; a distributed mesh's: the local nodes'),
+ * and the whole problem's dofs */
 int lg_problem_size(const lg_problem *p);
+int lg_problem_global_size(const lg_problem *p);
 /* this rank's share of the problem's matrix: its rows, and the columns its rows read that
  * other ranks own (the values a product with the matrix receives), -1 before the matrix */
 void lg_problem_ownership(const lg_problem *p, int *rows, long *ghosts);

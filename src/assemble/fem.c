@@ -616,6 +616,28 @@ dofmap *dofmap_block(const dofmap *s, int bs, char *err) {
   return dm;
 }
 
+void dofmap_dof_entity(const dofmap *d, int s, int *kind, int *id, int *j) {
+  const mesh *m = d->m;
+  int nloc = d->el.nloc, nper[4] = {0, 0, 0, 0};
+  for (int k = 0; k < nloc; k++) nper[d->disc ? 3 : d->el.ent_dim[k]]++;
+  long n[4] = {nper[0] ? m->nvert : 0, 0, 0, m->ncell};
+  int per[4] = {1, 0, 0, nper[3]};
+  int ne = cell_nedges(m->type), nfc = cell_nfacets(m->type);
+  if (nper[1]) { per[1] = nper[1] / ne; n[1] = m->nedge; }
+  if (nper[2] && m->dim == 3) { per[2] = nper[2] / nfc; n[2] = m->nface; }
+  long r = s;
+  for (int k = 0; k < 4; k++) {
+    long here = n[k] * per[k];
+    if (r < here || k == 3) {
+      *kind = k;
+      *id = (int)(r / per[k]);
+      *j = (int)(r % per[k]);
+      return;
+    }
+    r -= here;
+  }
+}
+
 void dofmap_free(dofmap *d) {
   if (!d) return;
   if (!d->alias) free(d->cell_dofs);

@@ -88,6 +88,10 @@ dofmap *dofmap_new(mesh *m, int degree, int disc, char *err);
 /* the bs-component space over a scalar one (bs = 1 .. 3) */
 dofmap *dofmap_block(const dofmap *scalar, int bs, char *err);
 void dofmap_free(dofmap *d);
+/* the mesh entity that holds scalar dof s of a scalar dof map (dofmap_new's numbering):
+ * kind 0 a vertex, 1 an edge, 2 a face, 3 a cell (a discontinuous map's every dof); its
+ * index and the dof's place j among the entity's dofs (an edge's from its lower vertex) */
+void dofmap_dof_entity(const dofmap *d, int s, int *kind, int *id, int *j);
 /* physical coordinates of local dof k of cell c (its node: k / bs) */
 void dofmap_node_coords(const dofmap *d, int c, int k, double *x);
 /* reference coordinates of local dof k (3 values) */

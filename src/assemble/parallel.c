@@ -143,8 +143,65 @@ int lg_bcast_bytes(char **buf, size_t *len) {
   return 0;
 }
 
+/* names[k] = path without ".pvtu" + "_p<k>.vtu" for k < npiece */
+static char **piece_names(const char *path, int npiece) {
+  size_t len = strlen(path) + 24;
+  char **names = calloc((size_t)npiece, sizeof(char *));
+  for (int k = 0; names && k < npiece; k++) {
+    if (!(names[k] = malloc(len))) {
+      for (int j = 0; j < k; j++) free(names[j]);
+      free(names);
+      return NULL;
+    }
+    snprintf(names[k], len, "%.*s_p%d.vtu", (int)(strlen(path) - 5), path, k);
+  }
+  return names;
+}
+
+/* a distributed mesh: a .pvtu is a piece per rank, its owned cells; a .vtu is gathered on
+ * rank 0 (lg_dist_gather) and written whole */
+static int dist_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_field *fl, int format, int npiece, char *err) {
+  int rank = lg_mpi_rank(), size = lg_mpi_size(), rc = 0;
+  if (!npiece) {
+    mesh *W;
+    double **vals;
+    if (lg_dist_gather(env, lm, nf, fl, &W, &vals)) {
+      snprintf(err, MESH_ERRLEN, "%.*s", MESH_ERRLEN - 1, env->err);
+      rc = 1;
+    } else if (rank == 0) {
+      mesh_field *wf = malloc(sizeof(mesh_field) * ((size_t)nf + 1));
+      for (int f = 0; wf && f < nf; f++) { wf[f] = fl[f]; wf[f].val = vals[f]; }
+      rc = !wf || mesh_write_vtu_format(W, path, nf, wf, format);
+      if (rc) snprintf(err, MESH_ERRLEN, "%s", wf ? W->err : "out of memory");
+      for (int f = 0; f < nf; f++) free(vals[f]);
+      free(vals);
+      free(wf);
+      mesh_free(W);
+    }
+    return lg_root_result(rc, err, MESH_ERRLEN);
+  }
+  if (npiece != size) {
+    snprintf(err, MESH_ERRLEN, "a distributed mesh is written in one piece per rank (%d), not %d", size, npiece);
+    return 1;
+  }
+  const mesh_part *P = lm->dist;
+  char **names = piece_names(path, npiece);
+  int *cells = malloc(sizeof(int) * ((size_t)P->m->ncell + 1)), nc = 0;
+  if (!names || !cells) rc = 1, snprintf(err, MESH_ERRLEN, "out of memory for %d pieces", npiece);
+  for (int c = 0; !rc && c < P->m->ncell; c++)
+    if (P->cowner[c] == rank) cells[nc++] = c;
+  if (!rc && (rc = mesh_write_vtu_piece(P->m, names[rank], nf, fl, format, cells, nc))) snprintf(err, MESH_ERRLEN, "%s", P->m->err);
+  free(cells);
+  rc = lg_any_result(rc, err, MESH_ERRLEN);
+  if (!rc) rc = lg_root_result(rank == 0 ? mesh_write_pvtu(path, nf, fl, npiece, names, err) : 0, err, MESH_ERRLEN);
+  for (int k = 0; names && k < npiece; k++) free(names[k]);
+  free(names);
+  return rc;
+}
+
 int lg_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_field *fl, int format, int npiece, char *err) {
   mesh *m = lm->m;
+  if (lm->dist) return dist_write_vtu(env, lm, path, nf, fl, format, npiece, err);
   if (!npiece) {
     int rc = lg_mpi_rank() == 0 ? mesh_write_vtu_format(m, path, nf, fl, format) : 0;
     if (rc) snprintf(err, MESH_ERRLEN, "%s", m->err);
@@ -155,9 +212,8 @@ int lg_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_
     snprintf(err, MESH_ERRLEN, "%.*s", MESH_ERRLEN - 1, env->err);
     return 1;
   }
-  size_t len = strlen(path) + 24;
   int rank = lg_mpi_rank(), size = lg_mpi_size(), rc = 0;
-  char **names = calloc((size_t)npiece, sizeof(char *));
+  char **names = piece_names(path, npiece);
   /* the cells piece by piece (a counting sort by part): cells[start[k] .. start[k + 1]) */
   int *cells = malloc(sizeof(int) * ((size_t)m->ncell + 1)), *start = calloc((size_t)npiece + 2, sizeof(int));
   int *runs = part ? NULL : malloc(sizeof(int) * ((size_t)m->ncell + 1));
@@ -170,13 +226,6 @@ int lg_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_
     for (int c = 0; c < m->ncell; c++) cells[start[pc[c] + 1]++] = c;
   }
   free(runs);
-  for (int k = 0; k < npiece && !rc; k++) {
-    if (!(names[k] = malloc(len))) {
-      rc = 1, snprintf(err, MESH_ERRLEN, "out of memory for %d piece names", npiece);
-      break;
-    }
-    snprintf(names[k], len, "%.*s_p%d.vtu", (int)(strlen(path) - 5), path, k);
-  }
   for (int k = rank; k < npiece && !rc; k += size)
     if ((rc = mesh_write_vtu_piece(m, names[k], nf, fl, format, cells + start[k], start[k + 1] - start[k])))
       snprintf(err, MESH_ERRLEN, "%s", m->err);

@@ -140,16 +140,18 @@ void lg_mesh_vertex_runs(const mesh *m, int nparts, int *part) {
   }
 }
 
-int lg_mesh_partition(lg_env *env, lg_mesh *lm, int nparts, const int **part) {
-  *part = NULL;
-  if (lm->nparts == nparts) { *part = lm->part; return 0; }
+/* the partition of m's cells into nparts, computed on the calling rank alone: into pt
+ * (ncell values) with *runs = 1 where it is the numbering's runs, or nothing (returns -1)
+ * where the cells' order is kept (-lugal_partitioner natural, or too few cells); 1 on an
+ * error */
+int lg_partition_cells(lg_env *env, mesh *m, int nparts, int *pt, int *runs) {
   char method[64] = "auto";
   PetscBool set = PETSC_FALSE;
   PetscOptionsGetString(NULL, NULL, "-lugal_partitioner", method, sizeof method, &set);
-  mesh *m = lm->m;
+  *runs = 0;
   /* a handful of cells per part is not worth a graph partitioner (nor safe: parts may be
    * empty); consecutive runs of cells are the identity numbering */
-  if (!strcmp(method, "natural") || nparts < 2 || m->ncell < 8 * nparts) return 0;
+  if (!strcmp(method, "natural") || nparts < 2 || m->ncell < 8 * nparts) return -1;
   double t0 = now_ms();
   if (!strcmp(method, "auto")) {
     /* a graph partition costs about a setup (1.57 M tetrahedra: 0.45 s); take it where the
@@ -163,21 +165,15 @@ int lg_mesh_partition(lg_env *env, lg_mesh *lm, int nparts, const int **part) {
     double planes = fmin(nparts - 1.0, d * (pow(nparts, 1.0 / d) - 1.0));
     double ideal = 2.0 * planes * pow((double)m->nvert, (double)(d - 1) / d);
     int keep = have >= 0 && have <= 2 * ideal;
-    if (env->verbose && lg_mpi_rank() == 0)
+    if (env->verbose)
       fprintf(stderr, "[lugal] partition: the numbering's split into %d has %ld vertices on its cuts (compact parts: %.0f): %s\n",
               nparts, have, ideal, keep ? "kept" : "PTScotch");
     if (keep) {
       /* the numbering's split of the cells: each with its lowest vertex, the vertices in
        * nparts runs (problems of P1 fields keep their rows in their own order, the others
        * number theirs by these parts: see set_ownership) */
-      int *pt = malloc(sizeof(int) * ((size_t)m->ncell + 1));
-      if (!pt) { lg_seterr(env, "out of memory for the partition of %d cells", m->ncell); return 1; }
       lg_mesh_vertex_runs(m, nparts, pt);
-      free(lm->part);
-      lm->part = pt;
-      lm->nparts = nparts;
-      lm->part_runs = 1;
-      *part = pt;
+      *runs = 1;
       return 0;
     }
 #ifdef PETSC_HAVE_PTSCOTCH
@@ -186,22 +182,42 @@ int lg_mesh_partition(lg_env *env, lg_mesh *lm, int nparts, const int **part) {
     strcpy(method, MATPARTITIONINGCURRENT);
 #endif
   }
-  int *pt = malloc(sizeof(int) * ((size_t)m->ncell + 1));
-  if (!pt) { lg_seterr(env, "out of memory for the partition of %d cells", m->ncell); return 1; }
-  /* rank 0 partitions, every rank gets its outcome and the parts */
-  int rc = lg_mpi_rank() == 0 ? partition_cells(env, m, nparts, method, pt) : 0;
-  rc = lg_root_result(rc, env->err, sizeof env->err);
-  if (!rc && lg_mpi_size() > 1 && MPI_Bcast(pt, m->ncell, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) {
-    lg_seterr(env, "the partition could not be sent to every rank");
-    rc = 1;
-  }
-  if (rc) { free(pt); return 1; }
-  if (env->verbose && lg_mpi_rank() == 0)
+  if (partition_cells(env, m, nparts, method, pt)) return 1;
+  if (env->verbose)
     fprintf(stderr, "[lugal] partition: %d cells into %d parts by %s in %.1f ms\n", m->ncell, nparts, method, now_ms() - t0);
+  return 0;
+}
+
+int lg_mesh_partition(lg_env *env, lg_mesh *lm, int nparts, const int **part) {
+  *part = NULL;
+  if (lm->nparts == nparts) { *part = lm->part; return 0; }
+  mesh *m = lm->m;
+  int *pt = malloc(sizeof(int) * ((size_t)m->ncell + 1)), runs = 0;
+  if (!pt) { lg_seterr(env, "out of memory for the partition of %d cells", m->ncell); return 1; }
+  /* rank 0 partitions, every rank gets its outcome and the parts (a numbering's split is
+   * everyone's own: it reads the mesh only) */
+  int verbose = env->verbose;
+  env->verbose = verbose && lg_mpi_rank() == 0;
+  int rc = lg_mpi_rank() == 0 ? lg_partition_cells(env, m, nparts, pt, &runs) : 0;
+  env->verbose = verbose;
+  int keep = rc == -1;
+  if (keep) rc = 0;
+  if (lg_mpi_size() > 1) {
+    int st[3] = {rc, keep, runs};
+    if (MPI_Bcast(st, 3, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) st[0] = 1;
+    rc = lg_root_result(st[0], env->err, sizeof env->err);
+    keep = st[1];
+    runs = st[2];
+    if (!rc && !keep && MPI_Bcast(pt, m->ncell, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) {
+      lg_seterr(env, "the partition could not be sent to every rank");
+      rc = 1;
+    }
+  }
+  if (rc || keep) { free(pt); return rc; }
   free(lm->part);
   lm->part = pt;
   lm->nparts = nparts;
-  lm->part_runs = 0;
+  lm->part_runs = runs;
   *part = pt;
   return 0;
 }

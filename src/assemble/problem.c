@@ -91,6 +91,12 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
     /* an interior facet term is linearized in the test functions and unknowns of both
      * sides: its element rows and columns are the fields on '+', then on '-' */
     t->interior = t->reg.kind == REGION_INTERIOR;
+    if (t->interior && p->lm->dist) {
+      /* a continuous field's row takes terms of facets beyond the ghost layer */
+      lg_seterr(env, "term %d of the equation integrates over interior facets, which a distributed mesh "
+                     "(-lugal_distribute) does not offer yet: run without -lugal_distribute", i + 1);
+      return 1;
+    }
     t->rl = p->rows;
     t->cl = p->cols;
     int tf[2 * KER_MAXFIELD], uf[2 * KER_MAXFIELD], nt = nf;
@@ -427,6 +433,8 @@ static int set_ownership(lg_env *env, lg_problem *p) {
   int size = lg_mpi_size(), rank = lg_mpi_rank(), B = lg_matrix_block_size(p), Nn = p->N / B;
   p->par = size > 1;
   p->pB = B;
+  p->Nglob = p->N;
+  if (p->lm->dist) return lg_dist_number_nodes(env, p, B);
   const int *part = NULL;
   if (p->par && lg_mesh_partition(env, p->lm, size, &part)) return 1;
   /* where the parts are the numbering's runs, one continuous P1 field (nodes = vertices)
@@ -633,11 +641,12 @@ void lg_problem_free(lg_problem *p) {
 }
 
 int lg_problem_size(const lg_problem *p) { return p->N; }
+int lg_problem_global_size(const lg_problem *p) { return p->Nglob; }
 
 void lg_problem_ownership(const lg_problem *p, int *rows, long *ghosts) {
   *rows = p->hi - p->lo;
   *ghosts = -1;
-  int B = p->pB, Nn = p->N / B, R0 = p->lo / B, R1 = p->hi / B;
+  int B = p->pB, Nn = p->Nglob / B, R0 = p->lo / B, R1 = p->hi / B; /* columns are global */
   char *seen = p->csr_i ? calloc((size_t)Nn + 1, 1) : NULL;
   if (!seen) return;
   /* the pattern's columns are nodes (B > 1: every B-th entry of a row is a node's first) */
@@ -665,9 +674,9 @@ void lg_problem_owned_part(const lg_problem *p, const double *whole, double sign
     for (int r = p->lo; r < p->hi; r++) owned[r - p->lo] = sign * whole[r];
     return;
   }
-  /* node by node: PETSc's node R holds the problem's node iperm[R] */
+  /* node by node: PETSc's node R holds the problem's node iperm[R - ioff] */
   for (int R = p->lo / B; R < p->hi / B; R++) {
-    const double *w = whole + (size_t)p->iperm[R] * B;
+    const double *w = whole + (size_t)p->iperm[R - p->ioff] * B;
     double *o = owned + ((size_t)R * B - (size_t)p->lo);
     for (int j = 0; j < B; j++) o[j] = sign * w[j];
   }
@@ -681,19 +690,37 @@ int lg_problem_vec_set(lg_env *env, lg_problem *p, Vec v, const double *whole) {
   return 0;
 }
 
+/* a distributed mesh's problem: the scatter of a distributed vector to the local nodes'
+ * dofs (owned and ghost), PETSc's entries perm[node] * B + j */
+static int local_scatter(lg_env *env, lg_problem *p, Vec v) {
+  int B = p->pB, Nn = p->N / B;
+  PetscInt *idx;
+  PCHK(PetscMalloc1((size_t)Nn + 1, &idx), "PetscMalloc1");
+  for (int i = 0; i < Nn; i++) idx[i] = p->perm[i];
+  IS is;
+  PCHK(ISCreateBlock(PETSC_COMM_SELF, B, Nn, idx, PETSC_OWN_POINTER, &is), "ISCreateBlock");
+  PCHK(VecCreateSeq(PETSC_COMM_SELF, p->N, &p->whole), "VecCreateSeq");
+  PCHK(VecScatterCreate(v, is, p->whole, NULL, &p->to_all), "VecScatterCreate");
+  PCHK(ISDestroy(&is), "ISDestroy");
+  return 0;
+}
+
 int lg_problem_vec_get(lg_env *env, lg_problem *p, Vec v, double *whole) {
   Vec src = v; /* a serial run's vector is whole already */
   if (p->par) {
-    if (!p->to_all) PCHK(VecScatterCreateToAll(v, &p->to_all, &p->whole), "VecScatterCreateToAll");
+    if (!p->to_all) {
+      if (p->lm->dist) { if (local_scatter(env, p, v)) return 1; }
+      else PCHK(VecScatterCreateToAll(v, &p->to_all, &p->whole), "VecScatterCreateToAll");
+    }
     PCHK(VecScatterBegin(p->to_all, v, p->whole, INSERT_VALUES, SCATTER_FORWARD), "VecScatterBegin");
     PCHK(VecScatterEnd(p->to_all, v, p->whole, INSERT_VALUES, SCATTER_FORWARD), "VecScatterEnd");
     src = p->whole;
   }
   const PetscScalar *a;
   PCHK(VecGetArrayRead(src, &a), "VecGetArrayRead");
-  if (p->iperm) /* node by node, as lg_problem_owned_part */
+  if (p->iperm && !p->lm->dist) /* node by node, as lg_problem_owned_part */
     for (int R = 0, B = p->pB; R < p->N / B; R++) memcpy(whole + (size_t)p->iperm[R] * B, a + (size_t)R * B, sizeof(double) * (size_t)B);
-  else memcpy(whole, a, sizeof(double) * (size_t)p->N);
+  else memcpy(whole, a, sizeof(double) * (size_t)p->N); /* a distributed mesh's: in the local order already */
   PCHK(VecRestoreArrayRead(src, &a), "VecRestoreArrayRead");
   return 0;
 }

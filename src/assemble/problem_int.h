@@ -66,6 +66,11 @@ struct lg_problem {
    * arrays (state, solution, rwhole, bc_rows) stay in the problem's order; the matrix's
    * pattern, own_rows and the PETSc vectors are in PETSc's */
   int *perm, *iperm, pB;
+  /* on a distributed mesh (lm->dist) the problem's order is the local mesh's: N counts its
+   * owned and ghost nodes' dofs, Nglob the whole problem's; perm gives every local node its
+   * PETSc node (distribute.c), iperm the owned ones' local nodes (PETSc node R at R - ioff),
+   * and to_all brings a distributed vector's owned and ghost values to the local arrays */
+  int Nglob, ioff;
   VecScatter to_all;    /* a distributed vector to every rank's whole copy */
   Vec whole;            /* that copy */
   double *rwhole;       /* a whole-length residual (parallel runs) */
@@ -154,7 +159,7 @@ static inline PetscInt lg_petsc_row(const lg_problem *p, PetscInt i) {
   return p->perm ? (PetscInt)p->perm[i / p->pB] * p->pB + i % p->pB : i;
 }
 static inline PetscInt lg_problem_row(const lg_problem *p, PetscInt r) {
-  return p->iperm ? (PetscInt)p->iperm[r / p->pB] * p->pB + r % p->pB : r;
+  return p->iperm ? (PetscInt)p->iperm[r / p->pB - p->ioff] * p->pB + r % p->pB : r;
 }
 
 /* problem.c: the owned rows of a whole-length array (the problem's order) times sign into
@@ -183,6 +188,9 @@ int lg_petsc_fail(lg_env *env, PetscErrorCode ierr, const char *what);
 void lg_term_nodes(const lg_problem *p, const prob_term *t, int it, int rows, int B, int petsc, PetscInt *out);
 /* the number of components when every field has the same, else 1 */
 int lg_matrix_block_size(const lg_problem *p);
+/* distribute.c: perm, iperm, lo, hi, Nglob and ioff of a problem on a distributed mesh,
+ * nodes of B dofs; collective */
+int lg_dist_number_nodes(lg_env *env, lg_problem *p, int B);
 /* the pattern, the element entries' places, the matrix and its vectors */
 int lg_problem_setup_matrix(lg_env *env, lg_problem *p);
 /* a single vector field of the mesh's dimension (elasticity): the rigid body modes as the

@@ -229,9 +229,10 @@ static int linear_solve_checked(lg_env *env, lg_problem *p, lg_solve_info *info)
  * same matrix and new data (an optimization's next evaluation, other essential values)
  * reuses the factorization */
 static int keep_bc_columns(lg_env *env, lg_problem *p) {
-  int *at = malloc(sizeof(int) * ((size_t)p->N + 1));
+  /* by PETSc's row: the whole problem's rows (a distributed mesh's columns are global) */
+  int *at = malloc(sizeof(int) * ((size_t)p->Nglob + 1));
   if (!at) { lg_seterr(env, "out of memory"); return 1; }
-  for (int i = 0; i < p->N; i++) at[i] = -1;
+  for (int i = 0; i < p->Nglob; i++) at[i] = -1;
   for (int k = 0; k < p->nbc; k++) at[lg_petsc_row(p, p->bc_rows[k])] = k; /* the matrix's order */
   size_t n = 0;
   /* the assembled values, before the elimination: the matrix's own array in a serial run,

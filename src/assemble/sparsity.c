@@ -315,7 +315,9 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
    * B = 1 otherwise. Each element entry (node pair) keeps its column node's rank in its row
    * node's row: 1 byte where rows have at most 256 nodes (4 bytes per entry before), and for
    * B = 1 each element row its row's start (P1 on 1.57 M tetrahedra: 50 MB instead of 102) */
-  int B = lg_matrix_block_size(p), Nn = N / B;
+  /* node arrays are indexed by PETSc's node numbers: global ones on a distributed mesh (a
+   * rank's rows and columns are among all of them; O(whole) int arrays during the setup) */
+  int B = lg_matrix_block_size(p), Nn = p->Nglob / B;
   size_t nrank = 0, nerow = 0;
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
@@ -470,7 +472,7 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   double t1 = now_ms();
   if (p->par) {
     if (split_blocks(env, p, n)) return 1;
-    PCHK(MatCreateMPIAIJWithSplitArrays(PETSC_COMM_WORLD, n, n, N, N, p->sd_i, p->sd_j, p->sd_a, p->so_i, p->so_j, p->so_a,
+    PCHK(MatCreateMPIAIJWithSplitArrays(PETSC_COMM_WORLD, n, n, p->Nglob, p->Nglob, p->sd_i, p->sd_j, p->sd_a, p->so_i, p->so_j, p->so_a,
                                         &p->A), "matrix creation");
   } else PCHK(MatCreateSeqAIJWithArrays(PETSC_COMM_SELF, N, N, ia, ja, p->csr_a, &p->A), "matrix creation");
   if (p->prefix[0]) PCHK(MatSetOptionsPrefix(p->A, p->prefix), "MatSetOptionsPrefix");
@@ -532,6 +534,11 @@ int lg_problem_setup_nullspace(lg_env *env, lg_problem *p, const lg_problem_spec
     p->nnull = dim == 2 ? 3 : 6;
     p->null_rigid = 1;
   } else {
+    if (p->lm->dist) {
+      lg_seterr(env, "nullspace: a constant null space on a distributed mesh (-lugal_distribute) is not offered yet "
+                     "(its mean is taken over the whole mesh): run without -lugal_distribute");
+      return 1;
+    }
     Vec v[KER_MAXFIELD * FEM_MAXBS] = {0};
     int nv = 0;
     for (int k = 0; k < s->nnull; k++) {

@@ -169,13 +169,33 @@ ud_mesh *check_mesh(lua_State *L, int idx, const char *fn) {
   return u;
 }
 
+void check_not_distributed(lua_State *L, const lg_mesh *lm, const char *fn) {
+  if (lm && lm->dist)
+    luaL_error(L, "%s: not offered on a distributed mesh yet (-lugal_distribute; every rank holds its part only): "
+                  "run without -lugal_distribute", fn);
+}
+
+ud_mesh *check_whole_mesh(lua_State *L, int idx, const char *fn) {
+  ud_mesh *u = check_mesh(L, idx, fn);
+  check_not_distributed(L, u->lm, fn);
+  return u;
+}
+
 void push_mesh(lua_State *L, mesh *m) {
   lg_env *env = get_env(L);
   ud_mesh *u = lua_newuserdatauv(L, sizeof *u, 1);
-  u->lm = lg_mesh_wrap(m);
-  if (!u->lm) { mesh_free(m); luaL_error(L, "out of memory"); }
+  u->lm = NULL;
   luaL_setmetatable(L, MT_MESH);
-  expr_set_dim(env->c, m->dim);
+  /* -lugal_distribute: rank 0's mesh (the others' copy is dropped) cut into parts, each rank
+   * keeping its own with a ghost layer */
+  if (lg_distribute_wanted()) {
+    u->lm = lg_mesh_distribute(env, m);
+    if (!u->lm) luaL_error(L, "distributing the mesh: %s", env->err);
+  } else {
+    u->lm = lg_mesh_wrap(m);
+    if (!u->lm) { mesh_free(m); luaL_error(L, "out of memory"); }
+  }
+  expr_set_dim(env->c, u->lm->m->dim);
 }
 
 double opt_num(lua_State *L, int t, const char *key, double def, const char *fn) {

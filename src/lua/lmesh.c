@@ -102,6 +102,11 @@ static int l_read(lua_State *L) {
   char err[MESH_ERRLEN] = "";
   int root = lg_mpi_rank() == 0;
   mesh *m = root ? mesh_read_gmsh(path, err) : NULL;
+  if (lg_distribute_wanted()) { /* rank 0 sends each rank its part only (push_mesh) */
+    if (lg_root_result(m == NULL, err, sizeof err)) return luaL_error(L, "lg.mesh.read: %s", err);
+    push_mesh(L, m);
+    return 1;
+  }
   if (lg_mpi_size() > 1) {
     char *buf = NULL;
     size_t len = 0;
@@ -246,6 +251,14 @@ static void region_add_tag(lua_State *L, region *r, int tag, const char *fn) {
   r->tags[r->ntag++] = tag;
 }
 
+/* a distributed mesh's answer to "is it anywhere": v on any rank (collective there) */
+static int on_any_rank(const lg_mesh *lm, int v) {
+  if (!lm->dist) return v;
+  double x = v;
+  lg_allreduce(&x, 1, LG_MAX);
+  return x != 0;
+}
+
 static int region_new(lua_State *L, region_kind kind, const char *fn) {
   ud_mesh *um = check_mesh(L, 1, fn);
   mesh *m = um->lm->m;
@@ -256,7 +269,7 @@ static int region_new(lua_State *L, region_kind kind, const char *fn) {
   r.mesh = um->lm;
   const char *what = kind == REGION_BOUNDARY ? "boundary" : "region";
   /* no names: every cell, or every tagged boundary facet (ntag = 0) */
-  if (kind == REGION_BOUNDARY && n == 0 && m->nbf == 0)
+  if (kind == REGION_BOUNDARY && n == 0 && !on_any_rank(um->lm, m->nbf > 0))
     return luaL_error(L, "%s: this mesh has no tagged boundary facets (lg.mesh.new takes them as boundary = "
                          "{name = {facets}}; Gmsh files as physical groups)", fn);
   for (int i = 0; i < n; i++) {
@@ -266,7 +279,7 @@ static int region_new(lua_State *L, region_kind kind, const char *fn) {
     if (isint) {
       int known = t >= INT_MIN && t <= INT_MAX &&
                   (kind == REGION_BOUNDARY ? mesh_has_boundary_tag(m, (int)t) : mesh_has_region_tag(m, (int)t));
-      if (!known) {
+      if (!on_any_rank(um->lm, known)) {
         char list[256];
         tag_list(m, kind, list, sizeof list);
         return luaL_error(L, "%s: no %s has tag %I (this mesh's %s tags: %s)", fn,
@@ -289,7 +302,7 @@ static int region_new(lua_State *L, region_kind kind, const char *fn) {
         used |= kind == REGION_BOUNDARY ? mesh_has_boundary_tag(m, tags[j]) : mesh_has_region_tag(m, tags[j]);
         region_add_tag(L, &r, tags[j], fn);
       }
-      if (!used) return luaL_error(L, "%s: the %s \"%s\" has no %s in this mesh", fn, what, name,
+      if (!on_any_rank(um->lm, used)) return luaL_error(L, "%s: the %s \"%s\" has no %s in this mesh", fn, what, name,
                                    kind == REGION_BOUNDARY ? "facets" : "cells");
     } else return typeerror(L, fn, arg, kind == REGION_BOUNDARY ? "a boundary name or an integer tag" : "a region name or an integer tag");
   }
@@ -364,7 +377,29 @@ static int mesh_vertices(lua_State *L) {
       for (int d = 0; d < m->dim; d++) s += (m->x[(size_t)v * m->dim + d] - x[d]) * (m->x[(size_t)v * m->dim + d] - x[d]);
       if (s < bd) { bd = s; best = v; }
     }
-    if (best < 0) return luaL_error(L, "%s: the mesh has no vertices", fn);
+    if (um->lm->dist) {
+      /* the whole mesh's nearest vertex (the lowest global number among equally near ones),
+       * on the ranks that hold it */
+      const mesh_part *P = um->lm->dist;
+      double d[2] = {bd, 0};
+      lg_allreduce(d, 1, LG_MIN);
+      d[1] = -INFINITY;
+      for (int v = 0; v < m->nvert; v++) {
+        double s = 0;
+        for (int k = 0; k < m->dim; k++) s += (m->x[(size_t)v * m->dim + k] - x[k]) * (m->x[(size_t)v * m->dim + k] - x[k]);
+        if (s == d[0] && -(double)P->vglobal[v] > d[1]) d[1] = -(double)P->vglobal[v];
+      }
+      lg_allreduce(d + 1, 1, LG_MAX);
+      int g = (int)-d[1];
+      best = -1;
+      for (int lo = 0, hi = m->nvert - 1; lo <= hi && best < 0;) {
+        int mid = (lo + hi) / 2;
+        if (P->vglobal[mid] == g) best = mid;
+        else if (P->vglobal[mid] < g) lo = mid + 1;
+        else hi = mid - 1;
+      }
+      if (best < 0) continue; /* another rank's vertex */
+    } else if (best < 0) return luaL_error(L, "%s: the mesh has no vertices", fn);
     int dup = 0;
     for (int k = 0; k < r.ntag; k++) dup |= r.tags[k] == best;
     if (!dup) r.tags[r.ntag++] = best;
@@ -376,7 +411,7 @@ static int mesh_vertices(lua_State *L) {
 }
 
 static int mesh_info(lua_State *L) {
-  ud_mesh *u = check_mesh(L, 1, "mesh:info");
+  ud_mesh *u = check_whole_mesh(L, 1, "mesh:info");
   mesh *m = u->lm->m;
   lua_createtable(L, 0, 6);
   lua_pushinteger(L, m->nvert); lua_setfield(L, -2, "vertices");
@@ -390,14 +425,15 @@ static int mesh_info(lua_State *L) {
   return 1;
 }
 
-static int mesh_nvertices(lua_State *L) { lua_pushinteger(L, check_mesh(L, 1, "mesh:nvertices")->lm->m->nvert); return 1; }
+/* the whole mesh's counts, on a distributed mesh too */
+static int mesh_nvertices(lua_State *L) { lua_pushinteger(L, lg_mesh_global_vertices(check_mesh(L, 1, "mesh:nvertices")->lm)); return 1; }
 
-static int mesh_ncells(lua_State *L) { lua_pushinteger(L, check_mesh(L, 1, "mesh:ncells")->lm->m->ncell); return 1; }
+static int mesh_ncells(lua_State *L) { lua_pushinteger(L, lg_mesh_global_cells(check_mesh(L, 1, "mesh:ncells")->lm)); return 1; }
 
 static int mesh_dim(lua_State *L) { lua_pushinteger(L, check_mesh(L, 1, "mesh:dim")->lm->m->dim); return 1; }
 
 static int lmesh_refine(lua_State *L) {
-  ud_mesh *u = check_mesh(L, 1, "mesh:refine");
+  ud_mesh *u = check_whole_mesh(L, 1, "mesh:refine");
   char err[MESH_ERRLEN];
   mesh *r = mesh_refine(u->lm->m, err);
   if (!r) return luaL_error(L, "mesh:refine: %s", err);
@@ -406,14 +442,14 @@ static int lmesh_refine(lua_State *L) {
 }
 
 static int lmesh_copy(lua_State *L) {
-  ud_mesh *u = check_mesh(L, 1, "mesh:copy");
+  ud_mesh *u = check_whole_mesh(L, 1, "mesh:copy");
   mesh *c = mesh_copy(u->lm->m);
   if (!c) return luaL_error(L, "mesh:copy: out of memory");
   push_mesh(L, c);
   return 1;
 }
 
-static int lmesh_hmax(lua_State *L) { lua_pushnumber(L, mesh_hmax(check_mesh(L, 1, "mesh:hmax")->lm->m)); return 1; }
+static int lmesh_hmax(lua_State *L) { lua_pushnumber(L, mesh_hmax(check_whole_mesh(L, 1, "mesh:hmax")->lm->m)); return 1; }
 
 static int opt_boundary(lua_State *L, int t, const char *fn) {
   const char *b = t ? opt_str(L, t, "boundary", "slide", fn) : "slide";
@@ -439,7 +475,7 @@ static const mesh *opt_reference(lua_State *L, int t, const mesh *m, const char 
 
 static int lmesh_untangle(lua_State *L) {
   const char *fn = "mesh:untangle";
-  ud_mesh *u = check_mesh(L, 1, fn);
+  ud_mesh *u = check_whole_mesh(L, 1, fn);
   int t = 0;
   if (!lua_isnoneornil(L, 2)) {
     if (!lua_istable(L, 2))
@@ -539,7 +575,7 @@ static int lmesh_untangle(lua_State *L) {
 
 static int lmesh_smooth(lua_State *L) {
   const char *fn = "mesh:smooth";
-  ud_mesh *u = check_mesh(L, 1, fn);
+  ud_mesh *u = check_whole_mesh(L, 1, fn);
   mesh *m = u->lm->m;
   int t = 0;
   if (!lua_isnoneornil(L, 2)) {
@@ -670,7 +706,7 @@ static void displacement_field(lua_State *L, int idx, ud_mesh *u, const unsigned
 
 static int lmesh_move(lua_State *L) {
   const char *fn = "mesh:move";
-  ud_mesh *u = check_mesh(L, 1, fn);
+  ud_mesh *u = check_whole_mesh(L, 1, fn);
   mesh *m = u->lm->m;
   if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {displacement = function or {fx, fy[, fz]}, quiet=}");
   static const char *const keys[] = {"displacement", "quiet", NULL};
@@ -704,7 +740,7 @@ static int lmesh_move(lua_State *L) {
 
 static int lmesh_displace(lua_State *L) {
   const char *fn = "mesh:displace";
-  ud_mesh *u = check_mesh(L, 1, fn);
+  ud_mesh *u = check_whole_mesh(L, 1, fn);
   mesh *m = u->lm->m;
   if (lua_isnoneornil(L, 2)) return typeerror(L, fn, 2, "a function (x, y[, z]) -> displacement or a table of discrete functions");
   double *disp = lua_newuserdatauv(L, sizeof(double) * ((size_t)m->nvert * m->dim + 1), 0);
@@ -722,7 +758,7 @@ static int lmesh_displace(lua_State *L) {
 }
 
 static int mesh_check(lua_State *L) {
-  ud_mesh *u = check_mesh(L, 1, "mesh:check");
+  ud_mesh *u = check_whole_mesh(L, 1, "mesh:check");
   int ids[10], n;
   mesh_count_invalid(u->lm->m, 10, ids, &n);
   lua_pushinteger(L, n);
@@ -741,7 +777,7 @@ static lua_Integer vertex_arg(lua_State *L, const mesh *m, const char *fn) {
 }
 
 static int mesh_coordinates(lua_State *L) {
-  ud_mesh *u = check_mesh(L, 1, "mesh:coordinates");
+  ud_mesh *u = check_whole_mesh(L, 1, "mesh:coordinates");
   mesh *m = u->lm->m;
   lua_Integer i = vertex_arg(L, m, "mesh:coordinates");
   for (int d = 0; d < m->dim; d++) lua_pushnumber(L, m->x[(size_t)(i - 1) * m->dim + d]);
@@ -749,7 +785,7 @@ static int mesh_coordinates(lua_State *L) {
 }
 
 static int mesh_set_coordinates(lua_State *L) {
-  ud_mesh *u = check_mesh(L, 1, "mesh:set_coordinates");
+  ud_mesh *u = check_whole_mesh(L, 1, "mesh:set_coordinates");
   mesh *m = u->lm->m;
   lua_Integer i = vertex_arg(L, m, "mesh:set_coordinates");
   double v[3];
@@ -852,19 +888,27 @@ static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, in
           fl[nf] = (mesh_field){name, 3, oncells, v};
         }
       } else if (lua_istable(L, -1)) {
+        /* one value per cell or vertex of the whole mesh (a distributed one's: each rank
+         * takes its local cells' or vertices' by their global numbers) */
         lua_Integer n = luaL_len(L, -1);
-        if (n != m->ncell && n != m->nvert)
-          return luaL_error(L, "%s: array '%s' has %I entries; need one per cell (%d) or vertex (%d)", fn, name, n, m->ncell, m->nvert);
-        double *v = lua_newuserdatauv(L, sizeof(double) * (size_t)n, 0);
+        long NC = lg_mesh_global_cells(lm), NV = lg_mesh_global_vertices(lm);
+        if (n != NC && n != NV)
+          return luaL_error(L, "%s: array '%s' has %I entries; need one per cell (%I) or vertex (%I)", fn, name, n, (lua_Integer)NC,
+                            (lua_Integer)NV);
+        int oncells = n == NC && n != NV;
+        const int *glob = lm->dist ? (oncells ? lm->dist->cglobal : lm->dist->vglobal) : NULL;
+        lua_Integer nl = glob ? (oncells ? m->ncell : m->nvert) : n;
+        double *v = lua_newuserdatauv(L, sizeof(double) * (size_t)(nl + 1), 0);
         lua_rawseti(L, anchor, nf + 1);
-        for (lua_Integer i = 1; i <= n; i++) {
-          lua_geti(L, -1, i);
+        for (lua_Integer i = 1; i <= nl; i++) {
+          lua_Integer at = glob ? glob[i - 1] + 1 : i;
+          lua_geti(L, -1, at);
           int isnum;
           v[i - 1] = lua_tonumberx(L, -1, &isnum);
-          if (!isnum) return luaL_error(L, "%s: array '%s' entry %I must be a number, got %s", fn, name, i, luaL_typename(L, -1));
+          if (!isnum) return luaL_error(L, "%s: array '%s' entry %I must be a number, got %s", fn, name, at, luaL_typename(L, -1));
           lua_pop(L, 1);
         }
-        fl[nf] = (mesh_field){name, 1, n == m->ncell && n != m->nvert, v};
+        fl[nf] = (mesh_field){name, 1, oncells, v};
       } else return luaL_error(L, "%s: field '%s' must be a discrete function, a quality array or an array of numbers, got %s",
                                fn, name, luaL_typename(L, -1));
       nf++;
@@ -929,10 +973,12 @@ static int mesh_write(lua_State *L) {
   const char *path = luaL_checkstring(L, 2);
   size_t l = strlen(path);
   if (l > 4 && !strcmp(path + l - 4, ".msh")) {
+    check_not_distributed(L, u->lm, "mesh:write (.msh)");
     int rc = lg_mpi_rank() == 0 ? mesh_write_gmsh(u->lm->m, path) : 0;
     if (lg_root_result(rc, u->lm->m->err, sizeof u->lm->m->err)) return luaL_error(L, "%s: %s", fn, u->lm->m->err);
     return 0;
   }
+  if (l > 4 && !strcmp(path + l - 4, ".svg")) check_not_distributed(L, u->lm, "mesh:write (.svg)");
   if (l > 4 && !strcmp(path + l - 4, ".svg")) return write_svg(L, u->lm->m, u->lm, path, fn);
   int pvtu = l > 5 && !strcmp(path + l - 5, ".pvtu");
   if (!pvtu && !(l > 4 && !strcmp(path + l - 4, ".vtu")))
@@ -998,7 +1044,7 @@ static int read_metric(lua_State *L, int t, mesh *m, double **buf, quality_metri
 }
 
 static ud_qarray *push_quality(lua_State *L, int midx, const char *name, int tidx, const char *fn) {
-  ud_mesh *um = check_mesh(L, midx, fn);
+  ud_mesh *um = check_whole_mesh(L, midx, fn);
   mesh *m = um->lm->m;
   int q = quality_from_name(name);
   if (q < 0) {
@@ -1139,7 +1185,7 @@ static int qa_tostring(lua_State *L) {
 /* every measure that applies, with statistics, as a table; printed unless quiet */
 static int mesh_quality_report(lua_State *L) {
   const char *fn = "mesh:quality_report";
-  ud_mesh *um = check_mesh(L, 1, fn);
+  ud_mesh *um = check_whole_mesh(L, 1, fn);
   mesh *m = um->lm->m;
   int quiet = lua_toboolean(L, 2) || lg_mpi_rank() != 0; /* every rank has the same report */
   /* split the invalid cells: inverted (clearly negative) and degenerate (about zero),

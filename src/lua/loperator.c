@@ -175,6 +175,7 @@ static int l_assemble(lua_State *L) {
   lg_mesh *lm = F->t[0].reg.mesh;
   for (int i = 1; i < F->n; i++)
     if (F->t[i].reg.mesh != lm) return luaL_error(L, "%s: the form integrates over two different meshes", fn);
+  check_not_distributed(L, lm, fn);
   if (lg_mesh_check(env, lm)) return lgerror(L, fn, env);
   int tests[KER_MAXFIELD], unks[KER_MAXFIELD], nt, nu;
   form_symbols(env, F, tests, &nt, unks, &nu);

@@ -19,7 +19,7 @@ static int l_control(lua_State *L) {
   const char *fn = "lg.control";
   ud_basis *b = luaL_testudata(L, 1, MT_BASIS);
   if (!b) return typeerror(L, fn, 1, "a basis (lg.lagrange(p))");
-  ud_mesh *um = check_mesh(L, 2, fn);
+  ud_mesh *um = check_whole_mesh(L, 2, fn);
   const char *name = luaL_optstring(L, 3, "m");
   lg_env *env = get_env(L);
   lg_function *f = lg_function_new(env, um->lm, lg_mesh_dofmap(env, um->lm, b->degree, b->ncomp, b->disc), name);
@@ -713,6 +713,7 @@ static int l_kkt_problem(lua_State *L) {
   lua_getfield(L, 1, "mesh");
   ud_mesh *um = luaL_testudata(L, -1, MT_MESH);
   if (!um) return luaL_error(L, "%s: option 'mesh' must be a mesh, got %s", fn, luaL_typename(L, -1));
+  check_not_distributed(L, um->lm, fn);
   int mesh_idx = lua_gettop(L);
   lua_getfield(L, 1, "lagrangian");
   ud_form *uL = luaL_testudata(L, -1, MT_FORM);

@@ -25,8 +25,28 @@ static int func_gc(lua_State *L) {
   return 0;
 }
 
+/* a distributed function's values or dof coordinates (w per dof) over the whole mesh */
+static int push_gathered(lua_State *L, ud_func *u, int coords, const char *fn) {
+  lg_env *env = get_env(L);
+  double *v;
+  long n;
+  if (lg_function_gather(env, u->f, coords, &v, &n)) return lgerror(L, fn, env);
+  int w = coords ? u->f->mesh->m->dim : 1;
+  lua_createtable(L, n < INT_MAX ? (int)n : 0, 0);
+  for (long i = 0; i < n; i++) {
+    if (coords) {
+      lua_createtable(L, w, 0);
+      for (int j = 0; j < w; j++) { lua_pushnumber(L, v[(size_t)i * (size_t)w + (size_t)j]); lua_rawseti(L, -2, j + 1); }
+    } else lua_pushnumber(L, v[i]);
+    lua_rawseti(L, -2, i + 1);
+  }
+  free(v);
+  return 1;
+}
+
 static int func_values(lua_State *L) {
   ud_func *u = check_func(L, 1, "f:values");
+  if (u->f->mesh->dist) return push_gathered(L, u, 0, "f:values");
   lua_createtable(L, u->f->dm->ndof, 0);
   for (int i = 0; i < u->f->dm->ndof; i++) { lua_pushnumber(L, u->f->x[i]); lua_rawseti(L, -2, i + 1); }
   return 1;
@@ -42,6 +62,7 @@ static int func_assign(lua_State *L) {
     return 0;
   }
   if (lua_istable(L, 2)) {
+    check_not_distributed(L, u->f->mesh, "f:assign of a table of values");
     int n = (int)luaL_len(L, 2);
     if (n != u->f->dm->ndof) return luaL_error(L, "f:assign: the table has %d values, the function %d dofs", n, u->f->dm->ndof);
     for (int i = 1; i <= n; i++) {
@@ -61,7 +82,14 @@ static int func_assign(lua_State *L) {
   return 0;
 }
 
-static int func_ndof(lua_State *L) { lua_pushinteger(L, check_func(L, 1, "f:ndof")->f->dm->ndof); return 1; }
+static int func_ndof(lua_State *L) {
+  ud_func *u = check_func(L, 1, "f:ndof");
+  lg_env *env = get_env(L);
+  long n = lg_function_global_ndof(env, u->f); /* the whole mesh's, on a distributed one too */
+  if (n < 0) return lgerror(L, "f:ndof", env);
+  lua_pushinteger(L, n);
+  return 1;
+}
 
 static int func_degree(lua_State *L) { lua_pushinteger(L, check_func(L, 1, "f:degree")->f->degree); return 1; }
 
@@ -127,7 +155,18 @@ static int func_eval(lua_State *L) {
       lua_pop(L, 1);
     }
     lua_pop(L, 1);
-    if (lg_eval_point(env, u->f, x, out)) return luaL_error(L, "%s: point %I: %s", fn, i, env->err);
+    if (u->f->mesh->dist) {
+      /* the ranks whose part holds the point answer (the same value, up to rounding at a
+       * shared facet: their mean) */
+      double r[FEM_MAXBS + 1] = {0};
+      if (!lg_eval_point(env, u->f, x, out)) {
+        for (int j = 0; j < bs; j++) r[j] = out[j];
+        r[bs] = 1;
+      }
+      if (lg_allreduce(r, bs + 1, LG_SUM)) return luaL_error(L, "%s: the sum over the ranks failed", fn);
+      if (r[bs] == 0) return luaL_error(L, "%s: point %I: no rank's part of the mesh holds it (%s)", fn, i, env->err);
+      for (int j = 0; j < bs; j++) out[j] = r[j] / r[bs];
+    } else if (lg_eval_point(env, u->f, x, out)) return luaL_error(L, "%s: point %I: %s", fn, i, env->err);
     if (bs == 1) lua_pushnumber(L, out[0]);
     else {
       lua_createtable(L, bs, 0);
@@ -141,6 +180,7 @@ static int func_eval(lua_State *L) {
 /* f:dof_coordinates(): the point of every dof ({x, y} tables, in dof order) */
 static int func_dof_coordinates(lua_State *L) {
   ud_func *u = check_func(L, 1, "f:dof_coordinates");
+  if (u->f->mesh->dist) return push_gathered(L, u, 1, "f:dof_coordinates");
   const dofmap *dm = u->f->dm;
   int dim = dm->m->dim;
   lua_createtable(L, dm->ndof, 0);
@@ -390,6 +430,7 @@ static int prob_solve(lua_State *L) {
 static int prob_sensitivity(lua_State *L) {
   const char *fn = "problem:sensitivity";
   ud_prob *u = luaL_checkudata(L, 1, MT_PROB);
+  check_not_distributed(L, lg_problem_mesh(u->p), fn);
   ud_expr *ue = luaL_testudata(L, 2, MT_EXPR);
   if (!ue || expr_of(L, ue)->kind != E_PARAM) return typeerror(L, fn, 2, "a parameter (lg.parameter)");
   lg_env *env = get_env(L);
@@ -430,6 +471,7 @@ int push_dense_matrix(lua_State *L, lg_problem *p, const char *fn) {
 
 static int prob_matrix(lua_State *L) {
   ud_prob *u = luaL_checkudata(L, 1, MT_PROB);
+  check_not_distributed(L, lg_problem_mesh(u->p), "problem:matrix");
   return push_dense_matrix(L, u->p, "problem:matrix");
 }
 
@@ -445,7 +487,7 @@ static int prob_assemble(lua_State *L) {
 
 static int prob_size(lua_State *L) {
   ud_prob *u = luaL_checkudata(L, 1, MT_PROB);
-  lua_pushinteger(L, lg_problem_size(u->p));
+  lua_pushinteger(L, lg_problem_global_size(u->p)); /* the whole problem's, distributed or not */
   return 1;
 }
 

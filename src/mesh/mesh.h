@@ -201,6 +201,27 @@ const int *hex_corner_neighbors(int i);
  * it is (it is tangled). Returns 1 when it flipped the cells. */
 int mesh_orient_consistently(mesh *m);
 
+/* part.c: one part of a mesh whose cells are split into parts, as a process of a
+ * distributed run holds it: the cells of the part (owned) and every cell sharing a vertex
+ * with one of them (ghosts), in the whole mesh's order, their vertices in increasing
+ * global order, the tagged boundary facets of those cells, every name. */
+typedef struct {
+  mesh *m;                /* the local mesh (no cells when the part is empty) */
+  int nvert_global, ncell_global, part;
+  int *vglobal, *cglobal; /* m->nvert / m->ncell: global numbers, increasing */
+  int *vowner, *cowner;   /* the part owning each local vertex / cell */
+  int nown_vert, nown_cell;
+} mesh_part;
+/* the part owning each vertex: the part of most of its cells (Boyer-Moore's vote in cell
+ * order, the first cell's where there is no majority); 1 when out of memory */
+int mesh_vertex_owners(const mesh *m, const int *part, int *owner);
+/* part p of m, whose cells have the parts `part` and vertices the owners vowner; NULL and
+ * a reason in err (MESH_ERRLEN) on failure */
+mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p, char *err);
+void mesh_part_free(mesh_part *P);
+int mesh_part_pack(const mesh_part *P, char **buf, size_t *len);
+mesh_part *mesh_part_unpack(const char *buf, size_t len, char *err);
+
 /* uniform refinement: triangles and quadrilaterals into 4, tetrahedra into 8 (Bey),
  * hexahedra into 8; boundary facets and tags follow */
 mesh *mesh_refine(const mesh *m, char *err);

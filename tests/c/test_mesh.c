@@ -62,6 +62,90 @@ static void pack(const char *data) {
   mesh_free(m);
 }
 
+/* a mesh cut into parts (part.c): every cell owned by exactly one part, each part holds
+ * every cell that shares a vertex with its own and nothing else, local numbers keep the
+ * global order, coordinates, tags and boundary facets follow, vertex owners agree with the
+ * whole mesh's vote; a part packed and unpacked is the same part; an empty part works */
+static void parts(const char *data) {
+  char err[MESH_ERRLEN], path[600];
+  snprintf(path, sizeof path, "%s/square_unstructured.msh", data);
+  mesh *m = mesh_read_gmsh(path, err);
+  CHECK(m != NULL, "%s", err);
+  if (!m) return;
+  const int np = 4; /* three stripes by x, the fourth part empty */
+  int *part = malloc(sizeof(int) * (size_t)m->ncell), *vown = malloc(sizeof(int) * (size_t)m->nvert);
+  for (int c = 0; c < m->ncell; c++) {
+    double cx = 0;
+    for (int k = 0; k < m->nvc; k++) cx += m->x[(size_t)m->cells[c * m->nvc + k] * 2] / m->nvc;
+    part[c] = cx < 0.3 ? 0 : cx < 0.6 ? 1 : 2;
+  }
+  m->cell_tag[5] = 9;
+  CHECK(mesh_vertex_owners(m, part, vown) == 0, "owners");
+  CHECK(mesh_build_boundary_cells(m) == 0, "%s", m->err);
+  int *owned = calloc((size_t)m->ncell, sizeof(int)), nbf = 0, nvown = 0;
+  for (int p = 0; p < np; p++) {
+    mesh_part *P = mesh_part_extract(m, part, vown, p, err);
+    CHECK(P != NULL, "part %d: %s", p, err);
+    if (!P) continue;
+    char *buf;
+    size_t len;
+    CHECK(mesh_part_pack(P, &buf, &len) == 0, "pack");
+    mesh_part *Q = mesh_part_unpack(buf, len, err);
+    CHECK(Q != NULL, "unpack: %s", err);
+    CHECK(mesh_part_unpack(buf, len - 1, err) == NULL && err[0], "a cut part refused");
+    free(buf);
+    if (!Q) { mesh_part_free(P); continue; }
+    mesh_part_free(P);
+    mesh *l = Q->m;
+    CHECK(Q->part == p && Q->nvert_global == m->nvert && Q->ncell_global == m->ncell, "the header");
+    if (p == 3) CHECK(l->ncell == 0 && l->nvert == 0 && Q->nown_cell == 0, "the empty part");
+    /* the local cells: the owned ones and exactly the cells that share a vertex with them */
+    char *mine = calloc((size_t)m->nvert, 1), *local = calloc((size_t)m->ncell, 1);
+    for (int c = 0; c < m->ncell; c++)
+      if (part[c] == p)
+        for (int k = 0; k < m->nvc; k++) mine[m->cells[c * m->nvc + k]] = 1;
+    int expect = 0, bad = 0, nown = 0;
+    for (int c = 0; c < m->ncell; c++) {
+      int in = 0;
+      for (int k = 0; k < m->nvc; k++) in |= mine[m->cells[c * m->nvc + k]];
+      expect += in;
+    }
+    for (int i = 0; i < l->ncell; i++) {
+      int g = Q->cglobal[i];
+      local[g] = 1;
+      bad += (i && g <= Q->cglobal[i - 1]) || Q->cowner[i] != part[g] || l->cell_tag[i] != m->cell_tag[g];
+      for (int k = 0; k < m->nvc; k++) {
+        int lv = l->cells[i * m->nvc + k], gv = m->cells[g * m->nvc + k];
+        bad += Q->vglobal[lv] != gv || l->x[lv * 2] != m->x[gv * 2] || l->x[lv * 2 + 1] != m->x[gv * 2 + 1];
+      }
+      if (Q->cowner[i] == p) { owned[g]++; nown++; }
+    }
+    CHECK(l->ncell == expect && !bad && nown == Q->nown_cell, "part %d: %d cells (expected %d), %d mismatches", p, l->ncell, expect, bad);
+    for (int v = 0; v < l->nvert; v++) {
+      bad += (v && Q->vglobal[v] <= Q->vglobal[v - 1]) || Q->vowner[v] != vown[Q->vglobal[v]];
+      nvown += Q->vowner[v] == p;
+    }
+    CHECK(!bad, "part %d: vertex numbers and owners", p);
+    int want = 0;
+    for (int b = 0; b < m->nbf; b++) want += local[m->bf_cell[b]];
+    CHECK(l->nbf == want && l->nbname == m->nbname && (!l->nbf || btag(l, m->bnames[0].name) == m->bnames[0].tag),
+          "part %d: %d boundary facets (expected %d)", p, l->nbf, want);
+    nbf += l->nbf;
+    if (l->ncell) CHECK(mesh_build_boundary_cells(l) == 0, "%s", l->err);
+    free(mine);
+    free(local);
+    mesh_part_free(Q);
+  }
+  int once = 1;
+  for (int c = 0; c < m->ncell; c++) once &= owned[c] == 1;
+  CHECK(once && nvown == m->nvert, "every cell owned once, every vertex by one part (%d of %d)", nvown, m->nvert);
+  CHECK(nbf > m->nbf, "boundary facets near a cut are on both sides (%d > %d)", nbf, m->nbf);
+  free(owned);
+  free(part);
+  free(vown);
+  mesh_free(m);
+}
+
 /* reading from folders and pipes, writing names with quotes, and writes that fail */
 static void files(const char *data) {
   char err[MESH_ERRLEN], path[600], tmp[600];
@@ -120,6 +204,7 @@ static void files(const char *data) {
 int main(int argc, char **argv) {
   const char *data = argc > 1 ? argv[1] : "tests/data";
   pack(data);
+  parts(data);
   char err[MESH_ERRLEN], path[1024];
   mesh_box_opts o = {3, 2, 2, 0, 2, 0, 1, 0, 1, CELL_TRIANGLE, 0};
   for (int dg = 0; dg < 3; dg++) {

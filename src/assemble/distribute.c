@@ -1,0 +1,561 @@
+/* distribute.c — distributed meshes (-lugal_distribute under mpiexec): rank 0 cuts the
+ * whole mesh into one part per rank (lg_partition_cells) and sends each rank its part with
+ * one layer of ghost cells (mesh_part, src/mesh/part.c); the other ranks never hold the
+ * whole mesh. And the global numbering of a problem's nodes on such a mesh: each rank
+ * numbers the nodes it owns (a node goes to the part of most of its cells, as in a run on a
+ * whole mesh) and learns the numbers of its ghost nodes from their owners through a
+ * rendezvous on the nodes' keys (the global numbers of the vertices of the entity holding
+ * the node), with no rank holding anything of the whole size. */
+#include "problem_int.h"
+
+#include <petscsys.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+int lg_distribute_wanted(void) {
+  if (lg_mpi_size() < 2) return 0;
+  PetscBool on = PETSC_FALSE, set = PETSC_FALSE;
+  PetscOptionsGetBool(NULL, NULL, "-lugal_distribute", &on, &set);
+  return set && on;
+}
+
+long lg_mesh_global_cells(const lg_mesh *lm) { return lm->dist ? lm->dist->ncell_global : lm->m->ncell; }
+long lg_mesh_global_vertices(const lg_mesh *lm) { return lm->dist ? lm->dist->nvert_global : lm->m->nvert; }
+
+#define TAG_PART 7301
+
+/* rank 0: partition, then each part extracted, packed and sent in turn (one part in memory
+ * at a time besides the whole mesh) */
+static int send_parts(lg_env *env, mesh *m, mesh_part **mine) {
+  int size = lg_mpi_size(), runs = 0;
+  int *part = malloc(sizeof(int) * ((size_t)m->ncell + 1)), *vown = malloc(sizeof(int) * ((size_t)m->nvert + 1));
+  if (!part || !vown) { free(part); free(vown); lg_seterr(env, "out of memory for the partition of %d cells", m->ncell); return 1; }
+  int rc = lg_partition_cells(env, m, size, part, &runs);
+  if (rc == -1) { lg_mesh_vertex_runs(m, size, part); rc = 0; } /* too few cells for a partitioner */
+  if (!rc && mesh_vertex_owners(m, part, vown)) { lg_seterr(env, "out of memory for the vertices' owners"); rc = 1; }
+  for (int r = size - 1; r >= 0; r--) { /* rank 0's own part last: it is kept */
+    char err[MESH_ERRLEN] = "";
+    mesh_part *P = rc ? NULL : mesh_part_extract(m, part, vown, r, err);
+    char *buf = NULL;
+    size_t len = 0;
+    if (!rc && !P) { lg_seterr(env, "%s", err); rc = 1; }
+    if (!rc && r > 0 && mesh_part_pack(P, &buf, &len)) { lg_seterr(env, "out of memory packing part %d of the mesh", r + 1); rc = 1; }
+    if (r > 0) {
+      /* every other rank waits for its message: a failure sends an empty one */
+      if (rc) len = 0;
+      if (len > (size_t)INT32_MAX) { lg_seterr(env, "part %d of the mesh is over 2 GB packed", r + 1); rc = 1; len = 0; }
+      if (MPI_Send(buf, (int)len, MPI_BYTE, r, TAG_PART, PETSC_COMM_WORLD) != MPI_SUCCESS && !rc) {
+        lg_seterr(env, "sending part %d of the mesh failed", r + 1);
+        rc = 1;
+      }
+      free(buf);
+      mesh_part_free(P);
+    } else *mine = P;
+  }
+  free(part);
+  free(vown);
+  return rc;
+}
+
+static int recv_part(lg_env *env, mesh_part **mine) {
+  MPI_Status st;
+  int len = 0;
+  if (MPI_Probe(0, TAG_PART, PETSC_COMM_WORLD, &st) != MPI_SUCCESS || MPI_Get_count(&st, MPI_BYTE, &len) != MPI_SUCCESS) {
+    lg_seterr(env, "receiving this rank's part of the mesh failed");
+    return 1;
+  }
+  char *buf = malloc((size_t)len + 1);
+  if (!buf) return 1;
+  if (MPI_Recv(buf, len, MPI_BYTE, 0, TAG_PART, PETSC_COMM_WORLD, MPI_STATUS_IGNORE) != MPI_SUCCESS) len = 0;
+  char err[MESH_ERRLEN] = "rank 0 failed";
+  *mine = len ? mesh_part_unpack(buf, (size_t)len, err) : NULL;
+  free(buf);
+  if (!*mine) { lg_seterr(env, "this rank's part of the mesh: %s", err); return 1; }
+  return 0;
+}
+
+lg_mesh *lg_mesh_distribute(lg_env *env, mesh *whole) {
+  double t0 = now_ms();
+  int rank = lg_mpi_rank();
+  mesh_part *P = NULL;
+  int rc = rank == 0 ? send_parts(env, whole, &P) : recv_part(env, &P);
+  if (rank != 0) mesh_free(whole);
+  rc = lg_any_result(rc, env->err, sizeof env->err);
+  lg_mesh *lm = rc ? NULL : lg_mesh_wrap(P->m);
+  if (!rc && !lm) lg_seterr(env, "out of memory");
+  if (!lm) { mesh_part_free(P); if (rank == 0) mesh_free(whole); return NULL; }
+  if (rank == 0) mesh_free(whole);
+  lm->dist = P;
+  if (env->verbose) {
+    double own[2] = {P->nown_cell, P->m->ncell - P->nown_cell};
+    fprintf(stderr, "[lugal] distribute: rank %d holds %d cells (%.0f owned, %.0f ghosts) and %d vertices of %d, %.1f ms\n", rank,
+            P->m->ncell, own[0], own[1], P->m->nvert, P->nvert_global, now_ms() - t0);
+  }
+  return lm;
+}
+
+/* ---------------------------------------------------------------- a problem's nodes */
+
+#define KEYLEN 8 /* field, component, entity kind, place j, up to four global vertex numbers */
+
+/* the key of dof d of dof map dm on the part P: field 0, its component, the entity that
+ * holds its node and the node's place there, the entity's global vertex numbers sorted (a
+ * cell's: its global number) */
+static void dof_key(const mesh_part *P, const dofmap *dm, int d, int *key) {
+  const mesh *m = P->m;
+  int kind, id, j;
+  dofmap_dof_entity(dm, d / dm->bs, &kind, &id, &j);
+  for (int i = 0; i < KEYLEN; i++) key[i] = -1;
+  key[0] = 0;
+  key[1] = d % dm->bs;
+  key[2] = kind;
+  key[3] = j;
+  int nv = 0, v[4];
+  if (kind == 0) v[nv++] = P->vglobal[id];
+  else if (kind == 1) for (int i = 0; i < 2; i++) v[nv++] = P->vglobal[m->edges[2 * (size_t)id + (size_t)i]];
+  else if (kind == 2) for (int i = 0; i < m->nvf; i++) v[nv++] = P->vglobal[m->faces[(size_t)id * (size_t)m->nvf + (size_t)i]];
+  else v[nv++] = P->cglobal[id];
+  for (int i = 1; i < nv; i++) /* sorted: an entity is its vertex set */
+    for (int k = i; k > 0 && v[k] < v[k - 1]; k--) { int t = v[k]; v[k] = v[k - 1]; v[k - 1] = t; }
+  for (int i = 0; i < nv; i++) key[4 + i] = v[i];
+}
+
+/* the key of a problem's node n (B dofs): its first dof's in its field's map, with the
+ * field's number */
+static void node_key(const lg_problem *p, int n, int B, int *key) {
+  int dof = n * B, a = 0;
+  while (a + 1 < p->cols.n && dof >= p->cglob[a + 1]) a++;
+  dof_key(p->lm->dist, p->cdm[a], dof - p->cglob[a], key);
+  key[0] = a;
+}
+
+static int key_rank(const int *key, int size) {
+  uint64_t h = 1469598103934665603ull;
+  for (int i = 0; i < KEYLEN; i++) { h ^= (uint32_t)key[i]; h *= 1099511628211ull; h ^= h >> 29; }
+  return (int)(h % (uint64_t)size);
+}
+
+static int cmp_key(const void *a, const void *b) {
+  const int *x = a, *y = b;
+  for (int i = 0; i < KEYLEN; i++)
+    if (x[i] != y[i]) return x[i] < y[i] ? -1 : 1;
+  return 0;
+}
+
+/* an all-to-all of records of w ints: send[] holds cnt[r] records for rank r one rank after
+ * another; returns the received records (*nrecv of them, from rank 0 up, rcnt[r] each) */
+static int *exchange(const int *send, const int *cnt, int w, int *rcnt, int *nrecv) {
+  int size = lg_mpi_size();
+  int *sc = malloc(sizeof(int) * 4 * (size_t)size);
+  if (!sc) return NULL;
+  int *sd = sc + size, *rc = sd + size, *rd = rc + size;
+  if (MPI_Alltoall((void *)cnt, 1, MPI_INT, rcnt, 1, MPI_INT, PETSC_COMM_WORLD) != MPI_SUCCESS) { free(sc); return NULL; }
+  long st = 0, rt = 0;
+  for (int r = 0; r < size; r++) {
+    sc[r] = cnt[r] * w; sd[r] = (int)st; st += sc[r];
+    rc[r] = rcnt[r] * w; rd[r] = (int)rt; rt += rc[r];
+  }
+  int *recv = st > INT32_MAX || rt > INT32_MAX ? NULL : malloc(sizeof(int) * ((size_t)rt + 1));
+  if (recv && MPI_Alltoallv((void *)send, sc, sd, MPI_INT, recv, rc, rd, MPI_INT, PETSC_COMM_WORLD) != MPI_SUCCESS) {
+    free(recv);
+    recv = NULL;
+  }
+  free(sc);
+  *nrecv = (int)(rt / w);
+  return recv;
+}
+
+/* records of w ints sorted by destination rank: counts per rank, then places */
+typedef struct {
+  int w, n, *rank, *data;
+} outbox;
+
+static int outbox_sort(outbox *o, int size, int *cnt, int **sorted) {
+  int *at = calloc((size_t)size + 1, sizeof(int));
+  *sorted = malloc(sizeof(int) * ((size_t)o->n * (size_t)o->w + 1));
+  if (!at || !*sorted) { free(at); free(*sorted); *sorted = NULL; return 1; }
+  for (int r = 0; r < size; r++) cnt[r] = 0;
+  for (int i = 0; i < o->n; i++) cnt[o->rank[i]]++;
+  for (int r = 1; r < size; r++) at[r] = at[r - 1] + cnt[r - 1];
+  for (int i = 0; i < o->n; i++)
+    memcpy(*sorted + (size_t)at[o->rank[i]]++ * (size_t)o->w, o->data + (size_t)i * (size_t)o->w, sizeof(int) * (size_t)o->w);
+  free(at);
+  return 0;
+}
+
+int lg_dist_number_nodes(lg_env *env, lg_problem *p, int B) {
+  double t0 = now_ms();
+  const mesh_part *P = p->lm->dist;
+  const mesh *m = P->m;
+  int rank = lg_mpi_rank(), size = lg_mpi_size(), Nn = p->N / B;
+  int *owner = malloc(sizeof(int) * ((size_t)Nn + 1)), *cnt = calloc((size_t)Nn + 1, sizeof(int));
+  char *shared = calloc((size_t)Nn + 1, 1), *ivert = calloc((size_t)m->nvert + 1, 1);
+  int bad = !owner || !cnt || !shared || !ivert;
+  /* each node to the part of most of its cells (Boyer-Moore's vote in the whole mesh's cell
+   * order, as set_ownership does on a whole mesh): exact for the nodes of owned cells, whose
+   * cells are all here; a node of ghost cells only is another rank's whatever the vote says */
+  for (int i = 0; !bad && i < Nn; i++) owner[i] = -1;
+  for (int a = 0; !bad && a < p->cols.n; a++) {
+    const dofmap *dm = p->cdm[a];
+    for (int c = 0; c < m->ncell; c++)
+      for (int k = 0; k < dm->nloc; k += B) {
+        int node = (p->cglob[a] + dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k]) / B;
+        if (!cnt[node]) { owner[node] = P->cowner[c]; cnt[node] = 1; }
+        else cnt[node] += owner[node] == P->cowner[c] ? 1 : -1;
+      }
+  }
+  free(cnt);
+  /* the owned nodes another rank may hold: those of owned cells with a vertex in a cell of
+   * another part (a rank holding an owned node holds a cell through it, which shares a
+   * vertex with an owned cell of it, or is one) */
+  for (int c = 0; !bad && c < m->ncell; c++)
+    if (P->cowner[c] != rank)
+      for (int k = 0; k < m->nvc; k++) ivert[m->cells[(size_t)c * (size_t)m->nvc + (size_t)k]] = 1;
+  for (int c = 0; !bad && c < m->ncell; c++) {
+    if (P->cowner[c] != rank) continue;
+    int touch = 0;
+    for (int k = 0; k < m->nvc; k++) touch |= ivert[m->cells[(size_t)c * (size_t)m->nvc + (size_t)k]];
+    if (!touch) continue;
+    for (int a = 0; a < p->cols.n; a++) {
+      const dofmap *dm = p->cdm[a];
+      for (int k = 0; k < dm->nloc; k += B) shared[(p->cglob[a] + dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k]) / B] = 1;
+    }
+  }
+  free(ivert);
+  /* the owned nodes numbered in the local order after the lower ranks' */
+  int nown = 0, nreg = 0, nask = 0;
+  for (int i = 0; !bad && i < Nn; i++) {
+    nown += owner[i] == rank;
+    nreg += owner[i] == rank && shared[i];
+    nask += owner[i] != rank;
+  }
+  int first = 0, total = 0; /* every rank reduces, failed or not */
+  MPI_Exscan(&nown, &first, 1, MPI_INT, MPI_SUM, PETSC_COMM_WORLD);
+  if (rank == 0) first = 0;
+  MPI_Allreduce(&nown, &total, 1, MPI_INT, MPI_SUM, PETSC_COMM_WORLD);
+  p->perm = malloc(sizeof(int) * ((size_t)Nn + 1));
+  p->iperm = malloc(sizeof(int) * ((size_t)nown + 1));
+  outbox reg = {KEYLEN + 1, 0, malloc(sizeof(int) * ((size_t)nreg + 1)), malloc(sizeof(int) * (KEYLEN + 1) * ((size_t)nreg + 1))};
+  outbox ask = {KEYLEN, 0, malloc(sizeof(int) * ((size_t)nask + 1)), malloc(sizeof(int) * KEYLEN * ((size_t)nask + 1))};
+  int *askn = malloc(sizeof(int) * ((size_t)nask + 1)); /* the node of each question, in the order asked */
+  bad |= !p->perm || !p->iperm || !reg.rank || !reg.data || !ask.rank || !ask.data || !askn;
+  for (int i = 0, k = 0; !bad && i < Nn; i++) {
+    if (owner[i] == rank) {
+      p->perm[i] = first + k;
+      p->iperm[k++] = i;
+      if (!shared[i]) continue;
+      int *r = reg.data + (size_t)reg.n * (KEYLEN + 1);
+      node_key(p, i, B, r);
+      r[KEYLEN] = p->perm[i];
+      reg.rank[reg.n++] = key_rank(r, size);
+    } else {
+      p->perm[i] = -1;
+      int *q = ask.data + (size_t)ask.n * KEYLEN;
+      node_key(p, i, B, q);
+      askn[ask.n] = i;
+      ask.rank[ask.n++] = key_rank(q, size);
+    }
+  }
+  free(owner);
+  free(shared);
+  /* the rendezvous: registrations and questions go to the rank of the key's hash, which
+   * answers each question from the registrations */
+  int *cnt1 = malloc(sizeof(int) * 4 * (size_t)size), *sreg = NULL, *sask = NULL, *dir = NULL, *qs = NULL, *ans = NULL, *back = NULL;
+  int ndir = 0, nq = 0, nback = 0, lost = 0;
+  bad |= !cnt1;
+  int *rcnt1 = cnt1 + size, *cnt2 = rcnt1 + size, *rcnt2 = cnt2 + size;
+  /* every rank takes part in every exchange, a failed one with empty messages */
+  if (bad || outbox_sort(&reg, size, cnt1, &sreg)) { bad = 1; if (cnt1) memset(cnt1, 0, sizeof(int) * (size_t)size); }
+  dir = cnt1 ? exchange(sreg, cnt1, KEYLEN + 1, rcnt1, &ndir) : NULL;
+  if (!dir) bad = 1;
+  if (bad || outbox_sort(&ask, size, cnt2, &sask)) { bad = 1; if (cnt1) memset(cnt2, 0, sizeof(int) * (size_t)size); }
+  qs = cnt1 ? exchange(sask, cnt2, KEYLEN, rcnt2, &nq) : NULL;
+  if (!qs) bad = 1;
+  if (!bad) {
+    qsort(dir, (size_t)ndir, sizeof(int) * (KEYLEN + 1), cmp_key);
+    ans = malloc(sizeof(int) * ((size_t)nq + 1));
+    bad = !ans;
+    for (int i = 0; !bad && i < nq; i++) {
+      const int *f = bsearch(qs + (size_t)i * KEYLEN, dir, (size_t)ndir, sizeof(int) * (KEYLEN + 1), cmp_key);
+      ans[i] = f ? f[KEYLEN] : -1;
+    }
+  }
+  /* the answers go back in the order asked, rank by rank (rcnt2 of them to each) */
+  if (bad && cnt1) memset(rcnt2, 0, sizeof(int) * (size_t)size);
+  back = cnt1 ? exchange(ans, rcnt2, 1, cnt2, &nback) : NULL;
+  if (!back) bad = 1;
+  if (!bad) {
+    /* the questions were sent sorted by rank, stably: the same order here */
+    int *at = calloc((size_t)size + 1, sizeof(int));
+    if (!at) bad = 1;
+    for (int r = 1; !bad && r < size; r++) at[r] = at[r - 1] + cnt2[r - 1];
+    for (int i = 0; !bad && i < ask.n; i++) {
+      int g = back[at[ask.rank[i]]++];
+      p->perm[askn[i]] = g;
+      lost += g < 0;
+    }
+    free(at);
+  }
+  free(cnt1); free(sreg); free(sask); free(dir); free(qs); free(ans); free(back);
+  free(reg.rank); free(reg.data); free(ask.rank); free(ask.data); free(askn);
+  int fail[2] = {bad, lost}, any[2];
+  MPI_Allreduce(fail, any, 2, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
+  if (any[0] || any[1]) {
+    if (any[1]) lg_seterr(env, "the global numbering of a distributed problem's nodes failed: a ghost node without an owner");
+    else lg_seterr(env, "out of memory numbering the nodes of a distributed problem");
+    return 1;
+  }
+  p->lo = first * B;
+  p->hi = (first + nown) * B;
+  p->Nglob = total * B;
+  p->ioff = first;
+  if (env->verbose && rank == 0)
+    fprintf(stderr, "[lugal] distributed nodes: %d in all, numbered in %.1f ms\n", total, now_ms() - t0);
+  return 0;
+}
+
+/* ---------------------------------------------------------------- gathering for output */
+
+/* rank 0 receives every rank's count items of w values of type t (send: this rank's),
+ * into recv (the ranks one after another); counts are this rank's numbers of items */
+static int gatherv(const void *send, int count, int w, MPI_Datatype t, void *recv, const int *counts, int size) {
+  int *rc = NULL, *rd = NULL;
+  if (lg_mpi_rank() == 0) {
+    rc = malloc(sizeof(int) * 2 * (size_t)size);
+    if (!rc) return 1;
+    rd = rc + size;
+    long at = 0;
+    for (int r = 0; r < size; r++) { rc[r] = counts[r] * w; rd[r] = (int)at; at += rc[r]; }
+  }
+  int bad = MPI_Gatherv((void *)send, count * w, t, recv, rc, rd, t, 0, PETSC_COMM_WORLD) != MPI_SUCCESS;
+  free(rc);
+  return bad;
+}
+
+int lg_dist_gather(lg_env *env, lg_mesh *lm, int nf, const mesh_field *fl, mesh **whole, double ***vals) {
+  const mesh_part *P = lm->dist;
+  const mesh *m = P->m;
+  int rank = lg_mpi_rank(), size = lg_mpi_size(), dim = m->dim, nvc = m->nvc;
+  *whole = NULL;
+  *vals = NULL;
+  int nc = 0, nv = 0;
+  for (int c = 0; c < m->ncell; c++) nc += P->cowner[c] == rank;
+  for (int v = 0; v < m->nvert; v++) nv += P->vowner[v] == rank;
+  int cnt[2] = {nc, nv}, *all = rank == 0 ? malloc(sizeof(int) * 2 * (size_t)size + 2) : NULL;
+  int *cg = malloc(sizeof(int) * ((size_t)nc * (size_t)(nvc + 2) + 1)), *vg = malloc(sizeof(int) * ((size_t)nv + 1));
+  double *vx = malloc(sizeof(double) * ((size_t)nv * (size_t)dim + 1));
+  double *fv = malloc(sizeof(double) * 3 * ((size_t)(nc > nv ? nc : nv) + 1));
+  int bad = !cg || !vg || !vx || !fv || (rank == 0 && !all);
+  /* this rank's owned cells: global number, tag, global vertices; its owned vertices */
+  for (int c = 0, k = 0; !bad && c < m->ncell; c++)
+    if (P->cowner[c] == rank) {
+      int *o = cg + (size_t)k++ * (size_t)(nvc + 2);
+      o[0] = P->cglobal[c];
+      o[1] = m->cell_tag[c];
+      for (int j = 0; j < nvc; j++) o[2 + j] = P->vglobal[m->cells[(size_t)c * (size_t)nvc + (size_t)j]];
+    }
+  for (int v = 0, k = 0; !bad && v < m->nvert; v++)
+    if (P->vowner[v] == rank) {
+      vg[k] = P->vglobal[v];
+      memcpy(vx + (size_t)k++ * (size_t)dim, m->x + (size_t)v * (size_t)dim, sizeof(double) * (size_t)dim);
+    }
+  int anybad = 0;
+  MPI_Allreduce(&bad, &anybad, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
+  if (anybad) goto oom;
+  if (MPI_Gather(cnt, 2, MPI_INT, all, 2, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) goto oom;
+  int *cc = NULL, *vc = NULL, *rcg = NULL, *rvg = NULL;
+  double *rvx = NULL, *rf = NULL;
+  long NC = P->ncell_global, NV = P->nvert_global;
+  if (rank == 0) {
+    /* the (cells, vertices) pairs rearranged: every cell count, then every vertex count */
+    int tmp[2 * 64], *t = size <= 64 ? tmp : malloc(sizeof(int) * 2 * (size_t)size);
+    if (!t) bad = 1;
+    for (int r = 0; !bad && r < size; r++) { t[r] = all[2 * r]; t[size + r] = all[2 * r + 1]; }
+    if (!bad) memcpy(all, t, sizeof(int) * 2 * (size_t)size);
+    if (t != tmp) free(t);
+    cc = all;
+    vc = all + size;
+    rcg = malloc(sizeof(int) * ((size_t)NC * (size_t)(nvc + 2) + 1));
+    rvg = malloc(sizeof(int) * ((size_t)NV + 1));
+    rvx = malloc(sizeof(double) * ((size_t)NV * (size_t)dim + 1));
+    rf = malloc(sizeof(double) * 3 * ((size_t)(NC > NV ? NC : NV) + 1));
+    *vals = calloc((size_t)nf + 1, sizeof(double *));
+    bad |= !rcg || !rvg || !rvx || !rf || !*vals;
+  }
+  /* the root's failure stops everyone before the gathers */
+  if (MPI_Bcast(&bad, 1, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) bad = 1;
+  if (bad) goto fail;
+  bad = gatherv(cg, nc, nvc + 2, MPI_INT, rcg, cc, size) || gatherv(vg, nv, 1, MPI_INT, rvg, vc, size) ||
+        gatherv(vx, nv, dim, MPI_DOUBLE, rvx, vc, size);
+  mesh *W = NULL;
+  char err[MESH_ERRLEN];
+  if (rank == 0 && !bad) {
+    int *cells = malloc(sizeof(int) * ((size_t)NC * (size_t)nvc + 1));
+    double *x = malloc(sizeof(double) * ((size_t)NV * (size_t)dim + 1));
+    if (cells && x) {
+      for (long k = 0; k < NC; k++) {
+        const int *o = rcg + (size_t)k * (size_t)(nvc + 2);
+        memcpy(cells + (size_t)o[0] * (size_t)nvc, o + 2, sizeof(int) * (size_t)nvc);
+      }
+      for (long k = 0; k < NV; k++) memcpy(x + (size_t)rvg[k] * (size_t)dim, rvx + (size_t)k * (size_t)dim, sizeof(double) * (size_t)dim);
+      W = mesh_create(m->type, (int)NV, x, (int)NC, cells, err);
+      if (W)
+        for (long k = 0; k < NC; k++) W->cell_tag[rcg[(size_t)k * (size_t)(nvc + 2)]] = rcg[(size_t)k * (size_t)(nvc + 2) + 1];
+    }
+    free(cells);
+    free(x);
+    if (!W) bad = 1;
+  }
+  /* each field: the owned cells' or vertices' values, placed by global number */
+  for (int f = 0; f < nf && !bad; f++) {
+    int oc = fl[f].on_cells, w = fl[f].ncomp;
+    for (int i = 0, k = 0; i < (oc ? m->ncell : m->nvert); i++)
+      if ((oc ? P->cowner[i] : P->vowner[i]) == rank) memcpy(fv + (size_t)k++ * (size_t)w, fl[f].val + (size_t)i * (size_t)w, sizeof(double) * (size_t)w);
+    bad = gatherv(fv, oc ? nc : nv, w, MPI_DOUBLE, rf, oc ? cc : vc, size);
+    if (rank == 0 && !bad) {
+      long n = oc ? NC : NV;
+      double *d = malloc(sizeof(double) * ((size_t)n * (size_t)w + 1));
+      if (!d) { bad = 1; break; }
+      for (long k = 0; k < n; k++) {
+        long g = oc ? rcg[(size_t)k * (size_t)(nvc + 2)] : rvg[k];
+        memcpy(d + (size_t)g * (size_t)w, rf + (size_t)k * (size_t)w, sizeof(double) * (size_t)w);
+      }
+      (*vals)[f] = d;
+    }
+  }
+  free(rcg); free(rvg); free(rvx); free(rf);
+  free(cg); free(vg); free(vx); free(fv); free(all);
+  if (rank == 0 && bad) {
+    mesh_free(W);
+    for (int f = 0; *vals && f < nf; f++) free((*vals)[f]);
+    free(*vals);
+    *vals = NULL;
+    lg_seterr(env, "gathering the distributed mesh on rank 0 failed (out of memory)");
+    return 1;
+  }
+  *whole = W;
+  return 0;
+fail:
+  free(rcg); free(rvg); free(rvx); free(rf);
+  if (rank == 0 && *vals) free(*vals);
+  *vals = NULL;
+oom:
+  free(cg); free(vg); free(vx); free(fv); free(all);
+  lg_seterr(env, "out of memory gathering the distributed mesh on rank 0");
+  return 1;
+}
+
+/* ---------------------------------------------------------------- discrete functions */
+
+/* the dofs of dm this rank owns (own[d] = 1): a node goes to the part of most of its cells,
+ * as a problem's do */
+static int owned_dofs(const lg_mesh *lm, const dofmap *dm, char *own) {
+  const mesh_part *P = lm->dist;
+  int rank = lg_mpi_rank(), bs = dm->bs, nn = dm->ndof / bs;
+  int *owner = malloc(sizeof(int) * ((size_t)nn + 1)), *cnt = calloc((size_t)nn + 1, sizeof(int));
+  if (!owner || !cnt) { free(owner); free(cnt); return 1; }
+  for (int i = 0; i < nn; i++) owner[i] = -1; /* a tie leaves the count at 0, not the owner */
+  for (int c = 0; c < P->m->ncell; c++)
+    for (int k = 0; k < dm->nloc; k += bs) {
+      int node = dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k] / bs;
+      if (!cnt[node]) { owner[node] = P->cowner[c]; cnt[node] = 1; }
+      else cnt[node] += owner[node] == P->cowner[c] ? 1 : -1;
+    }
+  for (int d = 0; d < dm->ndof; d++) own[d] = owner[d / bs] == rank;
+  free(owner);
+  free(cnt);
+  return 0;
+}
+
+long lg_function_global_ndof(lg_env *env, const lg_function *f) {
+  const dofmap *dm = f->dm;
+  if (!f->mesh->dist) return dm->ndof;
+  char *own = malloc((size_t)dm->ndof + 1);
+  int bad = !own || owned_dofs(f->mesh, dm, own);
+  double n = 0;
+  for (int d = 0; !bad && d < dm->ndof; d++) n += own[d];
+  double v[2] = {n, bad};
+  free(own);
+  if (lg_allreduce(v, 2, LG_SUM) || v[1]) { lg_seterr(env, "counting the dofs of a distributed function failed"); return -1; }
+  return (long)v[0];
+}
+
+/* a dof's place in the whole function's order: entity kind, its global vertices (or cell),
+ * the node's place on it, the component; and its value or coordinates */
+typedef struct {
+  int k[7];
+  double v[3];
+} dof_rec;
+
+static int cmp_rec(const void *a, const void *b) {
+  const int *x = ((const dof_rec *)a)->k, *y = ((const dof_rec *)b)->k;
+  for (int i = 0; i < 7; i++)
+    if (x[i] != y[i]) return x[i] < y[i] ? -1 : 1;
+  return 0;
+}
+
+int lg_function_gather(lg_env *env, const lg_function *f, int coords, double **out, long *n) {
+  const dofmap *dm = f->dm;
+  const mesh *m = dm->m;
+  int size = lg_mpi_size(), dim = m->dim;
+  *out = NULL;
+  *n = 0;
+  char *own = malloc((size_t)dm->ndof + 1);
+  double *xc = coords ? malloc(sizeof(double) * 3 * ((size_t)dm->ndof + 1)) : NULL;
+  int bad = !own || (coords && !xc) || owned_dofs(f->mesh, dm, own), nown = 0;
+  for (int d = 0; !bad && d < dm->ndof; d++) nown += own[d];
+  if (!bad && coords) /* each dof's node coordinates, from its first cell */
+    for (int c = 0; c < m->ncell; c++)
+      for (int k = 0; k < dm->nloc; k++) dofmap_node_coords(dm, c, k, xc + 3 * (size_t)dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k]);
+  dof_rec *mine = malloc(sizeof(dof_rec) * ((size_t)nown + 1));
+  bad |= !mine;
+  for (int d = 0, i = 0; !bad && d < dm->ndof; d++) {
+    if (!own[d]) continue;
+    int key[KEYLEN];
+    dof_key(f->mesh->dist, dm, d, key);
+    dof_rec *r = mine + i++;
+    r->k[0] = key[2];
+    memcpy(r->k + 1, key + 4, sizeof(int) * 4);
+    r->k[5] = key[3];
+    r->k[6] = key[1];
+    memset(r->v, 0, sizeof r->v);
+    if (coords) memcpy(r->v, xc + 3 * (size_t)d, sizeof(double) * (size_t)dim);
+    else r->v[0] = f->x[d];
+  }
+  free(own);
+  free(xc);
+  int *cnt = malloc(sizeof(int) * 2 * ((size_t)size + 1)), any = 0;
+  bad |= !cnt;
+  MPI_Allreduce(&bad, &any, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
+  long total = 0;
+  dof_rec *all = NULL;
+  if (!any) {
+    int *dsp = cnt + size, bytes = nown * (int)sizeof(dof_rec);
+    if (MPI_Allgather(&bytes, 1, MPI_INT, cnt, 1, MPI_INT, PETSC_COMM_WORLD) != MPI_SUCCESS) bytes = 0;
+    long at = 0;
+    for (int r = 0; r < size; r++) { dsp[r] = (int)at; at += cnt[r]; }
+    total = at / (long)sizeof(dof_rec);
+    all = at > INT32_MAX ? NULL : malloc((size_t)at + 1);
+    int none = all == NULL, anynone = 0;
+    MPI_Allreduce(&none, &anynone, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
+    if (anynone || MPI_Allgatherv(mine, bytes, MPI_BYTE, all, cnt, dsp, MPI_BYTE, PETSC_COMM_WORLD) != MPI_SUCCESS) any = 1;
+  }
+  free(mine);
+  free(cnt);
+  if (any) {
+    free(all);
+    lg_seterr(env, "gathering a distributed function's values failed (out of memory, or more than 2 GB of them)");
+    return 1;
+  }
+  qsort(all, (size_t)total, sizeof(dof_rec), cmp_rec);
+  int w = coords ? dim : 1;
+  double *o = malloc(sizeof(double) * ((size_t)total * (size_t)w + 1));
+  if (!o) { free(all); lg_seterr(env, "out of memory for %ld values", total); return 1; }
+  for (long i = 0; i < total; i++) memcpy(o + (size_t)i * (size_t)w, all[i].v, sizeof(double) * (size_t)w);
+  free(all);
+  *out = o;
+  *n = total;
+  return 0;
+}

@@ -1,0 +1,125 @@
+-- mpi_dist.lua — quantities that a run on a distributed mesh (mpiexec -n N with
+-- -lugal_distribute: each rank holds its part of the mesh and a ghost layer) must give as
+-- the serial run on the whole mesh does; tests/sh/test_mpi_dist.sh runs it serially and on
+-- 2 and 3 ranks and compares. Each line: name, tolerance class (direct: 1e-10 relative;
+-- iter: iterative solvers, 1e-8; count: integers within 1), value (%.17g).
+local lg = require "lugal"
+local x, y, z, pi = lg.x, lg.y, lg.z, math.pi
+local function out(name, class, v) print(string.format("%s %s %.17g", name, class, v)) end
+local function sum(t) local s = 0 for _, v in ipairs(t) do s = s + v end return s end
+
+-- the 2D Poisson demo: P1 and P2, direct solves, error norms; the whole counts
+for _, p in ipairs{1, 2} do
+  local mesh = lg.mesh.rectangle{nx = 24}
+  local V = lg.lagrange(p)
+  local u, v = lg.unknown(V, "u"), lg.test(V, "v")
+  local exact = lg.sin(pi*x)*lg.sin(pi*y)
+  local prob = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) - 2*pi^2*exact*v),
+                                 bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}
+  local uh = prob:solve()
+  local e = uh - exact
+  out("poisson_P" .. p .. "_L2", "direct", math.sqrt(lg.integrate(mesh, e^2)))
+  out("poisson_P" .. p .. "_H1", "direct", math.sqrt(lg.integrate(mesh, lg.dot(lg.grad(e), lg.grad(e)))))
+  out("poisson_P" .. p .. "_ndof", "count", uh:ndof())
+  out("poisson_P" .. p .. "_size", "count", prob:size())
+  -- the values over the whole mesh, whatever the order (P2's edges are ordered by their
+  -- vertices' global numbers, not by the whole mesh's edge numbering)
+  local vals = uh:values()
+  out("poisson_P" .. p .. "_nvalues", "count", #vals)
+  out("poisson_P" .. p .. "_sum", "direct", sum(vals))
+  out("poisson_P" .. p .. "_max", "direct", math.max(table.unpack(vals)))
+  local xy, s = uh:dof_coordinates(), 0
+  for i, c in ipairs(xy) do s = s + c[1] * vals[i] + c[2]^2 * vals[i] end
+  out("poisson_P" .. p .. "_moments", "direct", s)
+  local at = uh:eval{{0.3, 0.7}, {0.5, 0.5}}
+  out("poisson_P" .. p .. "_eval", "direct", at[1] + 2 * at[2])
+  out("boundary_integral_P" .. p, "direct", lg.integrate(mesh:boundary("left", "top"), lg.dot(lg.grad(uh), lg.grad(uh))))
+  out("interior_facets_P" .. p, "direct", lg.integrate(mesh:interior_facets(), lg.avg(uh)^2))
+  if p == 1 then
+    out("cells", "count", mesh:ncells())
+    out("vertices", "count", mesh:nvertices())
+    mesh:write(arg[1] .. "/poisson.vtu", {u = uh})
+    local id = {}
+    for i = 1, mesh:ncells() do id[i] = i end
+    mesh:write(arg[1] .. "/poisson.pvtu", {u = uh, id = id}, {format = "ascii"})
+  end
+end
+
+-- Bratu, Newton to a tight tolerance
+do
+  local mesh = lg.mesh.rectangle{nx = 16}
+  local P1 = lg.lagrange(1)
+  local u, v = lg.unknown(P1, "ub"), lg.test(P1, "vb")
+  local prob = lg.nonlinear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(u), lg.grad(v)) - 3*lg.exp(u)*v),
+                                    bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u, prefix = "bratu_"}
+  lg.options("-bratu_snes_rtol 1e-14 -bratu_snes_atol 1e-13")
+  local uh, info = prob:solve()
+  out("bratu_norm", "iter", math.sqrt(lg.integrate(mesh, uh*uh)))
+  out("bratu_newton", "count", info.iterations)
+end
+
+-- heat: a backward Euler loop, the previous step a discrete function (interpolated, then
+-- assigned from each solution), on quadrilaterals
+do
+  local mesh = lg.mesh.rectangle{nx = 16, cell = "quadrilateral"}
+  local Q = lg.lagrange(1)
+  local u, v = lg.unknown(Q, "uh_"), lg.test(Q, "vh_")
+  local uold = lg.interpolate(Q, mesh, lg.sin(pi*x)*lg.sin(pi*y), "uold")
+  local dt = 0.01
+  local prob = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), (u - uold)*v + dt*lg.dot(lg.grad(u), lg.grad(v))),
+                                 bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}
+  for _ = 1, 5 do local s = prob:solve(); uold:assign(s) end
+  out("heat_norm", "direct", math.sqrt(lg.integrate(mesh, uold*uold)))
+end
+
+-- Taylor-Hood Stokes with the pressure pinned by a boundary condition at a corner (a
+-- mixed system of two fields with different degrees)
+do
+  local mesh = lg.mesh.rectangle{nx = 12}
+  local V, Q = lg.vector(lg.lagrange(2)), lg.lagrange(1)
+  local u, p = lg.unknown(V, "us"), lg.unknown(Q, "ps")
+  local v, q = lg.test(V, "vs"), lg.test(Q, "qs")
+  local eqn = lg.integral(mesh:cells(), lg.inner(lg.grad(u), lg.grad(v)) - p*lg.div(v) - q*lg.div(u))
+  local bc = {lg.essential_bc(mesh:boundary("left", "right", "bottom"), lg.dot(v, u)),
+              lg.essential_bc(mesh:boundary("top"), lg.dot(v, u - {16*x^2*(1 - x)^2, 0})),
+              lg.essential_bc(mesh:vertices{near = {0.52, 0.49}}, q*(p - 0.25))}
+  local uh, ph = lg.linear_problem{mesh = mesh, eqn = eqn, bc = bc, test = {v, q}, unknown = {u, p}}:solve()
+  out("stokes_energy", "direct", 0.5*lg.integrate(mesh, lg.dot(uh, uh)))
+  out("stokes_divergence", "direct", lg.integrate(mesh, lg.div(uh)^2))
+  out("stokes_pressure", "direct", lg.integrate(mesh, ph))
+end
+
+-- vector P2 elasticity on tetrahedra with CG + GAMG (the rigid body modes), a tight tolerance
+do
+  local mesh = lg.mesh.box{nx = 4, ny = 2, nz = 2, x1 = 2}
+  local V = lg.vector(lg.lagrange(2), 3)
+  local u, v = lg.unknown(V, "ue"), lg.test(V, "ve")
+  local function eps(w) return lg.sym(lg.grad(w)) end
+  local a = lg.integral(mesh:cells(), 2*lg.inner(eps(u), eps(v)) + lg.div(u)*lg.div(v) - lg.dot({0, 0, -0.01}, v))
+  local prob = lg.linear_problem{mesh = mesh, eqn = a, bc = lg.essential_bc(mesh:boundary("left"), lg.dot(v, u)),
+                                 test = v, unknown = u, prefix = "el_", symmetric = true}
+  lg.options("-el_ksp_type cg -el_pc_type gamg -el_ksp_rtol 1e-11")
+  local uh = prob:solve()
+  out("elasticity_norm", "iter", math.sqrt(lg.integrate(mesh, lg.dot(uh, uh))))
+  out("elasticity_ndof", "count", uh:ndof())
+end
+
+-- P3 on tetrahedra (face nodes) and a mesh read from a file (rank 0 reads, each rank
+-- receives its part only)
+do
+  local mesh = lg.mesh.box{nx = 2}
+  local V = lg.lagrange(3)
+  local u, v = lg.unknown(V, "u3"), lg.test(V, "v3")
+  local exact = lg.sin(x + 2*y + 3*z)
+  local uh = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) + u*v - 15*exact*v),
+                               bc = lg.essential_bc(mesh:boundary(), v*(u - exact)), test = v, unknown = u}:solve()
+  out("p3_tet_L2", "direct", math.sqrt(lg.integrate(mesh, (uh - exact)^2)))
+  out("p3_tet_ndof", "count", uh:ndof())
+  local read = lg.mesh.read(arg[2] .. "/examples/domain.msh")
+  local P1 = lg.lagrange(1)
+  local w, t = lg.unknown(P1, "wr"), lg.test(P1, "tr")
+  local wh = lg.linear_problem{mesh = read, eqn = lg.integral(read:cells(), lg.dot(lg.grad(t), lg.grad(w)) - t),
+                               bc = lg.essential_bc(read:boundary(), t*w), test = t, unknown = w}:solve()
+  out("read_integral", "direct", lg.integrate(read, wh))
+  out("read_cells", "count", read:ncells())
+end

@@ -95,8 +95,8 @@ int lg_mesh_check(lg_env *env, lg_mesh *lm) {
   if (n) {
     char list[128] = "";
     size_t used = 0;
-    for (int i = 0; i < n && i < 5; i++)
-      used += (size_t)snprintf(list + used, sizeof list - used, "%s%d", i ? ", " : "", ids[i] + 1);
+    for (int i = 0; i < n && i < 5; i++) /* a distributed mesh's cells by their global numbers */
+      used += (size_t)snprintf(list + used, sizeof list - used, "%s%d", i ? ", " : "", (lm->dist ? lm->dist->cglobal[ids[i]] : ids[i]) + 1);
     lg_seterr(env, "the mesh has %d inverted or zero-size cell%s (cell%s %s%s); assembly needs "
                    "every cell positively oriented: repair it with mesh:untangle()",
               n, n == 1 ? "" : "s", n == 1 ? "" : "s", list, n > 5 ? ", ..." : "");

@@ -7,6 +7,7 @@
 
 #include "../expr/expr.h"
 #include "../mesh/mesh.h"
+#include "../mesh/quality.h"
 #include "fem.h"
 #include "kernel.h"
 
@@ -104,6 +105,14 @@ long lg_function_global_ndof(lg_env *env, const lg_function *f);
  * cells by their sorted global vertices), the node's place there, the component. For P1
  * and Q1 fields that is the whole mesh's own dof order. Collective; *out malloc'ed */
 int lg_function_gather(lg_env *env, const lg_function *f, int coords, double **out, long *n);
+/* per-cell values of a distributed mesh, each rank's n values v of its cells with global
+ * numbers gid (collective): all ncell of them in the global order on every rank (NaN where
+ * none came); their statistics as quality_stats_compute gives them on the whole mesh
+ * (argmin/argmax global cells, quality.h); the k worst (quality_worst) into gids and vals,
+ * returning how many (-1 on failure) */
+int lg_dist_cell_values(lg_env *env, const double *v, const int *gid, int n, long ncell, double *out);
+int lg_dist_stats(lg_env *env, const double *v, const int *gid, int n, quality_stats *st);
+int lg_dist_worst(lg_env *env, const double *v, const int *gid, int n, int k, int larger_is_better, int *gids, double *vals);
 /* the number of owned cells / vertices summed over the ranks (the whole mesh's counts) */
 long lg_mesh_global_cells(const lg_mesh *lm);
 long lg_mesh_global_vertices(const lg_mesh *lm);

@@ -8,6 +8,7 @@
  * the node), with no rank holding anything of the whole size. */
 #include "problem_int.h"
 
+#include <math.h>
 #include <petscsys.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -558,4 +559,103 @@ int lg_function_gather(lg_env *env, const lg_function *f, int coords, double **o
   *out = o;
   *n = total;
   return 0;
+}
+
+/* ---------------------------------------------------------------- per-cell values */
+
+/* every rank's n values v of cells with global numbers gid: all of them on every rank, as
+ * (gid, value) pairs (*total of them, malloc'ed) */
+static int allgather_cells(const double *v, const int *gid, int n, double **pairs, long *total) {
+  int size = lg_mpi_size(), bad = 0, any = 0;
+  double *mine = malloc(sizeof(double) * 2 * ((size_t)n + 1));
+  int *cnt = malloc(sizeof(int) * 2 * ((size_t)size + 1));
+  bad = !mine || !cnt;
+  for (int i = 0; !bad && i < n; i++) { mine[2 * i] = gid[i]; mine[2 * i + 1] = v[i]; }
+  MPI_Allreduce(&bad, &any, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
+  *pairs = NULL;
+  if (!any) {
+    int m = 2 * n, *dsp = cnt + size;
+    if (MPI_Allgather(&m, 1, MPI_INT, cnt, 1, MPI_INT, PETSC_COMM_WORLD) != MPI_SUCCESS) any = 1;
+    long at = 0;
+    for (int r = 0; !any && r < size; r++) { dsp[r] = (int)at; at += cnt[r]; }
+    *total = at / 2;
+    *pairs = any || at > INT32_MAX ? NULL : malloc(sizeof(double) * ((size_t)at + 1));
+    int none = !*pairs;
+    MPI_Allreduce(&none, &any, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
+    if (!any && MPI_Allgatherv(mine, m, MPI_DOUBLE, *pairs, cnt, dsp, MPI_DOUBLE, PETSC_COMM_WORLD) != MPI_SUCCESS) any = 1;
+  }
+  free(mine);
+  free(cnt);
+  if (any) { free(*pairs); *pairs = NULL; }
+  return any;
+}
+
+int lg_dist_cell_values(lg_env *env, const double *v, const int *gid, int n, long ncell, double *out) {
+  double *pairs;
+  long total;
+  if (allgather_cells(v, gid, n, &pairs, &total)) { lg_seterr(env, "gathering per-cell values failed (out of memory)"); return 1; }
+  for (long i = 0; i < ncell; i++) out[i] = NAN;
+  for (long i = 0; i < total; i++) {
+    long g = (long)pairs[2 * i];
+    if (g >= 0 && g < ncell) out[g] = pairs[2 * i + 1];
+  }
+  free(pairs);
+  return 0;
+}
+
+int lg_dist_stats(lg_env *env, const double *v, const int *gid, int n, quality_stats *st) {
+  quality_stats_compute(v, n, st);
+  /* min and max with the lowest global cell where they are reached (a serial run's first) */
+  double r[8] = {st->argmin >= 0 ? st->min : INFINITY, st->argmax >= 0 ? -st->max : INFINITY, 0, 0, 0, 0, 0, 0};
+  int bad = lg_allreduce(r, 2, LG_MIN);
+  double g[2] = {INFINITY, INFINITY};
+  if (st->argmin >= 0 && st->min == r[0]) g[0] = gid[st->argmin];
+  if (st->argmax >= 0 && -st->max == r[1]) g[1] = gid[st->argmax];
+  bad |= lg_allreduce(g, 2, LG_MIN);
+  /* the mean: sums of the finite values, counts of NaN and of each infinity */
+  double sum = n && isfinite(st->mean) ? st->mean * n : 0;
+  double s[5] = {sum, n, n && isnan(st->mean), st->mean == INFINITY, st->mean == -INFINITY};
+  bad |= lg_allreduce(s, 5, LG_SUM);
+  if (bad) { lg_seterr(env, "the reduction over the ranks failed"); return 1; }
+  st->n = (int)s[1];
+  st->min = isinf(g[0]) ? NAN : r[0];
+  st->max = isinf(g[1]) ? NAN : -r[1];
+  st->argmin = isinf(g[0]) ? -1 : (int)g[0];
+  st->argmax = isinf(g[1]) ? -1 : (int)g[1];
+  if (!st->n || s[2] || (s[3] && s[4])) st->mean = NAN;
+  else if (s[3]) st->mean = INFINITY;
+  else if (s[4]) st->mean = -INFINITY;
+  else st->mean = s[0] / s[1];
+  return 0;
+}
+
+int lg_dist_worst(lg_env *env, const double *v, const int *gid, int n, int k, int larger_is_better, int *gids, double *vals) {
+  /* each rank's k worst, gathered, the k worst of them by the mesh layer's order (its
+   * quality_worst on the gathered values; ties to the lower global cell) */
+  int kl = k < n ? k : n;
+  int *ids = malloc(sizeof(int) * ((size_t)kl + 1));
+  double *wv = malloc(sizeof(double) * ((size_t)kl + 1));
+  int *wg = malloc(sizeof(int) * ((size_t)kl + 1));
+  if (!ids || !wv || !wg) kl = 0;
+  if (kl) quality_worst(v, n, kl, larger_is_better, ids);
+  for (int i = 0; i < kl; i++) { wv[i] = v[ids[i]]; wg[i] = gid[ids[i]]; }
+  double *pairs;
+  long total;
+  int rc = allgather_cells(wv, wg, kl, &pairs, &total);
+  free(ids); free(wv); free(wg);
+  if (rc) { lg_seterr(env, "gathering the worst cells failed (out of memory)"); return -1; }
+  /* sorted by global cell, so that the mesh layer's first-index ties pick the lowest */
+  long m = total;
+  double *x = malloc(sizeof(double) * ((size_t)m + 1));
+  int *order = malloc(sizeof(int) * ((size_t)m + 1)), *sel = malloc(sizeof(int) * ((size_t)m + 1));
+  if (!x || !order || !sel) { free(x); free(order); free(sel); free(pairs); lg_seterr(env, "out of memory"); return -1; }
+  for (long i = 0; i < m; i++) order[i] = (int)i;
+  for (long i = 1; i < m; i++) /* insertion sort: k per rank, few in all */
+    for (long j = i; j > 0 && pairs[2 * order[j]] < pairs[2 * order[j - 1]]; j--) { int t = order[j]; order[j] = order[j - 1]; order[j - 1] = t; }
+  for (long i = 0; i < m; i++) x[i] = pairs[2 * order[i] + 1];
+  int kk = k < m ? k : (int)m;
+  quality_worst(x, (int)m, kk, larger_is_better, sel);
+  for (int i = 0; i < kk; i++) { gids[i] = (int)pairs[2 * order[sel[i]]]; vals[i] = x[sel[i]]; }
+  free(x); free(order); free(sel); free(pairs);
+  return kk;
 }

@@ -91,10 +91,14 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
     /* an interior facet term is linearized in the test functions and unknowns of both
      * sides: its element rows and columns are the fields on '+', then on '-' */
     t->interior = t->reg.kind == REGION_INTERIOR;
-    if (t->interior && p->lm->dist) {
-      /* a continuous field's row takes terms of facets beyond the ghost layer */
-      lg_seterr(env, "term %d of the equation integrates over interior facets, which a distributed mesh "
-                     "(-lugal_distribute) does not offer yet: run without -lugal_distribute", i + 1);
+    int continuous = 0; /* a test field with nodes shared by cells */
+    for (int a = 0; a < p->rows.n; a++) continuous |= !p->rdm[a]->disc && p->rdm[a]->degree > 0;
+    if (t->interior && p->lm->dist && continuous) {
+      /* a discontinuous field's rows are its owned cells', whose facets' both sides are
+       * here; a continuous field's row also takes the facets of ghost cells with cells
+       * beyond the ghost layer */
+      lg_seterr(env, "term %d of the equation integrates over interior facets with a continuous test function, which "
+                     "a distributed mesh (-lugal_distribute) does not offer yet: run without -lugal_distribute", i + 1);
       return 1;
     }
     t->rl = p->rows;

@@ -58,8 +58,11 @@ static int check_null_pivots(lg_env *env, lg_problem *p, KSP ksp) {
 }
 
 /* a constant null space field: shift it to mean zero (Lagrange bases hold the constants:
- * subtracting c from every dof subtracts c) */
+ * subtracting c from every dof subtracts c). On a distributed mesh each rank integrates its
+ * owned cells and the sums are reduced */
 static void null_mean_zero(lg_env *env, lg_problem *p, double *x) {
+  const mesh_part *P = p->lm->dist;
+  int rank = lg_mpi_rank();
   for (int a = 0; a < p->cols.n; a++) {
     if (!p->null_const[a]) continue;
     const dofmap *dm = p->cdm[a];
@@ -70,6 +73,7 @@ static void null_mean_zero(lg_env *env, lg_problem *p, double *x) {
       mesh *m = p->lm->m;
       if (cell_is_simplex(m->type)) {
         for (int c = 0; c < m->ncell; c++) {
+          if (P && P->cowner[c] != rank) continue;
           double J[3][3], K[3][3], det = fabs(simplex_jacobian(m, c, J, K));
           double s = 0;
           const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
@@ -82,6 +86,7 @@ static void null_mean_zero(lg_env *env, lg_problem *p, double *x) {
         quad_rule q;
         quad_cell(m->type, 0, dm->degree + 1, &q);
         for (int c = 0; c < m->ncell; c++) {
+          if (P && P->cowner[c] != rank) continue;
           const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
           for (int i = 0; i < q.n; i++) {
             double J[3][3], K[3][3], val[FEM_MAXLOC], grad[FEM_MAXLOC * 3];
@@ -93,7 +98,9 @@ static void null_mean_zero(lg_env *env, lg_problem *p, double *x) {
           }
         }
       }
-      double mean = vol > 0 ? num / vol : 0;
+      double nv[2] = {num, vol};
+      if (P) lg_allreduce(nv, 2, LG_SUM);
+      double mean = nv[1] > 0 ? nv[0] / nv[1] : 0;
       for (int i = j; i < dm->ndof; i += bs) x[p->cglob[a] + i] -= mean;
     }
   }

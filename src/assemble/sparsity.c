@@ -534,11 +534,6 @@ int lg_problem_setup_nullspace(lg_env *env, lg_problem *p, const lg_problem_spec
     p->nnull = dim == 2 ? 3 : 6;
     p->null_rigid = 1;
   } else {
-    if (p->lm->dist) {
-      lg_seterr(env, "nullspace: a constant null space on a distributed mesh (-lugal_distribute) is not offered yet "
-                     "(its mean is taken over the whole mesh): run without -lugal_distribute");
-      return 1;
-    }
     Vec v[KER_MAXFIELD * FEM_MAXBS] = {0};
     int nv = 0;
     for (int k = 0; k < s->nnull; k++) {

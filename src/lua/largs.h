@@ -35,7 +35,10 @@ typedef struct { lg_problem *p; int nfield; int nonlinear; } ud_prob;
 /* format: VTU_*; pieces: 0 for .vtu steps, else .pvtu steps of so many pieces */
 typedef struct { char path[512]; int n, cap; double *t; char **files; int format, pieces; } ud_series;
 typedef struct { lg_env *env; int owns_petsc; } ud_env;
-typedef struct { int n; int measure; double *v; } ud_qarray; /* v from mesh_big_alloc */
+/* a quality array: v (mesh_big_alloc) per cell; on a distributed mesh the owned cells' only,
+ * gid their global numbers and loc their local ones (malloc'ed; NULL on a whole mesh), of
+ * nglobal cells in all */
+typedef struct { int n; int measure; double *v; int *gid, *loc; long nglobal; } ud_qarray;
 
 /* the environment of this Lua state (symbolic context, JIT) */
 lg_env *get_env(lua_State *L);

@@ -411,14 +411,23 @@ static int mesh_vertices(lua_State *L) {
 }
 
 static int mesh_info(lua_State *L) {
-  ud_mesh *u = check_whole_mesh(L, 1, "mesh:info");
+  ud_mesh *u = check_mesh(L, 1, "mesh:info");
   mesh *m = u->lm->m;
+  /* the whole mesh's counts (a distributed one's: each tagged facet counted by the rank
+   * that owns its cell) */
+  double nbf = m->nbf;
+  if (u->lm->dist) {
+    if (mesh_build_boundary_cells(m)) return luaL_error(L, "mesh:info: %s", m->err);
+    nbf = 0;
+    for (int b = 0; b < m->nbf; b++) nbf += u->lm->dist->cowner[m->bf_cell[b]] == lg_mpi_rank();
+    lg_allreduce(&nbf, 1, LG_SUM);
+  }
   lua_createtable(L, 0, 6);
-  lua_pushinteger(L, m->nvert); lua_setfield(L, -2, "vertices");
-  lua_pushinteger(L, m->ncell); lua_setfield(L, -2, "cells");
+  lua_pushinteger(L, lg_mesh_global_vertices(u->lm)); lua_setfield(L, -2, "vertices");
+  lua_pushinteger(L, lg_mesh_global_cells(u->lm)); lua_setfield(L, -2, "cells");
   lua_pushinteger(L, m->dim); lua_setfield(L, -2, "dim");
   lua_pushstring(L, cell_name(m->type)); lua_setfield(L, -2, "cell");
-  lua_pushinteger(L, m->nbf); lua_setfield(L, -2, "boundary_facets");
+  lua_pushinteger(L, (lua_Integer)nbf); lua_setfield(L, -2, "boundary_facets");
   lua_newtable(L);
   for (int i = 0; i < m->nbname; i++) { lua_pushstring(L, m->bnames[i].name); lua_rawseti(L, -2, i + 1); }
   lua_setfield(L, -2, "boundaries");
@@ -449,7 +458,13 @@ static int lmesh_copy(lua_State *L) {
   return 1;
 }
 
-static int lmesh_hmax(lua_State *L) { lua_pushnumber(L, mesh_hmax(check_whole_mesh(L, 1, "mesh:hmax")->lm->m)); return 1; }
+static int lmesh_hmax(lua_State *L) {
+  ud_mesh *u = check_mesh(L, 1, "mesh:hmax");
+  double h = u->lm->m->ncell ? mesh_hmax(u->lm->m) : 0;
+  if (u->lm->dist) lg_allreduce(&h, 1, LG_MAX); /* the whole mesh's */
+  lua_pushnumber(L, h);
+  return 1;
+}
 
 static int opt_boundary(lua_State *L, int t, const char *fn) {
   const char *b = t ? opt_str(L, t, "boundary", "slide", fn) : "slide";
@@ -758,9 +773,27 @@ static int lmesh_displace(lua_State *L) {
 }
 
 static int mesh_check(lua_State *L) {
-  ud_mesh *u = check_whole_mesh(L, 1, "mesh:check");
+  ud_mesh *u = check_mesh(L, 1, "mesh:check");
   int ids[10], n;
-  mesh_count_invalid(u->lm->m, 10, ids, &n);
+  const mesh_part *P = u->lm->dist;
+  if (P) { /* each rank its owned cells; the ten lowest global numbers of all */
+    mesh *m = u->lm->m;
+    double v[10], cnt = 0;
+    int g[10], k = 0, rank = lg_mpi_rank();
+    for (int c = 0; c < m->ncell; c++) {
+      if (P->cowner[c] != rank) continue;
+      double q = mesh_cell_relative_validity(m, c);
+      if (q > 1e-13) continue;
+      cnt++;
+      if (k < 10) { g[k] = P->cglobal[c]; v[k++] = P->cglobal[c]; }
+    }
+    lg_env *env = get_env(L);
+    if (lg_allreduce(&cnt, 1, LG_SUM)) return luaL_error(L, "mesh:check: the sum over the ranks failed");
+    double wv[10];
+    int got = lg_dist_worst(env, v, g, k, 10, 1, ids, wv); /* the smallest values: the lowest cells */
+    if (got < 0) return lgerror(L, "mesh:check", env);
+    n = (int)cnt;
+  } else mesh_count_invalid(u->lm->m, 10, ids, &n);
   lua_pushinteger(L, n);
   lua_newtable(L);
   for (int i = 0; i < n && i < 10; i++) { lua_pushinteger(L, ids[i] + 1); lua_rawseti(L, -2, i + 1); }
@@ -768,26 +801,37 @@ static int mesh_check(lua_State *L) {
 }
 
 /* argument 1 of a vertex method: a vertex number 1..nvert */
-static lua_Integer vertex_arg(lua_State *L, const mesh *m, const char *fn) {
+/* argument 2, a vertex of the whole mesh (1-based): its local number (1-based), or 0 when
+ * it is a distributed mesh's vertex this rank does not hold */
+static lua_Integer vertex_arg(lua_State *L, const lg_mesh *lm, const char *fn) {
   int isint;
-  lua_Integer i = lua_tointegerx(L, 2, &isint);
-  if (!isint) luaL_error(L, "%s: argument 1 must be a vertex number (an integer 1..%d), got %s", fn, m->nvert, luaL_typename(L, 2));
-  if (i < 1 || i > m->nvert) luaL_error(L, "%s: vertex %I out of range 1..%d", fn, i, m->nvert);
-  return i;
+  lua_Integer i = lua_tointegerx(L, 2, &isint), n = lg_mesh_global_vertices(lm);
+  if (!isint) luaL_error(L, "%s: argument 1 must be a vertex number (an integer 1..%I), got %s", fn, n, luaL_typename(L, 2));
+  if (i < 1 || i > n) luaL_error(L, "%s: vertex %I out of range 1..%I", fn, i, n);
+  const mesh_part *P = lm->dist;
+  if (!P) return i;
+  for (int lo = 0, hi = P->m->nvert - 1; lo <= hi;) { /* vglobal increases */
+    int mid = (lo + hi) / 2;
+    if (P->vglobal[mid] == i - 1) return mid + 1;
+    if (P->vglobal[mid] < i - 1) lo = mid + 1;
+    else hi = mid - 1;
+  }
+  return 0;
 }
 
 static int mesh_coordinates(lua_State *L) {
-  ud_mesh *u = check_whole_mesh(L, 1, "mesh:coordinates");
+  ud_mesh *u = check_mesh(L, 1, "mesh:coordinates");
   mesh *m = u->lm->m;
-  lua_Integer i = vertex_arg(L, m, "mesh:coordinates");
+  lua_Integer i = vertex_arg(L, u->lm, "mesh:coordinates");
+  if (!i) return 0; /* another rank's vertex: nothing */
   for (int d = 0; d < m->dim; d++) lua_pushnumber(L, m->x[(size_t)(i - 1) * m->dim + d]);
   return m->dim;
 }
 
 static int mesh_set_coordinates(lua_State *L) {
-  ud_mesh *u = check_whole_mesh(L, 1, "mesh:set_coordinates");
+  ud_mesh *u = check_mesh(L, 1, "mesh:set_coordinates");
   mesh *m = u->lm->m;
-  lua_Integer i = vertex_arg(L, m, "mesh:set_coordinates");
+  lua_Integer i = vertex_arg(L, u->lm, "mesh:set_coordinates");
   double v[3];
   for (int d = 0; d < m->dim; d++) {
     int isnum;
@@ -797,6 +841,7 @@ static int mesh_set_coordinates(lua_State *L) {
                         luaL_typename(L, 3 + d));
     if (!isfinite(v[d])) return luaL_error(L, "mesh:set_coordinates: argument %d is not finite (%f)", 3 + d, v[d]);
   }
+  if (!i) return 0; /* another rank's vertex: that rank moves it */
   for (int d = 0; d < m->dim; d++) m->x[(size_t)(i - 1) * m->dim + d] = v[d];
   lg_mesh_changed(u->lm);
   return 0;
@@ -830,6 +875,8 @@ static int vtu_format_opt(lua_State *L, int idx, const char *fn, int argno, int 
 /* the fields of the table at tidx on the mesh into a .vtu (npiece 0: rank 0 writes the
  * whole mesh) or a .pvtu of npiece pieces; every buffer lives in a table on the stack until
  * the files are written (never under user-named keys in the registry) */
+static int cmp_field(const void *a, const void *b) { return strcmp(((const mesh_field *)a)->name, ((const mesh_field *)b)->name); }
+
 static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, int tidx, const char *fn, int format, int npiece) {
   int nf = 0;
   if (!lua_isnoneornil(L, tidx)) {
@@ -849,8 +896,15 @@ static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, in
       ud_func *uf = luaL_testudata(L, -1, MT_FUNC);
       ud_qarray *qa = luaL_testudata(L, -1, MT_QARRAY);
       if (qa) {
-        if (qa->n != m->ncell) return luaL_error(L, "%s: quality array '%s' belongs to a mesh of %d cells", fn, name, qa->n);
-        fl[nf] = (mesh_field){name, 1, 1, qa->v};
+        if (qa->nglobal != lg_mesh_global_cells(lm) || (qa->gid != NULL) != (lm->dist != NULL))
+          return luaL_error(L, "%s: quality array '%s' belongs to a mesh of %I cells", fn, name, (lua_Integer)qa->nglobal);
+        if (qa->gid) { /* the owned cells' values on the local cells (ghosts are not written) */
+          double *v = lua_newuserdatauv(L, sizeof(double) * ((size_t)m->ncell + 1), 0);
+          lua_rawseti(L, anchor, nf + 1);
+          for (int c = 0; c < m->ncell; c++) v[c] = NAN;
+          for (int i = 0; i < qa->n; i++) v[qa->loc[i]] = qa->v[i];
+          fl[nf] = (mesh_field){name, 1, 1, v};
+        } else fl[nf] = (mesh_field){name, 1, 1, qa->v};
       } else if (uf) {
         if (uf->f->mesh != lm) return luaL_error(L, "%s: field '%s' lives on a different mesh", fn, name);
         /* vertex dofs come first in every Lagrange numbering; P0 dofs are the cells' */
@@ -916,6 +970,9 @@ static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, in
     }
   }
   char err[MESH_ERRLEN] = "";
+  /* by name: a table's iteration order differs between processes (Lua seeds its string
+   * hashes per state), and a distributed mesh's ranks gather the fields in turn */
+  qsort(fl, (size_t)nf, sizeof *fl, cmp_field);
   int rc = lg_write_vtu(get_env(L), lm, path, nf, fl, format, npiece, err);
   lua_pop(L, 2);
   if (rc) return luaL_error(L, "%s: %s", fn, err);
@@ -1044,7 +1101,8 @@ static int read_metric(lua_State *L, int t, mesh *m, double **buf, quality_metri
 }
 
 static ud_qarray *push_quality(lua_State *L, int midx, const char *name, int tidx, const char *fn) {
-  ud_mesh *um = check_whole_mesh(L, midx, fn);
+  ud_mesh *um = check_mesh(L, midx, fn);
+  if (tidx && !lua_isnoneornil(L, tidx)) check_not_distributed(L, um->lm, "mesh:quality with options (a metric, a reference)");
   mesh *m = um->lm->m;
   int q = quality_from_name(name);
   if (q < 0) {
@@ -1072,6 +1130,8 @@ static ud_qarray *push_quality(lua_State *L, int midx, const char *name, int tid
   a->n = 0;
   a->measure = q;
   a->v = NULL;
+  a->gid = a->loc = NULL;
+  a->nglobal = m->ncell;
   luaL_setmetatable(L, MT_QARRAY);
   a->v = mesh_big_alloc(sizeof(double) * (size_t)(m->ncell + 1));
   if (!a->v) luaL_error(L, "%s: out of memory for %d values", fn, m->ncell);
@@ -1079,6 +1139,21 @@ static ud_qarray *push_quality(lua_State *L, int midx, const char *name, int tid
   char err[MESH_ERRLEN];
   int rc = ref ? mesh_deformation(m, ref->x, q, pexp, a->v, err) : mesh_quality(m, q, qm.kind ? &qm : NULL, a->v, err);
   if (rc) luaL_error(L, "%s: %s", fn, err);
+  const mesh_part *P = um->lm->dist;
+  if (P) { /* the owned cells' values, in the local (global) order */
+    a->gid = malloc(sizeof(int) * ((size_t)P->nown_cell + 1));
+    a->loc = malloc(sizeof(int) * ((size_t)P->nown_cell + 1));
+    if (!a->gid || !a->loc) luaL_error(L, "%s: out of memory", fn);
+    int k = 0, rank = lg_mpi_rank();
+    for (int c = 0; c < m->ncell; c++)
+      if (P->cowner[c] == rank) {
+        a->v[k] = a->v[c];
+        a->loc[k] = c;
+        a->gid[k++] = P->cglobal[c];
+      }
+    a->n = k;
+    a->nglobal = P->ncell_global;
+  }
   if (pushed) lua_remove(L, -2); /* the metric buffer */
   return a;
 }
@@ -1100,16 +1175,28 @@ static int qa_index(lua_State *L) {
     return luaL_error(L, "quality arrays have no field '%s'", lua_tostring(L, 2));
   }
   lua_Integer i = luaL_checkinteger(L, 2);
+  if (a->gid) return luaL_error(L, "q[i]: a distributed mesh's quality array holds each rank's cells: q:totable() gathers them all");
   if (i < 1 || i > a->n) return luaL_error(L, "quality index %I out of range 1..%d", i, a->n);
   lua_pushnumber(L, a->v[i - 1]);
   return 1;
 }
 
-static int qa_len(lua_State *L) { lua_pushinteger(L, check_qarray(L, 1)->n); return 1; }
+static int qa_len(lua_State *L) { lua_pushinteger(L, check_qarray(L, 1)->nglobal); return 1; }
+
+/* the statistics of the whole mesh's values (a distributed one's reduced over the ranks;
+ * argmin and argmax are global cells) */
+static void qa_stats(lua_State *L, ud_qarray *a, quality_stats *st, const char *fn) {
+  if (!a->gid) { quality_stats_compute(a->v, a->n, st); return; }
+  lg_env *env = get_env(L);
+  if (lg_dist_stats(env, a->v, a->gid, a->n, st)) lgerror(L, fn, env);
+}
 
 static int qa_gc(lua_State *L) {
   ud_qarray *a = lua_touserdata(L, 1);
   mesh_big_free(a->v);
+  free(a->gid);
+  free(a->loc);
+  a->gid = a->loc = NULL;
   a->v = NULL;
   a->n = 0;
   return 0;
@@ -1117,6 +1204,14 @@ static int qa_gc(lua_State *L) {
 
 static int qa_totable(lua_State *L) {
   ud_qarray *a = check_qarray(L, 1);
+  if (a->gid) { /* every rank's cells, in the global order */
+    double *all = lua_newuserdatauv(L, sizeof(double) * ((size_t)a->nglobal + 1), 0);
+    lg_env *env = get_env(L);
+    if (lg_dist_cell_values(env, a->v, a->gid, a->n, a->nglobal, all)) return lgerror(L, "q:totable", env);
+    lua_createtable(L, (int)a->nglobal, 0);
+    for (long i = 0; i < a->nglobal; i++) { lua_pushnumber(L, all[i]); lua_rawseti(L, -2, i + 1); }
+    return 1;
+  }
   lua_createtable(L, a->n, 0);
   for (int i = 0; i < a->n; i++) { lua_pushnumber(L, a->v[i]); lua_rawseti(L, -2, i + 1); }
   return 1;
@@ -1125,7 +1220,7 @@ static int qa_totable(lua_State *L) {
 static int qa_stat(lua_State *L, int which) {
   ud_qarray *a = check_qarray(L, 1);
   quality_stats st;
-  quality_stats_compute(a->v, a->n, &st);
+  qa_stats(L, a, &st, which == 0 ? "q:min" : which == 1 ? "q:max" : "q:mean");
   lua_pushnumber(L, which == 0 ? st.min : which == 1 ? st.max : st.mean);
   if (which == 2) return 1;
   lua_pushinteger(L, (which == 0 ? st.argmin : st.argmax) + 1);
@@ -1142,13 +1237,20 @@ static int qa_histogram(lua_State *L) {
   ud_qarray *a = check_qarray(L, 1);
   int nb = lua_isnoneornil(L, 2) ? 10 : check_int_arg(L, 2, 1, 10000, "q:histogram");
   quality_stats st;
-  quality_stats_compute(a->v, a->n, &st);
+  qa_stats(L, a, &st, "q:histogram");
   double lo = luaL_optnumber(L, 3, st.min), hi = luaL_optnumber(L, 4, st.max);
   if (!isfinite(lo) || !isfinite(hi) || !(lo <= hi))
     return luaL_error(L, "q:histogram: the range [lo, hi] must be finite with lo <= hi, got [%f, %f]%s", lo, hi,
                       lua_isnoneornil(L, 3) ? " (the values are not all finite: pass lo and hi)" : "");
   int *c = lua_newuserdatauv(L, sizeof(int) * (size_t)nb, 0);
   quality_histogram(a->v, a->n, (int)nb, lo, hi, c);
+  if (a->gid) { /* each rank counted its cells */
+    double *d = lua_newuserdatauv(L, sizeof(double) * (size_t)nb, 0);
+    for (int i = 0; i < nb; i++) d[i] = c[i];
+    if (lg_allreduce(d, nb, LG_SUM)) return luaL_error(L, "q:histogram: the sum over the ranks failed");
+    for (int i = 0; i < nb; i++) c[i] = (int)d[i];
+    lua_pop(L, 1);
+  }
   lua_createtable(L, 0, 3);
   lua_createtable(L, (int)nb, 0);
   for (int i = 0; i < nb; i++) { lua_pushinteger(L, c[i]); lua_rawseti(L, -2, i + 1); }
@@ -1161,6 +1263,22 @@ static int qa_histogram(lua_State *L) {
 static int qa_worst(lua_State *L) {
   ud_qarray *a = check_qarray(L, 1);
   lua_Integer k = lua_isnoneornil(L, 2) ? 10 : check_int_arg(L, 2, 1, INT_MAX, "q:worst");
+  if (a->gid) { /* the whole mesh's worst, from each rank's */
+    if (k > a->nglobal) k = a->nglobal;
+    int *gids = lua_newuserdatauv(L, sizeof(int) * (size_t)(k + 1), 0);
+    double *vals = lua_newuserdatauv(L, sizeof(double) * (size_t)(k + 1), 0);
+    lg_env *env = get_env(L);
+    int got = lg_dist_worst(env, a->v, a->gid, a->n, (int)k, quality_larger_is_better(a->measure), gids, vals);
+    if (got < 0) return lgerror(L, "q:worst", env);
+    lua_createtable(L, got, 0);
+    for (int i = 0; i < got; i++) {
+      lua_createtable(L, 0, 2);
+      lua_pushinteger(L, gids[i] + 1); lua_setfield(L, -2, "cell");
+      lua_pushnumber(L, vals[i]); lua_setfield(L, -2, "value");
+      lua_rawseti(L, -2, i + 1);
+    }
+    return 1;
+  }
   if (k > a->n) k = a->n;
   int *ids = lua_newuserdatauv(L, sizeof(int) * (size_t)(k + 1), 0);
   quality_worst(a->v, a->n, (int)k, quality_larger_is_better(a->measure), ids);
@@ -1178,59 +1296,73 @@ static int qa_tostring(lua_State *L) {
   ud_qarray *a = check_qarray(L, 1);
   quality_stats st;
   quality_stats_compute(a->v, a->n, &st);
-  lua_pushfstring(L, "%s of %d cells: min %f, max %f, mean %f", quality_name(a->measure), a->n, st.min, st.max, st.mean);
+  /* not collective (print calls it on rank 0 only): a distributed array shows its rank's cells */
+  if (a->gid) lua_pushfstring(L, "%s of this rank's %d of %I cells: min %f, max %f, mean %f", quality_name(a->measure), a->n,
+                              (lua_Integer)a->nglobal, st.min, st.max, st.mean);
+  else lua_pushfstring(L, "%s of %d cells: min %f, max %f, mean %f", quality_name(a->measure), a->n, st.min, st.max, st.mean);
   return 1;
 }
 
 /* every measure that applies, with statistics, as a table; printed unless quiet */
 static int mesh_quality_report(lua_State *L) {
   const char *fn = "mesh:quality_report";
-  ud_mesh *um = check_whole_mesh(L, 1, fn);
+  ud_mesh *um = check_mesh(L, 1, fn);
   mesh *m = um->lm->m;
-  int quiet = lua_toboolean(L, 2) || lg_mpi_rank() != 0; /* every rank has the same report */
+  const mesh_part *P = um->lm->dist; /* a distributed mesh: each rank its owned cells, reduced */
+  int rank = lg_mpi_rank();
+  int quiet = lua_toboolean(L, 2) || rank != 0; /* every rank has the same report */
   /* split the invalid cells: inverted (clearly negative) and degenerate (about zero),
-   * relative to each cell's size */
-  int ninverted = 0, ndegenerate = 0;
+   * relative to each cell's size; the quadrilaterals' Remark 1.1 classes */
+  double cnt[6] = {0, 0, 0, 0, 0, 0}; /* inverted, degenerate, then the four classes */
   for (int c = 0; c < m->ncell; c++) {
+    if (P && P->cowner[c] != rank) continue;
     double q = mesh_cell_relative_validity(m, c);
-    if (q < -1e-13) ninverted++;
-    else if (!(q > 1e-13)) ndegenerate++;
-  }
-  lua_createtable(L, 0, QM_COUNT + 4);
-  int rep = lua_gettop(L);
-  lua_pushinteger(L, m->ncell); lua_setfield(L, rep, "cells");
-  lua_pushinteger(L, ninverted); lua_setfield(L, rep, "inverted");
-  lua_pushinteger(L, ndegenerate); lua_setfield(L, rep, "degenerate");
-  if (m->type == CELL_QUADRILATERAL) { /* Remark 1.1 classes */
-    int cls[4] = {0, 0, 0, 0};
-    for (int c = 0; c < m->ncell; c++) {
+    if (q < -1e-13) cnt[0]++;
+    else if (!(q > 1e-13)) cnt[1]++;
+    if (m->type == CELL_QUADRILATERAL) {
       double x[8];
       for (int i = 0; i < 4; i++) { x[2 * i] = m->x[2 * m->cells[4 * c + i]]; x[2 * i + 1] = m->x[2 * m->cells[4 * c + i] + 1]; }
       quad_class k;
       quad_corner_area(x, &k);
-      cls[k]++;
+      cnt[2 + k]++;
     }
+  }
+  if (P && lg_allreduce(cnt, 6, LG_SUM)) return luaL_error(L, "%s: the sum over the ranks failed", fn);
+  long ncell = lg_mesh_global_cells(um->lm);
+  int ninverted = (int)cnt[0], ndegenerate = (int)cnt[1];
+  lua_createtable(L, 0, QM_COUNT + 4);
+  int rep = lua_gettop(L);
+  lua_pushinteger(L, ncell); lua_setfield(L, rep, "cells");
+  lua_pushinteger(L, ninverted); lua_setfield(L, rep, "inverted");
+  lua_pushinteger(L, ndegenerate); lua_setfield(L, rep, "degenerate");
+  if (m->type == CELL_QUADRILATERAL) {
+    int cls[4] = {(int)cnt[2 + QUAD_CONVEX], (int)cnt[2 + QUAD_NONCONVEX], (int)cnt[2 + QUAD_DEGENERATE], (int)cnt[2 + QUAD_CROSSED]};
     lua_createtable(L, 0, 4);
-    lua_pushinteger(L, cls[QUAD_CONVEX]); lua_setfield(L, -2, "convex");
-    lua_pushinteger(L, cls[QUAD_NONCONVEX]); lua_setfield(L, -2, "nonconvex");
-    lua_pushinteger(L, cls[QUAD_DEGENERATE]); lua_setfield(L, -2, "degenerate");
-    lua_pushinteger(L, cls[QUAD_CROSSED]); lua_setfield(L, -2, "crossed");
+    lua_pushinteger(L, cls[0]); lua_setfield(L, -2, "convex");
+    lua_pushinteger(L, cls[1]); lua_setfield(L, -2, "nonconvex");
+    lua_pushinteger(L, cls[2]); lua_setfield(L, -2, "degenerate");
+    lua_pushinteger(L, cls[3]); lua_setfield(L, -2, "crossed");
     lua_setfield(L, rep, "quadrilaterals");
     if (!quiet) printf("quadrilaterals: %d convex, %d non-convex, %d degenerate, %d crossed\n", cls[0], cls[1], cls[2], cls[3]);
   }
-  if (!quiet) printf("mesh quality: %d %s, %d inverted, %d degenerate\n  %-28s %12s %12s %12s %8s\n", m->ncell,
+  if (!quiet) printf("mesh quality: %ld %s, %d inverted, %d degenerate\n  %-28s %12s %12s %12s %8s\n", ncell,
                      cell_plural(m->type), ninverted, ndegenerate, "measure", "min", "mean", "max", "worst");
   for (int q = 0; q < QM_COUNT; q++) {
     if (!quality_applies(q, m->type) || quality_is_deformation(q)) continue;
     ud_qarray *a = push_quality(L, 1, quality_name(q), 0, fn);
     quality_stats st;
-    quality_stats_compute(a->v, a->n, &st);
+    qa_stats(L, a, &st, fn);
+    int wi = -1;
+    if (a->gid) { /* the whole mesh's worst cell, as quality_worst_index picks it */
+      double wv;
+      lg_env *env = get_env(L);
+      if (lg_dist_worst(env, a->v, a->gid, a->n, 1, quality_larger_is_better(q), &wi, &wv) < 0) return lgerror(L, fn, env);
+    } else wi = quality_worst_index(a->v, a->n, quality_larger_is_better(q));
     lua_pop(L, 1);
     lua_createtable(L, 0, 4);
     lua_pushnumber(L, st.min); lua_setfield(L, -2, "min");
     lua_pushnumber(L, st.max); lua_setfield(L, -2, "max");
     lua_pushnumber(L, st.mean); lua_setfield(L, -2, "mean");
-    int wi = quality_worst_index(a->v, a->n, quality_larger_is_better(q));
     lua_pushinteger(L, wi + 1); lua_setfield(L, -2, "worst");
     lua_setfield(L, rep, quality_name(q));
     if (!quiet) printf("  %-28s %12.6g %12.6g %12.6g %8d\n", quality_name(q), st.min, st.mean, st.max, wi + 1);

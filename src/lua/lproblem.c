@@ -119,6 +119,25 @@ static int func_len(lua_State *L) {
 }
 
 /* uh(x, y[, z]): the value at a point (a vector function returns its components) */
+/* f at point x into out; a distributed mesh's ranks whose part holds the point answer (the
+ * same value up to rounding at a shared facet: their mean); 1 with env->err when none does */
+static int eval_at(lg_env *env, const lg_function *f, const double *x, double *out) {
+  if (!f->mesh->dist) return lg_eval_point(env, (lg_function *)f, x, out);
+  int bs = f->dm->bs;
+  double r[FEM_MAXBS + 1] = {0};
+  if (!lg_eval_point(env, (lg_function *)f, x, out)) {
+    for (int j = 0; j < bs; j++) r[j] = out[j];
+    r[bs] = 1;
+  }
+  if (lg_allreduce(r, bs + 1, LG_SUM)) { lg_seterr(env, "the sum over the ranks failed"); return 1; }
+  if (r[bs] == 0) {
+    lg_seterr(env, "the point (%g, %g, %g) is in no rank's part of the mesh: outside the mesh", x[0], x[1], x[2]);
+    return 1;
+  }
+  for (int j = 0; j < bs; j++) out[j] = r[j] / r[bs];
+  return 0;
+}
+
 static int func_call(lua_State *L) {
   ud_func *u = check_func(L, 1, "f(x, y)");
   int dim = u->f->mesh->m->dim, n = lua_gettop(L) - 1;
@@ -129,7 +148,7 @@ static int func_call(lua_State *L) {
     if (!isfinite(x[k])) return luaL_error(L, "f(x, y): coordinate %d is not finite (%f)", k + 1, x[k]);
   }
   lg_env *env = get_env(L);
-  if (lg_eval_point(env, u->f, x, out)) return lgerror(L, "f(x, y)", env);
+  if (eval_at(env, u->f, x, out)) return lgerror(L, "f(x, y)", env);
   for (int j = 0; j < u->f->dm->bs; j++) lua_pushnumber(L, out[j]);
   return u->f->dm->bs;
 }
@@ -155,18 +174,7 @@ static int func_eval(lua_State *L) {
       lua_pop(L, 1);
     }
     lua_pop(L, 1);
-    if (u->f->mesh->dist) {
-      /* the ranks whose part holds the point answer (the same value, up to rounding at a
-       * shared facet: their mean) */
-      double r[FEM_MAXBS + 1] = {0};
-      if (!lg_eval_point(env, u->f, x, out)) {
-        for (int j = 0; j < bs; j++) r[j] = out[j];
-        r[bs] = 1;
-      }
-      if (lg_allreduce(r, bs + 1, LG_SUM)) return luaL_error(L, "%s: the sum over the ranks failed", fn);
-      if (r[bs] == 0) return luaL_error(L, "%s: point %I: no rank's part of the mesh holds it (%s)", fn, i, env->err);
-      for (int j = 0; j < bs; j++) out[j] = r[j] / r[bs];
-    } else if (lg_eval_point(env, u->f, x, out)) return luaL_error(L, "%s: point %I: %s", fn, i, env->err);
+    if (eval_at(env, u->f, x, out)) return luaL_error(L, "%s: point %I: %s", fn, i, env->err);
     if (bs == 1) lua_pushnumber(L, out[0]);
     else {
       lua_createtable(L, bs, 0);
@@ -422,7 +430,7 @@ static int prob_solve(lua_State *L) {
   lua_createtable(L, info.nres, 0);
   for (int i = 0; i < info.nres; i++) { lua_pushnumber(L, info.res[i]); lua_rawseti(L, -2, i + 1); }
   lua_setfield(L, -2, "residuals");
-  lua_pushinteger(L, lg_problem_size(u->p)); lua_setfield(L, -2, "dofs");
+  lua_pushinteger(L, lg_problem_global_size(u->p)); lua_setfield(L, -2, "dofs");
   return lua_gettop(L) - base;
 }
 

@@ -41,7 +41,7 @@ for _, p in ipairs{1, 2} do
     mesh:write(arg[1] .. "/poisson.vtu", {u = uh})
     local id = {}
     for i = 1, mesh:ncells() do id[i] = i end
-    mesh:write(arg[1] .. "/poisson.pvtu", {u = uh, id = id}, {format = "ascii"})
+    mesh:write(arg[1] .. "/poisson.pvtu", {u = uh, id = id, q = mesh:quality("mean_ratio")}, {format = "ascii"})
   end
 end
 
@@ -122,4 +122,66 @@ do
                                bc = lg.essential_bc(read:boundary(), t*w), test = t, unknown = w}:solve()
   out("read_integral", "direct", lg.integrate(read, wh))
   out("read_cells", "count", read:ncells())
+end
+
+-- discontinuous Galerkin (SIPG) with interior facets: a discontinuous field's rows are its
+-- owned cells', whose facets have both sides on the rank
+do
+  local mesh = lg.mesh.rectangle{nx = 8}
+  local D = lg.discontinuous(1)
+  local u, v = lg.unknown(D, "ud"), lg.test(D, "vd")
+  local n, h, s = lg.normal(), 1/8, 10
+  local ue = lg.sin(pi*x)*lg.sin(pi*y)
+  local F, B = mesh:interior_facets(), mesh:boundary()
+  local eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(u), lg.grad(v)) - 2*pi^2*ue*v)
+    + lg.integral(F, -lg.dot(lg.avg(lg.grad(u)), lg.jump(v, n)) - lg.dot(lg.avg(lg.grad(v)), lg.jump(u, n)) + s/h*lg.dot(lg.jump(u, n), lg.jump(v, n)))
+    + lg.integral(B, -lg.dot(lg.grad(u), n)*v - lg.dot(lg.grad(v), n)*u + s/h*u*v)
+  local uh = lg.linear_problem{mesh = mesh, eqn = eqn, test = v, unknown = u}:solve()
+  out("dg_L2", "direct", math.sqrt(lg.integrate(mesh, (uh - ue)^2)))
+  out("dg_jumps", "direct", lg.integrate(F, lg.dot(lg.jump(uh, n), lg.jump(uh, n))))
+  out("dg_ndof", "count", uh:ndof())
+end
+
+-- mesh quality: each rank its owned cells, reduced (the read mesh: unstructured)
+do
+  local mesh = lg.mesh.read(arg[2] .. "/examples/domain.msh")
+  local q = mesh:quality("mean_ratio")
+  local mn, imn = q:min()
+  local mx, imx = q:max()
+  out("quality_n", "count", #q)
+  out("quality_min", "direct", mn)
+  out("quality_argmin", "count", imn)
+  out("quality_argmax", "count", imx)
+  out("quality_mean", "direct", q:mean())
+  local h = q:histogram(4)
+  for i, c in ipairs(h.counts) do out("quality_histogram_" .. i, "count", c) end
+  local w = q:worst(3)
+  out("quality_worst", "count", w[1].cell + 10000 * w[2].cell)
+  local t, s = q:totable(), 0
+  for i, v in ipairs(t) do s = s + i * v end
+  out("quality_totable", "direct", s)
+  local r = mesh:quality_report(true)
+  out("report_cells", "count", r.cells)
+  out("report_angle", "direct", r.min_angle.min + r.min_angle.mean)
+  out("report_worst", "count", r.min_angle.worst)
+  local info = mesh:info()
+  out("info_boundary_facets", "count", info.boundary_facets)
+  local near = mesh:vertices{near = {0.3, 0.2}}
+  out("near_vertex", "direct", lg.integrate(mesh, x)) -- a region made on every rank, no hang
+end
+
+-- moving vertices by their global numbers (each rank moves the ones it holds), the check of
+-- a tangled mesh, hmax
+do
+  local mesh = lg.mesh.rectangle{nx = 8}
+  for i = 1, mesh:nvertices() do
+    local a, b = mesh:coordinates(i)
+    if a then mesh:set_coordinates(i, a + 0.02*math.sin(2*pi*b), b) end
+  end
+  out("moved_hmax", "direct", mesh:hmax())
+  out("moved_area_x", "direct", lg.integrate(mesh, x))
+  mesh:set_coordinates(41, 0.8, 0.8) -- past its neighbours: some cells inverted
+  local n, ids = mesh:check()
+  out("tangled_cells", "count", n)
+  out("tangled_first", "count", ids[1] + 1000 * ids[#ids])
 end

@@ -21,6 +21,8 @@ local l2 = math.sqrt(lg.integrate(mesh, (uh - exact)^2, {order = 6}))
 local f = io.open("/proc/self/status")
 local hwm = f and tonumber(f:read("a"):match("VmHWM:%s*(%d+)")) or 0
 if f then f:close() end
-print(string.format("lugal poisson3d N=%d P1 dofs=%d iterations=%d L2=%.6e ranks=%d assemble_s=%.3f peak_rss_mb_rank=%.0f",
+-- (and of the smallest: with -lugal_distribute rank 0 reads or generates the whole mesh, the
+-- others never hold it)
+print(string.format("lugal poisson3d N=%d P1 dofs=%d iterations=%d L2=%.6e ranks=%d assemble_s=%.3f peak_rss_mb_rank=%.0f (smallest %.0f)",
                     N, uh:ndof(), info and info.iterations or -1, l2, lg.size(),
-                    lg.allreduce(info.assemble_ms / 1000, "max"), lg.allreduce(hwm / 1024, "max")))
+                    lg.allreduce(info.assemble_ms / 1000, "max"), lg.allreduce(hwm / 1024, "max"), lg.allreduce(hwm / 1024, "min")))

@@ -67,12 +67,14 @@ static int recv_part(lg_env *env, mesh_part **mine) {
     lg_seterr(env, "receiving this rank's part of the mesh failed");
     return 1;
   }
-  char *buf = malloc((size_t)len + 1);
+  /* mapped, not malloc'ed: its pages go back to the system when it is freed (a part of a
+   * large mesh is tens of MB, which malloc keeps) */
+  char *buf = mesh_big_alloc((size_t)len + 1);
   if (!buf) return 1;
   if (MPI_Recv(buf, len, MPI_BYTE, 0, TAG_PART, PETSC_COMM_WORLD, MPI_STATUS_IGNORE) != MPI_SUCCESS) len = 0;
   char err[MESH_ERRLEN] = "rank 0 failed";
   *mine = len ? mesh_part_unpack(buf, (size_t)len, err) : NULL;
-  free(buf);
+  mesh_big_free(buf);
   if (!*mine) { lg_seterr(env, "this rank's part of the mesh: %s", err); return 1; }
   return 0;
 }

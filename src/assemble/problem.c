@@ -647,20 +647,36 @@ void lg_problem_free(lg_problem *p) {
 int lg_problem_size(const lg_problem *p) { return p->N; }
 int lg_problem_global_size(const lg_problem *p) { return p->Nglob; }
 
+static int cmp_petscint(const void *a, const void *b) {
+  PetscInt x = *(const PetscInt *)a, y = *(const PetscInt *)b;
+  return (x > y) - (x < y);
+}
+
 void lg_problem_ownership(const lg_problem *p, int *rows, long *ghosts) {
   *rows = p->hi - p->lo;
   *ghosts = -1;
-  int B = p->pB, Nn = p->Nglob / B, R0 = p->lo / B, R1 = p->hi / B; /* columns are global */
-  char *seen = p->csr_i ? calloc((size_t)Nn + 1, 1) : NULL;
-  if (!seen) return;
-  /* the pattern's columns are nodes (B > 1: every B-th entry of a row is a node's first) */
-  long n = 0;
+  if (!p->csr_i) return;
+  int B = p->pB, R0 = p->lo / B, R1 = p->hi / B;
+  /* the pattern's columns are nodes (B > 1: every B-th entry of a row is a node's first)
+   * outside the owned ones, sorted and counted once each (no array of the whole size) */
+  size_t m = 0;
   for (int R = R0; R < R1; R++)
     for (PetscInt e = p->csr_i[(size_t)(R - R0) * B]; e < p->csr_i[(size_t)(R - R0) * B + 1]; e += B) {
       PetscInt c = p->csr_j[e] / B;
-      if ((c < R0 || c >= R1) && !seen[c]) { seen[c] = 1; n++; }
+      m += c < R0 || c >= R1;
     }
-  free(seen);
+  PetscInt *col = malloc(sizeof(PetscInt) * (m + 1));
+  if (!col) return;
+  m = 0;
+  for (int R = R0; R < R1; R++)
+    for (PetscInt e = p->csr_i[(size_t)(R - R0) * B]; e < p->csr_i[(size_t)(R - R0) * B + 1]; e += B) {
+      PetscInt c = p->csr_j[e] / B;
+      if (c < R0 || c >= R1) col[m++] = c;
+    }
+  qsort(col, m, sizeof(PetscInt), cmp_petscint);
+  long n = 0;
+  for (size_t i = 0; i < m; i++) n += !i || col[i] != col[i - 1];
+  free(col);
   *ghosts = n * B;
 }
 

@@ -235,12 +235,54 @@ static int linear_solve_checked(lg_env *env, lg_problem *p, lg_solve_info *info)
  * side; their entries (rows outside the essential set) are kept so that a solve with the
  * same matrix and new data (an optimization's next evaluation, other essential values)
  * reuses the factorization */
+/* the essential condition (its index) of each PETSc row: an array over the whole problem's
+ * rows, or on a distributed mesh (whose columns are global) a hash of its essential rows */
+typedef struct {
+  int *at;             /* whole: at[row] */
+  PetscInt *key;       /* hash: rows (-1 empty) */
+  int *val, mask;
+} bc_index;
+
+static int bc_index_make(lg_problem *p, bc_index *x) {
+  memset(x, 0, sizeof *x);
+  if (!p->lm->dist) {
+    if (!(x->at = malloc(sizeof(int) * ((size_t)p->Nglob + 1)))) return 1;
+    for (int i = 0; i < p->Nglob; i++) x->at[i] = -1;
+    for (int k = 0; k < p->nbc; k++) x->at[lg_petsc_row(p, p->bc_rows[k])] = k; /* the matrix's order */
+    return 0;
+  }
+  int n = 16;
+  while (n < 2 * p->nbc + 2) n *= 2;
+  x->key = malloc(sizeof(PetscInt) * (size_t)n);
+  x->val = malloc(sizeof(int) * (size_t)n);
+  if (!x->key || !x->val) { free(x->key); free(x->val); return 1; }
+  x->mask = n - 1;
+  for (int i = 0; i < n; i++) x->key[i] = -1;
+  for (int k = 0; k < p->nbc; k++) {
+    PetscInt r = lg_petsc_row(p, p->bc_rows[k]);
+    unsigned h = (unsigned)((uint64_t)r * 0x9e3779b97f4a7c15ull >> 40) & (unsigned)x->mask;
+    while (x->key[h] >= 0 && x->key[h] != r) h = (h + 1) & (unsigned)x->mask;
+    x->key[h] = r;
+    x->val[h] = k;
+  }
+  return 0;
+}
+
+static inline int bc_index_get(const bc_index *x, PetscInt r) {
+  if (x->at) return x->at[r];
+  unsigned h = (unsigned)((uint64_t)r * 0x9e3779b97f4a7c15ull >> 40) & (unsigned)x->mask;
+  while (x->key[h] >= 0) {
+    if (x->key[h] == r) return x->val[h];
+    h = (h + 1) & (unsigned)x->mask;
+  }
+  return -1;
+}
+
+static void bc_index_free(bc_index *x) { free(x->at); free(x->key); free(x->val); }
+
 static int keep_bc_columns(lg_env *env, lg_problem *p) {
-  /* by PETSc's row: the whole problem's rows (a distributed mesh's columns are global) */
-  int *at = malloc(sizeof(int) * ((size_t)p->Nglob + 1));
-  if (!at) { lg_seterr(env, "out of memory"); return 1; }
-  for (int i = 0; i < p->Nglob; i++) at[i] = -1;
-  for (int k = 0; k < p->nbc; k++) at[lg_petsc_row(p, p->bc_rows[k])] = k; /* the matrix's order */
+  bc_index at;
+  if (bc_index_make(p, &at)) { lg_seterr(env, "out of memory"); return 1; }
   size_t n = 0;
   /* the assembled values, before the elimination: the matrix's own array in a serial run,
    * the one its blocks are copied from in a parallel one; the owned rows, global columns */
@@ -252,7 +294,7 @@ static int keep_bc_columns(lg_env *env, lg_problem *p) {
       p->bcc_col = malloc(sizeof(int) * (n + 1));
       p->bcc_val = malloc(sizeof(double) * (n + 1));
       if (!p->bcc_row || !p->bcc_col || !p->bcc_val) {
-        free(at);
+        bc_index_free(&at);
         p->bcc_n = 0;
         lg_seterr(env, "out of memory");
         return 1;
@@ -260,9 +302,9 @@ static int keep_bc_columns(lg_env *env, lg_problem *p) {
       n = 0;
     }
     for (int i = p->lo; i < p->hi; i++) {
-      if (at[i] >= 0) continue;
+      if (bc_index_get(&at, i) >= 0) continue;
       for (PetscInt e = p->csr_i[i - p->lo]; e < p->csr_i[i - p->lo + 1]; e++) {
-        int k = at[p->csr_j[e]];
+        int k = bc_index_get(&at, p->csr_j[e]);
         if (k < 0 || av[e] == 0) continue;
         if (pass) { p->bcc_row[n] = i; p->bcc_col[n] = k; p->bcc_val[n] = av[e]; }
         n++;
@@ -270,7 +312,7 @@ static int keep_bc_columns(lg_env *env, lg_problem *p) {
     }
   }
   p->bcc_n = n;
-  free(at);
+  bc_index_free(&at);
   return 0;
 }
 

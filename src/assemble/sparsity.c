@@ -43,7 +43,7 @@ void lg_term_nodes(const lg_problem *p, const prob_term *t, int it, int rows, in
  * map's own cell list where that is what they are (one field numbered from 0 over every
  * cell in order, B = 1, no reordering: a Laplacian's, 25 MB not copied on 1.57 M
  * tetrahedra), *owned = 0; else gathered */
-static const PetscInt *term_node_lists(const lg_problem *p, const prob_term *t, int rows, int B, int *owned) {
+static const PetscInt *term_node_lists(const lg_problem *p, const prob_term *t, int rows, int B, int petsc, int *owned) {
   const field_layout *l = rows ? &t->rl : &t->cl;
   const dofmap *dm = (rows ? p->rdm : p->cdm)[0];
   int direct = sizeof(PetscInt) == sizeof(int) && B == 1 && l->n == 1 && !t->interior && !p->perm &&
@@ -53,7 +53,7 @@ static const PetscInt *term_node_lists(const lg_problem *p, const prob_term *t, 
   if (direct) return (const PetscInt *)dm->cell_dofs;
   int n = l->size / B;
   PetscInt *o = malloc(sizeof(PetscInt) * ((size_t)t->nitems * (size_t)n + 1));
-  for (int it = 0; o && it < t->nitems; it++) lg_term_nodes(p, t, it, rows, B, 1, o + (size_t)it * n);
+  for (int it = 0; o && it < t->nitems; it++) lg_term_nodes(p, t, it, rows, B, petsc, o + (size_t)it * n);
   return o;
 }
 
@@ -64,12 +64,13 @@ static int find_term(const size_t *erow_off, int nterm, size_t e) {
   return i;
 }
 
-/* rows are short (tens of entries): insertion sort */
-static void sort_row(PetscInt *v, size_t n) {
+/* rows are short (tens of entries): insertion sort, by the nodes' PETSc numbers (perm: a
+ * distributed mesh's local node -> PETSc's; NULL: the nodes are PETSc's) */
+static void sort_row(PetscInt *v, size_t n, const int *perm) {
   for (size_t i = 1; i < n; i++) {
-    PetscInt x = v[i];
+    PetscInt x = v[i], kx = perm ? perm[x] : x;
     size_t j = i;
-    for (; j > 0 && v[j - 1] > x; j--) v[j] = v[j - 1];
+    for (; j > 0 && (perm ? perm[v[j - 1]] : v[j - 1]) > kx; j--) v[j] = v[j - 1];
     v[j] = x;
   }
 }
@@ -78,6 +79,10 @@ static void sort_row(PetscInt *v, size_t n) {
 typedef struct {
   lg_problem *p;
   int B, Nn, R0;         /* R0: the first owned node row; ia counts from it */
+  /* a distributed mesh's problem: the node lists, markers and row lists are in local node
+   * numbers (Nn of them, not the whole problem's), perm gives their PETSc numbers and
+   * iperm the local node of PETSc row R0 + j; NULL elsewhere (the nodes are PETSc's) */
+  const int *perm, *iperm;
   const size_t *start, *erow_off;
   const uint32_t *erow;  /* each node row's element rows: their items, numbered across terms */
   const PetscInt *const *rnod, *const *cnod;
@@ -91,6 +96,9 @@ typedef struct {
   PetscInt *nodes;       /* one node row */
   int bad;               /* 1 out of memory */
 } pattern_block;
+
+/* the node in the lists' numbering of PETSc's node row R */
+#define ROW_NODE(in, R) ((in)->iperm ? (in)->iperm[(R) - (in)->R0] : (R))
 
 /* each element row's term (a short scan: problems have few terms) */
 static inline int erow_term(const pattern_in *in, int *last, size_t item) {
@@ -133,7 +141,7 @@ static void pattern_count(const pattern_in *in, pattern_block *bk) {
   int B = in->B, last = 0;
   size_t nnz = 0, maxlen = 0;
   for (int R = bk->R0; R < bk->R1; R++) {
-    size_t len = row_nodes(in, R, &last, bk->mark, bk->nodes);
+    size_t len = row_nodes(in, ROW_NODE(in, R), &last, bk->mark, bk->nodes);
     in->ia[(size_t)(R - in->R0) * B] = (PetscInt)(len * (size_t)B);
     nnz += len * (size_t)B * (size_t)B;
     if (len > maxlen) maxlen = len;
@@ -154,14 +162,15 @@ static void pattern_fill(const pattern_in *in, pattern_block *bk) {
   int B = in->B, last = 0, w = p->rank_w;
   int *mark = bk->mark;
   PetscInt *nodes = bk->nodes, *ja = in->ja;
-  for (int R = bk->R0; R < bk->R1; R++) {
+  for (int RP = bk->R0; RP < bk->R1; RP++) {
+    int R = ROW_NODE(in, RP); /* the row's node in the lists' numbering */
     size_t len = row_nodes(in, R, &last, mark, nodes);
-    sort_row(nodes, len);
-    const PetscInt *iar = in->ia + (size_t)(R - in->R0) * B;
+    sort_row(nodes, len, in->perm);
+    const PetscInt *iar = in->ia + (size_t)(RP - in->R0) * B;
     size_t nz = (size_t)iar[0];
     for (int a = 0; a < B; a++)
       for (size_t k = 0; k < len; k++)
-        for (int b2 = 0; b2 < B; b2++) ja[nz++] = nodes[k] * B + b2;
+        for (int b2 = 0; b2 < B; b2++) ja[nz++] = (in->perm ? in->perm[nodes[k]] : nodes[k]) * B + b2;
     /* the marker now holds positions (>= Nn would clash with row numbers: use -2 - position) */
     for (size_t k = 0; k < len; k++) mark[nodes[k]] = -2 - (int)k;
     int r = -1;
@@ -315,9 +324,9 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
    * B = 1 otherwise. Each element entry (node pair) keeps its column node's rank in its row
    * node's row: 1 byte where rows have at most 256 nodes (4 bytes per entry before), and for
    * B = 1 each element row its row's start (P1 on 1.57 M tetrahedra: 50 MB instead of 102) */
-  /* node arrays are indexed by PETSc's node numbers: global ones on a distributed mesh (a
-   * rank's rows and columns are among all of them; O(whole) int arrays during the setup) */
-  int B = lg_matrix_block_size(p), Nn = p->Nglob / B;
+  /* node arrays are indexed by PETSc's node numbers, or on a distributed mesh by its local
+   * nodes' (no array of the whole problem's size on any rank) */
+  int B = lg_matrix_block_size(p), local = p->lm->dist != NULL, Nn = (local ? p->N : p->Nglob) / B;
   size_t nrank = 0, nerow = 0;
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
@@ -343,7 +352,7 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
     if (!t->have_mat) continue;
     int rn = t->rl.size / B;
     nitem += (size_t)t->nitems;
-    rnod[i] = term_node_lists(p, t, 1, B, &rown[i]);
+    rnod[i] = term_node_lists(p, t, 1, B, !local, &rown[i]);
     /* a square term (the same fields, dof maps and numbering for rows and columns, as a
      * Laplacian's) shares one list */
     int same = t->rl.n == t->cl.n && t->rl.size == t->cl.size && !memcmp(t->rl.nloc, t->cl.nloc, sizeof t->rl.nloc) &&
@@ -351,7 +360,7 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
                p->rows.n == p->cols.n &&
                !memcmp(p->rdm, p->cdm, sizeof(dofmap *) * (size_t)p->rows.n) &&
                !memcmp(p->rglob, p->cglob, sizeof(int) * (size_t)(p->rows.n + 1));
-    cnod[i] = same ? rnod[i] : term_node_lists(p, t, 0, B, &cown[i]);
+    cnod[i] = same ? rnod[i] : term_node_lists(p, t, 0, B, !local, &cown[i]);
     if (!rnod[i] || !cnod[i]) { bad = 1; break; }
     const PetscInt *rg = rnod[i];
     for (size_t e = 0, ne = (size_t)t->nitems * (size_t)rn; e < ne; e++) start[rg[e] + 2]++;
@@ -388,7 +397,9 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   if (!ia) bad = 1;
   /* the rows in contiguous blocks, one per OpenMP thread (balanced by element rows), each
    * with its own marker. The same pattern and ranks for any thread count */
-  size_t nown = start[R1] - start[R0];
+  size_t nown = 0;
+  pattern_in in = {p, B, Nn, R0, local ? p->perm : NULL, local ? p->iperm : NULL, start, erow_off, erow, rnod, cnod, ia, NULL};
+  for (int R = R0; !bad && R < R1; R++) nown += start[ROW_NODE(&in, R) + 1] - start[ROW_NODE(&in, R)];
   int nb = 1;
 #ifdef _OPENMP
   if (nown > 200000) nb = omp_get_max_threads();
@@ -397,11 +408,11 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   p->pattern_threads = nb;
   pattern_block blk[64];
   memset(blk, 0, sizeof blk);
-  pattern_in in = {p, B, Nn, R0, start, erow_off, erow, rnod, cnod, ia, NULL};
+  size_t acc = 0; /* element rows of the rows before R */
   for (int b = 0, R = R0; b < nb; b++) {
     blk[b].R0 = R;
-    size_t goal = start[R0] + nown / (size_t)nb * (size_t)(b + 1);
-    while (R < R1 && (b == nb - 1 || start[R] < goal)) R++;
+    size_t goal = nown / (size_t)nb * (size_t)(b + 1);
+    while (R < R1 && (b == nb - 1 || acc < goal)) { acc += start[ROW_NODE(&in, R) + 1] - start[ROW_NODE(&in, R)]; R++; }
     blk[b].R1 = b == nb - 1 ? R1 : R;
   }
   blk[0].mark = mark;

@@ -22,6 +22,15 @@ static int mesh_gc(lua_State *L) {
   return 0;
 }
 
+/* a generator's mesh: under -lugal_distribute only rank 0 makes it (push_mesh sends each rank
+ * its part), and its failure is every rank's */
+static int generate_here(void) { return !lg_distribute_wanted() || lg_mpi_rank() == 0; }
+
+static void generated(lua_State *L, mesh *m, char *err, const char *fn) {
+  int bad = generate_here() && !m;
+  if (lg_distribute_wanted() ? lg_root_result(bad, err, MESH_ERRLEN) : bad) luaL_error(L, "%s: %s", fn, err);
+}
+
 static int l_interval(lua_State *L) {
   const char *fn = "lg.mesh.interval";
   if (lua_isnoneornil(L, 1)) lua_newtable(L);
@@ -31,8 +40,9 @@ static int l_interval(lua_State *L) {
   int n = opt_int(L, 1, "n", opt_int(L, 1, "nx", 8, fn), fn);
   double x0 = opt_num(L, 1, "x0", 0, fn), x1 = opt_num(L, 1, "x1", 1, fn);
   char err[MESH_ERRLEN];
-  mesh *m = mesh_interval(n, x0, x1, err);
-  if (!m) return luaL_error(L, "%s: %s", fn, err);
+  err[0] = 0;
+  mesh *m = generate_here() ? mesh_interval(n, x0, x1, err) : NULL;
+  generated(L, m, err, fn);
   push_mesh(L, m);
   return 1;
 }
@@ -61,8 +71,9 @@ static int l_rectangle(lua_State *L) {
   else if (!strcmp(dg, "crossed")) o.diagonal = 2;
   else return luaL_error(L, "%s: option 'diagonal' must be \"right\", \"left\" or \"crossed\", got \"%s\"", fn, dg);
   char err[MESH_ERRLEN];
-  mesh *m = mesh_rectangle(&o, err);
-  if (!m) return luaL_error(L, "%s: %s", fn, err);
+  err[0] = 0;
+  mesh *m = generate_here() ? mesh_rectangle(&o, err) : NULL;
+  generated(L, m, err, fn);
   push_mesh(L, m);
   return 1;
 }
@@ -89,8 +100,9 @@ static int l_box(lua_State *L) {
   else if (!strcmp(cell, "hexahedron")) o.type = CELL_HEXAHEDRON;
   else return luaL_error(L, "%s: option 'cell' must be \"tetrahedron\" or \"hexahedron\", got \"%s\"", fn, cell);
   char err[MESH_ERRLEN];
-  mesh *m = mesh_box(&o, err);
-  if (!m) return luaL_error(L, "%s: %s", fn, err);
+  err[0] = 0;
+  mesh *m = generate_here() ? mesh_box(&o, err) : NULL;
+  generated(L, m, err, fn);
   push_mesh(L, m);
   return 1;
 }

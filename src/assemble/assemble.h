@@ -113,6 +113,11 @@ int lg_function_gather(lg_env *env, const lg_function *f, int coords, double **o
 int lg_dist_cell_values(lg_env *env, const double *v, const int *gid, int n, long ncell, double *out);
 int lg_dist_stats(lg_env *env, const double *v, const int *gid, int n, quality_stats *st);
 int lg_dist_worst(lg_env *env, const double *v, const int *gid, int n, int k, int larger_is_better, int *gids, double *vals);
+/* the whole mesh (cells, tags, tagged boundary facets, names) on rank 0 (NULL elsewhere),
+ * and the coordinates of rank 0's whole mesh back to every rank's local vertices: how a
+ * distributed mesh is repaired (untangled, smoothed) on one rank; collective */
+int lg_dist_gather_mesh(lg_env *env, lg_mesh *lm, mesh **whole);
+int lg_dist_scatter_coords(lg_env *env, lg_mesh *lm, const mesh *whole);
 /* the number of owned cells / vertices summed over the ranks (the whole mesh's counts) */
 long lg_mesh_global_cells(const lg_mesh *lm);
 long lg_mesh_global_vertices(const lg_mesh *lm);

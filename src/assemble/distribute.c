@@ -661,3 +661,100 @@ int lg_dist_worst(lg_env *env, const double *v, const int *gid, int n, int k, in
   free(x); free(order); free(sel); free(pairs);
   return kk;
 }
+
+/* ---------------------------------------------------------------- repairs on rank 0 */
+
+int lg_dist_gather_mesh(lg_env *env, lg_mesh *lm, mesh **whole) {
+  double **vals = NULL;
+  *whole = NULL;
+  int rc = lg_dist_gather(env, lm, 0, NULL, whole, &vals);
+  free(vals);
+  /* the tagged boundary facets of owned cells (each facet of the whole mesh once), by
+   * global vertex numbers, and every name */
+  const mesh_part *P = lm->dist;
+  mesh *m = P->m;
+  int rank = lg_mpi_rank(), size = lg_mpi_size(), nvf = m->nvf, bad = rc || mesh_build_boundary_cells(m);
+  int nb = 0;
+  for (int b = 0; !bad && b < m->nbf; b++) nb += P->cowner[m->bf_cell[b]] == rank;
+  int *mine = malloc(sizeof(int) * ((size_t)nb * (size_t)(nvf + 1) + 1)), *cnt = malloc(sizeof(int) * 2 * ((size_t)size + 1));
+  bad |= !mine || !cnt;
+  for (int b = 0, k = 0; !bad && b < m->nbf; b++)
+    if (P->cowner[m->bf_cell[b]] == rank) {
+      int *o = mine + (size_t)k++ * (size_t)(nvf + 1);
+      for (int j = 0; j < nvf; j++) o[j] = P->vglobal[m->bf_verts[(size_t)b * (size_t)nvf + (size_t)j]];
+      o[nvf] = m->bf_tag[b];
+    }
+  int any = 0;
+  MPI_Allreduce(&bad, &any, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
+  int *all = NULL, total = 0;
+  if (!any) {
+    int w = nb * (nvf + 1);
+    if (MPI_Gather(&w, 1, MPI_INT, cnt, 1, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) any = 1;
+    int *dsp = cnt + size;
+    if (rank == 0) {
+      long at = 0;
+      for (int r = 0; r < size; r++) { dsp[r] = (int)at; at += cnt[r]; }
+      total = (int)(at / (nvf + 1));
+      all = malloc(sizeof(int) * ((size_t)at + 1));
+      if (!all) any = 1;
+    }
+    if (MPI_Bcast(&any, 1, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) any = 1;
+    if (!any && MPI_Gatherv(mine, w, MPI_INT, all, cnt, dsp, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) any = 1;
+  }
+  mesh *W = *whole;
+  if (!any && rank == 0 && W && total) {
+    W->bf_verts = malloc(sizeof(int) * (size_t)total * (size_t)nvf);
+    W->bf_tag = malloc(sizeof(int) * (size_t)total);
+    if (!W->bf_verts || !W->bf_tag) any = 1;
+    for (int b = 0; !any && b < total; b++) {
+      memcpy(W->bf_verts + (size_t)b * (size_t)nvf, all + (size_t)b * (size_t)(nvf + 1), sizeof(int) * (size_t)nvf);
+      W->bf_tag[b] = all[(size_t)b * (size_t)(nvf + 1) + (size_t)nvf];
+    }
+    if (!any) W->nbf = total;
+  }
+  for (int i = 0; !any && rank == 0 && W && i < m->nbname; i++) any = mesh_set_boundary_name(W, m->bnames[i].tag, m->bnames[i].name);
+  for (int i = 0; !any && rank == 0 && W && i < m->ncname; i++) any = mesh_set_region_name(W, m->cnames[i].tag, m->cnames[i].name);
+  free(mine);
+  free(cnt);
+  free(all);
+  if (any || rc) {
+    mesh_free(*whole);
+    *whole = NULL;
+    if (!rc) lg_seterr(env, "gathering the distributed mesh on rank 0 failed (out of memory)");
+    return 1;
+  }
+  return 0;
+}
+
+int lg_dist_scatter_coords(lg_env *env, lg_mesh *lm, const mesh *whole) {
+  /* each rank's vertices to rank 0, which answers with their coordinates in W */
+  const mesh_part *P = lm->dist;
+  mesh *m = P->m;
+  int rank = lg_mpi_rank(), size = lg_mpi_size(), dim = m->dim, n = m->nvert;
+  int *cnt = malloc(sizeof(int) * 4 * ((size_t)size + 1)), *ids = NULL, bad = !cnt, any = 0;
+  double *x = NULL, *mine = malloc(sizeof(double) * ((size_t)n * (size_t)dim + 1));
+  bad |= !mine;
+  MPI_Allreduce(&bad, &any, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
+  if (any) { free(cnt); free(mine); lg_seterr(env, "out of memory"); return 1; }
+  int *dsp = cnt + size, *xc = dsp + size, *xd = xc + size;
+  if (MPI_Gather(&n, 1, MPI_INT, cnt, 1, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) bad = 1;
+  if (rank == 0) {
+    long at = 0;
+    for (int r = 0; r < size; r++) { dsp[r] = (int)at; xc[r] = cnt[r] * dim; xd[r] = (int)(at * dim); at += cnt[r]; }
+    ids = malloc(sizeof(int) * ((size_t)at + 1));
+    x = malloc(sizeof(double) * ((size_t)at * (size_t)dim + 1));
+    bad |= !ids || !x || at * dim > INT32_MAX;
+  }
+  if (MPI_Bcast(&bad, 1, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) bad = 1;
+  if (!bad && MPI_Gatherv(P->vglobal, n, MPI_INT, ids, cnt, dsp, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) bad = 1;
+  if (!bad && rank == 0) {
+    long at = 0;
+    for (int r = 0; r < size; r++) at += cnt[r];
+    for (long i = 0; i < at; i++) memcpy(x + (size_t)i * (size_t)dim, whole->x + (size_t)ids[i] * (size_t)dim, sizeof(double) * (size_t)dim);
+  }
+  if (!bad && MPI_Scatterv(x, xc, xd, MPI_DOUBLE, mine, n * dim, MPI_DOUBLE, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) bad = 1;
+  if (!bad) memcpy(m->x, mine, sizeof(double) * (size_t)n * (size_t)dim);
+  free(cnt); free(ids); free(x); free(mine);
+  if (bad) { lg_seterr(env, "sending the repaired coordinates to every rank failed"); return 1; }
+  return 0;
+}

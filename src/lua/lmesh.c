@@ -500,9 +500,37 @@ static const mesh *opt_reference(lua_State *L, int t, const mesh *m, const char 
   return ref;
 }
 
+/* a repair of a distributed mesh: rank 0 gathers the whole mesh and runs it, its outcome
+ * and report (rlen bytes at r) reach every rank, and the new coordinates each rank's
+ * vertices. The serial run's result, at the price of one rank's work and memory (issue 14
+ * asks at least this much) */
+typedef int (*repair_fn)(mesh *m, const void *opts, void *report, char *err);
+
+static int repair_untangle(mesh *m, const void *o, void *r, char *err) { return mesh_untangle(m, o, r, err); }
+static int repair_smooth(mesh *m, const void *o, void *r, char *err) { return mesh_smooth(m, o, r, err); }
+
+static int dist_repair(lua_State *L, ud_mesh *u, repair_fn op, const void *o, void *r, size_t rlen, char *err) {
+  lg_env *env = get_env(L);
+  mesh *W = NULL;
+  int rc = lg_dist_gather_mesh(env, u->lm, &W);
+  if (rc) snprintf(err, MESH_ERRLEN, "%.*s", MESH_ERRLEN - 1, env->err);
+  else if (lg_mpi_rank() == 0) rc = op(W, o, r, err);
+  rc = lg_root_result(rc, err, MESH_ERRLEN);
+  if (!rc && MPI_Bcast(r, (int)rlen, MPI_BYTE, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) {
+    snprintf(err, MESH_ERRLEN, "sending the report to every rank failed");
+    rc = 1;
+  }
+  if (!rc && lg_dist_scatter_coords(env, u->lm, W)) {
+    snprintf(err, MESH_ERRLEN, "%.*s", MESH_ERRLEN - 1, env->err);
+    rc = 1;
+  }
+  mesh_free(W);
+  return rc;
+}
+
 static int lmesh_untangle(lua_State *L) {
   const char *fn = "mesh:untangle";
-  ud_mesh *u = check_whole_mesh(L, 1, fn);
+  ud_mesh *u = check_mesh(L, 1, fn);
   int t = 0;
   if (!lua_isnoneornil(L, 2)) {
     if (!lua_istable(L, 2))
@@ -546,13 +574,24 @@ static int lmesh_untangle(lua_State *L) {
   if (ref && o.no_global) return luaL_error(L, "%s: option 'reference' needs the global stage (global = false was given)", fn);
   untangle_report r;
   char err[MESH_ERRLEN];
-  if (mesh_untangle(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
+  if (u->lm->dist) {
+    if (ref) check_not_distributed(L, u->lm, "mesh:untangle with a reference");
+    /* on rank 0's whole mesh; the stages' names are its pointers: sent as text */
+    struct { untangle_report r; char names[3][64]; } both;
+    memset(&both, 0, sizeof both);
+    int rc = dist_repair(L, u, repair_untangle, &o, &both.r, sizeof both, err);
+    if (!rc && lg_mpi_rank() == 0) for (int i = 0; i < both.r.nstage && i < 3; i++) snprintf(both.names[i], 64, "%s", both.r.stage[i].name);
+    if (!rc && MPI_Bcast(both.names, (int)sizeof both.names, MPI_CHAR, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) rc = 1;
+    if (rc) return luaL_error(L, "%s: %s", fn, err);
+    r = both.r;
+    for (int i = 0; i < r.nstage && i < 3; i++) r.stage[i].name = both.names[i];
+  } else if (mesh_untangle(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
   lg_mesh_changed(u->lm);
   char text[2048];
   size_t n = (size_t)snprintf(text, sizeof text,
                               "untangle: %d %s, beta %.3g: invalid %d -> %d (%s), %d vertices moved (mean %.3g, max "
                               "%.3g), %.3f s",
-                              m->ncell, cell_plural(m->type), r.beta, r.invalid_before, r.invalid_after,
+                              (int)lg_mesh_global_cells(u->lm), cell_plural(m->type), r.beta, r.invalid_before, r.invalid_after,
                               r.invalid_after ? "FAILED" : "valid", r.moved, r.mean_displacement, r.max_displacement,
                               r.seconds);
   if (r.passes > 1 && n < sizeof text) n += (size_t)snprintf(text + n, sizeof text - n, ", %d passes", r.passes);
@@ -602,7 +641,7 @@ static int lmesh_untangle(lua_State *L) {
 
 static int lmesh_smooth(lua_State *L) {
   const char *fn = "mesh:smooth";
-  ud_mesh *u = check_whole_mesh(L, 1, fn);
+  ud_mesh *u = check_mesh(L, 1, fn);
   mesh *m = u->lm->m;
   int t = 0;
   if (!lua_isnoneornil(L, 2)) {
@@ -657,7 +696,10 @@ static int lmesh_smooth(lua_State *L) {
   }
   smooth_report r;
   char err[MESH_ERRLEN];
-  if (mesh_smooth(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
+  if (u->lm->dist) {
+    if (ref) check_not_distributed(L, u->lm, "mesh:smooth with a reference");
+    if (dist_repair(L, u, repair_smooth, &o, &r, sizeof r, err)) return luaL_error(L, "%s: %s", fn, err);
+  } else if (mesh_smooth(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
   lg_mesh_changed(u->lm);
   char text[512];
   snprintf(text, sizeof text, "smooth (%s): %s%s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s",

@@ -185,3 +185,23 @@ do
   out("tangled_cells", "count", n)
   out("tangled_first", "count", ids[1] + 1000 * ids[#ids])
 end
+
+-- untangling and smoothing a distributed mesh: on rank 0's gathered whole mesh, the new
+-- coordinates back to every rank (the serial result)
+do
+  local mesh = lg.mesh.rectangle{nx = 12}
+  for i = 1, mesh:nvertices() do
+    local a, b = mesh:coordinates(i)
+    if a and a > 0.3 and a < 0.6 and b > 0.3 and b < 0.6 then mesh:set_coordinates(i, 1 - b * 0.9, a * 1.05) end
+  end
+  local r = mesh:untangle{quiet = true}
+  out("untangle_invalid_before", "count", r.invalid_before)
+  out("untangle_invalid_after", "count", mesh:check())
+  out("untangle_moved", "count", r.moved)
+  local q = mesh:quality("mean_ratio")
+  out("untangle_min_quality", "direct", q:min())
+  local s = mesh:smooth{quiet = true, method = "energy"}
+  out("smooth_min_quality", "direct", mesh:quality("mean_ratio"):min())
+  out("smooth_report_min", "direct", s.min_after)
+  out("smooth_x_moment", "direct", lg.integrate(mesh, x*x*y))
+end

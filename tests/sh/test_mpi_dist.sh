@@ -84,7 +84,7 @@ local function says(f, ...)
 end
 says(lg.control, P1, mesh, "c")
 says(mesh.quality, mesh, "mean_ratio", {reference = mesh})
-says(mesh.untangle, mesh)
+says(mesh.move, mesh, {})
 says(mesh.refine, mesh)
 says(lg.assemble, lg.integral(mesh:cells(), lg.x))
 says(mesh.write, mesh, "/tmp/never.msh")

@@ -105,6 +105,8 @@ long lg_function_global_ndof(lg_env *env, const lg_function *f);
  * cells by their sorted global vertices), the node's place there, the component. For P1
  * and Q1 fields that is the whole mesh's own dof order. Collective; *out malloc'ed */
 int lg_function_gather(lg_env *env, const lg_function *f, int coords, double **out, long *n);
+/* the n values v in that order into a distributed function's local dofs; collective */
+int lg_function_assign_whole(lg_env *env, lg_function *f, const double *v, long n);
 /* per-cell values of a distributed mesh, each rank's n values v of its cells with global
  * numbers gid (collective): all ncell of them in the global order on every rank (NaN where
  * none came); their statistics as quality_stats_compute gives them on the whole mesh
@@ -118,6 +120,8 @@ int lg_dist_worst(lg_env *env, const double *v, const int *gid, int n, int k, in
  * distributed mesh is repaired (untangled, smoothed) on one rank; collective */
 int lg_dist_gather_mesh(lg_env *env, lg_mesh *lm, mesh **whole);
 int lg_dist_scatter_coords(lg_env *env, lg_mesh *lm, const mesh *whole);
+/* an lg_mesh over a rank's part (it owns the part) */
+lg_mesh *lg_mesh_wrap_part(mesh_part *P);
 /* the number of owned cells / vertices summed over the ranks (the whole mesh's counts) */
 long lg_mesh_global_cells(const lg_mesh *lm);
 long lg_mesh_global_vertices(const lg_mesh *lm);

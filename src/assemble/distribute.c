@@ -22,6 +22,12 @@ int lg_distribute_wanted(void) {
   return set && on;
 }
 
+lg_mesh *lg_mesh_wrap_part(mesh_part *P) {
+  lg_mesh *lm = lg_mesh_wrap(P->m);
+  if (lm) lm->dist = P;
+  return lm;
+}
+
 long lg_mesh_global_cells(const lg_mesh *lm) { return lm->dist ? lm->dist->ncell_global : lm->m->ncell; }
 long lg_mesh_global_vertices(const lg_mesh *lm) { return lm->dist ? lm->dist->nvert_global : lm->m->nvert; }
 
@@ -86,11 +92,10 @@ lg_mesh *lg_mesh_distribute(lg_env *env, mesh *whole) {
   int rc = rank == 0 ? send_parts(env, whole, &P) : recv_part(env, &P);
   if (rank != 0) mesh_free(whole);
   rc = lg_any_result(rc, env->err, sizeof env->err);
-  lg_mesh *lm = rc ? NULL : lg_mesh_wrap(P->m);
+  lg_mesh *lm = rc ? NULL : lg_mesh_wrap_part(P);
   if (!rc && !lm) lg_seterr(env, "out of memory");
   if (!lm) { mesh_part_free(P); if (rank == 0) mesh_free(whole); return NULL; }
   if (rank == 0) mesh_free(whole);
-  lm->dist = P;
   if (env->verbose) {
     double own[2] = {P->nown_cell, P->m->ncell - P->nown_cell};
     fprintf(stderr, "[lugal] distribute: rank %d holds %d cells (%.0f owned, %.0f ghosts) and %d vertices of %d, %.1f ms\n", rank,
@@ -499,7 +504,19 @@ static int cmp_rec(const void *a, const void *b) {
   return 0;
 }
 
-int lg_function_gather(lg_env *env, const lg_function *f, int coords, double **out, long *n) {
+/* dof d's place in the whole function's order */
+static void rec_key(const mesh_part *P, const dofmap *dm, int d, dof_rec *r) {
+  int key[KEYLEN];
+  dof_key(P, dm, d, key);
+  r->k[0] = key[2];
+  memcpy(r->k + 1, key + 4, sizeof(int) * 4);
+  r->k[5] = key[3];
+  r->k[6] = key[1];
+}
+
+/* every rank's owned dofs of f with their values (coords = 0) or node coordinates, on
+ * every rank, sorted into the whole function's order */
+static int gather_records(lg_env *env, const lg_function *f, int coords, dof_rec **out, long *n) {
   const dofmap *dm = f->dm;
   const mesh *m = dm->m;
   int size = lg_mpi_size(), dim = m->dim;
@@ -516,13 +533,8 @@ int lg_function_gather(lg_env *env, const lg_function *f, int coords, double **o
   bad |= !mine;
   for (int d = 0, i = 0; !bad && d < dm->ndof; d++) {
     if (!own[d]) continue;
-    int key[KEYLEN];
-    dof_key(f->mesh->dist, dm, d, key);
     dof_rec *r = mine + i++;
-    r->k[0] = key[2];
-    memcpy(r->k + 1, key + 4, sizeof(int) * 4);
-    r->k[5] = key[3];
-    r->k[6] = key[1];
+    rec_key(f->mesh->dist, dm, d, r);
     memset(r->v, 0, sizeof r->v);
     if (coords) memcpy(r->v, xc + 3 * (size_t)d, sizeof(double) * (size_t)dim);
     else r->v[0] = f->x[d];
@@ -553,13 +565,43 @@ int lg_function_gather(lg_env *env, const lg_function *f, int coords, double **o
     return 1;
   }
   qsort(all, (size_t)total, sizeof(dof_rec), cmp_rec);
-  int w = coords ? dim : 1;
+  *out = all;
+  *n = total;
+  return 0;
+}
+
+int lg_function_gather(lg_env *env, const lg_function *f, int coords, double **out, long *n) {
+  dof_rec *all;
+  long total;
+  *out = NULL;
+  if (gather_records(env, f, coords, &all, &total)) return 1;
+  int w = coords ? f->dm->m->dim : 1;
   double *o = malloc(sizeof(double) * ((size_t)total * (size_t)w + 1));
   if (!o) { free(all); lg_seterr(env, "out of memory for %ld values", total); return 1; }
   for (long i = 0; i < total; i++) memcpy(o + (size_t)i * (size_t)w, all[i].v, sizeof(double) * (size_t)w);
   free(all);
   *out = o;
   *n = total;
+  return 0;
+}
+
+int lg_function_assign_whole(lg_env *env, lg_function *f, const double *v, long n) {
+  dof_rec *all;
+  long total;
+  if (gather_records(env, f, 0, &all, &total)) return 1;
+  if (total != n) {
+    free(all);
+    lg_seterr(env, "the table has %ld values, the function %ld dofs", n, total);
+    return 1;
+  }
+  const dofmap *dm = f->dm;
+  for (int d = 0; d < dm->ndof; d++) { /* every local dof, owned or ghost, from its place */
+    dof_rec r;
+    rec_key(f->mesh->dist, dm, d, &r);
+    const dof_rec *at = bsearch(&r, all, (size_t)total, sizeof(dof_rec), cmp_rec);
+    if (at) f->x[d] = v[at - all];
+  }
+  free(all);
   return 0;
 }
 

@@ -454,8 +454,19 @@ static int mesh_ncells(lua_State *L) { lua_pushinteger(L, lg_mesh_global_cells(c
 static int mesh_dim(lua_State *L) { lua_pushinteger(L, check_mesh(L, 1, "mesh:dim")->lm->m->dim); return 1; }
 
 static int lmesh_refine(lua_State *L) {
-  ud_mesh *u = check_whole_mesh(L, 1, "mesh:refine");
-  char err[MESH_ERRLEN];
+  ud_mesh *u = check_mesh(L, 1, "mesh:refine");
+  char err[MESH_ERRLEN] = "";
+  if (u->lm->dist) { /* rank 0 refines the whole mesh and distributes the result (push_mesh) */
+    lg_env *env = get_env(L);
+    mesh *W = NULL, *r = NULL;
+    int rc = lg_dist_gather_mesh(env, u->lm, &W);
+    if (rc) snprintf(err, sizeof err, "%.*s", (int)sizeof err - 1, env->err);
+    else if (lg_mpi_rank() == 0 && !(r = mesh_refine(W, err))) rc = 1;
+    mesh_free(W);
+    if (lg_root_result(rc, err, sizeof err)) { mesh_free(r); return luaL_error(L, "mesh:refine: %s", err); }
+    push_mesh(L, r);
+    return 1;
+  }
   mesh *r = mesh_refine(u->lm->m, err);
   if (!r) return luaL_error(L, "mesh:refine: %s", err);
   push_mesh(L, r);
@@ -463,7 +474,20 @@ static int lmesh_refine(lua_State *L) {
 }
 
 static int lmesh_copy(lua_State *L) {
-  ud_mesh *u = check_whole_mesh(L, 1, "mesh:copy");
+  ud_mesh *u = check_mesh(L, 1, "mesh:copy");
+  if (u->lm->dist) { /* each rank copies its part: the same partition, no communication */
+    char *buf;
+    size_t len;
+    char err[MESH_ERRLEN];
+    mesh_part *P = mesh_part_pack(u->lm->dist, &buf, &len) ? NULL : mesh_part_unpack(buf, len, err);
+    if (P) free(buf);
+    lg_mesh *lm = P ? lg_mesh_wrap_part(P) : NULL;
+    if (!lm) { mesh_part_free(P); return luaL_error(L, "mesh:copy: out of memory"); }
+    ud_mesh *c = lua_newuserdatauv(L, sizeof *c, 1);
+    c->lm = lm;
+    luaL_setmetatable(L, MT_MESH);
+    return 1;
+  }
   mesh *c = mesh_copy(u->lm->m);
   if (!c) return luaL_error(L, "mesh:copy: out of memory");
   push_mesh(L, c);
@@ -1083,8 +1107,18 @@ static int mesh_write(lua_State *L) {
   ud_mesh *u = check_mesh(L, 1, fn);
   const char *path = luaL_checkstring(L, 2);
   size_t l = strlen(path);
+  if (l > 4 && !strcmp(path + l - 4, ".msh") && u->lm->dist) { /* gathered and written by rank 0 */
+    lg_env *env = get_env(L);
+    mesh *W = NULL;
+    char err[MESH_ERRLEN];
+    int rc = lg_dist_gather_mesh(env, u->lm, &W);
+    if (rc) snprintf(err, sizeof err, "%.*s", (int)sizeof err - 1, env->err);
+    else if (lg_mpi_rank() == 0 && (rc = mesh_write_gmsh(W, path))) snprintf(err, sizeof err, "%s", W->err);
+    mesh_free(W);
+    if (lg_root_result(rc, err, sizeof err)) return luaL_error(L, "%s: %s", fn, err);
+    return 0;
+  }
   if (l > 4 && !strcmp(path + l - 4, ".msh")) {
-    check_not_distributed(L, u->lm, "mesh:write (.msh)");
     int rc = lg_mpi_rank() == 0 ? mesh_write_gmsh(u->lm->m, path) : 0;
     if (lg_root_result(rc, u->lm->m->err, sizeof u->lm->m->err)) return luaL_error(L, "%s: %s", fn, u->lm->m->err);
     return 0;

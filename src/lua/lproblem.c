@@ -61,8 +61,23 @@ static int func_assign(lua_State *L) {
     memcpy(u->f->x, g->f->x, sizeof(double) * (size_t)u->f->dm->ndof);
     return 0;
   }
+  if (lua_istable(L, 2) && u->f->mesh->dist) {
+    /* the whole function's values in f:values()'s order */
+    lua_Integer n = luaL_len(L, 2);
+    double *v = lua_newuserdatauv(L, sizeof(double) * ((size_t)(n > 0 ? n : 0) + 1), 0);
+    for (lua_Integer i = 1; i <= n; i++) {
+      lua_geti(L, 2, i);
+      int isnum;
+      v[i - 1] = lua_tonumberx(L, -1, &isnum);
+      if (!isnum) return luaL_error(L, "f:assign: entry %I of the table must be a number, got %s", i, luaL_typename(L, -1));
+      if (!isfinite(v[i - 1])) return luaL_error(L, "f:assign: entry %I of the table is not finite (%f)", i, v[i - 1]);
+      lua_pop(L, 1);
+    }
+    lg_env *env = get_env(L);
+    if (lg_function_assign_whole(env, u->f, v, (long)n)) return lgerror(L, "f:assign", env);
+    return 0;
+  }
   if (lua_istable(L, 2)) {
-    check_not_distributed(L, u->f->mesh, "f:assign of a table of values");
     int n = (int)luaL_len(L, 2);
     if (n != u->f->dm->ndof) return luaL_error(L, "f:assign: the table has %d values, the function %d dofs", n, u->f->dm->ndof);
     for (int i = 1; i <= n; i++) {

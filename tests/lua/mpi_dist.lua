@@ -205,3 +205,27 @@ do
   out("smooth_report_min", "direct", s.min_after)
   out("smooth_x_moment", "direct", lg.integrate(mesh, x*x*y))
 end
+
+-- refining (rank 0 refines the whole mesh and distributes it), copying (each rank its
+-- part), a Gmsh file written from the gathered mesh and read back, a table assigned to a
+-- function in f:values()'s order
+do
+  local mesh = lg.mesh.read(arg[2] .. "/examples/domain.msh")
+  local fine = mesh:refine()
+  out("refined_cells", "count", fine:ncells())
+  out("refined_moment", "direct", lg.integrate(fine, x*y*y))
+  local c = fine:copy()
+  for i = 1, c:nvertices() do local a, b = c:coordinates(i); if a then c:set_coordinates(i, 2*a, b) end end
+  out("copy_moment", "direct", lg.integrate(c, x*y*y))
+  out("copy_untouched", "direct", lg.integrate(fine, x*y*y))
+  fine:write(arg[1] .. "/fine.msh")
+  local back = lg.mesh.read(arg[1] .. "/fine.msh")
+  out("msh_boundary_facets", "count", back:info().boundary_facets)
+  out("msh_hole_length", "direct", lg.integrate(back:boundary("hole"), 1 + 0*x))
+  local P2 = lg.lagrange(2)
+  local f = lg.interpolate(P2, mesh, x + y*y, "ft")
+  local vals = f:values()
+  for i = 1, #vals do vals[i] = vals[i] * vals[i] end
+  f:assign(vals)
+  out("assigned_integral", "direct", lg.integrate(mesh, f))
+end

@@ -598,10 +598,10 @@ static int lmesh_untangle(lua_State *L) {
   if (ref && o.no_global) return luaL_error(L, "%s: option 'reference' needs the global stage (global = false was given)", fn);
   untangle_report r;
   char err[MESH_ERRLEN];
+  struct { untangle_report r; char names[3][64]; } both; /* the names outlive the block: r points at them */
   if (u->lm->dist) {
     if (ref) check_not_distributed(L, u->lm, "mesh:untangle with a reference");
     /* on rank 0's whole mesh; the stages' names are its pointers: sent as text */
-    struct { untangle_report r; char names[3][64]; } both;
     memset(&both, 0, sizeof both);
     int rc = dist_repair(L, u, repair_untangle, &o, &both.r, sizeof both, err);
     if (!rc && lg_mpi_rank() == 0) for (int i = 0; i < both.r.nstage && i < 3; i++) snprintf(both.names[i], 64, "%s", both.r.stage[i].name);
@@ -799,7 +799,7 @@ static void displacement_field(lua_State *L, int idx, ud_mesh *u, const unsigned
 
 static int lmesh_move(lua_State *L) {
   const char *fn = "mesh:move";
-  ud_mesh *u = check_whole_mesh(L, 1, fn);
+  ud_mesh *u = check_mesh(L, 1, fn);
   mesh *m = u->lm->m;
   if (!lua_istable(L, 2)) return typeerror(L, fn, 2, "an options table {displacement = function or {fx, fy[, fz]}, quiet=}");
   static const char *const keys[] = {"displacement", "quiet", NULL};
@@ -813,11 +813,41 @@ static int lmesh_move(lua_State *L) {
   unsigned char *fixed = lua_newuserdatauv(L, (size_t)m->nvert + 1, 0);
   double *disp = lua_newuserdatauv(L, sizeof(double) * ((size_t)m->nvert * m->dim + 1), 0);
   char err[MESH_ERRLEN];
-  if (mesh_boundary_vertices(m, fixed, err)) return luaL_error(L, "%s: %s", fn, err);
-  memset(disp, 0, sizeof(double) * (size_t)m->nvert * m->dim);
-  displacement_field(L, idx, u, fixed, disp, fn);
   move_report r;
-  if (mesh_move(m, disp, fixed, &r, err)) return luaL_error(L, "%s: %s", fn, err);
+  if (u->lm->dist) {
+    /* every local vertex's displacement (the outer vertices of the ghost layer are not the
+     * mesh's boundary), gathered with the mesh on rank 0, which moves it with the whole
+     * mesh's boundary fixed; the new coordinates back to every rank */
+    memset(disp, 0, sizeof(double) * (size_t)m->nvert * m->dim);
+    displacement_field(L, idx, u, NULL, disp, fn);
+    lg_env *env = get_env(L);
+    mesh_field f = {"displacement", m->dim, 0, disp};
+    mesh *W = NULL;
+    double **vals = NULL;
+    int rc = lg_dist_gather(env, u->lm, 1, &f, &W, &vals);
+    if (rc) snprintf(err, sizeof err, "%.*s", (int)sizeof err - 1, env->err);
+    else if (lg_mpi_rank() == 0) {
+      unsigned char *wf = malloc((size_t)W->nvert + 1);
+      rc = !wf || mesh_boundary_vertices(W, wf, err);
+      if (!wf) snprintf(err, sizeof err, "out of memory");
+      for (int v = 0; !rc && v < W->nvert; v++)
+        if (!wf[v]) memset(vals[0] + (size_t)v * m->dim, 0, sizeof(double) * (size_t)m->dim);
+      if (!rc) rc = mesh_move(W, vals[0], wf, &r, err);
+      free(wf);
+    }
+    if (vals) free(vals[0]);
+    free(vals);
+    rc = lg_root_result(rc, err, sizeof err);
+    if (!rc && MPI_Bcast(&r, (int)sizeof r, MPI_BYTE, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) { snprintf(err, sizeof err, "sending the report failed"); rc = 1; }
+    if (!rc && lg_dist_scatter_coords(env, u->lm, W)) { snprintf(err, sizeof err, "%.*s", (int)sizeof err - 1, env->err); rc = 1; }
+    mesh_free(W);
+    if (rc) return luaL_error(L, "%s: %s", fn, err);
+  } else {
+    if (mesh_boundary_vertices(m, fixed, err)) return luaL_error(L, "%s: %s", fn, err);
+    memset(disp, 0, sizeof(double) * (size_t)m->nvert * m->dim);
+    displacement_field(L, idx, u, fixed, disp, fn);
+    if (mesh_move(m, disp, fixed, &r, err)) return luaL_error(L, "%s: %s", fn, err);
+  }
   lg_mesh_changed(u->lm);
   char text[512];
   snprintf(text, sizeof text, "move: Laplacian motion, tau_max %.3g, %d CG iterations (residual %.1e), %d invalid cells after, %.3f s",
@@ -833,7 +863,7 @@ static int lmesh_move(lua_State *L) {
 
 static int lmesh_displace(lua_State *L) {
   const char *fn = "mesh:displace";
-  ud_mesh *u = check_whole_mesh(L, 1, fn);
+  ud_mesh *u = check_mesh(L, 1, fn);
   mesh *m = u->lm->m;
   if (lua_isnoneornil(L, 2)) return typeerror(L, fn, 2, "a function (x, y[, z]) -> displacement or a table of discrete functions");
   double *disp = lua_newuserdatauv(L, sizeof(double) * ((size_t)m->nvert * m->dim + 1), 0);
@@ -844,8 +874,13 @@ static int lmesh_displace(lua_State *L) {
                            "mesh is unchanged", fn, (int)(i / m->dim) + 1, "xyz"[i % m->dim], disp[i]);
   for (size_t i = 0; i < (size_t)m->nvert * m->dim; i++) m->x[i] += disp[i];
   lg_mesh_changed(u->lm);
-  int ninv;
-  mesh_count_invalid(m, 0, NULL, &ninv);
+  int ninv = 0;
+  if (u->lm->dist) { /* each rank its owned cells (a distributed mesh's vertices move on every rank that holds them) */
+    double n = 0;
+    for (int c = 0; c < m->ncell; c++) n += u->lm->dist->cowner[c] == lg_mpi_rank() && !(mesh_cell_relative_validity(m, c) > 1e-13);
+    lg_allreduce(&n, 1, LG_SUM);
+    ninv = (int)n;
+  } else mesh_count_invalid(m, 0, NULL, &ninv);
   lua_pushinteger(L, ninv);
   return 1;
 }

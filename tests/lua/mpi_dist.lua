@@ -229,3 +229,16 @@ do
   f:assign(vals)
   out("assigned_integral", "direct", lg.integrate(mesh, f))
 end
+
+-- mesh motion: displace by a function on every rank's vertices; Laplacian motion of the
+-- interior from a boundary displacement (rank 0 on the gathered mesh)
+do
+  local mesh = lg.mesh.rectangle{nx = 10}
+  local n = mesh:displace(function(a, b) return 0.03*math.sin(pi*a)*math.sin(pi*b), 0 end)
+  out("displaced_invalid", "count", n)
+  out("displaced_moment", "direct", lg.integrate(mesh, x*x))
+  local r = mesh:move{displacement = function(a, b) return 0.05*b*(1 - b)*(a > 0.99 and 1 or 0), 0 end, quiet = true}
+  out("moved_iterations", "count", r.iterations)
+  out("moved_invalid", "count", r.invalid_after)
+  out("moved_moment", "direct", lg.integrate(mesh, x*x*y))
+end

@@ -740,7 +740,8 @@ int lg_problem_vec_get(lg_env *env, lg_problem *p, Vec v, double *whole) {
   PCHK(VecGetArrayRead(src, &a), "VecGetArrayRead");
   if (p->iperm && !p->lm->dist) /* node by node, as lg_problem_owned_part */
     for (int R = 0, B = p->pB; R < p->N / B; R++) memcpy(whole + (size_t)p->iperm[R] * B, a + (size_t)R * B, sizeof(double) * (size_t)B);
-  else memcpy(whole, a, sizeof(double) * (size_t)p->N); /* a distributed mesh's: in the local order already */
+  else if (p->N) memcpy(whole, a, sizeof(double) * (size_t)p->N); /* a distributed mesh's: in the local order already
+                                                                    * (an empty part's array may be NULL) */
   PCHK(VecRestoreArrayRead(src, &a), "VecRestoreArrayRead");
   return 0;
 }

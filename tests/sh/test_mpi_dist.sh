@@ -10,13 +10,7 @@
 # inverted cell in one rank's part ending the run with its message; every example that does
 # not optimize, distributed on 2 ranks.
 BUILD=$1
-T=$(mktemp -d)
-trap 'rm -rf "$T"' EXIT
-fail() { echo "FAIL: $*"; exit 1; }
-command -v mpiexec > /dev/null 2>&1 || fail "mpiexec not found (Debian's openmpi-bin comes with petsc-dev)"
-export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
-ROOT=$(cd "$(dirname "$0")/../.." && pwd)
-case "$BUILD" in /*) LUGAL=$BUILD/lugal ;; *) LUGAL=$ROOT/$BUILD/lugal ;; esac
+. "$(dirname "$0")/mpi_lib.sh"
 run() { rn=$1; shift; if [ "$rn" = 1 ]; then "$LUGAL" "$@"; else timeout 300 mpiexec -n "$rn" "$LUGAL" "$@" -lugal_distribute; fi; }
 
 for n in 1 2 3 2p 3p; do
@@ -27,15 +21,7 @@ for n in 1 2 3 2p 3p; do
 done
 for n in 2 3 2p 3p; do
   [ "$(wc -l < "$T/out1")" = "$(wc -l < "$T/out$n")" ] || fail "$n ranks printed $(wc -l < "$T/out$n") lines, 1 rank $(wc -l < "$T/out1")"
-  paste "$T/out1" "$T/out$n" | awk -v n=$n '
-    { if ($1 != $4) { print "FAIL: line " NR ": " $1 " against " $4; bad = 1; next }
-      a = $3 + 0; b = $6 + 0; d = a - b; if (d < 0) d = -d; s = a < 0 ? -a : a
-      tol = $2 == "direct" ? 1e-10 : $2 == "iter" ? 1e-8 : 1
-      ok = $2 == "count" ? d <= 1 : d <= tol * (s > 1e-300 ? s : 1)
-      if (!ok) { print "FAIL: " $1 " on " n " distributed ranks: " b " against " a " (" $2 ")"; bad = 1 }
-      else if ($2 != "count" && d > worst) worst = d / (s > 1e-300 ? s : 1) }
-    END { if (bad) exit 1; printf "%s distributed ranks: %d quantities as on one (largest relative difference %.1e)\n", n, NR, worst }' || exit 1
-  # each rank held its part and a ghost layer, not the whole 24 x 24 mesh of 1152 cells
+  paste "$T/out1" "$T/out$n" | awk -v what="$n distributed ranks" -f "$ROOT/tests/sh/compare_ranks.awk" || exit 1
   # each rank held its part and a ghost layer of the first mesh (24 x 24, 1152 cells), not
   # the whole: "[lugal] distribute: rank R holds C cells (O owned, G ghosts) ..."
   grep "distribute: rank [0-9]* holds" "$T/err$n" | head -n ${n%p} | tr -d '(' | awk -v n=${n%p} '

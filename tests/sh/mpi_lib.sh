@@ -1,0 +1,11 @@
+# mpi_lib.sh — sourced by the parallel tests (test_mpi.sh, test_mpi_dist.sh) with BUILD set:
+# a scratch folder T removed at exit, fail(), Open MPI's settings for root and for more
+# ranks than cores, ROOT and LUGAL.
+T=$(mktemp -d)
+trap 'rm -rf "$T"' EXIT
+fail() { echo "FAIL: $*"; exit 1; }
+command -v mpiexec > /dev/null 2>&1 || fail "mpiexec not found (Debian's openmpi-bin comes with petsc-dev)"
+# Open MPI refuses root unless told, and a 2-core machine has 2 slots
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
+ROOT=$(cd "$(dirname "$0")/../.." && pwd)
+case "$BUILD" in /*) LUGAL=$BUILD/lugal ;; *) LUGAL=$ROOT/$BUILD/lugal ;; esac

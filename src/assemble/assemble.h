@@ -36,6 +36,7 @@ typedef struct {
   int no_keep_factor;   /* -lugal_keep_factor 0: refactor a linear problem's matrix at every change (solver.h) */
   kernel_pcache_group pcache; /* the point caches' groups (kernel.h): the list's sentinel */
   unsigned long pcache_uses[3]; /* assemblies with a point cache by mode: computed, stored, read */
+  unsigned long gc_points;      /* the Lua module's collection points passed (largs.c, gc_point) */
   char err[LG_ERRLEN];
 } lg_env;
 

@@ -169,6 +169,12 @@ ud_mesh *check_mesh(lua_State *L, int idx, const char *fn) {
   return u;
 }
 
+void gc_point(lua_State *L, int always) {
+  if (lg_mpi_size() < 2) return;
+  lg_env *env = get_env(L);
+  if (always || ++env->gc_points % 32 == 0) lua_gc(L, LUA_GCCOLLECT);
+}
+
 void check_not_distributed(lua_State *L, const lg_mesh *lm, const char *fn) {
   if (lm && lm->dist)
     luaL_error(L, "%s: not offered on a distributed mesh yet (-lugal_distribute; every rank holds its part only): "
@@ -183,6 +189,7 @@ ud_mesh *check_whole_mesh(lua_State *L, int idx, const char *fn) {
 
 void push_mesh(lua_State *L, mesh *m) {
   lg_env *env = get_env(L);
+  gc_point(L, 1);
   ud_mesh *u = lua_newuserdatauv(L, sizeof *u, 1);
   u->lm = NULL;
   luaL_setmetatable(L, MT_MESH);

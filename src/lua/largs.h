@@ -40,6 +40,16 @@ typedef struct { lg_env *env; int owns_petsc; } ud_env;
  * nglobal cells in all */
 typedef struct { int n; int measure; double *v; int *gid, *loc; long nglobal; } ud_qarray;
 
+/* Lua's garbage collection in a run of several ranks. Finalizers destroy PETSc objects,
+ * which is collective (a parallel matrix, MUMPS's factors), and Lua's automatic collector
+ * runs when a rank's own allocations say so, which differ between ranks (a distributed
+ * mesh's local sizes): rank 1 destroying a factor while rank 0 waits in a reduction hangs
+ * both. So the automatic collector is stopped there (luaopen_lugal) and full collections run
+ * at points every rank passes in the same order: always where `always` is set (problems
+ * created and solved, reduced functionals, minimizations, operators, meshes), every 32nd
+ * pass elsewhere (integrals, interpolations, functions). Nothing in a serial run. */
+void gc_point(lua_State *L, int always);
+
 /* the environment of this Lua state (symbolic context, JIT) */
 lg_env *get_env(lua_State *L);
 int typeerror(lua_State *L, const char *fn, int arg, const char *expected);
@@ -74,6 +84,13 @@ int opt_int(lua_State *L, int t, const char *key, int def, const char *fn);
 const char *opt_str(lua_State *L, int t, const char *key, const char *def, const char *fn);
 void check_keys(lua_State *L, int t, const char *fn, const char *const *allowed);
 int finish_report(lua_State *L, const char *text, int quiet);
+/* lrepair.c: the option 'reference' of options table t (the same mesh as m in another
+ * configuration, or NULL), and the repair methods lmesh.c registers on meshes */
+const mesh *opt_reference(lua_State *L, int t, const mesh *m, const char *fn);
+int lmesh_untangle(lua_State *L);
+int lmesh_smooth(lua_State *L);
+int lmesh_move(lua_State *L);
+int lmesh_displace(lua_State *L);
 void set_num(lua_State *L, const char *k, double v);
 void set_int(lua_State *L, const char *k, lua_Integer v);
 ud_func *check_func(lua_State *L, int idx, const char *fn);

@@ -526,6 +526,7 @@ static lg_mesh *region_or_mesh(lua_State *L, int idx, const char *fn, region *r)
 }
 
 static int l_integrate(lua_State *L) {
+  gc_point(L, 0);
   const char *fn = "lg.integrate";
   region r;
   lg_mesh *lm = region_or_mesh(L, 1, fn, &r);

@@ -48,6 +48,8 @@ int luaopen_lugal(lua_State *L) {
     }
     ue->env = lg_env_new(LUGAL_TCC_LIBDIR);
     if (!ue->env) return luaL_error(L, "lugal: out of memory");
+    /* several ranks: collections only at the points every rank passes alike (gc_point) */
+    if (lg_mpi_size() > 1) lua_gc(L, LUA_GCSTOP);
     lua_setfield(L, LUA_REGISTRYINDEX, "lugal.env");
     PetscBool set = PETSC_FALSE;
     char backend[16] = "";

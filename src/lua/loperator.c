@@ -165,6 +165,7 @@ static void form_symbols(lg_env *env, const form *F, int *tests, int *nt, int *u
 }
 
 static int l_assemble(lua_State *L) {
+  gc_point(L, 1);
   const char *fn = "lg.assemble";
   ud_form *uf = luaL_testudata(L, 1, MT_FORM);
   if (!uf) return typeerror(L, fn, 1, "a form (lg.integral(...) + ...)");

@@ -88,6 +88,7 @@ static int to_control(lua_State *L, int idx, lg_control *c, const char *fn, int 
 }
 
 static int l_reduced_functional(lua_State *L) {
+  gc_point(L, 1);
   const char *fn = "lg.reduced_functional";
   if (!lua_istable(L, 1)) return typeerror(L, fn, 1, "a table {problem=, functional=, control=}");
   static const char *const keys[] = {"problem", "functional", "control", NULL};
@@ -398,6 +399,7 @@ static void move_controls(lg_env *env, lg_reduced *rf, double **m0, double **dm,
  * R0 = |j(m + h dm) - j(m)|, R1 = |j(m + h dm) - j(m) - h dj(m; dm)| and, with hessian,
  * R2 = |... - h^2/2 dm.H(m) dm| for h, h/2, ...: rates 1, 2 and 3 when the derivatives are right */
 static int l_taylor_test(lua_State *L) {
+  gc_point(L, 1);
   const char *fn = "lg.taylor_test";
   ud_reduced *u = check_reduced(L, 1, fn);
   if (lua_isnoneornil(L, 2)) return typeerror(L, fn, 2, "the control values to test at (like rf:value's)");
@@ -535,6 +537,7 @@ static const double *bound_values(lua_State *L, lg_reduced *rf, int i, int idx, 
 /* lg.minimize(rf, {method=, bounds={lower, upper}, gatol=, grtol=, gttol=, maxit=, monitor=, series=,
  * inner_product=}) */
 static int l_minimize(lua_State *L) {
+  gc_point(L, 1);
   const char *fn = "lg.minimize";
   ud_reduced *u = check_reduced(L, 1, fn);
   lg_minimize_opts o;
@@ -706,6 +709,7 @@ static unsigned uses_of(lg_env *env, expr *e, int n, const int *ids) {
  * (dL/dlam: the state, dL/du: the adjoint, dL/dm: the optimality condition). The essential
  * conditions are the state's; the adjoint gets homogeneous ones on the same boundaries. */
 static int l_kkt_problem(lua_State *L) {
+  gc_point(L, 1);
   const char *fn = "lg.kkt_problem";
   if (!lua_istable(L, 1)) return typeerror(L, fn, 1, "a table {mesh=, lagrangian=, state=, adjoint=, control=, bc=}");
   static const char *const keys[] = {"mesh", "lagrangian", "state", "adjoint", "control", "bc", "prefix", "initial", NULL};

@@ -235,6 +235,7 @@ static int func_tostring(lua_State *L) {
 }
 
 static int l_interpolate(lua_State *L) {
+  gc_point(L, 0);
   const char *fn = "lg.interpolate";
   if (lua_gettop(L) > 4) return luaL_error(L, "%s: takes a basis, a mesh, an expression and a name, got %d arguments", fn, lua_gettop(L));
   ud_basis *b = luaL_testudata(L, 1, MT_BASIS);
@@ -251,6 +252,7 @@ static int l_interpolate(lua_State *L) {
 }
 
 static int l_function(lua_State *L) {
+  gc_point(L, 0);
   const char *fn = "lg.zero_function";
   if (lua_gettop(L) > 3) return luaL_error(L, "%s: takes a basis, a mesh and a name, got %d arguments", fn, lua_gettop(L));
   ud_basis *b = luaL_testudata(L, 1, MT_BASIS);
@@ -335,6 +337,7 @@ void push_problem(lua_State *L, lg_problem *p, int nfield, int nonlinear, int nd
 }
 
 static int make_problem(lua_State *L, int nonlinear) {
+  gc_point(L, 1);
   const char *fn = nonlinear ? "lg.nonlinear_problem" : "lg.linear_problem";
   if (!lua_istable(L, 1)) return typeerror(L, fn, 1, "a table {mesh=, eqn=, bc=, test=, unknown=}");
   static const char *const keys[] = {"mesh", "eqn", "bc", "test", "unknown", "initial", "symmetric", "prefix", "nullspace", NULL};
@@ -405,6 +408,7 @@ static int prob_gc(lua_State *L) {
 }
 
 static int prob_solve(lua_State *L) {
+  gc_point(L, 1);
   const char *fn = "problem:solve";
   ud_prob *u = luaL_checkudata(L, 1, MT_PROB);
   lg_env *env = get_env(L);

@@ -198,23 +198,12 @@ int lg_dist_number_nodes(lg_env *env, lg_problem *p, int B) {
   const mesh_part *P = p->lm->dist;
   const mesh *m = P->m;
   int rank = lg_mpi_rank(), size = lg_mpi_size(), Nn = p->N / B;
-  int *owner = malloc(sizeof(int) * ((size_t)Nn + 1)), *cnt = calloc((size_t)Nn + 1, sizeof(int));
+  int *owner = malloc(sizeof(int) * ((size_t)Nn + 1));
   char *shared = calloc((size_t)Nn + 1, 1), *ivert = calloc((size_t)m->nvert + 1, 1);
-  int bad = !owner || !cnt || !shared || !ivert;
-  /* each node to the part of most of its cells (Boyer-Moore's vote in the whole mesh's cell
-   * order, as set_ownership does on a whole mesh): exact for the nodes of owned cells, whose
-   * cells are all here; a node of ghost cells only is another rank's whatever the vote says */
-  for (int i = 0; !bad && i < Nn; i++) owner[i] = -1;
-  for (int a = 0; !bad && a < p->cols.n; a++) {
-    const dofmap *dm = p->cdm[a];
-    for (int c = 0; c < m->ncell; c++)
-      for (int k = 0; k < dm->nloc; k += B) {
-        int node = (p->cglob[a] + dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k]) / B;
-        if (!cnt[node]) { owner[node] = P->cowner[c]; cnt[node] = 1; }
-        else cnt[node] += owner[node] == P->cowner[c] ? 1 : -1;
-      }
-  }
-  free(cnt);
+  /* each node to the part of most of its cells, the vote set_ownership takes on a whole
+   * mesh, in the whole mesh's cell order: exact for the nodes of owned cells, whose cells are
+   * all here; a node of ghost cells only is another rank's whatever the vote says */
+  int bad = !owner || !shared || !ivert || lg_problem_node_owners(p, B, P->cowner, owner);
   /* the owned nodes another rank may hold: those of owned cells with a vertex in a cell of
    * another part (a rank holding an owned node holds a cell through it, which shares a
    * vertex with an owned cell of it, or is one) */
@@ -468,8 +457,7 @@ static int owned_dofs(const lg_mesh *lm, const dofmap *dm, char *own) {
   for (int c = 0; c < P->m->ncell; c++)
     for (int k = 0; k < dm->nloc; k += bs) {
       int node = dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k] / bs;
-      if (!cnt[node]) { owner[node] = P->cowner[c]; cnt[node] = 1; }
-      else cnt[node] += owner[node] == P->cowner[c] ? 1 : -1;
+      lg_vote(owner, cnt, node, P->cowner[c]);
     }
   for (int d = 0; d < dm->ndof; d++) own[d] = owner[d / bs] == rank;
   free(owner);

@@ -453,30 +453,16 @@ static int set_ownership(lg_env *env, lg_problem *p) {
     return 0;
   }
   int *owner = malloc(sizeof(int) * ((size_t)Nn + 1)), *start = calloc((size_t)size + 1, sizeof(int));
-  int *cnt = calloc((size_t)Nn + 1, sizeof(int));
   p->perm = malloc(sizeof(int) * ((size_t)Nn + 1));
   p->iperm = malloc(sizeof(int) * ((size_t)Nn + 1));
-  if (!owner || !start || !cnt || !p->perm || !p->iperm) {
-    free(owner); free(start); free(cnt);
+  /* each node to the part of most of its cells: a node of a part's border goes to the side
+   * that holds it most, which keeps the parts' row counts near their cell counts (the lowest
+   * part took every shared node before: +20% rows on 16 parts) */
+  if (!owner || !start || !p->perm || !p->iperm || lg_problem_node_owners(p, B, part, owner)) {
+    free(owner); free(start);
     lg_seterr(env, "out of memory for the rows' order of %d nodes", Nn);
     return 1;
   }
-  /* each node to the part of most of its cells (Boyer-Moore's vote, in cell order: the
-   * majority where there is one): a node of a part's border goes to the side that holds it
-   * most, which keeps the parts' row counts near their cell counts (the lowest part took
-   * every shared node before: +20% rows on 16 parts) */
-  for (int i = 0; i < Nn; i++) owner[i] = 0; /* every node is in some cell: each gets a vote */
-  const mesh *m = p->lm->m;
-  for (int a = 0; a < p->cols.n; a++) {
-    const dofmap *dm = p->cdm[a];
-    for (int c = 0; c < m->ncell; c++)
-      for (int k = 0; k < dm->nloc; k += B) { /* each node once (B > 1: its B dofs in a row) */
-        int node = (p->cglob[a] + dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k]) / B;
-        if (!cnt[node]) { owner[node] = part[c]; cnt[node] = 1; }
-        else cnt[node] += owner[node] == part[c] ? 1 : -1;
-      }
-  }
-  free(cnt);
   for (int i = 0; i < Nn; i++) start[owner[i] + 1]++;
   for (int r = 0; r < size; r++) start[r + 1] += start[r];
   p->lo = start[rank] * B;
@@ -487,6 +473,21 @@ static int set_ownership(lg_env *env, lg_problem *p) {
   }
   free(owner);
   free(start);
+  return 0;
+}
+
+int lg_problem_node_owners(const lg_problem *p, int B, const int *part, int *owner) {
+  int Nn = p->N / B, *cnt = calloc((size_t)Nn + 1, sizeof(int));
+  if (!cnt) return 1;
+  for (int i = 0; i < Nn; i++) owner[i] = -1;
+  const mesh *m = p->lm->m;
+  for (int a = 0; a < p->cols.n; a++) {
+    const dofmap *dm = p->cdm[a];
+    for (int c = 0; c < m->ncell; c++)
+      for (int k = 0; k < dm->nloc; k += B) /* each node once (B > 1: its B dofs in a row) */
+        lg_vote(owner, cnt, (p->cglob[a] + dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k]) / B, part[c]);
+  }
+  free(cnt);
   return 0;
 }
 

@@ -188,6 +188,17 @@ int lg_petsc_fail(lg_env *env, PetscErrorCode ierr, const char *what);
 void lg_term_nodes(const lg_problem *p, const prob_term *t, int it, int rows, int B, int petsc, PetscInt *out);
 /* the number of components when every field has the same, else 1 */
 int lg_matrix_block_size(const lg_problem *p);
+/* Boyer-Moore's majority vote, one cell's ballot for a node: owner is the candidate, cnt
+ * its count (0: none yet, or a tie so far); after all ballots in cell order owner is the
+ * part of most of the node's cells where there is a majority */
+static inline void lg_vote(int *owner, int *cnt, int node, int part) {
+  if (!cnt[node]) { owner[node] = part; cnt[node] = 1; }
+  else cnt[node] += owner[node] == part ? 1 : -1;
+}
+/* problem.c: the part of each of the problem's nodes (B dofs each) by that vote over its
+ * cells, whose parts are part[] (a whole mesh's partition, or a distributed mesh's local
+ * cells' owners); owner[] holds Nn = N / B entries; 1 when out of memory */
+int lg_problem_node_owners(const lg_problem *p, int B, const int *part, int *owner);
 /* distribute.c: perm, iperm, lo, hi, Nglob and ioff of a problem on a distributed mesh,
  * nodes of B dofs; collective */
 int lg_dist_number_nodes(lg_env *env, lg_problem *p, int B);

@@ -4,6 +4,7 @@
 -- domains) and 3D (twisted tetrahedral bars), and the simplices of a mesh as vertex lists.
 package.path = arg[0]:match("(.*/)") .. "../tests/lua/?.lua;" .. package.path
 local H = require "hard_meshes"
+local lg = require "lugal"
 local A = {}
 
 A.cases2d = {
@@ -20,6 +21,43 @@ A.cases2d = {
 A.cases2d_large = {
   {"spiral 400x60", function() return H.spiral(400, 60, 0.75) end},
   {"star 80x400, random interior", function() return H.star(80, 400, 5) end},
+}
+
+-- about a million cells (bench/untangle_anchor2d.lua ... 1m, untangle_anchor3d.lua ... 1m):
+-- the size at which issue 13 states its speed target. The spiral's Tutte embedding is
+-- solved exactly (two discrete Laplace problems on the strip's parameter grid, whose P1
+-- stencil on unit squares is the four-neighbour mean) instead of hard_meshes.lua's 2000
+-- Gauss-Seidel sweeps in Lua, which would take minutes at this size and not converge.
+function A.spiral_tutte(ns, nt, width, turns)
+  turns = turns or 1.5
+  local _, rest = H.spiral(ns, nt, width, turns, "triangle", 0)
+  local grid = lg.mesh.rectangle{nx = ns, ny = nt, x1 = ns, y1 = nt}
+  local s, t = lg.x/ns, lg.y/nt
+  local th, r = 2*math.pi*turns*s, 0.3 + 1.2*s + width*t
+  local P = lg.lagrange(1)
+  local u, v = lg.unknown(P, "u"), lg.test(P, "v")
+  local X = {}
+  for c, g in ipairs{r*lg.cos(th), r*lg.sin(th)} do
+    local prob = lg.linear_problem{mesh = grid, test = v, unknown = u,
+      eqn = lg.integral(grid:cells(), lg.dot(lg.grad(v), lg.grad(u))),
+      bc = lg.essential_bc(grid:boundary("left", "right", "bottom", "top"), v*(u - g))}
+    X[c] = prob:solve():values()
+  end
+  local tangled = rest:copy()
+  for k = 1, grid:nvertices() do
+    local a, b = grid:coordinates(k)
+    local i, j = math.floor(a + 0.5), math.floor(b + 0.5)
+    if i > 0 and i < ns and j > 0 and j < nt then tangled:set_coordinates(j*(ns + 1) + i + 1, X[1][k], X[2][k]) end
+  end
+  return tangled, rest
+end
+
+A.cases2d_1m = {
+  {"spiral 2000x250 (Tutte solved)", function() return A.spiral_tutte(2000, 250, 0.75) end},
+}
+
+A.cases3d_1m = {
+  {"bar 40, 1 turn", function() return H.twisted_bar(40, 6, 1) end},
 }
 
 A.cases3d = {

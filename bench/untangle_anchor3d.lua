@@ -7,7 +7,7 @@
 -- writes the result. DIR holds the files (a temporary folder by default). Per case: inverted
 -- cells, then for each untangler success, time, and the minimum and mean mean ratio of the
 -- result, and the rest mesh's own.
--- Run: lugal bench/untangle_anchor3d.lua /path/to/untangle3d
+-- Run: lugal bench/untangle_anchor3d.lua /path/to/untangle3d [dir] [1m]   ("1m": a 1 152 000-tetrahedron bar)
 package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
 local A = require "anchor_cases"
 local lg = require "lugal"
@@ -48,7 +48,7 @@ end
 
 print("| case | cells | inverted | lugal | s | min q | mean q | anchor | s | min q | mean q | rest mesh min q |")
 print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-for k, c in ipairs(A.cases3d) do
+for k, c in ipairs(arg[3] == "1m" and A.cases3d_1m or A.cases3d) do
   local tangled, rest = c[2]()
   local inv = tangled:check()
   -- lugal: untangle with the boundary fixed, then the energy smoother

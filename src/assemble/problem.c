@@ -837,8 +837,9 @@ typedef struct {
   lg_env *env;
   lg_problem *p;
   int term;
-  PetscScalar *a; /* matrices */
+  PetscScalar *a; /* matrices: a serial run's values */
   double *r;      /* vectors */
+  PetscScalar *da, *oa; /* matrices: a parallel run's diagonal and off-diagonal blocks' values */
 } scatter_ctx;
 
 /* the element matrices of items first .. first + n - 1 into the value array a: each entry
@@ -890,6 +891,36 @@ typedef struct {
     }                                                                                               \
   } while (0)
 
+/* the same into a parallel run's split blocks: entry e of owned row r at its place there,
+ * from the row's count of left columns and its blocks' starts (rows inside a part have no
+ * off-diagonal entries: the branches go one way there) */
+#define SCATTER_SPLIT(T)                                                                            \
+  do {                                                                                              \
+    const T *rk = (const T *)p->rank + t->rank_off + (size_t)first * (size_t)(rn * cn);            \
+    PetscInt R[KER_MAXFIELD * FEM_MAXLOC * 2];                                                      \
+    const PetscInt *rs = B == 1 ? p->row_start + t->erow_first + (size_t)first * (size_t)rn : NULL; \
+    for (int e = 0; e < n; e++, rk += rn * cn) {                                                    \
+      const double *ve = v + (size_t)e * size;                                                      \
+      if (B > 1) lg_term_nodes(p, t, first + e, 1, B, 1, R);                                        \
+      for (int i = 0; i < rn; i++) {                                                                \
+        if (B == 1 ? rs[(size_t)e * rn + i] < 0 : R[i] < R0 || R[i] >= R1) continue;                 \
+        const T *ri = rk + i * cn;                                                                  \
+        for (int r = 0; r < B; r++) {                                                               \
+          int row = B == 1 ? (int)rs[(size_t)e * rn + i] : (R[i] - R0) * B + r;                     \
+          PetscInt left = p->s_left[row], mid = left + p->sd_i[row + 1] - p->sd_i[row];             \
+          PetscScalar *dl = oa + p->so_i[row], *dd = da + p->sd_i[row] - left,                      \
+                      *dr = oa + p->so_i[row] - (mid - left);                                       \
+          const double *vr = ve + (size_t)(i * B + r) * cs;                                         \
+          for (int j = 0; j < cn; j++)                                                              \
+            for (int c = 0; c < B; c++) {                                                           \
+              PetscInt k = (PetscInt)ri[j] * B + c;                                                 \
+              (k < left ? dl : k < mid ? dd : dr)[k] += vr[j * B + c];                              \
+            }                                                                                       \
+        }                                                                                           \
+      }                                                                                             \
+    }                                                                                               \
+  } while (0)
+
 static int scatter_matrix_chunk(void *ud, int first, int n, const double *v) {
   scatter_ctx *sc = ud;
   lg_problem *p = sc->p;
@@ -900,12 +931,18 @@ static int scatter_matrix_chunk(void *ud, int first, int n, const double *v) {
   const PetscInt *ia = p->csr_i;
   int B = lg_matrix_block_size(p), rn = t->rl.size / B, cn = t->cl.size / B, cs = t->cl.size;
   int R0 = p->lo / B, R1 = p->hi / B; /* the owned node rows */
-  if (p->rank_w == 1) SCATTER_RANKS(uint8_t);
+  if (p->par) {
+    PetscScalar *da = sc->da, *oa = sc->oa;
+    if (p->rank_w == 1) SCATTER_SPLIT(uint8_t);
+    else if (p->rank_w == 2) SCATTER_SPLIT(uint16_t);
+    else SCATTER_SPLIT(uint32_t);
+  } else if (p->rank_w == 1) SCATTER_RANKS(uint8_t);
   else if (p->rank_w == 2) SCATTER_RANKS(uint16_t);
   else SCATTER_RANKS(uint32_t);
   return 0;
 }
 #undef SCATTER_RANKS
+#undef SCATTER_SPLIT
 
 static int scatter_vector_chunk(void *ud, int first, int n, const double *v) {
   scatter_ctx *sc = ud;
@@ -927,26 +964,28 @@ int lg_problem_assemble_into(lg_env *env, lg_problem *p, const double *state, Ma
   int ne = lg_problem_bind_unknowns(p, state, extra);
   /* element matrices a chunk of items at a time, added in place into the value array (no
    * per-entry buffer beyond two chunks) */
-  /* a serial run adds into the matrix's own value array; a parallel one into csr_a, whose
-   * rows are then copied into the diagonal and off-diagonal blocks (split arrays) */
-  PetscScalar *a = p->csr_a;
-  if (!p->par) PCHK(MatSeqAIJGetArray(A, &a), "matrix assembly");
-  memset(a, 0, sizeof(PetscScalar) * (size_t)p->nnz);
+  /* a serial run adds into the matrix's own value array; a parallel one into its diagonal
+   * and off-diagonal blocks (split arrays) */
+  PetscScalar *a = NULL, *da = NULL, *oa = NULL;
+  if (p->par) {
+    if (A != p->A) { lg_seterr(env, "the matrix assembly: a parallel run assembles only the problem's own matrix"); return 1; }
+    if (lg_problem_split_open(env, p, &da, &oa)) return 1;
+  } else {
+    PCHK(MatSeqAIJGetArray(A, &a), "matrix assembly");
+    memset(a, 0, sizeof(PetscScalar) * (size_t)p->nnz);
+  }
   int rc = 0;
   for (int i = 0; i < p->nterm && !rc; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
-    scatter_ctx sc = {env, p, i, a, NULL};
+    scatter_ctx sc = {env, p, i, a, NULL, da, oa};
     int size = t->rl.size * t->cl.size;
     rc = lg_chunk_bufs_reserve(env, &p->chunks, size) || lg_bind_discrete(env, p->lm, &t->kmat, ne, extra, bind) ||
          lg_assemble_chunks(env, p->lm, &t->kmat, t->nitems, t->cells, t->facets, bind, lg_chunk_items(size),
                             p->chunks.b, scatter_matrix_chunk, &sc);
   }
   if (!p->par) PCHK(MatSeqAIJRestoreArray(A, &a), "matrix assembly");
-  else if (!rc) {
-    if (A != p->A) { lg_seterr(env, "the matrix assembly: a parallel run assembles only the problem's own matrix"); return 1; }
-    rc = lg_problem_split_values(env, p);
-  }
+  else if (lg_problem_split_close(env, p, da, oa, !rc)) return 1;
   return rc;
 }
 
@@ -958,7 +997,7 @@ int lg_problem_residual_into(lg_env *env, lg_problem *p, const double *state, do
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_res) continue;
-    scatter_ctx sc = {env, p, i, NULL, r};
+    scatter_ctx sc = {env, p, i, NULL, r, NULL, NULL};
     if (lg_chunk_bufs_reserve(env, &p->chunks, t->rl.size) || lg_bind_discrete(env, p->lm, &t->kres, ne, extra, bind) ||
         lg_assemble_chunks(env, p->lm, &t->kres, t->nitems, t->cells, t->facets, bind, lg_chunk_items(t->rl.size),
                            p->chunks.b, scatter_vector_chunk, &sc))

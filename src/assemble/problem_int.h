@@ -96,7 +96,8 @@ struct lg_problem {
    * csr_i[R*B] + a*(csr_i[R*B+1] - csr_i[R*B]) + rank*B + b, R the row node */
   void *rank;
   int rank_w;           /* bytes per rank: 1 (rows of up to 256 nodes), 2 or 4 */
-  PetscInt *row_start;  /* B = 1: per element row (item, row) its row's csr_i, so that the
+  PetscInt *row_start;  /* B = 1: per element row (item, row) its row's csr_i (a parallel
+                         * run: its owned row's number, -1 for another rank's), so that the
                          * scatter reads no dof map (the loads of cell, dof and row start
                          * one after another made the P1 scatter latency-bound) */
   lg_chunk_bufs chunks; /* element tensors of two chunks of items (lg_assemble_chunks) */
@@ -105,14 +106,17 @@ struct lg_problem {
   int pattern_threads; /* the pattern pass's blocks, one per OpenMP thread */
   PetscInt *csr_i, *csr_j; /* the pattern of the owned rows: A's own arrays in a serial run
                             * (MatCreateSeqAIJWithArrays: freed after A); in a parallel one
-                            * csr_a's rows are copied into the split blocks below after each
-                            * assembly (lg_problem_split_values). Columns are global */
-  PetscScalar *csr_a;
+                            * the order in which each row's entries are ranked (ranks and
+                            * row_start), its values in the split blocks below. Columns are
+                            * global */
+  PetscScalar *csr_a;       /* a serial run's values (NULL in a parallel one) */
   /* a parallel run's matrix is made on split arrays of ours (MatCreateMPIAIJWithSplitArrays:
    * no copy, no CSR preallocation through MatSetValues): the diagonal block (columns lo ..
    * hi - 1, local) and the off-diagonal block (the others, global; PETSc compacts them in
-   * place), and per owned row the number of its columns left of the diagonal block; each
-   * assembly copies csr_a's rows into the blocks' values */
+   * place), and per owned row the number of its columns left of the diagonal block. A row's
+   * entries in csr order are its left columns, its diagonal block's, the rest: assembly adds
+   * each entry at its place in the blocks (lg_split_entry), with no CSR copy of the values
+   * beside them (55 MB per rank for P1 on 96³ cubes on 2 ranks) */
   PetscInt *sd_i, *sd_j, *so_i, *so_j;
   PetscScalar *sd_a, *so_a;
   int *s_left;
@@ -150,9 +154,16 @@ struct lg_problem {
   char prefix[64];
 };
 
-/* sparsity.c: a parallel run's assembled values (csr_a) into the matrix's diagonal and
- * off-diagonal blocks */
-int lg_problem_split_values(lg_env *env, lg_problem *p);
+/* a parallel run: entry e (its rank in the csr order) of owned row r in the diagonal block's
+ * values da or the off-diagonal block's oa */
+static inline PetscScalar *lg_split_entry(const lg_problem *p, PetscScalar *da, PetscScalar *oa, int r, PetscInt e) {
+  PetscInt left = p->s_left[r], nd = p->sd_i[r + 1] - p->sd_i[r];
+  return e < left ? oa + p->so_i[r] + e : e < left + nd ? da + p->sd_i[r] + (e - left) : oa + p->so_i[r] + (e - nd);
+}
+/* sparsity.c: a parallel run's block values to assemble into (zeroed), and after assembly
+ * given back to the matrix (assembled: its state moves on, so that solvers set up again) */
+int lg_problem_split_open(lg_env *env, lg_problem *p, PetscScalar **da, PetscScalar **oa);
+int lg_problem_split_close(lg_env *env, lg_problem *p, PetscScalar *da, PetscScalar *oa, int assembled);
 
 /* row i of the problem's order in PETSc's, and back (problem_int.h, perm) */
 static inline PetscInt lg_petsc_row(const lg_problem *p, PetscInt i) {

@@ -285,8 +285,18 @@ static int keep_bc_columns(lg_env *env, lg_problem *p) {
   if (bc_index_make(p, &at)) { lg_seterr(env, "out of memory"); return 1; }
   size_t n = 0;
   /* the assembled values, before the elimination: the matrix's own array in a serial run,
-   * the one its blocks are copied from in a parallel one; the owned rows, global columns */
+   * its diagonal and off-diagonal blocks in a parallel one; the owned rows, global columns */
   const PetscScalar *av = p->csr_a;
+  const PetscScalar *da = NULL, *oa = NULL;
+  if (p->par) {
+    Mat Ad, Ao;
+    const PetscInt *garray;
+    if (MatMPIAIJGetSeqAIJ(p->A, &Ad, &Ao, &garray) || MatSeqAIJGetArrayRead(Ad, &da) || MatSeqAIJGetArrayRead(Ao, &oa)) {
+      bc_index_free(&at);
+      lg_seterr(env, "the matrix's blocks could not be read");
+      return 1;
+    }
+  }
   for (int pass = 0; pass < 2; pass++) {
     if (pass) {
       free(p->bcc_row); free(p->bcc_col); free(p->bcc_val);
@@ -303,16 +313,27 @@ static int keep_bc_columns(lg_env *env, lg_problem *p) {
     }
     for (int i = p->lo; i < p->hi; i++) {
       if (bc_index_get(&at, i) >= 0) continue;
-      for (PetscInt e = p->csr_i[i - p->lo]; e < p->csr_i[i - p->lo + 1]; e++) {
+      int r = i - p->lo;
+      for (PetscInt e = p->csr_i[r]; e < p->csr_i[r + 1]; e++) {
         int k = bc_index_get(&at, p->csr_j[e]);
-        if (k < 0 || av[e] == 0) continue;
-        if (pass) { p->bcc_row[n] = i; p->bcc_col[n] = k; p->bcc_val[n] = av[e]; }
+        if (k < 0) continue;
+        double val = da ? *lg_split_entry(p, (PetscScalar *)da, (PetscScalar *)oa, r, e - p->csr_i[r]) : av[e];
+        if (val == 0) continue;
+        if (pass) { p->bcc_row[n] = i; p->bcc_col[n] = k; p->bcc_val[n] = val; }
         n++;
       }
     }
   }
   p->bcc_n = n;
   bc_index_free(&at);
+  if (da) {
+    Mat Ad, Ao;
+    const PetscInt *garray;
+    if (MatMPIAIJGetSeqAIJ(p->A, &Ad, &Ao, &garray) || MatSeqAIJRestoreArrayRead(Ao, &oa) || MatSeqAIJRestoreArrayRead(Ad, &da)) {
+      lg_seterr(env, "the matrix's blocks could not be given back");
+      return 1;
+    }
+  }
   return 0;
 }
 

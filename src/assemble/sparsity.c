@@ -184,7 +184,7 @@ static void pattern_fill(const pattern_in *in, pattern_block *bk) {
       r = q > in->start[R] && in->erow[q - 1] == item ? r + 1 : 0;
       while (rg[r] != R) r++;
       size_t at = t->rank_off + (local * (size_t)rn + (size_t)r) * (size_t)cn;
-      if (B == 1) p->row_start[t->erow_first + local * (size_t)rn + (size_t)r] = iar[0];
+      if (B == 1) p->row_start[t->erow_first + local * (size_t)rn + (size_t)r] = p->par ? (PetscInt)(RP - in->R0) : iar[0];
       if (w == 1)
         for (int k = 0; k < cn; k++) ((uint8_t *)p->rank)[at + k] = (uint8_t)(-2 - mark[en[k]]);
       else if (w == 2)
@@ -477,8 +477,10 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
    * pages, touched first by the first assembly */
   p->csr_i = ia;
   p->csr_j = ja;
-  p->csr_a = calloc(nnz ? nnz : 1, sizeof(PetscScalar));
-  if (!p->csr_a) { lg_seterr(env, "out of memory for %ld matrix values", (long)nnz); return 1; }
+  if (!p->par && !(p->csr_a = calloc(nnz ? nnz : 1, sizeof(PetscScalar)))) {
+    lg_seterr(env, "out of memory for %ld matrix values", (long)nnz);
+    return 1;
+  }
   int bs = lg_matrix_block_size(p);
   double t1 = now_ms();
   if (p->par) {
@@ -497,23 +499,25 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   return 0;
 }
 
-int lg_problem_split_values(lg_env *env, lg_problem *p) {
+int lg_problem_split_open(lg_env *env, lg_problem *p, PetscScalar **da, PetscScalar **oa) {
   Mat Ad, Ao;
   const PetscInt *garray;
-  PetscScalar *da, *oa;
   PCHK(MatMPIAIJGetSeqAIJ(p->A, &Ad, &Ao, &garray), "MatMPIAIJGetSeqAIJ");
-  PCHK(MatSeqAIJGetArray(Ad, &da), "MatSeqAIJGetArray");
-  PCHK(MatSeqAIJGetArray(Ao, &oa), "MatSeqAIJGetArray");
+  PCHK(MatSeqAIJGetArray(Ad, da), "MatSeqAIJGetArray");
+  PCHK(MatSeqAIJGetArray(Ao, oa), "MatSeqAIJGetArray");
   int n = p->hi - p->lo;
-  for (int r = 0; r < n; r++) {
-    const PetscScalar *row = p->csr_a + p->csr_i[r];
-    PetscInt left = p->s_left[r], nd = p->sd_i[r + 1] - p->sd_i[r], no = p->so_i[r + 1] - p->so_i[r];
-    memcpy(oa + p->so_i[r], row, sizeof(PetscScalar) * (size_t)left);
-    memcpy(da + p->sd_i[r], row + left, sizeof(PetscScalar) * (size_t)nd);
-    memcpy(oa + p->so_i[r] + left, row + left + nd, sizeof(PetscScalar) * (size_t)(no - left));
-  }
+  memset(*da, 0, sizeof(PetscScalar) * (size_t)p->sd_i[n]);
+  memset(*oa, 0, sizeof(PetscScalar) * (size_t)p->so_i[n]);
+  return 0;
+}
+
+int lg_problem_split_close(lg_env *env, lg_problem *p, PetscScalar *da, PetscScalar *oa, int assembled) {
+  Mat Ad, Ao;
+  const PetscInt *garray;
+  PCHK(MatMPIAIJGetSeqAIJ(p->A, &Ad, &Ao, &garray), "MatMPIAIJGetSeqAIJ");
   PCHK(MatSeqAIJRestoreArray(Ao, &oa), "MatSeqAIJRestoreArray");
   PCHK(MatSeqAIJRestoreArray(Ad, &da), "MatSeqAIJRestoreArray");
+  if (!assembled) return 0;
   /* the matrix's state moves on, so that solvers refactor or set up again */
   PCHK(MatAssemblyBegin(p->A, MAT_FINAL_ASSEMBLY), "MatAssemblyBegin");
   PCHK(MatAssemblyEnd(p->A, MAT_FINAL_ASSEMBLY), "MatAssemblyEnd");

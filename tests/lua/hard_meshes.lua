@@ -7,8 +7,8 @@ local M = {}
 -- a strip of ns x nt squares (two triangles each, or quadrilaterals with cell =
 -- "quadrilateral") along a spiral of `turns` turns, r = 0.3 + 1.2 s + width t; the interior
 -- started from the Tutte embedding (each interior vertex the mean of its four grid
--- neighbours, Gauss-Seidel), the boundary at its place
-function M.spiral(ns, nt, width, turns, cell)
+-- neighbours, `sweeps` Gauss-Seidel sweeps, 2000 by default), the boundary at its place
+function M.spiral(ns, nt, width, turns, cell, sweeps)
   turns = turns or 1.5
   cell = cell or "triangle"
   local function pos(s, t)
@@ -29,7 +29,7 @@ function M.spiral(ns, nt, width, turns, cell)
   local ref = mesh:copy()
   local X = {}
   for k, v in ipairs(verts) do X[k] = {v[1], v[2]} end
-  for _ = 1, 2000 do
+  for _ = 1, sweeps or 2000 do
     for j = 1, nt - 1 do for i = 1, ns - 1 do
       local a, b, c, d = X[id(i - 1, j)], X[id(i + 1, j)], X[id(i, j - 1)], X[id(i, j + 1)]
       X[id(i, j)] = {(a[1] + b[1] + c[1] + d[1])/4, (a[2] + b[2] + c[2] + d[2])/4}

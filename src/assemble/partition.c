@@ -164,15 +164,24 @@ int lg_partition_cells(lg_env *env, mesh *m, int nparts, int *pt, int *runs) {
     int d = cell_dim(m->type);
     double planes = fmin(nparts - 1.0, d * (pow(nparts, 1.0 / d) - 1.0));
     double ideal = 2.0 * planes * pow((double)m->nvert, (double)(d - 1) / d);
-    int keep = have >= 0 && have <= 2 * ideal;
-    if (env->verbose)
-      fprintf(stderr, "[lugal] partition: the numbering's split into %d has %ld vertices on its cuts (compact parts: %.0f): %s\n",
-              nparts, have, ideal, keep ? "kept" : "PTScotch");
+    int keep = have >= 0 && have <= 2 * ideal, few = 0;
     if (keep) {
       /* the numbering's split of the cells: each with its lowest vertex, the vertices in
        * nparts runs (problems of P1 fields keep their rows in their own order, the others
-       * number theirs by these parts: see set_ownership) */
+       * number theirs by these parts: see set_ownership); unless a part gets under half its
+       * share of the cells: on a small mesh a cell's lowest vertex is mostly in the first
+       * runs (box{nx = 2} on 2 ranks: 48 cells and 0) */
       lg_mesh_vertex_runs(m, nparts, pt);
+      int *cnt = calloc((size_t)nparts, sizeof(int));
+      few = !cnt;
+      for (int c = 0; cnt && c < m->ncell; c++) cnt[pt[c]]++;
+      for (int r = 0; cnt && r < nparts; r++) few |= 2L * nparts * cnt[r] < m->ncell;
+      free(cnt);
+    }
+    if (env->verbose)
+      fprintf(stderr, "[lugal] partition: the numbering's split into %d has %ld vertices on its cuts (compact parts: %.0f)%s: %s\n",
+              nparts, have, ideal, few ? " and a part under half its share of the cells" : "", keep && !few ? "kept" : "PTScotch");
+    if (keep && !few) {
       *runs = 1;
       return 0;
     }

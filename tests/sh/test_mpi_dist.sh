@@ -60,6 +60,20 @@ for n in 1 4; do
   [ "$out" = "0.125000000000000 3 0.062500000000000" ] || fail "u(1/2), ndof, integral = $out on $n ranks, expected 1/8, 3, 1/16"
 done
 
+# a small generated mesh whose numbering's runs would leave a rank without cells (each cell
+# goes with its lowest vertex: box{nx = 2} on 2 ranks gave 48 cells and 0) goes to PTScotch:
+# both ranks own cells
+cat > "$T/small.lua" <<'LUA'
+local lg = require "lugal"
+local mesh = lg.mesh.box{nx = 2}
+print(mesh:ncells())
+LUA
+run 2 "$T/small.lua" -lugal_verbose > /dev/null 2> "$T/e" || { cat "$T/e"; fail "box{nx = 2} on 2 ranks"; }
+for r in 0 1; do
+  own=$(grep "distribute: rank $r holds" "$T/e" | tr -d '(' | awk '{print $8}')
+  [ -n "$own" ] && [ "$own" -ge 12 ] || fail "box{nx = 2} on 2 ranks: rank $r owns '$own' of 48 cells, expected at least 12 $(cat "$T/e")"
+done
+
 # what a distributed mesh does not offer yet says so, on every rank
 cat > "$T/refuse.lua" <<'LUA'
 local lg = require "lugal"

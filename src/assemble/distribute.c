@@ -340,7 +340,7 @@ int lg_dist_gather(lg_env *env, lg_mesh *lm, int nf, const mesh_field *fl, mesh 
   int nc = 0, nv = 0;
   for (int c = 0; c < m->ncell; c++) nc += P->cowner[c] == rank;
   for (int v = 0; v < m->nvert; v++) nv += P->vowner[v] == rank;
-  int cnt[2] = {nc, nv}, *all = rank == 0 ? malloc(sizeof(int) * 2 * (size_t)size + 2) : NULL;
+  int *all = rank == 0 ? malloc(sizeof(int) * 2 * (size_t)size + 2) : NULL;
   int *cg = malloc(sizeof(int) * ((size_t)nc * (size_t)(nvc + 2) + 1)), *vg = malloc(sizeof(int) * ((size_t)nv + 1));
   double *vx = malloc(sizeof(double) * ((size_t)nv * (size_t)dim + 1));
   double *fv = malloc(sizeof(double) * 3 * ((size_t)(nc > nv ? nc : nv) + 1));
@@ -361,17 +361,14 @@ int lg_dist_gather(lg_env *env, lg_mesh *lm, int nf, const mesh_field *fl, mesh 
   int anybad = 0;
   MPI_Allreduce(&bad, &anybad, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
   if (anybad) goto oom;
-  if (MPI_Gather(cnt, 2, MPI_INT, all, 2, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) goto oom;
+  /* every rank's cell count, then every rank's vertex count */
+  if (MPI_Gather(&nc, 1, MPI_INT, all, 1, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS ||
+      MPI_Gather(&nv, 1, MPI_INT, all ? all + size : NULL, 1, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS)
+    goto oom;
   int *cc = NULL, *vc = NULL, *rcg = NULL, *rvg = NULL;
   double *rvx = NULL, *rf = NULL;
   long NC = P->ncell_global, NV = P->nvert_global;
   if (rank == 0) {
-    /* the (cells, vertices) pairs rearranged: every cell count, then every vertex count */
-    int tmp[2 * 64], *t = size <= 64 ? tmp : malloc(sizeof(int) * 2 * (size_t)size);
-    if (!t) bad = 1;
-    for (int r = 0; !bad && r < size; r++) { t[r] = all[2 * r]; t[size + r] = all[2 * r + 1]; }
-    if (!bad) memcpy(all, t, sizeof(int) * 2 * (size_t)size);
-    if (t != tmp) free(t);
     cc = all;
     vc = all + size;
     rcg = malloc(sizeof(int) * ((size_t)NC * (size_t)(nvc + 2) + 1));

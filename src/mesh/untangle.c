@@ -17,8 +17,15 @@
 
 /* ---------------------------------------------------------------- stage 2: optimization */
 
+/* above this many cells the objective's corner Jacobians are taken on threads (below it the
+ * threads' start costs more than the loop) */
+#define OBJ_PAR_CELLS 16384
+
 static int obj_bad(const objective *o, const double *x) {
   int bad = 0;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) reduction(+ : bad) if (o->ncell > OBJ_PAR_CELLS)
+#endif
   for (int i = 0; i < o->ncell; i++) {
     double J = ut_cell_min_jac(o->C, x, o->cells[i]);
     bad += o->lift ? !(J >= o->beta) : !(J > o->C->jtol);
@@ -26,27 +33,50 @@ static int obj_bad(const objective *o, const double *x) {
   return bad;
 }
 
-static double obj_eval(const objective *o, const double *x, double *grad, int nfree) {
+/* corner k of the objective's cell i into f and grad (the order of the sums is the caller's) */
+static void obj_corner(const objective *o, const double *x, int i, int k, double *f, double *grad) {
   const ctx *C = o->C;
   int d = C->d;
+  const int *cell = cell_of(C, o->cells[i]);
+  double g[4][3];
+  double J = ut_corner_jac(C, x, cell, k, grad ? g : NULL);
+  double r = (o->beta - J) / o->S;
+  if (!(r > 0)) return;
+  *f += r * r;
+  if (!grad) return;
+  for (int a = 0; a <= d; a++) {
+    int fi = o->fidx[cell[C->ct[k][a]]];
+    if (fi < 0) continue;
+    for (int j = 0; j < d; j++) grad[(size_t)fi * d + j] -= 2 * r / o->S * g[a][j];
+  }
+}
+
+/* (3.3) and its gradient. On many cells the corner Jacobians are taken on threads first and
+ * only the corners below β (few: the tangle's) are then added, one after another in the
+ * one-thread loop's order: the same bits for any thread count (a twisted bar's stage 2 over
+ * a million cells spent its time here, on one thread) */
+static double obj_eval(const objective *o, const double *x, double *grad, int nfree) {
+  const ctx *C = o->C;
+  int d = C->d, nk = C->ncorner;
   double f = 0;
   if (grad) memset(grad, 0, sizeof(double) * (size_t)nfree * d);
-  for (int i = 0; i < o->ncell; i++) {
-    const int *cell = cell_of(C, o->cells[i]);
-    for (int k = 0; k < C->ncorner; k++) {
-      double g[4][3];
-      double J = ut_corner_jac(C, x, cell, k, grad ? g : NULL);
-      double r = (o->beta - J) / o->S;
-      if (!(r > 0)) continue;
-      f += r * r;
-      if (!grad) continue;
-      for (int a = 0; a <= d; a++) {
-        int fi = o->fidx[cell[C->ct[k][a]]];
-        if (fi < 0) continue;
-        for (int j = 0; j < d; j++) grad[(size_t)fi * d + j] -= 2 * r / o->S * g[a][j];
-      }
+  size_t nc = (size_t)o->ncell * nk;
+  unsigned char *below = o->ncell > OBJ_PAR_CELLS ? malloc(nc) : NULL;
+  if (below) {
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static)
+#endif
+    for (int i = 0; i < o->ncell; i++) {
+      const int *cell = cell_of(C, o->cells[i]);
+      for (int k = 0; k < nk; k++) below[(size_t)i * nk + k] = (o->beta - ut_corner_jac(C, x, cell, k, NULL)) / o->S > 0;
     }
+    for (size_t q = 0; q < nc; q++)
+      if (below[q]) obj_corner(o, x, (int)(q / nk), (int)(q % nk), &f, grad);
+    free(below);
+    return f;
   }
+  for (int i = 0; i < o->ncell; i++)
+    for (int k = 0; k < nk; k++) obj_corner(o, x, i, k, &f, grad);
   return f;
 }
 
@@ -105,53 +135,54 @@ double ut_eval(const objective *o, const double *x, double *grad, int nfree) {
 
 /* L-BFGS (memory 8, Armijo backtracking) on the free vertices' coordinates */
 int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout) {
-  int d = o->C->d, n = nfree * d, M = 8, it;
+  int d = o->C->d, M = 8, it;
+  /* the vector loops and sums on threads when n is large (UT_PAR_FOR, ut_dot: the same bits
+   * for any thread count): on one thread they were a sixth of a twisted bar's stage 2 */
+  long n = (long)nfree * d;
   double *g = malloc(sizeof(double) * n), *gn = malloc(sizeof(double) * n), *p = malloc(sizeof(double) * n),
          *x0 = malloc(sizeof(double) * n), *S = malloc(sizeof(double) * n * M), *Y = malloc(sizeof(double) * n * M),
-         rho[8], alpha[8];
-  if (!g || !gn || !p || !x0 || !S || !Y) {
-    free(g); free(gn); free(p); free(x0); free(S); free(Y);
+         *part = malloc(sizeof(double) * ((size_t)n / UT_DOT_CHUNK + 2)), rho[8], alpha[8];
+  if (!g || !gn || !p || !x0 || !S || !Y || !part) {
+    free(g); free(gn); free(p); free(x0); free(S); free(Y); free(part);
     return -1;
   }
   int mem = 0, head = 0, best_bad = o->smooth ? 0 : obj_bad(o, x), start_bad = best_bad, stale = 0, worse = 0;
   double f = ut_eval(o, x, g, nfree), h0 = pow(o->S, 1.0 / d), fmark = f;
   for (it = 0; it < maxit && f > 0; it++) {
     /* two-loop recursion */
-    for (int i = 0; i < n; i++) p[i] = -g[i];
+    UT_PAR_FOR
+    for (long i = 0; i < n; i++) p[i] = -g[i];
     for (int q = 0; q < mem; q++) {
       int k = (head - 1 - q + M) % M;
-      double a = 0;
-      for (int i = 0; i < n; i++) a += S[k * n + i] * p[i];
-      alpha[k] = rho[k] * a;
-      for (int i = 0; i < n; i++) p[i] -= alpha[k] * Y[k * n + i];
+      double *Yk = Y + k * n;
+      alpha[k] = rho[k] * ut_dot(S + k * n, p, n, part);
+      UT_PAR_FOR
+      for (long i = 0; i < n; i++) p[i] -= alpha[k] * Yk[i];
     }
     double gamma;
     if (mem) {
       int k = (head - 1 + M) % M;
-      double sy = 0, yy = 0;
-      for (int i = 0; i < n; i++) { sy += S[k * n + i] * Y[k * n + i]; yy += Y[k * n + i] * Y[k * n + i]; }
-      gamma = sy / yy;
+      gamma = ut_dot(S + k * n, Y + k * n, n, part) / ut_dot(Y + k * n, Y + k * n, n, part);
     } else {
       double gi = 0;
-      for (int i = 0; i < n; i++) gi = fmax(gi, fabs(g[i]));
+      for (long i = 0; i < n; i++) gi = fmax(gi, fabs(g[i]));
       gamma = 0.1 * h0 / gi;
     }
-    for (int i = 0; i < n; i++) p[i] *= gamma;
+    UT_PAR_FOR
+    for (long i = 0; i < n; i++) p[i] *= gamma;
     for (int q = mem - 1; q >= 0; q--) {
       int k = (head - 1 - q + M) % M;
-      double bb = 0;
-      for (int i = 0; i < n; i++) bb += Y[k * n + i] * p[i];
-      bb *= rho[k];
-      for (int i = 0; i < n; i++) p[i] += S[k * n + i] * (alpha[k] - bb);
+      double bb = ut_dot(Y + k * n, p, n, part) * rho[k], *Sk = S + k * n;
+      UT_PAR_FOR
+      for (long i = 0; i < n; i++) p[i] += Sk[i] * (alpha[k] - bb);
     }
-    double gp = 0;
-    for (int i = 0; i < n; i++) gp += g[i] * p[i];
+    double gp = ut_dot(g, p, n, part);
     if (!(gp < 0)) { /* not a descent direction: restart from the gradient */
       mem = 0;
       double gi = 0;
-      for (int i = 0; i < n; i++) gi = fmax(gi, fabs(g[i]));
-      gp = 0;
-      for (int i = 0; i < n; i++) { p[i] = -0.1 * h0 / gi * g[i]; gp += g[i] * p[i]; }
+      for (long i = 0; i < n; i++) gi = fmax(gi, fabs(g[i]));
+      for (long i = 0; i < n; i++) p[i] = -0.1 * h0 / gi * g[i];
+      gp = ut_dot(g, p, n, part);
     }
     for (int i = 0; i < nfree; i++)
       for (int j = 0; j < d; j++) x0[i * d + j] = x[(size_t)freev[i] * d + j];
@@ -169,12 +200,13 @@ int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int max
         for (int j = 0; j < d; j++) x[(size_t)freev[i] * d + j] = x0[i * d + j];
       break;
     }
-    double sy = 0;
-    for (int i = 0; i < n; i++) {
-      S[head * n + i] = t * p[i];
-      Y[head * n + i] = gn[i] - g[i];
-      sy += S[head * n + i] * Y[head * n + i];
+    double *Sh = S + head * n, *Yh = Y + head * n;
+    UT_PAR_FOR
+    for (long i = 0; i < n; i++) {
+      Sh[i] = t * p[i];
+      Yh[i] = gn[i] - g[i];
     }
+    double sy = ut_dot(Sh, Yh, n, part);
     if (sy > 0) {
       rho[head] = 1 / sy;
       head = (head + 1) % M;
@@ -208,7 +240,7 @@ int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int max
     }
   }
   *fout = f;
-  free(g); free(gn); free(p); free(x0); free(S); free(Y);
+  free(g); free(gn); free(p); free(x0); free(S); free(Y); free(part);
   return it;
 }
 

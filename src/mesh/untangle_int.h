@@ -94,6 +94,17 @@ double ut_energy_qmin(const objective *o, const double *x);
  * from the preconditioned conjugate gradients on the projected Hessian, Armijo backtracking;
  * stops when a step lowers f by at most ftol·f (0: 1e-9). Iterations, or -1 out of memory */
 int ut_newton(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout);
+/* a · b in fixed chunks of UT_DOT_CHUNK entries summed in order (threads over the chunks
+ * when n is large): the same bits for any thread count; part holds n / UT_DOT_CHUNK + 1 */
+#define UT_DOT_CHUNK 4096
+double ut_dot(const double *a, const double *b, long n, double *part);
+/* an element-wise loop over n entries, on threads when n is large (each entry on its own:
+ * the same bits for any thread count) */
+#ifdef _OPENMP
+#define UT_PAR_FOR _Pragma("omp parallel for schedule(static) if (n > 4 * UT_DOT_CHUNK)")
+#else
+#define UT_PAR_FOR
+#endif
 /* the objective that ut_lbfgs and ut_newton minimize, with the motion weight's term */
 double ut_eval(const objective *o, const double *x, double *grad, int nfree);
 

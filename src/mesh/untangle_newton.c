@@ -14,18 +14,17 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define DOT_CHUNK 4096
-
-/* a · b over n entries: fixed chunks summed in order, whatever the thread count */
-static double dot(const double *a, const double *b, long n, double *part) {
-  long nch = (n + DOT_CHUNK - 1) / DOT_CHUNK;
+/* a · b over n entries: fixed chunks (UT_DOT_CHUNK) summed in order, whatever the thread
+ * count (up to UT_DOT_CHUNK entries: the plain loop's order and bits) */
+double ut_dot(const double *a, const double *b, long n, double *part) {
+  long nch = (n + UT_DOT_CHUNK - 1) / UT_DOT_CHUNK;
 #ifdef _OPENMP
-#pragma omp parallel for schedule(static) if (n > 4 * DOT_CHUNK)
+#pragma omp parallel for schedule(static) if (n > 4 * UT_DOT_CHUNK)
 #endif
   for (long c = 0; c < nch; c++) {
-    long hi = c * DOT_CHUNK + DOT_CHUNK < n ? c * DOT_CHUNK + DOT_CHUNK : n;
+    long hi = c * UT_DOT_CHUNK + UT_DOT_CHUNK < n ? c * UT_DOT_CHUNK + UT_DOT_CHUNK : n;
     double s = 0;
-    for (long i = c * DOT_CHUNK; i < hi; i++) s += a[i] * b[i];
+    for (long i = c * UT_DOT_CHUNK; i < hi; i++) s += a[i] * b[i];
     part[c] = s;
   }
   double s = 0;
@@ -33,14 +32,9 @@ static double dot(const double *a, const double *b, long n, double *part) {
   return s;
 }
 
-/* the conjugate gradients' element-wise updates on threads (each entry on its own: the
- * same bits for any thread count). On one thread they left the other spinning until the
- * next parallel product: the smoother took 1.4x as long on a 250 000-triangle strip */
-#ifdef _OPENMP
-#define PAR_FOR _Pragma("omp parallel for schedule(static) if (n > 4 * DOT_CHUNK)")
-#else
-#define PAR_FOR
-#endif
+/* the conjugate gradients' element-wise updates run on threads (UT_PAR_FOR): on one
+ * thread they left the other spinning until the next parallel product, and the smoother
+ * took 1.3x as long on a 250 000-triangle strip */
 
 /* the pattern: each free vertex's row holds itself and the free vertices of its cells, sorted */
 static int build_pattern(const ctx *C, const int *fidx, const int *freev, int nfree, ut_bsr *P) {
@@ -150,7 +144,7 @@ static void block_jacobi(double *val, const int *dpos, int nfree, int d, double 
 static void block_apply(const double *dinv, int nfree, int d, const double *r, double *z) {
   int dd = d * d;
   long n = (long)nfree * d;
-  PAR_FOR
+  UT_PAR_FOR
   for (int fi = 0; fi < nfree; fi++) {
     const double *w = dinv + (size_t)fi * dd, *rr = r + (size_t)fi * d;
     for (int a = 0; a < d; a++) {
@@ -172,7 +166,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
   double *g = malloc(sizeof(double) * (n + 1)), *gn = malloc(sizeof(double) * (n + 1)), *s = malloc(sizeof(double) * (n + 1)),
          *r = malloc(sizeof(double) * (n + 1)), *z = malloc(sizeof(double) * (n + 1)), *pd = malloc(sizeof(double) * (n + 1)),
          *q = malloc(sizeof(double) * (n + 1)), *x0 = malloc(sizeof(double) * (n + 1)),
-         *part = malloc(sizeof(double) * ((size_t)n / DOT_CHUNK + 2));
+         *part = malloc(sizeof(double) * ((size_t)n / UT_DOT_CHUNK + 2));
   int *dpos = malloc(sizeof(int) * ((size_t)nfree + 1));
   double *xkeep = o->keepq > 0 ? malloc(sizeof(double) * (n + 1)) : NULL;
   int ok = val && dinv && g && gn && s && r && z && pd && q && x0 && part && dpos && (xkeep || !(o->keepq > 0)), below = 0;
@@ -189,7 +183,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
       for (int a = 0; a < d; a++) xkeep[(size_t)i * d + a] = x[(size_t)freev[i] * d + a];
   double tol = o->ftol > 0 ? o->ftol : 1e-9;
   for (it = 0; it < maxit && isfinite(f) && f > 0; it++) {
-    double gg = dot(g, g, n, part);
+    double gg = ut_dot(g, g, n, part);
     if (!it) g0 = sqrt(gg);
     if (!(gg > 0) || ut_energy_hessian(o, x, &P, val, nfree)) break;
     if (C->anchor > 0 && C->x0) /* the motion weight's w |x − x0|² */
@@ -200,30 +194,30 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     /* the forcing term: at least 0.1 (0.01 cost the star 40x200 twice the CG iterations for
      * the same Newton steps) */
     double eta = fmin(0.5, fmax(0.1, sqrt(sqrt(gg) / g0))), rz;
-    PAR_FOR
+    UT_PAR_FOR
     for (long i = 0; i < n; i++) { s[i] = 0; r[i] = -g[i]; }
     block_apply(dinv, nfree, d, r, z);
     memcpy(pd, z, sizeof(double) * n);
-    rz = dot(r, z, n, part);
+    rz = ut_dot(r, z, n, part);
     for (int k = 0; k < 1000; k++) {
       bsr_mult(&P, val, nfree, d, pd, q);
-      double pq = dot(pd, q, n, part);
+      double pq = ut_dot(pd, q, n, part);
       if (!(pq > 0)) break;
       double al = rz / pq;
-      PAR_FOR
+      UT_PAR_FOR
       for (long i = 0; i < n; i++) { s[i] += al * pd[i]; r[i] -= al * q[i]; }
-      if (dot(r, r, n, part) <= eta * eta * gg) break;
+      if (ut_dot(r, r, n, part) <= eta * eta * gg) break;
       block_apply(dinv, nfree, d, r, z);
-      double rz1 = dot(r, z, n, part), be = rz1 / rz;
+      double rz1 = ut_dot(r, z, n, part), be = rz1 / rz;
       rz = rz1;
-      PAR_FOR
+      UT_PAR_FOR
       for (long i = 0; i < n; i++) pd[i] = z[i] + be * pd[i];
     }
-    double gp = dot(g, s, n, part);
+    double gp = ut_dot(g, s, n, part);
     if (!(gp < 0)) { /* no descent (a breakdown at the first step): the preconditioned gradient */
       block_apply(dinv, nfree, d, g, s);
       for (long i = 0; i < n; i++) s[i] = -s[i];
-      gp = dot(g, s, n, part);
+      gp = ut_dot(g, s, n, part);
       if (!(gp < 0)) break;
     }
     for (int i = 0; i < nfree; i++)

@@ -222,6 +222,19 @@ static int cand_cmp(const void *a, const void *b) {
   return x->bad != y->bad ? y->bad - x->bad : x->v - y->v;
 }
 
+/* a vertex of v's star (the vertices of its cells) moved in this pass (stamp == mark) */
+static int star_moved(const ctx *C, int v, const int *stamp, int mark) {
+  for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++) {
+    const int *cell = cell_of(C, C->vc[p]);
+    for (int i = 0; i < C->nvc; i++)
+      if (stamp[cell[i]] == mark) return 1;
+  }
+  return 0;
+}
+
+/* above this many candidates a pass computes their feasible positions on threads first */
+#define PASS_PAR_CANDIDATES 256
+
 int ut_feasible_passes(ctx *C, double *x, double target, int stage3, const unsigned char *region, int placement,
                            int maxpass, unsigned char *moved, int *npass) {
   int d = C->d, total = 0, pass;
@@ -229,6 +242,11 @@ int ut_feasible_passes(ctx *C, double *x, double target, int stage3, const unsig
   cand *list = malloc(sizeof(cand) * ((size_t)m->nvert + 1));
   int *nbad = malloc(sizeof(int) * ((size_t)m->nvert + 1));
   if (!list || !nbad) { free(list); free(nbad); return 0; }
+  /* the threaded placement's buffers: a position per candidate, whether it has one, and per
+   * vertex the pass in which it moved */
+  double *pos = NULL;
+  unsigned char *has = NULL;
+  int *stamp = NULL;
   long best = -1;
   int since = 0, ran = 0; /* ran: the passes that tried moves */
   for (pass = 0; pass < maxpass; pass++) {
@@ -248,13 +266,40 @@ int ut_feasible_passes(ctx *C, double *x, double target, int stage3, const unsig
     else if (++since >= PASS_PATIENCE) break;
     ran++;
     qsort(list, (size_t)n, sizeof(cand), cand_cmp);
+    /* Many candidates: each one's feasible position from the mesh as the pass found it, on
+     * threads (each an LP over its own star: a million-cell twisted bar's stage 2 spent most
+     * of its time in these LPs, on one thread). Then the moves in the list's order as
+     * before: a vertex none of whose star has moved yet in this pass sees the mesh the pass
+     * started from, so its precomputed answer is the one the loop would compute; the others
+     * compute theirs at their turn. Same moves, same bits, for any thread count */
+    int par = n > PASS_PAR_CANDIDATES;
+    if (par && !pos) {
+      pos = malloc(sizeof(double) * ((size_t)m->nvert * d + 1));
+      has = malloc((size_t)m->nvert + 1);
+      stamp = malloc(sizeof(int) * ((size_t)m->nvert + 1));
+      if (stamp)
+        for (int v = 0; v < nv; v++) stamp[v] = -1;
+    }
+    if (par && (!pos || !has || !stamp)) par = 0;
+    if (par) {
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 64)
+#endif
+      for (int i = 0; i < n; i++) has[i] = (unsigned char)feasible_position(C, x, list[i].v, stage3 ? target : 0, placement, pos + (size_t)i * d);
+    }
     int changed = 0;
     for (int i = 0; i < n; i++) {
       int v = list[i].v;
-      if (!vertex_violations(C, x, v, target, stage3)) continue; /* fixed by an earlier move in this pass */
       double np[3];
-      if (!feasible_position(C, x, v, stage3 ? target : 0, placement, np)) continue;
+      if (par && !star_moved(C, v, stamp, pass)) { /* its star as at the pass's start: violated (nbad) */
+        if (!has[i]) continue;
+        memcpy(np, pos + (size_t)i * d, sizeof(double) * (size_t)d);
+      } else {
+        if (!vertex_violations(C, x, v, target, stage3)) continue; /* fixed by an earlier move in this pass */
+        if (!feasible_position(C, x, v, stage3 ? target : 0, placement, np)) continue;
+      }
       for (int j = 0; j < d; j++) x[(size_t)d * v + j] = np[j];
+      if (stamp) stamp[v] = pass;
       if (!moved[v]) total++;
       moved[v] = 1;
       changed++;
@@ -263,6 +308,9 @@ int ut_feasible_passes(ctx *C, double *x, double target, int stage3, const unsig
   }
   free(list);
   free(nbad);
+  free(pos);
+  free(has);
+  free(stamp);
   *npass = ran;
   return total;
 }

@@ -65,6 +65,7 @@ void lg_mesh_free(lg_mesh *lm) {
     for (int i = 0; i < 4; i++)
       for (int j = 0; j < FEM_MAXBS; j++) dofmap_free(lm->dm[d][i][j]);
   lg_locator_free(lm->locator);
+  lg_dist_dofs_free(lm->ddofs);
   free(lm->part);
   if (lm->dist) mesh_part_free(lm->dist); /* its mesh is lm->m */
   else mesh_free(lm->m);
@@ -530,14 +531,9 @@ static void rank_slice(int n, int *f0, int *f1) {
 int lg_assemble_share(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells, const int *facets,
                       const coef_binding *bind, double *out, lg_chunk_bufs *cb, lg_chunk_use use, void *ud, int *first) {
   int f0 = 0, f1 = nitems, interior = k->facet == 2;
-  if (lm->dist) {
-    /* a distributed mesh: each rank the items of its owned cells (an interior facet's '+'
-     * cell), every item of the whole mesh once */
-    if (k->arity != 0) {
-      lg_seterr(env, "derivatives of functionals on a distributed mesh (-lugal_distribute) are not offered yet: run "
-                     "without -lugal_distribute");
-      return 1;
-    }
+  if (lm->dist && k->arity == 0) {
+    /* a distributed mesh's number: each rank the items of its owned cells (an interior
+     * facet's '+' cell), every item of the whole mesh once */
     *first = 0;
     int rank = lg_mpi_rank(), n = 0, *own = malloc(sizeof(int) * (2 * (size_t)nitems + 1)), *of = NULL;
     if (own && facets) of = malloc(sizeof(int) * ((size_t)nitems + 1));
@@ -557,7 +553,10 @@ int lg_assemble_share(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, 
     free(of);
     return rc;
   }
-  if (lg_mpi_size() > 1) rank_slice(nitems, &f0, &f1);
+  /* a distributed mesh's vector: every local item, which completes the entries of the owned
+   * dofs (all their cells are here) in the whole mesh's order; the caller brings the ghost
+   * dofs their owners' values (lg_dist_ghosts) */
+  if (lg_mpi_size() > 1 && !lm->dist) rank_slice(nitems, &f0, &f1);
   *first = f0;
   if (f1 <= f0) return 0;
   /* a slice of a plain list starts at its first item; an interior list's '-' cells follow

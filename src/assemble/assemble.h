@@ -53,6 +53,7 @@ typedef struct {
   /* a distributed mesh (distribute.c, -lugal_distribute): this rank's part, its owned cells
    * and their ghost layer, whose local mesh m is; NULL when every rank holds the whole */
   mesh_part *dist;
+  struct lg_dist_dofs *ddofs; /* its dof maps' layouts (distribute.c), built on first use */
 } lg_mesh;
 
 typedef struct {
@@ -121,6 +122,16 @@ int lg_dist_worst(lg_env *env, const double *v, const int *gid, int n, int k, in
  * distributed mesh is repaired (untangled, smoothed) on one rank; collective */
 int lg_dist_gather_mesh(lg_env *env, lg_mesh *lm, mesh **whole);
 int lg_dist_scatter_coords(lg_env *env, lg_mesh *lm, const mesh *whole);
+/* a dof map's dofs on a distributed mesh as one distributed vector (built on first use,
+ * kept with the mesh; the first call is collective): own[d] = 1 for the local dofs this
+ * rank owns (*nown of them; a node is owned where most of its cells are), NULL on failure;
+ * lg_dist_ghosts gives every local dof of x (dm->ndof values) its owner's value
+ * (collective); lg_dist_dot sums a[d] b[d] over the owned dofs (this rank's share) */
+typedef struct lg_dist_dofs lg_dist_dofs;
+const char *lg_dist_owned(lg_env *env, lg_mesh *lm, const dofmap *dm, int *nown);
+int lg_dist_ghosts(lg_env *env, lg_mesh *lm, const dofmap *dm, double *x);
+double lg_dist_dot(const char *own, int n, const double *a, const double *b);
+void lg_dist_dofs_free(lg_dist_dofs *D);
 /* an lg_mesh over a rank's part (it owns the part) */
 lg_mesh *lg_mesh_wrap_part(mesh_part *P);
 /* the number of owned cells / vertices summed over the ranks (the whole mesh's counts) */
@@ -163,7 +174,9 @@ void lg_chunk_bufs_free(lg_chunk_bufs *cb);
  * their derivatives, arity 1, through use): each rank runs its share of the items, a
  * contiguous slice from *first (interior facet terms: all of them on rank 0, none elsewhere);
  * a serial run all of them. lg_sum_ranks then sums out[0..n) over the ranks, once for all
- * the terms, with the error of any rank */
+ * the terms, with the error of any rank. On a distributed mesh a number takes the items of
+ * the rank's owned cells, a vector every local item (its owned dofs' entries are then
+ * complete; lg_dist_ghosts gives the ghost dofs theirs) */
 int lg_assemble_share(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells, const int *facets,
                       const coef_binding *bind, double *out, lg_chunk_bufs *cb, lg_chunk_use use, void *ud, int *first);
 int lg_sum_ranks(lg_env *env, double *out, size_t n, int rc);
@@ -267,6 +280,8 @@ int lg_problem_bc_mixed(lg_env *env, const lg_problem *p, int fid1, int param1, 
 /* their derivatives dg_r/dm_j at the last solve: triplets (problem row, control dof (0 for a
  * parameter), value), allocated; returns how many, -1 on failure */
 int lg_problem_bc_derivative(lg_env *env, lg_problem *p, int fid, int param, int **rows, int **cols, double **vals);
+/* is row r of the problem's arrays one this rank owns in PETSc's matrix (always, serially) */
+int lg_problem_row_owned(const lg_problem *p, int r);
 /* bindings of the unknowns (and of their '-' side copies, interior facets) to the last solution:
  * up to 2 per unknown; returns how many */
 int lg_problem_bind_state(const lg_problem *p, coef_binding *b);
@@ -331,6 +346,9 @@ int lg_reduced_value(lg_env *env, lg_reduced *rf, double *J);
 /* the gradient dj/dm_i as dual vectors (g[i] has lg_reduced_control_size values): one
  * adjoint solve with the state's factorization */
 int lg_reduced_gradient(lg_env *env, lg_reduced *rf, double **g);
+/* sum_i <a_i, b_i> over the controls' vectors (dual against primal: dofs paired one to one;
+ * a distributed mesh's owned dofs summed over the ranks, collective) */
+int lg_reduced_dot(lg_env *env, lg_reduced *rf, double **a, double **b, double *out);
 /* the Hessian action H dm (dual vectors, like the gradient) at the current controls: a
  * tangent-linear and a second-order adjoint solve with the state's factorization */
 int lg_reduced_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out);

@@ -193,72 +193,75 @@ static int outbox_sort(outbox *o, int size, int *cnt, int **sorted) {
   return 0;
 }
 
-int lg_dist_number_nodes(lg_env *env, lg_problem *p, int B) {
-  double t0 = now_ms();
-  const mesh_part *P = p->lm->dist;
+/* the vertices of this part's cells of other parts (a rank holding an owned node holds a
+ * cell through it, which shares a vertex with an owned cell of it, or is one); NULL when
+ * out of memory */
+static char *other_vertices(const mesh_part *P) {
   const mesh *m = P->m;
-  int rank = lg_mpi_rank(), size = lg_mpi_size(), Nn = p->N / B;
-  int *owner = malloc(sizeof(int) * ((size_t)Nn + 1));
-  char *shared = calloc((size_t)Nn + 1, 1), *ivert = calloc((size_t)m->nvert + 1, 1);
-  /* each node to the part of most of its cells, the vote set_ownership takes on a whole
-   * mesh, in the whole mesh's cell order: exact for the nodes of owned cells, whose cells are
-   * all here; a node of ghost cells only is another rank's whatever the vote says */
-  int bad = !owner || !shared || !ivert || lg_problem_node_owners(p, B, P->cowner, owner);
-  /* the owned nodes another rank may hold: those of owned cells with a vertex in a cell of
-   * another part (a rank holding an owned node holds a cell through it, which shares a
-   * vertex with an owned cell of it, or is one) */
-  for (int c = 0; !bad && c < m->ncell; c++)
+  int rank = lg_mpi_rank();
+  char *iv = calloc((size_t)m->nvert + 1, 1);
+  for (int c = 0; iv && c < m->ncell; c++)
     if (P->cowner[c] != rank)
-      for (int k = 0; k < m->nvc; k++) ivert[m->cells[(size_t)c * (size_t)m->nvc + (size_t)k]] = 1;
-  for (int c = 0; !bad && c < m->ncell; c++) {
+      for (int k = 0; k < m->nvc; k++) iv[m->cells[(size_t)c * (size_t)m->nvc + (size_t)k]] = 1;
+  return iv;
+}
+
+/* the nodes (B dofs from off on: dof map dm in a problem's vector) of owned cells with a
+ * vertex in other_vertices: the owned nodes another rank may hold */
+static void mark_shared(const mesh_part *P, const char *ivert, const dofmap *dm, int off, int B, char *shared) {
+  const mesh *m = P->m;
+  int rank = lg_mpi_rank();
+  for (int c = 0; c < m->ncell; c++) {
     if (P->cowner[c] != rank) continue;
     int touch = 0;
     for (int k = 0; k < m->nvc; k++) touch |= ivert[m->cells[(size_t)c * (size_t)m->nvc + (size_t)k]];
     if (!touch) continue;
-    for (int a = 0; a < p->cols.n; a++) {
-      const dofmap *dm = p->cdm[a];
-      for (int k = 0; k < dm->nloc; k += B) shared[(p->cglob[a] + dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k]) / B] = 1;
-    }
+    for (int k = 0; k < dm->nloc; k += B) shared[(off + dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k]) / B] = 1;
   }
-  free(ivert);
-  /* the owned nodes numbered in the local order after the lower ranks' */
+}
+
+typedef void (*node_key_fn)(const void *ctx, int node, int *key);
+
+/* the global numbers perm[Nn] of a part's nodes: the owned ones (owner[i] == rank) after the
+ * lower ranks' in the local order, the others the numbers their owners gave them, learnt
+ * through a rendezvous on the nodes' keys (registrations of the shared owned nodes and
+ * questions go to the rank of the key's hash, which answers). *first: this rank's first
+ * number, *nown its count, *total all ranks'. Collective, bad = this rank failed already
+ * (it still takes part); returns 0, or on every rank 1 (out of memory) or 2 (a ghost node
+ * without an owner) */
+static int rendezvous_number(int bad, int Nn, const int *owner, const char *shared, node_key_fn key, const void *ctx,
+                             int *perm, int *first, int *nown_out, int *total_out) {
+  int rank = lg_mpi_rank(), size = lg_mpi_size();
   int nown = 0, nreg = 0, nask = 0;
   for (int i = 0; !bad && i < Nn; i++) {
     nown += owner[i] == rank;
     nreg += owner[i] == rank && shared[i];
     nask += owner[i] != rank;
   }
-  int first = 0, total = 0; /* every rank reduces, failed or not */
-  MPI_Exscan(&nown, &first, 1, MPI_INT, MPI_SUM, PETSC_COMM_WORLD);
-  if (rank == 0) first = 0;
+  int f0 = 0, total = 0; /* every rank reduces, failed or not */
+  MPI_Exscan(&nown, &f0, 1, MPI_INT, MPI_SUM, PETSC_COMM_WORLD);
+  if (rank == 0) f0 = 0;
   MPI_Allreduce(&nown, &total, 1, MPI_INT, MPI_SUM, PETSC_COMM_WORLD);
-  p->perm = malloc(sizeof(int) * ((size_t)Nn + 1));
-  p->iperm = malloc(sizeof(int) * ((size_t)nown + 1));
   outbox reg = {KEYLEN + 1, 0, malloc(sizeof(int) * ((size_t)nreg + 1)), malloc(sizeof(int) * (KEYLEN + 1) * ((size_t)nreg + 1))};
   outbox ask = {KEYLEN, 0, malloc(sizeof(int) * ((size_t)nask + 1)), malloc(sizeof(int) * KEYLEN * ((size_t)nask + 1))};
   int *askn = malloc(sizeof(int) * ((size_t)nask + 1)); /* the node of each question, in the order asked */
-  bad |= !p->perm || !p->iperm || !reg.rank || !reg.data || !ask.rank || !ask.data || !askn;
+  bad |= !perm || !reg.rank || !reg.data || !ask.rank || !ask.data || !askn;
   for (int i = 0, k = 0; !bad && i < Nn; i++) {
     if (owner[i] == rank) {
-      p->perm[i] = first + k;
-      p->iperm[k++] = i;
+      perm[i] = f0 + k++;
       if (!shared[i]) continue;
       int *r = reg.data + (size_t)reg.n * (KEYLEN + 1);
-      node_key(p, i, B, r);
-      r[KEYLEN] = p->perm[i];
+      key(ctx, i, r);
+      r[KEYLEN] = perm[i];
       reg.rank[reg.n++] = key_rank(r, size);
     } else {
-      p->perm[i] = -1;
+      perm[i] = -1;
       int *q = ask.data + (size_t)ask.n * KEYLEN;
-      node_key(p, i, B, q);
+      key(ctx, i, q);
       askn[ask.n] = i;
       ask.rank[ask.n++] = key_rank(q, size);
     }
   }
-  free(owner);
-  free(shared);
-  /* the rendezvous: registrations and questions go to the rank of the key's hash, which
-   * answers each question from the registrations */
   int *cnt1 = malloc(sizeof(int) * 4 * (size_t)size), *sreg = NULL, *sask = NULL, *dir = NULL, *qs = NULL, *ans = NULL, *back = NULL;
   int ndir = 0, nq = 0, nback = 0, lost = 0;
   bad |= !cnt1;
@@ -290,7 +293,7 @@ int lg_dist_number_nodes(lg_env *env, lg_problem *p, int B) {
     for (int r = 1; !bad && r < size; r++) at[r] = at[r - 1] + cnt2[r - 1];
     for (int i = 0; !bad && i < ask.n; i++) {
       int g = back[at[ask.rank[i]]++];
-      p->perm[askn[i]] = g;
+      perm[askn[i]] = g;
       lost += g < 0;
     }
     free(at);
@@ -299,8 +302,41 @@ int lg_dist_number_nodes(lg_env *env, lg_problem *p, int B) {
   free(reg.rank); free(reg.data); free(ask.rank); free(ask.data); free(askn);
   int fail[2] = {bad, lost}, any[2];
   MPI_Allreduce(fail, any, 2, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
-  if (any[0] || any[1]) {
-    if (any[1]) lg_seterr(env, "the global numbering of a distributed problem's nodes failed: a ghost node without an owner");
+  *first = f0;
+  *nown_out = nown;
+  *total_out = total;
+  return any[0] ? 1 : any[1] ? 2 : 0;
+}
+
+static void problem_node_key(const void *ctx, int n, int *key) {
+  const lg_problem *p = ctx;
+  node_key(p, n, p->pB, key);
+}
+
+int lg_dist_number_nodes(lg_env *env, lg_problem *p, int B) {
+  double t0 = now_ms();
+  const mesh_part *P = p->lm->dist;
+  int rank = lg_mpi_rank(), Nn = p->N / B;
+  int *owner = malloc(sizeof(int) * ((size_t)Nn + 1));
+  char *shared = calloc((size_t)Nn + 1, 1), *ivert = other_vertices(P);
+  /* each node to the part of most of its cells, the vote set_ownership takes on a whole
+   * mesh, in the whole mesh's cell order: exact for the nodes of owned cells, whose cells are
+   * all here; a node of ghost cells only is another rank's whatever the vote says */
+  int bad = !owner || !shared || !ivert || lg_problem_node_owners(p, B, P->cowner, owner);
+  for (int a = 0; !bad && a < p->cols.n; a++) mark_shared(P, ivert, p->cdm[a], p->cglob[a], B, shared);
+  free(ivert);
+  int first, nown = 0, total;
+  for (int i = 0; !bad && i < Nn; i++) nown += owner[i] == rank;
+  p->perm = malloc(sizeof(int) * ((size_t)Nn + 1));
+  p->iperm = malloc(sizeof(int) * ((size_t)nown + 1));
+  bad |= !p->iperm;
+  int rc = rendezvous_number(bad, Nn, owner, shared, problem_node_key, p, p->perm, &first, &nown, &total);
+  for (int i = 0; !rc && i < Nn; i++)
+    if (owner[i] == rank) p->iperm[p->perm[i] - first] = i;
+  free(owner);
+  free(shared);
+  if (rc) {
+    if (rc == 2) lg_seterr(env, "the global numbering of a distributed problem's nodes failed: a ghost node without an owner");
     else lg_seterr(env, "out of memory numbering the nodes of a distributed problem");
     return 1;
   }
@@ -443,23 +479,142 @@ oom:
 
 /* ---------------------------------------------------------------- discrete functions */
 
-/* the dofs of dm this rank owns (own[d] = 1): a node goes to the part of most of its cells,
- * as a problem's do */
-static int owned_dofs(const lg_mesh *lm, const dofmap *dm, char *own) {
+/* the owner of each node of dm (owner[nn]): the part of most of its cells, as a problem's
+ * nodes */
+static int dof_owners(const lg_mesh *lm, const dofmap *dm, int *owner) {
   const mesh_part *P = lm->dist;
-  int rank = lg_mpi_rank(), bs = dm->bs, nn = dm->ndof / bs;
-  int *owner = malloc(sizeof(int) * ((size_t)nn + 1)), *cnt = calloc((size_t)nn + 1, sizeof(int));
-  if (!owner || !cnt) { free(owner); free(cnt); return 1; }
+  int bs = dm->bs, nn = dm->ndof / bs;
+  int *cnt = calloc((size_t)nn + 1, sizeof(int));
+  if (!cnt) return 1;
   for (int i = 0; i < nn; i++) owner[i] = -1; /* a tie leaves the count at 0, not the owner */
   for (int c = 0; c < P->m->ncell; c++)
     for (int k = 0; k < dm->nloc; k += bs) {
       int node = dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k] / bs;
       lg_vote(owner, cnt, node, P->cowner[c]);
     }
-  for (int d = 0; d < dm->ndof; d++) own[d] = owner[d / bs] == rank;
-  free(owner);
   free(cnt);
   return 0;
+}
+
+/* the dofs of dm this rank owns (own[d] = 1) */
+static int owned_dofs(const lg_mesh *lm, const dofmap *dm, char *own) {
+  int rank = lg_mpi_rank(), bs = dm->bs, nn = dm->ndof / bs;
+  int *owner = malloc(sizeof(int) * ((size_t)nn + 1));
+  if (!owner || dof_owners(lm, dm, owner)) { free(owner); return 1; }
+  for (int d = 0; d < dm->ndof; d++) own[d] = owner[d / bs] == rank;
+  free(owner);
+  return 0;
+}
+
+/* ---------------------------------------------------------------- a dof map's layout */
+
+/* a dof map's dofs on a distributed mesh as a distributed vector: each rank's owned dofs
+ * (in its local order, after the lower ranks'), and the scatter that brings every local
+ * dof, owned or ghost, its owner's value. Built on first use, kept with the mesh */
+struct lg_dist_dofs {
+  const dofmap *dm;
+  const mesh_part *P;
+  int nown;   /* owned dofs */
+  char *own;  /* per local dof */
+  Vec g, l;   /* the owned dofs (all ranks': the global vector), the local ones */
+  VecScatter sc;
+  struct lg_dist_dofs *next;
+};
+
+void lg_dist_dofs_free(lg_dist_dofs *D) {
+  while (D) {
+    lg_dist_dofs *n = D->next;
+    free(D->own);
+    if (D->sc) VecScatterDestroy(&D->sc);
+    if (D->g) VecDestroy(&D->g);
+    if (D->l) VecDestroy(&D->l);
+    free(D);
+    D = n;
+  }
+}
+
+static void dm_node_key(const void *ctx, int n, int *key) {
+  const lg_dist_dofs *D = ctx;
+  dof_key(D->P, D->dm, n * D->dm->bs, key);
+}
+
+static lg_dist_dofs *dist_dofs(lg_env *env, lg_mesh *lm, const dofmap *dm) {
+  for (lg_dist_dofs *D = lm->ddofs; D; D = D->next)
+    if (D->dm == dm) return D;
+  const mesh_part *P = lm->dist;
+  int rank = lg_mpi_rank(), bs = dm->bs, nn = dm->ndof / bs;
+  lg_dist_dofs *D = calloc(1, sizeof *D);
+  int *owner = malloc(sizeof(int) * ((size_t)nn + 1)), *perm = malloc(sizeof(int) * ((size_t)nn + 1));
+  char *shared = calloc((size_t)nn + 1, 1), *ivert = other_vertices(P);
+  int bad = !D || !owner || !perm || !shared || !ivert || dof_owners(lm, dm, owner);
+  if (D) {
+    D->dm = dm;
+    D->P = P;
+    bad |= !(D->own = malloc((size_t)dm->ndof + 1));
+  }
+  if (!bad) mark_shared(P, ivert, dm, 0, bs, shared);
+  free(ivert);
+  int first = 0, nown = 0, total = 0;
+  int rc = rendezvous_number(bad, nn, owner, shared, dm_node_key, D, perm, &first, &nown, &total);
+  free(shared);
+  PetscInt *idx = rc ? NULL : malloc(sizeof(PetscInt) * ((size_t)dm->ndof + 1));
+  IS is = NULL;
+  PetscErrorCode ierr = !idx;
+  if (!ierr) {
+    for (int d = 0; d < dm->ndof; d++) {
+      D->own[d] = owner[d / bs] == rank;
+      idx[d] = (PetscInt)perm[d / bs] * bs + d % bs;
+    }
+    D->nown = nown * bs;
+    ierr = VecCreateMPI(PETSC_COMM_WORLD, D->nown, PETSC_DETERMINE, &D->g) ||
+           VecCreateSeq(PETSC_COMM_SELF, dm->ndof, &D->l) ||
+           ISCreateGeneral(PETSC_COMM_SELF, dm->ndof, idx, PETSC_COPY_VALUES, &is) ||
+           VecScatterCreate(D->g, is, D->l, NULL, &D->sc);
+  }
+  if (is) ISDestroy(&is);
+  free(idx);
+  free(owner);
+  free(perm);
+  if (rc || ierr) {
+    lg_dist_dofs_free(D);
+    lg_seterr(env, rc == 2 ? "the global numbering of a distributed function's dofs failed: a ghost dof without an owner"
+                           : "out of memory numbering the dofs of a distributed function");
+    return NULL;
+  }
+  D->next = lm->ddofs;
+  lm->ddofs = D;
+  return D;
+}
+
+const char *lg_dist_owned(lg_env *env, lg_mesh *lm, const dofmap *dm, int *nown) {
+  lg_dist_dofs *D = dist_dofs(env, lm, dm);
+  if (!D) return NULL;
+  if (nown) *nown = D->nown;
+  return D->own;
+}
+
+int lg_dist_ghosts(lg_env *env, lg_mesh *lm, const dofmap *dm, double *x) {
+  lg_dist_dofs *D = dist_dofs(env, lm, dm);
+  if (!D) return 1;
+  PetscScalar *a;
+  PCHK(VecGetArray(D->g, &a), "VecGetArray");
+  for (int d = 0, k = 0; d < dm->ndof; d++)
+    if (D->own[d]) a[k++] = x[d];
+  PCHK(VecRestoreArray(D->g, &a), "VecRestoreArray");
+  PCHK(VecScatterBegin(D->sc, D->g, D->l, INSERT_VALUES, SCATTER_FORWARD), "VecScatterBegin");
+  PCHK(VecScatterEnd(D->sc, D->g, D->l, INSERT_VALUES, SCATTER_FORWARD), "VecScatterEnd");
+  const PetscScalar *b;
+  PCHK(VecGetArrayRead(D->l, &b), "VecGetArrayRead");
+  if (dm->ndof) memcpy(x, b, sizeof(double) * (size_t)dm->ndof);
+  PCHK(VecRestoreArrayRead(D->l, &b), "VecRestoreArrayRead");
+  return 0;
+}
+
+double lg_dist_dot(const char *own, int n, const double *a, const double *b) {
+  double s = 0;
+  for (int d = 0; d < n; d++)
+    if (own[d]) s += a[d] * b[d];
+  return s;
 }
 
 long lg_function_global_ndof(lg_env *env, const lg_function *f) {

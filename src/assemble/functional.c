@@ -198,7 +198,14 @@ int lg_form_kernels_eval(lg_env *env, lg_mesh *lm, lg_form_kernels *K, int nextr
                            &vc.first);
   }
   size_t n = K->arity ? (size_t)K->dm->ndof : 1;
-  if (lg_sum_ranks(env, out, n, rc)) return 1;
+  if (lm->dist && K->arity) {
+    /* the owned dofs' entries are complete: the ghost dofs get their owners' (every rank
+     * takes part, failed or not) */
+    double flag = rc;
+    if (lg_allreduce(&flag, 1, LG_MAX)) { lg_seterr(env, "the maximum over the ranks failed"); return 1; }
+    if (flag && !rc) { lg_seterr(env, "another rank failed to evaluate the derivative (its message is on stderr)"); return 1; }
+    if (rc || lg_dist_ghosts(env, lm, K->dm, out)) return 1;
+  } else if (lg_sum_ranks(env, out, n, rc)) return 1;
   for (size_t i = 0; i < n; i++)
     if (!isfinite(out[i])) {
       lg_seterr(env, "a functional or its derivative is not finite (%g): its integrand is not finite somewhere "
@@ -468,6 +475,16 @@ static int add_bc_transpose(lg_env *env, lg_reduced *rf, int i, const double *w,
   double *v;
   int n = lg_problem_bc_derivative(env, rf->p, rf->c[i].kind == LG_CONTROL_FIELD ? rf->c[i].f->fid : -1, rf->c[i].param, &r, &c, &v);
   if (n < 0) return 1;
+  if (rf->lm->dist && rf->c[i].kind == LG_CONTROL_PARAM) {
+    /* a parameter's: a sum over the rows, each on the rank that owns it */
+    double sum = 0;
+    for (int k = 0; k < n; k++)
+      if (lg_problem_row_owned(rf->p, r[k])) sum += s * v[k] * w[r[k]];
+    free(r); free(c); free(v);
+    if (lg_allreduce(&sum, 1, LG_SUM)) { lg_seterr(env, "the sum over the ranks failed"); return 1; }
+    out[0] += sum;
+    return 0;
+  }
   for (int k = 0; k < n; k++) out[c[k]] += s * v[k] * w[r[k]];
   free(r); free(c); free(v);
   return 0;
@@ -481,6 +498,31 @@ static int add_bc_action(lg_env *env, lg_reduced *rf, int i, const double *dm, d
   if (n < 0) return 1;
   for (int k = 0; k < n; k++) out[r[k]] += v[k] * dm[c[k]];
   free(r); free(c); free(v);
+  return 0;
+}
+
+/* a Dirichlet control's derivative on a distributed mesh: the essential rows added to its
+ * owned dofs, which the ghost dofs now take */
+static int dirichlet_ghosts(lg_env *env, lg_reduced *rf, int i, double *v) {
+  if (!rf->lm->dist || !rf->bcdep[i] || rf->c[i].kind != LG_CONTROL_FIELD) return 0;
+  return lg_dist_ghosts(env, rf->lm, rf->c[i].f->dm, v);
+}
+
+int lg_reduced_dot(lg_env *env, lg_reduced *rf, double **a, double **b, double *out) {
+  double s[2] = {0, 0}, par = 0; /* field dofs (a distributed mesh's: this rank's owned), failure */
+  for (int i = 0; i < rf->nc; i++) {
+    int n = lg_reduced_control_size(rf, i);
+    if (rf->c[i].kind == LG_CONTROL_PARAM) par += a[i][0] * b[i][0];
+    else if (rf->lm->dist) {
+      const char *own = lg_dist_owned(env, rf->lm, rf->c[i].f->dm, NULL);
+      if (own) s[0] += lg_dist_dot(own, n, a[i], b[i]);
+      else s[1] = 1;
+    } else
+      for (int k = 0; k < n; k++) s[0] += a[i][k] * b[i][k];
+  }
+  if (rf->lm->dist && lg_allreduce(s, 2, LG_SUM)) { lg_seterr(env, "the sum over the ranks failed"); return 1; }
+  if (s[1]) { if (!env->err[0]) lg_seterr(env, "another rank failed to number a control's dofs"); return 1; }
+  *out = s[0] + par;
   return 0;
 }
 
@@ -525,6 +567,7 @@ int lg_reduced_gradient(lg_env *env, lg_reduced *rf, double **g) {
     /* a Dirichlet control: the essential rows u_r - g_r(m) add -lam_r dg_r/dm */
     if (rf->bcdep[i] && add_bc_transpose(env, rf, i, rf->lamv, -1, g[i])) { free(tmp); return 1; }
     free(tmp);
+    if (dirichlet_ghosts(env, rf, i, g[i])) return 1;
   }
   return 0;
 }
@@ -794,6 +837,7 @@ int lg_reduced_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
     if (!rc)
       for (int k = 0; k < n; k++) out[i][k] += tmp[k];
     if (!rc && rf->bcdep[i]) rc = add_bc_transpose(env, rf, i, dlr, -1, out[i]);
+    if (!rc) rc = dirichlet_ghosts(env, rf, i, out[i]);
     free(tmp);
   }
   free(dlr);

@@ -29,6 +29,11 @@ typedef struct {
   lg_reduced *rf;
   const lg_minimize_opts *o;
   int nc, off[LG_MAXCONTROL + 1];
+  /* TAO's vector on this rank: control i's entries off[i] .. off[i + 1] are its dofs idx[i]
+   * (NULL: all, in order). A distributed mesh's (dist): the owned dofs of each field control
+   * and the parameters on rank 0, in one vector over the ranks; otherwise every rank holds
+   * the whole vector (a whole-mesh run repeats the same iterations on each) */
+  int dist, *idx[LG_MAXCONTROL];
   double *g[LG_MAXCONTROL];
   double *sq;       /* sqrt(d): x = sq m */
   int failed, evals, hess_failed, hmults;
@@ -52,32 +57,64 @@ static int tao_fail(lg_env *env, PetscErrorCode ierr, const char *what) {
 }
 #define TCHK(call, what) do { PetscErrorCode ierr_ = (call); if (ierr_) { rc = tao_fail(env, ierr_, what); goto done; } } while (0)
 
+/* the dof of control i at its entry j of TAO's vector */
+static inline int dof_at(const opt_ctx *C, int i, int j) { return C->idx[i] ? C->idx[i][j] : j; }
+
+/* does any rank see a difference (a distributed mesh's ranks decide together what to
+ * recompute: every rank takes part in the solves) */
+static int any_rank(const opt_ctx *C, int differs) {
+  if (!C->dist) return differs;
+  int any = differs;
+  MPI_Allreduce(&differs, &any, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
+  return any;
+}
+
+/* v (TAO's entries of control i, divided by the scaling) into the dofs of out: every local
+ * dof, a distributed mesh's ghosts from their owners, a parameter from rank 0 */
+static void spread(opt_ctx *C, int i, const PetscScalar *v, double *out) {
+  const lg_control *c = lg_reduced_control(C->rf, i);
+  const double *q = C->sq + C->off[i];
+  int nl = C->off[i + 1] - C->off[i];
+  for (int j = 0; j < nl; j++) out[dof_at(C, i, j)] = v[C->off[i] + j] / q[j];
+  if (!C->dist) return;
+  if (c->kind == LG_CONTROL_PARAM) {
+    if (MPI_Bcast(out, 1, MPI_DOUBLE, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) C->failed = 1;
+  } else if (lg_dist_ghosts(C->env, c->f->mesh, c->f->dm, out)) C->failed = 1;
+}
+
 /* controls <-> the TAO vector x = sqrt(d) m */
 static void to_controls(opt_ctx *C, const PetscScalar *x) {
   int n = C->off[C->nc];
   if (C->xlast) {
-    if (C->xlast[n] == 1 && !memcmp(C->xlast, x, sizeof(double) * (size_t)n)) return;
+    if (!any_rank(C, C->xlast[n] != 1 || memcmp(C->xlast, x, sizeof(double) * (size_t)n))) return;
     memcpy(C->xlast, x, sizeof(double) * (size_t)n);
     C->xlast[n] = 1;
   }
   for (int i = 0; i < C->nc; i++) {
     const lg_control *c = lg_reduced_control(C->rf, i);
-    const double *q = C->sq + C->off[i];
-    if (c->kind == LG_CONTROL_PARAM) expr_param_values(C->env->c)[c->param] = x[C->off[i]] / q[0];
-    else
-      for (int k = 0; k < c->f->dm->ndof; k++) c->f->x[k] = x[C->off[i] + k] / q[k];
+    spread(C, i, x, c->kind == LG_CONTROL_PARAM ? &expr_param_values(C->env->c)[c->param] : c->f->x);
   }
   lg_reduced_changed(C->rf);
   for (int j = 0; j < C->o->ncons; j++) lg_reduced_changed(C->o->cons[j].rf);
 }
+/* TAO's entries of the dof vectors v[i] (dual: s = -1 divides by the scaling, primal: s = 1
+ * multiplies), each times f */
+static void gather_entries(opt_ctx *C, double **v, int s, double f, PetscScalar *x) {
+  for (int i = 0; i < C->nc; i++) {
+    const double *q = C->sq + C->off[i];
+    for (int j = 0; j < C->off[i + 1] - C->off[i]; j++) {
+      double d = v[i][dof_at(C, i, j)];
+      x[C->off[i] + j] = (s > 0 ? d * q[j] : d / q[j]) * f;
+    }
+  }
+}
 static void from_controls(opt_ctx *C, PetscScalar *x) {
+  double *v[LG_MAXCONTROL];
   for (int i = 0; i < C->nc; i++) {
     const lg_control *c = lg_reduced_control(C->rf, i);
-    const double *q = C->sq + C->off[i];
-    if (c->kind == LG_CONTROL_PARAM) x[C->off[i]] = expr_param_values(C->env->c)[c->param] * q[0];
-    else
-      for (int k = 0; k < c->f->dm->ndof; k++) x[C->off[i] + k] = c->f->x[k] * q[k];
+    v[i] = c->kind == LG_CONTROL_PARAM ? &expr_param_values(C->env->c)[c->param] : c->f->x;
   }
+  gather_entries(C, v, 1, 1, x);
 }
 
 static PetscErrorCode objective_gradient(Tao tao, Vec X, PetscReal *f, Vec G, void *ud) {
@@ -99,9 +136,7 @@ static PetscErrorCode objective_gradient(Tao tao, Vec X, PetscReal *f, Vec G, vo
   *f = J / C->fs;
   PetscScalar *g;
   PetscCall(VecGetArray(G, &g));
-  for (int i = 0; i < C->nc; i++)
-    for (int k = 0; k < lg_reduced_control_size(C->rf, i); k++)
-      g[C->off[i] + k] = C->g[i][k] / C->sq[C->off[i] + k] / C->fs;
+  gather_entries(C, C->g, -1, 1 / C->fs, g);
   PetscCall(VecRestoreArray(G, &g));
   return 0;
 }
@@ -115,7 +150,8 @@ static int constraint_values(opt_ctx *C, Vec X, Vec V, int eq) {
   to_controls(C, x);
   VecRestoreArrayRead(X, &x);
   PetscScalar *v;
-  if (VecGetArray(V, &v)) return 1;
+  PetscInt nv;
+  if (VecGetLocalSize(V, &nv) || VecGetArray(V, &v)) return 1;
   int r = 0, bad = 0;
   for (int j = 0; j < C->o->ncons && !bad; j++) {
     int kind = C->o->cons[j].kind;
@@ -123,7 +159,8 @@ static int constraint_values(opt_ctx *C, Vec X, Vec V, int eq) {
     double g;
     lg_reduced_share_state(C->o->cons[j].rf, C->rf);
     if (lg_reduced_value(C->env, C->o->cons[j].rf, &g)) { bad = 1; break; }
-    v[r++] = (kind == LG_CON_LE ? C->o->cons[j].c - g : g - C->o->cons[j].c) / C->cs[j];
+    if (r < nv) v[r] = (kind == LG_CON_LE ? C->o->cons[j].c - g : g - C->o->cons[j].c) / C->cs[j];
+    r++; /* (a distributed run's are on rank 0) */
   }
   VecRestoreArray(V, &v);
   if (bad) C->failed = 1;
@@ -144,10 +181,11 @@ static int constraint_jacobian(opt_ctx *C, Vec X, Mat A, int eq) {
   to_controls(C, x);
   VecRestoreArrayRead(X, &x);
   int r = 0, n = C->off[C->nc];
-  PetscInt *cols = malloc(sizeof(PetscInt) * ((size_t)n + 1));
+  PetscInt *cols = malloc(sizeof(PetscInt) * ((size_t)n + 1)), c0 = 0;
   PetscScalar *row = malloc(sizeof(PetscScalar) * ((size_t)n + 1));
   if (!cols || !row) { free(cols); free(row); lg_seterr(C->env, "out of memory"); C->failed = 1; return 1; }
-  for (int k = 0; k < n; k++) cols[k] = k;
+  if (VecGetOwnershipRange(X, &c0, NULL)) { free(cols); free(row); return 1; }
+  for (int k = 0; k < n; k++) cols[k] = c0 + k; /* this rank's columns (rows on rank 0 get them) */
   for (int j = 0; j < C->o->ncons; j++) {
     int kind = C->o->cons[j].kind;
     if ((kind == LG_CON_EQ) != eq) continue;
@@ -157,10 +195,7 @@ static int constraint_jacobian(opt_ctx *C, Vec X, Mat A, int eq) {
     if (lg_reduced_value(C->env, rg, &g) || lg_reduced_gradient(C->env, rg, C->cg)) {
       free(cols); free(row); C->failed = 1; return 1;
     }
-    double sg = (kind == LG_CON_LE ? -1 : 1) / C->cs[j];
-    for (int i = 0; i < C->nc; i++)
-      for (int k = 0; k < lg_reduced_control_size(C->rf, i); k++)
-        row[C->off[i] + k] = sg * C->cg[i][k] / C->sq[C->off[i] + k];
+    gather_entries(C, C->cg, -1, (kind == LG_CON_LE ? -1 : 1) / C->cs[j], row);
     PetscInt rr = r++;
     if (MatSetValues(A, 1, &rr, n, cols, row, INSERT_VALUES)) { free(cols); free(row); return 1; }
   }
@@ -196,11 +231,10 @@ static PetscErrorCode hessian_mult(Mat H, Vec V, Vec Y) {
   /* the controls may have moved since (a line search): back to the Hessian's point */
   double *cur = C->hd[0]; /* scratch, overwritten below */
   from_controls(C, cur);
-  if (memcmp(cur, C->xh, sizeof(double) * (size_t)n)) to_controls(C, C->xh);
+  if (any_rank(C, memcmp(cur, C->xh, sizeof(double) * (size_t)n) != 0)) to_controls(C, C->xh);
   const PetscScalar *v;
   PetscCall(VecGetArrayRead(V, &v));
-  for (int i = 0; i < C->nc; i++)
-    for (int k = 0; k < lg_reduced_control_size(C->rf, i); k++) C->dm[i][k] = v[C->off[i] + k] / C->sq[C->off[i] + k];
+  for (int i = 0; i < C->nc; i++) spread(C, i, v, C->dm[i]);
   PetscCall(VecRestoreArrayRead(V, &v));
   C->hmults++;
   if (lg_reduced_hessian(C->env, C->rf, C->dm, C->hd)) {
@@ -209,8 +243,7 @@ static PetscErrorCode hessian_mult(Mat H, Vec V, Vec Y) {
   }
   PetscScalar *y;
   PetscCall(VecGetArray(Y, &y));
-  for (int i = 0; i < C->nc; i++)
-    for (int k = 0; k < lg_reduced_control_size(C->rf, i); k++) y[C->off[i] + k] = C->hd[i][k] / C->sq[C->off[i] + k];
+  gather_entries(C, C->hd, -1, 1, y);
   PetscCall(VecRestoreArray(Y, &y));
   return 0;
 }
@@ -250,8 +283,14 @@ static int write_step(opt_ctx *C, int it) {
   return 0;
 }
 
+/* the monitor's context is a PetscContainer holding the opt_ctx: TAOALMM hands its monitors
+ * to its subsolver with a PetscObjectReference of their contexts (PETSc 3.18), which
+ * incremented a field of a plain struct (found as a pointer of 1 in a control's dof list) */
+static PetscErrorCode monitor_ctx_destroy(void **ctx) { return PetscContainerDestroy((PetscContainer *)ctx); }
+
 static PetscErrorCode monitor(Tao tao, void *ud) {
-  opt_ctx *C = ud;
+  opt_ctx *C;
+  PetscCall(PetscContainerGetPointer((PetscContainer)ud, (void **)&C));
   PetscInt it;
   PetscReal f, gnorm, cnorm, step;
   TaoConvergedReason reason;
@@ -281,11 +320,32 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
   C.fs = 1;
   for (int j = 0; j < LG_MAXCONS; j++) C.cs[j] = 1;
   int n = 0, rc = 0;
+  lg_mesh *lm = lg_problem_mesh(lg_reduced_problem(rf));
+  C.dist = lm->dist != NULL;
   for (int i = 0; i < C.nc; i++) {
     C.off[i] = n;
-    n += lg_reduced_control_size(rf, i);
+    const lg_control *c = lg_reduced_control(rf, i);
+    if (!C.dist) n += lg_reduced_control_size(rf, i);
+    else if (c->kind == LG_CONTROL_PARAM) n += lg_mpi_rank() == 0;
+    else { /* the owned dofs (every rank numbers them, failed or not) */
+      int nown = 0, ni = lg_reduced_control_size(rf, i);
+      const char *own = lg_dist_owned(env, lm, c->f->dm, &nown);
+      C.idx[i] = own ? malloc(sizeof(int) * ((size_t)nown + 1)) : NULL;
+      if (!C.idx[i]) { if (own) lg_seterr(env, "out of memory"); rc = 1; continue; }
+      for (int k = 0, j = 0; k < ni; k++)
+        if (own[k]) C.idx[i][j++] = k;
+      n += nown;
+    }
   }
   C.off[C.nc] = n;
+  if (C.dist) {
+    double bad = rc;
+    if (lg_allreduce(&bad, 1, LG_MAX) || bad) {
+      if (!rc) lg_seterr(env, "another rank failed to number the controls' dofs");
+      rc = 1;
+      goto done_early;
+    }
+  }
   static const struct { const char *name; TaoType type; int bounded, newton; } methods[] = {
       {"lmvm", TAOLMVM, 0, 0}, {"blmvm", TAOBLMVM, 1, 0}, {"nls", TAONLS, 0, 1},
       {"ntr", TAONTR, 0, 1},   {"bnls", TAOBNLS, 1, 1},   {"bntr", TAOBNTR, 1, 1},
@@ -323,7 +383,8 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
     C.g[i] = malloc(sz);
     C.dm[i] = newton ? malloc(sz) : NULL;
     /* hd[0] doubles as a scratch of all n values in hessian_mult */
-    C.hd[i] = newton ? malloc(i ? sz : sizeof(double) * ((size_t)n + 1)) : NULL;
+    size_t all = sizeof(double) * ((size_t)n + 1);
+    C.hd[i] = newton ? malloc(i || all < sz ? sz : all) : NULL;
     C.cg[i] = almm ? malloc(sz) : NULL;
     if (almm && i == 0 && !(C.xlast = calloc((size_t)n + 1, sizeof(double)))) { lg_seterr(env, "out of memory"); rc = 1; goto done_early; }
     if (!C.g[i] || (newton && (!C.dm[i] || !C.hd[i])) || (almm && !C.cg[i])) { lg_seterr(env, "out of memory"); rc = 1; goto done_early; }
@@ -342,43 +403,51 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
   if (!C.sq) { lg_seterr(env, "out of memory"); rc = 1; goto done; }
   for (int i = 0; i < C.nc; i++) {
     const lg_control *c = lg_reduced_control(rf, i);
-    int ni = lg_reduced_control_size(rf, i);
+    int ni = lg_reduced_control_size(rf, i), nl = C.off[i + 1] - C.off[i];
     double *q = C.sq + C.off[i];
     if (c->kind == LG_CONTROL_PARAM || o->riesz == LG_RIESZ_NONE) {
-      for (int k = 0; k < ni; k++) q[k] = 1;
+      for (int k = 0; k < nl; k++) q[k] = 1;
       continue;
     }
     lg_problem *G = lg_reduced_gram(env, rf, i, 0);
-    double *rs = malloc(sizeof(double) * ((size_t)ni + 1));
-    if (!G || !rs || lg_problem_matrix_diagonal(env, G, q, rs)) {
-      if (!rs) lg_seterr(env, "out of memory");
+    double *dg = malloc(sizeof(double) * ((size_t)ni + 1)), *rs = malloc(sizeof(double) * ((size_t)ni + 1));
+    if (!G || !dg || !rs || lg_problem_matrix_diagonal(env, G, dg, rs)) {
+      if (!rs || !dg) lg_seterr(env, "out of memory");
       free(rs);
+      free(dg);
       rc = 1;
       goto done;
     }
-    double total = 0, diag = 0;
-    for (PetscInt r = 0; r < ni; r++) {
-      total += rs[r];
-      diag += q[r];
+    double sum[2] = {0, 0}; /* the row sums' and the diagonal's totals (over the ranks) */
+    for (int j = 0; j < nl; j++) {
+      sum[0] += rs[dof_at(&C, i, j)];
+      sum[1] += dg[dof_at(&C, i, j)];
+    }
+    if (C.dist && lg_allreduce(sum, 2, LG_SUM)) { lg_seterr(env, "the sum over the ranks failed"); rc = 1; }
+    for (int j = 0; j < nl && !rc; j++) {
+      q[j] = sqrt(dg[dof_at(&C, i, j)] * sum[0] / sum[1]);
+      if (!(q[j] > 0)) { lg_seterr(env, "the mass matrix of control %d is not positive", i + 1); rc = 1; }
     }
     free(rs);
-    for (int k = 0; k < ni; k++) {
-      q[k] = sqrt(q[k] * total / diag);
-      if (!(q[k] > 0)) { lg_seterr(env, "the mass matrix of control %d is not positive", i + 1); rc = 1; goto done; }
-    }
+    free(dg);
+    if (rc) goto done;
   }
-  TCHK(VecCreateSeq(PETSC_COMM_SELF, n, &X), "VecCreateSeq");
+  MPI_Comm comm = C.dist ? PETSC_COMM_WORLD : PETSC_COMM_SELF;
+  PetscInt N = C.dist ? PETSC_DETERMINE : n;
+  int r0 = lg_mpi_rank() == 0 || !C.dist; /* holds the constraints */
+  if (C.dist) TCHK(VecCreateMPI(comm, n, N, &X), "VecCreateMPI");
+  else TCHK(VecCreateSeq(comm, n, &X), "VecCreateSeq");
   PetscScalar *x;
   TCHK(VecGetArray(X, &x), "VecGetArray");
   from_controls(&C, x);
   TCHK(VecRestoreArray(X, &x), "VecRestoreArray");
-  TCHK(TaoCreate(PETSC_COMM_SELF, &tao), "TaoCreate");
+  TCHK(TaoCreate(comm, &tao), "TaoCreate");
   TCHK(TaoSetType(tao, methods[mi].type), "TaoSetType");
   C.outer = tao;
   TCHK(TaoSetSolution(tao, X), "TaoSetSolution");
   TCHK(TaoSetObjectiveAndGradient(tao, NULL, objective_gradient, &C), "TaoSetObjectiveAndGradient");
   if (newton) {
-    TCHK(MatCreateShell(PETSC_COMM_SELF, n, n, n, n, &C, &H), "MatCreateShell");
+    TCHK(MatCreateShell(comm, n, n, N, N, &C, &H), "MatCreateShell");
     TCHK(MatShellSetOperation(H, MATOP_MULT, (void (*)(void))hessian_mult), "MatShellSetOperation");
     TCHK(MatSetOption(H, MAT_SYMMETRIC, PETSC_TRUE), "MatSetOption");
     TCHK(TaoSetHessian(tao, H, H, hessian_at, &C), "TaoSetHessian");
@@ -413,14 +482,14 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
     }
     /* few dense constraints: their Jacobians are small dense matrices */
     if (nie) {
-      TCHK(VecCreateSeq(PETSC_COMM_SELF, nie, &CI), "VecCreateSeq");
-      TCHK(MatCreateSeqDense(PETSC_COMM_SELF, nie, n, NULL, &AI), "MatCreateSeqDense");
+      TCHK(VecCreateMPI(comm, r0 ? nie : 0, nie, &CI), "VecCreateMPI");
+      TCHK(MatCreateDense(comm, r0 ? nie : 0, n, nie, N, NULL, &AI), "MatCreateDense");
       TCHK(TaoSetInequalityConstraintsRoutine(tao, CI, ineq_constraints, &C), "TaoSetInequalityConstraintsRoutine");
       TCHK(TaoSetJacobianInequalityRoutine(tao, AI, AI, ineq_jacobian, &C), "TaoSetJacobianInequalityRoutine");
     }
     if (nee) {
-      TCHK(VecCreateSeq(PETSC_COMM_SELF, nee, &CE), "VecCreateSeq");
-      TCHK(MatCreateSeqDense(PETSC_COMM_SELF, nee, n, NULL, &AE), "MatCreateSeqDense");
+      TCHK(VecCreateMPI(comm, r0 ? nee : 0, nee, &CE), "VecCreateMPI");
+      TCHK(MatCreateDense(comm, r0 ? nee : 0, n, nee, N, NULL, &AE), "MatCreateDense");
       TCHK(TaoSetEqualityConstraintsRoutine(tao, CE, eq_constraints, &C), "TaoSetEqualityConstraintsRoutine");
       TCHK(TaoSetJacobianEqualityRoutine(tao, AE, AE, eq_jacobian, &C), "TaoSetJacobianEqualityRoutine");
     }
@@ -432,9 +501,10 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
     VecGetArray(XL, &l);
     VecGetArray(XU, &u);
     for (int i = 0; i < C.nc; i++)
-      for (int k = 0; k < lg_reduced_control_size(rf, i); k++) {
-        l[C.off[i] + k] = o->lower[i] ? o->lower[i][k] * C.sq[C.off[i] + k] : PETSC_NINFINITY;
-        u[C.off[i] + k] = o->upper[i] ? o->upper[i][k] * C.sq[C.off[i] + k] : PETSC_INFINITY;
+      for (int j = 0; j < C.off[i + 1] - C.off[i]; j++) {
+        int k = dof_at(&C, i, j);
+        l[C.off[i] + j] = o->lower[i] ? o->lower[i][k] * C.sq[C.off[i] + j] : PETSC_NINFINITY;
+        u[C.off[i] + j] = o->upper[i] ? o->upper[i][k] * C.sq[C.off[i] + j] : PETSC_INFINITY;
       }
     VecRestoreArray(XL, &l);
     VecRestoreArray(XU, &u);
@@ -443,7 +513,12 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
   TCHK(TaoSetTolerances(tao, o->gatol >= 0 ? o->gatol : almm ? 1e-6 : PETSC_DEFAULT, o->grtol >= 0 ? o->grtol : PETSC_DEFAULT,
                         o->gttol >= 0 ? o->gttol : PETSC_DEFAULT), "TaoSetTolerances");
   if (o->maxit > 0) TCHK(TaoSetMaximumIterations(tao, o->maxit), "TaoSetMaximumIterations");
-  TCHK(TaoSetMonitor(tao, monitor, &C, NULL), "TaoSetMonitor");
+  {
+    PetscContainer mc;
+    TCHK(PetscContainerCreate(comm, &mc), "PetscContainerCreate");
+    TCHK(PetscContainerSetPointer(mc, &C), "PetscContainerSetPointer");
+    TCHK(TaoSetMonitor(tao, monitor, mc, monitor_ctx_destroy), "TaoSetMonitor"); /* the Tao owns it */
+  }
   if (!newton) {
     /* lugal's defaults for the quasi-Newton matrix, unless the user chose: a scalar
      * (Shanno-Phua) initial scaling and 10 updates. PETSc 3.18's diagonal scaling stalled on
@@ -504,8 +579,9 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
         int k = kind == LG_CON_EQ ? ke++ : ki++;
         const PetscInt *at = kind == LG_CON_EQ ? ie : ii;
         PetscInt pos = at ? at[k] : (kind == LG_CON_EQ ? k : nee + k);
-        info->lambda[j] = have ? (kind == LG_CON_LE ? 1 : -1) * y[pos] * C.fs / C.cs[j] : NAN;
+        info->lambda[j] = have && r0 ? (kind == LG_CON_LE ? 1 : -1) * y[pos] * C.fs / C.cs[j] : NAN;
       }
+      if (C.dist && MPI_Bcast(info->lambda, o->ncons, MPI_DOUBLE, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) rc = 1; /* rank 0 holds them */
       if (ie) ISRestoreIndices(ise, &ie);
       if (ii) ISRestoreIndices(isi, &ii);
       if (have) VecRestoreArrayRead(Y, &y);
@@ -553,7 +629,7 @@ done:
   free(C.files);
   free(C.times);
 done_early:
-  for (int i = 0; i < C.nc; i++) { free(C.g[i]); free(C.dm[i]); free(C.hd[i]); free(C.cg[i]); }
+  for (int i = 0; i < C.nc; i++) { free(C.g[i]); free(C.dm[i]); free(C.hd[i]); free(C.cg[i]); free(C.idx[i]); }
   free(C.xh);
   free(C.xlast);
   return rc;

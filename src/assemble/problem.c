@@ -1111,6 +1111,11 @@ int lg_problem_bc_mixed(lg_env *env, const lg_problem *p, int fid1, int param1, 
   return 0;
 }
 
+int lg_problem_row_owned(const lg_problem *p, int r) {
+  PetscInt g = lg_petsc_row(p, r);
+  return !p->par || (g >= p->lo && g < p->hi);
+}
+
 int lg_problem_bc_derivative(lg_env *env, lg_problem *p, int fid, int param, int **rows, int **cols, double **vals) {
   *rows = *cols = NULL;
   *vals = NULL;

@@ -130,7 +130,7 @@ static uint64_t matrix_fingerprint(lg_env *env, lg_problem *p) {
     memcpy(keep, env->err, sizeof keep);
     int rc = lg_bind_discrete(env, p->lm, &t->kmat, ne, extra, bind);
     memcpy(env->err, keep, sizeof keep);
-    if (rc) return 0;
+    if (rc) { h = 0; break; }
     for (int k = 0; k < t->kmat.ncoef; k++) {
       int unknown = 0;
       for (int a = 0; a < ne; a++) unknown |= bind[k].func == extra[a].func;
@@ -140,7 +140,17 @@ static uint64_t matrix_fingerprint(lg_env *env, lg_problem *p) {
     }
   }
 #undef MIX
-  return h | 1;
+  if (h) h |= 1;
+  if (p->lm->dist) {
+    /* a distributed mesh's ranks hash their own parts: they decide together (whether to
+     * assemble, which is collective), on the combination of their hashes, 0 if any has none */
+    uint64_t v[2] = {h, h == 0}, all[2] = {0, 0};
+    if (MPI_Allreduce(v, all, 1, MPI_UINT64_T, MPI_BXOR, PETSC_COMM_WORLD) != MPI_SUCCESS ||
+        MPI_Allreduce(v + 1, all + 1, 1, MPI_UINT64_T, MPI_MAX, PETSC_COMM_WORLD) != MPI_SUCCESS || all[1])
+      return 0;
+    h = all[0] | 1;
+  }
+  return h;
 }
 
 /* the linear solver of a linear problem: direct LU by default (default_lu), every -ksp_* and
@@ -483,11 +493,15 @@ static PetscErrorCode snes_jacobian(SNES snes, Vec X, Mat J, Mat P, void *ctx) {
   PetscCall(SNESGetIterationNumber(snes, &k));
   PetscCall(SNESGetFunctionNorm(snes, &fn));
   int keep = 0;
-  if (k == 0)
-    keep = p->have_solution && !p->adj_stale && P == p->A &&
-           !memcmp(p->state, p->solution, sizeof(double) * (size_t)p->N) && p->adj_fp &&
-           p->adj_fp == matrix_fingerprint(p->env, p);
-  else
+  if (k == 0) {
+    uint64_t fp = p->have_solution && !p->adj_stale && P == p->A ? matrix_fingerprint(p->env, p) : 0;
+    keep = fp && p->adj_fp == fp && !memcmp(p->state, p->solution, sizeof(double) * (size_t)p->N);
+    if (p->lm->dist) { /* every rank assembles, or none (the assembly is collective) */
+      int all = keep;
+      MPI_Allreduce(&keep, &all, 1, MPI_INT, MPI_MIN, PETSC_COMM_WORLD);
+      keep = all;
+    }
+  } else
     /* a resolve near the last solution: the last Jacobian stays (its factorization too) for
      * as long as a step with it cut |F| tenfold (chord steps, each a residual and a
      * triangular solve instead of a factorization); a poorer step refreshes it */

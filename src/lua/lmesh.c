@@ -728,9 +728,18 @@ static int write_svg(lua_State *L, mesh *m, lg_mesh *lm, const char *path, const
     if (uf->f->dm->degree != 0)
       return luaL_error(L, "%s: an SVG picture colours cells: field '%s' must be piecewise constant (P0), or write a .vtu", fn, name);
     v = uf->f->x;
+  } else if (qa && lm->dist) { /* the owned cells' values at their local places */
+    if (!qa->loc || qa->nglobal != lm->dist->ncell_global)
+      return luaL_error(L, "%s: quality array '%s' belongs to another mesh", fn, name);
+    own = lua_newuserdatauv(L, sizeof(double) * ((size_t)m->ncell + 1), 0);
+    for (int i = 0; i < m->ncell; i++) own[i] = NAN;
+    for (int i = 0; i < qa->n; i++) own[qa->loc[i]] = qa->v[i];
+    v = own;
   } else if (qa) {
     if (qa->n != m->ncell) return luaL_error(L, "%s: quality array '%s' belongs to a mesh of %d cells", fn, name, qa->n);
     v = qa->v;
+  } else if (lm->dist) {
+    return luaL_error(L, "%s: on a distributed mesh, field '%s' must be a P0 function or a quality array", fn, name);
   } else if (lua_istable(L, vidx) && luaL_len(L, vidx) == m->ncell) {
     own = lua_newuserdatauv(L, sizeof(double) * ((size_t)m->ncell + 1), 0);
     for (int i = 0; i < m->ncell; i++) {
@@ -742,12 +751,29 @@ static int write_svg(lua_State *L, mesh *m, lg_mesh *lm, const char *path, const
     }
     v = own;
   } else return luaL_error(L, "%s: field '%s' must be a P0 function, a quality array or %d numbers (one per cell)", fn, name, m->ncell);
-  double lo = INFINITY, hi = -INFINITY;
-  for (int i = 0; i < m->ncell; i++)
-    if (isfinite(v[i])) { lo = fmin(lo, v[i]); hi = fmax(hi, v[i]); }
-  if (!(lo <= hi)) lo = 0, hi = 1;
   char err[MESH_ERRLEN] = "";
-  int rc = lg_mpi_rank() == 0 ? mesh_write_svg(m, path, v, lo, hi, name, err) : 0;
+  mesh *W = NULL; /* a distributed mesh's whole, with the values, on rank 0 */
+  double **vals = NULL;
+  int rc = 0;
+  if (lm->dist) {
+    mesh_field f = {name, 1, 1, v};
+    lg_env *env = get_env(L);
+    if ((rc = lg_dist_gather(env, lm, 1, &f, &W, &vals))) snprintf(err, sizeof err, "%.*s", (int)sizeof err - 1, env->err);
+    else if (W) {
+      m = W;
+      v = vals[0];
+    }
+  }
+  if (!rc && lg_mpi_rank() == 0) {
+    double lo = INFINITY, hi = -INFINITY;
+    for (int i = 0; i < m->ncell; i++)
+      if (isfinite(v[i])) { lo = fmin(lo, v[i]); hi = fmax(hi, v[i]); }
+    if (!(lo <= hi)) lo = 0, hi = 1;
+    rc = mesh_write_svg(m, path, v, lo, hi, name, err);
+  }
+  if (vals) free(vals[0]);
+  free(vals);
+  mesh_free(W);
   if (lg_root_result(rc, err, sizeof err)) return luaL_error(L, "%s: %s", fn, err);
   return 0;
 }
@@ -773,7 +799,6 @@ static int mesh_write(lua_State *L) {
     if (lg_root_result(rc, u->lm->m->err, sizeof u->lm->m->err)) return luaL_error(L, "%s: %s", fn, u->lm->m->err);
     return 0;
   }
-  if (l > 4 && !strcmp(path + l - 4, ".svg")) check_not_distributed(L, u->lm, "mesh:write (.svg)");
   if (l > 4 && !strcmp(path + l - 4, ".svg")) return write_svg(L, u->lm->m, u->lm, path, fn);
   int pvtu = l > 5 && !strcmp(path + l - 5, ".pvtu");
   if (!pvtu && !(l > 4 && !strcmp(path + l - 4, ".vtu")))

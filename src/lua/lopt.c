@@ -19,7 +19,7 @@ static int l_control(lua_State *L) {
   const char *fn = "lg.control";
   ud_basis *b = luaL_testudata(L, 1, MT_BASIS);
   if (!b) return typeerror(L, fn, 1, "a basis (lg.lagrange(p))");
-  ud_mesh *um = check_whole_mesh(L, 2, fn);
+  ud_mesh *um = check_mesh(L, 2, fn);
   const char *name = luaL_optstring(L, 3, "m");
   lg_env *env = get_env(L);
   lg_function *f = lg_function_new(env, um->lm, lg_mesh_dofmap(env, um->lm, b->degree, b->ncomp, b->disc), name);
@@ -257,10 +257,10 @@ static void read_direction(lua_State *L, lg_reduced *rf, int idx, double **dm, c
 }
 
 /* sum_i <a_i, b_i> over the controls' vectors */
-static double pair_vectors(lg_reduced *rf, double **a, double **b) {
-  double s = 0;
-  for (int i = 0; i < lg_reduced_ncontrols(rf); i++)
-    for (int j = 0; j < lg_reduced_control_size(rf, i); j++) s += a[i][j] * b[i][j];
+static double pair_vectors(lua_State *L, lg_reduced *rf, double **a, double **b, const char *fn) {
+  double s;
+  lg_env *env = get_env(L);
+  if (lg_reduced_dot(env, rf, a, b, &s)) lgerror(L, fn, env);
   return s;
 }
 
@@ -320,7 +320,7 @@ static int reduced_derivative(lua_State *L) {
   double *g[LG_MAXCONTROL], *dm[LG_MAXCONTROL];
   read_direction(L, u->rf, 2, dm, fn);
   raw_gradient(L, u->rf, g, fn);
-  lua_pushnumber(L, pair_vectors(u->rf, g, dm));
+  lua_pushnumber(L, pair_vectors(L, u->rf, g, dm, fn));
   return 1;
 }
 
@@ -436,10 +436,10 @@ static int l_taylor_test(lua_State *L) {
   double J0;
   if (lg_reduced_value(env, rf, &J0)) return lgerror(L, fn, env);
   raw_gradient(L, rf, g, fn);
-  double dJ = pair_vectors(rf, g, dm), d2J = 0;
+  double dJ = pair_vectors(L, rf, g, dm, fn), d2J = 0;
   if (hess) {
     raw_hessian(L, rf, dm, hd, fn);
-    d2J = pair_vectors(rf, dm, hd);
+    d2J = pair_vectors(L, rf, dm, hd, fn);
   }
   lua_createtable(L, 0, 9);
   int res = lua_gettop(L);
@@ -717,7 +717,6 @@ static int l_kkt_problem(lua_State *L) {
   lua_getfield(L, 1, "mesh");
   ud_mesh *um = luaL_testudata(L, -1, MT_MESH);
   if (!um) return luaL_error(L, "%s: option 'mesh' must be a mesh, got %s", fn, luaL_typename(L, -1));
-  check_not_distributed(L, um->lm, fn);
   int mesh_idx = lua_gettop(L);
   lua_getfield(L, 1, "lagrangian");
   ud_form *uL = luaL_testudata(L, -1, MT_FORM);

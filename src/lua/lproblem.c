@@ -457,7 +457,6 @@ static int prob_solve(lua_State *L) {
 static int prob_sensitivity(lua_State *L) {
   const char *fn = "problem:sensitivity";
   ud_prob *u = luaL_checkudata(L, 1, MT_PROB);
-  check_not_distributed(L, lg_problem_mesh(u->p), fn);
   ud_expr *ue = luaL_testudata(L, 2, MT_EXPR);
   if (!ue || expr_of(L, ue)->kind != E_PARAM) return typeerror(L, fn, 2, "a parameter (lg.parameter)");
   lg_env *env = get_env(L);

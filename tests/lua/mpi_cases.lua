@@ -57,30 +57,6 @@ do
   out("operator_nnz", "count", A:nnz())
 end
 
--- PDE-constrained optimization: the mother problem, its Taylor test and L-BFGS
-do
-  local mesh = lg.mesh.rectangle{nx = 12}
-  local P1 = lg.lagrange(1)
-  local u, v = lg.unknown(P1, "uo"), lg.test(P1, "vo")
-  local f = lg.control(P1, mesh, "fo")
-  local d = lg.sin(pi*x)*lg.sin(pi*y) / (2*pi^2)
-  local state = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) - f*v),
-                                  bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}
-  local J = lg.functional(lg.integral(mesh:cells(), 0.5*(u - d)^2 + 1e-6/2*f^2))
-  local rf = lg.reduced_functional{problem = state, functional = J, control = f}
-  local t = lg.taylor_test(rf, x*y, lg.sin(2*pi*x))
-  out("taylor_rate", "iter", t.rates1[#t.rates1])
-  -- L-BFGS's path over ~190 iterations follows rounding (the parallel direct solver's
-  -- differs in the last bits): its optimum is compared; Newton-CG's few steps are counted
-  f:assign(0*x)
-  local _, info = lg.minimize(rf, {method = "lmvm", gttol = 1e-8, gatol = 0, grtol = 0, monitor = false})
-  out("lbfgs_J", "iter", info.J)
-  f:assign(0*x)
-  _, info = lg.minimize(rf, {method = "nls", gttol = 1e-8, gatol = 0, grtol = 0, monitor = false, series = arg[1] .. "/opt.pvd"})
-  out("newton_J", "iter", info.J)
-  out("newton_steps", "count", info.iterations)
-end
-
 -- reductions
 out("allreduce_sum", "direct", lg.allreduce(1) / lg.size())
 out("allreduce_max", "direct", lg.allreduce(lg.rank(), "max") - (lg.size() - 1))

@@ -44,19 +44,6 @@ package.path = (arg[0]:match("(.*/)") or "./") .. "?.lua;" .. package.path -- be
 require("mpi_shared")(lg, out)
 
 
--- an assembled operator
-do
-  local mesh = lg.mesh.rectangle{nx = 10}
-  local P2 = lg.lagrange(2)
-  local u, v = lg.unknown(P2, "ua"), lg.test(P2, "va")
-  local A = lg.assemble(lg.integral(mesh:cells(), lg.dot(lg.grad(u), lg.grad(v)) + x*u*v))
-  local w = lg.interpolate(P2, mesh, lg.sin(x + 2*y), "wa")
-  out("operator_norm", "direct", A:norm())
-  out("operator_dot", "direct", A:dot(w, w))
-  out("operator_mult", "direct", A:mult(w):norm())
-  out("operator_nnz", "count", A:nnz())
-end
-
 -- reductions
 out("allreduce_sum", "direct", lg.allreduce(1) / lg.size())
 out("allreduce_max", "direct", lg.allreduce(lg.rank(), "max") - (lg.size() - 1))

@@ -171,4 +171,37 @@ do
   out("kkt_f_l2", "direct", math.sqrt(lg.integrate(mesh, fh*fh)))
   out("kkt_optimality", "direct", math.sqrt(lg.integrate(mesh, (1e-3*fh - lh)^2)) + 1)
 end
+-- assembled operators: a number, a vector (dual, no conditions) and a matrix, P2 and a
+-- vector P1 space, their products, sizes and gathered values
+do
+  local mesh = lg.mesh.rectangle{nx = 10}
+  local P2 = lg.lagrange(2)
+  local u, v = lg.unknown(P2, "ua"), lg.test(P2, "va")
+  local A = lg.assemble(lg.integral(mesh:cells(), lg.dot(lg.grad(u), lg.grad(v)) + x*u*v))
+  local w = lg.interpolate(P2, mesh, lg.sin(x + 2*y), "wa")
+  out("operator_norm", "direct", A:norm())
+  out("operator_dot", "direct", A:dot(w, w))
+  local Aw = A:mult(w)
+  out("operator_mult", "direct", Aw:norm())
+  out("operator_mult_dot", "direct", Aw:dot(w))
+  out("operator_nnz", "count", A:nnz())
+  out("operator_size", "count", A:size())
+  out("operator_number", "direct", lg.assemble(lg.integral(mesh:boundary("top"), x^2)))
+  local b = lg.assemble(lg.integral(mesh:cells(), lg.cos(x)*v) + lg.integral(mesh:boundary("left"), y*v))
+  out("vector_size", "count", b:size())
+  out("vector_norm", "direct", b:norm())
+  out("vector_dot", "direct", b:dot(w))
+  local bv, s = b:values(), 0
+  for i, c in ipairs(w:values()) do s = s + bv[i] * c end
+  out("vector_values_dot", "direct", s)
+  local ones = {}
+  for i = 1, b:size() do ones[i] = 1 end
+  out("vector_dot_table", "direct", b:dot(ones))
+  local V = lg.vector(lg.lagrange(1))
+  local uv, vv = lg.unknown(V, "uav"), lg.test(V, "vav")
+  local E = lg.assemble(lg.integral(mesh:cells(), lg.inner(lg.grad(uv), lg.grad(vv)) + lg.dot(uv, vv)))
+  local wv = lg.interpolate(V, mesh, {x*y, lg.sin(y)}, "wav")
+  out("vector_operator_dot", "direct", E:dot(wv, wv))
+  out("vector_operator_size", "count", E:size())
+end
 end

@@ -745,6 +745,40 @@ int lg_function_assign_whole(lg_env *env, lg_function *f, const double *v, long 
   return 0;
 }
 
+int lg_dist_problem_order(lg_env *env, const lg_problem *p, int *order) {
+  int N = (int)p->Nglob, bad = 0, base = 0;
+  for (int g = 0; g < N; g++) order[g] = -1;
+  double *zero = calloc((size_t)p->N + 1, sizeof(double));
+  if (!zero) bad = 1;
+  for (int a = 0; a < p->cols.n; a++) {
+    const dofmap *dm = p->cdm[a];
+    lg_function f = {p->lm, (dofmap *)dm, dm->degree, zero, -1};
+    dof_rec *all = NULL;
+    long total = 0;
+    /* collective whatever this rank's state: every rank gathers every field */
+    if (gather_records(env, &f, 0, &all, &total)) { bad = 1; continue; }
+    for (int d = 0; !bad && d < dm->ndof; d++) {
+      PetscInt g = lg_petsc_row(p, p->cglob[a] + d);
+      if (g < p->lo || g >= p->hi) continue;
+      dof_rec r;
+      rec_key(p->lm->dist, dm, d, &r);
+      const dof_rec *at = bsearch(&r, all, (size_t)total, sizeof(dof_rec), cmp_rec);
+      if (at && g < N) order[g] = base + (int)(at - all);
+      else bad = 1;
+    }
+    free(all);
+    base += (int)total;
+  }
+  free(zero);
+  /* every rank's owned rows' places, on every rank (the others' entries are -1) */
+  if (MPI_Allreduce(MPI_IN_PLACE, order, N, MPI_INT, MPI_MAX, PETSC_COMM_WORLD) != MPI_SUCCESS ||
+      MPI_Allreduce(MPI_IN_PLACE, &bad, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD) != MPI_SUCCESS || bad || base != N) {
+    lg_seterr(env, "ordering a distributed problem's rows failed");
+    return 1;
+  }
+  return 0;
+}
+
 /* ---------------------------------------------------------------- per-cell values */
 
 /* every rank's n values v of cells with global numbers gid: all of them on every rank, as

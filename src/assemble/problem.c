@@ -1015,20 +1015,40 @@ int lg_problem_assemble_matrix(lg_env *env, lg_problem *p, double *ms) {
   return 0;
 }
 
-int lg_problem_dense_matrix(lg_env *env, lg_problem *p, double *dense, int n) {
-  if (n != p->N) { lg_seterr(env, "dense matrix size %d != %d", n, p->N); return 1; }
-  p->matrix_fp = 0;
-  p->adj_stale = 1;
-  if (lg_problem_assemble_into(env, p, p->state, p->A)) return 1;
+/* this rank's owned rows of p's matrix into the dense n x n array, rows and columns at
+ * order[] (a distributed problem) or the problem's own numbering */
+static int dense_rows(lg_env *env, lg_problem *p, double *dense, int n, const int *order) {
   memset(dense, 0, sizeof(double) * (size_t)n * (size_t)n);
   for (PetscInt i = p->lo; i < p->hi; i++) {
     PetscInt nc;
     const PetscInt *cols;
     const PetscScalar *vals;
     PCHK(MatGetRow(p->A, i, &nc, &cols, &vals), "MatGetRow");
-    for (PetscInt k = 0; k < nc; k++) dense[(size_t)lg_problem_row(p, i) * n + lg_problem_row(p, cols[k])] = vals[k];
+    for (PetscInt k = 0; k < nc; k++) {
+      PetscInt r = order ? order[i] : lg_problem_row(p, i), c = order ? order[cols[k]] : lg_problem_row(p, cols[k]);
+      dense[(size_t)r * n + c] = vals[k];
+    }
     PCHK(MatRestoreRow(p->A, i, &nc, &cols, &vals), "MatRestoreRow");
   }
+  return 0;
+}
+
+int lg_problem_dense_matrix(lg_env *env, lg_problem *p, double *dense, int n) {
+  if (n != p->Nglob) { lg_seterr(env, "dense matrix size %d != %d", n, p->Nglob); return 1; }
+  p->matrix_fp = 0;
+  p->adj_stale = 1;
+  if (lg_problem_assemble_into(env, p, p->state, p->A)) return 1;
+  /* a distributed problem's rows and columns in its fields' gathered order (f:values()'s),
+   * which does not depend on the number of ranks */
+  int *order = p->lm->dist ? malloc(sizeof(int) * ((size_t)n + 1)) : NULL;
+  if (p->lm->dist && (!order || lg_dist_problem_order(env, p, order))) {
+    if (!order) lg_seterr(env, "out of memory for a dense matrix's order");
+    free(order);
+    return 1;
+  }
+  int rc = dense_rows(env, p, dense, n, order);
+  free(order);
+  if (rc) return 1;
   /* every rank its rows: the whole matrix on every rank */
   for (size_t at = 0, all = (size_t)n * (size_t)n; p->par && at < all; at += 1 << 24)
     if (lg_allreduce(dense + at, (int)(all - at < (1u << 24) ? all - at : 1u << 24), LG_SUM)) {

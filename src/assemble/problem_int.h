@@ -213,6 +213,10 @@ int lg_problem_node_owners(const lg_problem *p, int B, const int *part, int *own
 /* distribute.c: perm, iperm, lo, hi, Nglob and ioff of a problem on a distributed mesh,
  * nodes of B dofs; collective */
 int lg_dist_number_nodes(lg_env *env, lg_problem *p, int B);
+/* distribute.c: the place order[g] of each of a distributed problem's Nglob PETSc rows g in
+ * the order of its fields' gathered values (f:values()'s, field after field), on every
+ * rank: for a whole dense matrix (collective) */
+int lg_dist_problem_order(lg_env *env, const lg_problem *p, int *order);
 /* the pattern, the element entries' places, the matrix and its vectors */
 int lg_problem_setup_matrix(lg_env *env, lg_problem *p);
 /* a single vector field of the mesh's dimension (elasticity): the rigid body modes as the

@@ -207,7 +207,6 @@ static int matrix_dot(lua_State *L) {
 
 static int matrix_values(lua_State *L) {
   ud_matrix *u = luaL_checkudata(L, 1, MT_MATRIX);
-  check_not_distributed(L, u->sp.lm, "matrix:values");
   return push_dense_matrix(L, u->p, "matrix:values");
 }
 

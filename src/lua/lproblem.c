@@ -479,7 +479,7 @@ static int prob_sensitivity(lua_State *L) {
 }
 
 int push_dense_matrix(lua_State *L, lg_problem *p, const char *fn) {
-  int n = lg_problem_size(p);
+  int n = lg_problem_global_size(p);
   if (n > 2000) return luaL_error(L, "%s: the dense matrix is for small problems (n <= 2000, this one has %d)", fn, n);
   double *d = malloc(sizeof(double) * (size_t)n * n);
   if (!d) return luaL_error(L, "%s: out of memory", fn);
@@ -497,7 +497,6 @@ int push_dense_matrix(lua_State *L, lg_problem *p, const char *fn) {
 
 static int prob_matrix(lua_State *L) {
   ud_prob *u = luaL_checkudata(L, 1, MT_PROB);
-  check_not_distributed(L, lg_problem_mesh(u->p), "problem:matrix");
   return push_dense_matrix(L, u->p, "problem:matrix");
 }
 

@@ -203,5 +203,34 @@ do
   local wv = lg.interpolate(V, mesh, {x*y, lg.sin(y)}, "wav")
   out("vector_operator_dot", "direct", E:dot(wv, wv))
   out("vector_operator_size", "count", E:size())
+  -- dense matrices in the order of the fields' dof coordinates (serially the problem's
+  -- order, distributed the gathered one): sums weighted by the rows' and columns' places
+  local small = lg.mesh.rectangle{nx = 4}
+  local function weighted(M, X)
+    local s, d = 0, 0
+    for i, row in ipairs(M) do
+      local xi, yi = X[i][1], X[i][2]
+      d = d + row[i] * (1 + xi)
+      for j, a in ipairs(row) do s = s + a * (1 + xi + 2*yi) * (1 + 3*X[j][1] - X[j][2]) end
+    end
+    return s, d
+  end
+  local As = lg.assemble(lg.integral(small:cells(), lg.dot(lg.grad(u), lg.grad(v)) + x*u*v))
+  local X = lg.interpolate(P2, small, 0, "wx"):dof_coordinates()
+  local s, d = weighted(As:values(), X)
+  out("matrix_values_weighted", "direct", s)
+  out("matrix_values_diagonal", "direct", d)
+  local P1 = lg.lagrange(1)
+  local pu, pq = lg.unknown(P1, "pa"), lg.test(P1, "qa")
+  local two = lg.linear_problem{mesh = small, unknown = {u, pu}, test = {v, pq},
+    eqn = lg.integral(small:cells(), lg.dot(lg.grad(u), lg.grad(v)) + u*v + (1 + y)*pu*pq + x*u*pq + pu*v*y - v - pq),
+    bc = lg.essential_bc(small:boundary("left"), v*(u - y))}
+  local Xp = lg.interpolate(P1, small, 0, "wp"):dof_coordinates()
+  for _, c in ipairs(Xp) do X[#X + 1] = c end
+  local M = two:matrix()
+  out("problem_matrix_size", "count", #M)
+  s, d = weighted(M, X)
+  out("problem_matrix_weighted", "direct", s)
+  out("problem_matrix_diagonal", "direct", d)
 end
 end

@@ -84,7 +84,6 @@ local function says(f, ...)
   assert(not ok and err:find("distributed mesh", 1, true), tostring(err))
 end
 says(mesh.quality, mesh, "mean_ratio", {reference = mesh})
-says(function() return lg.assemble(lg.integral(mesh:cells(), lg.test(P1, "w")*lg.unknown(P1, "z"))):values() end)
 says(mesh.write, mesh, "/tmp/never.svg", {a = {1, 2}}) -- (a P0 function or a quality array is drawn)
 -- a continuous test function with interior facet terms (its rows take facets beyond the ghosts)
 local u, v = lg.unknown(P1, "u"), lg.test(P1, "v")

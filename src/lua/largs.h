@@ -84,9 +84,9 @@ int opt_int(lua_State *L, int t, const char *key, int def, const char *fn);
 const char *opt_str(lua_State *L, int t, const char *key, const char *def, const char *fn);
 void check_keys(lua_State *L, int t, const char *fn, const char *const *allowed);
 int finish_report(lua_State *L, const char *text, int quiet);
-/* lrepair.c: the option 'reference' of options table t (the same mesh as m in another
+/* lrepair.c: the option 'reference' of options table t (the same mesh as lm's in another
  * configuration, or NULL), and the repair methods lmesh.c registers on meshes */
-const mesh *opt_reference(lua_State *L, int t, const mesh *m, const char *fn);
+lg_mesh *opt_reference(lua_State *L, int t, const lg_mesh *lm, const char *fn);
 int lmesh_untangle(lua_State *L);
 int lmesh_smooth(lua_State *L);
 int lmesh_move(lua_State *L);

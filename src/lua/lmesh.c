@@ -818,9 +818,11 @@ static int mesh_tostring(lua_State *L) {
   return 1;
 }
 
-/* {metric = {{a, b}, {b, c}}} (constant) or {metric = {M_1, ..., M_nvert}} (per vertex) */
-static int read_metric(lua_State *L, int t, mesh *m, double **buf, quality_metric *qm, const char *fn) {
-  int d = m->dim;
+/* {metric = {{a, b}, {b, c}}} (constant) or {metric = {M_1, ..., M_nvert}} (per vertex; on
+ * a distributed mesh P the whole mesh's vertices, each rank reading its local ones' by their
+ * global numbers) */
+static int read_metric(lua_State *L, int t, mesh *m, const mesh_part *P, double **buf, quality_metric *qm, const char *fn) {
+  int d = m->dim, nv = P ? P->nvert_global : m->nvert;
   qm->kind = 0;
   qm->m = NULL;
   *buf = NULL;
@@ -835,14 +837,14 @@ static int read_metric(lua_State *L, int t, mesh *m, double **buf, quality_metri
     lua_pop(L, 1);
   }
   lua_pop(L, 1);
-  if (!nested) return luaL_error(L, "%s: option 'metric' must be a %dx%d table or a list of %d of them (one per vertex)", fn, d, d, m->nvert);
+  if (!nested) return luaL_error(L, "%s: option 'metric' must be a %dx%d table or a list of %d of them (one per vertex)", fn, d, d, nv);
   int count = pervertex ? m->nvert : 1;
-  if ((pervertex && n != m->nvert) || (!pervertex && n != d))
-    return luaL_error(L, "%s: option 'metric' must be a %dx%d table or a list of %d of them (one per vertex)", fn, d, d, m->nvert);
+  if ((pervertex && n != nv) || (!pervertex && n != d))
+    return luaL_error(L, "%s: option 'metric' must be a %dx%d table or a list of %d of them (one per vertex)", fn, d, d, nv);
   double *b = lua_newuserdatauv(L, sizeof(double) * (size_t)count * d * d, 0);
   lua_insert(L, -2); /* keep the buffer below the table while reading */
   for (int v = 0; v < count; v++) {
-    if (pervertex) lua_geti(L, -1, v + 1);
+    if (pervertex) lua_geti(L, -1, (P ? P->vglobal[v] : v) + 1);
     for (int i = 0; i < d; i++) {
       if (lua_geti(L, -1, i + 1) != LUA_TTABLE || luaL_len(L, -1) != d)
         return luaL_error(L, "%s: metric row %d must have %d numbers", fn, i + 1, d);
@@ -863,9 +865,19 @@ static int read_metric(lua_State *L, int t, mesh *m, double **buf, quality_metri
   return 1;
 }
 
+/* two distributed meshes' parts hold the same cells with the same vertices on every rank */
+static int same_parts(lua_State *L, const lg_mesh *a, const lg_mesh *b) {
+  const mesh *p = a->m, *q = b->m;
+  double bad = p->type != q->type || p->nvert != q->nvert || p->ncell != q->ncell ||
+               memcmp(p->cells, q->cells, sizeof(int) * (size_t)p->ncell * (size_t)p->nvc) ||
+               memcmp(a->dist->vglobal, b->dist->vglobal, sizeof(int) * (size_t)p->nvert) ||
+               memcmp(a->dist->cglobal, b->dist->cglobal, sizeof(int) * (size_t)p->ncell);
+  if (lg_allreduce(&bad, 1, LG_MAX)) luaL_error(L, "mesh:quality: comparing the reference's parts failed");
+  return bad == 0;
+}
+
 static ud_qarray *push_quality(lua_State *L, int midx, const char *name, int tidx, const char *fn) {
   ud_mesh *um = check_mesh(L, midx, fn);
-  if (tidx && !lua_isnoneornil(L, tidx)) check_not_distributed(L, um->lm, "mesh:quality with options (a metric, a reference)");
   mesh *m = um->lm->m;
   int q = quality_from_name(name);
   if (q < 0) {
@@ -882,9 +894,13 @@ static ud_qarray *push_quality(lua_State *L, int midx, const char *name, int tid
     if (!lua_istable(L, tidx)) typeerror(L, fn, tidx, "a table of options {metric=, reference=, p=}");
     static const char *const keys[] = {"metric", "reference", "p", NULL};
     check_keys(L, tidx, fn, keys);
-    ref = opt_reference(L, tidx, m, fn);
+    lg_mesh *refl = opt_reference(L, tidx, um->lm, fn);
+    ref = refl ? refl->m : NULL;
+    if (refl && um->lm->dist && !same_parts(L, um->lm, refl))
+      luaL_error(L, "%s: the reference must be distributed as the mesh is (a copy made before the motion, or the same "
+                    "file read with the same partitioner)", fn);
     pexp = opt_num(L, tidx, "p", 2, fn);
-    pushed = read_metric(L, tidx, m, &buf, &qm, fn);
+    pushed = read_metric(L, tidx, m, um->lm->dist, &buf, &qm, fn);
   }
   if (quality_is_deformation(q) && !ref)
     luaL_error(L, "%s: %s compares two configurations: pass {reference = mesh}", fn, name);

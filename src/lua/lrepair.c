@@ -19,15 +19,23 @@ static int opt_boundary(lua_State *L, int t, const char *fn) {
   return luaL_error(L, "%s: option 'boundary' must be \"slide\" or \"fixed\", got \"%s\"", fn, b);
 }
 
-/* the option 'reference' of table t: the same mesh as m in another configuration, or NULL */
-const mesh *opt_reference(lua_State *L, int t, const mesh *m, const char *fn) {
-  const mesh *ref = NULL;
+/* the option 'reference' of table t: the same mesh as lm's in another configuration, or
+ * NULL. A distributed mesh's reference is distributed too: their cells are compared where
+ * they are used (rank 0's gathered meshes for a repair, each rank's parts for quality) */
+lg_mesh *opt_reference(lua_State *L, int t, const lg_mesh *lm, const char *fn) {
+  lg_mesh *ref = NULL;
+  const mesh *m = lm->m;
   if (t && lua_getfield(L, t, "reference") != LUA_TNIL) {
     ud_mesh *ur = luaL_testudata(L, -1, MT_MESH);
     if (!ur) luaL_error(L, "%s: option 'reference' must be a mesh (the same mesh in another configuration)", fn);
-    ref = ur->lm->m;
-    if (ref->type != m->type || ref->nvert != m->nvert || ref->ncell != m->ncell ||
-        memcmp(ref->cells, m->cells, sizeof(int) * (size_t)m->ncell * (size_t)m->nvc))
+    ref = ur->lm;
+    const mesh *r = ref->m;
+    if (lm->dist || ref->dist) {
+      if (!lm->dist || !ref->dist || r->type != m->type || ref->dist->nvert_global != lm->dist->nvert_global ||
+          ref->dist->ncell_global != lm->dist->ncell_global)
+        luaL_error(L, "%s: the reference must be the same mesh (same cells) in another configuration", fn);
+    } else if (r->type != m->type || r->nvert != m->nvert || r->ncell != m->ncell ||
+               memcmp(r->cells, m->cells, sizeof(int) * (size_t)m->ncell * (size_t)m->nvc))
       luaL_error(L, "%s: the reference must be the same mesh (same cells) in another configuration", fn);
   }
   if (t) lua_pop(L, 1);
@@ -43,12 +51,23 @@ typedef int (*repair_fn)(mesh *m, const void *opts, void *report, char *err);
 static int repair_untangle(mesh *m, const void *o, void *r, char *err) { return mesh_untangle(m, o, r, err); }
 static int repair_smooth(mesh *m, const void *o, void *r, char *err) { return mesh_smooth(m, o, r, err); }
 
-static int dist_repair(lua_State *L, ud_mesh *u, repair_fn op, const void *o, void *r, size_t rlen, char *err) {
+static int dist_repair(lua_State *L, ud_mesh *u, lg_mesh *ref, const double **xref, repair_fn op, const void *o, void *r,
+                       size_t rlen, char *err) {
   lg_env *env = get_env(L);
-  mesh *W = NULL;
+  mesh *W = NULL, *R = NULL;
   int rc = lg_dist_gather_mesh(env, u->lm, &W);
+  if (!rc && ref) rc = lg_dist_gather_mesh(env, ref, &R);
   if (rc) snprintf(err, MESH_ERRLEN, "%.*s", MESH_ERRLEN - 1, env->err);
-  else if (lg_mpi_rank() == 0) rc = op(W, o, r, err);
+  else if (lg_mpi_rank() == 0) {
+    if (R && (R->nvert != W->nvert || R->ncell != W->ncell ||
+              memcmp(R->cells, W->cells, sizeof(int) * (size_t)W->ncell * (size_t)W->nvc))) {
+      snprintf(err, MESH_ERRLEN, "the reference must be the same mesh (same cells) in another configuration");
+      rc = 1;
+    } else {
+      if (R) *xref = R->x;
+      rc = op(W, o, r, err);
+    }
+  }
   rc = lg_root_result(rc, err, MESH_ERRLEN);
   if (!rc && MPI_Bcast(r, (int)rlen, MPI_BYTE, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) {
     snprintf(err, MESH_ERRLEN, "sending the report to every rank failed");
@@ -58,6 +77,8 @@ static int dist_repair(lua_State *L, ud_mesh *u, repair_fn op, const void *o, vo
     snprintf(err, MESH_ERRLEN, "%.*s", MESH_ERRLEN - 1, env->err);
     rc = 1;
   }
+  if (xref) *xref = NULL; /* R is freed here */
+  mesh_free(R);
   mesh_free(W);
   return rc;
 }
@@ -103,17 +124,17 @@ int lmesh_untangle(lua_State *L) {
   }
   o.slide = opt_boundary(L, t, fn);
   mesh *m = u->lm->m;
-  const mesh *ref = opt_reference(L, t, m, fn);
+  lg_mesh *refl = opt_reference(L, t, u->lm, fn);
+  const mesh *ref = refl ? refl->m : NULL;
   if (ref) o.xref = ref->x;
   if (ref && o.no_global) return luaL_error(L, "%s: option 'reference' needs the global stage (global = false was given)", fn);
   untangle_report r;
   char err[MESH_ERRLEN];
   struct { untangle_report r; char names[3][64]; } both; /* the names outlive the block: r points at them */
   if (u->lm->dist) {
-    if (ref) check_not_distributed(L, u->lm, "mesh:untangle with a reference");
-    /* on rank 0's whole mesh; the stages' names are its pointers: sent as text */
+    /* on rank 0's whole mesh (and whole reference); the stages' names are its pointers: sent as text */
     memset(&both, 0, sizeof both);
-    int rc = dist_repair(L, u, repair_untangle, &o, &both.r, sizeof both, err);
+    int rc = dist_repair(L, u, refl, &o.xref, repair_untangle, &o, &both.r, sizeof both, err);
     if (!rc && lg_mpi_rank() == 0) for (int i = 0; i < both.r.nstage && i < 3; i++) snprintf(both.names[i], 64, "%s", both.r.stage[i].name);
     if (!rc && MPI_Bcast(both.names, (int)sizeof both.names, MPI_CHAR, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) rc = 1;
     if (rc) return luaL_error(L, "%s: %s", fn, err);
@@ -185,7 +206,8 @@ int lmesh_smooth(lua_State *L) {
     check_keys(L, 2, fn, keys);
     t = 2;
   }
-  const mesh *ref = opt_reference(L, t, m, fn);
+  lg_mesh *refl = opt_reference(L, t, u->lm, fn);
+  const mesh *ref = refl ? refl->m : NULL;
   smooth_opts o = {m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 20, 1, 0, 0, 0, NULL,
                    SMOOTH_AUTO};
   int quiet = 0;
@@ -231,8 +253,7 @@ int lmesh_smooth(lua_State *L) {
   smooth_report r;
   char err[MESH_ERRLEN];
   if (u->lm->dist) {
-    if (ref) check_not_distributed(L, u->lm, "mesh:smooth with a reference");
-    if (dist_repair(L, u, repair_smooth, &o, &r, sizeof r, err)) return luaL_error(L, "%s: %s", fn, err);
+    if (dist_repair(L, u, refl, &o.xref, repair_smooth, &o, &r, sizeof r, err)) return luaL_error(L, "%s: %s", fn, err);
   } else if (mesh_smooth(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
   lg_mesh_changed(u->lm);
   char text[512];

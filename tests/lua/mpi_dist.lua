@@ -152,6 +152,49 @@ do
   out("smooth_x_moment", "direct", lg.integrate(mesh, x*x*y))
 end
 
+-- reference shapes and metrics on a distributed mesh: quality relative to a copy made
+-- before a motion (each rank its part of both), a constant metric and one per vertex by
+-- global vertex numbers, a tangle untangled and smoothed towards the rest shapes (rank 0's
+-- gathered mesh and reference)
+do
+  local rest = lg.mesh.rectangle{nx = 10}
+  for i = 1, rest:nvertices() do
+    local a, b = rest:coordinates(i)
+    if a then rest:set_coordinates(i, 0.5*a*a + 0.5*a, b) end
+  end
+  local mesh = rest:copy()
+  for i = 1, mesh:nvertices() do
+    local a, b = mesh:coordinates(i)
+    if a then mesh:set_coordinates(i, a + 0.08*math.sin(2*pi*b)*a*(1 - a), b) end
+  end
+  local d = mesh:quality("deformation_quality", {reference = rest})
+  out("deformation_max", "direct", d:max())
+  out("deformation_mean", "direct", d:mean())
+  out("deformation_inf", "direct", mesh:quality("deformation_quality", {reference = rest, p = math.huge}):mean())
+  out("metric_const_mean", "direct", mesh:quality("mean_ratio", {metric = {{2, 0.3}, {0.3, 1}}}):mean())
+  local M = {}
+  for i = 1, mesh:nvertices() do M[i] = {{1 + (i % 7)/7, 0.1}, {0.1, 1}} end
+  local qm = mesh:quality("mean_ratio", {metric = M})
+  local mn, imn = qm:min()
+  out("metric_vertex_mean", "direct", qm:mean())
+  out("metric_vertex_min", "direct", mn)
+  out("metric_vertex_argmin", "count", imn)
+  -- a tangle untangled towards the rest shapes, then smoothed towards them
+  for i = 1, mesh:nvertices() do
+    local a, b = mesh:coordinates(i)
+    if a and a > 0.3 and a < 0.6 and b > 0.3 and b < 0.6 then mesh:set_coordinates(i, 1 - b*0.9, a*1.05) end
+  end
+  local r = mesh:untangle{quiet = true, reference = rest}
+  out("ref_untangle_invalid_before", "count", r.invalid_before)
+  out("ref_untangle_invalid_after", "count", mesh:check())
+  out("ref_untangle_moved", "count", r.moved)
+  out("ref_untangle_deformation", "direct", mesh:quality("deformation_quality", {reference = rest}):mean())
+  local s = mesh:smooth{quiet = true, reference = rest}
+  out("ref_smooth_min", "direct", s.min_after)
+  out("ref_smooth_mean", "direct", s.mean_after)
+  out("ref_smooth_x_moment", "direct", lg.integrate(mesh, x*x*y))
+end
+
 -- refining (rank 0 refines the whole mesh and distributes it), copying (each rank its
 -- part), a Gmsh file written from the gathered mesh and read back, a table assigned to a
 -- function in f:values()'s order

@@ -91,6 +91,9 @@ int lg_mesh_check(lg_env *env, lg_mesh *lm);
 
 /* distribute.c: distributed meshes. Is -lugal_distribute set in a run of several ranks */
 int lg_distribute_wanted(void);
+/* the ghost layers a distributed mesh gets (-lugal_ghost_layers, default 1; 2 for interior
+ * facet terms with a continuous test function) */
+int lg_ghost_layers(void);
 /* the mesh `whole` (rank 0's; other ranks pass NULL, or their own copy, which is freed)
  * cut into one part per rank (the partition of lg_partition_cells, rank 0's work), each
  * rank getting its part with one layer of ghost cells (mesh_part); collective. NULL and the

@@ -1,6 +1,6 @@
 /* distribute.c — distributed meshes (-lugal_distribute under mpiexec): rank 0 cuts the
  * whole mesh into one part per rank (lg_partition_cells) and sends each rank its part with
- * one layer of ghost cells (mesh_part, src/mesh/part.c); the other ranks never hold the
+ * one layer of ghost cells, or more (-lugal_ghost_layers; mesh_part, src/mesh/part.c); the other ranks never hold the
  * whole mesh. And the global numbering of a problem's nodes on such a mesh: each rank
  * numbers the nodes it owns (a node goes to the part of most of its cells, as in a run on a
  * whole mesh) and learns the numbers of its ghost nodes from their owners through a
@@ -15,11 +15,19 @@
 #include <stdlib.h>
 #include <string.h>
 
+int lg_ghost_layers(void) {
+  PetscInt n = 1;
+  PetscBool set = PETSC_FALSE;
+  PetscOptionsGetInt(NULL, NULL, "-lugal_ghost_layers", &n, &set);
+  return set && n > 1 ? (n > 8 ? 8 : (int)n) : 1;
+}
+
 int lg_distribute_wanted(void) {
-  if (lg_mpi_size() < 2) return 0;
+  /* read on one rank too: the options of a script written for mpiexec are not misspelt */
   PetscBool on = PETSC_FALSE, set = PETSC_FALSE;
   PetscOptionsGetBool(NULL, NULL, "-lugal_distribute", &on, &set);
-  return set && on;
+  (void)lg_ghost_layers();
+  return lg_mpi_size() > 1 && set && on;
 }
 
 lg_mesh *lg_mesh_wrap_part(mesh_part *P) {
@@ -44,7 +52,7 @@ static int send_parts(lg_env *env, mesh *m, mesh_part **mine) {
   if (!rc && mesh_vertex_owners(m, part, vown)) { lg_seterr(env, "out of memory for the vertices' owners"); rc = 1; }
   for (int r = size - 1; r >= 0; r--) { /* rank 0's own part last: it is kept */
     char err[MESH_ERRLEN] = "";
-    mesh_part *P = rc ? NULL : mesh_part_extract(m, part, vown, r, err);
+    mesh_part *P = rc ? NULL : mesh_part_extract(m, part, vown, r, lg_ghost_layers(), err);
     char *buf = NULL;
     size_t len = 0;
     if (!rc && !P) { lg_seterr(env, "%s", err); rc = 1; }
@@ -194,15 +202,29 @@ static int outbox_sort(outbox *o, int size, int *cnt, int **sorted) {
 }
 
 /* the vertices of this part's cells of other parts (a rank holding an owned node holds a
- * cell through it, which shares a vertex with an owned cell of it, or is one); NULL when
- * out of memory */
+ * cell through it, which shares a vertex with an owned cell of it, or is one), and with more
+ * ghost layers the vertices of every cell within the further layers of those (another rank's
+ * outer ghosts reach that far into this part); NULL when out of memory */
 static char *other_vertices(const mesh_part *P) {
   const mesh *m = P->m;
+  size_t nvc = (size_t)m->nvc;
   int rank = lg_mpi_rank();
-  char *iv = calloc((size_t)m->nvert + 1, 1);
+  char *iv = calloc((size_t)m->nvert + 1, 1), *next = P->layers > 1 ? calloc((size_t)m->nvert + 1, 1) : NULL;
+  if (P->layers > 1 && !next) { free(iv); return NULL; }
   for (int c = 0; iv && c < m->ncell; c++)
     if (P->cowner[c] != rank)
-      for (int k = 0; k < m->nvc; k++) iv[m->cells[(size_t)c * (size_t)m->nvc + (size_t)k]] = 1;
+      for (size_t k = 0; k < nvc; k++) iv[m->cells[(size_t)c * nvc + k]] = 1;
+  for (int layer = 1; iv && layer < P->layers; layer++) {
+    memcpy(next, iv, (size_t)m->nvert);
+    for (int c = 0; c < m->ncell; c++) {
+      int touch = 0;
+      for (size_t k = 0; k < nvc && !touch; k++) touch = iv[m->cells[(size_t)c * nvc + k]];
+      if (touch)
+        for (size_t k = 0; k < nvc; k++) next[m->cells[(size_t)c * nvc + k]] = 1;
+    }
+    memcpy(iv, next, (size_t)m->nvert);
+  }
+  free(next);
   return iv;
 }
 

@@ -93,12 +93,13 @@ static int setup_terms(lg_env *env, lg_problem *p, const form *eqn, const int *t
     t->interior = t->reg.kind == REGION_INTERIOR;
     int continuous = 0; /* a test field with nodes shared by cells */
     for (int a = 0; a < p->rows.n; a++) continuous |= !p->rdm[a]->disc && p->rdm[a]->degree > 0;
-    if (t->interior && p->lm->dist && continuous) {
+    if (t->interior && p->lm->dist && continuous && p->lm->dist->layers < 2) {
       /* a discontinuous field's rows are its owned cells', whose facets' both sides are
-       * here; a continuous field's row also takes the facets of ghost cells with cells
-       * beyond the ghost layer */
-      lg_seterr(env, "term %d of the equation integrates over interior facets with a continuous test function, which "
-                     "a distributed mesh (-lugal_distribute) does not offer yet: run without -lugal_distribute", i + 1);
+       * here; a continuous field's row also takes the facets of its ghost cells, whose
+       * other sides are in a second ghost layer */
+      lg_seterr(env, "term %d of the equation integrates over interior facets with a continuous test function: on a "
+                     "distributed mesh (-lugal_distribute) that needs a second layer of ghost cells, "
+                     "-lugal_ghost_layers 2 (set before the mesh is made)", i + 1);
       return 1;
     }
     t->rl = p->rows;

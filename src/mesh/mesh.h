@@ -211,13 +211,14 @@ typedef struct {
   int *vglobal, *cglobal; /* m->nvert / m->ncell: global numbers, increasing */
   int *vowner, *cowner;   /* the part owning each local vertex / cell */
   int nown_vert, nown_cell;
+  int layers;             /* ghost layers (1: the cells around the owned cells' vertices) */
 } mesh_part;
 /* the part owning each vertex: the part of most of its cells (Boyer-Moore's vote in cell
  * order, the first cell's where there is no majority); 1 when out of memory */
 int mesh_vertex_owners(const mesh *m, const int *part, int *owner);
 /* part p of m, whose cells have the parts `part` and vertices the owners vowner; NULL and
  * a reason in err (MESH_ERRLEN) on failure */
-mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p, char *err);
+mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p, int layers, char *err);
 void mesh_part_free(mesh_part *P);
 int mesh_part_pack(const mesh_part *P, char **buf, size_t *len);
 mesh_part *mesh_part_unpack(const char *buf, size_t len, char *err);

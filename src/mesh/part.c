@@ -1,6 +1,7 @@
 /* part.c — one part of a mesh whose cells are split into parts, as a process of a
- * distributed run holds it: the part's own cells plus one layer of ghost cells (every cell
- * that shares a vertex with an owned one), with the global numbers and owners of its
+ * distributed run holds it: the part's own cells plus layers of ghost cells (the first:
+ * every cell that shares a vertex with an owned one; the next: every cell sharing a vertex
+ * with one of those), with the global numbers and owners of its
  * vertices and cells; and such a part as one byte buffer and back (what the reading rank
  * sends to each of the others).
  *
@@ -56,7 +57,7 @@ bad:
   return 1;
 }
 
-mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p, char *err) {
+mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p, int layers, char *err) {
   if (mesh_build_boundary_cells(m)) { snprintf(err, MESH_ERRLEN, "%s", m->err); return NULL; }
   size_t nv = (size_t)m->nvert, nc = (size_t)m->ncell, nvc = (size_t)m->nvc;
   /* vmap: 1 on the vertices of owned cells, then the local number + 1 of local vertices;
@@ -64,15 +65,26 @@ mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p,
   int *vmap = calloc(nv + 1, sizeof(int)), *cmap = calloc(nc + 1, sizeof(int));
   mesh_part *P = calloc(1, sizeof *P);
   if (!vmap || !cmap || !P) goto oom;
+  if (layers < 1) layers = 1;
   for (size_t c = 0; c < nc; c++)
     if (part[c] == p)
       for (size_t k = 0; k < nvc; k++) vmap[m->cells[c * nvc + k]] = 1;
   int ncl = 0, nown = 0;
-  for (size_t c = 0; c < nc; c++) {
-    int in = part[c] == p;
-    for (size_t k = 0; k < nvc && !in; k++) in = vmap[m->cells[c * nvc + k]] == 1;
-    if (in) { cmap[c] = ++ncl; nown += part[c] == p; }
+  for (int layer = 1; layer <= layers; layer++) {
+    /* the cells around the marked vertices; for another layer, their vertices marked */
+    for (size_t c = 0; c < nc; c++) {
+      if (cmap[c]) continue;
+      int in = part[c] == p;
+      for (size_t k = 0; k < nvc && !in; k++) in = vmap[m->cells[c * nvc + k]] == 1;
+      if (in) cmap[c] = 1;
+    }
+    if (layer < layers)
+      for (size_t c = 0; c < nc; c++)
+        if (cmap[c])
+          for (size_t k = 0; k < nvc; k++) vmap[m->cells[c * nvc + k]] = 1;
   }
+  for (size_t c = 0; c < nc; c++)
+    if (cmap[c]) { cmap[c] = ++ncl; nown += part[c] == p; }
   for (size_t v = 0; v < nv; v++) vmap[v] = 0;
   for (size_t c = 0; c < nc; c++)
     if (cmap[c])
@@ -83,6 +95,7 @@ mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p,
   P->nvert_global = m->nvert;
   P->ncell_global = m->ncell;
   P->part = p;
+  P->layers = layers;
   P->m = ncl ? mesh_create(m->type, nvl, NULL, ncl, NULL, err) : empty_mesh(m->type, err);
   if (!P->m) goto fail;
   P->vglobal = malloc(sizeof(int) * ((size_t)nvl + 1));
@@ -156,7 +169,7 @@ int mesh_part_pack(const mesh_part *P, char **buf, size_t *len) {
   if (!one.ncell) one.nvert = one.ncell = 1;
   if (mesh_pack(&one, &mb, &ml)) return 1;
   size_t nv = (size_t)P->m->nvert, nc = (size_t)P->m->ncell;
-  int64_t hd[10] = {PART_MAGIC, P->m->type, P->nvert_global, P->ncell_global, P->part, P->nown_vert, P->nown_cell, (int64_t)nv, (int64_t)nc, (int64_t)ml};
+  int64_t hd[11] = {PART_MAGIC, P->m->type, P->nvert_global, P->ncell_global, P->part, P->nown_vert, P->nown_cell, (int64_t)nv, (int64_t)nc, (int64_t)ml, P->layers};
   size_t n = sizeof hd + ml + sizeof(int) * (2 * nv + 2 * nc);
   char *b = malloc(n), *at = b;
   if (!b) { free(mb); return 1; }
@@ -180,12 +193,12 @@ static int check_ids(const int *a, size_t n, int lo, int hi, int increasing) {
 }
 
 mesh_part *mesh_part_unpack(const char *buf, size_t len, char *err) {
-  int64_t hd[10];
+  int64_t hd[11];
   if (len < sizeof hd) { snprintf(err, MESH_ERRLEN, "a packed mesh part of %zu bytes has no header", len); return NULL; }
   memcpy(hd, buf, sizeof hd);
   if (hd[0] != PART_MAGIC || hd[1] < 0 || hd[1] > CELL_INTERVAL || hd[2] < 1 || hd[2] > 0x7fffffff || hd[3] < 1 ||
       hd[3] > 0x7fffffff || hd[4] < 0 || hd[7] < 0 || hd[7] > hd[2] || hd[8] < 0 || hd[8] > hd[3] || hd[9] < 0 ||
-      (size_t)hd[9] > len || hd[5] < 0 || hd[5] > hd[7] || hd[6] < 0 || hd[6] > hd[8]) {
+      (size_t)hd[9] > len || hd[5] < 0 || hd[5] > hd[7] || hd[6] < 0 || hd[6] > hd[8] || hd[10] < 1 || hd[10] > 1000) {
     snprintf(err, MESH_ERRLEN, "not a packed mesh part (a bad header)");
     return NULL;
   }
@@ -201,6 +214,7 @@ mesh_part *mesh_part_unpack(const char *buf, size_t len, char *err) {
   P->part = (int)hd[4];
   P->nown_vert = (int)hd[5];
   P->nown_cell = (int)hd[6];
+  P->layers = (int)hd[10];
   const char *at = buf + sizeof hd;
   P->m = mesh_unpack(at, ml, err);
   at += ml;

@@ -84,7 +84,7 @@ static void parts(const char *data) {
   CHECK(mesh_build_boundary_cells(m) == 0, "%s", m->err);
   int *owned = calloc((size_t)m->ncell, sizeof(int)), nbf = 0, nvown = 0;
   for (int p = 0; p < np; p++) {
-    mesh_part *P = mesh_part_extract(m, part, vown, p, err);
+    mesh_part *P = mesh_part_extract(m, part, vown, p, 1, err);
     CHECK(P != NULL, "part %d: %s", p, err);
     if (!P) continue;
     char *buf;
@@ -140,6 +140,42 @@ static void parts(const char *data) {
   for (int c = 0; c < m->ncell; c++) once &= owned[c] == 1;
   CHECK(once && nvown == m->nvert, "every cell owned once, every vertex by one part (%d of %d)", nvown, m->nvert);
   CHECK(nbf > m->nbf, "boundary facets near a cut are on both sides (%d > %d)", nbf, m->nbf);
+  /* two ghost layers: the cells sharing a vertex with a cell that shares one with an owned
+   * cell, and the count kept through packing */
+  for (int p = 0; p < 3; p++) {
+    mesh_part *P = mesh_part_extract(m, part, vown, p, 2, err);
+    CHECK(P != NULL, "part %d with two layers: %s", p, err);
+    if (!P) continue;
+    char *buf;
+    size_t len;
+    CHECK(mesh_part_pack(P, &buf, &len) == 0, "pack");
+    mesh_part *Q = mesh_part_unpack(buf, len, err);
+    free(buf);
+    CHECK(Q && Q->layers == 2, "two layers through packing");
+    char *v1 = calloc((size_t)m->nvert, 1), *v2 = calloc((size_t)m->nvert, 1);
+    for (int c = 0; c < m->ncell; c++)
+      if (part[c] == p)
+        for (int k = 0; k < m->nvc; k++) v1[m->cells[c * m->nvc + k]] = 1;
+    int one = 0, two = 0;
+    for (int c = 0; c < m->ncell; c++) {
+      int in = 0;
+      for (int k = 0; k < m->nvc; k++) in |= v1[m->cells[c * m->nvc + k]];
+      one += in;
+      if (in)
+        for (int k = 0; k < m->nvc; k++) v2[m->cells[c * m->nvc + k]] = 1;
+    }
+    for (int c = 0; c < m->ncell; c++) {
+      int in = 0;
+      for (int k = 0; k < m->nvc; k++) in |= v2[m->cells[c * m->nvc + k]];
+      two += in;
+    }
+    CHECK(Q && Q->m->ncell == two && two > one && Q->nown_cell == P->nown_cell,
+          "part %d with two layers: %d cells (expected %d, one layer %d)", p, Q ? Q->m->ncell : -1, two, one);
+    free(v1);
+    free(v2);
+    mesh_part_free(P);
+    mesh_part_free(Q);
+  }
   free(owned);
   free(part);
   free(vown);

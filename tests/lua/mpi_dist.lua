@@ -231,3 +231,26 @@ do
   out("moved_invalid", "count", r.invalid_after)
   out("moved_moment", "direct", lg.integrate(mesh, x*x*y))
 end
+
+-- continuous interior penalty: gradient jumps on interior facets with a continuous P2 test
+-- function, whose rows on a distributed mesh need a second ghost layer (-lugal_ghost_layers
+-- 2, given before the mesh is made); solution, facet integral and the dense matrix
+do
+  lg.options("-lugal_ghost_layers 2")
+  local mesh = lg.mesh.rectangle{nx = 12}
+  local V = lg.lagrange(2)
+  local u, v = lg.unknown(V, "u"), lg.test(V, "v")
+  local n, h = lg.normal(), 1/12
+  local exact = lg.sin(pi*x)*lg.sin(pi*y)
+  local eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) + 10*v*lg.grad(u)[1] - (2*pi^2*exact + 10*pi*lg.cos(pi*x)*lg.sin(pi*y))*v)
+    + lg.integral(mesh:interior_facets(), 0.1*h^2*lg.dot(lg.jump(lg.grad(u)), n)*lg.dot(lg.jump(lg.grad(v)), n))
+  local prob = lg.linear_problem{mesh = mesh, eqn = eqn, bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}
+  local uh = prob:solve()
+  out("cip_L2", "direct", math.sqrt(lg.integrate(mesh, (uh - exact)^2)))
+  out("cip_jumps", "direct", lg.integrate(mesh:interior_facets(), lg.dot(lg.jump(lg.grad(uh)), n)^2))
+  local A = prob:matrix()
+  local s = 0
+  local c = uh:dof_coordinates()
+  for i = 1, #A do for j = 1, #A do s = s + A[i][j]^2*(1 + c[i][1] + 2*c[j][2] + c[i][1]*c[j][2]) end end
+  out("cip_matrix", "direct", s)
+end

@@ -12,7 +12,7 @@ local function solve(cell, p, m, distorted)
   if distorted then
     for i = 1, mesh:nvertices() do
       local a, b = mesh:coordinates(i)
-      if a then -- (on a distributed mesh, -lugal_distribute, a rank has its part's vertices only)
+      if a then -- (on a distributed mesh, as under mpiexec, a rank has its part's vertices only)
         local s = 0.04*math.sin(2*pi*a)*math.sin(2*pi*b)
         mesh:set_coordinates(i, a + s, b + 0.5*s)
       end

@@ -89,7 +89,8 @@ void lg_mesh_vertex_runs(const mesh *m, int nparts, int *part);
 /* the validity check run before assembly */
 int lg_mesh_check(lg_env *env, lg_mesh *lm);
 
-/* distribute.c: distributed meshes. Is -lugal_distribute set in a run of several ranks */
+/* distribute.c: distributed meshes. Are meshes distributed in this run: several ranks and
+ * not -lugal_distribute 0 */
 int lg_distribute_wanted(void);
 /* the ghost layers a distributed mesh gets (-lugal_ghost_layers, default 1; 2 for interior
  * facet terms with a continuous test function) */

@@ -1,4 +1,4 @@
-/* distribute.c — distributed meshes (-lugal_distribute under mpiexec): rank 0 cuts the
+/* distribute.c — distributed meshes (under mpiexec, unless -lugal_distribute 0): rank 0 cuts the
  * whole mesh into one part per rank (lg_partition_cells) and sends each rank its part with
  * one layer of ghost cells, or more (-lugal_ghost_layers; mesh_part, src/mesh/part.c); the other ranks never hold the
  * whole mesh. And the global numbering of a problem's nodes on such a mesh: each rank
@@ -23,11 +23,12 @@ int lg_ghost_layers(void) {
 }
 
 int lg_distribute_wanted(void) {
-  /* read on one rank too: the options of a script written for mpiexec are not misspelt */
-  PetscBool on = PETSC_FALSE, set = PETSC_FALSE;
+  /* the default under mpiexec; -lugal_distribute 0 keeps a whole mesh on every rank. Read on
+   * one rank too: the options of a script written for mpiexec are not misspelt there */
+  PetscBool on = PETSC_TRUE, set = PETSC_FALSE;
   PetscOptionsGetBool(NULL, NULL, "-lugal_distribute", &on, &set);
   (void)lg_ghost_layers();
-  return lg_mpi_size() > 1 && set && on;
+  return lg_mpi_size() > 1 && on;
 }
 
 lg_mesh *lg_mesh_wrap_part(mesh_part *P) {

@@ -175,18 +175,6 @@ void gc_point(lua_State *L, int always) {
   if (always || ++env->gc_points % 32 == 0) lua_gc(L, LUA_GCCOLLECT);
 }
 
-void check_not_distributed(lua_State *L, const lg_mesh *lm, const char *fn) {
-  if (lm && lm->dist)
-    luaL_error(L, "%s: not offered on a distributed mesh yet (-lugal_distribute; every rank holds its part only): "
-                  "run without -lugal_distribute", fn);
-}
-
-ud_mesh *check_whole_mesh(lua_State *L, int idx, const char *fn) {
-  ud_mesh *u = check_mesh(L, idx, fn);
-  check_not_distributed(L, u->lm, fn);
-  return u;
-}
-
 void push_mesh(lua_State *L, mesh *m) {
   lg_env *env = get_env(L);
   gc_point(L, 1);

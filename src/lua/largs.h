@@ -69,11 +69,6 @@ expr *check_expr_raw(lua_State *L, int idx, const char *fn);
 /* the resolved expression of a userdata */
 expr *expr_of(lua_State *L, ud_expr *u);
 ud_mesh *check_mesh(lua_State *L, int idx, const char *fn);
-/* the mesh at idx, which must be whole on every rank: functions not yet offered on a
- * distributed mesh (-lugal_distribute) say so, naming fn */
-ud_mesh *check_whole_mesh(lua_State *L, int idx, const char *fn);
-/* raise fn's "not on a distributed mesh" error when lm is one */
-void check_not_distributed(lua_State *L, const lg_mesh *lm, const char *fn);
 void push_mesh(lua_State *L, mesh *m);
 double opt_num(lua_State *L, int t, const char *key, double def, const char *fn);
 /* integers checked as the C int they become (lo..hi within the int range): a float with an

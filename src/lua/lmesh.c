@@ -738,19 +738,19 @@ static int write_svg(lua_State *L, mesh *m, lg_mesh *lm, const char *path, const
   } else if (qa) {
     if (qa->n != m->ncell) return luaL_error(L, "%s: quality array '%s' belongs to a mesh of %d cells", fn, name, qa->n);
     v = qa->v;
-  } else if (lm->dist) {
-    return luaL_error(L, "%s: on a distributed mesh, field '%s' must be a P0 function or a quality array", fn, name);
-  } else if (lua_istable(L, vidx) && luaL_len(L, vidx) == m->ncell) {
+  } else if (lua_istable(L, vidx) && luaL_len(L, vidx) == lg_mesh_global_cells(lm)) {
+    /* one value per cell of the whole mesh: a distributed mesh's local cells by their global numbers */
     own = lua_newuserdatauv(L, sizeof(double) * ((size_t)m->ncell + 1), 0);
     for (int i = 0; i < m->ncell; i++) {
-      lua_geti(L, vidx, i + 1);
+      lua_geti(L, vidx, (lm->dist ? lm->dist->cglobal[i] : i) + 1);
       int isnum;
       own[i] = lua_tonumberx(L, -1, &isnum);
-      if (!isnum) return luaL_error(L, "%s: array '%s' entry %d must be a number", fn, name, i + 1);
+      if (!isnum) return luaL_error(L, "%s: array '%s' entry %d must be a number", fn, name, (lm->dist ? lm->dist->cglobal[i] : i) + 1);
       lua_pop(L, 1);
     }
     v = own;
-  } else return luaL_error(L, "%s: field '%s' must be a P0 function, a quality array or %d numbers (one per cell)", fn, name, m->ncell);
+  } else return luaL_error(L, "%s: field '%s' must be a P0 function, a quality array or %ld numbers (one per cell)", fn, name,
+                           lg_mesh_global_cells(lm));
   char err[MESH_ERRLEN] = "";
   mesh *W = NULL; /* a distributed mesh's whole, with the values, on rank 0 */
   double **vals = NULL;

@@ -8,7 +8,7 @@
 # and field); each rank holding fewer cells than the mesh; more ranks than cells (empty
 # parts); the functions not offered on a distributed mesh yet refusing with a message; an
 # inverted cell in one rank's part ending the run with its message; every example,
-# distributed on 2 ranks.
+# distributed on 2 and 3 ranks.
 BUILD=$1
 . "$(dirname "$0")/mpi_lib.sh"
 run() { rn=$1; shift; if [ "$rn" = 1 ]; then "$LUGAL" "$@"; else timeout 300 mpiexec -n "$rn" "$LUGAL" "$@" -lugal_distribute; fi; }
@@ -121,11 +121,13 @@ start=$(date +%s)
 run 2 "$T/tangle.lua" > "$T/o" 2> "$T/e" && fail "a tangled part ran to the end"
 grep -q "inverted or zero-size cell" "$T/e" || { cat "$T/e"; fail "the tangled part's message"; }
 [ $(( $(date +%s) - start )) -lt 60 ] || fail "the tangled run took more than a minute to end"
-# every example, distributed on 2 ranks (their own checks: rates, Taylor tests, reference
-# values, optimized designs)
+# every example, distributed on 2 and 3 ranks (their own checks: rates, Taylor tests,
+# reference values, optimized designs)
 mkdir -p "$T/ex"
-for e in ale_vortex boundary_control bratu burgers1d cahn_hilliard coefficient_inversion dg_poisson elasticity gmsh_domain \
-         heat hyperelasticity kkt_poisson navier_stokes poisson poisson3d poisson_control poisson_quad stokes topology; do
-  (cd "$T/ex" && run 2 "$ROOT/examples/$e.lua" > "$T/ex.out" 2>&1) || { tail -n 15 "$T/ex.out"; fail "example $e distributed on 2 ranks"; }
+for n in 2 3; do
+  for e in ale_vortex boundary_control bratu burgers1d cahn_hilliard coefficient_inversion dg_poisson elasticity gmsh_domain \
+           heat hyperelasticity kkt_poisson navier_stokes poisson poisson3d poisson_control poisson_quad stokes topology; do
+    (cd "$T/ex" && run $n "$ROOT/examples/$e.lua" > "$T/ex.out" 2>&1) || { tail -n 15 "$T/ex.out"; fail "example $e distributed on $n ranks"; }
+  done
 done
-echo "mpi_dist: distributed meshes on 2 and 3 ranks as the serial run, VTU and .pvtu, empty parts, refusals, a tangled part, 19 examples: as expected"
+echo "mpi_dist: distributed meshes on 2 and 3 ranks as the serial run, VTU and .pvtu, empty parts, refusals, a tangled part, 19 examples on 2 and 3 ranks: as expected"

@@ -93,7 +93,9 @@ int lg_mesh_check(lg_env *env, lg_mesh *lm);
  * not -lugal_distribute 0 */
 int lg_distribute_wanted(void);
 /* the ghost layers a distributed mesh gets (-lugal_ghost_layers, default 1; 2 for interior
- * facet terms with a continuous test function) */
+ * facet terms with a continuous test function); -1 when the option is not 1 to
+ * LG_MAX_GHOST_LAYERS */
+#define LG_MAX_GHOST_LAYERS 8
 int lg_ghost_layers(void);
 /* the mesh `whole` (rank 0's; other ranks pass NULL, or their own copy, which is freed)
  * cut into one part per rank (the partition of lg_partition_cells, rank 0's work), each

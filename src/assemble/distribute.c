@@ -19,7 +19,7 @@ int lg_ghost_layers(void) {
   PetscInt n = 1;
   PetscBool set = PETSC_FALSE;
   PetscOptionsGetInt(NULL, NULL, "-lugal_ghost_layers", &n, &set);
-  return set && n > 1 ? (n > 8 ? 8 : (int)n) : 1;
+  return !set ? 1 : n >= 1 && n <= LG_MAX_GHOST_LAYERS ? (int)n : -1;
 }
 
 int lg_distribute_wanted(void) {
@@ -48,12 +48,18 @@ static int send_parts(lg_env *env, mesh *m, mesh_part **mine) {
   int size = lg_mpi_size(), runs = 0;
   int *part = malloc(sizeof(int) * ((size_t)m->ncell + 1)), *vown = malloc(sizeof(int) * ((size_t)m->nvert + 1));
   if (!part || !vown) { free(part); free(vown); lg_seterr(env, "out of memory for the partition of %d cells", m->ncell); return 1; }
-  int rc = lg_partition_cells(env, m, size, part, &runs);
+  int layers = lg_ghost_layers(), rc = 0;
+  /* the other ranks wait for their parts whatever happens here: errors go through the loop */
+  if (layers < 0) {
+    lg_seterr(env, "-lugal_ghost_layers: expected a whole number from 1 to %d", LG_MAX_GHOST_LAYERS);
+    rc = 1;
+  }
+  if (!rc) rc = lg_partition_cells(env, m, size, part, &runs);
   if (rc == -1) { lg_mesh_vertex_runs(m, size, part); rc = 0; } /* too few cells for a partitioner */
   if (!rc && mesh_vertex_owners(m, part, vown)) { lg_seterr(env, "out of memory for the vertices' owners"); rc = 1; }
   for (int r = size - 1; r >= 0; r--) { /* rank 0's own part last: it is kept */
     char err[MESH_ERRLEN] = "";
-    mesh_part *P = rc ? NULL : mesh_part_extract(m, part, vown, r, lg_ghost_layers(), err);
+    mesh_part *P = rc ? NULL : mesh_part_extract(m, part, vown, r, layers, err);
     char *buf = NULL;
     size_t len = 0;
     if (!rc && !P) { lg_seterr(env, "%s", err); rc = 1; }
@@ -210,22 +216,11 @@ static char *other_vertices(const mesh_part *P) {
   const mesh *m = P->m;
   size_t nvc = (size_t)m->nvc;
   int rank = lg_mpi_rank();
-  char *iv = calloc((size_t)m->nvert + 1, 1), *next = P->layers > 1 ? calloc((size_t)m->nvert + 1, 1) : NULL;
-  if (P->layers > 1 && !next) { free(iv); return NULL; }
+  char *iv = calloc((size_t)m->nvert + 1, 1);
   for (int c = 0; iv && c < m->ncell; c++)
     if (P->cowner[c] != rank)
       for (size_t k = 0; k < nvc; k++) iv[m->cells[(size_t)c * nvc + k]] = 1;
-  for (int layer = 1; iv && layer < P->layers; layer++) {
-    memcpy(next, iv, (size_t)m->nvert);
-    for (int c = 0; c < m->ncell; c++) {
-      int touch = 0;
-      for (size_t k = 0; k < nvc && !touch; k++) touch = iv[m->cells[(size_t)c * nvc + k]];
-      if (touch)
-        for (size_t k = 0; k < nvc; k++) next[m->cells[(size_t)c * nvc + k]] = 1;
-    }
-    memcpy(iv, next, (size_t)m->nvert);
-  }
-  free(next);
+  if (iv && mesh_grow_vertex_layers(m, iv, P->layers - 1)) { free(iv); return NULL; }
   return iv;
 }
 

@@ -216,6 +216,10 @@ typedef struct {
 /* the part owning each vertex: the part of most of its cells (Boyer-Moore's vote in cell
  * order, the first cell's where there is no majority); 1 when out of memory */
 int mesh_vertex_owners(const mesh *m, const int *part, int *owner);
+/* grows the vertex set `mark` (nvert flags) by n vertex layers: each time, every vertex of a
+ * cell with a marked vertex is marked. 1 when out of memory (mark then unchanged past the
+ * layers done) */
+int mesh_grow_vertex_layers(const mesh *m, char *mark, int n);
 /* part p of m, whose cells have the parts `part` and vertices the owners vowner; NULL and
  * a reason in err (MESH_ERRLEN) on failure */
 mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p, int layers, char *err);

@@ -20,6 +20,25 @@
 
 #define PART_MAGIC 0x6c677074u /* "lgpt" */
 
+int mesh_grow_vertex_layers(const mesh *m, char *mark, int n) {
+  size_t nvc = (size_t)m->nvc;
+  char *next = n > 0 ? malloc((size_t)m->nvert + 1) : NULL;
+  if (n > 0 && !next) return 1;
+  for (int layer = 0; layer < n; layer++) {
+    memcpy(next, mark, (size_t)m->nvert);
+    for (int c = 0; c < m->ncell; c++) {
+      const int *cv = m->cells + (size_t)c * nvc;
+      int touch = 0;
+      for (size_t k = 0; k < nvc && !touch; k++) touch = mark[cv[k]];
+      if (touch)
+        for (size_t k = 0; k < nvc; k++) next[cv[k]] = 1;
+    }
+    memcpy(mark, next, (size_t)m->nvert);
+  }
+  free(next);
+  return 0;
+}
+
 int mesh_vertex_owners(const mesh *m, const int *part, int *owner) {
   /* Boyer-Moore's vote in cell order: the part of most of a vertex's cells where there is
    * a majority, which keeps the parts' vertex counts near their cell counts */
@@ -63,26 +82,24 @@ mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p,
   /* vmap: 1 on the vertices of owned cells, then the local number + 1 of local vertices;
    * cmap: the local number + 1 of local cells */
   int *vmap = calloc(nv + 1, sizeof(int)), *cmap = calloc(nc + 1, sizeof(int));
+  char *near = calloc(nv + 1, 1);
   mesh_part *P = calloc(1, sizeof *P);
-  if (!vmap || !cmap || !P) goto oom;
+  if (!vmap || !cmap || !near || !P) goto oom;
   if (layers < 1) layers = 1;
+  /* the vertices of owned cells and layers - 1 vertex layers around them; the local cells
+   * are the owned ones and those with a vertex there */
   for (size_t c = 0; c < nc; c++)
     if (part[c] == p)
-      for (size_t k = 0; k < nvc; k++) vmap[m->cells[c * nvc + k]] = 1;
+      for (size_t k = 0; k < nvc; k++) near[m->cells[c * nvc + k]] = 1;
+  if (mesh_grow_vertex_layers(m, near, layers - 1)) goto oom;
   int ncl = 0, nown = 0;
-  for (int layer = 1; layer <= layers; layer++) {
-    /* the cells around the marked vertices; for another layer, their vertices marked */
-    for (size_t c = 0; c < nc; c++) {
-      if (cmap[c]) continue;
-      int in = part[c] == p;
-      for (size_t k = 0; k < nvc && !in; k++) in = vmap[m->cells[c * nvc + k]] == 1;
-      if (in) cmap[c] = 1;
-    }
-    if (layer < layers)
-      for (size_t c = 0; c < nc; c++)
-        if (cmap[c])
-          for (size_t k = 0; k < nvc; k++) vmap[m->cells[c * nvc + k]] = 1;
+  for (size_t c = 0; c < nc; c++) {
+    int in = part[c] == p;
+    for (size_t k = 0; k < nvc && !in; k++) in = near[m->cells[c * nvc + k]];
+    cmap[c] = in;
   }
+  free(near);
+  near = NULL;
   for (size_t c = 0; c < nc; c++)
     if (cmap[c]) { cmap[c] = ++ncl; nown += part[c] == p; }
   for (size_t v = 0; v < nv; v++) vmap[v] = 0;
@@ -146,6 +163,7 @@ oom:
 fail:
   free(vmap);
   free(cmap);
+  free(near);
   mesh_part_free(P);
   return NULL;
 }

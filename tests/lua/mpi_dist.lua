@@ -236,6 +236,11 @@ end
 -- function, whose rows on a distributed mesh need a second ghost layer (-lugal_ghost_layers
 -- 2, given before the mesh is made); solution, facet integral and the dense matrix
 do
+  if lg.size() > 1 then -- a count out of 1 to 8 is reported, on every rank, not clamped
+    lg.options("-lugal_ghost_layers 0")
+    local ok, err = pcall(lg.mesh.rectangle, {nx = 4})
+    assert(not ok and err:find("-lugal_ghost_layers: expected a whole number from 1 to 8", 1, true), tostring(err))
+  end
   lg.options("-lugal_ghost_layers 2")
   local mesh = lg.mesh.rectangle{nx = 12}
   local V = lg.lagrange(2)

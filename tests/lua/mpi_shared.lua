@@ -93,7 +93,9 @@ do
   local h = rf:hessian(lg.sin(2*pi*x), x*y)
   out("hessian_l2", "direct", math.sqrt(lg.integrate(mesh, h*h)))
   -- L-BFGS's path over ~190 iterations follows rounding (the parallel direct solver's
-  -- differs in the last bits): its optimum is compared; Newton-CG's few steps are counted
+  -- differs in the last bits; serially too, another fill-reducing ordering alone moves the
+  -- example's 157 iterations to 153 or 155, MUMPS to 143): its optimum is compared;
+  -- Newton-CG's few steps are counted
   f:assign(0*x)
   local _, info = lg.minimize(rf, {method = "lmvm", gttol = 1e-8, gatol = 0, grtol = 0, monitor = false})
   out("lbfgs_J", "iter", info.J)

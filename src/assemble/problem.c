@@ -898,6 +898,29 @@ typedef struct {
 #define SCATTER_SPLIT(T)                                                                            \
   do {                                                                                              \
     const T *rk = (const T *)p->rank + t->rank_off + (size_t)first * (size_t)(rn * cn);            \
+    if (B == 1) { /* element rows one after another, as SCATTER_RANKS; a row with no         \
+                   * off-diagonal entries (inside the part) adds into its diagonal block only */ \
+      const PetscInt *rs = p->row_start + t->erow_first + (size_t)first * (size_t)rn;              \
+      const double *vr = v;                                                                         \
+      for (size_t er = 0, ner = (size_t)n * rn; er < ner; er++, rk += cn, vr += cn) {               \
+        PetscInt row = rs[er];                                                                      \
+        if (row < 0) continue; /* another rank's row */                                             \
+        if (p->so_i[row + 1] == p->so_i[row]) {                                                     \
+          PetscScalar *dd = da + p->sd_i[row];                                                      \
+          if (cn == 4) { dd[rk[0]] += vr[0]; dd[rk[1]] += vr[1]; dd[rk[2]] += vr[2]; dd[rk[3]] += vr[3]; } \
+          else                                                                                      \
+            for (int j = 0; j < cn; j++) dd[rk[j]] += vr[j];                                        \
+          continue;                                                                                 \
+        }                                                                                           \
+        PetscInt left = p->s_left[row], mid = left + p->sd_i[row + 1] - p->sd_i[row];              \
+        PetscScalar *dl = oa + p->so_i[row], *dd = da + p->sd_i[row] - left, *dr = oa + p->so_i[row] - (mid - left); \
+        for (int j = 0; j < cn; j++) {                                                              \
+          PetscInt k = (PetscInt)rk[j];                                                             \
+          (k < left ? dl : k < mid ? dd : dr)[k] += vr[j];                                          \
+        }                                                                                           \
+      }                                                                                             \
+      break;                                                                                        \
+    }                                                                                               \
     PetscInt R[KER_MAXFIELD * FEM_MAXLOC * 2];                                                      \
     const PetscInt *rs = B == 1 ? p->row_start + t->erow_first + (size_t)first * (size_t)rn : NULL; \
     for (int e = 0; e < n; e++, rk += rn * cn) {                                                    \

@@ -248,28 +248,36 @@ static int linear_solve_checked(lg_env *env, lg_problem *p, lg_solve_info *info)
 /* the essential condition (its index) of each PETSc row: an array over the whole problem's
  * rows, or on a distributed mesh (whose columns are global) a hash of its essential rows */
 typedef struct {
-  int *at;             /* whole: at[row] */
-  PetscInt *key;       /* hash: rows (-1 empty) */
+  int *at;             /* whole: at[row]; distributed: at[row - lo] for owned rows */
+  PetscInt lo, hi;     /* the rows of at */
+  PetscInt *key;       /* distributed, other ranks' rows: a hash (-1 empty) */
   int *val, mask;
 } bc_index;
 
 static int bc_index_make(lg_problem *p, bc_index *x) {
   memset(x, 0, sizeof *x);
-  if (!p->lm->dist) {
-    if (!(x->at = malloc(sizeof(int) * ((size_t)p->Nglob + 1)))) return 1;
-    for (int i = 0; i < p->Nglob; i++) x->at[i] = -1;
-    for (int k = 0; k < p->nbc; k++) x->at[lg_petsc_row(p, p->bc_rows[k])] = k; /* the matrix's order */
-    return 0;
+  /* a whole mesh: every row; a distributed one: the owned rows (most columns of the owned
+   * rows are owned: a probe of the hash for each was most of the time of the elimination) */
+  x->lo = p->lm->dist ? p->lo : 0;
+  x->hi = p->lm->dist ? p->hi : p->Nglob;
+  if (!(x->at = malloc(sizeof(int) * ((size_t)(x->hi - x->lo) + 1)))) return 1;
+  for (PetscInt i = 0; i < x->hi - x->lo; i++) x->at[i] = -1;
+  int n = 16, nother = 0;
+  for (int k = 0; k < p->nbc; k++) {
+    PetscInt r = lg_petsc_row(p, p->bc_rows[k]); /* the matrix's order */
+    if (r >= x->lo && r < x->hi) x->at[r - x->lo] = k;
+    else nother++;
   }
-  int n = 16;
-  while (n < 2 * p->nbc + 2) n *= 2;
+  if (!p->lm->dist) return 0;
+  while (n < 2 * nother + 2) n *= 2;
   x->key = malloc(sizeof(PetscInt) * (size_t)n);
   x->val = malloc(sizeof(int) * (size_t)n);
-  if (!x->key || !x->val) { free(x->key); free(x->val); return 1; }
+  if (!x->key || !x->val) { free(x->at); free(x->key); free(x->val); return 1; }
   x->mask = n - 1;
   for (int i = 0; i < n; i++) x->key[i] = -1;
   for (int k = 0; k < p->nbc; k++) {
     PetscInt r = lg_petsc_row(p, p->bc_rows[k]);
+    if (r >= x->lo && r < x->hi) continue;
     unsigned h = (unsigned)((uint64_t)r * 0x9e3779b97f4a7c15ull >> 40) & (unsigned)x->mask;
     while (x->key[h] >= 0 && x->key[h] != r) h = (h + 1) & (unsigned)x->mask;
     x->key[h] = r;
@@ -279,7 +287,8 @@ static int bc_index_make(lg_problem *p, bc_index *x) {
 }
 
 static inline int bc_index_get(const bc_index *x, PetscInt r) {
-  if (x->at) return x->at[r];
+  if (r >= x->lo && r < x->hi) return x->at[r - x->lo];
+  if (!x->key) return -1;
   unsigned h = (unsigned)((uint64_t)r * 0x9e3779b97f4a7c15ull >> 40) & (unsigned)x->mask;
   while (x->key[h] >= 0) {
     if (x->key[h] == r) return x->val[h];

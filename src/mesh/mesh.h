@@ -91,6 +91,9 @@ mesh *mesh_copy(const mesh *m);
  * buffer, for another process of the same build, and a mesh from such a buffer (every
  * length checked; NULL and a reason in err) */
 int mesh_pack(const mesh *m, char **buf, size_t *len);
+/* the packed size of m, and m packed at `at` (that many bytes; returns the end) */
+size_t mesh_pack_size(const mesh *m);
+char *mesh_pack_into(const mesh *m, char *at);
 mesh *mesh_unpack(const char *buf, size_t len, char *err);
 int mesh_add_boundary_facets(mesh *m, int n, const int *verts, int tag, const char *name);
 int mesh_set_boundary_name(mesh *m, int tag, const char *name);

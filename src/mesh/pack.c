@@ -13,48 +13,55 @@
 
 #define PACK_MAGIC 0x6c67706bu /* "lgpk" */
 
-typedef struct {
-  char *b;
-  size_t n, cap;
-} wbuf;
-
-static int put(wbuf *w, const void *p, size_t n) {
-  if (w->n + n > w->cap) {
-    size_t cap = w->cap ? w->cap : 4096;
-    while (cap < w->n + n) cap *= 2;
-    char *nb = realloc(w->b, cap);
-    if (!nb) return 1;
-    w->b = nb;
-    w->cap = cap;
-  }
-  if (n) memcpy(w->b + w->n, p, n);
-  w->n += n;
-  return 0;
+/* the bytes of the names t[0 .. n - 1] packed: tag, length, text each */
+static size_t names_size(const mesh_name *t, int n) {
+  size_t z = 0;
+  for (int i = 0; i < n; i++) z += 2 * sizeof(int64_t) + strlen(t[i].name);
+  return z;
 }
 
-static int put_names(wbuf *w, const mesh_name *t, int n) {
-  int bad = 0;
-  for (int i = 0; i < n && !bad; i++) {
+static char *put(char *at, const void *p, size_t n) {
+  if (n) memcpy(at, p, n);
+  return at + n;
+}
+
+static char *put_names(char *at, const mesh_name *t, int n) {
+  for (int i = 0; i < n; i++) {
     int64_t hd[2] = {t[i].tag, (int64_t)strlen(t[i].name)};
-    bad = put(w, hd, sizeof hd) || put(w, t[i].name, (size_t)hd[1]);
+    at = put(at, hd, sizeof hd);
+    at = put(at, t[i].name, (size_t)hd[1]);
   }
-  return bad;
+  return at;
+}
+
+size_t mesh_pack_size(const mesh *m) {
+  size_t nx = (size_t)m->nvert * (size_t)m->dim, nc = (size_t)m->ncell * (size_t)m->nvc, nf = (size_t)m->nbf * (size_t)m->nvf;
+  return 8 * sizeof(int64_t) + sizeof(double) * nx + sizeof(int) * (nc + (size_t)m->ncell + nf + (size_t)m->nbf) +
+         names_size(m->bnames, m->nbname) + names_size(m->cnames, m->ncname);
+}
+
+/* written once into a buffer of its exact size (a part of a large mesh is tens of MB: a
+ * growing buffer copied it several times) */
+char *mesh_pack_into(const mesh *m, char *at) {
+  int64_t hd[8] = {PACK_MAGIC, m->type, m->nvert, m->ncell, m->nbf, m->nbname, m->ncname, 0};
+  size_t nx = (size_t)m->nvert * (size_t)m->dim, nc = (size_t)m->ncell * (size_t)m->nvc, nf = (size_t)m->nbf * (size_t)m->nvf;
+  at = put(at, hd, sizeof hd);
+  at = put(at, m->x, sizeof(double) * nx);
+  at = put(at, m->cells, sizeof(int) * nc);
+  at = put(at, m->cell_tag, sizeof(int) * (size_t)m->ncell);
+  at = put(at, m->bf_verts, sizeof(int) * nf);
+  at = put(at, m->bf_tag, sizeof(int) * (size_t)m->nbf);
+  at = put_names(at, m->bnames, m->nbname);
+  return put_names(at, m->cnames, m->ncname);
 }
 
 int mesh_pack(const mesh *m, char **buf, size_t *len) {
-  wbuf w = {NULL, 0, 0};
-  int64_t hd[8] = {PACK_MAGIC, m->type, m->nvert, m->ncell, m->nbf, m->nbname, m->ncname, 0};
-  size_t nx = (size_t)m->nvert * (size_t)m->dim, nc = (size_t)m->ncell * (size_t)m->nvc, nf = (size_t)m->nbf * (size_t)m->nvf;
-  int bad = put(&w, hd, sizeof hd) || put(&w, m->x, sizeof(double) * nx) || put(&w, m->cells, sizeof(int) * nc) ||
-            put(&w, m->cell_tag, sizeof(int) * (size_t)m->ncell) || put(&w, m->bf_verts, sizeof(int) * nf) ||
-            put(&w, m->bf_tag, sizeof(int) * (size_t)m->nbf) || put_names(&w, m->bnames, m->nbname) ||
-            put_names(&w, m->cnames, m->ncname);
-  if (bad) {
-    free(w.b);
-    return 1;
-  }
-  *buf = w.b;
-  *len = w.n;
+  size_t n = mesh_pack_size(m);
+  char *b = malloc(n);
+  if (!b) return 1;
+  mesh_pack_into(m, b);
+  *buf = b;
+  *len = n;
   return 0;
 }
 

@@ -181,20 +181,15 @@ void mesh_part_free(mesh_part *P) {
 /* the buffer: a header, the packed local mesh (mesh_pack), then vglobal, vowner, cglobal,
  * cowner */
 int mesh_part_pack(const mesh_part *P, char **buf, size_t *len) {
-  char *mb = NULL;
-  size_t ml = 0;
   mesh one = *P->m; /* an empty part's mesh keeps the single vertex and cell it was made with */
   if (!one.ncell) one.nvert = one.ncell = 1;
-  if (mesh_pack(&one, &mb, &ml)) return 1;
-  size_t nv = (size_t)P->m->nvert, nc = (size_t)P->m->ncell;
+  size_t ml = mesh_pack_size(&one), nv = (size_t)P->m->nvert, nc = (size_t)P->m->ncell;
   int64_t hd[11] = {PART_MAGIC, P->m->type, P->nvert_global, P->ncell_global, P->part, P->nown_vert, P->nown_cell, (int64_t)nv, (int64_t)nc, (int64_t)ml, P->layers};
   size_t n = sizeof hd + ml + sizeof(int) * (2 * nv + 2 * nc);
   char *b = malloc(n), *at = b;
-  if (!b) { free(mb); return 1; }
+  if (!b) return 1;
   memcpy(at, hd, sizeof hd); at += sizeof hd;
-  if (ml) memcpy(at, mb, ml);
-  at += ml;
-  free(mb);
+  at = mesh_pack_into(&one, at);
   memcpy(at, P->vglobal, sizeof(int) * nv); at += sizeof(int) * nv;
   memcpy(at, P->vowner, sizeof(int) * nv); at += sizeof(int) * nv;
   memcpy(at, P->cglobal, sizeof(int) * nc); at += sizeof(int) * nc;

@@ -246,7 +246,8 @@ static int linear_solve_checked(lg_env *env, lg_problem *p, lg_solve_info *info)
  * same matrix and new data (an optimization's next evaluation, other essential values)
  * reuses the factorization */
 /* the essential condition (its index) of each PETSc row: an array over the whole problem's
- * rows, or on a distributed mesh (whose columns are global) a hash of its essential rows */
+ * rows, or on a distributed mesh (whose columns are global) an array over the owned rows
+ * and a hash of the other ranks' essential rows */
 typedef struct {
   int *at;             /* whole: at[row]; distributed: at[row - lo] for owned rows */
   PetscInt lo, hi;     /* the rows of at */

@@ -23,8 +23,9 @@ int lg_ghost_layers(void) {
 }
 
 int lg_distribute_wanted(void) {
-  /* the default under mpiexec; -lugal_distribute 0 keeps a whole mesh on every rank. Read on
-   * one rank too: the options of a script written for mpiexec are not misspelt there */
+  /* the default under mpiexec; -lugal_distribute 0 keeps a whole mesh on every rank. Both
+   * options are read on one rank too (the ghost layers only for that): the options of a
+   * script written for mpiexec are not reported as unused there */
   PetscBool on = PETSC_TRUE, set = PETSC_FALSE;
   PetscOptionsGetBool(NULL, NULL, "-lugal_distribute", &on, &set);
   (void)lg_ghost_layers();

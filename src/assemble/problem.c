@@ -892,15 +892,15 @@ typedef struct {
     }                                                                                               \
   } while (0)
 
-/* the same into a parallel run's split blocks: entry e of owned row r at its place there,
- * from the row's count of left columns and its blocks' starts (rows inside a part have no
- * off-diagonal entries: the branches go one way there) */
+/* the same into a parallel run's split blocks. B = 1: element rows one after another, as
+ * SCATTER_RANKS; a row with no off-diagonal entries (inside the part) adds into its diagonal
+ * block with no per-entry choice (a generic loop here was 39% of a rank's profile). B > 1:
+ * a node's rows from its node */
 #define SCATTER_SPLIT(T)                                                                            \
   do {                                                                                              \
-    const T *rk = (const T *)p->rank + t->rank_off + (size_t)first * (size_t)(rn * cn);            \
-    if (B == 1) { /* element rows one after another, as SCATTER_RANKS; a row with no         \
-                   * off-diagonal entries (inside the part) adds into its diagonal block only */ \
-      const PetscInt *rs = p->row_start + t->erow_first + (size_t)first * (size_t)rn;              \
+    const T *rk = (const T *)p->rank + t->rank_off + (size_t)first * (size_t)(rn * cn);             \
+    if (B == 1) {                                                                                   \
+      const PetscInt *rs = p->row_start + t->erow_first + (size_t)first * (size_t)rn;               \
       const double *vr = v;                                                                         \
       for (size_t er = 0, ner = (size_t)n * rn; er < ner; er++, rk += cn, vr += cn) {               \
         PetscInt row = rs[er];                                                                      \
@@ -912,34 +912,23 @@ typedef struct {
             for (int j = 0; j < cn; j++) dd[rk[j]] += vr[j];                                        \
           continue;                                                                                 \
         }                                                                                           \
-        PetscInt left = p->s_left[row], mid = left + p->sd_i[row + 1] - p->sd_i[row];              \
-        PetscScalar *dl = oa + p->so_i[row], *dd = da + p->sd_i[row] - left, *dr = oa + p->so_i[row] - (mid - left); \
-        for (int j = 0; j < cn; j++) {                                                              \
-          PetscInt k = (PetscInt)rk[j];                                                             \
-          (k < left ? dl : k < mid ? dd : dr)[k] += vr[j];                                          \
-        }                                                                                           \
+        lg_split_row S = lg_split_row_at(p, row, da, oa);                                           \
+        for (int j = 0; j < cn; j++) *lg_split_row_entry(&S, (PetscInt)rk[j]) += vr[j];             \
       }                                                                                             \
       break;                                                                                        \
     }                                                                                               \
     PetscInt R[KER_MAXFIELD * FEM_MAXLOC * 2];                                                      \
-    const PetscInt *rs = B == 1 ? p->row_start + t->erow_first + (size_t)first * (size_t)rn : NULL; \
     for (int e = 0; e < n; e++, rk += rn * cn) {                                                    \
       const double *ve = v + (size_t)e * size;                                                      \
-      if (B > 1) lg_term_nodes(p, t, first + e, 1, B, 1, R);                                        \
+      lg_term_nodes(p, t, first + e, 1, B, 1, R);                                                   \
       for (int i = 0; i < rn; i++) {                                                                \
-        if (B == 1 ? rs[(size_t)e * rn + i] < 0 : R[i] < R0 || R[i] >= R1) continue;                 \
+        if (R[i] < R0 || R[i] >= R1) continue; /* another rank's row */                             \
         const T *ri = rk + i * cn;                                                                  \
         for (int r = 0; r < B; r++) {                                                               \
-          int row = B == 1 ? (int)rs[(size_t)e * rn + i] : (R[i] - R0) * B + r;                     \
-          PetscInt left = p->s_left[row], mid = left + p->sd_i[row + 1] - p->sd_i[row];             \
-          PetscScalar *dl = oa + p->so_i[row], *dd = da + p->sd_i[row] - left,                      \
-                      *dr = oa + p->so_i[row] - (mid - left);                                       \
+          lg_split_row S = lg_split_row_at(p, (R[i] - R0) * B + r, da, oa);                         \
           const double *vr = ve + (size_t)(i * B + r) * cs;                                         \
           for (int j = 0; j < cn; j++)                                                              \
-            for (int c = 0; c < B; c++) {                                                           \
-              PetscInt k = (PetscInt)ri[j] * B + c;                                                 \
-              (k < left ? dl : k < mid ? dd : dr)[k] += vr[j * B + c];                              \
-            }                                                                                       \
+            for (int c = 0; c < B; c++) *lg_split_row_entry(&S, (PetscInt)ri[j] * B + c) += vr[j * B + c]; \
         }                                                                                           \
       }                                                                                             \
     }                                                                                               \

@@ -154,11 +154,29 @@ struct lg_problem {
   char prefix[64];
 };
 
-/* a parallel run: entry e (its rank in the csr order) of owned row r in the diagonal block's
- * values da or the off-diagonal block's oa */
+/* a parallel run's owned row r in the diagonal block's values da and the off-diagonal
+ * block's oa: the entry of rank e (its place in the row's global column order) is at
+ * (e < left ? dl : e < mid ? dd : dr) + e. Taken once per row in assembly's hot loop */
+typedef struct {
+  PetscInt left, mid;
+  PetscScalar *dl, *dd, *dr;
+} lg_split_row;
+static inline lg_split_row lg_split_row_at(const lg_problem *p, PetscInt r, PetscScalar *da, PetscScalar *oa) {
+  lg_split_row s;
+  s.left = p->s_left[r];
+  s.mid = s.left + p->sd_i[r + 1] - p->sd_i[r];
+  s.dl = oa + p->so_i[r];
+  s.dd = da + p->sd_i[r] - s.left;
+  s.dr = oa + p->so_i[r] - (s.mid - s.left);
+  return s;
+}
+static inline PetscScalar *lg_split_row_entry(const lg_split_row *s, PetscInt e) {
+  return (e < s->left ? s->dl : e < s->mid ? s->dd : s->dr) + e;
+}
+/* entry e of owned row r there */
 static inline PetscScalar *lg_split_entry(const lg_problem *p, PetscScalar *da, PetscScalar *oa, int r, PetscInt e) {
-  PetscInt left = p->s_left[r], nd = p->sd_i[r + 1] - p->sd_i[r];
-  return e < left ? oa + p->so_i[r] + e : e < left + nd ? da + p->sd_i[r] + (e - left) : oa + p->so_i[r] + (e - nd);
+  lg_split_row s = lg_split_row_at(p, r, da, oa);
+  return lg_split_row_entry(&s, e);
 }
 /* sparsity.c: a parallel run's block values to assemble into (zeroed), and after assembly
  * given back to the matrix (assembled: its state moves on, so that solvers set up again) */

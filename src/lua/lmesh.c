@@ -742,10 +742,11 @@ static int write_svg(lua_State *L, mesh *m, lg_mesh *lm, const char *path, const
     /* one value per cell of the whole mesh: a distributed mesh's local cells by their global numbers */
     own = lua_newuserdatauv(L, sizeof(double) * ((size_t)m->ncell + 1), 0);
     for (int i = 0; i < m->ncell; i++) {
-      lua_geti(L, vidx, (lm->dist ? lm->dist->cglobal[i] : i) + 1);
+      int at = (lm->dist ? lm->dist->cglobal[i] : i) + 1;
+      lua_geti(L, vidx, at);
       int isnum;
       own[i] = lua_tonumberx(L, -1, &isnum);
-      if (!isnum) return luaL_error(L, "%s: array '%s' entry %d must be a number", fn, name, (lm->dist ? lm->dist->cglobal[i] : i) + 1);
+      if (!isnum) return luaL_error(L, "%s: array '%s' entry %d must be a number", fn, name, at);
       lua_pop(L, 1);
     }
     v = own;

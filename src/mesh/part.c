@@ -79,7 +79,7 @@ bad:
 mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p, int layers, char *err) {
   if (mesh_build_boundary_cells(m)) { snprintf(err, MESH_ERRLEN, "%s", m->err); return NULL; }
   size_t nv = (size_t)m->nvert, nc = (size_t)m->ncell, nvc = (size_t)m->nvc;
-  /* vmap: 1 on the vertices of owned cells, then the local number + 1 of local vertices;
+  /* near: the vertices whose cells are local; vmap: the local number + 1 of local vertices;
    * cmap: the local number + 1 of local cells */
   int *vmap = calloc(nv + 1, sizeof(int)), *cmap = calloc(nc + 1, sizeof(int));
   char *near = calloc(nv + 1, 1);
@@ -96,12 +96,10 @@ mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p,
   for (size_t c = 0; c < nc; c++) {
     int in = part[c] == p;
     for (size_t k = 0; k < nvc && !in; k++) in = near[m->cells[c * nvc + k]];
-    cmap[c] = in;
+    if (in) { cmap[c] = ++ncl; nown += part[c] == p; }
   }
   free(near);
   near = NULL;
-  for (size_t c = 0; c < nc; c++)
-    if (cmap[c]) { cmap[c] = ++ncl; nown += part[c] == p; }
   for (size_t v = 0; v < nv; v++) vmap[v] = 0;
   for (size_t c = 0; c < nc; c++)
     if (cmap[c])

@@ -706,25 +706,25 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
       touched[v] |= region[v];
       whole &= region[v];
     }
-    /* the tangle's neighbourhood already holds half the interior vertices (or 40% in one
-     * piece, below), and it is not a
-     * scrambled knot, over a quarter of the cells inverted (those go to the pieces' harmonic restart, which gives a scrambled grid
-     * back exactly): a twisted bar, every interior vertex out of place. Little is left to
-     * keep in place, and the global energy, which
-     * moves every interior vertex together, is the faster way (bar of 73 728 tetrahedra:
-     * 0.56 s against 1.79 s for the pieces' optimization, and a mesh the energy smoother
-     * no longer improves). The local rounds go on from its result if it leaves cells invalid */
+    /* the tangle's neighbourhood already holds half the interior vertices, or 40% in one
+     * connected piece, and it is not a scrambled knot (over a quarter of the cells inverted:
+     * those go to the pieces' harmonic restart, which gives a scrambled grid back exactly):
+     * a twisted bar, every interior vertex out of place. Little is left to keep in place, and
+     * the global energy, which moves every interior vertex together, is the faster way (bar of
+     * 73 728 tetrahedra: 0.56 s against 1.79 s for the pieces' optimization, and a mesh the
+     * energy smoother no longer improves). The local rounds go on from its result if it
+     * leaves cells invalid.
+     * The 40% in one piece: the twisted bars of 144 000 and 248 832 tetrahedra (49% and 41%)
+     * took 4.5 and 5.2 s to untangle by the pieces' optimization and left minima of 0.007
+     * and 0.09 that cost the energy smoother 5.9 and 2.6 s; by the global energy 1.7 and
+     * 3.6 s, minima 0.31 and 0.25, smoothing 0.9 and 1.9 s. Scattered tangles (a 5% random
+     * perturbation of 546 750 tetrahedra: 40-50% of the vertices in many pieces) stay local:
+     * there the global energy moved every vertex */
     int nin = 0, nreg = 0; /* interior vertices, those in the region */
     for (int v = 0; v < m->nvert; v++) { nin += !C.bnd[v]; nreg += region[v] && !C.bnd[v]; }
-    /* or 40% of them in one connected piece: the twisted bars of 144 000 and 248 832
-     * tetrahedra (49% and 41%) took 4.5 and 5.2 s to untangle by the pieces' optimization
-     * and left minima of 0.007 and 0.09 that cost the energy smoother 5.9 and 2.6 s; by the
-     * global energy 1.7 and 3.6 s, minima 0.31 and 0.25, smoothing 0.9 and 1.9 s. Scattered
-     * tangles (a 5% random perturbation of 546 750 tetrahedra: 40-50% of the vertices in
-     * many pieces) stay local: there the global energy moved every vertex */
-    int big = rings == 2 && !global_tried && !o->no_global && 2 * nreg < nin && 5 * nreg >= 2 * nin &&
-              region_pieces(&C, region, list, off) == 1;
-    if (rings == 2 && (2 * nreg >= nin || big) && 4 * ninv <= m->ncell && !global_tried && !o->no_global) {
+    int np = region_pieces(&C, region, list, off), all = 1; /* the region's pieces, below too */
+    if (rings == 2 && (2 * nreg >= nin || (5 * nreg >= 2 * nin && np == 1)) && 4 * ninv <= m->ncell && !global_tried &&
+        !o->no_global) {
       global_tried = 1;
       if (try_global(&C, &W, m->x, save, trial, moved, touched, 10 * maxit, cwinv, beta, &ninv, s)) {
         ut_count_cells(&C, m->x, beta, &ninv, NULL);
@@ -737,7 +737,6 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
      * need moved and could leave a tangle that the fixed-boundary run undoes) */
     if (o->slide && rings > 2) s->moved += slide_boundary(&C, m->x, beta, region, moved);
     /* each connected piece of the region on its own: small problems converge fast */
-    int np = region_pieces(&C, region, list, off), all = 1;
     for (int k = 0; k < np; k++) {
       int *pv = list + off[k], n = off[k + 1] - off[k];
       int bad = piece_invalid(&C, &W, m->x, pv, n);

@@ -7,7 +7,8 @@
 -- writes the result. DIR holds the files (a temporary folder by default). Per case: inverted
 -- cells, then for each untangler success, time, and the minimum and mean mean ratio of the
 -- result, and the rest mesh's own.
--- Run: lugal bench/untangle_anchor3d.lua /path/to/untangle3d [dir] [1m]   ("1m": a 1 152 000-tetrahedron bar)
+-- Run: lugal bench/untangle_anchor3d.lua /path/to/untangle3d [dir] [1m|small] [newton|lbfgs]
+--   ("1m": a 1 152 000-tetrahedron bar; the last argument: the smoother's optimizer, auto by default)
 package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
 local A = require "anchor_cases"
 local lg = require "lugal"
@@ -55,7 +56,7 @@ for k, c in ipairs(arg[3] == "1m" and A.cases3d_1m or A.cases3d) do
   local m = tangled:copy()
   local t0 = lg.wtime()
   local r = m:untangle{quiet = true, boundary = "fixed"}
-  if r.success then m:smooth{quiet = true, method = "energy", iterations = 50, boundary = "fixed"} end
+  if r.success then m:smooth{quiet = true, method = "energy", iterations = 50, boundary = "fixed", optimizer = arg[4]} end
   local tl = lg.wtime() - t0
   local ql = m:quality("mean_ratio")
   local linv = m:check()

@@ -52,7 +52,9 @@ static int send_parts(lg_env *env, mesh *m, mesh_part **mine) {
   int layers = lg_ghost_layers(), rc = 0;
   /* the other ranks wait for their parts whatever happens here: errors go through the loop */
   if (layers < 0) {
-    lg_seterr(env, "-lugal_ghost_layers: expected a whole number from 1 to %d", LG_MAX_GHOST_LAYERS);
+    char given[64] = "";
+    PetscOptionsGetString(NULL, NULL, "-lugal_ghost_layers", given, sizeof given, NULL);
+    lg_seterr(env, "-lugal_ghost_layers: expected a whole number from 1 to %d, got %s", LG_MAX_GHOST_LAYERS, given);
     rc = 1;
   }
   if (!rc) rc = lg_partition_cells(env, m, size, part, &runs);

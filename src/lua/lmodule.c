@@ -76,6 +76,9 @@ int luaopen_lugal(lua_State *L) {
     PetscBool keep = PETSC_TRUE;
     PetscOptionsGetBool(NULL, NULL, "-lugal_keep_factor", &keep, NULL);
     ue->env->no_keep_factor = !keep;
+    /* -lugal_distribute and -lugal_ghost_layers, read again when a mesh is made: a script
+     * that makes none is not told they went unused */
+    (void)lg_distribute_wanted();
   } else lua_pop(L, 1);
 
   lg_lua_expr_register(L);

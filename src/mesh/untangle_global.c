@@ -212,7 +212,8 @@ static int sym_pd(int n, const double *a) {
 /* the eigenvalues w and eigenvectors (the columns of v) of a symmetric n×n matrix a (n ≤ 9,
  * destroyed) */
 static void sym_eigen(int n, double *a, double *w, double *v) {
-  dense_sym_eigen(n, a, v, 0, 1e-30);
+  if (n == 3) dense_sym_eigen3(a, v, 0, 1e-30);
+  else dense_sym_eigen(n, a, v, 0, 1e-30);
   for (int i = 0; i < n; i++) w[i] = a[i * n + i];
 }
 
@@ -506,9 +507,9 @@ double ut_energy_qmin(const objective *o, const double *x) {
   return qmin;
 }
 
-/* the corner Hessians' buffer limit (a hexahedron's eight corners take 9 KB): above it they
- * are computed and added on one thread, in the same order and with the same result */
-#define HESS_BUF_MAX ((size_t)512 << 20)
+/* the corner Hessians are computed in chunks of cells whose Hessians fit this buffer (a
+ * hexahedron's eight corners take 9 KB, a tetrahedron's one 1.1 KB) */
+#define HESS_CHUNK_BYTES ((size_t)64 << 20)
 
 /* row fk (the free vertex at corner kc's vertex k of cell vertices v) of the corner Hessian
  * h added into its blocks */
@@ -526,37 +527,49 @@ static void add_row_blocks(const objective *o, const ut_bsr *P, double *val, con
 }
 
 /* The projected Hessian of the energy in the free vertices' coordinates, d×d blocks on
- * pattern P. With OpenMP the corners' Hessians are computed on threads, then each free
- * vertex's row gathers them in (cell, corner, vertex) order, the order of the one-thread
- * loop, so that the result does not depend on the number of threads. 1 where the energy
- * is infinite. */
+ * pattern P. The cells go in chunks (HESS_CHUNK_BYTES): the chunk's corner Hessians are
+ * computed on threads, then each free vertex's row gathers those of its slots that lie in
+ * the chunk (a cursor per row: the slots are in (cell, corner, vertex) order), so every
+ * block receives its terms in the order of the one-thread loop below and the result does
+ * not depend on the number of threads. Before the chunks, a million-tetrahedron bar's
+ * Hessians (1.3 GB) did not fit a whole-mesh buffer and were assembled on one thread: 2 s
+ * of each 2.2 s Newton step. 1 where the energy is infinite. */
 int ut_energy_hessian(const objective *o, const double *x, const ut_bsr *P, double *val, int nfree) {
   const ctx *C = o->C;
   int d = C->d, nk = C->ncorner, n = o->ncell, nx = (d + 1) * d, dd = d * d;
-  size_t hs = (size_t)nx * nx, nc = (size_t)n * nk;
+  size_t hs = (size_t)nx * nx, per_cell = sizeof(double) * hs * (size_t)nk;
+  int chunk = HESS_CHUNK_BYTES / per_cell < (size_t)n ? (int)(HESS_CHUNK_BYTES / per_cell) : n;
   memset(val, 0, sizeof(double) * (size_t)P->off[nfree] * dd);
   ut_energy_buf *b = o->eb;
-  if (b && !energy_prepare(o, nfree) && (b->hc || sizeof(double) * nc * hs <= HESS_BUF_MAX) &&
-      (b->hc || (b->hc = malloc(sizeof(double) * nc * hs + 1)))) {
+  int *cur = NULL;
+  if (b && chunk > 0 && !energy_prepare(o, nfree) && (b->hc || (b->hc = malloc(per_cell * (size_t)chunk + 1))) &&
+      (cur = malloc(sizeof(int) * ((size_t)nfree + 1)))) {
     int bad = 0;
+    memcpy(cur, b->off, sizeof(int) * (size_t)nfree);
+    for (int c0 = 0; c0 < n && !bad; c0 += chunk) {
+      int c1 = n - c0 > chunk ? c0 + chunk : n;
+      size_t send = (size_t)c1 * nk * (size_t)(d + 1); /* the first slot past the chunk */
 #ifdef _OPENMP
-#pragma omp parallel for schedule(static) reduction(|| : bad) if (n > 1024)
+#pragma omp parallel for schedule(static) reduction(|| : bad) if (c1 - c0 > 1024)
 #endif
-    for (int i = 0; i < n; i++)
-      for (int kc = 0; kc < nk; kc++) bad = corner_hessian(o, x, i, kc, b->hc + ((size_t)i * nk + kc) * hs) || bad;
-    if (bad) return 1;
+      for (int i = c0; i < c1; i++)
+        for (int kc = 0; kc < nk; kc++) bad = corner_hessian(o, x, i, kc, b->hc + ((size_t)(i - c0) * nk + kc) * hs) || bad;
+      if (bad) break;
 #ifdef _OPENMP
 #pragma omp parallel for schedule(static) if (nfree > 1024)
 #endif
-    for (int fi = 0; fi < nfree; fi++)
-      for (int q = b->off[fi]; q < b->off[fi + 1]; q++) {
-        size_t sl = (size_t)b->slot[q], cq = sl / (size_t)(d + 1);
-        int k = (int)(sl % (size_t)(d + 1)), i = (int)(cq / (size_t)nk), kc = (int)(cq % (size_t)nk);
-        const int *v = cell_of(C, o->cells[i]);
-        const double *h = b->hc + cq * hs;
-        add_row_blocks(o, P, val, v, kc, k, fi, h);
+      for (int fi = 0; fi < nfree; fi++) {
+        int q = cur[fi];
+        for (; q < b->off[fi + 1] && (size_t)b->slot[q] < send; q++) {
+          size_t sl = (size_t)b->slot[q], cq = sl / (size_t)(d + 1);
+          int k = (int)(sl % (size_t)(d + 1)), i = (int)(cq / (size_t)nk), kc = (int)(cq % (size_t)nk);
+          add_row_blocks(o, P, val, cell_of(C, o->cells[i]), kc, k, fi, b->hc + (cq - (size_t)c0 * nk) * hs);
+        }
+        cur[fi] = q;
       }
-    return 0;
+    }
+    free(cur);
+    return bad;
   }
   double h[144];
   for (int i = 0; i < n; i++) {

@@ -62,7 +62,7 @@ typedef struct {
 typedef struct ut_energy_buf {
   int ready;
   double *fc, *gc;
-  double *hc; /* the corners' projected Hessians (ut_energy_hessian), or NULL */
+  double *hc; /* a chunk of cells' corner Hessians (ut_energy_hessian), or NULL */
   int *off, *slot;
 } ut_energy_buf;
 /* frees what ut_energy_eval allocated in b (the struct itself is the caller's) */

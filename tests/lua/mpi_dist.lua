@@ -239,7 +239,7 @@ do
   if lg.size() > 1 then -- a count out of 1 to 8 is reported, on every rank, not clamped
     lg.options("-lugal_ghost_layers 0")
     local ok, err = pcall(lg.mesh.rectangle, {nx = 4})
-    assert(not ok and err:find("-lugal_ghost_layers: expected a whole number from 1 to 8", 1, true), tostring(err))
+    assert(not ok and err:find("-lugal_ghost_layers: expected a whole number from 1 to 8, got 0", 1, true), tostring(err))
   end
   lg.options("-lugal_ghost_layers 2")
   local mesh = lg.mesh.rectangle{nx = 12}

@@ -5,24 +5,15 @@
 -- each method, boundary sliding. Per run: min and mean quality before and after, sum of 1/q
 -- (the objective), sweeps or rounds, time.
 -- Run: lugal bench/smooth.lua [n2d] [n3d]   (cells per direction; default 30 and 8)
-local lg = require "lugal"
+package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
+local perturbed = require "perturbed"
 local n2, n3 = tonumber(arg[1]) or 30, tonumber(arg[2]) or 8
 
 print("| mesh | method | min before | min after | mean before | mean after | sum 1/q after | sweeps/rounds | time s |")
 print("|---|---|---|---|---|---|---|---|---|")
 for _, cell in ipairs{"triangle", "quadrilateral", "tetrahedron", "hexahedron"} do
   for _, method in ipairs{"local", "global"} do
-    local solid = cell:match("hedron")
-    local n = solid and n3 or n2
-    local m = solid and lg.mesh.box{nx = n, cell = cell} or lg.mesh.rectangle{nx = n, cell = cell}
-    local seed = 7
-    local function rand() seed = (seed * 1103515245 + 12345) % 2147483648; return seed / 2147483648 end
-    local amp = (cell == "hexahedron" and 0.15 or 0.2) / n
-    for i = 1, m:nvertices() do
-      local p = {m:coordinates(i)}
-      for k = 1, #p do if p[k] > 0 and p[k] < 1 then p[k] = p[k] + amp * (2 * rand() - 1) end end
-      m:set_coordinates(i, table.unpack(p))
-    end
+    local m = perturbed(cell, cell:match("hedron") and n3 or n2)
     assert(m:check() == 0, "perturbed mesh must be valid")
     local r = m:smooth{method = method, iterations = 50, quiet = true}
     local q, inv = m:quality(r.measure), 0

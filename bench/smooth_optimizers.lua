@@ -4,27 +4,15 @@
 -- boundary fixed. Per run: time, minimum and mean quality (mean ratio; corner condition on
 -- hexahedra). Auto picks L-BFGS in 3D.
 -- Run: lugal bench/smooth_optimizers.lua
-package.path = arg[0]:match("(.*/)") .. "../tests/lua/?.lua;" .. package.path
+package.path = arg[0]:match("(.*/)") .. "?.lua;" .. arg[0]:match("(.*/)") .. "../tests/lua/?.lua;" .. package.path
+local perturbed = require "perturbed"
 local H = require "hard_meshes"
 local lg = require "lugal"
 local cases = {}
-local function perturbed(cell, n)
-  return function()
-    local m = lg.mesh.box{nx = n, cell = cell}
-    local seed = 7
-    local function rand() seed = (seed * 1103515245 + 12345) % 2147483648; return seed / 2147483648 end
-    local amp = (cell == "hexahedron" and 0.15 or 0.2) / n
-    for i = 1, m:nvertices() do
-      local p = {m:coordinates(i)}
-      for k = 1, #p do if p[k] > 0 and p[k] < 1 then p[k] = p[k] + amp * (2 * rand() - 1) end end
-      m:set_coordinates(i, table.unpack(p))
-    end
-    return m
-  end
-end
+local function box(cell, n) return function() return perturbed(cell, n) end end
 for _, n in ipairs{8, 16, 32} do
-  cases[#cases + 1] = {"tet box " .. n, perturbed("tetrahedron", n), "fixed"}
-  cases[#cases + 1] = {"hex box " .. n, perturbed("hexahedron", n), "fixed"}
+  cases[#cases + 1] = {"tet box " .. n, box("tetrahedron", n), "fixed"}
+  cases[#cases + 1] = {"hex box " .. n, box("hexahedron", n), "fixed"}
 end
 for _, n in ipairs{8, 16, 24, 32} do
   cases[#cases + 1] = {"bar " .. n, function()

@@ -9,8 +9,5 @@
  * the squared off-diagonal sum is below off_abs or at most off_rel times the squared
  * diagonal's (or after 100 sweeps); entries below 1e-300 are not rotated. */
 void dense_sym_eigen(int n, double *a, double *v, double off_abs, double off_rel);
-/* the same for n = 3, with the same result, unrolled: the projected Newton smoother's 3D
- * corner Hessians take two per tetrahedron corner */
-void dense_sym_eigen3(double *a, double *v, double off_abs, double off_rel);
 
 #endif

@@ -212,8 +212,7 @@ static int sym_pd(int n, const double *a) {
 /* the eigenvalues w and eigenvectors (the columns of v) of a symmetric n×n matrix a (n ≤ 9,
  * destroyed) */
 static void sym_eigen(int n, double *a, double *w, double *v) {
-  if (n == 3) dense_sym_eigen3(a, v, 0, 1e-30);
-  else dense_sym_eigen(n, a, v, 0, 1e-30);
+  dense_sym_eigen(n, a, v, 0, 1e-30);
   for (int i = 0; i < n; i++) w[i] = a[i * n + i];
 }
 

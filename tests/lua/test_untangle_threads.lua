@@ -30,6 +30,15 @@ local function perturb(m, amp, seed)
   end
 end
 
+-- the same for a unit cube's inner coordinates, continuing the random sequence
+local function perturb3(m, amp)
+  for k = 1, m:nvertices() do
+    local p = {m:coordinates(k)}
+    for j = 1, 3 do if p[j] > 1e-9 and p[j] < 1 - 1e-9 then p[j] = p[j] + amp*(math.random() - 0.5) end end
+    m:set_coordinates(k, table.unpack(p))
+  end
+end
+
 if arg[1] == "child" then
   local sp = H.spiral(100, 20, 0.7)
   local r = sp:untangle{quiet = true}
@@ -47,11 +56,7 @@ if arg[1] == "child" then
   local s = big:smooth{quiet = true, method = "energy", iterations = 2}
   print("newton", s.optimizer, string.format("%.6f %.6f", s.min_before, s.min_after), digest(big))
   local box = lg.mesh.box{nx = 6}
-  for k = 1, box:nvertices() do
-    local p = {box:coordinates(k)}
-    for j = 1, 3 do if p[j] > 1e-9 and p[j] < 1 - 1e-9 then p[j] = p[j] + 0.02*(math.random() - 0.5) end end
-    box:set_coordinates(k, table.unpack(p))
-  end
+  perturb3(box, 0.02)
   s = box:smooth{quiet = true, method = "energy", optimizer = "newton"}
   local z = 0
   for k = 1, box:nvertices() do local _, _, c = box:coordinates(k); z = z + c*k end
@@ -60,11 +65,7 @@ if arg[1] == "child" then
   -- 64 MB chunks, each computed on threads and gathered row by row with a cursor; L-BFGS
   -- reaches the same mesh (to its tolerance) without the Hessian
   local hex = lg.mesh.box{nx = 20, cell = "hexahedron"}
-  for k = 1, hex:nvertices() do
-    local p = {hex:coordinates(k)}
-    for j = 1, 3 do if p[j] > 1e-9 and p[j] < 1 - 1e-9 then p[j] = p[j] + 0.01*(math.random() - 0.5) end end
-    hex:set_coordinates(k, table.unpack(p))
-  end
+  perturb3(hex, 0.01)
   local hex2 = hex:copy()
   local hn = hex:smooth{quiet = true, method = "energy", optimizer = "newton", boundary = "fixed"}
   local hl = hex2:smooth{quiet = true, method = "energy", optimizer = "lbfgs", boundary = "fixed"}

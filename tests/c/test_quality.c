@@ -329,9 +329,21 @@ int main(int argc, char **argv) {
         for (int i = 0; i < 4; i++)
           for (int d = 0; d < 3; d++) x[i * 3 + d] = m->x[3 * m->cells[4 * c + i] + d];
         CHECK_CLOSE(fast[c], simplex_quality(3, x, qf[k]), 1e-13);
+        /* one cell at a time (the smoothers' star objectives and guards): the same bits */
+        CHECK(mesh_cell_quality(m, c, qf[k]) == fast[c], "cell %d: %.17g, mesh_quality %.17g", c,
+              mesh_cell_quality(m, c, qf[k]), fast[c]);
         if (k == 1) ninv += fast[c] < 0;
       }
     }
+    /* far from unit size (squared edges below 1e-60) the cells take the normalized path:
+     * the same shapes, the same values */
+    mesh *tiny = mesh_copy(m);
+    for (int v = 0; v < m->nvert * 3; v++) tiny->x[v] *= 1e-35;
+    for (int k = 0; k < 2; k++) {
+      CHECK(mesh_quality(m, qf[k], NULL, fast, err) == 0, "%s", err);
+      for (int c = 0; c < m->ncell; c++) CHECK_CLOSE(mesh_cell_quality(tiny, c, qf[k]), fast[c], 1e-13);
+    }
+    mesh_free(tiny);
     printf("fast loops checked on %d perturbed tetrahedra (%d inverted)\n", m->ncell, ninv);
     free(fast);
     mesh_free(m);

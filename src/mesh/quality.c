@@ -525,45 +525,6 @@ static inline double cbrt_pos(double x) {
   return x * r * r;
 }
 
-/* tight loops for the two measures people run on huge tetrahedral meshes: no square root
- * for η (squared lengths, a determinant and one cube root), one for the scaled Jacobian
- * (the largest product of a corner's three squared edge lengths) */
-static double scaled_cell_quality(const mesh *m, int c, int q);
-
-/* the mean ratio or scaled Jacobian of tetrahedron c straight from its coordinates, without
- * normalizing them (the scaled path for cells far from unit size) */
-static double tet_fast_cell(const mesh *m, int c, int q) {
-  const double *X = m->x;
-  const int *v = m->cells + 4 * (size_t)c;
-  const double *p0 = X + 3 * (size_t)v[0], *p1 = X + 3 * (size_t)v[1], *p2 = X + 3 * (size_t)v[2],
-               *p3 = X + 3 * (size_t)v[3];
-  double a[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
-  double b[3] = {p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
-  double d[3] = {p3[0] - p0[0], p3[1] - p0[1], p3[2] - p0[2]};
-  double e[3] = {p2[0] - p1[0], p2[1] - p1[1], p2[2] - p1[2]};
-  double f[3] = {p3[0] - p1[0], p3[1] - p1[1], p3[2] - p1[2]};
-  double g[3] = {p3[0] - p2[0], p3[1] - p2[1], p3[2] - p2[2]};
-  double det = a[0] * (b[1] * d[2] - b[2] * d[1]) - a[1] * (b[0] * d[2] - b[2] * d[0]) + a[2] * (b[0] * d[1] - b[1] * d[0]);
-  double la = a[0] * a[0] + a[1] * a[1] + a[2] * a[2], lb = b[0] * b[0] + b[1] * b[1] + b[2] * b[2];
-  double ld = d[0] * d[0] + d[1] * d[1] + d[2] * d[2], le = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
-  double lf = f[0] * f[0] + f[1] * f[1] + f[2] * f[2], lg = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
-  double s = la + lb + ld + le + lf + lg;
-  if (!(s > 1e-60 && s < 1e60)) return scaled_cell_quality(m, c, q); /* far from unit size (or not finite) */
-  if (q == QM_MEAN_RATIO) {
-    /* (2.1): 12 (9 V²)^(1/3) / Σ L², V = det/6 → 12 (det²/4)^(1/3) / Σ L² */
-    double t = 0.25 * det * det;
-    return s > 0 && t > 0 ? 12 * cbrt_pos(t) / s : 0;
-  }
-  /* corners: 0 (a, b, d), 1 (a, e, f), 2 (b, e, g), 3 (d, f, g) */
-  double m0 = la * lb * ld, m1 = la * le * lf, m2 = lb * le * lg, m3 = ld * lf * lg;
-  double mx = fmax(fmax(m0, m1), fmax(m2, m3));
-  return mx > 0 ? det / sqrt(mx) * sqrt(2.0) : 0;
-}
-
-static void tet_fast(const mesh *m, int q, double *out) {
-  for (int c = 0; c < m->ncell; c++) out[c] = tet_fast_cell(m, c, q);
-}
-
 /* measure q of one cell of type t given its vertex coordinates */
 static double coords_quality(cell_type t, const double *xc, int q) {
   if (t == CELL_TRIANGLE) return q >= QM_V_AREA ? verdict_tri(xc, q) : tri_quality(xc, q);
@@ -605,9 +566,40 @@ static double scaled_cell_quality(const mesh *m, int c, int q) {
   return scaled_quality(m->type, x, e, q);
 }
 
-/* a tetrahedron's mean ratio and scaled Jacobian by mesh_quality's direct path (the same
- * values: the smoothers' star objectives and guards agree with the reported quality, at a
- * third of the cost of normalizing the coordinates) */
+/* the two measures people run on huge tetrahedral meshes, for one cell straight from its
+ * coordinates: no square root for η (squared lengths, a determinant and one cube root), one
+ * for the scaled Jacobian (the largest product of a corner's three squared edge lengths);
+ * cells far from unit size take the normalized path */
+static double tet_fast_cell(const mesh *m, int c, int q) {
+  const double *X = m->x;
+  const int *v = m->cells + 4 * (size_t)c;
+  const double *p0 = X + 3 * (size_t)v[0], *p1 = X + 3 * (size_t)v[1], *p2 = X + 3 * (size_t)v[2],
+               *p3 = X + 3 * (size_t)v[3];
+  double a[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
+  double b[3] = {p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
+  double d[3] = {p3[0] - p0[0], p3[1] - p0[1], p3[2] - p0[2]};
+  double e[3] = {p2[0] - p1[0], p2[1] - p1[1], p2[2] - p1[2]};
+  double f[3] = {p3[0] - p1[0], p3[1] - p1[1], p3[2] - p1[2]};
+  double g[3] = {p3[0] - p2[0], p3[1] - p2[1], p3[2] - p2[2]};
+  double det = a[0] * (b[1] * d[2] - b[2] * d[1]) - a[1] * (b[0] * d[2] - b[2] * d[0]) + a[2] * (b[0] * d[1] - b[1] * d[0]);
+  double la = a[0] * a[0] + a[1] * a[1] + a[2] * a[2], lb = b[0] * b[0] + b[1] * b[1] + b[2] * b[2];
+  double ld = d[0] * d[0] + d[1] * d[1] + d[2] * d[2], le = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+  double lf = f[0] * f[0] + f[1] * f[1] + f[2] * f[2], lg = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
+  double s = la + lb + ld + le + lf + lg;
+  if (!(s > 1e-60 && s < 1e60)) return scaled_cell_quality(m, c, q); /* far from unit size (or not finite) */
+  if (q == QM_MEAN_RATIO) {
+    /* (2.1): 12 (9 V²)^(1/3) / Σ L², V = det/6 → 12 (det²/4)^(1/3) / Σ L² */
+    double t = 0.25 * det * det;
+    return s > 0 && t > 0 ? 12 * cbrt_pos(t) / s : 0;
+  }
+  /* corners: 0 (a, b, d), 1 (a, e, f), 2 (b, e, g), 3 (d, f, g) */
+  double m0 = la * lb * ld, m1 = la * le * lf, m2 = lb * le * lg, m3 = ld * lf * lg;
+  double mx = fmax(fmax(m0, m1), fmax(m2, m3));
+  return mx > 0 ? det / sqrt(mx) * sqrt(2.0) : 0;
+}
+
+/* mesh_quality without a metric takes this cell by cell, so the smoothers' star objectives
+ * and guards see the reported values */
 double mesh_cell_quality(const mesh *m, int c, int q) {
   if (m->type == CELL_TETRAHEDRON && (q == QM_MEAN_RATIO || q == QM_SCALED_JACOBIAN)) return tet_fast_cell(m, c, q);
   return scaled_cell_quality(m, c, q);
@@ -626,10 +618,12 @@ int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out
   int d = m->dim, nvc = m->nvc;
   double N[3][3];
   int kind = metric ? metric->kind : 0;
-  if (!kind && m->type == CELL_TETRAHEDRON && (q == QM_MEAN_RATIO || q == QM_SCALED_JACOBIAN)) {
-    tet_fast(m, q, out);
+  if (!kind) {
+    for (int c = 0; c < m->ncell; c++) out[c] = mesh_cell_quality(m, c, q);
     return 0;
   }
+  /* a metric: each cell mapped by N with N^T N = M (constant, or the vertices' tensors
+   * averaged over the cell) and measured there */
   if (kind == 1 && !metric_map(d, metric->m, N)) {
     snprintf(err, MESH_ERRLEN, "the metric tensor is not symmetric positive definite");
     return 1;
@@ -647,17 +641,13 @@ int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out
         return 1;
       }
     }
-    const double *xc = x;
-    if (kind) {
-      for (int i = 0; i < nvc; i++)
-        for (int r = 0; r < d; r++) {
-          double s = 0;
-          for (int k = 0; k < d; k++) s += N[r][k] * x[i * d + k];
-          y[i * d + r] = s;
-        }
-      xc = y;
-    }
-    out[c] = scaled_quality(m->type, xc, e, q);
+    for (int i = 0; i < nvc; i++) /* the cell mapped by N (N^T N = M) */
+      for (int r = 0; r < d; r++) {
+        double s = 0;
+        for (int k = 0; k < d; k++) s += N[r][k] * x[i * d + k];
+        y[i * d + r] = s;
+      }
+    out[c] = scaled_quality(m->type, y, e, q);
   }
   return 0;
 }

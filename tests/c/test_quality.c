@@ -314,8 +314,9 @@ int main(int argc, char **argv) {
     }
   }
 
-  /* the fast tetrahedron loops (mean ratio, scaled Jacobian) agree with the generic
-   * formulas cell by cell on a randomly perturbed box, inverted cells included */
+  /* the direct tetrahedron formulas (mean ratio, scaled Jacobian; mesh_cell_quality, which
+   * mesh_quality takes cell by cell without a metric) agree with the generic formulas on a
+   * randomly perturbed box, inverted cells included */
   {
     mesh_box_opts ob = {5, 4, 3, 0, 1, 0, 1, 0, 1, CELL_TETRAHEDRON, 0};
     mesh *m = mesh_box(&ob, err);
@@ -329,9 +330,6 @@ int main(int argc, char **argv) {
         for (int i = 0; i < 4; i++)
           for (int d = 0; d < 3; d++) x[i * 3 + d] = m->x[3 * m->cells[4 * c + i] + d];
         CHECK_CLOSE(fast[c], simplex_quality(3, x, qf[k]), 1e-13);
-        /* one cell at a time (the smoothers' star objectives and guards): the same bits */
-        CHECK(mesh_cell_quality(m, c, qf[k]) == fast[c], "cell %d: %.17g, mesh_quality %.17g", c,
-              mesh_cell_quality(m, c, qf[k]), fast[c]);
         if (k == 1) ninv += fast[c] < 0;
       }
     }

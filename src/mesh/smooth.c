@@ -30,11 +30,19 @@ double ut_star_objective(const ctx *C, int v, int q, double *qmin) {
 }
 
 
+/* a boundary vertex may move (a sliding boundary with somewhere to slide) */
+static int has_sliding(const ctx *C) {
+  for (int v = 0; v < C->m->nvert; v++)
+    if (C->bnd[v] && !C->fixed[v]) return 1;
+  return 0;
+}
+
 /* one local step at v (interior: along minus the central-difference gradient of Σ 1/q over
  * its star; 2D sliding boundary vertex: along the better boundary edge); 1 if v moved */
 typedef struct {
   int measure;
   double qmin0;
+  const objective *ob; /* the energy whose gradient is d Σ 1/q (tetrahedra, the mean ratio), or NULL */
 } smooth_arg;
 static double smooth_penalty(const ctx *C, int v, const void *arg, int probe) {
   const smooth_arg *a = arg;
@@ -42,14 +50,21 @@ static double smooth_penalty(const ctx *C, int v, const void *arg, int probe) {
   return probe || qmin >= a->qmin0 ? f : INFINITY;
 }
 
-static int smooth_vertex_step(ctx *C, int v, int measure) {
+/* the analytic gradient of the energy, a multiple of Σ 1/q's: one evaluation of the star
+ * instead of four (the central differences), which were most of a sliding 3D round's slides */
+static int smooth_gradient(const ctx *C, int v, const void *arg, double *g) {
+  const smooth_arg *a = arg;
+  return !isfinite(ut_energy_vertex(a->ob, C->m->x, v, g));
+}
+
+static int smooth_vertex_step(ctx *C, int v, int measure, const objective *ob) {
   mesh *m = C->m;
   int d = m->dim;
   if (C->fixed[v]) return 0;
   double *p = m->x + (size_t)v * d, p0[3], qmin0, f0 = ut_star_objective(C, v, measure, &qmin0);
   if (C->bnd[v] && d == 3) { /* along the flat face or straight edge, never lowering the star's minimum */
-    smooth_arg a = {measure, qmin0};
-    return ut_slide_3d(C, m->x, v, smooth_penalty, &a);
+    smooth_arg a = {measure, qmin0, ob};
+    return ut_slide_3d(C, m->x, v, smooth_penalty, ob ? smooth_gradient : NULL, &a);
   }
   for (int j = 0; j < d; j++) p0[j] = p[j];
   double h = ut_star_h(C, v), dir[3] = {0, 0, 0};
@@ -90,10 +105,10 @@ static int smooth_vertex_step(ctx *C, int v, int measure) {
 }
 
 /* the step, and what it gained: f0 − f of the star is the change of Σ 1/q over the mesh */
-static int smooth_vertex(ctx *C, int v, int measure, double *gain) {
+static int smooth_vertex(ctx *C, int v, int measure, const objective *ob, double *gain) {
   if (C->fixed[v]) return 0;
   double q0, q1, f0 = ut_star_objective(C, v, measure, &q0);
-  if (!smooth_vertex_step(C, v, measure)) return 0;
+  if (!smooth_vertex_step(C, v, measure, ob)) return 0;
   *gain += f0 - ut_star_objective(C, v, measure, &q1);
   return 1;
 }
@@ -136,7 +151,12 @@ static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, smoo
      * the same term over the corners, J relative to a square's or cube's corner: each is the
      * inverse mean ratio of a corner's map, which the corner condition measures too */
     ob.smooth = 2;
-    ob.stall = 1;
+    /* the window that ends an L-BFGS round: 20 iterations; 5 when the boundary slides
+     * between rounds. There a round's interior only has to follow the boundary's last
+     * slides, which the next round moves again: the 3D rounds spent their second 20
+     * iterations on a 0.01% gain (perturbed 24³ tetrahedral box: 712 L-BFGS iterations in
+     * 18 rounds, 335 with the short window, the same rounds and minimum, bench/RESULTS.md) */
+    ob.stall = o->slide && !cwinv && has_sliding(C) ? 5 : 20;
     ob.eb = &eb;
     ob.theta = 0;
     ob.eps = 0;
@@ -166,6 +186,10 @@ static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, smoo
     }
     r->optimizer = SMOOTH_LBFGS;
   }
+  /* the slides' gradient from the energy where it is d Σ 1/q: tetrahedra and the mean ratio
+   * (a hexahedron's corner condition is not its corners' mean ratio; 2D slides probe the
+   * two boundary edges) */
+  const objective *slide_ob = ob.smooth == 2 && m->type == CELL_TETRAHEDRON && !cwinv ? &ob : NULL;
   for (int round = 0; round < o->iterations; round++) {
     double f0 = 0;
     if (ob.smooth == 2) f0 = ut_energy_eval(&ob, m->x, NULL, nfree);
@@ -194,7 +218,7 @@ static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, smoo
     if (its < 0) { snprintf(err, MESH_ERRLEN, "out of memory"); status = 1; break; }
     if (o->slide && !cwinv) /* with reference shapes the boundary stays */
       for (int v = 0; v < m->nvert; v++)
-        if (C->bnd[v]) slid += smooth_vertex(C, v, o->measure, &gain);
+        if (C->bnd[v]) slid += smooth_vertex(C, v, o->measure, slide_ob, &gain);
     r->sweeps = round + 1;
     if (its > 0) r->iterations += its;
     if (o->verbose) printf("smooth: round %d, %d %s iterations, sum 1/q %.6g -> %.6g, %d boundary vertices slid\n",
@@ -261,7 +285,7 @@ static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err
       int changed = 0;
       double total = 0, gain = 0;
       for (int c = 0; c < m->ncell; c++) total += 1 / mesh_cell_quality(m, c, o->measure);
-      for (int v = 0; v < m->nvert; v++) changed += smooth_vertex(&C, v, o->measure, &gain);
+      for (int v = 0; v < m->nvert; v++) changed += smooth_vertex(&C, v, o->measure, NULL, &gain);
       r->sweeps = sweep + 1;
       if (o->verbose) printf("smooth: sweep %d moved %d vertices, sum 1/q %.6g -> %.6g\n", sweep + 1, changed, total,
                              total - gain);

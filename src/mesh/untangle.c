@@ -217,12 +217,13 @@ int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int max
     f = fn;
     if (o->smooth) {
       if (fprev - f <= (o->ftol > 0 ? o->ftol : 1e-9) * fprev) break;
-      /* the energy smoother: 20 iterations that gained less than 1e-4 of it end the round
-       * (its rounds stop at a 1e-3 gain; a mesh the untangler's global energy left near
-       * the smoother's optimum otherwise spends a round of 100 iterations on nothing) */
+      /* the energy smoother: a window of o->stall iterations (20: 1e-4 of f in all) that
+       * gained less than 5e-6 of f per iteration ends the round (its rounds stop at a 1e-3
+       * gain; a mesh the untangler's global energy left near the smoother's optimum
+       * otherwise spends a round of 100 iterations on nothing) */
       if (o->stall) {
-        if (it % 20 == 0) fmark = fprev;
-        else if (it % 20 == 19 && fmark - f < 1e-4 * fmark) { it++; break; }
+        if (it % o->stall == 0) fmark = fprev;
+        else if (it % o->stall == o->stall - 1 && fmark - f < 5e-6 * o->stall * fmark) { it++; break; }
       }
       continue;
     }
@@ -286,7 +287,7 @@ static int slide_boundary(ctx *C, double *x, double beta, const unsigned char *r
     for (int v = 0; v < m->nvert; v++) {
       if (!C->bnd[v] || C->fixed[v] || !region[v]) continue;
       if (C->d == 3) {
-        if (ut_slide_3d(C, x, v, untangle_penalty, &pa)) {
+        if (ut_slide_3d(C, x, v, untangle_penalty, NULL, &pa)) {
           changed++;
           if (!moved[v]) total++;
           moved[v] = 1;

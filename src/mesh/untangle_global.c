@@ -150,9 +150,9 @@ void ut_relative_mean_ratio(const ctx *C, const double *cwinv, double *out) {
 
 /* One corner's energy (a simplex has one corner), and with gk its gradient in each of the
  * corner's d + 1 vertices (C->ct[kc] order, d each); +∞ for an invalid corner at ε = 0 */
-static double corner_energy(const objective *o, const double *x, int i, int kc, double *gk) {
+static double corner_energy(const objective *o, const double *x, int c, int kc, double *gk) {
   const ctx *C = o->C;
-  int d = C->d, c = o->cells[i];
+  int d = C->d;
   double theta = o->theta, eps = o->eps;
   double J[3][3], K[3][3];
   const int *v;
@@ -454,7 +454,7 @@ double ut_energy_eval(const objective *o, const double *x, double *grad, int nfr
     for (int i = 0; i < n; i++)
       for (int kc = 0; kc < nk; kc++) {
         size_t q = (size_t)i * nk + kc;
-        b->fc[q] = corner_energy(o, x, i, kc, grad ? b->gc + q * (size_t)(d + 1) * d : NULL);
+        b->fc[q] = corner_energy(o, x, o->cells[i], kc, grad ? b->gc + q * (size_t)(d + 1) * d : NULL);
         bad = bad || isinf(b->fc[q]);
       }
     if (bad) return INFINITY;
@@ -477,7 +477,7 @@ double ut_energy_eval(const objective *o, const double *x, double *grad, int nfr
   for (int i = 0; i < n; i++) {
     const int *v = cell_of(C, o->cells[i]);
     for (int kc = 0; kc < nk; kc++) {
-      double e = corner_energy(o, x, i, kc, grad ? gk : NULL);
+      double e = corner_energy(o, x, o->cells[i], kc, grad ? gk : NULL);
       if (isinf(e)) return INFINITY;
       f += e;
       for (int k = 0; grad && k <= d; k++) {
@@ -485,6 +485,26 @@ double ut_energy_eval(const objective *o, const double *x, double *grad, int nfr
         if (fi < 0) continue;
         for (int a = 0; a < d; a++) grad[(size_t)fi * d + a] += gk[k * d + a];
       }
+    }
+  }
+  return f;
+}
+
+double ut_energy_vertex(const objective *o, const double *x, int v, double *gv) {
+  const ctx *C = o->C;
+  int d = C->d;
+  double f = 0, gk[12];
+  for (int a = 0; a < d; a++) gv[a] = 0;
+  for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++) {
+    int c = C->vc[p];
+    const int *cell = cell_of(C, c);
+    for (int kc = 0; kc < C->ncorner; kc++) {
+      double e = corner_energy(o, x, c, kc, gk);
+      if (isinf(e)) return INFINITY;
+      f += e;
+      for (int k = 0; k <= d; k++)
+        if (cell[C->ct[kc][k]] == v)
+          for (int a = 0; a < d; a++) gv[a] += gk[k * d + a];
     }
   }
   return f;

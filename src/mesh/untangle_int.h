@@ -31,6 +31,9 @@ typedef struct {
 } ctx;
 
 typedef double (*vertex_penalty)(const ctx *C, int v, const void *arg, int probe); /* probe: for the gradient, no guard */
+/* the gradient in v of what a vertex_penalty measures (without its guard), into g[0..d); 1 where
+ * it is not finite */
+typedef int (*vertex_gradient)(const ctx *C, int v, const void *arg, double *g);
 
 /* f = Σ ((|J − β| − (J − β)) / (2 S))² = Σ (max(0, β − J)/S)² over the corners of cells,
  * the quadratic objective (3.3) scaled by a typical corner Jacobian S */
@@ -52,7 +55,8 @@ typedef struct {
   double eps, theta, winv[9];
   const double *cwinv; /* per corner W⁻¹ (ncell*ncorner*d*d) of its reference shape, or NULL: winv */
   struct ut_energy_buf *eb; /* smooth == 2: the threaded evaluation's buffers (ut_energy_eval) */
-  int stall;        /* smooth == 2 (the energy smoother): 20 iterations that gain less than 1e-4 end the run */
+  int stall;        /* smooth == 2 (the energy smoother): a window of this many iterations that
+                     * gains less than 5e-6 of f per iteration ends the run (0: no window) */
   double ftol;      /* smooth: a step that lowers f by at most ftol·f ends the run (0: 1e-9) */
   double keepq;     /* ut_newton: an end whose smallest corner quality is below keepq gives way to
                      * the last iterate that was not (the smoother never lowers the minimum) */
@@ -90,6 +94,9 @@ int ut_energy_hessian(const objective *o, const double *x, const ut_bsr *P, doub
 /* the smallest corner quality d det(J)^(2/d) / |J|² of a smooth == 2 objective's cells
  * (0 where a corner is invalid): the mean ratio, relative to the reference shapes if any */
 double ut_energy_qmin(const objective *o, const double *x);
+/* the energy of a smooth == 2 objective over the corners of v's cells (all of them, not only
+ * o->cells), and into gv its gradient in v; +∞ where a corner is invalid */
+double ut_energy_vertex(const objective *o, const double *x, int v, double *gv);
 /* projected Newton on a smooth == 2 objective (untangle_newton.c): as ut_lbfgs, each step
  * from the preconditioned conjugate gradients on the projected Hessian, Armijo backtracking;
  * stops when a step lowers f by at most ftol·f (0: 1e-9). Iterations, or -1 out of memory */
@@ -146,8 +153,9 @@ void ut_ctx_free(ctx *C);
 double ut_star_h(const ctx *C, int v);
 double ut_cell_min_jac(const ctx *C, const double *x, int c);
 void ut_count_cells(const ctx *C, const double *x, double beta, int *ninv, int *nbelow);
-/* 3D: one boundary vertex descends pen along its slide directions; 1 if it moved */
-int ut_slide_3d(const ctx *C, double *x, int v, vertex_penalty pen, const void *arg);
+/* 3D: one boundary vertex descends pen along its slide directions (the gradient from grad, or
+ * by central differences of pen when grad is NULL); 1 if it moved */
+int ut_slide_3d(const ctx *C, double *x, int v, vertex_penalty pen, vertex_gradient grad, const void *arg);
 int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout);
 /* the cells around the free vertices (each once) */
 int ut_cells_around(const ctx *C, work *W, const int *freev, int nfree);

@@ -1,4 +1,7 @@
-/* test_hessian.c — the projected corner Hessians of the untangling energy (untangle_global.c,
+/* test_hessian.c — the derivatives of the untangling energy: a vertex's star energy and its
+ * gradient, which the sliding smoother's 3D slides descend (ut_energy_vertex: d Σ 1/q of the
+ * mean ratio over the star, its gradient against central differences), and the projected
+ * corner Hessians (untangle_global.c,
  * included here to reach its static functions): on one simplex whose W⁻¹ is the identity and
  * whose vertex 0 is the origin, J's columns are vertices 1..d, so the block of the vertex
  * Hessian in vertices 1..d is the Hessian in J. It must equal the finite-difference Hessian of
@@ -8,6 +11,7 @@
  * (θ = 1/2, ε > 0, inverted corners too). */
 #include "../../src/mesh/untangle_global.c"
 
+#include "../../src/mesh/quality.h"
 #include "check.h"
 
 static unsigned rng = 12345;
@@ -96,8 +100,54 @@ static void check_case(int d, double J[3][3], double theta, double eps, const ch
   }
 }
 
+/* ut_energy_vertex on a perturbed 3×3×3 tetrahedral box at ε = 0, θ = 0, J relative to a
+ * regular tetrahedron (the energy smoother's objective): its value is 3 Σ 1/q over the cells
+ * around the vertex (q the mean ratio mesh_cell_quality reports) and its gradient the
+ * central differences of that value, at interior, face, edge and corner vertices */
+static void check_vertex_energy(void) {
+  char err[MESH_ERRLEN];
+  mesh_box_opts bo = {3, 3, 3, 0, 1, 0, 1, 0, 1, CELL_TETRAHEDRON, 0};
+  mesh *m = mesh_box(&bo, err);
+  CHECK(m != NULL, "box: %s", err);
+  if (!m) return;
+  for (int v = 0; v < m->nvert; v++)
+    for (int a = 0; a < 3; a++) {
+      double *p = m->x + 3 * v + a;
+      if (*p > 0 && *p < 1) *p += 0.07 * rnd();
+    }
+  ctx C;
+  CHECK(!ut_ctx_init(&C, m, 1, err), "context: %s", err);
+  objective o;
+  memset(&o, 0, sizeof o);
+  o.C = &C;
+  o.smooth = 2;
+  ut_regular_winv(3, 1.0, o.winv);
+  int checked = 0;
+  for (int v = 0; v < m->nvert; v++) {
+    double g[3], gp[3], sq = 0, f = ut_energy_vertex(&o, m->x, v, g), gmax = 0;
+    for (int p = C.vc_off[v]; p < C.vc_off[v + 1]; p++) sq += 1 / mesh_cell_quality(m, C.vc[p], QM_MEAN_RATIO);
+    CHECK(fabs(f - 3 * sq) <= 1e-12 * f, "vertex %d: star energy %.17g, 3 sum 1/q %.17g", v, f, 3 * sq);
+    for (int a = 0; a < 3; a++) gmax = fmax(gmax, fabs(g[a]));
+    for (int a = 0; a < 3; a++) {
+      double *p = m->x + 3 * v + a, p0 = *p, h = 1e-6;
+      *p = p0 + h;
+      double fp = ut_energy_vertex(&o, m->x, v, gp);
+      *p = p0 - h;
+      double fm = ut_energy_vertex(&o, m->x, v, gp);
+      *p = p0;
+      CHECK(fabs((fp - fm) / (2 * h) - g[a]) <= 1e-6 * (1 + gmax), "vertex %d, coordinate %d: gradient %.12g, central "
+            "differences %.12g", v, a, g[a], (fp - fm) / (2 * h));
+    }
+    checked++;
+  }
+  CHECK(checked == 64, "%d vertices", checked);
+  ut_ctx_free(&C);
+  mesh_free(m);
+}
+
 int main(void) {
   char what[128];
+  check_vertex_energy();
   for (int d = 2; d <= 3; d++)
     for (int t = 0; t < 40; t++) {
       double J[3][3];

@@ -60,6 +60,7 @@ typedef struct {
   double ftol;      /* smooth: a step that lowers f by at most ftol·f ends the run (0: 1e-9) */
   double keepq;     /* ut_newton: an end whose smallest corner quality is below keepq gives way to
                      * the last iterate that was not (the smoother never lowers the minimum) */
+  int *amg_used;    /* ut_newton sets *amg_used when it takes the multigrid (NULL: not asked) */
 } objective;
 
 /* per cell: its energy and vertex gradients; per free vertex: its (cell, vertex) slots */
@@ -101,6 +102,38 @@ double ut_energy_vertex(const objective *o, const double *x, int v, double *gv);
  * from the preconditioned conjugate gradients on the projected Hessian, Armijo backtracking;
  * stops when a step lowers f by at most ftol·f (0: 1e-9). Iterations, or -1 out of memory */
 int ut_newton(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout);
+/* the block-sparse algebra (untangle_amg.c): y = H x on the pattern (nrow block rows); the
+ * inverse diagonal blocks (made positive definite by a relative shift of 1e-10 of their
+ * trace, which is added to val's diagonal; dpos: each row's diagonal block); z = D⁻¹ r */
+void ut_bsr_mult(const ut_bsr *P, const double *val, int nrow, int d, const double *x, double *y);
+void ut_block_jacobi(double *val, const int *dpos, int nrow, int d, double *dinv);
+void ut_block_apply(const double *dinv, int nrow, int d, const double *r, double *z);
+/* the aggregation multigrid for the Newton smoother's conjugate gradients: one level per
+ * coarsening, the finest on the Hessian's own pattern and values (not owned) */
+#define UT_AMG_MAXLEV 16
+typedef struct {
+  int n;              /* block rows */
+  ut_bsr P;           /* pattern */
+  double *val, *dinv; /* blocks and inverse diagonal blocks */
+  int *dpos, owns;    /* each row's diagonal block; val and dinv are this level's */
+  double omega;       /* the Jacobi smoother's damping */
+  int *agg;           /* row -> the next level's row (its aggregate) */
+  int *mem_off, *mem; /* the next level's rows: their members here, in row order */
+  size_t *cpos;       /* per block here: the next level's block it adds into */
+  double *t, *v1, *w1, *v2, *w2, *r1, *in, *out; /* work vectors */
+} ut_amg_level;
+typedef struct {
+  int nlev, d;
+  ut_amg_level L[UT_AMG_MAXLEV];
+  double *chol, *part; /* the coarsest level's Cholesky factor; ut_dot's partial sums */
+} ut_amg;
+/* the hierarchy's patterns from the Hessian's (n block rows of d); 1 out of memory (then
+ * ut_amg_free); ut_amg_values: the values for one Newton step (val: the Hessian's, dinv:
+ * its inverse diagonal blocks, both kept by pointer); ut_amg_apply: z from one cycle on r */
+int ut_amg_build(ut_amg *A, const ut_bsr *P, int n, int d);
+void ut_amg_values(ut_amg *A, double *val, const double *dinv);
+void ut_amg_apply(ut_amg *A, const double *r, double *z);
+void ut_amg_free(ut_amg *A);
 /* a · b in fixed chunks of UT_DOT_CHUNK entries summed in order (threads over the chunks
  * when n is large): the same bits for any thread count; part holds n / UT_DOT_CHUNK + 1 */
 #define UT_DOT_CHUNK 4096

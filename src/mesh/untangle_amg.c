@@ -1,0 +1,428 @@
+/* untangle_amg.c — the block-sparse algebra of the projected Newton smoother
+ * (untangle_newton.c): products with the Hessian's d×d blocks, its block Jacobi
+ * preconditioner, and an aggregation multigrid for its conjugate gradients on large meshes.
+ *
+ * Block Jacobi's conjugate gradients need more iterations as the mesh grows (50–240 per
+ * Newton step on a million-triangle spiral, three quarters of the smoother's time). The
+ * multigrid keeps the count nearly flat: aggregates of a vertex and its neighbours (Vaněk's
+ * plain aggregation on the Hessian's block graph, so the hierarchy is built once per Newton
+ * run: the pattern does not change between steps), coarse matrices as sums of the fine
+ * blocks (the Galerkin product with piecewise constant prolongation, d×d identity blocks),
+ * one damped block Jacobi sweep before and after each coarse correction, and on every coarse
+ * level two flexible conjugate-gradient steps preconditioned by the next (Notay and
+ * Vassilevski's K-cycle, which makes plain aggregation converge independently of the number
+ * of levels), down to a level small enough for a dense Cholesky factor. The outer conjugate
+ * gradients are the flexible variant (the K-cycle is not a fixed linear operator).
+ * Every sum is in a fixed order and every threaded loop element-wise, so the result has the
+ * same bits for any number of threads. */
+#include "untangle_int.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* y = H x on the pattern, rows on threads; d = 2 and 3 written out (the general loop's
+ * accumulator went through memcpy: a fifth of the smoother's time on a 24 000-vertex strip).
+ * d is 2 or 3: smoothing refuses intervals (smooth.c) */
+void ut_bsr_mult(const ut_bsr *P, const double *val, int nrow, int d, const double *x, double *y) {
+  if (d == 2) {
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (nrow > 2048)
+#endif
+    for (int fi = 0; fi < nrow; fi++) {
+      double s0 = 0, s1 = 0;
+      for (int q = P->off[fi]; q < P->off[fi + 1]; q++) {
+        const double *b = val + (size_t)q * 4, *xc = x + (size_t)P->col[q] * 2;
+        s0 += b[0] * xc[0]; /* one product at a time: the general loop's order and bits */
+        s0 += b[1] * xc[1];
+        s1 += b[2] * xc[0];
+        s1 += b[3] * xc[1];
+      }
+      y[(size_t)fi * 2] = s0;
+      y[(size_t)fi * 2 + 1] = s1;
+    }
+    return;
+  }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (nrow > 2048)
+#endif
+  for (int fi = 0; fi < nrow; fi++) {
+    double s0 = 0, s1 = 0, s2 = 0;
+    for (int q = P->off[fi]; q < P->off[fi + 1]; q++) {
+      const double *b = val + (size_t)q * 9, *xc = x + (size_t)P->col[q] * 3;
+      s0 += b[0] * xc[0]; s0 += b[1] * xc[1]; s0 += b[2] * xc[2];
+      s1 += b[3] * xc[0]; s1 += b[4] * xc[1]; s1 += b[5] * xc[2];
+      s2 += b[6] * xc[0]; s2 += b[7] * xc[1]; s2 += b[8] * xc[2];
+    }
+    y[(size_t)fi * 3] = s0;
+    y[(size_t)fi * 3 + 1] = s1;
+    y[(size_t)fi * 3 + 2] = s2;
+  }
+}
+
+void ut_block_jacobi(double *val, const int *dpos, int nrow, int d, double *dinv) {
+  int dd = d * d;
+  for (int fi = 0; fi < nrow; fi++) {
+    double *b = val + (size_t)dpos[fi] * dd, *w = dinv + (size_t)fi * dd, tr = 0;
+    for (int a = 0; a < d; a++) tr += b[a * d + a];
+    double mu = tr > 0 ? 1e-10 * tr / d : 1e-300;
+    for (int a = 0; a < d; a++) b[a * d + a] += mu;
+    double det;
+    if (d == 2) {
+      det = b[0] * b[3] - b[1] * b[2];
+      w[0] = b[3] / det; w[1] = -b[1] / det; w[2] = -b[2] / det; w[3] = b[0] / det;
+    } else {
+      w[0] = b[4] * b[8] - b[5] * b[7]; w[1] = b[2] * b[7] - b[1] * b[8]; w[2] = b[1] * b[5] - b[2] * b[4];
+      w[3] = b[5] * b[6] - b[3] * b[8]; w[4] = b[0] * b[8] - b[2] * b[6]; w[5] = b[2] * b[3] - b[0] * b[5];
+      w[6] = b[3] * b[7] - b[4] * b[6]; w[7] = b[1] * b[6] - b[0] * b[7]; w[8] = b[0] * b[4] - b[1] * b[3];
+      det = b[0] * w[0] + b[1] * w[3] + b[2] * w[6];
+      for (int k = 0; k < 9; k++) w[k] /= det;
+    }
+    if (!(det > 0) || !isfinite(det)) { /* not positive definite: the diagonal's scale */
+      memset(w, 0, sizeof(double) * dd);
+      for (int a = 0; a < d; a++) w[a * d + a] = tr > 0 ? d / tr : 1;
+    }
+  }
+}
+
+void ut_block_apply(const double *dinv, int nrow, int d, const double *r, double *z) {
+  int dd = d * d;
+  long n = (long)nrow * d;
+  UT_PAR_FOR
+  for (int fi = 0; fi < nrow; fi++) {
+    const double *w = dinv + (size_t)fi * dd, *rr = r + (size_t)fi * d;
+    for (int a = 0; a < d; a++) {
+      double s = 0;
+      for (int e = 0; e < d; e++) s += w[a * d + e] * rr[e];
+      z[(size_t)fi * d + a] = s;
+    }
+  }
+}
+
+/* ---------------------------------------------------------------- the hierarchy */
+
+/* the coarsest level: at most this many block rows, solved by a dense Cholesky factor */
+#define AMG_COARSEST 200
+
+/* aggregates of the block graph P (n rows): a row none of whose neighbours is taken yet
+ * starts an aggregate with all of them; a row left over joins the first neighbouring
+ * aggregate of that first pass; what remains groups with its untaken neighbours. Returns
+ * the number of aggregates */
+static int aggregate(const ut_bsr *P, int n, int *agg, int *first) {
+  int nc = 0;
+  for (int i = 0; i < n; i++) agg[i] = -1;
+  for (int i = 0; i < n; i++) {
+    if (agg[i] >= 0) continue;
+    int free = 1;
+    for (int q = P->off[i]; q < P->off[i + 1] && free; q++) free = agg[P->col[q]] < 0;
+    if (!free) continue;
+    for (int q = P->off[i]; q < P->off[i + 1]; q++) agg[P->col[q]] = nc;
+    agg[i] = nc++;
+  }
+  memcpy(first, agg, sizeof(int) * (size_t)n);
+  for (int i = 0; i < n; i++) {
+    if (agg[i] >= 0) continue;
+    for (int q = P->off[i]; q < P->off[i + 1]; q++)
+      if (first[P->col[q]] >= 0) { agg[i] = first[P->col[q]]; break; }
+  }
+  for (int i = 0; i < n; i++) {
+    if (agg[i] >= 0) continue;
+    for (int q = P->off[i]; q < P->off[i + 1]; q++)
+      if (agg[P->col[q]] < 0) agg[P->col[q]] = nc;
+    agg[i] = nc++;
+  }
+  return nc;
+}
+
+static int int_cmp(const void *a, const void *b) { return (*(const int *)a > *(const int *)b) - (*(const int *)a < *(const int *)b); }
+
+/* level l + 1 from level l's pattern: its aggregates, their members, the coarse pattern and
+ * where each fine block adds in it */
+static int coarsen(ut_amg *A, int l) {
+  ut_amg_level *F = &A->L[l], *Cl = &A->L[l + 1];
+  int n = F->n;
+  int *first = malloc(sizeof(int) * ((size_t)n + 1));
+  F->agg = malloc(sizeof(int) * ((size_t)n + 1));
+  if (!first || !F->agg) { free(first); return 1; }
+  int nc = aggregate(&F->P, n, F->agg, first);
+  free(first);
+  Cl->n = nc;
+  F->mem_off = calloc((size_t)nc + 1, sizeof(int));
+  F->mem = malloc(sizeof(int) * ((size_t)n + 1));
+  Cl->P.off = calloc((size_t)nc + 1, sizeof(int));
+  int *mark = malloc(sizeof(int) * ((size_t)nc + 1)), *row = NULL;
+  if (!F->mem_off || !F->mem || !Cl->P.off || !mark) { free(mark); return 1; }
+  for (int i = 0; i < n; i++) F->mem_off[F->agg[i] + 1]++;
+  for (int c = 0; c < nc; c++) F->mem_off[c + 1] += F->mem_off[c];
+  int *pos = malloc(sizeof(int) * ((size_t)nc + 1));
+  if (!pos) { free(mark); return 1; }
+  memcpy(pos, F->mem_off, sizeof(int) * (size_t)nc);
+  for (int i = 0; i < n; i++) F->mem[pos[F->agg[i]]++] = i; /* members in row order */
+  free(pos);
+  /* the coarse pattern: counted, then filled and sorted row by row */
+  for (int c = 0; c < nc; c++) mark[c] = -1;
+  for (int pass = 0; pass < 2; pass++) {
+    for (int c = 0; c < nc; c++) {
+      int cnt = 0;
+      if (pass) row = Cl->P.col + Cl->P.off[c];
+      for (int k = F->mem_off[c]; k < F->mem_off[c + 1]; k++) {
+        int i = F->mem[k];
+        for (int q = F->P.off[i]; q < F->P.off[i + 1]; q++) {
+          int cc = F->agg[F->P.col[q]];
+          if (mark[cc] == 2 * c + pass) continue;
+          mark[cc] = 2 * c + pass;
+          if (pass) row[cnt] = cc;
+          cnt++;
+        }
+      }
+      if (!pass) Cl->P.off[c + 1] = cnt;
+      else qsort(row, (size_t)cnt, sizeof(int), int_cmp);
+    }
+    if (!pass) {
+      for (int c = 0; c < nc; c++) Cl->P.off[c + 1] += Cl->P.off[c];
+      if (!(Cl->P.col = malloc(sizeof(int) * ((size_t)Cl->P.off[nc] + 1)))) { free(mark); return 1; }
+    }
+  }
+  free(mark);
+  size_t nb = (size_t)F->P.off[n];
+  if (!(F->cpos = malloc(sizeof(size_t) * (nb + 1)))) return 1;
+  for (int i = 0; i < n; i++)
+    for (int q = F->P.off[i]; q < F->P.off[i + 1]; q++) F->cpos[q] = ut_bsr_find(&Cl->P, F->agg[i], F->agg[F->P.col[q]]);
+  return 0;
+}
+
+static int level_buffers(ut_amg_level *L, int d, int owns_values) {
+  size_t n = (size_t)L->n * d + 1, nb = (size_t)L->P.off[L->n];
+  L->owns = owns_values;
+  if (owns_values && !(L->val = malloc(sizeof(double) * (nb * d * d + 1)))) return 1;
+  L->dpos = malloc(sizeof(int) * ((size_t)L->n + 1));
+  if (owns_values) L->dinv = malloc(sizeof(double) * ((size_t)L->n * d * d + 1));
+  double **bufs[] = {&L->t, &L->v1, &L->w1, &L->v2, &L->w2, &L->r1, &L->in, &L->out};
+  for (size_t k = 0; k < sizeof bufs / sizeof *bufs; k++)
+    if (!(*bufs[k] = malloc(sizeof(double) * n))) return 1;
+  if (!L->dpos || (owns_values && !L->dinv)) return 1;
+  for (int i = 0; i < L->n; i++) {
+    int q = L->P.off[i];
+    while (q < L->P.off[i + 1] && L->P.col[q] != i) q++;
+    if (q == L->P.off[i + 1]) return 1; /* every row holds its diagonal */
+    L->dpos[i] = q;
+  }
+  return 0;
+}
+
+int ut_amg_build(ut_amg *A, const ut_bsr *P, int n, int d) {
+  memset(A, 0, sizeof *A);
+  A->d = d;
+  A->L[0].n = n;
+  A->L[0].P = *P; /* the Hessian's pattern: not owned */
+  if (level_buffers(&A->L[0], d, 0)) return 1;
+  int l = 0;
+  while (A->L[l].n > AMG_COARSEST && l + 1 < UT_AMG_MAXLEV) {
+    A->nlev = l + 2; /* ut_amg_free releases level l + 1 from here on */
+    if (coarsen(A, l)) return 1;
+    if (level_buffers(&A->L[l + 1], d, 1)) return 1;
+    l++;
+    if (A->L[l].n * 10 > A->L[l - 1].n * 9) break; /* no longer coarsening */
+  }
+  A->nlev = l + 1;
+  /* coarsening stalled above the dense solve's size (its factor, m³/3 per Newton step,
+   * would cost more than it saves): the caller keeps block Jacobi */
+  if (A->L[l].n > 2 * AMG_COARSEST) return 1;
+  size_t m = (size_t)A->L[l].n * d;
+  if (!(A->chol = malloc(sizeof(double) * (m * m + 1)))) return 1;
+  if (!(A->part = malloc(sizeof(double) * ((size_t)n * d / UT_DOT_CHUNK + 2)))) return 1;
+  return 0;
+}
+
+void ut_amg_free(ut_amg *A) {
+  for (int l = 0; l < (A->nlev > 0 ? A->nlev : 1); l++) { /* level 0 even when building it failed */
+    ut_amg_level *L = &A->L[l];
+    if (l) { free(L->P.off); free(L->P.col); }
+    if (L->owns) { free(L->val); free(L->dinv); }
+    free(L->dpos); free(L->agg); free(L->mem_off); free(L->mem); free(L->cpos);
+    free(L->t); free(L->v1); free(L->w1); free(L->v2); free(L->w2); free(L->r1); free(L->in); free(L->out);
+  }
+  free(A->chol);
+  free(A->part);
+  memset(A, 0, sizeof *A);
+}
+
+/* a bound of the largest eigenvalue of D⁻¹A (Gershgorin on the block rows of D⁻¹A) and the
+ * smoother's damping 4/(3 λ) */
+static double jacobi_damping(const ut_amg_level *L, int d) {
+  double lam = 0;
+  int dd = d * d;
+  for (int i = 0; i < L->n; i++) {
+    const double *w = L->dinv + (size_t)i * dd;
+    double rs[3] = {0, 0, 0};
+    for (int q = L->P.off[i]; q < L->P.off[i + 1]; q++) {
+      const double *b = L->val + (size_t)q * dd;
+      for (int a = 0; a < d; a++)
+        for (int c = 0; c < d; c++) {
+          double s = 0;
+          for (int e = 0; e < d; e++) s += w[a * d + e] * b[e * d + c];
+          rs[a] += fabs(s);
+        }
+    }
+    for (int a = 0; a < d; a++) lam = fmax(lam, rs[a]);
+  }
+  return lam > 0 && isfinite(lam) ? 4.0 / (3.0 * lam) : 0.5;
+}
+
+/* the coarsest level's matrix, dense, factored by Cholesky with a growing diagonal shift
+ * when it is not positive definite (a projected Hessian may be singular) */
+static void coarsest_factor(ut_amg *A) {
+  ut_amg_level *L = &A->L[A->nlev - 1];
+  int d = A->d, m = L->n * d, dd = d * d;
+  double *c = A->chol, tr = 0;
+  for (int attempt = 0; attempt < 12; attempt++) {
+    memset(c, 0, sizeof(double) * (size_t)m * m);
+    for (int i = 0; i < L->n; i++)
+      for (int q = L->P.off[i]; q < L->P.off[i + 1]; q++)
+        for (int a = 0; a < d; a++)
+          for (int b = 0; b < d; b++) c[(size_t)(i * d + a) * m + L->P.col[q] * d + b] = L->val[(size_t)q * dd + a * d + b];
+    if (!attempt)
+      for (int k = 0; k < m; k++) tr += fabs(c[(size_t)k * m + k]);
+    double shift = (tr > 0 ? tr / m : 1) * 1e-12 * pow(100, attempt);
+    for (int k = 0; k < m; k++) c[(size_t)k * m + k] += shift;
+    int ok = 1;
+    for (int j = 0; j < m && ok; j++) {
+      double s = c[(size_t)j * m + j];
+      for (int k = 0; k < j; k++) s -= c[(size_t)j * m + k] * c[(size_t)j * m + k];
+      if (!(s > 0) || !isfinite(s)) { ok = 0; break; }
+      double ljj = sqrt(s);
+      c[(size_t)j * m + j] = ljj;
+      for (int i = j + 1; i < m; i++) {
+        double t = c[(size_t)i * m + j];
+        for (int k = 0; k < j; k++) t -= c[(size_t)i * m + k] * c[(size_t)j * m + k];
+        c[(size_t)i * m + j] = t / ljj;
+      }
+    }
+    if (ok) return;
+  }
+  /* never positive definite: the identity scaled to the diagonal (a weak but safe solve) */
+  memset(c, 0, sizeof(double) * (size_t)m * m);
+  for (int k = 0; k < m; k++) c[(size_t)k * m + k] = tr > 0 ? sqrt(tr / m) : 1;
+}
+
+void ut_amg_values(ut_amg *A, double *val, const double *dinv) {
+  int d = A->d, dd = d * d;
+  A->L[0].val = val;
+  A->L[0].dinv = (double *)dinv;
+  A->L[0].omega = jacobi_damping(&A->L[0], d);
+  for (int l = 0; l + 1 < A->nlev; l++) {
+    ut_amg_level *F = &A->L[l], *Cl = &A->L[l + 1];
+    memset(Cl->val, 0, sizeof(double) * (size_t)Cl->P.off[Cl->n] * dd);
+    for (size_t q = 0; q < (size_t)F->P.off[F->n]; q++) {
+      double *t = Cl->val + F->cpos[q] * dd;
+      const double *s = F->val + q * dd;
+      for (int k = 0; k < dd; k++) t[k] += s[k];
+    }
+    if (l + 2 < A->nlev) {
+      ut_block_jacobi(Cl->val, Cl->dpos, Cl->n, d, Cl->dinv);
+      Cl->omega = jacobi_damping(Cl, d);
+    }
+  }
+  coarsest_factor(A);
+}
+
+static void coarsest_solve(const ut_amg *A, const double *b, double *x) {
+  const ut_amg_level *L = &A->L[A->nlev - 1];
+  int m = L->n * A->d;
+  const double *c = A->chol;
+  for (int i = 0; i < m; i++) {
+    double s = b[i];
+    for (int k = 0; k < i; k++) s -= c[(size_t)i * m + k] * x[k];
+    x[i] = s / c[(size_t)i * m + i];
+  }
+  for (int i = m - 1; i >= 0; i--) {
+    double s = x[i];
+    for (int k = i + 1; k < m; k++) s -= c[(size_t)k * m + i] * x[k];
+    x[i] = s / c[(size_t)i * m + i];
+  }
+}
+
+static void kcycle(ut_amg *A, int l, const double *b, double *x);
+
+/* one cycle at level l < nlev − 1: z ≈ A_l⁻¹ r, a Jacobi sweep, the coarse correction, a
+ * Jacobi sweep (the same damping both ways) */
+static void vcycle(ut_amg *A, int l, const double *r, double *z) {
+  ut_amg_level *L = &A->L[l], *Cl = &A->L[l + 1];
+  int d = A->d;
+  long n = (long)L->n * d;
+  double om = L->omega, *t = L->t;
+  ut_block_apply(L->dinv, L->n, d, r, z);
+  UT_PAR_FOR
+  for (long i = 0; i < n; i++) z[i] *= om;
+  ut_bsr_mult(&L->P, L->val, L->n, d, z, t);
+  UT_PAR_FOR
+  for (long i = 0; i < n; i++) t[i] = r[i] - t[i];
+  /* restriction: each aggregate sums its members' residuals, in row order */
+  int nc = Cl->n;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (nc > 2048)
+#endif
+  for (int c = 0; c < nc; c++)
+    for (int a = 0; a < d; a++) {
+      double s = 0;
+      for (int k = L->mem_off[c]; k < L->mem_off[c + 1]; k++) s += t[(size_t)L->mem[k] * d + a];
+      Cl->in[(size_t)c * d + a] = s;
+    }
+  if (l + 1 == A->nlev - 1) coarsest_solve(A, Cl->in, Cl->out);
+  else kcycle(A, l + 1, Cl->in, Cl->out);
+  int nr = L->n;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (nr > 2048)
+#endif
+  for (int i = 0; i < nr; i++)
+    for (int a = 0; a < d; a++) z[(size_t)i * d + a] += Cl->out[(size_t)L->agg[i] * d + a];
+  ut_bsr_mult(&L->P, L->val, L->n, d, z, t);
+  UT_PAR_FOR
+  for (long i = 0; i < n; i++) t[i] = r[i] - t[i];
+  ut_block_apply(L->dinv, L->n, d, t, L->v1); /* v1 is free here: kcycle(l) is not running */
+  UT_PAR_FOR
+  for (long i = 0; i < n; i++) z[i] += om * L->v1[i];
+}
+
+/* level l ≥ 1: x ≈ A_l⁻¹ b by two flexible conjugate-gradient steps preconditioned with the
+ * cycle (the second only when the first left more than a quarter of the residual) */
+static void kcycle(ut_amg *A, int l, const double *b, double *x) {
+  ut_amg_level *L = &A->L[l];
+  int d = A->d;
+  long n = (long)L->n * d;
+  /* vcycle(l) works in L->t and L->v1: these two steps use the other buffers */
+  double *v1 = L->v2, *w1 = L->w1, *v2 = L->r1, *w2 = L->w2;
+  vcycle(A, l, b, v1);
+  ut_bsr_mult(&L->P, L->val, L->n, d, v1, w1);
+  double rho1 = ut_dot(v1, w1, n, A->part), a1 = ut_dot(v1, b, n, A->part);
+  if (!(rho1 > 0)) {
+    memcpy(x, v1, sizeof(double) * n);
+    return;
+  }
+  double c1 = a1 / rho1, bb = ut_dot(b, b, n, A->part);
+  /* the residual b − c1 w1 into x for now (x is written last) */
+  UT_PAR_FOR
+  for (long i = 0; i < n; i++) x[i] = b[i] - c1 * w1[i];
+  if (ut_dot(x, x, n, A->part) <= 0.0625 * bb) {
+    UT_PAR_FOR
+    for (long i = 0; i < n; i++) x[i] = c1 * v1[i];
+    return;
+  }
+  vcycle(A, l, x, v2);
+  ut_bsr_mult(&L->P, L->val, L->n, d, v2, w2);
+  double g = ut_dot(v2, w1, n, A->part), be = ut_dot(v2, w2, n, A->part), a2 = ut_dot(v2, x, n, A->part);
+  double rho2 = be - g * g / rho1;
+  if (!(rho2 > 0)) {
+    UT_PAR_FOR
+    for (long i = 0; i < n; i++) x[i] = c1 * v1[i];
+    return;
+  }
+  double k1 = c1 - g * a2 / (rho1 * rho2), k2 = a2 / rho2;
+  UT_PAR_FOR
+  for (long i = 0; i < n; i++) x[i] = k1 * v1[i] + k2 * v2[i];
+}
+
+void ut_amg_apply(ut_amg *A, const double *r, double *z) {
+  if (A->nlev == 1) { coarsest_solve(A, r, z); return; }
+  vcycle(A, 0, r, z);
+}

@@ -197,8 +197,10 @@ static int level_buffers(ut_amg_level *L, int d, int owns_values) {
   if (owns_values && !(L->val = malloc(sizeof(double) * (nb * d * d + 1)))) return 1;
   L->dpos = malloc(sizeof(int) * ((size_t)L->n + 1));
   if (owns_values) L->dinv = malloc(sizeof(double) * ((size_t)L->n * d * d + 1));
+  /* every level smooths in t and v1; the K-cycle's four and the restricted residual and
+   * correction (in, out) live on the coarse levels only */
   double **bufs[] = {&L->t, &L->v1, &L->w1, &L->v2, &L->w2, &L->r1, &L->in, &L->out};
-  for (size_t k = 0; k < sizeof bufs / sizeof *bufs; k++)
+  for (size_t k = 0; k < (owns_values ? sizeof bufs / sizeof *bufs : 2); k++)
     if (!(*bufs[k] = malloc(sizeof(double) * n))) return 1;
   if (!L->dpos || (owns_values && !L->dinv)) return 1;
   for (int i = 0; i < L->n; i++) {

@@ -258,8 +258,7 @@ int lmesh_smooth(lua_State *L) {
   lg_mesh_changed(u->lm);
   char text[512];
   snprintf(text, sizeof text, "smooth (%s): %s%s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s",
-           o.energy ? (r.optimizer == SMOOTH_NEWTON ? (r.multigrid ? "energy, Newton, multigrid" : "energy, Newton") : "energy, L-BFGS")
-           : o.global ? "global" : "local", quality_name(o.measure), ref ? " relative to the reference" : "",
+           smooth_method_label(&o, &r), quality_name(o.measure), ref ? " relative to the reference" : "",
            r.min_before, r.min_after, r.mean_before,
            r.mean_after, r.moved, r.sweeps, o.global ? "rounds" : "sweeps", r.seconds);
   lua_createtable(L, 0, 10);

@@ -261,7 +261,7 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
     mesh_free(ref);
     if (bad) { fprintf(stderr, "lugal-mesh smooth: %s\n", err); mesh_free(m); return 1; }
     printf("smooth (%s): %s%s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s\n",
-           energy ? (r.optimizer == SMOOTH_NEWTON ? (r.multigrid ? "energy, Newton, multigrid" : "energy, Newton") : "energy, L-BFGS") : global ? "global" : "local",
+           smooth_method_label(&so, &r),
            quality_name(so.measure), refpath ? " relative to the reference" : "",
            r.min_before, r.min_after, r.mean_before, r.mean_after,
            r.moved, r.sweeps, global ? "rounds" : "sweeps", r.seconds);

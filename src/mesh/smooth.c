@@ -324,6 +324,12 @@ static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err
   return 0;
 }
 
+const char *smooth_method_label(const smooth_opts *o, const smooth_report *r) {
+  if (!o->energy) return o->global ? "global" : "local";
+  if (r->optimizer != SMOOTH_NEWTON) return "energy, L-BFGS";
+  return r->multigrid ? "energy, Newton, multigrid" : "energy, Newton";
+}
+
 int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
   memset(r, 0, sizeof *r);
   if (ut_check_finite(m, "smoothing", err)) return 1;

@@ -105,6 +105,9 @@ typedef struct {
  * the result is kept only if its minimum beats the input's. The mesh must be valid.
  * iterations: sweeps (local) or rounds of up to 20 L-BFGS iterations (global, energy). */
 int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err);
+/* what ran, for a one-line summary: "local", "global", "energy, L-BFGS", "energy, Newton" or
+ * "energy, Newton, multigrid" */
+const char *smooth_method_label(const smooth_opts *o, const smooth_report *r);
 
 typedef struct {
   int iterations;  /* CG iterations used per component */

@@ -253,8 +253,12 @@ void ut_amg_free(ut_amg *A) {
  * smoother's damping 4/(3 λ) */
 static double jacobi_damping(const ut_amg_level *L, int d) {
   double lam = 0;
-  int dd = d * d;
-  for (int i = 0; i < L->n; i++) {
+  int dd = d * d, nr = L->n;
+  /* a maximum: the same for any thread count */
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) reduction(max : lam) if (nr > 2048)
+#endif
+  for (int i = 0; i < nr; i++) {
     const double *w = L->dinv + (size_t)i * dd;
     double rs[3] = {0, 0, 0};
     for (int q = L->P.off[i]; q < L->P.off[i + 1]; q++) {

@@ -1,9 +1,10 @@
 /* test_amg.c — the aggregation multigrid of the Newton smoother (src/mesh/untangle_amg.c) as
  * the preconditioner of flexible conjugate gradients, against block Jacobi, on block
- * matrices like the smoother's Hessians: the P1 stiffness matrix of an n×n grid of right
- * triangles (interior vertices only, the boundary fixed) coupled into 2×2 blocks (an
+ * matrices like the smoother's Hessians: the 5-point Laplacian of an n×n grid (interior
+ * vertices only, the boundary fixed) coupled into 2×2 blocks (an
  * elasticity-like operator: K ⊗ [[2, c], [c, 1]] plus a Laplacian stretched along x,
- * K_x ⊗ [[1, 0], [0, 3]]), in 2D, and 3×3 blocks on a tetrahedral-grid graph in 3D.
+ * K_x ⊗ [[1, 0], [0, 3]]), in 2D, and in 3D the 7-point Laplacian of an n³ grid coupled into
+ * 3×3 blocks (K ⊗ S, S symmetric positive definite).
  * Checks: the multigrid solves to a 1e-8 relative residual in a count of iterations that
  * grows little with n, where block Jacobi's grows about in proportion to n; the solution solves the system
  * (its residual recomputed); coarse levels are built; the result has the same bits on 1, 2
@@ -18,8 +19,8 @@
 #include <omp.h>
 #endif
 
-/* the block matrix on the interior vertices of an n×n grid (2D: 5-point-like P1 stiffness of
- * right triangles; 3D: the 7-point graph), d×d blocks */
+/* the block matrix on the interior vertices of an n×n (n³) grid: the 5-point (7-point)
+ * Laplacian in d×d blocks */
 typedef struct {
   ut_bsr P;
   double *val;

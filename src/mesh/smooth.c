@@ -137,7 +137,8 @@ static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, smoo
   }
   work W = {fidx, cmark, cells};
   int ncell = ut_cells_around(C, &W, freev, nfree), status = 0;
-  objective ob = {C, 0, C->jscale, ncell, cells, fidx, 0, 1, o->measure, 0, freev, hv, 0, 0, {0}, cwinv, NULL, 0, 0, 0, &r->multigrid};
+  objective ob = {.C = C, .S = C->jscale, .ncell = ncell, .cells = cells, .fidx = fidx, .smooth = 1, .measure = o->measure,
+                  .freev = freev, .hv = hv, .cwinv = cwinv, .amg_used = &r->multigrid};
   ut_energy_buf eb = {0};
   double fprev = INFINITY;
   ob.qfloor = INFINITY;

@@ -486,7 +486,7 @@ static int optimize_vertices(ctx *C, work *W, double *x, double beta, int lift, 
     for (int j = 0; j < d; j++) xs[i * d + j] = x[(size_t)freev[i] * d + j];
   }
   int ncell = ut_cells_around(C, W, freev, nfree);
-  objective o = {C, beta, C->jscale, ncell, W->cells, W->fidx, lift, 0, 0, 0, freev, NULL, 0, 0, {0}, NULL, NULL, 0, 0, 0, NULL};
+  objective o = {.C = C, .beta = beta, .S = C->jscale, .ncell = ncell, .cells = W->cells, .fidx = W->fidx, .lift = lift, .freev = freev};
   double f = 0;
   int it = nfree ? ut_lbfgs(&o, x, freev, nfree, maxit, &f) : 0;
   int total = 0;

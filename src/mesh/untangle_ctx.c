@@ -329,15 +329,15 @@ int ut_slide_3d(const ctx *C, double *x, int v, vertex_penalty pen, vertex_gradi
         g[k] = gx[0] * t[3 * k] + gx[1] * t[3 * k + 1] + gx[2] * t[3 * k + 2];
         gn += g[k] * g[k];
       }
-    }
-    for (int k = 0; k < nt && !grad; k++) {
-      for (int j = 0; j < 3; j++) p[j] = p0[j] + e * t[3 * k + j];
-      double fp = pen(C, v, arg, 1);
-      for (int j = 0; j < 3; j++) p[j] = p0[j] - e * t[3 * k + j];
-      double fm = pen(C, v, arg, 1);
-      g[k] = isfinite(fp) && isfinite(fm) ? (fp - fm) / (2 * e) : 0;
-      gn += g[k] * g[k];
-    }
+    } else
+      for (int k = 0; k < nt; k++) {
+        for (int j = 0; j < 3; j++) p[j] = p0[j] + e * t[3 * k + j];
+        double fp = pen(C, v, arg, 1);
+        for (int j = 0; j < 3; j++) p[j] = p0[j] - e * t[3 * k + j];
+        double fm = pen(C, v, arg, 1);
+        g[k] = isfinite(fp) && isfinite(fm) ? (fp - fm) / (2 * e) : 0;
+        gn += g[k] * g[k];
+      }
     for (int j = 0; j < 3; j++) p[j] = p0[j];
     if (!(gn > 0)) break;
     for (int k = 0; k < nt; k++)

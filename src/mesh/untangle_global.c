@@ -435,6 +435,8 @@ void ut_energy_release(ut_energy_buf *b) {
   free(b->gc);
   free(b->off);
   free(b->slot);
+  free(b->touch_off);
+  free(b->touch);
   memset(b, 0, sizeof *b);
 }
 
@@ -527,8 +529,41 @@ double ut_energy_qmin(const objective *o, const double *x) {
 }
 
 /* the corner Hessians are computed in chunks of cells whose Hessians fit this buffer (a
- * hexahedron's eight corners take 9 KB, a tetrahedron's one 1.1 KB) */
-#define HESS_CHUNK_BYTES ((size_t)64 << 20)
+ * hexahedron's eight corners take 9 KB, a tetrahedron's one 1.1 KB): one core's L2 cache,
+ * so that the gather that follows each chunk reads it from the cache. With 64 MB chunks
+ * the gather's reads missed: the 590 000-tetrahedron bar's Hessian took 1.0–1.1 s per
+ * Newton step, 0.6–0.7 s with 2 MB (512 KB to 8 MB within the noise of each other) */
+#define HESS_CHUNK_BYTES ((size_t)2 << 20)
+
+/* b->touch: for each chunk of `chunk` cells, the free vertices that have slots in it, in
+ * ascending order (a vertex's slots ascend, so its chunks come in order): the gather after
+ * a chunk visits those only (with small chunks, a pass over every free vertex per chunk
+ * would cost more than the chunk) */
+static int chunk_touch(ut_energy_buf *b, int nfree, int n, int chunk, int slots_per_cell) {
+  int nch = (n + chunk - 1) / chunk;
+  if (!(b->touch_off = calloc((size_t)nch + 2, sizeof(int)))) return 1;
+  for (int pass = 0; pass < 2; pass++) {
+    for (int fi = 0; fi < nfree; fi++) {
+      int last = -1;
+      for (int q = b->off[fi]; q < b->off[fi + 1]; q++) {
+        int ch = b->slot[q] / slots_per_cell / chunk;
+        if (ch == last) continue;
+        last = ch;
+        if (pass) b->touch[b->touch_off[ch + 1]++] = fi;
+        else b->touch_off[ch + 2]++;
+      }
+    }
+    if (!pass) {
+      for (int ch = 0; ch < nch; ch++) b->touch_off[ch + 2] += b->touch_off[ch + 1];
+      if (!(b->touch = malloc(sizeof(int) * ((size_t)b->touch_off[nch + 1] + 1)))) {
+        free(b->touch_off);
+        b->touch_off = NULL;
+        return 1;
+      }
+    }
+  }
+  return 0;
+}
 
 /* row fk (the free vertex at corner kc's vertex k of cell vertices v) of the corner Hessian
  * h added into its blocks */
@@ -547,8 +582,8 @@ static void add_row_blocks(const objective *o, const ut_bsr *P, double *val, con
 
 /* The projected Hessian of the energy in the free vertices' coordinates, d×d blocks on
  * pattern P. The cells go in chunks (HESS_CHUNK_BYTES): the chunk's corner Hessians are
- * computed on threads, then each free vertex's row gathers those of its slots that lie in
- * the chunk (a cursor per row: the slots are in (cell, corner, vertex) order), so every
+ * computed on threads, then each free vertex with slots in the chunk (b->touch) gathers them
+ * into its row (a cursor per row: the slots are in (cell, corner, vertex) order), so every
  * block receives its terms in the order of the one-thread loop below and the result does
  * not depend on the number of threads. Before the chunks, a million-tetrahedron bar's
  * Hessians (1.3 GB) did not fit a whole-mesh buffer and were assembled on one thread: 2 s
@@ -562,23 +597,23 @@ int ut_energy_hessian(const objective *o, const double *x, const ut_bsr *P, doub
   ut_energy_buf *b = o->eb;
   int *cur = NULL;
   if (b && chunk > 0 && !energy_prepare(o, nfree) && (b->hc || (b->hc = malloc(per_cell * (size_t)chunk + 1))) &&
-      (cur = malloc(sizeof(int) * ((size_t)nfree + 1)))) {
+      (b->touch || !chunk_touch(b, nfree, n, chunk, nk * (d + 1))) && (cur = malloc(sizeof(int) * ((size_t)nfree + 1)))) {
     int bad = 0;
     memcpy(cur, b->off, sizeof(int) * (size_t)nfree);
     for (int c0 = 0; c0 < n && !bad; c0 += chunk) {
-      int c1 = n - c0 > chunk ? c0 + chunk : n;
+      int c1 = n - c0 > chunk ? c0 + chunk : n, ch = c0 / chunk, t0 = b->touch_off[ch], t1 = b->touch_off[ch + 1];
       size_t send = (size_t)c1 * nk * (size_t)(d + 1); /* the first slot past the chunk */
 #ifdef _OPENMP
-#pragma omp parallel for schedule(static) reduction(|| : bad) if (c1 - c0 > 1024)
+#pragma omp parallel for schedule(static) reduction(|| : bad) if (n > 1024)
 #endif
       for (int i = c0; i < c1; i++)
         for (int kc = 0; kc < nk; kc++) bad = corner_hessian(o, x, i, kc, b->hc + ((size_t)(i - c0) * nk + kc) * hs) || bad;
       if (bad) break;
 #ifdef _OPENMP
-#pragma omp parallel for schedule(static) if (nfree > 1024)
+#pragma omp parallel for schedule(static) if (n > 1024)
 #endif
-      for (int fi = 0; fi < nfree; fi++) {
-        int q = cur[fi];
+      for (int t = t0; t < t1; t++) {
+        int fi = b->touch[t], q = cur[fi];
         for (; q < b->off[fi + 1] && (size_t)b->slot[q] < send; q++) {
           size_t sl = (size_t)b->slot[q], cq = sl / (size_t)(d + 1);
           int k = (int)(sl % (size_t)(d + 1)), i = (int)(cq / (size_t)nk), kc = (int)(cq % (size_t)nk);

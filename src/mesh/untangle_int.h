@@ -69,6 +69,7 @@ typedef struct ut_energy_buf {
   double *fc, *gc;
   double *hc; /* a chunk of cells' corner Hessians (ut_energy_hessian), or NULL */
   int *off, *slot;
+  int *touch_off, *touch; /* per chunk of hc: the free vertices with slots in it, ascending */
 } ut_energy_buf;
 /* frees what ut_energy_eval allocated in b (the struct itself is the caller's) */
 void ut_energy_release(ut_energy_buf *b);

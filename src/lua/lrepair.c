@@ -154,6 +154,8 @@ int lmesh_untangle(lua_State *L) {
     n += (size_t)snprintf(text + n, sizeof text - n, ", then placement %s", r.fallback_placement ? "corners" : "chebyshev");
   else if (r.fallback_tried && n < sizeof text)
     n += (size_t)snprintf(text + n, sizeof text - n, ", the other placement did not help");
+  if (r.tutte_tried && n < sizeof text)
+    n += (size_t)snprintf(text + n, sizeof text - n, r.tutte_kept ? ", then Tutte disk shapes" : ", Tutte disk shapes did not help");
   lua_createtable(L, 0, 12);
   set_num(L, "beta", r.beta);
   set_int(L, "invalid_before", r.invalid_before);
@@ -167,6 +169,10 @@ int lmesh_untangle(lua_State *L) {
   set_int(L, "passes", r.passes);
   lua_pushboolean(L, r.fallback_tried);
   lua_setfield(L, -2, "fallback_tried");
+  lua_pushboolean(L, r.tutte_tried);
+  lua_setfield(L, -2, "tutte_tried");
+  lua_pushboolean(L, r.tutte_kept);
+  lua_setfield(L, -2, "tutte_kept");
   if (r.fallback_placement >= 0) {
     lua_pushstring(L, r.fallback_placement ? "corners" : "chebyshev");
     lua_setfield(L, -2, "fallback_placement");

@@ -845,7 +845,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
    * towards them (the local stages only aim at validity, and may have repaired the mesh
    * without the global stage); kept if every cell stays valid and the mean of the cells'
    * mean ratios relative to their shapes grows */
-  if (cwinv && !s->invalid_after && W.fidx && W.cells && save && trial && !o->no_global) {
+  if (cwinv && !s->invalid_after && W.fidx && W.cells && save && trial && !o->no_global && !o->no_reference_polish) {
     double *q = malloc(sizeof(double) * ((size_t)m->ncell + 1));
     if (q) {
       double q0 = 0, q1 = 0;
@@ -920,6 +920,78 @@ void untangle_report_print(const untangle_report *r, const mesh *m) {
            r->fallback_placement ? "chebyshev" : "corners", r->fallback_placement ? "corners" : "chebyshev");
   else if (r->fallback_tried)
     printf("  (the other placement was tried from where the passes stalled, and did not repair more)\n");
+  if (r->tutte_tried)
+    printf("  (then a run aiming at the cells' shapes in the mesh's Tutte embedding on a circle%s)\n",
+           r->tutte_kept ? " repaired more" : ", which did not repair more");
+}
+
+/* ---------------------------------------------------------------- Tutte reference */
+
+/* A 2D mesh that is a topological disk (its boundary one loop, V − E + F = 1) embedded with
+ * its boundary on a circle, in the boundary's arc-length proportions, the interior vertices
+ * at the discrete harmonic positions (laplace_solve's edge weights): a convex-combination
+ * map, valid for triangulations by Tutte's and Floater's theorems, which keeps the mesh's
+ * combinatorial anisotropy (a strip of 12 x 30 cells about 40:1 becomes a disk of cells as
+ * thin). Its cells are the reference shapes of the last fallback in mesh_untangle. The
+ * circle's area is the mesh's (the sum of the signed cell measures, which moving interior
+ * vertices does not change), and it runs in the boundary's orientation. NULL when the mesh
+ * is not a disk, its signed measure is not positive, or out of memory. */
+static double *tutte_reference(mesh *m) {
+  if (m->dim != 2) return NULL;
+  char err[MESH_ERRLEN];
+  ctx C;
+  if (ut_ctx_init(&C, m, 0, err)) { ut_ctx_free(&C); return NULL; }
+  int nv = m->nvert, nbv = 0, nfree = 0, v0 = -1;
+  double *z = malloc(sizeof(double) * 2 * (size_t)nv + 1), *cum = NULL, area = 0;
+  int *loop = malloc(sizeof(int) * ((size_t)nv + 1)), *freev = malloc(sizeof(int) * ((size_t)nv + 1));
+  work W = {malloc(sizeof(int) * ((size_t)nv + 1)), NULL, NULL};
+  int ok = z && loop && freev && W.fidx;
+  for (int v = 0; ok && v < nv; v++) {
+    W.fidx[v] = -1;
+    if (!C.bnd[v]) { freev[nfree++] = v; continue; }
+    if (C.bnb[2 * v] < 0 || C.bnb[2 * v + 1] < 0) ok = 0;
+    if (v0 < 0) v0 = v;
+    nbv++;
+  }
+  for (int c = 0; ok && c < m->ncell; c++) area += mesh_cell_signed_measure(m, c);
+  /* the loop from v0; every boundary vertex on it once */
+  int len = 0;
+  for (int prev = -1, cur = v0; ok && len < nbv;) {
+    loop[len++] = cur;
+    int next = C.bnb[2 * cur] != prev ? C.bnb[2 * cur] : C.bnb[2 * cur + 1];
+    if (C.bnb[2 * next] != cur && C.bnb[2 * next + 1] != cur) ok = 0;
+    prev = cur;
+    cur = next;
+    if (cur == v0) break;
+  }
+  /* V − E + F = 1, E = (edges per cell · F + B) / 2 with B = nbv boundary edges */
+  long twice_e = (long)cell_nedges(m->type) * m->ncell + nbv;
+  ok = ok && len == nbv && nbv >= 3 && area > 0 && twice_e % 2 == 0 && (long)nv - twice_e / 2 + m->ncell == 1 &&
+       (cum = malloc(sizeof(double) * ((size_t)nbv + 1)));
+  if (ok) {
+    double turn = 0; /* the loop's own orientation (shoelace), to run the circle the same way */
+    cum[0] = 0;
+    for (int k = 0; k < nbv; k++) {
+      const double *a = m->x + 2 * (size_t)loop[k], *b = m->x + 2 * (size_t)loop[(k + 1) % nbv];
+      cum[k + 1] = cum[k] + hypot(b[0] - a[0], b[1] - a[1]);
+      turn += a[0] * b[1] - a[1] * b[0];
+    }
+    double R = sqrt(area / M_PI), sg = turn < 0 ? -1 : 1;
+    ok = cum[nbv] > 0;
+    for (int v = 0; ok && v < nv; v++) z[2 * v] = z[2 * v + 1] = 0;
+    for (int k = 0; ok && k < nbv; k++) {
+      double t = 2 * M_PI * cum[k] / cum[nbv];
+      z[2 * (size_t)loop[k]] = R * cos(t);
+      z[2 * (size_t)loop[k] + 1] = sg * R * sin(t);
+    }
+    int its;
+    double res;
+    if (ok && nfree && laplace_solve(&C, &W, z, freev, nfree, NULL, 20 * nv + 100, 1e-12, &its, &res)) ok = 0;
+  }
+  free(cum); free(loop); free(freev); free(W.fidx);
+  ut_ctx_free(&C);
+  if (!ok) { free(z); return NULL; }
+  return z;
 }
 
 /* ---------------------------------------------------------------- motion */
@@ -1162,6 +1234,35 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
       free(before);
     }
   }
+  /* still invalid cells in a 2D disk: a run whose global stage aims at the cells' shapes in
+   * the mesh's Tutte embedding on a circle (tutte_reference) instead of regular ones, from
+   * where the runs stopped, kept if it leaves fewer invalid cells. Tutte-started strips whose
+   * cells are 20:1 to 60:1 stall with regular shapes, whose energy has no valid minimizer
+   * near that start (19 of 24 such spirals, bench/RESULTS.md); the disk's shapes carry the
+   * strip's anisotropy, and all of them untangle. Not with reference shapes of the user's
+   * own or without the global stage */
+  if (!rc && r->invalid_after > 0 && m->dim == 2 && !oo.xref && !oo.no_global) {
+    double *tref = tutte_reference(m), *before = tref ? malloc(sizeof(double) * (nx + 1)) : NULL;
+    if (before) {
+      memcpy(before, m->x, sizeof(double) * nx);
+      untangle_opts to = oo;
+      to.xref = tref;
+      to.no_reference_polish = 1;
+      untangle_report r2;
+      rc = untangle_run(m, &to, &r2, err);
+      if (!rc) {
+        r->seconds += r2.seconds;
+        r->tutte_tried = 1;
+        if (r2.invalid_after < r->invalid_after) {
+          r->invalid_after = r2.invalid_after;
+          r->passes++;
+          r->tutte_kept = 1;
+        } else memcpy(m->x, before, sizeof(double) * nx);
+      }
+    }
+    free(before);
+    free(tref);
+  }
   if (f.orig) {
     r->beta = ldexp(r->beta, m->dim * f.e);
     r->mean_displacement = ldexp(r->mean_displacement, f.e);
@@ -1170,7 +1271,7 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
   ut_frame_leave(m, &f);
   int back = 0;
   if (!rc && oo.slide) back = restore_boundary(m, keep);
-  if (!rc && (r->passes > 1 || back > 0 || r->fallback_tried)) {
+  if (!rc && (r->passes > 1 || back > 0 || r->fallback_tried || r->tutte_tried)) {
     /* the motion of all passes together, from the input */
     double sum = 0;
     r->moved = 0;

@@ -26,6 +26,8 @@ typedef struct {
                            (h a typical edge), for the smallest motion (ALE remap); 0 none */
   int no_global;        /* 1: no global stage (only the local stages, which keep the mesh
                            away from the tangles bit for bit) */
+  int no_reference_polish; /* with xref: no final move towards its shapes (the Tutte fallback's
+                              disk shapes are only a way out of the tangle) */
 } untangle_opts;
 
 typedef struct {
@@ -52,6 +54,9 @@ typedef struct {
   int fallback_tried;               /* the passes stalled with invalid cells: the other
                                        placement was tried from there */
   int fallback_placement;           /* and repaired more (0 chebyshev, 1 corners); -1: not used */
+  int tutte_tried, tutte_kept;      /* 2D disks still invalid after those: a run aiming at the
+                                       cells' shapes in the mesh's Tutte embedding on a circle
+                                       was tried, and kept (it left fewer invalid cells) */
 } untangle_report;
 
 void untangle_defaults(untangle_opts *o);

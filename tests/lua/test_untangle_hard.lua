@@ -317,6 +317,24 @@ do
   local rq = q:untangle{quiet = true, boundary = "fixed"}
   T.check(rq.success and q:check() == 0 and rq.tutte_kept, "anisotropic quadrilateral spiral 12x30: %d -> %d invalid, Tutte shapes kept: %s",
           rq.invalid_before, rq.invalid_after, tostring(rq.tutte_kept))
+  -- an annulus (two boundary loops: not a disk) whose inner loop is mirrored, so that no valid
+  -- embedding exists: not repaired, never left worse, and no Tutte run (nor an error from one)
+  local nA, nrA = 24, 3
+  local av, ac, ab = {}, {}, {}
+  local function aid(i, j) return j*nA + (i % nA) + 1 end
+  for j = 0, nrA do for i = 0, nA - 1 do
+    local th, rr = 2*math.pi*i/nA, 1 + j/nrA
+    av[#av + 1] = {rr*math.cos(th), (j == 0 and -1 or 1)*rr*math.sin(th)}
+  end end
+  for j = 0, nrA - 1 do for i = 0, nA - 1 do
+    ac[#ac + 1] = {aid(i, j), aid(i + 1, j), aid(i + 1, j + 1)}; ac[#ac + 1] = {aid(i, j), aid(i + 1, j + 1), aid(i, j + 1)}
+  end end
+  for i = 0, nA - 1 do ab[#ab + 1] = {aid(i, 0), aid(i + 1, 0)}; ab[#ab + 1] = {aid(i, nrA), aid(i + 1, nrA)} end
+  local ann = lg.mesh.new{cell = "triangle", vertices = av, cells = ac, boundary = {wall = ab}}
+  local ra = ann:untangle{quiet = true, boundary = "fixed"}
+  T.check(not ra.success and ra.invalid_after <= ra.invalid_before and not ra.tutte_tried,
+          "mirrored annulus: %d -> %d invalid, Tutte run tried: %s (not a disk: never)", ra.invalid_before, ra.invalid_after,
+          tostring(ra.tutte_tried))
   -- a run that succeeds by itself never tries the disk shapes
   local ok = H.spiral(30, 10, 0.7):untangle{quiet = true, boundary = "fixed"}
   T.check(ok.success and not ok.tutte_tried, "spiral 30x10: untangled without the Tutte fallback")

@@ -1222,12 +1222,15 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
       untangle_opts alt = oo;
       alt.placement = 1 - oo.placement;
       untangle_report r2;
-      int left = r->invalid_after, npass = 0;
+      int left = r->invalid_after, npass = 0, alt_kept = 3; /* as if a pass had kept its stage 3 */
       double secs = 0;
-      for (int prev = left + 1, kept2 = 3; !rc && npass < 4 && left > 0 && left < prev && kept2 >= 2; npass++) {
+      if (oo.verbose)
+        printf("untangle: %d invalid left after %d pass%s; runs with the %s placement follow\n", left, r->passes,
+               r->passes > 1 ? "es" : "", alt.placement ? "corners" : "chebyshev");
+      for (int prev = left + 1; !rc && npass < 4 && left > 0 && left < prev && alt_kept >= 2; npass++) {
         prev = left;
         rc = untangle_run(m, &alt, &r2, err);
-        if (!rc) { left = r2.invalid_after; secs += r2.seconds; kept2 = r2.kept_stage; }
+        if (!rc) { left = r2.invalid_after; secs += r2.seconds; alt_kept = r2.kept_stage; }
       }
       r->seconds += secs;
       if (!rc && left < r->invalid_after) {
@@ -1250,6 +1253,9 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
     double *tref = tutte_reference(m), *before = tref ? malloc(sizeof(double) * (nx + 1)) : NULL;
     if (before) {
       memcpy(before, m->x, sizeof(double) * nx);
+      if (oo.verbose)
+        printf("untangle: %d invalid left; a run aiming at the cells' shapes in the mesh's Tutte embedding on a circle "
+               "follows\n", r->invalid_after);
       untangle_opts to = oo;
       to.xref = tref;
       to.no_reference_polish = 1;

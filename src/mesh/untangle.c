@@ -646,6 +646,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
     C.x0 = x0;
     C.anchor = o->motion_weight / pow(C.jscale, 2.0 / m->dim);
   }
+  C.escape = o->xref && o->no_reference_polish;
   /* reference shapes for the global stage */
   double *cwinv = NULL;
   if (o->xref) {

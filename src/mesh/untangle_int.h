@@ -28,6 +28,9 @@ typedef struct {
   double jscale;        /* a typical corner Jacobian, to scale the objective */
   const double *x0;     /* motion_weight: where the run started (nvert*d), or NULL */
   double anchor;        /* motion_weight / h²: the weight of |x − x0|² in the objectives */
+  int escape;           /* the reference shapes are only a way out of a tangle (the Tutte-disk
+                         * run, untangle_opts.no_reference_polish): the global stage minimizes by
+                         * projected Newton and stops once every cell is valid */
 } ctx;
 
 typedef double (*vertex_penalty)(const ctx *C, int v, const void *arg, int probe); /* probe: for the gradient, no guard */
@@ -61,6 +64,10 @@ typedef struct {
   double keepq;     /* ut_newton: an end whose smallest corner quality is below keepq gives way to
                      * the last iterate that was not (the smoother never lowers the minimum) */
   int *amg_used;    /* ut_newton sets *amg_used when it takes the multigrid (NULL: not asked) */
+  int no_multigrid; /* ut_newton: block Jacobi throughout. Plain aggregation follows the graph,
+                     * not the anisotropy: on the Tutte-disk run of a 160 000-triangle strip it
+                     * made the run take twice as long (128 s against 64 s), and forced on a
+                     * 40 000-triangle one it needed 200–440 iterations per step and more steps */
 } objective;
 
 /* per cell: its energy and vertex gradients; per free vertex: its (cell, vertex) slots */

@@ -1,12 +1,13 @@
 /* untangle_newton.c — projected Newton on the corner energy of untangle_global.c (the
- * energy smoother, smooth.c): each step solves H p = −g, H the energy's Hessian in the free
+ * energy smoother, smooth.c, and the untangler's Tutte-disk run, whose ε > 0 keeps inverted
+ * corners finite): each step solves H p = −g, H the energy's Hessian in the free
  * vertices with every corner's part made positive semidefinite (ut_energy_hessian), by
  * conjugate gradients preconditioned with H's diagonal d×d blocks (block Jacobi) or, once
  * those need more than AMG_SWITCH_ITS iterations on a mesh of AMG_MIN_ROWS free vertices or
  * more, with the aggregation multigrid of untangle_amg.c, to the relative
  * residual min(1/2, max(1/10, sqrt(|g|/|g₀|))) (an inexact Newton method's forcing term,
- * Eisenstat and Walker 1996), then backtracks on the energy (Armijo; the barrier makes every inverted
- * trial infinite). On anisotropic meshes the energy's condition number is what slows
+ * Eisenstat and Walker 1996), then backtracks on the energy (Armijo; at ε = 0 the barrier makes every
+ * inverted trial infinite). On anisotropic meshes the energy's condition number is what slows
  * L-BFGS: the Tutte-started spiral strip took 360 L-BFGS iterations, a random star 1 200
  * without converging. Results do not depend on the number of threads: sums are taken in
  * fixed chunks, in order. */
@@ -158,7 +159,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
      * Block Jacobi's count grows with the mesh where the error is smooth (a million-triangle
      * spiral: 50–240 per step), while perturbed grids, whose error is local, need few and
      * were faster without the multigrid's five products per cycle */
-    if (!use_amg && !amg_failed && k > AMG_SWITCH_ITS && nfree >= AMG_MIN_ROWS) {
+    if (!use_amg && !amg_failed && k > AMG_SWITCH_ITS && nfree >= AMG_MIN_ROWS && !o->no_multigrid) {
       if (ut_amg_build(&amg, &P, nfree, d)) { ut_amg_free(&amg); amg_failed = 1; }
       else {
         use_amg = 1;

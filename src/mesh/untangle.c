@@ -646,7 +646,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
     C.x0 = x0;
     C.anchor = o->motion_weight / pow(C.jscale, 2.0 / m->dim);
   }
-  C.escape = o->xref && o->no_reference_polish;
+  C.escape = o->xref && o->reference_escape;
   /* reference shapes for the global stage */
   double *cwinv = NULL;
   if (o->xref) {
@@ -846,7 +846,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
    * towards them (the local stages only aim at validity, and may have repaired the mesh
    * without the global stage); kept if every cell stays valid and the mean of the cells'
    * mean ratios relative to their shapes grows */
-  if (cwinv && !s->invalid_after && W.fidx && W.cells && save && trial && !o->no_global && !o->no_reference_polish) {
+  if (cwinv && !s->invalid_after && W.fidx && W.cells && save && trial && !o->no_global && !C.escape) {
     double *q = malloc(sizeof(double) * ((size_t)m->ncell + 1));
     if (q) {
       double q0 = 0, q1 = 0;
@@ -1259,7 +1259,7 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
                "follows\n", r->invalid_after);
       untangle_opts to = oo;
       to.xref = tref;
-      to.no_reference_polish = 1;
+      to.reference_escape = 1;
       untangle_report r2;
       rc = untangle_run(m, &to, &r2, err);
       if (!rc) {

@@ -26,8 +26,10 @@ typedef struct {
                            (h a typical edge), for the smallest motion (ALE remap); 0 none */
   int no_global;        /* 1: no global stage (only the local stages, which keep the mesh
                            away from the tangles bit for bit) */
-  int no_reference_polish; /* with xref: no final move towards its shapes (the Tutte fallback's
-                              disk shapes are only a way out of the tangle) */
+  int reference_escape; /* with xref: its shapes are only a way out of the tangle (the Tutte
+                           fallback's disk shapes): the global stage minimizes by projected
+                           Newton and ends at the first valid state, and no final move goes
+                           towards those shapes (C only, not in Lua) */
 } untangle_opts;
 
 typedef struct {

@@ -28,8 +28,8 @@ typedef struct {
   double jscale;        /* a typical corner Jacobian, to scale the objective */
   const double *x0;     /* motion_weight: where the run started (nvert*d), or NULL */
   double anchor;        /* motion_weight / h²: the weight of |x − x0|² in the objectives */
-  int escape;           /* the reference shapes are only a way out of a tangle (the Tutte-disk
-                         * run, untangle_opts.no_reference_polish): the global stage minimizes by
+  int escape;           /* untangle_opts.reference_escape with a reference: its shapes are only a
+                         * way out of a tangle (the Tutte-disk run); the global stage minimizes by
                          * projected Newton and stops once every cell is valid */
 } ctx;
 

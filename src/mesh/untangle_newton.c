@@ -128,8 +128,8 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
   double tol_amg = 0.1 * tol, gain[3] = {0, 0, 0};
   /* a later round of the same smoothing takes the multigrid from its first step when an
    * earlier one took it: the same mesh and pattern, and the same (tenfold) tolerance, which
-   * block Jacobi's first steps, back at 1e-5, had met on the 160 000-triangle strip below
-   * with its minimum at 0.0131 instead of 0.0197 */
+   * block Jacobi's first steps, back at 1e-5, had met on the Tutte-started 160 × 500 strip
+   * (160 000 triangles) with its minimum at 0.0131 instead of 0.0197 (bench/RESULTS.md) */
   if (o->amg_used && *o->amg_used && nfree >= AMG_MIN_ROWS && !o->no_multigrid) {
     if (ut_amg_build(&amg, &P, nfree, d)) { ut_amg_free(&amg); amg_failed = 1; }
     else use_amg = 1;
@@ -203,7 +203,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
      * (every corner's negative curvature set to 0) is far stiffer than the energy itself.
      * Double the step while it gains that much (at ε = 0 an inverted trial is infinite and
      * stops it). The Tutte-started 80 × 250 strip's smoothing took 581 steps of t = 1 whose
-     * gains were as g·s predicted, each 1e-5 of f: steps of 2–32 took 267, 11.7 → 3.9–5.2 s, the
+     * gains were as g·s predicted, each 1e-5 of f: steps of 2–32 took 267–290, 11.6 → 3.9–5.2 s, the
      * same minimum (bench/RESULTS.md) */
     if (ls == 0 && f - fn > 0.75 * -gp) {
       for (int e = 0; e < 10; e++) {

@@ -184,20 +184,17 @@ int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int max
       for (long i = 0; i < n; i++) p[i] = -0.1 * h0 / gi * g[i];
       gp = ut_dot(g, p, n, part);
     }
-    for (int i = 0; i < nfree; i++)
-      for (int j = 0; j < d; j++) x0[i * d + j] = x[(size_t)freev[i] * d + j];
+    ut_gather(x0, x, freev, nfree, d);
     double t = 1, fn = f;
     int ls;
     for (ls = 0; ls < 50; ls++) {
-      for (int i = 0; i < nfree; i++)
-        for (int j = 0; j < d; j++) x[(size_t)freev[i] * d + j] = x0[i * d + j] + t * p[i * d + j];
+      ut_place(x, x0, p, t, freev, nfree, d);
       fn = ut_eval(o, x, gn, nfree); /* with the gradient: the first step is usually taken */
       if (fn <= f + 1e-4 * t * gp) break;
       t *= 0.5;
     }
     if (ls == 50) { /* no decrease: restore and stop */
-      for (int i = 0; i < nfree; i++)
-        for (int j = 0; j < d; j++) x[(size_t)freev[i] * d + j] = x0[i * d + j];
+      ut_place(x, x0, NULL, 0, freev, nfree, d);
       break;
     }
     double *Sh = S + head * n, *Yh = Y + head * n;

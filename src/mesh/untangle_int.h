@@ -146,6 +146,21 @@ void ut_amg_free(ut_amg *A);
  * when n is large): the same bits for any thread count; part holds n / UT_DOT_CHUNK + 1 */
 #define UT_DOT_CHUNK 4096
 double ut_dot(const double *a, const double *b, long n, double *part);
+
+/* the free vertices' coordinates (freev, d each) copied out of x into buf, in free-vertex order */
+static inline void ut_gather(double *buf, const double *x, const int *freev, int nfree, int d) {
+  for (int i = 0; i < nfree; i++)
+    for (int a = 0; a < d; a++) buf[(size_t)i * d + a] = x[(size_t)freev[i] * d + a];
+}
+
+/* the free vertices placed at x0 + t s (x0 and s in free-vertex order; s NULL: at x0), the
+ * line searches' trial points and restores */
+static inline void ut_place(double *x, const double *x0, const double *s, double t, const int *freev, int nfree, int d) {
+  for (int i = 0; i < nfree; i++)
+    for (int a = 0; a < d; a++)
+      x[(size_t)freev[i] * d + a] = s ? x0[(size_t)i * d + a] + t * s[(size_t)i * d + a] : x0[(size_t)i * d + a];
+}
+
 /* an element-wise loop over n entries, on threads when n is large (each entry on its own:
  * the same bits for any thread count) */
 #ifdef _OPENMP

@@ -84,12 +84,6 @@ static int build_pattern(const ctx *C, const int *fidx, const int *freev, int nf
 #define AMG_SWITCH_ITS 40
 #define PRECOND(r, z) (use_amg ? ut_amg_apply(&amg, r, z) : ut_block_apply(dinv, nfree, d, r, z))
 
-/* the free vertices at x0 + t s (x0 and s in free-vertex order, d per vertex) */
-static void place(double *x, const double *x0, const double *s, double t, const int *freev, int nfree, int d) {
-  for (int i = 0; i < nfree; i++)
-    for (int a = 0; a < d; a++) x[(size_t)freev[i] * d + a] = x0[(size_t)i * d + a] + t * s[(size_t)i * d + a];
-}
-
 int ut_newton(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout) {
   const ctx *C = o->C;
   int d = C->d, dd = d * d, it;
@@ -117,8 +111,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
   }
   f = ut_eval(o, x, g, nfree);
   if (xkeep)
-    for (int i = 0; i < nfree; i++)
-      for (int a = 0; a < d; a++) xkeep[(size_t)i * d + a] = x[(size_t)freev[i] * d + a];
+    ut_gather(xkeep, x, freev, nfree, d);
   double tol = o->ftol > 0 ? o->ftol : 1e-9;
   /* with the multigrid, a tenth of that: its steps resolve every scale alike where block
    * Jacobi's resolve the local ones first, and at the same gain its runs had left the
@@ -188,12 +181,11 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
       gp = ut_dot(g, s, n, part);
       if (!(gp < 0)) break;
     }
-    for (int i = 0; i < nfree; i++)
-      for (int a = 0; a < d; a++) x0[(size_t)i * d + a] = x[(size_t)freev[i] * d + a];
+    ut_gather(x0, x, freev, nfree, d);
     double t = 1, fn = f;
     int ls;
     for (ls = 0; ls < 50; ls++) {
-      place(x, x0, s, t, freev, nfree, d);
+      ut_place(x, x0, s, t, freev, nfree, d);
       fn = ut_eval(o, x, gn, nfree);
       if (fn <= f + 1e-4 * t * gp) break;
       t *= 0.5;
@@ -208,19 +200,20 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     if (ls == 0 && f - fn > 0.75 * -gp) {
       for (int e = 0; e < 10; e++) {
         double t2 = 2 * t, f2;
-        place(x, x0, s, t2, freev, nfree, d);
+        ut_place(x, x0, s, t2, freev, nfree, d);
         f2 = ut_eval(o, x, q, nfree);
         if (!(f2 < fn)) break;
         t = t2;
         fn = f2;
-        memcpy(gn, q, sizeof(double) * n);
+        double *tq = gn; /* q holds the trial's gradient: it becomes the accepted point's */
+        gn = q;
+        q = tq;
         if (!(f - fn > 0.75 * t * -gp)) break;
       }
-      place(x, x0, s, t, freev, nfree, d);
+      ut_place(x, x0, s, t, freev, nfree, d);
     }
     if (ls == 50) { /* no decrease: restore and stop */
-      for (int i = 0; i < nfree; i++)
-        for (int a = 0; a < d; a++) x[(size_t)freev[i] * d + a] = x0[(size_t)i * d + a];
+      ut_place(x, x0, NULL, 0, freev, nfree, d);
       break;
     }
     double fprev = f;
@@ -232,8 +225,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
                   * no vertex can move, measured by the caller in other arithmetic, is kept) */
       below = ut_energy_qmin(o, x) < o->keepq * (1 - 1e-12);
       if (!below)
-        for (int i = 0; i < nfree; i++)
-          for (int a = 0; a < d; a++) xkeep[(size_t)i * d + a] = x[(size_t)freev[i] * d + a];
+        ut_gather(xkeep, x, freev, nfree, d);
     }
     /* the end: a step that gains at most tol·f where the gradient has fallen to a tenth of
      * the first step's (Newton near its minimum). Where it has not, a step's small gain says
@@ -248,8 +240,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     }
   }
   if (below) {
-    for (int i = 0; i < nfree; i++)
-      for (int a = 0; a < d; a++) x[(size_t)freev[i] * d + a] = xkeep[(size_t)i * d + a];
+    ut_place(x, xkeep, NULL, 0, freev, nfree, d);
     f = ut_eval(o, x, NULL, nfree);
   }
 done:

@@ -116,20 +116,30 @@ static double smooth_eval(const objective *o, const double *x, double *grad, int
 /* the untangling objectives (3.3) and the global energy, plus with motion_weight w the
  * distance to where the run started, w Σ |x_v − x0_v|² / h² over the free vertices (h a
  * typical edge), for an ALE remap that wants the smallest motion */
+void ut_slide_project(const objective *o, double *vec, int nfree) {
+  if (!o->slide) return;
+  const ctx *C = o->C;
+  for (int fi = 0; fi < nfree; fi++)
+    if (C->bnd[o->freev[fi]]) ut_tangent_project(C, o->freev[fi], vec + (size_t)fi * C->d);
+}
+
 double ut_eval(const objective *o, const double *x, double *grad, int nfree) {
   double f = o->smooth == 2 ? ut_energy_eval(o, x, grad, nfree)
              : o->smooth   ? smooth_eval(o, x, grad, nfree)
                            : obj_eval(o, x, grad, nfree);
   const ctx *C = o->C;
-  if (o->smooth == 1 || !(C->anchor > 0) || !C->x0 || !o->freev || !isfinite(f)) return f;
-  int d = C->d;
-  for (int i = 0; i < nfree; i++)
-    for (int j = 0; j < d; j++) {
-      size_t k = (size_t)o->freev[i] * d + j;
-      double e = x[k] - C->x0[k];
-      f += C->anchor * e * e;
-      if (grad) grad[(size_t)i * d + j] += 2 * C->anchor * e;
-    }
+  if (!isfinite(f)) return f;
+  if (o->smooth != 1 && C->anchor > 0 && C->x0 && o->freev) {
+    int d = C->d;
+    for (int i = 0; i < nfree; i++)
+      for (int j = 0; j < d; j++) {
+        size_t k = (size_t)o->freev[i] * d + j;
+        double e = x[k] - C->x0[k];
+        f += C->anchor * e * e;
+        if (grad) grad[(size_t)i * d + j] += 2 * C->anchor * e;
+      }
+  }
+  if (grad) ut_slide_project(o, grad, nfree);
   return f;
 }
 
@@ -184,6 +194,7 @@ int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int max
       for (long i = 0; i < n; i++) p[i] = -0.1 * h0 / gi * g[i];
       gp = ut_dot(g, p, n, part);
     }
+    ut_slide_project(o, p, nfree); /* exactly on the tangents (g is: p is to rounding) */
     ut_gather(x0, x, freev, nfree, d);
     double t = 1, fn = f;
     int ls;

@@ -159,11 +159,15 @@ int mesh_boundary_vertices(const mesh *m, unsigned char *flags, char *err) {
 
 /* 2D boundary edges: the two boundary neighbours of every boundary vertex; a vertex with
  * other than two, or whose two edges are not collinear, is a corner of the boundary */
-static int boundary_2d(ctx *C, char *err) {
+static int boundary_2d(ctx *C, int slide, char *err) {
   mesh *m = C->m;
   C->bnb = malloc(sizeof(int) * 2 * (size_t)m->nvert);
+  if (slide) {
+    C->ntan = calloc((size_t)m->nvert + 1, 1);
+    C->tan = calloc((size_t)m->nvert * 4 + 1, sizeof(double));
+  }
   int *nb = calloc((size_t)m->nvert, sizeof(int)), *bf = NULL, n = 0, nf = cell_nfacets(m->type);
-  if (!C->bnb || !nb || boundary_facets(m, &bf, &n, err)) {
+  if (!C->bnb || !nb || (slide && (!C->ntan || !C->tan)) || boundary_facets(m, &bf, &n, err)) {
     free(nb);
     snprintf(err, MESH_ERRLEN, "out of memory");
     return 1;
@@ -186,6 +190,13 @@ static int boundary_2d(ctx *C, char *err) {
       double cr = ax * by - ay * bx;
       /* straight: the two edges collinear (possibly folded back by a tangle) */
       corner = !(fabs(cr) <= 1e-12 * sqrt((ax * ax + ay * ay) * (bx * bx + by * by)));
+      double l = sqrt((bx - ax) * (bx - ax) + (by - ay) * (by - ay));
+      if (slide && !corner && l > 0) { /* the line's direction */
+        double *t = ut_tangents(C, v);
+        t[0] = (bx - ax) / l;
+        t[1] = (by - ay) / l;
+        C->ntan[v] = 1;
+      }
     }
     if (corner) C->fixed[v] = 1;
   }
@@ -250,7 +261,7 @@ static int boundary_3d(ctx *C, char *err) {
         ncl++;
       }
     }
-    double *t = C->tan + 6 * (size_t)v;
+    double *t = ut_tangents(C, v);
     if (ncl == 1) {
       /* a unit vector orthogonal to the normal, then the normal cross it */
       const double *nn = cl[0];
@@ -317,7 +328,7 @@ static int on_star(const ctx *C, const double *x, int v, const double *p) {
 
 int ut_slide_3d(const ctx *C, double *x, int v, vertex_penalty pen, vertex_gradient grad, const void *arg) {
   int nt = C->ntan[v], moved = 0;
-  const double *t = C->tan + 6 * (size_t)v;
+  const double *t = ut_tangents(C, v);
   double *p = x + 3 * (size_t)v, h = ut_star_h(C, v), f = pen(C, v, arg, 0);
   if (!nt || !(f > 0) || !isfinite(f)) return 0;
   double s0 = 1;
@@ -398,7 +409,7 @@ int ut_ctx_init(ctx *C, mesh *m, int slide, char *err) {
   free(pos);
   if (mesh_boundary_vertices(m, C->bnd, err)) return 1;
   for (int v = 0; v < nv; v++) C->fixed[v] = C->bnd[v] && !slide;
-  if (m->dim == 2 && boundary_2d(C, err)) return 1;
+  if (m->dim == 2 && boundary_2d(C, slide, err)) return 1;
   if (m->dim == 3 && slide && boundary_3d(C, err)) return 1;
   double h = bbox_diag(m) / pow(fmax((double)m->ncell, 1), 1.0 / m->dim);
   C->jscale = pow(h, m->dim);

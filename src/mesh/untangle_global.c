@@ -588,7 +588,7 @@ static void add_row_blocks(const objective *o, const ut_bsr *P, double *val, con
  * not depend on the number of threads. Before the chunks, a million-tetrahedron bar's
  * Hessians (1.3 GB) did not fit a whole-mesh buffer and were assembled on one thread: 2 s
  * of each 2.2 s Newton step. 1 where the energy is infinite. */
-int ut_energy_hessian(const objective *o, const double *x, const ut_bsr *P, double *val, int nfree) {
+static int hessian_assemble(const objective *o, const double *x, const ut_bsr *P, double *val, int nfree) {
   const ctx *C = o->C;
   int d = C->d, nk = C->ncorner, n = o->ncell, nx = (d + 1) * d, dd = d * d;
   size_t hs = (size_t)nx * nx, per_cell = sizeof(double) * hs * (size_t)nk;
@@ -636,6 +636,71 @@ int ut_energy_hessian(const objective *o, const double *x, const ut_bsr *P, doub
       }
     }
   }
+  return 0;
+}
+
+/* P = Σ t tᵀ over v's slide directions */
+static void slide_projector(const ctx *C, int v, double *Pm) {
+  int d = C->d;
+  const double *t = ut_tangents(C, v);
+  for (int a = 0; a < d * d; a++) Pm[a] = 0;
+  for (int k = 0; k < C->ntan[v]; k++)
+    for (int a = 0; a < d; a++)
+      for (int b = 0; b < d; b++) Pm[a * d + b] += t[k * d + a] * t[k * d + b];
+}
+
+/* a = l a r for d×d matrices (l, r NULL: the identity) */
+static void mat_sandwich(int d, const double *l, double *a, const double *r) {
+  double t[9];
+  for (int i = 0; i < d; i++)
+    for (int j = 0; j < d; j++) {
+      double s = 0;
+      for (int k = 0; k < d; k++) s += (l ? l[i * d + k] : (i == k)) * a[k * d + j];
+      t[i * d + j] = s;
+    }
+  for (int i = 0; i < d; i++)
+    for (int j = 0; j < d; j++) {
+      double s = 0;
+      for (int k = 0; k < d; k++) s += t[i * d + k] * (r ? r[k * d + j] : (k == j));
+      a[i * d + j] = s;
+    }
+}
+
+/* sliding vertices (o->slide): their rows and columns in their tangent directions, P H P with
+ * P a vertex's projector (the identity off the boundary), and c (I − P) added to their
+ * diagonal blocks, c the block's mean diagonal: the normal directions decouple, so a solve
+ * whose right side is tangent (the projected gradient) has no normal component. Each row
+ * changes its own blocks (threads, the same bits) */
+static void hessian_slide(const objective *o, const ut_bsr *P, double *val, int nfree) {
+  const ctx *C = o->C;
+  int d = C->d, dd = d * d;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (nfree > 2048)
+#endif
+  for (int fi = 0; fi < nfree; fi++) {
+    int u = o->freev[fi], su = C->bnd[u];
+    double Pu[9], Pw[9];
+    if (su) slide_projector(C, u, Pu);
+    for (int q = P->off[fi]; q < P->off[fi + 1]; q++) {
+      int w = o->freev[P->col[q]], sw = C->bnd[w];
+      if (!su && !sw) continue;
+      double *blk = val + (size_t)q * dd;
+      if (P->col[q] == fi) {
+        double c = 0;
+        for (int a = 0; a < d; a++) c += blk[a * d + a] / d;
+        mat_sandwich(d, Pu, blk, Pu);
+        for (int a = 0; a < dd; a++) blk[a] += c * ((a % (d + 1) == 0) - Pu[a]);
+      } else {
+        if (sw) slide_projector(C, w, Pw);
+        mat_sandwich(d, su ? Pu : NULL, blk, sw ? Pw : NULL);
+      }
+    }
+  }
+}
+
+int ut_energy_hessian(const objective *o, const double *x, const ut_bsr *P, double *val, int nfree) {
+  if (hessian_assemble(o, x, P, val, nfree)) return 1;
+  if (o->slide) hessian_slide(o, P, val, nfree);
   return 0;
 }
 

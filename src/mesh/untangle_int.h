@@ -21,9 +21,10 @@ typedef struct {
   unsigned char *fixed; /* may not move: boundary corners, or every boundary vertex */
   int *bnb;             /* 2D: the two boundary neighbours of a boundary vertex */
   int *bf_off, *bf;     /* 3D: vertex -> its boundary facets (cell * nfacets + facet) */
-  unsigned char *ntan;  /* 3D: directions a boundary vertex may slide in: 2 on a flat face,
-                         * 1 on a straight edge between two flat faces, 0 elsewhere */
-  double *tan;          /* 3D: those directions, 2 unit vectors per vertex */
+  unsigned char *ntan;  /* sliding boundaries: the directions a boundary vertex may slide in,
+                         * 3D: 2 on a flat face, 1 on a straight edge between two flat faces;
+                         * 2D: 1 on a straight piece of the boundary; 0 elsewhere (NULL: fixed) */
+  double *tan;          /* those directions, 2 unit vectors of d per vertex (ut_tangents) */
   double jtol;          /* corner Jacobians <= jtol count as invalid */
   double jscale;        /* a typical corner Jacobian, to scale the objective */
   const double *x0;     /* motion_weight: where the run started (nvert*d), or NULL */
@@ -32,6 +33,21 @@ typedef struct {
                          * way out of a tangle (the Tutte-disk run); the global stage minimizes by
                          * projected Newton and stops once every cell is valid */
 } ctx;
+
+/* v's slide directions (C->ntan[v] unit vectors of C->d) */
+static inline double *ut_tangents(const ctx *C, int v) { return C->tan + (size_t)v * 2 * C->d; }
+/* g (d entries at v) projected on v's slide directions: Σ t (t·g), orthonormal t */
+static inline void ut_tangent_project(const ctx *C, int v, double *g) {
+  int d = C->d, nt = C->ntan[v];
+  const double *t = ut_tangents(C, v);
+  double out[3] = {0, 0, 0};
+  for (int k = 0; k < nt; k++) {
+    double a = 0;
+    for (int j = 0; j < d; j++) a += t[k * d + j] * g[j];
+    for (int j = 0; j < d; j++) out[j] += a * t[k * d + j];
+  }
+  for (int j = 0; j < d; j++) g[j] = out[j];
+}
 
 typedef double (*vertex_penalty)(const ctx *C, int v, const void *arg, int probe); /* probe: for the gradient, no guard */
 /* the gradient in v of what a vertex_penalty measures (without its guard), into g[0..d); 1 where
@@ -63,6 +79,9 @@ typedef struct {
   double ftol;      /* smooth: a step that lowers f by at most ftol·f ends the run (0: 1e-9) */
   double keepq;     /* ut_newton: an end whose smallest corner quality is below keepq gives way to
                      * the last iterate that was not (the smoother never lowers the minimum) */
+  int slide;        /* smooth == 2: the free vertices on the boundary (C->bnd) slide along their
+                     * tangents (C->tan) inside the optimizer: ut_eval projects their gradients,
+                     * ut_energy_hessian their rows and columns, ut_newton and ut_lbfgs their steps */
   int *amg_used;    /* ut_newton sets *amg_used when it takes the multigrid (NULL: not asked) */
   int no_multigrid; /* ut_newton: block Jacobi throughout. Plain aggregation follows the graph,
                      * not the anisotropy: on the Tutte-disk run of a 160 000-triangle strip it
@@ -168,8 +187,11 @@ static inline void ut_place(double *x, const double *x0, const double *s, double
 #else
 #define UT_PAR_FOR
 #endif
-/* the objective that ut_lbfgs and ut_newton minimize, with the motion weight's term */
+/* the objective that ut_lbfgs and ut_newton minimize, with the motion weight's term; with
+ * o->slide the sliding vertices' gradients projected on their tangents */
 double ut_eval(const objective *o, const double *x, double *grad, int nfree);
+/* with o->slide: the sliding free vertices' parts of vec (nfree × d) projected on their tangents */
+void ut_slide_project(const objective *o, double *vec, int nfree);
 
 /* reusable per-vertex / per-cell marks, kept at their rest values (-1 / 0) between uses */
 typedef struct {

@@ -174,10 +174,14 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
         if (o->amg_used) *o->amg_used = 1;
       }
     }
+    /* sliding vertices: the multigrid's coarse corrections leave the normal components of an
+     * inexact solve nonzero (the exact solution has none); g·s is unchanged, g being tangent */
+    ut_slide_project(o, s, nfree);
     double gp = ut_dot(g, s, n, part);
     if (!(gp < 0)) { /* no descent (a breakdown at the first step): the preconditioned gradient */
       ut_block_apply(dinv, nfree, d, g, s);
       for (long i = 0; i < n; i++) s[i] = -s[i];
+      ut_slide_project(o, s, nfree);
       gp = ut_dot(g, s, n, part);
       if (!(gp < 0)) break;
     }

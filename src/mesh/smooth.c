@@ -237,18 +237,6 @@ static int smooth_pass(ctx *C, const smooth_opts *o, const double *cwinv, int sl
   return status;
 }
 
-/* the smallest and the mean quality */
-static void min_mean(const mesh *m, int measure, double *mn, double *mean) {
-  double q = INFINITY, s = 0;
-  for (int c = 0; c < m->ncell; c++) {
-    double v = mesh_cell_quality(m, c, measure);
-    q = fmin(q, v);
-    s += v;
-  }
-  *mn = q;
-  *mean = s / (m->ncell ? m->ncell : 1);
-}
-
 /* global smoothing. The energy method with its own measure and a sliding boundary runs two
  * passes: the boundary fixed, then sliding inside the optimizer, kept when its minimum beats
  * the first pass's (or ties it with a higher mean); otherwise the first pass's mesh goes on
@@ -260,7 +248,7 @@ static void min_mean(const mesh *m, int measure, double *mn, double *mean) {
  * end vertices crowded the fixed corners (400x60: 0.20, the fixed boundary's 0.38);
  * bench/RESULTS.md. Other methods and reference shapes: one pass (with reference shapes the
  * boundary stays) */
-static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, smooth_report *r, char *err) {
+static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, double *q, smooth_report *r, char *err) {
   mesh *m = C->m;
   int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON, nslide = 0;
   for (int v = 0; v < m->nvert; v++) nslide += C->bnd[v] && !C->fixed[v];
@@ -268,13 +256,15 @@ static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, smoo
     return smooth_pass(C, o, cwinv, o->slide && !cwinv ? SLIDE_LOCAL : SLIDE_NONE, r, err);
   if (smooth_pass(C, o, cwinv, SLIDE_NONE, r, err)) return 1;
   size_t nx = (size_t)m->nvert * m->dim;
-  double q1, mean1, q2, mean2, *x1 = malloc(sizeof(double) * (nx + 1));
+  double *x1 = malloc(sizeof(double) * (nx + 1));
+  quality_stats s1, s2;
   if (!x1) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
-  min_mean(m, o->measure, &q1, &mean1);
+  if (mesh_quality(m, o->measure, NULL, q, err)) { free(x1); return 1; }
+  quality_stats_compute(q, m->ncell, &s1);
   memcpy(x1, m->x, sizeof(double) * nx);
-  int rc = smooth_pass(C, o, cwinv, SLIDE_INNER, r, err);
-  if (!rc) min_mean(m, o->measure, &q2, &mean2);
-  if (!rc && !(q2 > q1 || (q2 == q1 && mean2 > mean1))) {
+  int rc = smooth_pass(C, o, cwinv, SLIDE_INNER, r, err) || mesh_quality(m, o->measure, NULL, q, err);
+  if (!rc) quality_stats_compute(q, m->ncell, &s2);
+  if (!rc && !(s2.min > s1.min || (s2.min == s1.min && s2.mean > s1.mean))) {
     memcpy(m->x, x1, sizeof(double) * nx);
     rc = smooth_pass(C, o, cwinv, SLIDE_LOCAL, r, err);
   }
@@ -340,7 +330,7 @@ static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err
       /* converged: the sweep lowered Σ 1/q by less than 1e-4 of it */
       if (!changed || gain < 1e-4 * total) break;
     }
-  else if (smooth_global(&C, o, cwinv, r, err)) {
+  else if (smooth_global(&C, o, cwinv, q, r, err)) {
     memcpy(m->x, x0, sizeof(double) * (size_t)m->nvert * d);
     free(x0); mesh_big_free(q); free(moved); free(cwinv); ut_ctx_free(&C);
     return 1;

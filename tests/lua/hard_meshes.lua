@@ -81,17 +81,4 @@ function M.twisted_bar(n, L, turns)
   return mesh, ref
 end
 
--- a unit square's or cube's mesh with every coordinate strictly inside (0, 1) moved by up to
--- `amount` either way (a linear congruential sequence from `seed`): interior vertices move in
--- every direction, boundary vertices within their faces
-function M.perturb(mesh, amount, seed)
-  local function lcg() seed = (seed * 1103515245 + 12345) % 2147483648; return seed / 2147483648 end
-  for i = 1, mesh:nvertices() do
-    local p = {mesh:coordinates(i)}
-    for k = 1, #p do if p[k] > 0 and p[k] < 1 then p[k] = p[k] + amount * (2 * lcg() - 1) end end
-    mesh:set_coordinates(i, table.unpack(p))
-  end
-  return mesh
-end
-
 return M

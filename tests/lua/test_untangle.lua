@@ -1,6 +1,6 @@
 -- Untangling (seed: "Untangling of 2D triangular and quadrilateral meshes in ALE
 -- simulations"), quality-guarded smoothing and Laplacian motion (morphing paper 1.1-1.3).
-package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
+package.path = arg[0]:match("(.*/)") .. "?.lua;" .. arg[0]:match("(.*/)") .. "../../bench/?.lua;" .. package.path
 local T = require "testlib"
 local lg = require "lugal"
 
@@ -256,7 +256,7 @@ end
 -- tetrahedra). Before, they took one guarded local step per round: 7 rounds, 90 L-BFGS
 -- iterations, mean 0.888. The sliding box's optimum has a mean above 0.9.
 do
-  local m = require("hard_meshes").perturb(lg.mesh.box{nx = 8}, 0.2 / 8, 7)
+  local m = require "perturbed"("tetrahedron", 8)
   local fixed = m:copy()
   local s = m:smooth{method = "energy", quiet = true}
   local sf = fixed:smooth{method = "energy", quiet = true, boundary = "fixed"}

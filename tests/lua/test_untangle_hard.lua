@@ -7,7 +7,7 @@
 -- minimum, cannot. The same in quadrilaterals. Random interior vertices in a star domain. A
 -- tetrahedral bar twisted by 360 degrees. Reference shapes on triangles, quadrilaterals and
 -- hexahedra.
-package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
+package.path = arg[0]:match("(.*/)") .. "?.lua;" .. arg[0]:match("(.*/)") .. "../../bench/?.lua;" .. package.path
 local T = require "testlib"
 local lg = require "lugal"
 
@@ -89,7 +89,7 @@ end
 -- lowers the minimum below the fixed boundary's (its end vertices crowd the fixed corners):
 -- it is dropped for the guarded local slides between rounds, which raise it
 do
-  local m = H.perturb(lg.mesh.rectangle{nx = 16}, 0.25 / 16, 3)
+  local m = require "perturbed"("triangle", 16)
   local s = m:smooth{method = "energy", quiet = true}
   T.check(s.sweeps == 2 and s.min_after > 0.866 and s.mean_after > 0.995,
           "perturbed 16² triangles, sliding: %d rounds, min %.4f, mean %.4f", s.sweeps, s.min_after, s.mean_after)

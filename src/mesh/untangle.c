@@ -550,6 +550,10 @@ static double piece_min_jac(const ctx *C, work *W, const double *x, const int *v
 }
 
 void untangle_defaults(untangle_opts *o) {
+  /* every field not named below is 0 (reference_escape was left unset: a Lua call's stack
+   * garbage made mesh:untangle{reference = ...} now and then stop at the first valid state
+   * without moving towards the reference shapes) */
+  memset(o, 0, sizeof *o);
   o->beta = -1;
   o->max_iterations = 100;
   o->slide = 1;

@@ -4,6 +4,7 @@
  * fail (with the reason, leaving the old file), packing into bytes and back. argv[1] is
  * tests/data. */
 #include "../../src/mesh/mesh.h"
+#include "../../src/mesh/untangle.h"
 #include "check.h"
 
 #include <signal.h>
@@ -237,8 +238,21 @@ static void files(const char *data) {
   mesh_free(m);
 }
 
+/* untangle_defaults sets every option: on a struct full of garbage (a Lua call's stack),
+ * the C-only reference_escape was left as it was, and mesh:untangle{reference = ...} now
+ * and then stopped at the first valid state instead of moving towards the shapes */
+static void untangle_option_defaults(void) {
+  untangle_opts o;
+  memset(&o, 0xa5, sizeof o);
+  untangle_defaults(&o);
+  CHECK(o.reference_escape == 0 && o.xref == NULL && o.no_global == 0 && o.verbose == 0 && o.motion_weight == 0 &&
+            o.beta == -1 && o.max_iterations == 100 && o.slide == 1 && o.placement == 0,
+        "untangle_defaults left a field unset (reference_escape %d)", o.reference_escape);
+}
+
 int main(int argc, char **argv) {
   const char *data = argc > 1 ? argv[1] : "tests/data";
+  untangle_option_defaults();
   pack(data);
   parts(data);
   char err[MESH_ERRLEN], path[1024];

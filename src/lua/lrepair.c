@@ -207,15 +207,15 @@ int lmesh_smooth(lua_State *L) {
   int t = 0;
   if (!lua_isnoneornil(L, 2)) {
     if (!lua_istable(L, 2))
-      return typeerror(L, fn, 2, "an options table {measure=, method=, iterations=, boundary=, quiet=, reference=, optimizer=}");
-    static const char *const keys[] = {"measure", "method", "iterations", "boundary", "quiet", "reference", "optimizer", NULL};
+      return typeerror(L, fn, 2, "an options table {measure=, method=, iterations=, boundary=, quiet=, reference=, optimizer=, sliding=}");
+    static const char *const keys[] = {"measure", "method", "iterations", "boundary", "quiet", "reference", "optimizer", "sliding", NULL};
     check_keys(L, 2, fn, keys);
     t = 2;
   }
   lg_mesh *refl = opt_reference(L, t, u->lm, fn);
   const mesh *ref = refl ? refl->m : NULL;
   smooth_opts o = {m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 20, 1, 0, 0, 0, NULL,
-                   SMOOTH_AUTO};
+                   SMOOTH_AUTO, SMOOTH_SLIDE_NONE};
   int quiet = 0;
   if (t) {
     const char *name = opt_str(L, t, "measure", NULL, fn);
@@ -256,6 +256,17 @@ int lmesh_smooth(lua_State *L) {
       return luaL_error(L, "%s: option 'optimizer' must be \"auto\", \"newton\" or \"lbfgs\", got '%s'", fn, opt);
     if (!o.energy) return luaL_error(L, "%s: option 'optimizer' needs method = \"energy\" (or reference shapes)", fn);
   }
+  const char *sl = t ? opt_str(L, t, "sliding", NULL, fn) : NULL;
+  if (sl) {
+    if (!strcmp(sl, "optimizer")) o.sliding = SMOOTH_SLIDE_INNER;
+    else if (!strcmp(sl, "local")) o.sliding = SMOOTH_SLIDE_LOCAL;
+    else if (strcmp(sl, "best"))
+      return luaL_error(L, "%s: option 'sliding' must be \"best\", \"optimizer\" or \"local\", got '%s'", fn, sl);
+    int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON;
+    if (!o.energy || !o.slide || ref || o.measure != (simplex ? QM_MEAN_RATIO : QM_CORNER_CONDITION))
+      return luaL_error(L, "%s: option 'sliding' needs method = \"energy\" with boundary = \"slide\", the measure %s and no "
+                           "reference", fn, simplex ? "mean_ratio" : "corner_condition");
+  }
   smooth_report r;
   char err[MESH_ERRLEN];
   if (u->lm->dist) {
@@ -263,8 +274,8 @@ int lmesh_smooth(lua_State *L) {
   } else if (mesh_smooth(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
   lg_mesh_changed(u->lm);
   char text[512];
-  snprintf(text, sizeof text, "smooth (%s): %s%s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s",
-           smooth_method_label(&o, &r), quality_name(o.measure), ref ? " relative to the reference" : "",
+  snprintf(text, sizeof text, "smooth (%s%s): %s%s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s",
+           smooth_method_label(&o, &r), smooth_sliding_label(&r), quality_name(o.measure), ref ? " relative to the reference" : "",
            r.min_before, r.min_after, r.mean_before,
            r.mean_after, r.moved, r.sweeps, o.global ? "rounds" : "sweeps", r.seconds);
   lua_createtable(L, 0, 10);
@@ -285,6 +296,10 @@ int lmesh_smooth(lua_State *L) {
     if (r.optimizer == SMOOTH_NEWTON) {
       lua_pushstring(L, r.multigrid ? "multigrid" : "block_jacobi");
       lua_setfield(L, -2, "preconditioner");
+    }
+    if (r.sliding) {
+      lua_pushstring(L, r.sliding == SMOOTH_SLIDE_INNER ? "optimizer" : "local");
+      lua_setfield(L, -2, "sliding");
     }
   }
   set_num(L, "seconds", r.seconds);

@@ -21,7 +21,7 @@ static void usage(FILE *f) {
              "                  [--motion-weight W] [--no-global] [--report]\n"
              "       lugal-mesh smooth IN.msh OUT.msh [--measure NAME] [--iterations N]\n"
              "                  [--method local|global|energy] [--reference REST.msh] [--boundary slide|fixed]\n"
-             "                  [--optimizer auto|newton|lbfgs]\n"
+             "                  [--optimizer auto|newton|lbfgs] [--sliding best|optimizer|local]\n"
              "       lugal-mesh --version | --help\n\n"
              "quality   prints min, mean, max and the worst cell of every measure that applies to\n"
              "          the mesh's cells, and the number of inverted or degenerate cells;\n"
@@ -43,6 +43,9 @@ static void usage(FILE *f) {
              "          when its minimum beats the input's: for bent and anisotropic meshes;\n"
              "          --optimizer (energy) newton takes projected Newton steps, lbfgs L-BFGS\n"
              "          ones, auto (default) Newton in 2D and L-BFGS in 3D;\n"
+             "          --sliding (energy, sliding boundary) optimizer moves the boundary inside\n"
+             "          the optimizer, local by guarded steps between its rounds, best (default)\n"
+             "          runs both and keeps the higher minimum;\n"
              "          --reference REST.msh (energy; the mean ratio on simplices, the corner\n"
              "          condition on quadrilaterals and hexahedra) aims at each cell's shape in\n"
              "          REST.msh, the same mesh at rest, instead of regular cells.\n");
@@ -166,7 +169,8 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
   const char *in = NULL, *out = NULL, *measure = NULL, *refpath = NULL;
   untangle_opts uo;
   untangle_defaults(&uo);
-  int report = 0, iterations = 20, slide = 1, global = 0, energy = 0, method_given = 0, optimizer = SMOOTH_AUTO;
+  int report = 0, iterations = 20, slide = 1, global = 0, energy = 0, method_given = 0, optimizer = SMOOTH_AUTO,
+      sliding = -1;
   for (int i = 0; i < argc; i++) {
     const char *a = argv[i];
     int has = i + 1 < argc;
@@ -199,6 +203,12 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
       else if (!strcmp(v, "global")) global = 1;
       else if (!strcmp(v, "energy")) global = energy = 1;
       else { fprintf(stderr, "lugal-mesh smooth: --method must be local, global or energy\n"); return 2; }
+    } else if (!strcmp(a, "--sliding") && has && !strcmp(cmd, "smooth")) {
+      const char *v = argv[++i];
+      if (!strcmp(v, "best")) sliding = SMOOTH_SLIDE_NONE;
+      else if (!strcmp(v, "optimizer")) sliding = SMOOTH_SLIDE_INNER;
+      else if (!strcmp(v, "local")) sliding = SMOOTH_SLIDE_LOCAL;
+      else { fprintf(stderr, "lugal-mesh smooth: --sliding must be best, optimizer or local\n"); return 2; }
     } else if (!strcmp(a, "--optimizer") && has && !strcmp(cmd, "smooth")) {
       const char *v = argv[++i];
       if (!strcmp(v, "auto")) optimizer = SMOOTH_AUTO;
@@ -248,20 +258,27 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
     int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON;
     /* reference shapes are the energy method's */
     if (ref && !method_given) global = energy = 1;
+    if (sliding >= 0 && (!energy || !slide || refpath || (measure && strcmp(measure, simplex ? "mean_ratio" : "corner_condition")))) {
+      fprintf(stderr, "lugal-mesh smooth: --sliding needs --method energy with a sliding boundary, the measure %s and no "
+                      "--reference\n", simplex ? "mean_ratio" : "corner_condition");
+      mesh_free(ref);
+      mesh_free(m);
+      return 2;
+    }
     if (optimizer != SMOOTH_AUTO && !energy) {
       fprintf(stderr, "lugal-mesh smooth: --optimizer needs --method energy (or --reference)\n");
       mesh_free(ref); mesh_free(m);
       return 2;
     }
     smooth_opts so = {quality_from_name(measure ? measure : simplex ? "mean_ratio" : "corner_condition"), iterations, slide, report, global, energy,
-                      ref ? ref->x : NULL, optimizer};
+                      ref ? ref->x : NULL, optimizer, sliding < 0 ? SMOOTH_SLIDE_NONE : sliding};
     if (so.measure < 0) { fprintf(stderr, "lugal-mesh smooth: unknown measure %s\n", measure); mesh_free(ref); mesh_free(m); return 2; }
     smooth_report r;
     int bad = mesh_smooth(m, &so, &r, err);
     mesh_free(ref);
     if (bad) { fprintf(stderr, "lugal-mesh smooth: %s\n", err); mesh_free(m); return 1; }
-    printf("smooth (%s): %s%s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s\n",
-           smooth_method_label(&so, &r),
+    printf("smooth (%s%s): %s%s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s\n",
+           smooth_method_label(&so, &r), smooth_sliding_label(&r),
            quality_name(so.measure), refpath ? " relative to the reference" : "",
            r.min_before, r.min_after, r.mean_before, r.mean_after,
            r.moved, r.sweeps, global ? "rounds" : "sweeps", r.seconds);

@@ -89,16 +89,25 @@ typedef struct {
                     * corner's) map from its reference shape; NULL: regular cells */
   int optimizer;   /* energy: SMOOTH_AUTO (projected Newton in 2D, L-BFGS in 3D), SMOOTH_NEWTON
                     * or SMOOTH_LBFGS */
+  int sliding;     /* energy, its own measure, a sliding boundary: SMOOTH_SLIDE_NONE runs both
+                    * passes and keeps the higher minimum; SMOOTH_SLIDE_INNER or
+                    * SMOOTH_SLIDE_LOCAL runs that pass alone */
 } smooth_opts;
 
 enum { SMOOTH_AUTO, SMOOTH_NEWTON, SMOOTH_LBFGS };
+/* how a sliding boundary moves in a pass of the global smoothing, and the pass kept
+ * (smooth_report.sliding): not at all, by guarded local steps between the optimizer's
+ * rounds, or inside the optimizer */
+enum { SMOOTH_SLIDE_NONE, SMOOTH_SLIDE_LOCAL, SMOOTH_SLIDE_INNER };
 
 typedef struct {
   int measure, sweeps, moved;
   int optimizer;    /* energy: SMOOTH_NEWTON or SMOOTH_LBFGS, the one that ran */
   int multigrid;    /* Newton: its conjugate gradients took the aggregation multigrid (block
                      * Jacobi needed more than 40 iterations on 32 768 free vertices or more) */
-  int iterations;   /* energy: the optimizer's iterations over all rounds */
+  int iterations;   /* energy: the optimizer's iterations over all rounds (and passes) */
+  int sliding;      /* the energy method's own measure with a sliding boundary: the pass kept,
+                     * SMOOTH_SLIDE_INNER or SMOOTH_SLIDE_LOCAL; SMOOTH_SLIDE_NONE otherwise */
   double min_before, min_after, mean_before, mean_after, seconds;
 } smooth_report;
 
@@ -115,6 +124,9 @@ int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err);
 /* what ran, for a one-line summary: "local", "global", "energy, L-BFGS", "energy, Newton" or
  * "energy, Newton, multigrid" */
 const char *smooth_method_label(const smooth_opts *o, const smooth_report *r);
+/* the pass kept with a sliding boundary, for the same summary: "" when there was no choice,
+ * else ", boundary slid in the optimizer" or ", boundary slid by local steps" */
+const char *smooth_sliding_label(const smooth_report *r);
 
 typedef struct {
   int iterations;  /* CG iterations used per component */

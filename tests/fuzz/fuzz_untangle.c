@@ -88,8 +88,12 @@ int fuzz_untangle_run(const uint8_t *data, size_t size) {
     UFUZZ_CHECK(r.invalid_after <= r.invalid_before, "never worse than the input (the report)");
     UFUZZ_CHECK(after <= before || after <= r.invalid_after, "never worse than the input (the mesh)");
     if (!after) {
+      /* the optimizer and the sliding passes from one more byte (flags is a byte: its bits
+       * past 7 were always 0, so the optimizer was always the default) */
+      unsigned sflags = next(&b);
       smooth_opts so = {t == CELL_TRIANGLE || t == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 1 + (int)(flags % 3),
-                        uo.slide, 0, (flags >> 6) & 1, (flags >> 6) & (flags >> 7) & 1, NULL, (int)((flags >> 8) % 3)};
+                        uo.slide, 0, (flags >> 6) & 1, (flags >> 6) & (flags >> 7) & 1, NULL, (int)(sflags % 3),
+                        (int)((sflags / 3) % 3)};
       smooth_report sr;
       if (!mesh_smooth(m, &so, &sr, err)) UFUZZ_CHECK(!(sr.min_after < sr.min_before * (1 - 1e-12)), "smoothing keeps the minimum");
     }

@@ -250,21 +250,22 @@ for _, case in ipairs{{"triangle", "mean_ratio"}, {"quadrilateral", "corner_cond
           inv.global, inv["local"])
 end
 
--- 6b. The energy method with a sliding boundary on a perturbed 8³ tetrahedral box: a pass
--- with the boundary fixed (L-BFGS, min 0.535, mean 0.750), then one where the boundary
--- vertices slide along their faces and edges inside the optimizer (projected Newton on
--- tetrahedra). Before, they took one guarded local step per round: 7 rounds, 90 L-BFGS
--- iterations, mean 0.888. The sliding box's optimum has a mean above 0.9.
+-- 6b. The energy method with a sliding boundary on a perturbed 8³ tetrahedral box: one
+-- round with the boundary fixed (L-BFGS, min 0.535, mean 0.750), then two passes, the better
+-- minimum kept: the boundary vertices sliding along their faces and edges inside the
+-- optimizer (projected Newton on tetrahedra: mean 0.916 but a minimum near 0.70, the box's
+-- edge vertices graded), and guarded local slides between rounds (L-BFGS: min 0.754, mean
+-- 0.888), which win here
 do
   local m = require "perturbed"("tetrahedron", 8)
   local fixed = m:copy()
   local s = m:smooth{method = "energy", quiet = true}
   local sf = fixed:smooth{method = "energy", quiet = true, boundary = "fixed"}
-  T.check(s.optimizer == "newton", "3D sliding pass's optimizer %s", s.optimizer)
-  T.check(s.sweeps == 2, "%d rounds (one fixed, one sliding)", s.sweeps)
-  T.check(s.min_before < 0.39 and s.min_after > 0.70 and s.min_after > sf.min_after + 0.1, "min %g -> %g (fixed %g)",
+  T.check(s.sliding == "local" and s.optimizer == "lbfgs", "3D sliding: %s pass kept, optimizer %s", tostring(s.sliding),
+          s.optimizer)
+  T.check(s.min_before < 0.39 and s.min_after > 0.75 and s.min_after > sf.min_after + 0.1, "min %g -> %g (fixed %g)",
           s.min_before, s.min_after, sf.min_after)
-  T.check(s.mean_after > 0.905, "mean %g", s.mean_after)
+  T.check(s.mean_after > 0.885, "mean %g", s.mean_after)
   -- every boundary vertex is still on its face: a coordinate at 0 or 1 stayed there
   local off = 0
   for i = 1, m:nvertices() do

@@ -55,6 +55,15 @@ out=$("$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/smooth.msh" --method energy)
 echo "$out" | grep -q "smooth (energy, Newton): corner_condition min"
 out=$("$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/smooth.msh" --method energy --optimizer lbfgs)
 echo "$out" | grep -q "smooth (energy, L-BFGS): corner_condition min"
+# a sliding boundary: the pass kept is named (here the optimizer's, which reaches the grid)
+out=$("$BUILD/lugal-mesh" smooth "$T/bumped.msh" "$T/x.msh" --method energy)
+echo "$out" | grep -q "smooth (energy, Newton, boundary slid in the optimizer): corner_condition min 0.7571 -> 1,"
+out=$("$BUILD/lugal-mesh" smooth "$T/bumped.msh" "$T/x.msh" --method energy --sliding local)
+echo "$out" | grep -q "smooth (energy, Newton, boundary slid by local steps): corner_condition min 0.7571 -> "
+if "$BUILD/lugal-mesh" smooth "$T/bumped.msh" "$T/x.msh" --method energy --sliding both 2> "$T/err"; then exit 1; fi
+grep -q "sliding must be best, optimizer or local" "$T/err"
+if "$BUILD/lugal-mesh" smooth "$T/bumped.msh" "$T/x.msh" --sliding local 2> "$T/err"; then exit 1; fi
+grep -q "sliding needs --method energy" "$T/err"
 if "$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/x.msh" --method energy --optimizer bfgs 2> "$T/err"; then exit 1; fi
 grep -q "optimizer must be auto, newton or lbfgs" "$T/err"
 if "$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/x.msh" --optimizer newton 2> "$T/err"; then exit 1; fi

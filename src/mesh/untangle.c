@@ -1191,6 +1191,43 @@ static int restore_boundary(mesh *m, const double *keep) {
   return total;
 }
 
+/* a run whose global stage aims at the cells' shapes in the mesh's Tutte embedding on a
+ * circle (tutte_reference) instead of regular ones, from where the runs stopped, kept if it
+ * leaves fewer invalid cells: 2D disks with invalid cells left, not with reference shapes of
+ * the user's own or without the global stage. Tutte-started strips whose cells are 20:1 to
+ * 60:1 stall with regular shapes, whose energy has no valid minimizer near that start (19 of
+ * 24 such spirals, bench/RESULTS.md); the disk's shapes carry the strip's anisotropy, and all
+ * of them untangle. 0, or 1 with err (out of memory is not an error: the run is skipped) */
+static int tutte_run(mesh *m, const untangle_opts *oo, untangle_report *r, char *err) {
+  int rc = 0;
+  size_t nx = (size_t)m->nvert * m->dim;
+  if (!(r->invalid_after > 0 && m->dim == 2 && !oo->xref && !oo->no_global)) return 0;
+  double *tref = tutte_reference(m), *before = tref ? malloc(sizeof(double) * (nx + 1)) : NULL;
+  if (before) {
+    memcpy(before, m->x, sizeof(double) * nx);
+    if (oo->verbose)
+      printf("untangle: %d invalid left; a run aiming at the cells' shapes in the mesh's Tutte embedding on a circle "
+             "follows\n", r->invalid_after);
+    untangle_opts to = *oo;
+    to.xref = tref;
+    to.reference_escape = 1;
+    untangle_report r2;
+    rc = untangle_run(m, &to, &r2, err);
+    if (!rc) {
+      r->seconds += r2.seconds;
+      r->tutte_tried = 1;
+      if (r2.invalid_after < r->invalid_after) {
+        r->invalid_after = r2.invalid_after;
+        r->passes++;
+        r->tutte_kept = 1;
+      } else memcpy(m->x, before, sizeof(double) * nx);
+    }
+  }
+  free(before);
+  free(tref);
+  return rc;
+}
+
 int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err) {
   memset(r, 0, sizeof *r);
   if (check_opts(o, err) || ut_check_finite(m, "untangling", err)) return 1;
@@ -1212,6 +1249,18 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
    * next pass would repeat it to the bit (the anisotropic Tutte spiral 160x500, which no
    * pass repairs: its third pass was the second's copy, 12 of its 53 s) */
   int kept = r->kept_stage;
+  /* more than 5% of the cells still invalid after the first pass in a 2D disk: its global
+   * energy failed (the anisotropic Tutte-started strips, 20% and more; the other hard cases
+   * leave none or a few), and the passes after it and the other placement restart that
+   * energy from where it stopped and leave as many (80x250 strip: 8323 invalid after each,
+   * 6 of its 13 s). The Tutte-disk run goes first; the other placement follows only if it
+   * leaves invalid cells. Not for a few cells (under 50: the other placement's local moves
+   * may do, where the Tutte run moves every vertex) nor with a motion weight (the smallest
+   * motion asked for) */
+  if (!rc && r->invalid_after > m->ncell / 20 && r->invalid_after >= 50 && !(oo.motion_weight > 0)) {
+    rc = tutte_run(m, &oo, r, err);
+    if (r->tutte_tried) kept = 0; /* no more passes */
+  }
   for (int prev = r->invalid_before; !rc && r->passes < 4 && r->invalid_after > 0 && r->invalid_after < prev && kept >= 2;) {
     untangle_report r2;
     prev = r->invalid_after;
@@ -1255,38 +1304,8 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
       free(before);
     }
   }
-  /* still invalid cells in a 2D disk: a run whose global stage aims at the cells' shapes in
-   * the mesh's Tutte embedding on a circle (tutte_reference) instead of regular ones, from
-   * where the runs stopped, kept if it leaves fewer invalid cells. Tutte-started strips whose
-   * cells are 20:1 to 60:1 stall with regular shapes, whose energy has no valid minimizer
-   * near that start (19 of 24 such spirals, bench/RESULTS.md); the disk's shapes carry the
-   * strip's anisotropy, and all of them untangle. Not with reference shapes of the user's
-   * own or without the global stage */
-  if (!rc && r->invalid_after > 0 && m->dim == 2 && !oo.xref && !oo.no_global) {
-    double *tref = tutte_reference(m), *before = tref ? malloc(sizeof(double) * (nx + 1)) : NULL;
-    if (before) {
-      memcpy(before, m->x, sizeof(double) * nx);
-      if (oo.verbose)
-        printf("untangle: %d invalid left; a run aiming at the cells' shapes in the mesh's Tutte embedding on a circle "
-               "follows\n", r->invalid_after);
-      untangle_opts to = oo;
-      to.xref = tref;
-      to.reference_escape = 1;
-      untangle_report r2;
-      rc = untangle_run(m, &to, &r2, err);
-      if (!rc) {
-        r->seconds += r2.seconds;
-        r->tutte_tried = 1;
-        if (r2.invalid_after < r->invalid_after) {
-          r->invalid_after = r2.invalid_after;
-          r->passes++;
-          r->tutte_kept = 1;
-        } else memcpy(m->x, before, sizeof(double) * nx);
-      }
-    }
-    free(before);
-    free(tref);
-  }
+  /* still invalid cells in a 2D disk: the Tutte-disk run (tutte_run), unless it ran first */
+  if (!rc && !r->tutte_tried && r->invalid_after > 0) rc = tutte_run(m, &oo, r, err);
   if (f.orig) {
     r->beta = ldexp(r->beta, m->dim * f.e);
     r->mean_displacement = ldexp(r->mean_displacement, f.e);

@@ -325,12 +325,12 @@ do
 end
 -- anisotropic Tutte starts: a spiral of 12 x 30 cells about 40:1 (width 1.0) started from its
 -- Tutte embedding. With regular target shapes the runs stall (the energy has no valid
--- minimizer near that start; 142 cells stay inverted), and after a run whose stages 2 and 3
--- only made it worse (the state kept is its stage 1's) no further run of that kind follows,
--- since it would repeat it to the bit: two passes, then the other placement's. The last
--- fallback aims at the cells' shapes in the mesh's Tutte embedding on a circle, which carry
--- the strip's anisotropy: valid, the boundary where it was, and energy smoothing then reaches
--- the strip's own minimum
+-- minimizer near that start; 142 cells stay inverted, more than 5% of the cells). A first
+-- pass that leaves that many is a failure of its global energy, which further passes and
+-- the other placement would only restart (they left as many, in 2/3 of the time on 24 such
+-- strips): the run aiming at the cells' shapes in the mesh's Tutte embedding on a circle,
+-- which carry the strip's anisotropy, follows at once and the other placement is not tried.
+-- Valid, the boundary where it was, and energy smoothing then reaches the strip's own minimum
 do
   local m, ref = H.spiral(12, 30, 1.0)
   local m0 = m:copy()
@@ -345,9 +345,9 @@ do
   end
   print(string.format("anisotropic spiral 12x30: %d inverted -> %d, %d passes, other placement tried %s, Tutte disk shapes kept %s; smoothed %.4f (strip's own %.4f)",
                       r.invalid_before, r.invalid_after, r.passes, tostring(r.fallback_tried), tostring(r.tutte_kept), s.min_after, qref))
-  T.check(r.success and m:check() == 0 and r.tutte_tried and r.tutte_kept and r.fallback_tried and r.passes == 3,
-          "anisotropic spiral 12x30: %d -> %d invalid, %d passes (2 and the Tutte run expected), Tutte shapes kept: %s",
-          r.invalid_before, r.invalid_after, r.passes, tostring(r.tutte_kept))
+  T.check(r.success and m:check() == 0 and r.tutte_tried and r.tutte_kept and not r.fallback_tried and r.passes == 2,
+          "anisotropic spiral 12x30: %d -> %d invalid, %d passes (1 and the Tutte run expected), Tutte shapes kept: %s, other placement tried: %s",
+          r.invalid_before, r.invalid_after, r.passes, tostring(r.tutte_kept), tostring(r.fallback_tried))
   T.check(bmax == 0, "anisotropic spiral 12x30: the boundary stayed (moved by %g)", bmax)
   T.check(s.min_after >= 0.9*qref, "anisotropic spiral 12x30: energy smoothing reaches 0.9 of the strip's minimum (%.4f vs %.4f)",
           s.min_after, qref)

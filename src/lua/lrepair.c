@@ -258,9 +258,7 @@ int lmesh_smooth(lua_State *L) {
   }
   const char *sl = t ? opt_str(L, t, "sliding", NULL, fn) : NULL;
   if (sl) {
-    if (!strcmp(sl, "optimizer")) o.sliding = SMOOTH_SLIDE_INNER;
-    else if (!strcmp(sl, "local")) o.sliding = SMOOTH_SLIDE_LOCAL;
-    else if (strcmp(sl, "best"))
+    if ((o.sliding = smooth_sliding_from_name(sl)) < 0)
       return luaL_error(L, "%s: option 'sliding' must be \"best\", \"optimizer\" or \"local\", got '%s'", fn, sl);
     int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON;
     if (!o.energy || !o.slide || ref || o.measure != (simplex ? QM_MEAN_RATIO : QM_CORNER_CONDITION))
@@ -297,8 +295,8 @@ int lmesh_smooth(lua_State *L) {
       lua_pushstring(L, r.multigrid ? "multigrid" : "block_jacobi");
       lua_setfield(L, -2, "preconditioner");
     }
-    if (r.sliding) {
-      lua_pushstring(L, r.sliding == SMOOTH_SLIDE_INNER ? "optimizer" : "local");
+    if (smooth_sliding_name(r.sliding)) {
+      lua_pushstring(L, smooth_sliding_name(r.sliding));
       lua_setfield(L, -2, "sliding");
     }
   }

@@ -204,11 +204,10 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
       else if (!strcmp(v, "energy")) global = energy = 1;
       else { fprintf(stderr, "lugal-mesh smooth: --method must be local, global or energy\n"); return 2; }
     } else if (!strcmp(a, "--sliding") && has && !strcmp(cmd, "smooth")) {
-      const char *v = argv[++i];
-      if (!strcmp(v, "best")) sliding = SMOOTH_SLIDE_NONE;
-      else if (!strcmp(v, "optimizer")) sliding = SMOOTH_SLIDE_INNER;
-      else if (!strcmp(v, "local")) sliding = SMOOTH_SLIDE_LOCAL;
-      else { fprintf(stderr, "lugal-mesh smooth: --sliding must be best, optimizer or local\n"); return 2; }
+      if ((sliding = smooth_sliding_from_name(argv[++i])) < 0) {
+        fprintf(stderr, "lugal-mesh smooth: --sliding must be best, optimizer or local\n");
+        return 2;
+      }
     } else if (!strcmp(a, "--optimizer") && has && !strcmp(cmd, "smooth")) {
       const char *v = argv[++i];
       if (!strcmp(v, "auto")) optimizer = SMOOTH_AUTO;

@@ -267,14 +267,17 @@ static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, doub
   quality_stats s2, s3;
   if (!x1 || !x2) { free(x1); free(x2); snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
   memcpy(x1, m->x, sizeof(double) * nx);
+  /* the report's optimizer and preconditioner are the kept pass's (and the fixed round's) */
+  int mg1 = r->multigrid;
   int rc = smooth_pass(C, o, cwinv, SMOOTH_SLIDE_INNER, o->iterations, r, err) || mesh_quality(m, o->measure, NULL, q, err);
-  int opt2 = r->optimizer;
+  int opt2 = r->optimizer, mg2 = r->multigrid;
   if (!rc) quality_stats_compute(q, m->ncell, &s2);
   /* a minimum of 1 (to 1e-4) is every cell's best shape: the local pass cannot beat it
    * (the hexahedral boxes and the quadrilateral grid, whose local passes cost 1.5x more) */
   if (!rc && s2.min < 1 - 1e-4) {
     memcpy(x2, m->x, sizeof(double) * nx);
     memcpy(m->x, x1, sizeof(double) * nx);
+    r->multigrid = mg1;
     rc = smooth_pass(C, o, cwinv, SMOOTH_SLIDE_LOCAL, o->iterations, r, err) || mesh_quality(m, o->measure, NULL, q, err);
     if (!rc) {
       quality_stats_compute(q, m->ncell, &s3);
@@ -285,6 +288,7 @@ static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, doub
         memcpy(m->x, x2, sizeof(double) * nx);
         r->sliding = SMOOTH_SLIDE_INNER;
         r->optimizer = opt2;
+        r->multigrid = mg2;
       }
     }
   }
@@ -388,6 +392,18 @@ const char *smooth_method_label(const smooth_opts *o, const smooth_report *r) {
   if (!o->energy) return o->global ? "global" : "local";
   if (r->optimizer != SMOOTH_NEWTON) return "energy, L-BFGS";
   return r->multigrid ? "energy, Newton, multigrid" : "energy, Newton";
+}
+
+static const char *const sliding_names[] = {"best", "local", "optimizer"}; /* SMOOTH_SLIDE_* order */
+
+int smooth_sliding_from_name(const char *name) {
+  for (int i = SMOOTH_SLIDE_NONE; i <= SMOOTH_SLIDE_INNER; i++)
+    if (!strcmp(name, sliding_names[i])) return i;
+  return -1;
+}
+
+const char *smooth_sliding_name(int sliding) {
+  return sliding > SMOOTH_SLIDE_NONE && sliding <= SMOOTH_SLIDE_INNER ? sliding_names[sliding] : NULL;
 }
 
 const char *smooth_sliding_label(const smooth_report *r) {

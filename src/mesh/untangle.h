@@ -127,6 +127,10 @@ const char *smooth_method_label(const smooth_opts *o, const smooth_report *r);
 /* the pass kept with a sliding boundary, for the same summary: "" when there was no choice,
  * else ", boundary slid in the optimizer" or ", boundary slid by local steps" */
 const char *smooth_sliding_label(const smooth_report *r);
+/* smooth_opts.sliding from its name, "best", "optimizer" or "local" (-1 for another); the
+ * name of a kept pass (smooth_report.sliding: "optimizer" or "local", NULL for none) */
+int smooth_sliding_from_name(const char *name);
+const char *smooth_sliding_name(int sliding);
 
 typedef struct {
   int iterations;  /* CG iterations used per component */

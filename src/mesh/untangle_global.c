@@ -788,10 +788,15 @@ int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwin
        * 1 000-iteration cap at every round on the Tutte-started strips (40 000 triangles: 15
        * rounds, 15 040 iterations, 39 s; 160 000: failed), and stopping them at 1e-4 had failed
        * even the smaller; Newton's rounds take 15–40 steps, and both are repaired (11 s, 75 s
-       * in all, bench/RESULTS.md) */
+       * in all, bench/RESULTS.md). In 2D every run with reference shapes does too: their
+       * fully converged rounds took L-BFGS 4.5 s on the 48 000-triangle spiral, Newton 0.58 s
+       * (0.45 -> 0.085 s on a quadrilateral spiral, 0.43 -> 0.043 s on a random star), to the
+       * same or a higher mean; on tetrahedra its 12×12 corner Hessians cost more than they
+       * save (twisted bar 16: 0.61 s by L-BFGS, 1.6 s by Newton) */
       o.ftol = ninv && (!cwinv || C->escape) ? 1e-4 : 0;
       double f;
-      int it = C->escape ? ut_newton(&o, x, freev, nfree, maxit / 10, &f) : ut_lbfgs(&o, x, freev, nfree, maxit, &f);
+      int it = C->escape || (cwinv && C->d == 2) ? ut_newton(&o, x, freev, nfree, maxit / 10, &f)
+                                                 : ut_lbfgs(&o, x, freev, nfree, maxit, &f);
       if (it < 0) break;
       *iters += it;
       if (!it) break;

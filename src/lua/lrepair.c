@@ -214,8 +214,7 @@ int lmesh_smooth(lua_State *L) {
   }
   lg_mesh *refl = opt_reference(L, t, u->lm, fn);
   const mesh *ref = refl ? refl->m : NULL;
-  smooth_opts o = {m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 20, 1, 0, 0, 0, NULL,
-                   SMOOTH_AUTO, SMOOTH_SLIDE_NONE};
+  smooth_opts o = {smooth_energy_measure(m->type), 20, 1, 0, 0, 0, NULL, SMOOTH_AUTO, SMOOTH_SLIDE_NONE};
   int quiet = 0;
   if (t) {
     const char *name = opt_str(L, t, "measure", NULL, fn);
@@ -260,10 +259,9 @@ int lmesh_smooth(lua_State *L) {
   if (sl) {
     if ((o.sliding = smooth_sliding_from_name(sl)) < 0)
       return luaL_error(L, "%s: option 'sliding' must be \"best\", \"optimizer\" or \"local\", got '%s'", fn, sl);
-    int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON;
-    if (!o.energy || !o.slide || ref || o.measure != (simplex ? QM_MEAN_RATIO : QM_CORNER_CONDITION))
+    if (!smooth_has_sliding_passes(m, &o))
       return luaL_error(L, "%s: option 'sliding' needs method = \"energy\" with boundary = \"slide\", the measure %s and no "
-                           "reference", fn, simplex ? "mean_ratio" : "corner_condition");
+                           "reference", fn, quality_name(smooth_energy_measure(m->type)));
   }
   smooth_report r;
   char err[MESH_ERRLEN];

@@ -254,24 +254,23 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
     if (!report) untangle_report_print(&r, m);
     rc = r.invalid_after ? 3 : 0;
   } else {
-    int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON;
     /* reference shapes are the energy method's */
     if (ref && !method_given) global = energy = 1;
-    if (sliding >= 0 && (!energy || !slide || refpath || (measure && strcmp(measure, simplex ? "mean_ratio" : "corner_condition")))) {
-      fprintf(stderr, "lugal-mesh smooth: --sliding needs --method energy with a sliding boundary, the measure %s and no "
-                      "--reference\n", simplex ? "mean_ratio" : "corner_condition");
-      mesh_free(ref);
-      mesh_free(m);
-      return 2;
-    }
     if (optimizer != SMOOTH_AUTO && !energy) {
       fprintf(stderr, "lugal-mesh smooth: --optimizer needs --method energy (or --reference)\n");
       mesh_free(ref); mesh_free(m);
       return 2;
     }
-    smooth_opts so = {quality_from_name(measure ? measure : simplex ? "mean_ratio" : "corner_condition"), iterations, slide, report, global, energy,
-                      ref ? ref->x : NULL, optimizer, sliding < 0 ? SMOOTH_SLIDE_NONE : sliding};
+    smooth_opts so = {measure ? quality_from_name(measure) : smooth_energy_measure(m->type), iterations, slide, report, global,
+                      energy, ref ? ref->x : NULL, optimizer, sliding < 0 ? SMOOTH_SLIDE_NONE : sliding};
     if (so.measure < 0) { fprintf(stderr, "lugal-mesh smooth: unknown measure %s\n", measure); mesh_free(ref); mesh_free(m); return 2; }
+    if (sliding >= 0 && !smooth_has_sliding_passes(m, &so)) {
+      fprintf(stderr, "lugal-mesh smooth: --sliding needs --method energy with a sliding boundary, the measure %s and no "
+                      "--reference\n", quality_name(smooth_energy_measure(m->type)));
+      mesh_free(ref);
+      mesh_free(m);
+      return 2;
+    }
     smooth_report r;
     int bad = mesh_smooth(m, &so, &r, err);
     mesh_free(ref);

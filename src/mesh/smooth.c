@@ -106,16 +106,24 @@ static int smooth_vertex(ctx *C, int v, int measure, const objective *ob, double
   return 1;
 }
 
+int smooth_energy_measure(int cell_type) {
+  return cell_type == CELL_TRIANGLE || cell_type == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION;
+}
+
+int smooth_has_sliding_passes(const mesh *m, const smooth_opts *o) {
+  return o->energy && o->slide && !o->xref && o->measure == smooth_energy_measure(m->type);
+}
+
 /* global smoothing: L-BFGS on Σ 1/q over all interior vertices together (Mesquite's
  * inverse-mean-ratio objective when q is the mean ratio), rounds of up to 20 iterations;
  * a step is taken only when every cell stays valid and no q falls below the mesh's
  * smallest q before smoothing (a floor that rises with every round blocks the steps
  * once many cells share the minimum). 2D sliding boundary vertices take one local step
  * each between rounds. Stops when a round lowers Σ 1/q by less than 1e-4 (relative; the energy method 1e-3). */
-/* one pass of rounds; slide: the boundary stays (SMOOTH_SLIDE_NONE), takes local steps between
- * rounds (SMOOTH_SLIDE_LOCAL), or slides inside the optimizer (SMOOTH_SLIDE_INNER, the energy method with
- * its own measure: the sliding boundary vertices are free vertices that move along their
- * line or plane, ob.slide) */
+/* one pass of up to `rounds` rounds; slide: the boundary stays (SMOOTH_SLIDE_NONE), takes
+ * local steps between rounds (SMOOTH_SLIDE_LOCAL), or slides inside the optimizer
+ * (SMOOTH_SLIDE_INNER, the energy method with its own measure: the sliding boundary vertices
+ * are free vertices that move along their line or plane, ob.slide) */
 static int smooth_pass(ctx *C, const smooth_opts *o, const double *cwinv, int slide, int rounds, smooth_report *r,
                        char *err) {
   mesh *m = C->m;
@@ -143,7 +151,7 @@ static int smooth_pass(ctx *C, const smooth_opts *o, const double *cwinv, int sl
   ob.qfloor = INFINITY;
   for (int i = 0; i < ncell && !cwinv; i++) ob.qfloor = fmin(ob.qfloor, mesh_cell_quality(m, cells[i], o->measure));
   if (o->energy) ob.qfloor = 0; /* the barrier alone: 1/q is infinite on degenerate cells */
-  if (o->energy && (cwinv || (o->measure == QM_MEAN_RATIO && simplex) || (o->measure == QM_CORNER_CONDITION && !simplex))) {
+  if (o->energy && (cwinv || o->measure == smooth_energy_measure(m->type))) {
     /* Σ 1/q of the mean ratio is (1/d) Σ |J|²/det(J)^(2/d), J relative to a regular simplex:
      * the untangling energy's shape term at ε = 0 (a strict barrier), with its analytic
      * gradient instead of 2d star evaluations per vertex. On quadrilaterals and hexahedra
@@ -239,9 +247,10 @@ static int smooth_pass(ctx *C, const smooth_opts *o, const double *cwinv, int sl
 
 /* global smoothing. The energy method with its own measure and a sliding boundary starts
  * with one round with the boundary fixed, then from there runs two passes and keeps the one
- * with the higher minimum (the higher mean when they are within 1e-4): the boundary sliding inside the
- * optimizer, and the guarded local slides between rounds. Neither wins everywhere (bench/RESULTS.md,
- * "Two sliding passes"): the first reaches higher means and is 3-4x faster where the boundary
+ * with the higher minimum (the higher mean when they are within 1e-4): the boundary sliding
+ * inside the optimizer, and the guarded local slides between rounds (o->sliding: one of them
+ * alone). Neither wins everywhere (bench/RESULTS.md, "Two sliding passes"): the first
+ * reaches higher means and is 3-4x faster where the boundary
  * must slide far (perturbed grids: 256² triangles 0.785 -> 0.866, hexahedral boxes 0.98 -> 1),
  * but it trades the minimum for the sum where the boundary's cells cannot all be good (the
  * spiral strips' ends: 30x10 0.203 against 0.182; the tetrahedral boxes' edges, whose vertices
@@ -250,9 +259,9 @@ static int smooth_pass(ctx *C, const smooth_opts *o, const double *cwinv, int sl
  * stays) */
 static int smooth_global(ctx *C, const smooth_opts *o, const double *cwinv, double *q, smooth_report *r, char *err) {
   mesh *m = C->m;
-  int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON, nslide = 0;
+  int nslide = 0;
   for (int v = 0; v < m->nvert; v++) nslide += C->bnd[v] && !C->fixed[v];
-  if (!(o->energy && o->slide && !cwinv && nslide && (simplex ? o->measure == QM_MEAN_RATIO : o->measure == QM_CORNER_CONDITION)))
+  if (!(smooth_has_sliding_passes(m, o) && nslide))
     return smooth_pass(C, o, cwinv, o->slide && !cwinv ? SMOOTH_SLIDE_LOCAL : SMOOTH_SLIDE_NONE, o->iterations, r, err);
   /* the fixed round is the passes' common start. One round only: a round that ends at the
    * iteration cap leaves a cell the fixed boundary pins near degenerate (the Tutte-started
@@ -321,8 +330,7 @@ static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err
   }
   double *cwinv = NULL;
   if (o->xref) {
-    int simplex = m->type == CELL_TRIANGLE || m->type == CELL_TETRAHEDRON;
-    if (!o->energy || m->type == CELL_INTERVAL || o->measure != (simplex ? QM_MEAN_RATIO : QM_CORNER_CONDITION)) {
+    if (!o->energy || m->type == CELL_INTERVAL || o->measure != smooth_energy_measure(m->type)) {
       snprintf(err, MESH_ERRLEN, "reference shapes need method \"energy\" and the mean ratio (triangles, tetrahedra) or "
                                  "the corner condition (quadrilaterals, hexahedra)");
       ut_ctx_free(&C);

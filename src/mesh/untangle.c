@@ -1305,7 +1305,7 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
     }
   }
   /* still invalid cells in a 2D disk: the Tutte-disk run (tutte_run), unless it ran first */
-  if (!rc && !r->tutte_tried && r->invalid_after > 0) rc = tutte_run(m, &oo, r, err);
+  if (!rc && !r->tutte_tried) rc = tutte_run(m, &oo, r, err);
   if (f.orig) {
     r->beta = ldexp(r->beta, m->dim * f.e);
     r->mean_displacement = ldexp(r->mean_displacement, f.e);

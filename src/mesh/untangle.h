@@ -95,6 +95,13 @@ typedef struct {
 } smooth_opts;
 
 enum { SMOOTH_AUTO, SMOOTH_NEWTON, SMOOTH_LBFGS };
+/* the energy method's own measure on cells of a type: the mean ratio on simplices, the
+ * corner condition on quadrilaterals and hexahedra (the one whose energy has an analytic
+ * gradient and Newton's Hessian, and whose sliding passes can be chosen) */
+int smooth_energy_measure(int cell_type);
+/* whether o smooths m by the two sliding passes (smooth_opts.sliding chooses among them):
+ * the energy method, its own measure, a sliding boundary, no reference shapes */
+int smooth_has_sliding_passes(const mesh *m, const smooth_opts *o);
 /* how a sliding boundary moves in a pass of the global smoothing, and the pass kept
  * (smooth_report.sliding): not at all, by guarded local steps between the optimizer's
  * rounds, or inside the optimizer */

@@ -91,7 +91,7 @@ int fuzz_untangle_run(const uint8_t *data, size_t size) {
       /* the optimizer and the sliding passes from one more byte (flags is a byte: its bits
        * past 7 were always 0, so the optimizer was always the default) */
       unsigned sflags = next(&b);
-      smooth_opts so = {t == CELL_TRIANGLE || t == CELL_TETRAHEDRON ? QM_MEAN_RATIO : QM_CORNER_CONDITION, 1 + (int)(flags % 3),
+      smooth_opts so = {smooth_energy_measure(t), 1 + (int)(flags % 3),
                         uo.slide, 0, (flags >> 6) & 1, (flags >> 6) & (flags >> 7) & 1, NULL, (int)(sflags % 3),
                         (int)((sflags / 3) % 3)};
       smooth_report sr;

@@ -6,14 +6,15 @@
 -- Garanzha et al. 2021), built beside lugal, never part of it. DIR holds the files (a
 -- temporary folder by default). Per case: inverted cells, then for each untangler success,
 -- time, and the minimum and mean mean ratio of the result, and the rest mesh's own.
--- Run: lugal bench/untangle_anchor2d.lua /path/to/untangle2d [dir] [large|1m]   ("large": a 48 000-cell spiral and a 63 600-cell star;
---      "1m": a 1 000 000-triangle spiral)
+-- Run: lugal bench/untangle_anchor2d.lua /path/to/untangle2d [dir] [large|100k|1m]   ("large": a 48 000-cell spiral and a 63 600-cell star;
+--      "100k": a 204 800-triangle spiral (103 000 vertices); "1m": a 1 000 000-triangle spiral)
 package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
 local A = require "anchor_cases"
 local lg = require "lugal"
 local anchor = assert(arg[1], "usage: lugal bench/untangle_anchor2d.lua /path/to/untangle2d [dir]")
 local dir = arg[2] or os.tmpname() .. ".d"
-local cases = arg[3] == "large" and A.cases2d_large or arg[3] == "1m" and A.cases2d_1m or A.cases2d
+local cases = arg[3] == "large" and A.cases2d_large or arg[3] == "1m" and A.cases2d_1m or arg[3] == "100k" and A.cases2d_100k
+              or A.cases2d
 os.execute("mkdir -p '" .. dir .. "'")
 
 local function write_obj(path, tangled, rest, tris)

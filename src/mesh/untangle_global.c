@@ -748,7 +748,10 @@ int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwin
   o.eb = &eb;
   o.theta = 0.5; /* shape and size alike (0.1 and 0.9 untangled the same spirals) */
   o.cwinv = cwinv; /* reference shapes, or the regular simplex below */
-  o.no_multigrid = 1; /* ut_newton (the escape run): the Tutte disk's cells are as thin as the strip's */
+  /* Newton's conjugate gradients on aggregation multigrid, except in the escape run, whose
+   * Tutte disk's cells are as thin as the strip's (a 640 x 160 Tutte-started spiral's global
+   * energy: 9 Newton steps and 1.5 s with it, 14 and 2.6 s with block Jacobi) */
+  o.no_multigrid = C->escape;
   if (mean > 0 && nfree) {
     if (simplex) ut_regular_winv(d, mean, o.winv);
     else {
@@ -788,15 +791,16 @@ int ut_untangle_global(ctx *C, work *W, double *x, int maxit, const double *cwin
        * 1 000-iteration cap at every round on the Tutte-started strips (40 000 triangles: 15
        * rounds, 15 040 iterations, 39 s; 160 000: failed), and stopping them at 1e-4 had failed
        * even the smaller; Newton's rounds take 15–40 steps, and both are repaired (11 s, 75 s
-       * in all, bench/RESULTS.md). In 2D every run with reference shapes does too: their
-       * fully converged rounds took L-BFGS 4.5 s on the 48 000-triangle spiral, Newton 0.58 s
-       * (0.45 -> 0.085 s on a quadrilateral spiral, 0.43 -> 0.043 s on a random star), to the
-       * same or a higher mean; on tetrahedra its 12×12 corner Hessians cost more than they
-       * save (twisted bar 16: 0.61 s by L-BFGS, 1.6 s by Newton) */
+       * in all, bench/RESULTS.md). In 2D every run does too: with reference shapes the fully
+       * converged rounds took L-BFGS 4.5 s on the 48 000-triangle spiral, Newton 0.58 s (0.45
+       * -> 0.085 s on a quadrilateral spiral, 0.43 -> 0.043 s on a random star), to the same or
+       * a higher mean; with regular shapes L-BFGS took 1 530 iterations and 17.6 s on a
+       * 205 000-triangle Tutte-started spiral, Newton 9 steps, and it repairs the anisotropic
+       * 12 x 30 strip that L-BFGS left 142 cells inverted. On tetrahedra the 12×12 corner
+       * Hessians cost more than they save (twisted bar 16: 0.61 s by L-BFGS, 1.6 s by Newton) */
       o.ftol = ninv && (!cwinv || C->escape) ? 1e-4 : 0;
       double f;
-      int it = C->escape || (cwinv && C->d == 2) ? ut_newton(&o, x, freev, nfree, maxit / 10, &f)
-                                                 : ut_lbfgs(&o, x, freev, nfree, maxit, &f);
+      int it = C->d == 2 ? ut_newton(&o, x, freev, nfree, maxit / 10, &f) : ut_lbfgs(&o, x, freev, nfree, maxit, &f);
       if (it < 0) break;
       *iters += it;
       if (!it) break;

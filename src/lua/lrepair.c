@@ -249,9 +249,7 @@ int lmesh_smooth(lua_State *L) {
   }
   const char *opt = t ? opt_str(L, t, "optimizer", NULL, fn) : NULL;
   if (opt) {
-    if (!strcmp(opt, "newton")) o.optimizer = SMOOTH_NEWTON;
-    else if (!strcmp(opt, "lbfgs")) o.optimizer = SMOOTH_LBFGS;
-    else if (strcmp(opt, "auto"))
+    if ((o.optimizer = smooth_optimizer_from_name(opt)) < 0)
       return luaL_error(L, "%s: option 'optimizer' must be \"auto\", \"newton\" or \"lbfgs\", got '%s'", fn, opt);
     if (!o.energy) return luaL_error(L, "%s: option 'optimizer' needs method = \"energy\" (or reference shapes)", fn);
   }
@@ -286,7 +284,7 @@ int lmesh_smooth(lua_State *L) {
   set_int(L, "moved", r.moved);
   set_int(L, "sweeps", r.sweeps);
   if (o.energy) {
-    lua_pushstring(L, r.optimizer == SMOOTH_NEWTON ? "newton" : "lbfgs");
+    lua_pushstring(L, smooth_optimizer_name(r.optimizer));
     lua_setfield(L, -2, "optimizer");
     set_int(L, "iterations", r.iterations);
     if (r.optimizer == SMOOTH_NEWTON) {

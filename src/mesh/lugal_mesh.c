@@ -209,11 +209,10 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
         return 2;
       }
     } else if (!strcmp(a, "--optimizer") && has && !strcmp(cmd, "smooth")) {
-      const char *v = argv[++i];
-      if (!strcmp(v, "auto")) optimizer = SMOOTH_AUTO;
-      else if (!strcmp(v, "newton")) optimizer = SMOOTH_NEWTON;
-      else if (!strcmp(v, "lbfgs")) optimizer = SMOOTH_LBFGS;
-      else { fprintf(stderr, "lugal-mesh smooth: --optimizer must be auto, newton or lbfgs\n"); return 2; }
+      if ((optimizer = smooth_optimizer_from_name(argv[++i])) < 0) {
+        fprintf(stderr, "lugal-mesh smooth: --optimizer must be auto, newton or lbfgs\n");
+        return 2;
+      }
     } else if (!strcmp(a, "--max-iterations") && has) {
       if ((uo.max_iterations = int_option(cmd, "--max-iterations", argv[++i], 1, 1000000)) < 0) return 2;
     } else if (!strcmp(a, "--iterations") && has) {

@@ -402,6 +402,18 @@ const char *smooth_method_label(const smooth_opts *o, const smooth_report *r) {
   return r->multigrid ? "energy, Newton, multigrid" : "energy, Newton";
 }
 
+static const char *const optimizer_names[] = {"auto", "newton", "lbfgs"}; /* SMOOTH_AUTO, _NEWTON, _LBFGS */
+
+int smooth_optimizer_from_name(const char *name) {
+  for (int i = SMOOTH_AUTO; i <= SMOOTH_LBFGS; i++)
+    if (!strcmp(name, optimizer_names[i])) return i;
+  return -1;
+}
+
+const char *smooth_optimizer_name(int optimizer) {
+  return optimizer >= SMOOTH_AUTO && optimizer <= SMOOTH_LBFGS ? optimizer_names[optimizer] : NULL;
+}
+
 static const char *const sliding_names[] = {"best", "local", "optimizer"}; /* SMOOTH_SLIDE_* order */
 
 int smooth_sliding_from_name(const char *name) {

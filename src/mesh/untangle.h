@@ -136,6 +136,8 @@ const char *smooth_method_label(const smooth_opts *o, const smooth_report *r);
 const char *smooth_sliding_label(const smooth_report *r);
 /* smooth_opts.sliding from its name, "best", "optimizer" or "local" (-1 for another); the
  * name of a kept pass (smooth_report.sliding: "optimizer" or "local", NULL for none) */
+int smooth_optimizer_from_name(const char *name); /* "auto", "newton", "lbfgs": SMOOTH_*, or -1 */
+const char *smooth_optimizer_name(int optimizer);
 int smooth_sliding_from_name(const char *name);
 const char *smooth_sliding_name(int sliding);
 

@@ -68,7 +68,7 @@ static double obj_eval(const objective *o, const double *x, double *grad, int nf
 #endif
     for (int i = 0; i < o->ncell; i++) {
       const int *cell = cell_of(C, o->cells[i]);
-      for (int k = 0; k < nk; k++) below[(size_t)i * nk + k] = (o->beta - ut_corner_jac(C, x, cell, k, NULL)) / o->S > 0;
+      for (int k = 0; k < nk; k++) below[(size_t)i * nk + k] = (o->beta - ut_corner_det(C, x, cell, k)) / o->S > 0;
     }
     for (size_t q = 0; q < nc; q++)
       if (below[q]) obj_corner(o, x, (int)(q / nk), (int)(q % nk), &f, grad);
@@ -260,7 +260,7 @@ static double local_penalty(const ctx *C, const double *x, int v, double beta, d
   for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++) {
     const int *cell = cell_of(C, C->vc[p]);
     for (int k = 0; k < C->ncorner; k++) {
-      double r = (beta - ut_corner_jac(C, x, cell, k, NULL)) / S;
+      double r = (beta - ut_corner_det(C, x, cell, k)) / S;
       if (r > 0) f += r * r;
     }
   }

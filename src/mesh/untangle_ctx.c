@@ -458,7 +458,7 @@ double ut_corner_jac(const ctx *C, const double *x, const int *cell, int k, doub
 
 double ut_cell_min_jac(const ctx *C, const double *x, int c) {
   double mn = INFINITY;
-  for (int k = 0; k < C->ncorner; k++) mn = fmin(mn, ut_corner_jac(C, x, cell_of(C, c), k, NULL));
+  for (int k = 0; k < C->ncorner; k++) mn = fmin(mn, ut_corner_det(C, x, cell_of(C, c), k));
   return mn;
 }
 

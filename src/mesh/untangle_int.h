@@ -212,6 +212,25 @@ typedef struct {
 
 static inline const int *cell_of(const ctx *C, int c) { return C->m->cells + (size_t)c * C->nvc; }
 
+/* corner k's Jacobian determinant alone: ut_corner_jac without the gradient, the same
+ * operations in the same order (the same bits), inlined with d's two cases written out, for
+ * the loops that only need its value (the sign tests of (3.3) and the cell counts: a third
+ * of a twisted bar's untangling was spent in the out-of-line call) */
+static inline double ut_corner_det(const ctx *C, const double *x, const int *cell, int k) {
+  const int *t = C->ct[k];
+  if (C->d == 2) {
+    const double *p = x + 2 * (size_t)cell[t[0]], *a = x + 2 * (size_t)cell[t[1]], *b = x + 2 * (size_t)cell[t[2]];
+    double e00 = a[0] - p[0], e01 = a[1] - p[1], e10 = b[0] - p[0], e11 = b[1] - p[1];
+    return e00 * e11 - e01 * e10;
+  }
+  const double *p = x + 3 * (size_t)cell[t[0]], *a = x + 3 * (size_t)cell[t[1]], *b = x + 3 * (size_t)cell[t[2]],
+               *c = x + 3 * (size_t)cell[t[3]];
+  double e0[3] = {a[0] - p[0], a[1] - p[1], a[2] - p[2]}, e1[3] = {b[0] - p[0], b[1] - p[1], b[2] - p[2]},
+         e2[3] = {c[0] - p[0], c[1] - p[1], c[2] - p[2]};
+  double c0 = e1[1] * e2[2] - e1[2] * e2[1], c1 = e1[2] * e2[0] - e1[0] * e2[2], c2 = e1[0] * e2[1] - e1[1] * e2[0];
+  return e0[0] * c0 + e0[1] * c1 + e0[2] * c2;
+}
+
 /* corner k of cell (global vertex ids) at coordinates x: its Jacobian determinant, and, when
  * g is given, its gradient with respect to each of the corner's d + 1 vertices */
 double ut_corner_jac(const ctx *C, const double *x, const int *cell, int k, double g[4][3]);

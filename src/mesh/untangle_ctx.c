@@ -418,8 +418,10 @@ int ut_ctx_init(ctx *C, mesh *m, int slide, char *err) {
 }
 
 /* corner k of cell (global vertex ids) at coordinates x: J = det(x_n1 − x_c, ..., x_nd − x_c),
- * and, when g is given, ∂J/∂x of each of the d+1 corner vertices (J is affine in each) */
+ * and, when g is given, ∂J/∂x of each of the d+1 corner vertices (J is affine in each); J
+ * alone is ut_corner_det's (untangle_int.h), the same operations */
 double ut_corner_jac(const ctx *C, const double *x, const int *cell, int k, double g[4][3]) {
+  if (!g) return ut_corner_det(C, x, cell, k);
   const int *t = C->ct[k];
   int d = C->d;
   const double *p = x + (size_t)d * cell[t[0]];
@@ -429,29 +431,24 @@ double ut_corner_jac(const ctx *C, const double *x, const int *cell, int k, doub
   double J;
   if (d == 2) {
     J = e[0][0] * e[1][1] - e[0][1] * e[1][0];
-    if (g) {
-      g[1][0] = e[1][1]; g[1][1] = -e[1][0];
-      g[2][0] = -e[0][1]; g[2][1] = e[0][0];
-    }
+    g[1][0] = e[1][1]; g[1][1] = -e[1][0];
+    g[2][0] = -e[0][1]; g[2][1] = e[0][0];
   } else {
     double c12[3] = {e[1][1] * e[2][2] - e[1][2] * e[2][1], e[1][2] * e[2][0] - e[1][0] * e[2][2],
                      e[1][0] * e[2][1] - e[1][1] * e[2][0]};
     J = e[0][0] * c12[0] + e[0][1] * c12[1] + e[0][2] * c12[2];
-    if (g) {
-      for (int j = 0; j < 3; j++) g[1][j] = c12[j];
-      g[2][0] = e[2][1] * e[0][2] - e[2][2] * e[0][1];
-      g[2][1] = e[2][2] * e[0][0] - e[2][0] * e[0][2];
-      g[2][2] = e[2][0] * e[0][1] - e[2][1] * e[0][0];
-      g[3][0] = e[0][1] * e[1][2] - e[0][2] * e[1][1];
-      g[3][1] = e[0][2] * e[1][0] - e[0][0] * e[1][2];
-      g[3][2] = e[0][0] * e[1][1] - e[0][1] * e[1][0];
-    }
+    for (int j = 0; j < 3; j++) g[1][j] = c12[j];
+    g[2][0] = e[2][1] * e[0][2] - e[2][2] * e[0][1];
+    g[2][1] = e[2][2] * e[0][0] - e[2][0] * e[0][2];
+    g[2][2] = e[2][0] * e[0][1] - e[2][1] * e[0][0];
+    g[3][0] = e[0][1] * e[1][2] - e[0][2] * e[1][1];
+    g[3][1] = e[0][2] * e[1][0] - e[0][0] * e[1][2];
+    g[3][2] = e[0][0] * e[1][1] - e[0][1] * e[1][0];
   }
-  if (g)
-    for (int j = 0; j < d; j++) {
-      g[0][j] = 0;
-      for (int i = 1; i <= d; i++) g[0][j] -= g[i][j];
-    }
+  for (int j = 0; j < d; j++) {
+    g[0][j] = 0;
+    for (int i = 1; i <= d; i++) g[0][j] -= g[i][j];
+  }
   return J;
 }
 

@@ -1202,9 +1202,10 @@ static int restore_boundary(mesh *m, const double *keep) {
  * circle (tutte_reference) instead of regular ones, from where the runs stopped, kept if it
  * leaves fewer invalid cells: 2D disks with invalid cells left, not with reference shapes of
  * the user's own or without the global stage. Tutte-started strips whose cells are 20:1 to
- * 60:1 stall with regular shapes, whose energy has no valid minimizer near that start (19 of
- * 24 such spirals, bench/RESULTS.md); the disk's shapes carry the strip's anisotropy, and all
- * of them untangle. 0, or 1 with err (out of memory is not an error: the run is skipped) */
+ * 60:1 can stall with regular shapes, whose energy has no valid minimizer near that start (3
+ * of 24 such spirals since the global energy takes Newton steps in 2D, 19 with L-BFGS,
+ * bench/RESULTS.md); the disk's shapes carry the strip's anisotropy, and all of them
+ * untangle. 0, or 1 with err (out of memory is not an error: the run is skipped) */
 static int tutte_run(mesh *m, const untangle_opts *oo, untangle_report *r, char *err) {
   int rc = 0;
   size_t nx = (size_t)m->nvert * m->dim;

@@ -134,10 +134,12 @@ const char *smooth_method_label(const smooth_opts *o, const smooth_report *r);
 /* the pass kept with a sliding boundary, for the same summary: "" when there was no choice,
  * else ", boundary slid in the optimizer" or ", boundary slid by local steps" */
 const char *smooth_sliding_label(const smooth_report *r);
+/* smooth_opts.optimizer from its name, "auto", "newton" or "lbfgs" (-1 for another); the name
+ * of one (smooth_report.optimizer: "newton" or "lbfgs", the one that ran) */
+int smooth_optimizer_from_name(const char *name);
+const char *smooth_optimizer_name(int optimizer);
 /* smooth_opts.sliding from its name, "best", "optimizer" or "local" (-1 for another); the
  * name of a kept pass (smooth_report.sliding: "optimizer" or "local", NULL for none) */
-int smooth_optimizer_from_name(const char *name); /* "auto", "newton", "lbfgs": SMOOTH_*, or -1 */
-const char *smooth_optimizer_name(int optimizer);
 int smooth_sliding_from_name(const char *name);
 const char *smooth_sliding_name(int sliding);
 

@@ -84,8 +84,12 @@ int lg_mesh_partition(lg_env *env, lg_mesh *lm, int nparts, const int **part);
 /* the same on the calling rank alone, into pt (ncell values), *runs = 1 where they are the
  * numbering's runs; returns -1 where the cells' order is kept (no partition), 1 on error */
 int lg_partition_cells(lg_env *env, mesh *m, int nparts, int *pt, int *runs);
-/* the vertex numbering's split into nparts: each cell in the run of its lowest vertex */
-void lg_mesh_vertex_runs(const mesh *m, int nparts, int *part);
+/* auto's test of the numbering's runs (mesh_runs_interface, mesh_vertex_runs): do they cut
+ * about as little as compact parts would (have: the vertices on their cuts), and are they
+ * kept (also: no part under half its share of the cells; fewest, the smallest part's
+ * cells, or -1 when not counted); lg_runs_kept prints the choice with -lugal_verbose */
+int lg_runs_cut_little(long have, long nvert, int d, int nparts);
+int lg_runs_kept(lg_env *env, long have, long fewest, long nvert, long ncell, int d, int nparts);
 /* the validity check run before assembly */
 int lg_mesh_check(lg_env *env, lg_mesh *lm);
 
@@ -102,6 +106,14 @@ int lg_ghost_layers(void);
  * rank getting its part with one layer of ghost cells (mesh_part); collective. NULL and the
  * reason in env->err on every rank when any failed */
 lg_mesh *lg_mesh_distribute(lg_env *env, mesh *whole);
+/* a generated box or rectangle (o) distributed without a whole mesh anywhere: each rank
+ * generates the window of cell layers that holds its part (the numbering's runs), its ghost
+ * layers and the cells around their vertices, and extracts from it the part
+ * lg_mesh_distribute would send it (the same to the byte); collective. Where the runs are not
+ * the partition (PTScotch's choice, -lugal_partitioner, crossed diagonals, refused options)
+ * NULL with *whole = 1 on every rank: rank 0 then generates the whole mesh for
+ * lg_mesh_distribute. NULL with *whole = 0 and the reason in env->err on failure */
+lg_mesh *lg_mesh_generate_part(lg_env *env, const mesh_box_opts *o, int *whole);
 /* the whole mesh and the fields' whole arrays (point or cell data of fl) on rank 0, from
  * every rank's owned cells and vertices (for output); other ranks get NULLs; collective */
 int lg_dist_gather(lg_env *env, lg_mesh *lm, int nf, const mesh_field *fl, mesh **whole, double ***vals);
@@ -422,7 +434,7 @@ int lg_bcast_bytes(char **buf, size_t *len);
 /* the fields on a mesh that every rank holds whole, written for ParaView: npiece 0, a .vtu
  * that rank 0 writes; else a .pvtu of npiece pieces <stem>_p<k>.vtu beside it (k = 0 ..
  * npiece - 1: the parts of the mesh's partition into npiece, lg_mesh_partition, or where it
- * keeps the problems' order lg_mesh_vertex_runs), rank r writing the pieces k = r mod size
+ * keeps the problems' order mesh_vertex_runs), rank r writing the pieces k = r mod size
  * and rank 0 the collection. Every rank gets the outcome, and the message (MESH_ERRLEN) in
  * err */
 int lg_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_field *fl, int format, int npiece, char *err);

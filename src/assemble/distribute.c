@@ -58,7 +58,7 @@ static int send_parts(lg_env *env, mesh *m, mesh_part **mine) {
     rc = 1;
   }
   if (!rc) rc = lg_partition_cells(env, m, size, part, &runs);
-  if (rc == -1) { lg_mesh_vertex_runs(m, size, part); rc = 0; } /* too few cells for a partitioner */
+  if (rc == -1) { mesh_vertex_runs(m, NULL, m->nvert, size, part); rc = 0; } /* too few cells for a partitioner */
   if (!rc && mesh_vertex_owners(m, part, vown)) { lg_seterr(env, "out of memory for the vertices' owners"); rc = 1; }
   for (int r = size - 1; r >= 0; r--) { /* rank 0's own part last: it is kept */
     char err[MESH_ERRLEN] = "";
@@ -119,6 +119,80 @@ lg_mesh *lg_mesh_distribute(lg_env *env, mesh *whole) {
     fprintf(stderr, "[lugal] distribute: rank %d holds %d cells (%.0f owned, %.0f ghosts) and %d vertices of %d, %.1f ms\n", rank,
             P->m->ncell, own[0], own[1], P->m->nvert, P->nvert_global, now_ms() - t0);
   }
+  return lm;
+}
+
+lg_mesh *lg_mesh_generate_part(lg_env *env, const mesh_box_opts *o, int *whole) {
+  double t0 = now_ms();
+  int rank = lg_mpi_rank(), size = lg_mpi_size(), box = o->type == CELL_TETRAHEDRON || o->type == CELL_HEXAHEDRON;
+  long nvg, ncg, per;
+  int nl;
+  mesh_box_counts(o, &nvg, &ncg, &nl, &per);
+  char method[64] = "auto";
+  PetscOptionsGetString(NULL, NULL, "-lugal_partitioner", method, sizeof method, NULL);
+  int layers = lg_ghost_layers(), natural = !strcmp(method, "natural") || ncg < 8L * size;
+  /* the whole mesh on rank 0 where the options are refused or the ghost layers bad (its
+   * messages), a partitioner is asked for, a run would be empty, or the numbering has no
+   * layers (crossed triangles: the centres come last) */
+  *whole = 1;
+  long vlo, vhi;
+  mesh_box_opts w;
+  if (!nvg || layers < 0 || (!natural && strcmp(method, "auto")) || o->hi || mesh_box_part_window(o, size, rank, layers, &w, &vlo, &vhi))
+    return NULL;
+  char err[MESH_ERRLEN] = "";
+  mesh *m = box ? mesh_box(&w, err) : mesh_rectangle(&w, err);
+  int *vglob = m ? malloc(sizeof(int) * ((size_t)m->nvert + 1)) : NULL, *cglob = m ? malloc(sizeof(int) * ((size_t)m->ncell + 1)) : NULL;
+  int *part = m ? malloc(sizeof(int) * ((size_t)m->ncell + 1)) : NULL, *vown = m ? malloc(sizeof(int) * ((size_t)m->nvert + 1)) : NULL;
+  int rc = !m || !vglob || !cglob || !part || !vown;
+  if (m && rc) snprintf(err, sizeof err, "out of memory for this rank's window of the mesh");
+  long cnt[2] = {0, 0}; /* the vertices of this run on the runs' cuts, the cells of this part */
+  if (!rc) {
+    mesh_box_window_numbers(&w, m, vglob, cglob);
+    mesh_vertex_runs(m, vglob, (int)nvg, size, part);
+    for (int c = 0; c < m->ncell; c++) cnt[1] += part[c] == rank;
+    if (!natural && (cnt[0] = mesh_runs_interface(m, vglob, (int)nvg, size, (int)vlo, (int)vhi)) < 0) {
+      snprintf(err, sizeof err, "out of memory for the runs' cuts");
+      rc = 1;
+    }
+  }
+  if (lg_any_result(rc, err, sizeof err)) {
+    mesh_free(m); free(vglob); free(cglob); free(part); free(vown);
+    *whole = 0;
+    lg_seterr(env, "generating this rank's part of the mesh: %s", err);
+    return NULL;
+  }
+  if (!natural) { /* auto: the runs where rank 0, cutting the whole mesh, would keep them */
+    long have = 0, fewest = 0;
+    int fail = MPI_Allreduce(&cnt[0], &have, 1, MPI_LONG, MPI_SUM, PETSC_COMM_WORLD) != MPI_SUCCESS ||
+               MPI_Allreduce(&cnt[1], &fewest, 1, MPI_LONG, MPI_MIN, PETSC_COMM_WORLD) != MPI_SUCCESS;
+    int verbose = env->verbose;
+    env->verbose = verbose && rank == 0;
+    int keep = !fail && lg_runs_kept(env, have, lg_runs_cut_little(have, nvg, cell_dim(o->type), size) ? fewest : -1, nvg, ncg,
+                                     cell_dim(o->type), size);
+    env->verbose = verbose;
+    if (!keep) {
+      mesh_free(m); free(vglob); free(cglob); free(part); free(vown);
+      return NULL;
+    }
+  }
+  *whole = 0;
+  mesh_part *P = NULL;
+  if (mesh_vertex_owners(m, part, vown)) { snprintf(err, sizeof err, "out of memory for the vertices' owners"); rc = 1; }
+  else if (!(P = mesh_part_extract_window(m, vglob, cglob, (int)nvg, (int)ncg, part, vown, rank, layers, err))) rc = 1;
+  int wv = m->nvert, wc = m->ncell;
+  mesh_free(m); free(vglob); free(cglob); free(part); free(vown);
+  m = NULL; vglob = cglob = part = vown = NULL;
+  lg_mesh *lm = rc ? NULL : lg_mesh_wrap_part(P);
+  if (!rc && !lm) { snprintf(err, sizeof err, "out of memory"); rc = 1; }
+  if (rc) { mesh_part_free(P); P = NULL; }
+  if (lg_any_result(rc, err, sizeof err)) {
+    if (lm) lg_mesh_free(lm);
+    lg_seterr(env, "generating this rank's part of the mesh: %s", err);
+    return NULL;
+  }
+  if (env->verbose)
+    fprintf(stderr, "[lugal] distribute: rank %d holds %d cells (%d owned, %d ghosts) and %d vertices of %ld, generated here from a window of %d cells and %d vertices, %.1f ms\n",
+            rank, P->m->ncell, P->nown_cell, P->m->ncell - P->nown_cell, P->m->nvert, nvg, wc, wv, now_ms() - t0);
   return lm;
 }
 

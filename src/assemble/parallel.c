@@ -219,7 +219,7 @@ int lg_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_
   int *runs = part ? NULL : malloc(sizeof(int) * ((size_t)m->ncell + 1));
   if (!names || !cells || !start || (!part && !runs)) rc = 1, snprintf(err, MESH_ERRLEN, "out of memory for %d pieces", npiece);
   if (!rc) {
-    if (!part) lg_mesh_vertex_runs(m, npiece, runs);
+    if (!part) mesh_vertex_runs(m, NULL, m->nvert, npiece, runs);
     const int *pc = part ? part : runs;
     for (int c = 0; c < m->ncell; c++) start[pc[c] + 2]++;
     for (int k = 0; k < npiece; k++) start[k + 2] += start[k + 1];

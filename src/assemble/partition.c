@@ -112,32 +112,32 @@ static int partition_cells(lg_env *env, mesh *m, int nparts, const char *method,
   return 0;
 }
 
-/* the vertices of cells whose vertices lie in different parts when the vertices are split
- * into nparts runs of their numbering: what the rows split in the problem's order (a P1
- * problem's, and a proxy for every degree) exchange, about two layers along each cut */
-static long natural_interface(const mesh *m, int nparts) {
-  char *mark = calloc((size_t)m->nvert + 1, 1);
-  if (!mark) return -1;
-  long n = 0;
-  for (int c = 0; c < m->ncell; c++) {
-    const int *v = m->cells + (size_t)c * (size_t)m->nvc;
-    long p0 = (long)v[0] * nparts / m->nvert;
-    int cut = 0;
-    for (int k = 1; k < m->nvc && !cut; k++) cut = (long)v[k] * nparts / m->nvert != p0;
-    for (int k = 0; cut && k < m->nvc; k++)
-      if (!mark[v[k]]) { mark[v[k]] = 1; n++; }
-  }
-  free(mark);
-  return n;
+int lg_runs_cut_little(long have, long nvert, int d, int nparts) {
+  /* a graph partition costs about a setup (1.57 M tetrahedra: 0.45 s); take it where the
+   * numbering's split cuts more than twice what compact parts would: on a cube of V
+   * vertices in d dimensions, nparts cubes meet along d (nparts^(1/d) - 1) planes, slabs
+   * along nparts - 1 (fewer below 4 parts in 3D), each cut two layers of V^((d-1)/d)
+   * vertices. Slabs stay while that holds (a generator's numbering, 2 to 4 parts in 3D),
+   * and beyond it their halo is the whole part */
+  double planes = fmin(nparts - 1.0, d * (pow(nparts, 1.0 / d) - 1.0));
+  double ideal = 2.0 * planes * pow((double)nvert, (double)(d - 1) / d);
+  return have >= 0 && have <= 2 * ideal;
 }
 
-void lg_mesh_vertex_runs(const mesh *m, int nparts, int *part) {
-  for (int c = 0; c < m->ncell; c++) {
-    const int *v = m->cells + (size_t)c * (size_t)m->nvc;
-    int lo = v[0];
-    for (int k = 1; k < m->nvc; k++) lo = v[k] < lo ? v[k] : lo;
-    part[c] = (int)((long)lo * nparts / m->nvert);
+int lg_runs_kept(lg_env *env, long have, long fewest, long nvert, long ncell, int d, int nparts) {
+  /* the numbering's split of the cells (problems of P1 fields keep their rows in their own
+   * order, the others number theirs by these parts: see set_ownership), unless a part gets
+   * under half its share of the cells (fewest: the smallest part's cells, -1 when the
+   * split cuts too much to count them): on a small mesh a cell's lowest vertex is mostly in
+   * the first runs (box{nx = 2} on 2 ranks: 48 cells and 0) */
+  int keep = lg_runs_cut_little(have, nvert, d, nparts), few = keep && (fewest < 0 || 2L * nparts * fewest < ncell);
+  if (env->verbose) {
+    double planes = fmin(nparts - 1.0, d * (pow(nparts, 1.0 / d) - 1.0));
+    fprintf(stderr, "[lugal] partition: the numbering's split into %d has %ld vertices on its cuts (compact parts: %.0f)%s: %s\n",
+            nparts, have, 2.0 * planes * pow((double)nvert, (double)(d - 1) / d), few ? " and a part under half its share of the cells" : "",
+            keep && !few ? "kept" : "PTScotch");
   }
+  return keep && !few;
 }
 
 /* the partition of m's cells into nparts, computed on the calling rank alone: into pt
@@ -154,34 +154,15 @@ int lg_partition_cells(lg_env *env, mesh *m, int nparts, int *pt, int *runs) {
   if (!strcmp(method, "natural") || nparts < 2 || m->ncell < 8 * nparts) return -1;
   double t0 = now_ms();
   if (!strcmp(method, "auto")) {
-    /* a graph partition costs about a setup (1.57 M tetrahedra: 0.45 s); take it where the
-     * numbering's split cuts more than twice what compact parts would: on a cube of V
-     * vertices in d dimensions, nparts cubes meet along d (nparts^(1/d) - 1) planes, slabs
-     * along nparts - 1 (fewer below 4 parts in 3D), each cut two layers of V^((d-1)/d)
-     * vertices. Slabs stay while that holds (a generator's numbering, 2 to 4 parts in 3D),
-     * and beyond it their halo is the whole part */
-    long have = natural_interface(m, nparts);
-    int d = cell_dim(m->type);
-    double planes = fmin(nparts - 1.0, d * (pow(nparts, 1.0 / d) - 1.0));
-    double ideal = 2.0 * planes * pow((double)m->nvert, (double)(d - 1) / d);
-    int keep = have >= 0 && have <= 2 * ideal, few = 0;
-    if (keep) {
-      /* the numbering's split of the cells: each with its lowest vertex, the vertices in
-       * nparts runs (problems of P1 fields keep their rows in their own order, the others
-       * number theirs by these parts: see set_ownership); unless a part gets under half its
-       * share of the cells: on a small mesh a cell's lowest vertex is mostly in the first
-       * runs (box{nx = 2} on 2 ranks: 48 cells and 0) */
-      lg_mesh_vertex_runs(m, nparts, pt);
+    long have = mesh_runs_interface(m, NULL, m->nvert, nparts, 0, m->nvert), fewest = -1;
+    if (have >= 0 && lg_runs_cut_little(have, m->nvert, cell_dim(m->type), nparts)) {
+      mesh_vertex_runs(m, NULL, m->nvert, nparts, pt);
       int *cnt = calloc((size_t)nparts, sizeof(int));
-      few = !cnt;
       for (int c = 0; cnt && c < m->ncell; c++) cnt[pt[c]]++;
-      for (int r = 0; cnt && r < nparts; r++) few |= 2L * nparts * cnt[r] < m->ncell;
+      for (int r = 0; cnt && r < nparts; r++) fewest = fewest < 0 || cnt[r] < fewest ? cnt[r] : fewest;
       free(cnt);
     }
-    if (env->verbose)
-      fprintf(stderr, "[lugal] partition: the numbering's split into %d has %ld vertices on its cuts (compact parts: %.0f)%s: %s\n",
-              nparts, have, ideal, few ? " and a part under half its share of the cells" : "", keep && !few ? "kept" : "PTScotch");
-    if (keep && !few) {
+    if (lg_runs_kept(env, have, fewest, m->nvert, m->ncell, cell_dim(m->type), nparts)) {
       *runs = 1;
       return 0;
     }

@@ -175,15 +175,17 @@ void gc_point(lua_State *L, int always) {
   if (always || ++env->gc_points % 32 == 0) lua_gc(L, LUA_GCCOLLECT);
 }
 
-void push_mesh(lua_State *L, mesh *m) {
+/* the mesh m (NULL: a rank's part already made, lm) as a Lua mesh */
+static void push_either(lua_State *L, mesh *m, lg_mesh *lm) {
   lg_env *env = get_env(L);
   gc_point(L, 1);
   ud_mesh *u = lua_newuserdatauv(L, sizeof *u, 1);
-  u->lm = NULL;
+  u->lm = lm;
   luaL_setmetatable(L, MT_MESH);
   /* -lugal_distribute: rank 0's mesh (the others' copy is dropped) cut into parts, each rank
    * keeping its own with a ghost layer */
-  if (lg_distribute_wanted()) {
+  if (lm) {
+  } else if (lg_distribute_wanted()) {
     u->lm = lg_mesh_distribute(env, m);
     if (!u->lm) luaL_error(L, "distributing the mesh: %s", env->err);
   } else {
@@ -192,6 +194,10 @@ void push_mesh(lua_State *L, mesh *m) {
   }
   expr_set_dim(env->c, u->lm->m->dim);
 }
+
+void push_mesh(lua_State *L, mesh *m) { push_either(L, m, NULL); }
+
+void push_mesh_part(lua_State *L, lg_mesh *lm) { push_either(L, NULL, lm); }
 
 double opt_num(lua_State *L, int t, const char *key, double def, const char *fn) {
   double v = def;

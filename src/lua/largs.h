@@ -70,6 +70,8 @@ expr *check_expr_raw(lua_State *L, int idx, const char *fn);
 expr *expr_of(lua_State *L, ud_expr *u);
 ud_mesh *check_mesh(lua_State *L, int idx, const char *fn);
 void push_mesh(lua_State *L, mesh *m);
+/* a rank's part of a distributed mesh, made on that rank (lg_mesh_generate_part) */
+void push_mesh_part(lua_State *L, lg_mesh *lm);
 double opt_num(lua_State *L, int t, const char *key, double def, const char *fn);
 /* integers checked as the C int they become (lo..hi within the int range): a float with an
  * integral value is accepted, 2.5 is "a fraction", 2^32 + 2 "too large" */

@@ -24,6 +24,19 @@ static int mesh_gc(lua_State *L) {
  * its part), and its failure is every rank's */
 static int generate_here(void) { return !lg_distribute_wanted() || lg_mpi_rank() == 0; }
 
+/* a distributed box or rectangle: each rank generates its own part where it can
+ * (lg_mesh_generate_part) and pushes it (1); 0 where rank 0 must generate the whole mesh */
+static int generate_part(lua_State *L, const mesh_box_opts *o, const char *fn) {
+  if (!lg_distribute_wanted()) return 0;
+  lg_env *env = get_env(L);
+  int whole = 0;
+  lg_mesh *lm = lg_mesh_generate_part(env, o, &whole);
+  if (!lm && !whole) return luaL_error(L, "%s: %s", fn, env->err);
+  if (!lm) return 0;
+  push_mesh_part(L, lm);
+  return 1;
+}
+
 static void generated(lua_State *L, mesh *m, char *err, const char *fn) {
   int bad = generate_here() && !m;
   if (lg_distribute_wanted() ? lg_root_result(bad, err, MESH_ERRLEN) : bad) luaL_error(L, "%s: %s", fn, err);
@@ -70,6 +83,7 @@ static int l_rectangle(lua_State *L) {
   else return luaL_error(L, "%s: option 'diagonal' must be \"right\", \"left\" or \"crossed\", got \"%s\"", fn, dg);
   char err[MESH_ERRLEN];
   err[0] = 0;
+  if (generate_part(L, &o, fn)) return 1;
   mesh *m = generate_here() ? mesh_rectangle(&o, err) : NULL;
   generated(L, m, err, fn);
   push_mesh(L, m);
@@ -99,6 +113,7 @@ static int l_box(lua_State *L) {
   else return luaL_error(L, "%s: option 'cell' must be \"tetrahedron\" or \"hexahedron\", got \"%s\"", fn, cell);
   char err[MESH_ERRLEN];
   err[0] = 0;
+  if (generate_part(L, &o, fn)) return 1;
   mesh *m = generate_here() ? mesh_box(&o, err) : NULL;
   generated(L, m, err, fn);
   push_mesh(L, m);

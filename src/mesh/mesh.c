@@ -869,38 +869,122 @@ mesh *mesh_interval(int nx, double x0, double x1, char *err) {
   return m;
 }
 
+/* the whole mesh's counts and layers (mesh.h); 1 with the reason in err when the options
+ * are refused */
+static int box_counts(const mesh_box_opts *o, long *nvert, long *ncell, int *layers, long *per_layer, char *err) {
+  int nx = o->nx, ny = o->ny, nz = o->nz, box = o->type == CELL_TETRAHEDRON || o->type == CELL_HEXAHEDRON;
+  *nvert = *ncell = *per_layer = 0;
+  *layers = 0;
+  if (box) {
+    if (nx < 1 || ny < 1 || nz < 1) { seterr(err, "nx, ny and nz must be at least 1"); return 1; }
+    if (!(o->x1 > o->x0) || !(o->y1 > o->y0) || !(o->z1 > o->z0)) { seterr(err, "need x0 < x1, y0 < y1 and z0 < z1"); return 1; }
+    double dv = ((double)nx + 1) * ((double)ny + 1) * ((double)nz + 1), dc = 6.0 * nx * ny * nz; /* no overflow */
+    long nv = dv > 4e9 ? 4000000000L : ((long)nx + 1) * ((long)ny + 1) * ((long)nz + 1);
+    long nc = dc > 4e9 ? 4000000000L : (long)nx * ny * nz * (o->type == CELL_TETRAHEDRON ? 6 : 1);
+    if (nv > 2000000000L || nc * 8 > 2000000000L) {
+      seterr(err, "a %d x %d x %d mesh is too large (%ld vertices and %ld cells; at most 2e9 vertices and 2.5e8 cells)", nx, ny,
+             nz, nv, nc);
+      return 1;
+    }
+    *nvert = nv;
+    *ncell = nc;
+    *layers = nz;
+    *per_layer = ((long)nx + 1) * ((long)ny + 1);
+  } else if (o->type == CELL_TRIANGLE || o->type == CELL_QUADRILATERAL) {
+    if (nx < 1 || ny < 1) { seterr(err, "nx and ny must be at least 1 (got %d, %d)", nx, ny); return 1; }
+    if (!(o->x1 > o->x0) || !(o->y1 > o->y0)) { seterr(err, "need x0 < x1 and y0 < y1"); return 1; }
+    int crossed = o->type == CELL_TRIANGLE && o->diagonal == 2;
+    double dv = ((double)nx + 1) * ((double)ny + 1) + (double)nx * ny, dc = 4.0 * nx * ny; /* no overflow */
+    long nv = dv > 4e9 ? 4000000000L : ((long)nx + 1) * ((long)ny + 1) + (crossed ? (long)nx * ny : 0);
+    long nc = dc > 4e9 ? 4000000000L : (long)nx * ny * (o->type == CELL_QUADRILATERAL ? 1 : crossed ? 4 : 2);
+    if (nv > 2000000000L || nc * 4 > 2000000000L) {
+      seterr(err, "a %d x %d mesh is too large (%ld vertices and %ld cells; at most 2e9 vertices and 5e8 cells)", nx, ny, nv, nc);
+      return 1;
+    }
+    *nvert = nv;
+    *ncell = nc;
+    *layers = crossed ? 0 : ny;
+    *per_layer = crossed ? 0 : (long)nx + 1;
+  } else {
+    seterr(err, "a rectangle has triangles or quadrilaterals, a box tetrahedra or hexahedra");
+    return 1;
+  }
+  int n = box ? nz : ny;
+  if (o->hi && (o->lo < 0 || o->hi > n || o->lo >= o->hi)) {
+    seterr(err, "the window of cell layers %d .. %d is not within 0 .. %d", o->lo, o->hi - 1, n - 1);
+    return 1;
+  }
+  return 0;
+}
+
+void mesh_box_counts(const mesh_box_opts *o, long *nvert, long *ncell, int *layers, long *per_layer) {
+  char err[MESH_ERRLEN];
+  box_counts(o, nvert, ncell, layers, per_layer, err);
+}
+
+int mesh_box_part_window(const mesh_box_opts *o, int nparts, int p, int layers, mesh_box_opts *w, long *vlo, long *vhi) {
+  long nv, nc, per;
+  int nl;
+  mesh_box_counts(o, &nv, &nc, &nl, &per);
+  if (!nl || nparts < 1 || p < 0 || p >= nparts || nv < nparts || layers < 1) return 1;
+  /* the run: the vertices v with v nparts / nv = p. A cell of the part has its lowest
+   * vertex there, in the cell's own lowest vertex layer; ghost layer g lies within g cell
+   * layers of the part, the cells around its vertices within one more: a margin of
+   * layers + 1 holds them all, and two layers are to spare */
+  *vlo = ((long)p * nv + nparts - 1) / nparts;
+  *vhi = ((long)(p + 1) * nv + nparts - 1) / nparts;
+  int margin = layers + 3;
+  *w = *o;
+  w->lo = (int)(*vlo / per) - margin;
+  w->hi = (int)((*vhi - 1) / per) + margin + 1;
+  if (w->lo < 0) w->lo = 0;
+  if (w->hi > nl) w->hi = nl;
+  return 0;
+}
+
+void mesh_box_window_numbers(const mesh_box_opts *o, const mesh *w, int *vglob, int *cglob) {
+  int box = o->type == CELL_TETRAHEDRON || o->type == CELL_HEXAHEDRON, lo = o->hi ? o->lo : 0;
+  long nx = o->nx, ny = o->ny, plane = box ? (nx + 1) * (ny + 1) : nx + 1;
+  long ncl = box ? nx * ny * (o->type == CELL_TETRAHEDRON ? 6 : 1) : nx * (o->type == CELL_QUADRILATERAL ? 1 : o->diagonal == 2 ? 4 : 2);
+  /* the crossed triangles' centres follow the window's grid vertices, and every grid vertex
+   * in the whole mesh */
+  long ngrid = o->type == CELL_TRIANGLE && o->diagonal == 2 ? (long)w->nvert - nx * (w->ncell / (4 * nx)) : w->nvert;
+  for (long v = 0; v < w->nvert; v++)
+    vglob[v] = (int)(v < ngrid ? lo * plane + v : (nx + 1) * (ny + 1) + nx * lo + (v - ngrid));
+  for (long c = 0; c < w->ncell; c++) cglob[c] = (int)(lo * ncl + c);
+}
+
 mesh *mesh_rectangle(const mesh_box_opts *o, char *err) {
-  int nx = o->nx, ny = o->ny;
-  if (nx < 1 || ny < 1) { seterr(err, "nx and ny must be at least 1 (got %d, %d)", nx, ny); return NULL; }
-  if (!(o->x1 > o->x0) || !(o->y1 > o->y0)) { seterr(err, "need x0 < x1 and y0 < y1"); return NULL; }
+  long nv, nc, plane;
+  int rows;
   if (o->type != CELL_TRIANGLE && o->type != CELL_QUADRILATERAL) {
     seterr(err, "a rectangle has triangles or quadrilaterals");
     return NULL;
   }
+  if (box_counts(o, &nv, &nc, &rows, &plane, err)) return NULL;
+  int nx = o->nx, ny = o->ny, lo = o->hi ? o->lo : 0, hi = o->hi ? o->hi : ny, nr = hi - lo;
   int crossed = o->type == CELL_TRIANGLE && o->diagonal == 2;
-  double dv = ((double)nx + 1) * ((double)ny + 1) + (double)nx * ny, dc = 4.0 * nx * ny; /* no overflow */
-  long nv = dv > 4e9 ? 4000000000L : ((long)nx + 1) * ((long)ny + 1) + (crossed ? (long)nx * ny : 0);
-  long nc = dc > 4e9 ? 4000000000L : (long)nx * ny * (o->type == CELL_QUADRILATERAL ? 1 : crossed ? 4 : 2);
-  if (nv > 2000000000L || nc * 4 > 2000000000L) {
-    seterr(err, "a %d x %d mesh is too large (%ld vertices and %ld cells; at most 2e9 vertices and 5e8 cells)", nx, ny, nv, nc);
-    return NULL;
-  }
+  /* the window's rows lo .. hi - 1: its grid vertices (rows lo .. hi) first, then the
+   * crossed triangles' centres */
+  long ngrid = ((long)nx + 1) * (nr + 1);
+  nv = ngrid + (crossed ? (long)nx * nr : 0);
+  nc = nc / ny * nr;
   mesh *m = mesh_create(o->type, (int)nv, NULL, (int)nc, NULL, err);
   if (!m) return NULL;
-  for (int j = 0; j <= ny; j++)
+  for (int j = lo; j <= hi; j++)
     for (int i = 0; i <= nx; i++) {
-      int id = j * (nx + 1) + i;
+      int id = (j - lo) * (nx + 1) + i;
       m->x[2 * id] = o->x0 + (o->x1 - o->x0) * i / nx;
       m->x[2 * id + 1] = o->y0 + (o->y1 - o->y0) * j / ny;
     }
   int *c = m->cells;
-  for (int j = 0; j < ny; j++)
+  for (int j = lo; j < hi; j++)
     for (int i = 0; i < nx; i++) {
-      int v0 = j * (nx + 1) + i, v1 = v0 + 1, v3 = v0 + nx + 1, v2 = v3 + 1;
+      int v0 = (j - lo) * (nx + 1) + i, v1 = v0 + 1, v3 = v0 + nx + 1, v2 = v3 + 1;
       if (o->type == CELL_QUADRILATERAL) {
         *c++ = v0; *c++ = v1; *c++ = v2; *c++ = v3;
       } else if (crossed) {
-        int vc = (nx + 1) * (ny + 1) + j * nx + i;
+        int vc = (int)ngrid + (j - lo) * nx + i;
         m->x[2 * vc] = 0.25 * (m->x[2 * v0] + m->x[2 * v1] + m->x[2 * v2] + m->x[2 * v3]);
         m->x[2 * vc + 1] = 0.25 * (m->x[2 * v0 + 1] + m->x[2 * v1 + 1] + m->x[2 * v2 + 1] + m->x[2 * v3 + 1]);
         *c++ = v0; *c++ = v1; *c++ = vc;
@@ -916,18 +1000,18 @@ mesh *mesh_rectangle(const mesh_box_opts *o, char *err) {
       }
     }
   /* boundary edges, side by side (left x0, right x1, bottom y0, top y1), oriented with the
-   * domain on their left */
+   * domain on their left; a window has the bottom and top only where it reaches them */
   static const char *names[] = {"left", "right", "bottom", "top"};
   int cap = 2 * (nx > ny ? nx : ny), *fv = malloc(sizeof(int) * 2 * (size_t)cap);
   if (!fv) { mesh_free(m); seterr(err, "out of memory"); return NULL; }
   for (int side = 0; side < 4; side++) {
-    int n = side < 2 ? ny : nx;
+    int n = side < 2 ? nr : (side == 2 ? lo == 0 : hi == ny) ? nx : 0, top = (hi - lo) * (nx + 1);
     for (int k = 0; k < n; k++) {
       int a, b;
       if (side == 0) { a = (k + 1) * (nx + 1); b = k * (nx + 1); }
       else if (side == 1) { a = k * (nx + 1) + nx; b = (k + 1) * (nx + 1) + nx; }
       else if (side == 2) { a = k; b = k + 1; }
-      else { a = ny * (nx + 1) + k + 1; b = ny * (nx + 1) + k; }
+      else { a = top + k + 1; b = top + k; }
       fv[2 * k] = a;
       fv[2 * k + 1] = b;
     }
@@ -943,28 +1027,21 @@ mesh *mesh_rectangle(const mesh_box_opts *o, char *err) {
 }
 
 mesh *mesh_box(const mesh_box_opts *o, char *err) {
-  int nx = o->nx, ny = o->ny, nz = o->nz;
-  if (nx < 1 || ny < 1 || nz < 1) { seterr(err, "nx, ny and nz must be at least 1"); return NULL; }
-  if (!(o->x1 > o->x0) || !(o->y1 > o->y0) || !(o->z1 > o->z0)) {
-    seterr(err, "need x0 < x1, y0 < y1 and z0 < z1");
-    return NULL;
-  }
+  long nv, nc, plane;
+  int layers;
   if (o->type != CELL_TETRAHEDRON && o->type != CELL_HEXAHEDRON) {
     seterr(err, "a box has tetrahedra or hexahedra");
     return NULL;
   }
-  double dv = ((double)nx + 1) * ((double)ny + 1) * ((double)nz + 1), dc = 6.0 * nx * ny * nz; /* no overflow */
-  long nv = dv > 4e9 ? 4000000000L : ((long)nx + 1) * ((long)ny + 1) * ((long)nz + 1);
-  long nc = dc > 4e9 ? 4000000000L : (long)nx * ny * nz * (o->type == CELL_TETRAHEDRON ? 6 : 1);
-  if (nv > 2000000000L || nc * 8 > 2000000000L) {
-    seterr(err, "a %d x %d x %d mesh is too large (%ld vertices and %ld cells; at most 2e9 vertices and 2.5e8 cells)", nx, ny,
-           nz, nv, nc);
-    return NULL;
-  }
+  if (box_counts(o, &nv, &nc, &layers, &plane, err)) return NULL;
+  int nx = o->nx, ny = o->ny, nz = o->nz, lo = o->hi ? o->lo : 0, hi = o->hi ? o->hi : nz;
+  /* the window's cell layers lo .. hi - 1 and vertex layers lo .. hi */
+  nv = plane * (hi - lo + 1);
+  nc = nc / nz * (hi - lo);
   mesh *m = mesh_create(o->type, (int)nv, NULL, (int)nc, NULL, err);
   if (!m) return NULL;
-#define VID(i, j, k) (((k) * (ny + 1) + (j)) * (nx + 1) + (i))
-  for (int k = 0; k <= nz; k++)
+#define VID(i, j, k) ((((k) - lo) * (ny + 1) + (j)) * (nx + 1) + (i))
+  for (int k = lo; k <= hi; k++)
     for (int j = 0; j <= ny; j++)
       for (int i = 0; i <= nx; i++) {
         int id = VID(i, j, k);
@@ -976,7 +1053,7 @@ mesh *mesh_box(const mesh_box_opts *o, char *err) {
    * main diagonal; conforming because every cube is split the same way */
   static const int perm[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
   int *c = m->cells;
-  for (int k = 0; k < nz; k++)
+  for (int k = lo; k < hi; k++)
     for (int j = 0; j < ny; j++)
       for (int i = 0; i < nx; i++) {
         if (o->type == CELL_HEXAHEDRON) {
@@ -993,11 +1070,11 @@ mesh *mesh_box(const mesh_box_opts *o, char *err) {
           }
         }
       }
-#undef VID
   orient_simplices(m);
   /* boundary facets side by side, straight from the grid: a square of side s (normal
    * axis d, at index 0 or n_d) spans the two other axes (u, w); the Kuhn split cuts every
-   * square along the diagonal from its low to its high corner */
+   * square along the diagonal from its low to its high corner. A window has the squares
+   * of its layers, and the bottom and top only where it reaches them */
   static const char *names[] = {"left", "right", "front", "back", "bottom", "top"};
   int nn[3] = {nx, ny, nz};
   int tets = o->type == CELL_TETRAHEDRON;
@@ -1011,7 +1088,9 @@ mesh *mesh_box(const mesh_box_opts *o, char *err) {
   for (int side = 0; side < 6; side++) {
     int d = side / 2, u = d == 0 ? 1 : 0, w = d == 2 ? 1 : 2, cnt = 0;
     int at = side % 2 ? nn[d] : 0;
-    for (int b2 = 0; b2 < nn[w]; b2++)
+    int b2lo = w == 2 ? lo : 0, b2hi = w == 2 ? hi : nn[w];
+    if (d == 2 && (side % 2 ? hi != nz : lo != 0)) b2hi = b2lo; /* not in the window */
+    for (int b2 = b2lo; b2 < b2hi; b2++)
       for (int b1 = 0; b1 < nn[u]; b1++) {
         int idx[4][3];
         int cu[4] = {0, 1, 1, 0}, cw[4] = {0, 0, 1, 1};
@@ -1021,7 +1100,7 @@ mesh *mesh_box(const mesh_box_opts *o, char *err) {
           idx[c][w] = b2 + cw[c];
         }
         int v[4];
-        for (int c = 0; c < 4; c++) v[c] = (idx[c][2] * (ny + 1) + idx[c][1]) * (nx + 1) + idx[c][0];
+        for (int c = 0; c < 4; c++) v[c] = VID(idx[c][0], idx[c][1], idx[c][2]);
         if (tets) {
           int t[6] = {v[0], v[1], v[2], v[0], v[2], v[3]};
           memcpy(fv + (size_t)cnt * 3, t, sizeof t);
@@ -1038,6 +1117,7 @@ mesh *mesh_box(const mesh_box_opts *o, char *err) {
       return NULL;
     }
   }
+#undef VID
   free(fv);
   return m;
 }

@@ -118,12 +118,34 @@ typedef struct {
   double x0, x1, y0, y1, z0, z1;
   cell_type type;
   int diagonal; /* triangles: 0 right, 1 left, 2 crossed */
+  /* a window of the mesh (hi > 0): the cell layers lo .. hi - 1 along the last axis (y for
+   * a rectangle, z for a box), their vertices and the boundary facets of those cells, in
+   * the whole mesh's order, with every name (mesh_box_window_numbers gives their global
+   * numbers). What a rank of a distributed run generates instead of the whole mesh. */
+  int lo, hi;
 } mesh_box_opts;
 
+/* the rectangle (triangles or quadrilaterals; vertices row by row, y outermost) or its
+ * window; NULL and the reason in err */
 mesh *mesh_rectangle(const mesh_box_opts *o, char *err);
 /* [x0, x1] in nx intervals; boundary points "left" (tag 1) and "right" (tag 2) */
 mesh *mesh_interval(int nx, double x0, double x1, char *err);
+/* the box (tetrahedra, six per cube, or hexahedra; vertices layer by layer, z outermost)
+ * or its window */
 mesh *mesh_box(const mesh_box_opts *o, char *err);
+/* the whole mesh's vertex and cell counts (0 when the options are refused), and the cell
+ * layers along the last axis and the vertices per vertex layer (a window's vertex v has
+ * the global number lo * per_layer + v, its cell c lo * ncells / layers + c); the crossed
+ * triangles' centre vertices, numbered after every grid vertex, have no such layers:
+ * *layers is then 0 */
+void mesh_box_counts(const mesh_box_opts *o, long *nvert, long *ncell, int *layers, long *per_layer);
+/* the window w (o with lo, hi set) holding part p of nparts of the numbering's runs
+ * (mesh_vertex_runs; the part's vertex run is *vlo .. *vhi - 1), its `layers` ghost layers
+ * and every cell around their vertices: what mesh_part_extract_window needs. 1 where
+ * there is none: no layers (crossed triangles), fewer vertices than parts, bad arguments */
+int mesh_box_part_window(const mesh_box_opts *o, int nparts, int p, int layers, mesh_box_opts *w, long *vlo, long *vhi);
+/* the global numbers of the vertices and cells of w, the window made with o */
+void mesh_box_window_numbers(const mesh_box_opts *o, const mesh *w, int *vglob, int *cglob);
 
 /* Gmsh MSH 2.2 and 4.1 ASCII (gmsh.c): from a file (a regular file or a pipe) or from
  * len bytes in memory (name labels the messages). Hostile input gives an error naming the
@@ -226,6 +248,20 @@ int mesh_grow_vertex_layers(const mesh *m, char *mark, int n);
 /* part p of m, whose cells have the parts `part` and vertices the owners vowner; NULL and
  * a reason in err (MESH_ERRLEN) on failure */
 mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p, int layers, char *err);
+/* the same from a window of the whole mesh (mesh_box_opts): m's vertices and cells have
+ * the global numbers vglob and cglob (increasing) of a mesh of nvert_global vertices and
+ * ncell_global cells; m must hold every cell of part p, its ghost layers and every cell
+ * around their vertices (vowner must be the whole mesh's owners there), and then the
+ * part is the one mesh_part_extract makes from the whole mesh, to the byte */
+mesh_part *mesh_part_extract_window(mesh *m, const int *vglob, const int *cglob, int nvert_global, int ncell_global,
+                                    const int *part, const int *vowner, int p, int layers, char *err);
+/* the numbering's runs: each cell in the part of its lowest vertex, the vertices (global
+ * numbers vglob, or m's own when NULL, of nvert_global) split into nparts runs */
+void mesh_vertex_runs(const mesh *m, const int *vglob, int nvert_global, int nparts, int *part);
+/* the vertices with global numbers in vlo .. vhi - 1 on cells that those runs cut (cells
+ * whose vertices lie in different runs): what the rows split in the problems' order
+ * exchange; -1 when out of memory */
+long mesh_runs_interface(const mesh *m, const int *vglob, int nvert_global, int nparts, int vlo, int vhi);
 void mesh_part_free(mesh_part *P);
 int mesh_part_pack(const mesh_part *P, char **buf, size_t *len);
 mesh_part *mesh_part_unpack(const char *buf, size_t len, char *err);

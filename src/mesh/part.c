@@ -76,7 +76,42 @@ bad:
   return 1;
 }
 
+void mesh_vertex_runs(const mesh *m, const int *vglob, int nvert_global, int nparts, int *part) {
+  for (int c = 0; c < m->ncell; c++) {
+    const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+    int lo = vglob ? vglob[v[0]] : v[0];
+    for (int k = 1; k < m->nvc; k++) {
+      int g = vglob ? vglob[v[k]] : v[k];
+      lo = g < lo ? g : lo;
+    }
+    part[c] = (int)((long)lo * nparts / nvert_global);
+  }
+}
+
+long mesh_runs_interface(const mesh *m, const int *vglob, int nvert_global, int nparts, int vlo, int vhi) {
+  char *mark = calloc((size_t)m->nvert + 1, 1);
+  if (!mark) return -1;
+  long n = 0;
+  for (int c = 0; c < m->ncell; c++) {
+    const int *v = m->cells + (size_t)c * (size_t)m->nvc;
+    long p0 = (long)(vglob ? vglob[v[0]] : v[0]) * nparts / nvert_global;
+    int cut = 0;
+    for (int k = 1; k < m->nvc && !cut; k++) cut = (long)(vglob ? vglob[v[k]] : v[k]) * nparts / nvert_global != p0;
+    for (int k = 0; cut && k < m->nvc; k++) {
+      int g = vglob ? vglob[v[k]] : v[k];
+      if (!mark[v[k]] && g >= vlo && g < vhi) { mark[v[k]] = 1; n++; }
+    }
+  }
+  free(mark);
+  return n;
+}
+
 mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p, int layers, char *err) {
+  return mesh_part_extract_window(m, NULL, NULL, m->nvert, m->ncell, part, vowner, p, layers, err);
+}
+
+mesh_part *mesh_part_extract_window(mesh *m, const int *vglob, const int *cglob, int nvert_global, int ncell_global,
+                                    const int *part, const int *vowner, int p, int layers, char *err) {
   if (mesh_build_boundary_cells(m)) { snprintf(err, MESH_ERRLEN, "%s", m->err); return NULL; }
   size_t nv = (size_t)m->nvert, nc = (size_t)m->ncell, nvc = (size_t)m->nvc;
   /* near: the vertices whose cells are local; vmap: the local number + 1 of local vertices;
@@ -107,8 +142,8 @@ mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p,
   int nvl = 0;
   for (size_t v = 0; v < nv; v++)
     if (vmap[v]) vmap[v] = ++nvl;
-  P->nvert_global = m->nvert;
-  P->ncell_global = m->ncell;
+  P->nvert_global = nvert_global;
+  P->ncell_global = ncell_global;
   P->part = p;
   P->layers = layers;
   P->m = ncl ? mesh_create(m->type, nvl, NULL, ncl, NULL, err) : empty_mesh(m->type, err);
@@ -123,7 +158,7 @@ mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p,
   for (size_t v = 0; v < nv; v++)
     if (vmap[v]) {
       size_t i = (size_t)vmap[v] - 1;
-      P->vglobal[i] = (int)v;
+      P->vglobal[i] = vglob ? vglob[v] : (int)v;
       P->vowner[i] = vowner[v];
       memcpy(l->x + i * dim, m->x + v * dim, sizeof(double) * dim);
       P->nown_vert += vowner[v] == p;
@@ -131,7 +166,7 @@ mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p,
   for (size_t c = 0; c < nc; c++)
     if (cmap[c]) {
       size_t i = (size_t)cmap[c] - 1;
-      P->cglobal[i] = (int)c;
+      P->cglobal[i] = cglob ? cglob[c] : (int)c;
       P->cowner[i] = part[c];
       l->cell_tag[i] = m->cell_tag[c];
       for (size_t k = 0; k < nvc; k++) l->cells[i * nvc + k] = vmap[m->cells[c * nvc + k]] - 1;
@@ -157,7 +192,7 @@ mesh_part *mesh_part_extract(mesh *m, const int *part, const int *vowner, int p,
   free(cmap);
   return P;
 oom:
-  snprintf(err, MESH_ERRLEN, "out of memory for part %d of a mesh of %d cells", p + 1, m->ncell);
+  snprintf(err, MESH_ERRLEN, "out of memory for part %d of a mesh of %d cells", p + 1, ncell_global);
 fail:
   free(vmap);
   free(cmap);

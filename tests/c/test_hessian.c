@@ -106,7 +106,7 @@ static void check_case(int d, double J[3][3], double theta, double eps, const ch
  * central differences of that value, at interior, face, edge and corner vertices */
 static void check_vertex_energy(void) {
   char err[MESH_ERRLEN];
-  mesh_box_opts bo = {3, 3, 3, 0, 1, 0, 1, 0, 1, CELL_TETRAHEDRON, 0};
+  mesh_box_opts bo = {3, 3, 3, 0, 1, 0, 1, 0, 1, CELL_TETRAHEDRON, 0, 0, 0};
   mesh *m = mesh_box(&bo, err);
   CHECK(m != NULL, "box: %s", err);
   if (!m) return;

@@ -204,7 +204,7 @@ static void files(const char *data) {
     mesh_free(p);
     unlink(tmp);
   }
-  mesh_box_opts b = {2, 2, 0, 0, 1, 0, 1, 0, 1, CELL_TRIANGLE, 0};
+  mesh_box_opts b = {2, 2, 0, 0, 1, 0, 1, 0, 1, CELL_TRIANGLE, 0, 0, 0};
   mesh *m = mesh_rectangle(&b, err);
   CHECK(m && mesh_set_boundary_name(m, 1, "say \"hi\"\\\nnext") == 0, "names");
   snprintf(tmp, sizeof tmp, "/tmp/lugal_names_%d.msh", (int)getpid());
@@ -222,7 +222,7 @@ static void files(const char *data) {
     signal(SIGXFSZ, SIG_IGN);
     struct rlimit rl = {200, 200};
     setrlimit(RLIMIT_FSIZE, &rl);
-    mesh_box_opts big = {40, 40, 0, 0, 1, 0, 1, 0, 1, CELL_TRIANGLE, 0};
+    mesh_box_opts big = {40, 40, 0, 0, 1, 0, 1, 0, 1, CELL_TRIANGLE, 0, 0, 0};
     mesh *bm = mesh_rectangle(&big, err);
     int rc = mesh_write_gmsh(bm, tmp);
     if (!rc || !strstr(bm->err, "File too large")) fprintf(stderr, "write under a size limit: %d %s\n", rc, bm->err);
@@ -250,13 +250,83 @@ static void untangle_option_defaults(void) {
         "untangle_defaults left a field unset (reference_escape %d)", o.reference_escape);
 }
 
+/* a box's or rectangle's part made from a window (what each rank of a distributed run
+ * generates) is the part cut from the whole mesh, to the byte, for every part of 2 to 5 runs
+ * and 1 or 2 ghost layers; the runs' cuts counted window by window add up to the whole
+ * mesh's count */
+static void windows(void) {
+  char err[MESH_ERRLEN];
+  mesh_box_opts cases[] = {{5, 4, 9, 0, 1, 0, 2, 0, 3, CELL_TETRAHEDRON, 0, 0, 0},
+                           {3, 4, 11, 0, 1, 0, 1, -1, 1, CELL_HEXAHEDRON, 0, 0, 0},
+                           {7, 13, 0, 0, 2, 0, 1, 0, 0, CELL_TRIANGLE, 0, 0, 0},
+                           {6, 10, 0, 0, 1, -1, 1, 0, 0, CELL_TRIANGLE, 1, 0, 0},
+                           {4, 15, 0, 0, 1, 0, 3, 0, 0, CELL_QUADRILATERAL, 0, 0, 0}};
+  int same = 0, tried = 0, smaller = 0;
+  for (size_t ci = 0; ci < sizeof cases / sizeof cases[0]; ci++) {
+    const mesh_box_opts *o = &cases[ci];
+    int box = o->type == CELL_TETRAHEDRON || o->type == CELL_HEXAHEDRON;
+    mesh *m = box ? mesh_box(o, err) : mesh_rectangle(o, err);
+    CHECK(m != NULL, "%s", err);
+    if (!m) continue;
+    int *part = malloc(sizeof(int) * (size_t)m->ncell), *vown = malloc(sizeof(int) * (size_t)m->nvert);
+    for (int np = 2; np <= 5; np++) {
+      mesh_vertex_runs(m, NULL, m->nvert, np, part);
+      CHECK(mesh_vertex_owners(m, part, vown) == 0, "owners");
+      long cuts = 0, whole = mesh_runs_interface(m, NULL, m->nvert, np, 0, m->nvert);
+      for (int layers = 1; layers <= 2; layers++)
+        for (int p = 0; p < np; p++) {
+          mesh_box_opts w;
+          long vlo, vhi;
+          CHECK(mesh_box_part_window(o, np, p, layers, &w, &vlo, &vhi) == 0, "a window for part %d of %d", p, np);
+          mesh *wm = box ? mesh_box(&w, err) : mesh_rectangle(&w, err);
+          CHECK(wm != NULL, "window %d .. %d: %s", w.lo, w.hi, err);
+          if (!wm) continue;
+          smaller += wm->ncell < m->ncell;
+          int *vg = malloc(sizeof(int) * (size_t)wm->nvert), *cg = malloc(sizeof(int) * (size_t)wm->ncell);
+          int *wp = malloc(sizeof(int) * (size_t)wm->ncell), *wo = malloc(sizeof(int) * (size_t)wm->nvert);
+          mesh_box_window_numbers(&w, wm, vg, cg);
+          mesh_vertex_runs(wm, vg, m->nvert, np, wp);
+          mesh_vertex_owners(wm, wp, wo);
+          if (layers == 1) cuts += mesh_runs_interface(wm, vg, m->nvert, np, (int)vlo, (int)vhi);
+          mesh_part *A = mesh_part_extract(m, part, vown, p, layers, err);
+          mesh_part *B = mesh_part_extract_window(wm, vg, cg, m->nvert, m->ncell, wp, wo, p, layers, err);
+          char *ba = NULL, *bb = NULL;
+          size_t la = 0, lb = 0;
+          tried++;
+          if (A && B && !mesh_part_pack(A, &ba, &la) && !mesh_part_pack(B, &bb, &lb) && la == lb && !memcmp(ba, bb, la)) same++;
+          else fprintf(stderr, "case %zu, part %d of %d, %d layers: the window's part differs\n", ci, p, np, layers);
+          free(ba); free(bb);
+          mesh_part_free(A);
+          mesh_part_free(B);
+          free(vg); free(cg); free(wp); free(wo);
+          mesh_free(wm);
+        }
+      CHECK(cuts == whole, "case %zu, %d runs: %ld vertices on the cuts window by window, %ld in the whole mesh", ci, np, cuts, whole);
+    }
+    free(part);
+    free(vown);
+    mesh_free(m);
+  }
+  CHECK(same == tried && tried == 5 * 14 * 2 && smaller > tried / 2, "%d of %d parts the same from windows (%d windows smaller than the mesh)", same, tried, smaller);
+  /* crossed triangles have no layers (their centres come last): no window */
+  mesh_box_opts x = {4, 4, 0, 0, 1, 0, 1, 0, 0, CELL_TRIANGLE, 2, 0, 0}, w;
+  long vlo, vhi;
+  CHECK(mesh_box_part_window(&x, 2, 0, 1, &w, &vlo, &vhi) == 1, "no window for crossed triangles");
+  /* a window outside the mesh is refused with the reason */
+  x.diagonal = 0;
+  x.lo = 2;
+  x.hi = 6;
+  CHECK(mesh_rectangle(&x, err) == NULL && strstr(err, "window"), "a window past the top refused: %s", err);
+}
+
 int main(int argc, char **argv) {
   const char *data = argc > 1 ? argv[1] : "tests/data";
   untangle_option_defaults();
   pack(data);
   parts(data);
+  windows();
   char err[MESH_ERRLEN], path[1024];
-  mesh_box_opts o = {3, 2, 2, 0, 2, 0, 1, 0, 1, CELL_TRIANGLE, 0};
+  mesh_box_opts o = {3, 2, 2, 0, 2, 0, 1, 0, 1, CELL_TRIANGLE, 0, 0, 0};
   for (int dg = 0; dg < 3; dg++) {
     o.diagonal = dg;
     mesh *m = mesh_rectangle(&o, err);
@@ -279,7 +349,7 @@ int main(int argc, char **argv) {
   CHECK(qr && qr->ncell == 24 && fabs(total(qr) - 2) < 1e-14 && qr->nbf == 2 * q->nbf, "quad refine");
   mesh_free(q);
   mesh_free(qr);
-  mesh_box_opts b = {2, 3, 2, 0, 1, 0, 1, 0, 2, CELL_TETRAHEDRON, 0};
+  mesh_box_opts b = {2, 3, 2, 0, 1, 0, 1, 0, 2, CELL_TETRAHEDRON, 0, 0, 0};
   mesh *t = mesh_box(&b, err);
   CHECK(t && t->ncell == 72 && fabs(total(t) - 2) < 1e-13, "tet box");
   int ninv;

@@ -161,7 +161,7 @@ int main(int argc, char **argv) {
    * by N (N^T N = M), on a mesh of 2 triangles and a box of tetrahedra */
   char err[MESH_ERRLEN];
   for (int d = 2; d <= 3; d++) {
-    mesh_box_opts o = {2, 2, 2, 0, 1, 0, 1, 0, 1, d == 2 ? CELL_TRIANGLE : CELL_TETRAHEDRON, 0};
+    mesh_box_opts o = {2, 2, 2, 0, 1, 0, 1, 0, 1, d == 2 ? CELL_TRIANGLE : CELL_TETRAHEDRON, 0, 0, 0};
     mesh *m = d == 2 ? mesh_rectangle(&o, err) : mesh_box(&o, err);
     double M2[4] = {4, 1, 1, 2}, M3[9] = {3, 1, 0, 1, 2, 0.5, 0, 0.5, 1};
     double *M = d == 2 ? M2 : M3;
@@ -223,7 +223,7 @@ int main(int argc, char **argv) {
   mesh_quality(qm, QM_MIN_CORNER_JACOBIAN, NULL, &v, err); CHECK(v < 0, "dart corner Jacobian %g", v);
   mesh_quality(qm, QM_MAX_ANGLE, NULL, &v, err); CHECK(v > 180, "dart reflex angle %g", v);
   mesh_free(qm);
-  mesh_box_opts ho = {1, 1, 1, 0, 2, 0, 2, 0, 2, CELL_HEXAHEDRON, 0};
+  mesh_box_opts ho = {1, 1, 1, 0, 2, 0, 2, 0, 2, CELL_HEXAHEDRON, 0, 0, 0};
   mesh *hm = mesh_box(&ho, err);
   mesh_quality(hm, QM_SCALED_JACOBIAN, NULL, &v, err); CHECK_CLOSE(v, 1, 1e-14);
   mesh_quality(hm, QM_CORNER_CONDITION, NULL, &v, err); CHECK_CLOSE(v, 1, 1e-14);
@@ -271,8 +271,8 @@ int main(int argc, char **argv) {
 
   /* deformation measures: an affine map x -> A x + b gives B = A on every cell and corner */
   {
-    mesh_box_opts o2 = {3, 2, 1, 0, 1, 0, 1, 0, 1, CELL_TRIANGLE, 0};
-    mesh_box_opts o3 = {2, 2, 2, 0, 1, 0, 1, 0, 1, CELL_TETRAHEDRON, 0};
+    mesh_box_opts o2 = {3, 2, 1, 0, 1, 0, 1, 0, 1, CELL_TRIANGLE, 0, 0, 0};
+    mesh_box_opts o3 = {2, 2, 2, 0, 1, 0, 1, 0, 1, CELL_TETRAHEDRON, 0, 0, 0};
     mesh *ms[4];
     ms[0] = mesh_rectangle(&o2, err);
     o2.type = CELL_QUADRILATERAL;
@@ -318,7 +318,7 @@ int main(int argc, char **argv) {
    * mesh_quality takes cell by cell without a metric) agree with the generic formulas on a
    * randomly perturbed box, inverted cells included */
   {
-    mesh_box_opts ob = {5, 4, 3, 0, 1, 0, 1, 0, 1, CELL_TETRAHEDRON, 0};
+    mesh_box_opts ob = {5, 4, 3, 0, 1, 0, 1, 0, 1, CELL_TETRAHEDRON, 0, 0, 0};
     mesh *m = mesh_box(&ob, err);
     for (int v = 0; v < m->nvert * 3; v++) m->x[v] += 0.15 * (urand() - 0.5);
     double *fast = malloc(sizeof(double) * (size_t)m->ncell);

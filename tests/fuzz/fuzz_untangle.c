@@ -56,7 +56,7 @@ int fuzz_untangle_run(const uint8_t *data, size_t size) {
   unsigned t = next(&b) % 4, nx = 1 + next(&b) % 6, ny = 1 + next(&b) % 6, nz = 1 + next(&b) % 3;
   unsigned scale = next(&b) % 4;
   double L = scale == 0 ? 1 : scale == 1 ? 1e-200 : scale == 2 ? 1e200 : 1e-3;
-  mesh_box_opts o = {(int)nx, (int)ny, (int)nz, 0, L, 0, L, 0, L, (cell_type)t, (int)(next(&b) % 3)};
+  mesh_box_opts o = {(int)nx, (int)ny, (int)nz, 0, L, 0, L, 0, L, (cell_type)t, (int)(next(&b) % 3), 0, 0};
   char err[MESH_ERRLEN];
   mesh *m = t <= CELL_QUADRILATERAL ? mesh_rectangle(&o, err) : mesh_box(&o, err);
   UFUZZ_CHECK(m != NULL, "a structured mesh");

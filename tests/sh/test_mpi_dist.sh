@@ -27,6 +27,13 @@ for n in 2 3 2p 3p; do
   grep "distribute: rank [0-9]* holds" "$T/err$n" | head -n ${n%p} | tr -d '(' | awk -v n=${n%p} '
     { k++; own += $8; if ($6 + 0 >= 1152) whole = 1 }
     END { if (k != n || own != 1152 || whole) { print "FAIL: the parts of " n " ranks: " k " reports, " own " owned cells, whole " whole; exit 1 } }' || exit 1
+  # the generated mesh made rank by rank (its window of rows), not cut from a whole mesh on
+  # rank 0, where the numbering's runs are the partition; with PTScotch's, rank 0 cuts it
+  made=$(grep "distribute: rank [0-9]* holds" "$T/err$n" | head -n ${n%p} | grep -c "generated here")
+  case $n in
+    *p) [ "$made" = 0 ] || fail "$n ranks: PTScotch's partition, yet $made ranks generated their own parts" ;;
+    *) [ "$made" = "$n" ] || fail "$n ranks: $made ranks generated their own part of the 24 x 24 mesh, expected $n" ;;
+  esac
   [ -s "$T/$n/poisson.vtu" ] || fail "no VTU gathered on $n ranks"
   [ "$(wc -c < "$T/1/poisson.vtu")" = "$(wc -c < "$T/$n/poisson.vtu")" ] || fail "the gathered VTU of $n ranks differs in size from the serial one"
 done

@@ -34,6 +34,13 @@ int lg_petsc_init(int *argc, char ***argv) {
                                   {"HWLOC_COMPONENTS", "-linuxio"},
                                   {"HWLOC_PLUGINS_BLACKLIST", "hwloc_pci,hwloc_opencl,hwloc_gl,hwloc_xml_libxml"}};
     for (size_t i = 0; i < sizeof kv / sizeof kv[0]; i++) setenv(kv[i][0], kv[i][1], 0);
+  } else if (local && getenv("OMPI_COMM_WORLD_SIZE") && !strcmp(local, getenv("OMPI_COMM_WORLD_SIZE"))) {
+    /* Open MPI's mpiexec with every rank on this machine: its point-to-point layer ob1 (shared
+     * memory), the one it selects here anyway, without first probing the network libraries
+     * of its other layers (psm, psm2, ofi): a 2-rank run of an empty script 0.52 -> 0.33 s.
+     * Not where the ranks span machines (the network layers are the point there), nor where
+     * the user set OMPI_MCA_pml */
+    setenv("OMPI_MCA_pml", "ob1", 0);
   }
 #ifdef _OPENMP
   /* ranks on one machine share its cores: each takes its share of OpenMP threads (two ranks

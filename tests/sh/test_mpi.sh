@@ -8,7 +8,8 @@
 # and sent to the others, print on rank 0 only,
 # lg.rank / lg.size / lg.allreduce, a rank with no rows (more ranks than nodes), and a Lua
 # error or a tangled mesh on one rank ending the whole run with its message and status 1
-# within seconds, and Lua garbage on one rank not hanging the run. Meshes whole on every
+# within seconds, and Lua garbage on one rank not hanging the run; Open MPI's shared-memory
+# layer chosen for ranks on one machine unless the user chose one. Meshes whole on every
 # rank (-lugal_distribute 0) but for the garbage case, run both ways.
 BUILD=$1
 . "$(dirname "$0")/mpi_lib.sh"
@@ -182,4 +183,14 @@ for e in "$ROOT"/examples/*.lua; do
   (cd "$T/ex" && run 2 "$e" > "$T/ex.out" 2>&1) || { tail -n 15 "$T/ex.out"; fail "example $(basename "$e") on 2 ranks"; }
 done
 (cd "$T/ex" && run 3 "$ROOT/tests/lua/test_convergence.lua" > "$T/conv.out" 2>&1) || { tail -n 15 "$T/conv.out"; fail "test_convergence on 3 ranks"; }
+# ranks all on this machine take Open MPI's shared-memory layer without probing the others
+# (lg_petsc_init sets OMPI_MCA_pml=ob1), unless the user chose a layer
+printf 'local lg = require "lugal"\nlg.print_all(os.getenv("OMPI_MCA_pml"))\n' > "$T/pml.lua"
+out=$(env -u OMPI_MCA_pml timeout 60 mpiexec -n 2 "$LUGAL" "$T/pml.lua" 2>&1)
+[ "$out" = "ob1
+ob1" ] || fail "OMPI_MCA_pml on 2 ranks of one machine: got '$out', expected ob1 on each"
+out=$(OMPI_MCA_pml=^cm timeout 60 mpiexec -n 2 "$LUGAL" "$T/pml.lua" 2>&1)
+[ "$out" = "^cm
+^cm" ] || fail "the user's OMPI_MCA_pml: got '$out'"
+
 echo "mpi: ranks, reductions, empty ranks, errors on one rank, every example on 2 ranks, convergence on 3: as expected"

@@ -155,44 +155,36 @@ lg_mesh *lg_mesh_generate_part(lg_env *env, const mesh_box_opts *o, int *whole) 
       rc = 1;
     }
   }
-  if (lg_any_result(rc, err, sizeof err)) {
-    mesh_free(m); free(vglob); free(cglob); free(part); free(vown);
-    *whole = 0;
-    lg_seterr(env, "generating this rank's part of the mesh: %s", err);
-    return NULL;
-  }
+  lg_mesh *lm = NULL;
+  mesh_part *P = NULL;
+  if ((rc = lg_any_result(rc, err, sizeof err))) goto done;
   if (!natural) { /* auto: the runs where rank 0, cutting the whole mesh, would keep them */
     long have = 0, fewest = 0;
     int fail = MPI_Allreduce(&cnt[0], &have, 1, MPI_LONG, MPI_SUM, PETSC_COMM_WORLD) != MPI_SUCCESS ||
                MPI_Allreduce(&cnt[1], &fewest, 1, MPI_LONG, MPI_MIN, PETSC_COMM_WORLD) != MPI_SUCCESS;
-    int verbose = env->verbose;
+    int verbose = env->verbose, d = cell_dim(o->type);
     env->verbose = verbose && rank == 0;
-    int keep = !fail && lg_runs_kept(env, have, lg_runs_cut_little(have, nvg, cell_dim(o->type), size) ? fewest : -1, nvg, ncg,
-                                     cell_dim(o->type), size);
+    int keep = !fail && lg_runs_kept(env, have, lg_runs_cut_little(have, nvg, d, size) ? fewest : -1, nvg, ncg, d, size);
     env->verbose = verbose;
-    if (!keep) {
-      mesh_free(m); free(vglob); free(cglob); free(part); free(vown);
-      return NULL;
-    }
+    if (!keep) goto done; /* *whole stays 1 */
   }
-  *whole = 0;
-  mesh_part *P = NULL;
   if (mesh_vertex_owners(m, part, vown)) { snprintf(err, sizeof err, "out of memory for the vertices' owners"); rc = 1; }
   else if (!(P = mesh_part_extract_window(m, vglob, cglob, (int)nvg, (int)ncg, part, vown, rank, layers, err))) rc = 1;
-  int wv = m->nvert, wc = m->ncell;
-  mesh_free(m); free(vglob); free(cglob); free(part); free(vown);
-  m = NULL; vglob = cglob = part = vown = NULL;
-  lg_mesh *lm = rc ? NULL : lg_mesh_wrap_part(P);
-  if (!rc && !lm) { snprintf(err, sizeof err, "out of memory"); rc = 1; }
+  else if (!(lm = lg_mesh_wrap_part(P))) { snprintf(err, sizeof err, "out of memory"); rc = 1; }
   if (rc) { mesh_part_free(P); P = NULL; }
   if (lg_any_result(rc, err, sizeof err)) {
+    rc = 1;
     if (lm) lg_mesh_free(lm);
-    lg_seterr(env, "generating this rank's part of the mesh: %s", err);
-    return NULL;
-  }
-  if (env->verbose)
+    lm = NULL;
+  } else if (env->verbose)
     fprintf(stderr, "[lugal] distribute: rank %d holds %d cells (%d owned, %d ghosts) and %d vertices of %ld, generated here from a window of %d cells and %d vertices, %.1f ms\n",
-            rank, P->m->ncell, P->nown_cell, P->m->ncell - P->nown_cell, P->m->nvert, nvg, wc, wv, now_ms() - t0);
+            rank, P->m->ncell, P->nown_cell, P->m->ncell - P->nown_cell, P->m->nvert, nvg, m->ncell, m->nvert, now_ms() - t0);
+done:
+  if (rc) {
+    *whole = 0;
+    lg_seterr(env, "generating this rank's part of the mesh: %s", err);
+  } else if (lm) *whole = 0;
+  mesh_free(m); free(vglob); free(cglob); free(part); free(vown);
   return lm;
 }
 

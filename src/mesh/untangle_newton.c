@@ -216,6 +216,28 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
       }
       ut_place(x, x0, s, t, freev, nfree, d);
     }
+    /* a full step that lowered f by 0.55–0.75 of g·s: the energy along s is flatter than the
+     * model (at its minimum ½ g·s) and its minimum lies past t = 1. With the barrier alone
+     * (ε = 0: smoothing) one more trial, at the minimum of the parabola through f, g·s and
+     * the full step's value (t* = −g·s / (2 (f(1) − f − g·s)), up to 2), kept when lower.
+     * The million-triangle spiral's smoothing: 15 → 12 steps, 9.5–11.6 → 7.8 s, the same
+     * minimum (its steps gained two thirds of g·s at t = 1, t* 1.4–1.5). Not with ε > 0: the
+     * untangler's global energy then zigzagged (the 100 000-vertex Tutte spiral 9 → 14 steps) */
+    else if (o->eps == 0 && ls == 0 && f - fn > 0.55 * -gp) {
+      double c = 2 * (fn - f - gp), ts = c > 0 ? fmin(2, -gp / c) : 2;
+      if (ts > 1.15) {
+        ut_place(x, x0, s, ts, freev, nfree, d);
+        double f2 = ut_eval(o, x, q, nfree);
+        if (f2 < fn) {
+          t = ts;
+          fn = f2;
+          double *tq = gn; /* q holds the trial's gradient: it becomes the accepted point's */
+          gn = q;
+          q = tq;
+        } else
+          ut_place(x, x0, s, t, freev, nfree, d);
+      }
+    }
     if (ls == 50) { /* no decrease: restore and stop */
       ut_place(x, x0, NULL, 0, freev, nfree, d);
       break;

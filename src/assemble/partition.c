@@ -5,7 +5,8 @@
  * split in the problems' order). "auto" (the default) takes the numbering's runs where they
  * cut about as little as compact parts would (a generator's numbering, a few parts) and
  * PTScotch elsewhere. Rank 0 partitions and every rank receives its result, so that all
- * hold the same partition. The problems number their rows part by part (problem.c), so that
+ * hold the same partition (a box or rectangle generated rank by rank, distribute.c, takes
+ * auto's test, lg_runs_kept, on counts reduced over the ranks instead). The problems number their rows part by part (problem.c), so that
  * a rank owns the rows of its cells. */
 #include "problem_int.h"
 

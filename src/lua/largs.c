@@ -184,11 +184,10 @@ static void push_either(lua_State *L, mesh *m, lg_mesh *lm) {
   luaL_setmetatable(L, MT_MESH);
   /* -lugal_distribute: rank 0's mesh (the others' copy is dropped) cut into parts, each rank
    * keeping its own with a ghost layer */
-  if (lm) {
-  } else if (lg_distribute_wanted()) {
+  if (!lm && lg_distribute_wanted()) {
     u->lm = lg_mesh_distribute(env, m);
     if (!u->lm) luaL_error(L, "distributing the mesh: %s", env->err);
-  } else {
+  } else if (!lm) {
     u->lm = lg_mesh_wrap(m);
     if (!u->lm) { mesh_free(m); luaL_error(L, "out of memory"); }
   }

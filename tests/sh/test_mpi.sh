@@ -186,10 +186,11 @@ done
 # ranks all on this machine take Open MPI's shared-memory layer without probing the others
 # (lg_petsc_init sets OMPI_MCA_pml=ob1), unless the user chose a layer
 printf 'local lg = require "lugal"\nlg.print_all(os.getenv("OMPI_MCA_pml"))\n' > "$T/pml.lua"
-out=$(env -u OMPI_MCA_pml timeout 60 mpiexec -n 2 "$LUGAL" "$T/pml.lua" 2>&1)
+# (stdout only: a sanitizer build prints its suppression counts on stderr)
+out=$(env -u OMPI_MCA_pml timeout 60 mpiexec -n 2 "$LUGAL" "$T/pml.lua" 2> "$T/pml.err") || fail "OMPI_MCA_pml: $(cat "$T/pml.err")"
 [ "$out" = "ob1
 ob1" ] || fail "OMPI_MCA_pml on 2 ranks of one machine: got '$out', expected ob1 on each"
-out=$(OMPI_MCA_pml=^cm timeout 60 mpiexec -n 2 "$LUGAL" "$T/pml.lua" 2>&1)
+out=$(OMPI_MCA_pml=^cm timeout 60 mpiexec -n 2 "$LUGAL" "$T/pml.lua" 2> "$T/pml.err") || fail "OMPI_MCA_pml=^cm: $(cat "$T/pml.err")"
 [ "$out" = "^cm
 ^cm" ] || fail "the user's OMPI_MCA_pml: got '$out'"
 

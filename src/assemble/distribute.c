@@ -125,9 +125,8 @@ lg_mesh *lg_mesh_distribute(lg_env *env, mesh *whole) {
 lg_mesh *lg_mesh_generate_part(lg_env *env, const mesh_box_opts *o, int *whole) {
   double t0 = now_ms();
   int rank = lg_mpi_rank(), size = lg_mpi_size(), box = o->type == CELL_TETRAHEDRON || o->type == CELL_HEXAHEDRON;
-  long nvg, ncg, per;
-  int nl;
-  mesh_box_counts(o, &nvg, &ncg, &nl, &per);
+  long nvg, ncg;
+  mesh_box_counts(o, &nvg, &ncg, NULL, NULL);
   char method[64] = "auto";
   PetscOptionsGetString(NULL, NULL, "-lugal_partitioner", method, sizeof method, NULL);
   int layers = lg_ghost_layers(), natural = !strcmp(method, "natural") || ncg < 8L * size;

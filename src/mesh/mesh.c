@@ -919,7 +919,13 @@ static int box_counts(const mesh_box_opts *o, long *nvert, long *ncell, int *lay
 
 void mesh_box_counts(const mesh_box_opts *o, long *nvert, long *ncell, int *layers, long *per_layer) {
   char err[MESH_ERRLEN];
-  box_counts(o, nvert, ncell, layers, per_layer, err);
+  long nv, nc, per;
+  int nl;
+  box_counts(o, &nv, &nc, &nl, &per, err);
+  if (nvert) *nvert = nv;
+  if (ncell) *ncell = nc;
+  if (layers) *layers = nl;
+  if (per_layer) *per_layer = per;
 }
 
 int mesh_box_part_window(const mesh_box_opts *o, int nparts, int p, int layers, mesh_box_opts *w, long *vlo, long *vhi) {

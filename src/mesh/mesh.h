@@ -134,7 +134,7 @@ mesh *mesh_interval(int nx, double x0, double x1, char *err);
  * or its window */
 mesh *mesh_box(const mesh_box_opts *o, char *err);
 /* the whole mesh's vertex and cell counts (0 when the options are refused), and the cell
- * layers along the last axis and the vertices per vertex layer (a window's vertex v has
+ * layers along the last axis and the vertices per vertex layer (each output may be NULL) (a window's vertex v has
  * the global number lo * per_layer + v, its cell c lo * ncells / layers + c); the crossed
  * triangles' centre vertices, numbered after every grid vertex, have no such layers:
  * *layers is then 0 */

@@ -27,6 +27,9 @@ for _, re in ipairs{1, 10, 100} do
   print(string.format("navier_stokes: Re = %g, %d Newton iterations, |F| %.1e", re, info.iterations, info.residuals[#info.residuals]))
   assert(info.iterations <= 8, "Newton converges in a few steps from the last solution")
 end
+-- the pressure's constant (the null space): the solution comes back with its mean at zero
+local pmean = lg.integrate(mesh, ph)
+assert(math.abs(pmean) < 1e-12, "the pressure has mean zero, as nullspace = p promises: " .. pmean)
 -- the centreline x = 1/2: the minimum of u_x
 local umin, ymin = math.huge, 0
 for i = 0, 400 do

@@ -231,20 +231,15 @@ static void sym_project_psd(int n, double *a) {
     }
 }
 
-/* H += w vec(M) vec(M)ᵀ for an n-entry vec(M) */
-static void add_mode(int n, double w, const double *m, double *H) {
-  if (!(w > 0)) return;
-  for (int i = 0; i < n; i++)
-    for (int j = 0; j < n; j++) H[i * n + j] += w * m[i] * m[j];
-}
-
-/* 3D: the projected Hessian in J of an energy F(A, D), A = |J|², D = det J > 0, in closed
- * form from J's singular value decomposition J = U Σ Vᵀ (Smith, de Goes and Kim, ACM TOG
- * 2019): the twist and flip modes (u_i v_jᵀ ∓ u_j v_iᵀ)/√2 have the eigenvalues 2F_A ± F_D σ_k
- * ({i, j, k} = {1, 2, 3}); the scaling modes Σ c_i u_i v_iᵀ are the eigenvectors c of the 3×3
- * Hessian in (σ1, σ2, σ3). 1 when J is too close to singular for U = J V Σ⁻¹: the caller
- * projects the 9×9 Hessian numerically. */
-static int hessian_3d_psd(double J[3][3], double fA, double fD, double fAD, double fDD, double *H) {
+/* 3D: the eigensystem of the Hessian in J of an energy F(A, D), A = |J|², D = det J > 0, in
+ * closed form from J's singular value decomposition J = U Σ Vᵀ (Smith, de Goes and Kim, ACM
+ * TOG 2019): the twist and flip modes (u_i v_jᵀ ∓ u_j v_iᵀ)/√2 have the eigenvalues
+ * 2F_A ± F_D σ_k ({i, j, k} = {1, 2, 3}); the scaling modes Σ c_i u_i v_iᵀ are the
+ * eigenvectors c of the 3×3 Hessian in (σ1, σ2, σ3). The nine modes vec(M_e) (row-major 3×3)
+ * go to m, their eigenvalues to lam: the projected Hessian is Σ_{λ_e > 0} λ_e vec(M_e)
+ * vec(M_e)ᵀ. 1 when J is too close to singular for U = J V Σ⁻¹: the caller projects the 9×9
+ * Hessian numerically. */
+static int hessian_3d_modes(double J[3][3], double fA, double fD, double fAD, double fDD, double *lam, double m[9][9]) {
   double S[9], V[9], w[3], sg[3], U[3][3];
   for (int i = 0; i < 3; i++)
     for (int j = 0; j < 3; j++) S[i * 3 + j] = J[0][i] * J[0][j] + J[1][i] * J[1][j] + J[2][i] * J[2][j];
@@ -255,26 +250,24 @@ static int hessian_3d_psd(double J[3][3], double fA, double fD, double fAD, doub
     if (!(sg[i] > 1e-6 * smax)) return 1;
   for (int r = 0; r < 3; r++)
     for (int i = 0; i < 3; i++) U[r][i] = (J[r][0] * V[0 * 3 + i] + J[r][1] * V[1 * 3 + i] + J[r][2] * V[2 * 3 + i]) / sg[i];
-  double kk[3] = {sg[1] * sg[2], sg[0] * sg[2], sg[0] * sg[1]}, Hs[9], ws[3], cs[9], m[9];
+  double kk[3] = {sg[1] * sg[2], sg[0] * sg[2], sg[0] * sg[1]}, Hs[9], cs[9];
   for (int i = 0; i < 3; i++)
     for (int j = 0; j < 3; j++)
       Hs[i * 3 + j] = (i == j ? 2 * fA : fD * sg[3 - i - j]) + 2 * fAD * (sg[i] * kk[j] + kk[i] * sg[j]) + fDD * kk[i] * kk[j];
-  sym_eigen(3, Hs, ws, cs);
-  memset(H, 0, sizeof(double) * 81);
-  for (int e = 0; e < 3; e++) {
+  sym_eigen(3, Hs, lam, cs);
+  for (int e = 0; e < 3; e++)
     for (int a = 0; a < 3; a++)
       for (int b = 0; b < 3; b++)
-        m[a * 3 + b] = cs[0 * 3 + e] * U[a][0] * V[b * 3 + 0] + cs[1 * 3 + e] * U[a][1] * V[b * 3 + 1] +
-                       cs[2 * 3 + e] * U[a][2] * V[b * 3 + 2];
-    add_mode(9, ws[e], m, H);
-  }
+        m[e][a * 3 + b] = cs[0 * 3 + e] * U[a][0] * V[b * 3 + 0] + cs[1 * 3 + e] * U[a][1] * V[b * 3 + 1] +
+                          cs[2 * 3 + e] * U[a][2] * V[b * 3 + 2];
+  int e = 3;
   for (int i = 0; i < 3; i++)
     for (int j = i + 1; j < 3; j++) {
       int k = 3 - i - j;
-      for (int sgn = -1; sgn <= 1; sgn += 2) { /* twist (−), flip (+) */
+      for (int sgn = -1; sgn <= 1; sgn += 2, e++) { /* twist (−), flip (+) */
         for (int a = 0; a < 3; a++)
-          for (int b = 0; b < 3; b++) m[a * 3 + b] = (U[a][i] * V[b * 3 + j] + sgn * U[a][j] * V[b * 3 + i]) * M_SQRT1_2;
-        add_mode(9, 2 * fA - sgn * fD * sg[k], m, H);
+          for (int b = 0; b < 3; b++) m[e][a * 3 + b] = (U[a][i] * V[b * 3 + j] + sgn * U[a][j] * V[b * 3 + i]) * M_SQRT1_2;
+        lam[e] = 2 * fA - sgn * fD * sg[k];
       }
     }
   return 0;
@@ -286,9 +279,9 @@ static int hessian_3d_psd(double J[3][3], double fA, double fD, double fAD, doub
  * r = |α|, s = |β|: F depends on r and s alone, so its Hessian in (α, β) has the eigenvectors
  * α⊥ and β⊥ (eigenvalues F_r/r = 4F_A + 2F_D and F_s/s = 4F_A − 2F_D) and two in the plane
  * of α̂ and β̂ (the 2×2 Hessian in (r, s)), as in Smith, de Goes and Kim's analytic
- * eigensystems (ACM TOG 2019). Each eigenvector e with eigenvalue λ > 0 adds λ/4 (Me)(Me)ᵀ,
- * M = ∂vec J/∂(α, β). */
-static void hessian_2d_psd(double J[3][3], double fA, double fD, double fAD, double fDD, double *H) {
+ * eigensystems (ACM TOG 2019). Each eigenvector e with eigenvalue λ adds λ/4 (Me)(Me)ᵀ,
+ * M = ∂vec J/∂(α, β): the four modes Me go to m, the λ/4 to lam, as hessian_3d_modes. */
+static void hessian_2d_modes(double J[3][3], double fA, double fD, double fAD, double fDD, double *lam, double m[9][9]) {
   double a1 = 0.5 * (J[0][0] + J[1][1]), a2 = 0.5 * (J[1][0] - J[0][1]);
   double b1 = 0.5 * (J[0][0] - J[1][1]), b2 = 0.5 * (J[0][1] + J[1][0]);
   double r = sqrt(a1 * a1 + a2 * a2), s = sqrt(b1 * b1 + b2 * b2);
@@ -297,20 +290,20 @@ static void hessian_2d_psd(double J[3][3], double fA, double fD, double fAD, dou
   if (s > 0) { bh[0] = b1 / s; bh[1] = b2 / s; }
   double frr = 4 * fA + 2 * fD + 16 * r * r * fAD + 4 * r * r * fDD, fss = 4 * fA - 2 * fD - 16 * s * s * fAD + 4 * s * s * fDD,
          frs = -4 * r * s * fDD;
-  /* the 2×2 [frr frs; frs fss]: eigenvalues m ± rad, (cp, sp) the eigenvector of m + rad */
-  double m = 0.5 * (frr + fss), h = 0.5 * (frr - fss), rad = sqrt(h * h + frs * frs);
+  /* the 2×2 [frr frs; frs fss]: eigenvalues mid ± rad, (cp, sp) the eigenvector of mid + rad */
+  double mid = 0.5 * (frr + fss), h = 0.5 * (frr - fss), rad = sqrt(h * h + frs * frs);
   double vx = h >= 0 ? h + rad : frs, vy = h >= 0 ? frs : rad - h, nv = sqrt(vx * vx + vy * vy);
   double cp = nv > 0 ? vx / nv : 1, sp = nv > 0 ? vy / nv : 0;
-  double lam[4] = {4 * fA + 2 * fD, 4 * fA - 2 * fD, m + rad, m - rad};
+  double la[4] = {4 * fA + 2 * fD, 4 * fA - 2 * fD, mid + rad, mid - rad};
   double e[4][4] = {{-ah[1], ah[0], 0, 0}, {0, 0, -bh[1], bh[0]},
                     {cp * ah[0], cp * ah[1], sp * bh[0], sp * bh[1]}, {-sp * ah[0], -sp * ah[1], cp * bh[0], cp * bh[1]}};
-  memset(H, 0, sizeof(double) * 16);
   for (int k = 0; k < 4; k++) {
-    if (!(lam[k] > 0)) continue;
     const double *u = e[k];
-    double me[4] = {u[0] + u[2], -u[1] + u[3], u[1] + u[3], u[0] - u[2]}, w = 0.25 * lam[k];
-    for (int i = 0; i < 4; i++)
-      for (int j = 0; j < 4; j++) H[i * 4 + j] += w * me[i] * me[j];
+    m[k][0] = u[0] + u[2];
+    m[k][1] = -u[1] + u[3];
+    m[k][2] = u[1] + u[3];
+    m[k][3] = u[0] - u[2];
+    lam[k] = 0.25 * la[k];
   }
 }
 
@@ -335,6 +328,30 @@ static void hessian_3d_numeric(double J[3][3], double fA, double fD, double fAD,
       H[row + a2 * 3 + b1] -= fD * J[a1][b2];
     }
   sym_project_psd(9, H);
+}
+
+/* a corner's Hessian in its d + 1 vertices (hk, (d+1)d square) from the modes of its
+ * Hessian in J: Σ λ_e g_e g_eᵀ over λ_e > 0, g_e = (∂J/∂x)ᵀ vec(M_e), g_e[k d + a] =
+ * Σ_b M_e[a][b] w_k[b]; called with a constant d, whose loops the compiler unrolls */
+static inline void modes_to_corner(int d, int nm, const double *lam, double m[9][9], double w[4][3], double *hk) {
+  int nx = (d + 1) * d;
+  for (int i = 0; i < nx * nx; i++) hk[i] = 0;
+  for (int e = 0; e < nm; e++) {
+    if (!(lam[e] > 0)) continue;
+    double g[12];
+    for (int k = 0; k <= d; k++)
+      for (int a = 0; a < d; a++) {
+        double t = 0;
+        for (int b = 0; b < d; b++) t += m[e][a * d + b] * w[k][b];
+        g[k * d + a] = t;
+      }
+    for (int r = 0; r < nx; r++) {
+      double lg = lam[e] * g[r];
+      for (int col = r; col < nx; col++) hk[r * nx + col] += lg * g[col];
+    }
+  }
+  for (int r = 1; r < nx; r++)
+    for (int col = 0; col < r; col++) hk[r * nx + col] = hk[col * nx + r];
 }
 
 /* One corner's Hessian in its d + 1 vertices, hk ((d+1)d square, row (k d + a) for
@@ -362,21 +379,31 @@ static int corner_hessian(const objective *o, const double *x, int i, int kc, do
          t2 = 2 / ch - 4 * D * c1 / (ch * ch) - N * c2 / (ch * ch) + 2 * N * c1 * c1 / (ch * ch * ch);
   double fA = (1 - theta) * s, fD = (1 - theta) * A * s1 + theta * t1, fAD = (1 - theta) * s1,
          fDD = (1 - theta) * A * s2 + theta * t2;
-  double H[81];
-  if (d == 2) hessian_2d_psd(J, fA, fD, fAD, fDD, H);
-  else if (D <= 0 || hessian_3d_psd(J, fA, fD, fAD, fDD, H)) hessian_3d_numeric(J, fA, fD, fAD, fDD, H);
   /* ∂J_ab/∂x_kc = δ_ac w_k[b]: w_k row k − 1 of W⁻¹, w_0 minus their sum */
-  double w[4][3], T[9][12];
+  double w[4][3];
   for (int b = 0; b < d; b++) {
     w[0][b] = 0;
     for (int k = 1; k <= d; k++) { w[k][b] = winv[(k - 1) * d + b]; w[0][b] -= w[k][b]; }
   }
+  /* the closed forms' modes mapped one by one: half the operations of forming the d²×d²
+   * Hessian and mapping it (the twisted bar's Newton steps spent a quarter of their time
+   * there: add_mode 7%, corner_hessian 16%) */
+  double lam[9], m[9][9];
+  int nm = d == 2 ? (hessian_2d_modes(J, fA, fD, fAD, fDD, lam, m), 4) : D > 0 && !hessian_3d_modes(J, fA, fD, fAD, fDD, lam, m) ? 9 : 0;
+  if (nm) {
+    if (d == 2) modes_to_corner(2, nm, lam, m, w, hk);
+    else modes_to_corner(3, nm, lam, m, w, hk);
+    return 0;
+  }
+  /* 3D, inverted or near-singular: the numeric projection of the 9×9 Hessian, mapped */
+  double H[81], T[9][12];
+  hessian_3d_numeric(J, fA, fD, fAD, fDD, H);
   for (int ab = 0; ab < n; ab++) /* T = H (∂J/∂x): row (a, b), column (m, e) */
-    for (int m = 0; m <= d; m++)
+    for (int mm = 0; mm <= d; mm++)
       for (int e = 0; e < d; e++) {
         double t = 0;
-        for (int b2 = 0; b2 < d; b2++) t += H[ab * n + e * d + b2] * w[m][b2];
-        T[ab][m * d + e] = t;
+        for (int b2 = 0; b2 < d; b2++) t += H[ab * n + e * d + b2] * w[mm][b2];
+        T[ab][mm * d + e] = t;
       }
   for (int k = 0; k <= d; k++)
     for (int a = 0; a < d; a++)

@@ -192,9 +192,9 @@ static double corner_energy(const objective *o, const double *x, int c, int kc, 
 
 /* ---------------------------------------------------------------- second derivatives */
 
-/* a symmetric n×n matrix (n ≤ 9, row-major) is positive definite: its Cholesky pivots */
-static int sym_pd(int n, const double *a) {
-  double L[81];
+/* a symmetric n×n matrix (n ≤ 9, row-major) is positive definite: its Cholesky pivots; L
+ * (n×n, lower triangle) its factor when it is */
+static int sym_pd(int n, const double *a, double *L) {
   for (int j = 0; j < n; j++) {
     double s = a[j * n + j];
     for (int k = 0; k < j; k++) s -= L[j * n + k] * L[j * n + k];
@@ -216,19 +216,22 @@ static void sym_eigen(int n, double *a, double *w, double *v) {
   for (int i = 0; i < n; i++) w[i] = a[i * n + i];
 }
 
-/* a symmetric n×n matrix (n ≤ 9) replaced by its nearest positive semidefinite one: the
- * negative eigenvalues set to 0 */
-static void sym_project_psd(int n, double *a) {
-  if (sym_pd(n, a)) return;
-  double v[81], w[9];
-  sym_eigen(n, a, w, v);
-  for (int i = 0; i < n; i++) w[i] = fmax(w[i], 0);
-  for (int i = 0; i < n; i++)
-    for (int j = 0; j <= i; j++) {
-      double s = 0;
-      for (int k = 0; k < n; k++) s += v[i * n + k] * w[k] * v[j * n + k];
-      a[i * n + j] = a[j * n + i] = s;
+/* the modes of a symmetric n×n matrix a (n ≤ 9, destroyed) for its nearest positive
+ * semidefinite one Σ_{λ_k > 0} λ_k m_k m_kᵀ: where a is positive definite the columns of its
+ * Cholesky factor (λ = 1, no eigensystem), else its eigenvectors and eigenvalues (the negative
+ * ones are the ones set to 0) */
+static void sym_psd_modes(int n, double *a, double *lam, double m[9][9]) {
+  double v[81];
+  if (sym_pd(n, a, v))
+    for (int k = 0; k < n; k++) {
+      lam[k] = 1;
+      for (int i = 0; i < n; i++) m[k][i] = i < k ? 0 : v[i * n + k];
     }
+  else {
+    sym_eigen(n, a, lam, v);
+    for (int k = 0; k < n; k++)
+      for (int i = 0; i < n; i++) m[k][i] = v[i * n + k];
+  }
 }
 
 /* 3D: the eigensystem of the Hessian in J of an energy F(A, D), A = |J|², D = det J > 0, in
@@ -309,10 +312,10 @@ static void hessian_2d_modes(double J[3][3], double fA, double fD, double fAD, d
 
 /* 3D, numerically: the 9×9 Hessian in J of F(A, D),
  *     ∂²F/∂J² = 2 F_A I + 2 F_AD (J⊗K + K⊗J) + F_DD K⊗K + F_D ∂²D/∂J²,  K = ∂D/∂J,
- * with its negative eigenvalues set to 0 (for an inverted corner, or one too close to
- * singular for the closed form) */
-static void hessian_3d_numeric(double J[3][3], double fA, double fD, double fAD, double fDD, double *H) {
-  double K[3][3];
+ * as the modes of its nearest positive semidefinite matrix (for an inverted corner, or one
+ * too close to singular for the closed form) */
+static void hessian_3d_numeric(double J[3][3], double fA, double fD, double fAD, double fDD, double *lam, double m[9][9]) {
+  double K[3][3], H[81];
   cofactor(3, J, K);
   for (int a = 0; a < 9; a++)
     for (int b = 0; b < 9; b++) {
@@ -327,7 +330,7 @@ static void hessian_3d_numeric(double J[3][3], double fA, double fD, double fAD,
       H[row + a1 * 3 + b2] -= fD * J[a2][b1];
       H[row + a2 * 3 + b1] -= fD * J[a1][b2];
     }
-  sym_project_psd(9, H);
+  sym_psd_modes(9, H, lam, m);
 }
 
 /* a corner's Hessian in its d + 1 vertices (hk, (d+1)d square) from the modes of its
@@ -363,7 +366,7 @@ static inline void modes_to_corner(int d, int nm, const double *lam, double m[9]
  * above need. 1 for a corner where the energy is infinite (ε = 0 and det J ≤ 0). */
 static int corner_hessian(const objective *o, const double *x, int i, int kc, double *hk) {
   const ctx *C = o->C;
-  int d = C->d, c = o->cells[i], n = d * d, nx = (d + 1) * d;
+  int d = C->d, c = o->cells[i];
   double theta = o->theta, eps = o->eps;
   double J[3][3];
   const int *v;
@@ -385,33 +388,17 @@ static int corner_hessian(const objective *o, const double *x, int i, int kc, do
     w[0][b] = 0;
     for (int k = 1; k <= d; k++) { w[k][b] = winv[(k - 1) * d + b]; w[0][b] -= w[k][b]; }
   }
-  /* the closed forms' modes mapped one by one: half the operations of forming the d²×d²
-   * Hessian and mapping it (the twisted bar's Newton steps spent a quarter of their time
-   * there: add_mode 7%, corner_hessian 16%) */
+  /* the modes of the projected Hessian in J, mapped one by one: half the operations of
+   * forming the d²×d² Hessian and mapping it (the twisted bar's Newton steps spent a quarter
+   * of their time there: add_mode 7%, corner_hessian 16%) */
   double lam[9], m[9][9];
-  int nm = d == 2 ? (hessian_2d_modes(J, fA, fD, fAD, fDD, lam, m), 4) : D > 0 && !hessian_3d_modes(J, fA, fD, fAD, fDD, lam, m) ? 9 : 0;
-  if (nm) {
-    if (d == 2) modes_to_corner(2, nm, lam, m, w, hk);
-    else modes_to_corner(3, nm, lam, m, w, hk);
-    return 0;
+  if (d == 2) {
+    hessian_2d_modes(J, fA, fD, fAD, fDD, lam, m);
+    modes_to_corner(2, 4, lam, m, w, hk);
+  } else {
+    if (!(D > 0) || hessian_3d_modes(J, fA, fD, fAD, fDD, lam, m)) hessian_3d_numeric(J, fA, fD, fAD, fDD, lam, m);
+    modes_to_corner(3, 9, lam, m, w, hk);
   }
-  /* 3D, inverted or near-singular: the numeric projection of the 9×9 Hessian, mapped */
-  double H[81], T[9][12];
-  hessian_3d_numeric(J, fA, fD, fAD, fDD, H);
-  for (int ab = 0; ab < n; ab++) /* T = H (∂J/∂x): row (a, b), column (m, e) */
-    for (int mm = 0; mm <= d; mm++)
-      for (int e = 0; e < d; e++) {
-        double t = 0;
-        for (int b2 = 0; b2 < d; b2++) t += H[ab * n + e * d + b2] * w[mm][b2];
-        T[ab][mm * d + e] = t;
-      }
-  for (int k = 0; k <= d; k++)
-    for (int a = 0; a < d; a++)
-      for (int col = 0; col < nx; col++) {
-        double t = 0;
-        for (int b = 0; b < d; b++) t += w[k][b] * T[a * d + b][col];
-        hk[(k * d + a) * nx + col] = t;
-      }
   return 0;
 }
 

@@ -75,7 +75,13 @@ static void check_case(int d, double J[3][3], double theta, double eps, const ch
   for (int i = 0; i < n; i++)
     for (int j = 0; j < i; j++) H[i * n + j] = H[j * n + i] = 0.5 * (H[i * n + j] + H[j * n + i]);
   for (int i = 0; i < n * n; i++) scale = fmax(scale, fabs(H[i]));
-  sym_project_psd(n, H);
+  /* its nearest positive semidefinite matrix, Σ_{λ > 0} λ m mᵀ */
+  double lam[9], md[9][9];
+  sym_psd_modes(n, H, lam, md);
+  memset(H, 0, sizeof H);
+  for (int k = 0; k < n; k++)
+    for (int i = 0; i < n && lam[k] > 0; i++)
+      for (int j = 0; j < n; j++) H[i * n + j] += lam[k] * md[k][i] * md[k][j];
   double err = 0;
   for (int a = 0; a < d; a++)
     for (int b = 0; b < d; b++)

@@ -46,3 +46,115 @@ void dense_sym_eigen(int n, double *a, double *v, double off_abs, double off_rel
   if (n == 3) sym_eigen_jacobi(3, a, v, off_abs, off_rel);
   else sym_eigen_jacobi(n, a, v, off_abs, off_rel);
 }
+
+/* ---------------------------------------------------------------- 3×3 in closed form */
+
+static void cross3(const double *a, const double *b, double *c) {
+  c[0] = a[1] * b[2] - a[2] * b[1];
+  c[1] = a[2] * b[0] - a[0] * b[2];
+  c[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+void dense_sym_eigen3(const double *a, double *w, double *v) {
+  double mx = 0;
+  for (int i = 0; i < 3; i++)
+    for (int j = i; j < 3; j++) mx = fmax(mx, fabs(a[i * 3 + j]));
+  /* scaled to entries in [−1, 1]; q the mean eigenvalue, c = b − q I, p² = |c|²/6 */
+  double sc = mx > 0 && isfinite(mx) ? 1 / mx : 0, b01 = a[1] * sc, b02 = a[2] * sc, b12 = a[5] * sc;
+  double q = (a[0] + a[4] + a[8]) * sc / 3, c00 = a[0] * sc - q, c11 = a[4] * sc - q, c22 = a[8] * sc - q;
+  double p = sqrt((c00 * c00 + c11 * c11 + c22 * c22 + 2 * (b01 * b01 + b02 * b02 + b12 * b12)) / 6);
+  /* a multiple of I to rounding (or 0, or not finite): any basis */
+  if (!(p > 1e-14)) {
+    if (!isfinite(mx)) { /* the cyclic method reports what it can */
+      double t[9];
+      for (int i = 0; i < 9; i++) t[i] = a[i];
+      sym_eigen_jacobi(3, t, v, 0, 1e-30);
+      for (int i = 0; i < 3; i++) w[i] = t[i * 3 + i];
+      return;
+    }
+    int o[3] = {0, 1, 2};
+    for (int k = 1; k < 3; k++)
+      for (int j = k; j > 0 && a[o[j] * 4] < a[o[j - 1] * 4]; j--) { int t = o[j]; o[j] = o[j - 1]; o[j - 1] = t; }
+    for (int k = 0; k < 3; k++) {
+      w[k] = a[o[k] * 4];
+      for (int i = 0; i < 3; i++) v[i * 3 + k] = i == o[k];
+    }
+    return;
+  }
+  /* the eigenvalues q + p β of (c/p)'s characteristic equation β³ − 3β − 2r = 0,
+   * r = det(c/p)/2 = cos 3φ: β = 2 cos φ, 2 cos(φ ± 2π/3) */
+  double det = c00 * (c11 * c22 - b12 * b12) - b01 * (b01 * c22 - b12 * b02) + b02 * (b01 * b12 - c11 * b02);
+  double r = fmax(-1, fmin(1, det / (2 * p * p * p))), phi = acos(r) / 3, cf = cos(phi), sf = sin(phi);
+  /* first the eigenvector of the eigenvalue farthest from the other two, the largest
+   * 2 cos φ where r ≥ 0, else the smallest 2 cos(φ + 2π/3) (where acos is least accurate, at
+   * r = ±1, φ = 0 or π/3, these are stationary in φ): the largest cross product of two rows
+   * of c − pβ I, which has rank 2 with its other two eigenvalues at least p √3 from 0 */
+  double l0 = r >= 0 ? 2 * p * cf : p * (-cf - sqrt(3.0) * sf);
+  double r0[3] = {c00 - l0, b01, b02}, r1[3] = {b01, c11 - l0, b12}, r2[3] = {b02, b12, c22 - l0};
+  double x[3][3], n[3], e0[3], e1[3], e2[3];
+  cross3(r0, r1, x[0]);
+  cross3(r0, r2, x[1]);
+  cross3(r1, r2, x[2]);
+  int best = 0;
+  for (int i = 0; i < 3; i++) {
+    n[i] = x[i][0] * x[i][0] + x[i][1] * x[i][1] + x[i][2] * x[i][2];
+    if (n[i] > n[best]) best = i;
+  }
+  if (!(n[best] > 0)) { /* cannot happen for p > 0; the cyclic method if it does */
+    double t[9];
+    for (int i = 0; i < 9; i++) t[i] = a[i];
+    sym_eigen_jacobi(3, t, v, 0, 1e-30);
+    for (int i = 0; i < 3; i++) w[i] = t[i * 3 + i];
+    return;
+  }
+  double inv = 1 / sqrt(n[best]);
+  for (int i = 0; i < 3; i++) e0[i] = x[best][i] * inv;
+  /* an orthonormal basis (u, t) of e0's complement, where the other two eigenvectors are
+   * those of the 2×2 matrix of c, by one rotation (as in the cyclic method): not from their
+   * eigenvalues above, which acos gives to √ε only where they are close (r near ±1) */
+  double u[3], t[3];
+  if (fabs(e0[0]) > fabs(e0[1])) {
+    double s = 1 / sqrt(e0[0] * e0[0] + e0[2] * e0[2]);
+    u[0] = -e0[2] * s; u[1] = 0; u[2] = e0[0] * s;
+  } else {
+    double s = 1 / sqrt(e0[1] * e0[1] + e0[2] * e0[2]);
+    u[0] = 0; u[1] = e0[2] * s; u[2] = -e0[1] * s;
+  }
+  cross3(e0, u, t);
+  double cu[3], ct[3];
+  cu[0] = c00 * u[0] + b01 * u[1] + b02 * u[2];
+  cu[1] = b01 * u[0] + c11 * u[1] + b12 * u[2];
+  cu[2] = b02 * u[0] + b12 * u[1] + c22 * u[2];
+  ct[0] = c00 * t[0] + b01 * t[1] + b02 * t[2];
+  ct[1] = b01 * t[0] + c11 * t[1] + b12 * t[2];
+  ct[2] = b02 * t[0] + b12 * t[1] + c22 * t[2];
+  double m00 = u[0] * cu[0] + u[1] * cu[1] + u[2] * cu[2], m01 = 0.5 * (u[0] * ct[0] + u[1] * ct[1] + u[2] * ct[2] + t[0] * cu[0] + t[1] * cu[1] + t[2] * cu[2]),
+         m11 = t[0] * ct[0] + t[1] * ct[1] + t[2] * ct[2], rc = 1, rs = 0;
+  if (m01 != 0) {
+    double th = (m11 - m00) / (2 * m01), tn = (th >= 0 ? 1 : -1) / (fabs(th) + sqrt(th * th + 1));
+    rc = 1 / sqrt(tn * tn + 1);
+    rs = tn * rc;
+  }
+  for (int i = 0; i < 3; i++) {
+    e1[i] = rc * u[i] - rs * t[i];
+    e2[i] = rs * u[i] + rc * t[i];
+  }
+  /* the eigenvalues as Rayleigh quotients of a (accurate where acos is not), in ascending
+   * order with their columns */
+  const double *col[3] = {e0, e1, e2};
+  for (int k = 0; k < 3; k++) {
+    const double *e = col[k];
+    double s = 0;
+    for (int i = 0; i < 3; i++) s += e[i] * (a[i * 3 + 0] * e[0] + a[i * 3 + 1] * e[1] + a[i * 3 + 2] * e[2]);
+    w[k] = s;
+  }
+  for (int k = 1; k < 3; k++)
+    for (int j = k; j > 0 && w[j] < w[j - 1]; j--) {
+      double tw = w[j];
+      const double *tc = col[j];
+      w[j] = w[j - 1]; col[j] = col[j - 1];
+      w[j - 1] = tw; col[j - 1] = tc;
+    }
+  for (int k = 0; k < 3; k++)
+    for (int i = 0; i < 3; i++) v[i * 3 + k] = col[k][i];
+}

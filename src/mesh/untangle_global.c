@@ -17,6 +17,7 @@
 
 #include <limits.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -29,18 +30,27 @@ static double dchi(double D, double eps) { return 0.5 * (1 + D / sqrt(eps * eps 
 
 /* J = E W⁻¹ of corner k of cell c (E: the edge vectors from the corner vertex to its d
  * neighbours as columns, C->ct), its determinant; *vout the cell's vertices. A simplex has
- * one corner, a quadrilateral 4 and a hexahedron 8: their energy sums the corners' */
-static double cell_map(const ctx *C, const double *x, int c, int k, const double *winv, double J[3][3], const int **vout) {
-  int d = C->d;
+ * one corner, a quadrilateral 4 and a hexahedron 8: their energy sums the corners'. Inlined
+ * with a constant d (cell_map below), whose loops are unrolled: with d a variable the loops
+ * took 500 instructions a call, a quarter of the L-BFGS smoother's */
+static inline double cell_map_d(int d, const ctx *C, const double *x, int c, int k, const double *winv, double J[3][3],
+                                const int **vout) {
   const int *v = C->m->cells + (size_t)c * (size_t)C->nvc, *ct = C->ct[k];
   *vout = v;
   double E[3][3];
   const double *p = x + (size_t)v[ct[0]] * d;
+#pragma GCC unroll 3
+  for (int j = 0; j < d; j++) {
+    const double *q = x + (size_t)v[ct[j + 1]] * d;
+#pragma GCC unroll 3
+    for (int i = 0; i < d; i++) E[i][j] = q[i] - p[i];
+  }
+#pragma GCC unroll 3
   for (int i = 0; i < d; i++)
-    for (int j = 0; j < d; j++) E[i][j] = x[(size_t)v[ct[j + 1]] * d + i] - p[i];
-  for (int i = 0; i < d; i++)
+#pragma GCC unroll 3
     for (int j = 0; j < d; j++) {
       double s = 0;
+#pragma GCC unroll 3
       for (int l = 0; l < d; l++) s += E[i][l] * winv[l * d + j];
       J[i][j] = s;
     }
@@ -49,18 +59,26 @@ static double cell_map(const ctx *C, const double *x, int c, int k, const double
          J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
 }
 
+static double cell_map(const ctx *C, const double *x, int c, int k, const double *winv, double J[3][3], const int **vout) {
+  return C->d == 3 ? cell_map_d(3, C, x, c, k, winv, J, vout) : cell_map_d(2, C, x, c, k, winv, J, vout);
+}
+
 /* ∂ det J / ∂ J_ik */
-static void cofactor(int d, double J[3][3], double K[3][3]) {
+static inline void cofactor(int d, double J[3][3], double K[3][3]) {
   if (d == 2) {
     K[0][0] = J[1][1]; K[0][1] = -J[1][0];
     K[1][0] = -J[0][1]; K[1][1] = J[0][0];
     return;
   }
-  for (int i = 0; i < 3; i++)
-    for (int k = 0; k < 3; k++) {
-      int i1 = (i + 1) % 3, i2 = (i + 2) % 3, k1 = (k + 1) % 3, k2 = (k + 2) % 3;
-      K[i][k] = J[i1][k1] * J[i2][k2] - J[i1][k2] * J[i2][k1];
-    }
+  K[0][0] = J[1][1] * J[2][2] - J[1][2] * J[2][1];
+  K[0][1] = J[1][2] * J[2][0] - J[1][0] * J[2][2];
+  K[0][2] = J[1][0] * J[2][1] - J[1][1] * J[2][0];
+  K[1][0] = J[2][1] * J[0][2] - J[2][2] * J[0][1];
+  K[1][1] = J[2][2] * J[0][0] - J[2][0] * J[0][2];
+  K[1][2] = J[2][0] * J[0][1] - J[2][1] * J[0][0];
+  K[2][0] = J[0][1] * J[1][2] - J[0][2] * J[1][1];
+  K[2][1] = J[0][2] * J[1][0] - J[0][0] * J[1][2];
+  K[2][2] = J[0][0] * J[1][1] - J[0][1] * J[1][0];
 }
 
 /* W⁻¹ of a regular simplex whose edge matrix has determinant mean > 0 */
@@ -126,6 +144,28 @@ static const double *corner_winv(const ctx *C, const double *cwinv, const double
   return cwinv ? cwinv + ((size_t)c * C->ncorner + kc) * C->d * C->d : winv;
 }
 
+/* t^(−1/3) for t > 0: four Newton steps y ← y (4 − t y³)/3 from a guess by the exponent's
+ * bits within 3.5%, to a few units in the last place (glibc's cbrt and pow were a sixth of
+ * the L-BFGS smoother's time on a perturbed tetrahedral box); cbrt outside 2^±1000 */
+static inline double inv_cbrt(double t) {
+  if (!(t > 0x1p-1000 && t < 0x1p1000)) return 1 / cbrt(t);
+  uint64_t i;
+  double y;
+  memcpy(&i, &t, sizeof i);
+  i = 0x553ef0ff289dd796ULL - i / 3;
+  memcpy(&y, &i, sizeof y);
+  double t3 = t / 3;
+  for (int k = 0; k < 4; k++) y = y * (4.0 / 3 - t3 * (y * y * y));
+  return y;
+}
+
+/* t^(−2/d) for d = 2, 3 and t > 0 */
+static inline double pow_m2d(double t, int d) {
+  if (d == 2) return 1 / t;
+  double y = inv_cbrt(t);
+  return y * y;
+}
+
 /* the mean ratio d det(J)^(2/d) / |J|² of corner kc of cell c's map J = E W⁻¹ (0 if invalid) */
 static double corner_mean_ratio(const ctx *C, const double *x, int c, int kc, const double *winv) {
   int d = C->d;
@@ -134,7 +174,7 @@ static double corner_mean_ratio(const ctx *C, const double *x, int c, int kc, co
   double D = cell_map(C, x, c, kc, winv, J, &v);
   for (int a = 0; a < d; a++)
     for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
-  return D > 0 && A > 0 ? d * pow(D, 2.0 / d) / A : 0;
+  return D > 0 && A > 0 ? d * (d == 2 ? D : D * inv_cbrt(D)) / A : 0;
 }
 
 void ut_relative_mean_ratio(const ctx *C, const double *cwinv, double *out) {
@@ -150,44 +190,56 @@ void ut_relative_mean_ratio(const ctx *C, const double *cwinv, double *out) {
 
 /* One corner's energy (a simplex has one corner), and with gk its gradient in each of the
  * corner's d + 1 vertices (C->ct[kc] order, d each); +∞ for an invalid corner at ε = 0 */
-static double corner_energy(const objective *o, const double *x, int c, int kc, double *gk) {
+static inline double corner_energy_d(int d, const objective *o, const double *x, int c, int kc, double *gk) {
   const ctx *C = o->C;
-  int d = C->d;
   double theta = o->theta, eps = o->eps;
-  double J[3][3], K[3][3];
+  double J[3][3] = {{0}}, K[3][3] = {{0}}; /* zeros: d = 2 leaves row and column 2 unused */
   const int *v;
   /* reference shapes per corner (a simplex has one); without them a quadrilateral's or
    * hexahedron's corners aim at a square's or cube's */
   const double *winv = corner_winv(C, o->cwinv, o->winv, c, kc);
-  double D = cell_map(C, x, c, kc, winv, J, &v), A = 0;
+  double D = cell_map_d(d, C, x, c, kc, winv, J, &v), A = 0;
+#pragma GCC unroll 4
   for (int a = 0; a < d; a++)
+#pragma GCC unroll 4
     for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
   if (eps == 0 && !(D > 0)) return INFINITY; /* ε = 0: the pure barrier (smoothing a valid mesh) */
-  double ch = chi(D, eps), chp = dchi(D, eps), cs = pow(ch, -2.0 / d);
+  double ch = chi(D, eps), chp = dchi(D, eps), cs = pow_m2d(ch, d);
   double f = (1 - theta) * A * cs + theta * (D * D + 1) / ch;
   if (!gk) return f;
   /* ∂f/∂J = (1-θ)(2 J cs - (2/d) A cs/χ χ' K) + θ (2 D χ - (D² + 1) χ')/χ² K */
   cofactor(d, J, K);
   double kd = -(1 - theta) * (2.0 / d) * A * cs / ch * chp + theta * (2 * D * ch - (D * D + 1) * chp) / (ch * ch);
   double G[3][3], GE[3][3];
+#pragma GCC unroll 4
   for (int a = 0; a < d; a++)
+#pragma GCC unroll 4
     for (int b = 0; b < d; b++) G[a][b] = (1 - theta) * 2 * J[a][b] * cs + kd * K[a][b];
   /* ∂f/∂E = G W⁻ᵀ: column k is the gradient in vertex k + 1, minus their sum vertex 0's */
+#pragma GCC unroll 4
   for (int a = 0; a < d; a++)
+#pragma GCC unroll 4
     for (int k = 0; k < d; k++) {
       double s2 = 0;
+#pragma GCC unroll 4
       for (int l = 0; l < d; l++) s2 += G[a][l] * winv[k * d + l];
       GE[a][k] = s2;
     }
-  for (int k = 0; k <= d; k++)
-    for (int a = 0; a < d; a++) {
-      double g = 0;
-      if (k) g = GE[a][k - 1];
-      else
-        for (int l = 0; l < d; l++) g -= GE[a][l];
-      gk[k * d + a] = g;
+#pragma GCC unroll 4
+  for (int a = 0; a < d; a++) {
+    double g = 0;
+#pragma GCC unroll 4
+    for (int l = 0; l < d; l++) {
+      g -= GE[a][l];
+      gk[(l + 1) * d + a] = GE[a][l];
     }
+    gk[a] = g;
+  }
   return f;
+}
+
+static double corner_energy(const objective *o, const double *x, int c, int kc, double *gk) {
+  return o->C->d == 3 ? corner_energy_d(3, o, x, c, kc, gk) : corner_energy_d(2, o, x, c, kc, gk);
 }
 
 /* ---------------------------------------------------------------- second derivatives */
@@ -238,39 +290,55 @@ static void sym_psd_modes(int n, double *a, double *lam, double m[9][9]) {
  * closed form from J's singular value decomposition J = U Σ Vᵀ (Smith, de Goes and Kim, ACM
  * TOG 2019): the twist and flip modes (u_i v_jᵀ ∓ u_j v_iᵀ)/√2 have the eigenvalues
  * 2F_A ± F_D σ_k ({i, j, k} = {1, 2, 3}); the scaling modes Σ c_i u_i v_iᵀ are the
- * eigenvectors c of the 3×3 Hessian in (σ1, σ2, σ3). The nine modes vec(M_e) (row-major 3×3)
- * go to m, their eigenvalues to lam: the projected Hessian is Σ_{λ_e > 0} λ_e vec(M_e)
- * vec(M_e)ᵀ. 1 when J is too close to singular for U = J V Σ⁻¹: the caller projects the 9×9
- * Hessian numerically. */
-static int hessian_3d_modes(double J[3][3], double fA, double fD, double fAD, double fDD, double *lam, double m[9][9]) {
-  double S[9], V[9], w[3], sg[3], U[3][3];
+ * eigenvectors c of the 3×3 Hessian in (σ1, σ2, σ3). The nine eigenvalues go to lam, and for
+ * each mode M_e its gradient in the corner's vertices 1..3, g[(k − 1) 3 + a][e] = (M_e w_k)_a
+ * (w_k row k − 1 of W⁻¹), straight from u and z_ik = v_i · w_k without forming M_e: the
+ * projected Hessian is Σ_{λ_e > 0} λ_e g_e g_eᵀ (corner_from_modes). 1 when J is too close
+ * to singular for U = J V Σ⁻¹: the caller projects the 9×9 Hessian numerically. */
+static int hessian_3d_modes(double J[3][3], double fA, double fD, double fAD, double fDD, double w[4][3], double *lam,
+                            double g[9][9]) {
+  double S[9], V[9], ev[3], sg[3], U[3][3];
   for (int i = 0; i < 3; i++)
     for (int j = 0; j < 3; j++) S[i * 3 + j] = J[0][i] * J[0][j] + J[1][i] * J[1][j] + J[2][i] * J[2][j];
-  sym_eigen(3, S, w, V);
+  /* in closed form (two Jacobi eigensystems per corner were a third of the Newton smoother's
+   * time on a perturbed box); σ_i = |J v_i|, so that U's columns are unit vectors */
+  dense_sym_eigen3(S, ev, V);
   double smax = 0;
-  for (int i = 0; i < 3; i++) { sg[i] = sqrt(fmax(w[i], 0)); smax = fmax(smax, sg[i]); }
+  for (int r = 0; r < 3; r++)
+    for (int i = 0; i < 3; i++) U[r][i] = J[r][0] * V[0 * 3 + i] + J[r][1] * V[1 * 3 + i] + J[r][2] * V[2 * 3 + i];
+  for (int i = 0; i < 3; i++) {
+    sg[i] = sqrt(U[0][i] * U[0][i] + U[1][i] * U[1][i] + U[2][i] * U[2][i]);
+    smax = fmax(smax, sg[i]);
+  }
   for (int i = 0; i < 3; i++)
     if (!(sg[i] > 1e-6 * smax)) return 1;
   for (int r = 0; r < 3; r++)
-    for (int i = 0; i < 3; i++) U[r][i] = (J[r][0] * V[0 * 3 + i] + J[r][1] * V[1 * 3 + i] + J[r][2] * V[2 * 3 + i]) / sg[i];
+    for (int i = 0; i < 3; i++) U[r][i] /= sg[i];
   double kk[3] = {sg[1] * sg[2], sg[0] * sg[2], sg[0] * sg[1]}, Hs[9], cs[9];
   for (int i = 0; i < 3; i++)
     for (int j = 0; j < 3; j++)
       Hs[i * 3 + j] = (i == j ? 2 * fA : fD * sg[3 - i - j]) + 2 * fAD * (sg[i] * kk[j] + kk[i] * sg[j]) + fDD * kk[i] * kk[j];
-  sym_eigen(3, Hs, lam, cs);
-  for (int e = 0; e < 3; e++)
-    for (int a = 0; a < 3; a++)
-      for (int b = 0; b < 3; b++)
-        m[e][a * 3 + b] = cs[0 * 3 + e] * U[a][0] * V[b * 3 + 0] + cs[1 * 3 + e] * U[a][1] * V[b * 3 + 1] +
-                          cs[2 * 3 + e] * U[a][2] * V[b * 3 + 2];
+  dense_sym_eigen3(Hs, lam, cs);
+  double z[3][3]; /* z[i][k] = v_i · w_{k+1} */
+  for (int i = 0; i < 3; i++)
+    for (int k = 0; k < 3; k++) z[i][k] = V[0 * 3 + i] * w[k + 1][0] + V[1 * 3 + i] * w[k + 1][1] + V[2 * 3 + i] * w[k + 1][2];
+  for (int e = 0; e < 3; e++) { /* scaling: Σ_i c_i u_i (v_i · w_k) */
+    double y[3][3];
+    for (int i = 0; i < 3; i++)
+      for (int k = 0; k < 3; k++) y[i][k] = cs[i * 3 + e] * z[i][k];
+    for (int k = 0; k < 3; k++)
+      for (int a = 0; a < 3; a++) g[k * 3 + a][e] = U[a][0] * y[0][k] + U[a][1] * y[1][k] + U[a][2] * y[2][k];
+  }
   int e = 3;
   for (int i = 0; i < 3; i++)
     for (int j = i + 1; j < 3; j++) {
       int k = 3 - i - j;
       for (int sgn = -1; sgn <= 1; sgn += 2, e++) { /* twist (−), flip (+) */
-        for (int a = 0; a < 3; a++)
-          for (int b = 0; b < 3; b++) m[e][a * 3 + b] = (U[a][i] * V[b * 3 + j] + sgn * U[a][j] * V[b * 3 + i]) * M_SQRT1_2;
         lam[e] = 2 * fA - sgn * fD * sg[k];
+        for (int kk2 = 0; kk2 < 3; kk2++) {
+          double zj = z[j][kk2] * M_SQRT1_2, zi = sgn * z[i][kk2] * M_SQRT1_2;
+          for (int a = 0; a < 3; a++) g[kk2 * 3 + a][e] = U[a][i] * zj + U[a][j] * zi;
+        }
       }
     }
   return 0;
@@ -283,7 +351,7 @@ static int hessian_3d_modes(double J[3][3], double fA, double fD, double fAD, do
  * α⊥ and β⊥ (eigenvalues F_r/r = 4F_A + 2F_D and F_s/s = 4F_A − 2F_D) and two in the plane
  * of α̂ and β̂ (the 2×2 Hessian in (r, s)), as in Smith, de Goes and Kim's analytic
  * eigensystems (ACM TOG 2019). Each eigenvector e with eigenvalue λ adds λ/4 (Me)(Me)ᵀ,
- * M = ∂vec J/∂(α, β): the four modes Me go to m, the λ/4 to lam, as hessian_3d_modes. */
+ * M = ∂vec J/∂(α, β): the four modes Me go to m (row-major 2×2), the λ/4 to lam. */
 static void hessian_2d_modes(double J[3][3], double fA, double fD, double fAD, double fDD, double *lam, double m[9][9]) {
   double a1 = 0.5 * (J[0][0] + J[1][1]), a2 = 0.5 * (J[1][0] - J[0][1]);
   double b1 = 0.5 * (J[0][0] - J[1][1]), b2 = 0.5 * (J[0][1] + J[1][0]);
@@ -333,28 +401,55 @@ static void hessian_3d_numeric(double J[3][3], double fA, double fD, double fAD,
   sym_psd_modes(9, H, lam, m);
 }
 
-/* a corner's Hessian in its d + 1 vertices (hk, (d+1)d square) from the modes of its
- * Hessian in J: Σ λ_e g_e g_eᵀ over λ_e > 0, g_e = (∂J/∂x)ᵀ vec(M_e), g_e[k d + a] =
- * Σ_b M_e[a][b] w_k[b]; called with a constant d, whose loops the compiler unrolls */
-static inline void modes_to_corner(int d, int nm, const double *lam, double m[9][9], double w[4][3], double *hk) {
-  int nx = (d + 1) * d;
-  for (int i = 0; i < nx * nx; i++) hk[i] = 0;
+/* the gradients in the corner's vertices 1..d of the modes M_e of its Hessian in J (m,
+ * row-major d×d): g[(k − 1) d + a][e] = Σ_b M_e[a][b] w_k[b] (the 2D closed form and the
+ * numeric 3D fallback; the 3D closed form writes g itself) */
+static inline void modes_g(int d, int nm, double m[9][9], double w[4][3], double g[9][9]) {
   for (int e = 0; e < nm; e++) {
-    if (!(lam[e] > 0)) continue;
-    double g[12];
-    for (int k = 0; k <= d; k++)
+    for (int k = 1; k <= d; k++)
       for (int a = 0; a < d; a++) {
         double t = 0;
         for (int b = 0; b < d; b++) t += m[e][a * d + b] * w[k][b];
-        g[k * d + a] = t;
+        g[(k - 1) * d + a][e] = t;
       }
-    for (int r = 0; r < nx; r++) {
-      double lg = lam[e] * g[r];
-      for (int col = r; col < nx; col++) hk[r * nx + col] += lg * g[col];
-    }
   }
-  for (int r = 1; r < nx; r++)
-    for (int col = 0; col < r; col++) hk[r * nx + col] = hk[col * nx + r];
+}
+
+/* a corner's Hessian in its d + 1 vertices (hk, (d+1)d square) from its modes' eigenvalues
+ * and gradients in vertices 1..d (g, one row per coordinate, one column per mode):
+ * Σ_{λ_e > 0} λ_e g_e g_eᵀ there (d² square), entry by entry as a sum over the modes (the
+ * modes' rank-one updates one by one took twice the instructions), and vertex 0's rows and
+ * columns from w_0 = −Σ_k w_k: its gradient is minus the sum of the others', so its blocks are
+ * minus the sums of theirs (half the products of summing over all d + 1 vertices); called with
+ * a constant d, whose loops the compiler unrolls */
+static inline void corner_from_modes(int d, int nm, const double *lam, double g[9][9], double *hk) {
+  int n = d * d, nx = n + d;
+  double lp[9], gl[9][9];
+  for (int e = 0; e < nm; e++) lp[e] = lam[e] > 0 ? lam[e] : 0;
+  for (int r = 0; r < n; r++)
+#pragma GCC unroll 9
+    for (int e = 0; e < nm; e++) gl[r][e] = lp[e] * g[r][e];
+  for (int r = 0; r < n; r++) /* vertices 1..d */
+    for (int c = r; c < n; c++) {
+      double t = 0;
+#pragma GCC unroll 9
+      for (int e = 0; e < nm; e++) t += gl[r][e] * g[c][e];
+      hk[(r + d) * nx + c + d] = hk[(c + d) * nx + r + d] = t;
+    }
+  for (int a = 0; a < d; a++) /* vertex 0 against vertices 1..d */
+    for (int c = 0; c < n; c++) {
+      double t = 0;
+#pragma GCC unroll 3
+      for (int k = 0; k < d; k++) t -= hk[(k * d + a + d) * nx + c + d];
+      hk[a * nx + c + d] = hk[(c + d) * nx + a] = t;
+    }
+  for (int a = 0; a < d; a++) /* vertex 0 against itself */
+    for (int b = a; b < d; b++) {
+      double t = 0;
+#pragma GCC unroll 3
+      for (int l = 0; l < d; l++) t -= hk[a * nx + l * d + b + d];
+      hk[a * nx + b] = hk[b * nx + a] = t;
+    }
 }
 
 /* One corner's Hessian in its d + 1 vertices, hk ((d+1)d square, row (k d + a) for
@@ -377,7 +472,7 @@ static int corner_hessian(const objective *o, const double *x, int i, int kc, do
   if (eps == 0 && !(D > 0)) return 1;
   /* χ and its derivatives in D; s, t and theirs */
   double r = sqrt(eps * eps + D * D), ch = 0.5 * (D + r), c1 = 0.5 * (1 + D / r), c2 = 0.5 * eps * eps / (r * r * r);
-  double p = 2.0 / d, s = d == 2 ? 1 / ch : 1 / (cbrt(ch) * cbrt(ch)), s1 = -p * s / ch * c1, s2 = p * (p + 1) * s / (ch * ch) * c1 * c1 - p * s / ch * c2;
+  double p = 2.0 / d, s = pow_m2d(ch, d), s1 = -p * s / ch * c1, s2 = p * (p + 1) * s / (ch * ch) * c1 * c1 - p * s / ch * c2;
   double N = D * D + 1, t1 = 2 * D / ch - N * c1 / (ch * ch),
          t2 = 2 / ch - 4 * D * c1 / (ch * ch) - N * c2 / (ch * ch) + 2 * N * c1 * c1 / (ch * ch * ch);
   double fA = (1 - theta) * s, fD = (1 - theta) * A * s1 + theta * t1, fAD = (1 - theta) * s1,
@@ -388,16 +483,20 @@ static int corner_hessian(const objective *o, const double *x, int i, int kc, do
     w[0][b] = 0;
     for (int k = 1; k <= d; k++) { w[k][b] = winv[(k - 1) * d + b]; w[0][b] -= w[k][b]; }
   }
-  /* the modes of the projected Hessian in J, mapped one by one: half the operations of
-   * forming the d²×d² Hessian and mapping it (the twisted bar's Newton steps spent a quarter
-   * of their time there: add_mode 7%, corner_hessian 16%) */
-  double lam[9], m[9][9];
+  /* the modes of the projected Hessian in J, mapped one by one to the corner's vertices: half
+   * the operations of forming the d²×d² Hessian and mapping it (the twisted bar's Newton
+   * steps spent a quarter of their time there: add_mode 7%, corner_hessian 16%) */
+  double lam[9], m[9][9], g[9][9];
   if (d == 2) {
     hessian_2d_modes(J, fA, fD, fAD, fDD, lam, m);
-    modes_to_corner(2, 4, lam, m, w, hk);
+    modes_g(2, 4, m, w, g);
+    corner_from_modes(2, 4, lam, g, hk);
   } else {
-    if (!(D > 0) || hessian_3d_modes(J, fA, fD, fAD, fDD, lam, m)) hessian_3d_numeric(J, fA, fD, fAD, fDD, lam, m);
-    modes_to_corner(3, 9, lam, m, w, hk);
+    if (!(D > 0) || hessian_3d_modes(J, fA, fD, fAD, fDD, w, lam, g)) {
+      hessian_3d_numeric(J, fA, fD, fAD, fDD, lam, m);
+      modes_g(3, 9, m, w, g);
+    }
+    corner_from_modes(3, 9, lam, g, hk);
   }
   return 0;
 }

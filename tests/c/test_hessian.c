@@ -8,7 +8,8 @@
  * the analytic gradient (corner_energy) with its negative eigenvalues set to 0 — for the
  * closed forms (2D conformal/anticonformal, 3D SVD modes) and the numeric 3D fallback alike —
  * and be positive semidefinite, for the smoother's energy (θ = 0, ε = 0) and the untangler's
- * (θ = 1/2, ε > 0, inverted corners too). */
+ * (θ = 1/2, ε > 0, inverted corners too); and the closed-form 3×3 eigensystem behind the 3D
+ * modes (dense_sym_eigen3) against known spectra. */
 #include "../../src/mesh/untangle_global.c"
 
 #include "../../src/mesh/quality.h"
@@ -106,6 +107,80 @@ static void check_case(int d, double J[3][3], double theta, double eps, const ch
   }
 }
 
+/* dense_sym_eigen3 on a = Q diag(l) Qᵀ, Q a random rotation: ascending eigenvalues within
+ * a rounding error of |a| of l, orthonormal vectors, residuals |a v − w v| at rounding level
+ * (the backward stability the 3D Hessian modes rely on), repeated and nearly repeated
+ * eigenvalues included, and the answer of the cyclic method */
+static void check_eigen3(const double *l, double scale, const char *what) {
+  double q[9], a[9], w[3], v[9], ls[3] = {l[0], l[1], l[2]}, amax = 0;
+  /* a random rotation, from a random unit quaternion (orthonormal to rounding) */
+  double qw = rnd(), qx = rnd(), qy = rnd(), qz = rnd(), qn = sqrt(qw * qw + qx * qx + qy * qy + qz * qz);
+  qw /= qn; qx /= qn; qy /= qn; qz /= qn;
+  double rot[9] = {1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw),     2 * (qx * qz + qy * qw),
+                   2 * (qx * qy + qz * qw),     1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw),
+                   2 * (qx * qz - qy * qw),     2 * (qy * qz + qx * qw),     1 - 2 * (qx * qx + qy * qy)};
+  memcpy(q, rot, sizeof rot);
+  for (int i = 0; i < 3; i++)
+    for (int j = 0; j < 3; j++) {
+      a[i * 3 + j] = 0;
+      for (int k = 0; k < 3; k++) a[i * 3 + j] += q[i * 3 + k] * l[k] * scale * q[j * 3 + k];
+    }
+  for (int i = 0; i < 3; i++)
+    for (int j = 0; j < i; j++) a[i * 3 + j] = a[j * 3 + i];
+  for (int i = 0; i < 9; i++) amax = fmax(amax, fabs(a[i]));
+  dense_sym_eigen3(a, w, v);
+  for (int i = 0; i < 3; i++) /* sort l */
+    for (int j = i + 1; j < 3; j++)
+      if (ls[j] < ls[i]) { double t = ls[i]; ls[i] = ls[j]; ls[j] = t; }
+  double ew = 0, eo = 0, er = 0;
+  for (int k = 0; k < 3; k++) {
+    ew = fmax(ew, fabs(w[k] - ls[k] * scale));
+    for (int j = 0; j < 3; j++) {
+      double d = 0;
+      for (int i = 0; i < 3; i++) d += v[i * 3 + k] * v[i * 3 + j];
+      eo = fmax(eo, fabs(d - (j == k)));
+    }
+    for (int i = 0; i < 3; i++) {
+      double t = -w[k] * v[i * 3 + k];
+      for (int j = 0; j < 3; j++) t += a[i * 3 + j] * v[j * 3 + k];
+      er = fmax(er, fabs(t));
+    }
+  }
+  CHECK(ew <= 1e-14 * amax + 1e-300, "%s: eigenvalues off by %.3g (|a| %.3g)", what, ew, amax);
+  CHECK(eo <= 1e-14, "%s: VᵀV − I %.3g", what, eo);
+  CHECK(er <= 1e-14 * amax + 1e-300, "%s: residual %.3g (|a| %.3g)", what, er, amax);
+  CHECK(w[0] <= w[1] && w[1] <= w[2], "%s: ascending %.17g %.17g %.17g", what, w[0], w[1], w[2]);
+  if (scale != 1) return; /* the cyclic method's squared sums overflow at 1e±200 */
+  double t[9], vj[9];
+  memcpy(t, a, sizeof t);
+  dense_sym_eigen(3, t, vj, 0, 1e-30);
+  double jw[3] = {t[0], t[4], t[8]};
+  for (int i = 0; i < 3; i++)
+    for (int j = i + 1; j < 3; j++)
+      if (jw[j] < jw[i]) { double x = jw[i]; jw[i] = jw[j]; jw[j] = x; }
+  for (int k = 0; k < 3; k++)
+    CHECK(fabs(jw[k] - w[k]) <= 1e-14 * amax + 1e-300, "%s: eigenvalue %d %.17g, the cyclic method's %.17g", what, k, w[k], jw[k]);
+}
+
+static void check_eigen3_all(void) {
+  char what[128];
+  static const double cases[][3] = {
+      {1, 2, 3},         {-1, 0.5, 4},      {2, 2, 2},          {1, 1, 3},          {1, 3, 3},         {0, 0, 0},
+      {0, 0, 1},         {-5, -5, 1},       {1, 1 + 1e-6, 2},   {1, 1 + 1e-10, 2},  {1, 1 + 1e-15, 2}, {1, 2, 2 + 1e-12},
+      {1, 1 + 1e-9, 1 + 2e-9}, {1, 1, 1 + 1e-13}, {1e-8, 1, 1e8}, {-1, 0, 1},       {3, -3, 0},        {1e-300, 1, 2}};
+  for (int c = 0; c < (int)(sizeof cases / sizeof cases[0]); c++)
+    for (double sc = 1e-200; sc < 1e201; sc *= 1e100)
+      for (int t = 0; t < 20; t++) {
+        snprintf(what, sizeof what, "eigen3 (%g, %g, %g) x %g, rotation %d", cases[c][0], cases[c][1], cases[c][2], sc, t);
+        check_eigen3(cases[c], sc, what);
+      }
+  double z[9] = {0}, w[3], v[9], I[9] = {4, 0, 0, 0, 4, 0, 0, 0, 4};
+  dense_sym_eigen3(z, w, v);
+  CHECK(w[0] == 0 && w[2] == 0 && v[0] == 1 && v[4] == 1 && v[8] == 1, "eigen3 of 0: 0 and I");
+  dense_sym_eigen3(I, w, v);
+  CHECK(w[0] == 4 && w[1] == 4 && w[2] == 4 && v[0] == 1 && v[1] == 0, "eigen3 of 4 I: 4 and I");
+}
+
 /* ut_energy_vertex on a perturbed 3×3×3 tetrahedral box at ε = 0, θ = 0, J relative to a
  * regular tetrahedron (the energy smoother's objective): its value is 3 Σ 1/q over the cells
  * around the vertex (q the mean ratio mesh_cell_quality reports) and its gradient the
@@ -153,6 +228,7 @@ static void check_vertex_energy(void) {
 
 int main(void) {
   char what[128];
+  check_eigen3_all();
   check_vertex_energy();
   for (int d = 2; d <= 3; d++)
     for (int t = 0; t < 40; t++) {
@@ -173,5 +249,17 @@ int main(void) {
   double Jc[3][3] = {{0.8, -0.6, 0}, {0.6, 0.8, 0}, {0, 0, 0}}, Ji[3][3] = {{2, 0, 0}, {0, 2, 0}, {0, 0, 2}};
   check_case(2, Jc, 0, 0, "2D conformal");
   check_case(3, Ji, 0, 0, "3D isotropic");
+  /* nearly repeated singular values (the closed-form eigensystem's hard case): a rotation
+   * times diag(1, 1, 1 + δ) and diag(1, 1 + δ, 2) */
+  double th = 0.7, c = cos(th), sn = sin(th);
+  for (int k = 0; k < 3; k++) {
+    double dl = k == 0 ? 1e-5 : k == 1 ? 1e-9 : 1e-14, sv[2][3] = {{1, 1, 1 + dl}, {1, 1 + dl, 2}};
+    for (int j = 0; j < 2; j++) {
+      double Jr[3][3] = {{c * sv[j][0], -sn * sv[j][1], 0}, {sn * sv[j][0], c * sv[j][1], 0}, {0, 0, sv[j][2]}};
+      snprintf(what, sizeof what, "3D singular values (%g, %g, %g)", sv[j][0], sv[j][1], sv[j][2]);
+      check_case(3, Jr, 0, 0, what);
+      check_case(3, Jr, 0.5, 0.05, what);
+    }
+  }
   return CHECK_DONE();
 }

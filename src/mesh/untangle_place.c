@@ -13,52 +13,71 @@
 /* ---------------------------------------------------------------- small linear programs */
 
 /* maximize c·z subject to A z <= b, z >= 0, where b >= 0 so that the slack basis is
- * feasible; dense tableau, Bland's rule (no cycling). m rows, n columns. Returns 0 with the
- * optimum in z, 1 when unbounded or out of iterations. */
+ * feasible; Bland's rule (no cycling). m rows, n columns. Returns 0 with the optimum in z, 1
+ * when unbounded or out of iterations. A condensed (Tucker) tableau: one column per nonbasic
+ * variable, a pivot exchanges the labels of a row and a column, (m + 1)(n + 1) entries where
+ * the full tableau's slack columns made it (m + 1)(n + m + 1). The pivots and the arithmetic on
+ * the entries kept are the full tableau's, so the results are the same to the bit; a vertex's
+ * Chebyshev centre (some 30 rows, 7 columns) took a quarter of the million-tetrahedron bar's
+ * untangling in the full tableau's row updates. */
 static int lp_max(int m, int n, const double *A, const double *b, const double *c, double *z) {
-  int W = n + m + 1;
-  double *T = calloc((size_t)(m + 1) * W, sizeof(double));
-  int *basis = malloc(sizeof(int) * (size_t)m);
-  if (!T || !basis) { free(T); free(basis); return 1; }
+  int W = n + 1;
+  double tbuf[65 * 8], *T = (size_t)(m + 1) * W <= sizeof tbuf / sizeof tbuf[0] ? tbuf : malloc(sizeof(double) * (size_t)(m + 1) * W);
+  int lbuf[72], *label = m + n <= 72 ? lbuf : malloc(sizeof(int) * (size_t)(m + n)); /* rows' basic, then columns' nonbasic */
+  if (!T || !label) {
+    if (T != tbuf) free(T);
+    if (label != lbuf) free(label);
+    return 1;
+  }
+  int *basis = label, *nonbasic = label + m;
   for (int i = 0; i < m; i++) {
     for (int j = 0; j < n; j++) T[i * W + j] = A[i * n + j];
-    T[i * W + n + i] = 1;
-    T[i * W + W - 1] = b[i];
+    T[i * W + n] = b[i];
     basis[i] = n + i;
   }
-  for (int j = 0; j < n; j++) T[m * W + j] = -c[j];
+  for (int j = 0; j < n; j++) {
+    T[m * W + j] = -c[j];
+    nonbasic[j] = j;
+  }
+  T[m * W + n] = 0;
   int status = 1;
   for (int it = 0; it < 50 * (m + n); it++) {
-    int e = -1;
-    for (int j = 0; j < n + m; j++)
-      if (T[m * W + j] < -1e-12) { e = j; break; }
+    int e = -1; /* the entering variable: the lowest label with a negative reduced cost */
+    for (int j = 0; j < n; j++)
+      if (T[m * W + j] < -1e-12 && (e < 0 || nonbasic[j] < nonbasic[e])) e = j;
     if (e < 0) { status = 0; break; }
     int r = -1;
     double best = INFINITY;
     for (int i = 0; i < m; i++) {
       double a = T[i * W + e];
       if (a <= 1e-12) continue;
-      double q = T[i * W + W - 1] / a;
+      double q = T[i * W + n] / a;
       if (q < best || (q == best && basis[i] < basis[r])) { best = q; r = i; }
     }
     if (r < 0) break; /* unbounded */
+    /* the exchange: column e becomes the leaving variable's, whose full-tableau column was
+     * the unit vector of row r */
     double pv = T[r * W + e];
+    T[r * W + e] = 1;
     for (int j = 0; j < W; j++) T[r * W + j] /= pv;
     for (int i = 0; i <= m; i++) {
       if (i == r) continue;
       double f = T[i * W + e];
       if (f == 0) continue;
+      T[i * W + e] = 0;
       for (int j = 0; j < W; j++) T[i * W + j] -= f * T[r * W + j];
     }
-    basis[r] = e;
+    int t = basis[r];
+    basis[r] = nonbasic[e];
+    nonbasic[e] = t;
   }
   if (!status) {
     for (int j = 0; j < n; j++) z[j] = 0;
     for (int i = 0; i < m; i++)
-      if (basis[i] < n) z[basis[i]] = T[i * W + W - 1];
+      if (basis[i] < n) z[basis[i]] = T[i * W + n];
   }
-  free(T);
-  free(basis);
+  if (T != tbuf) free(T);
+  if (label != lbuf) free(label);
   return status;
 }
 

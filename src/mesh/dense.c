@@ -3,9 +3,7 @@
 
 #include <math.h>
 
-/* the method for any n; inlined below with a constant n = 3 too, whose loops the compiler
- * unrolls (the projected Newton smoother's 3D corner Hessians take two 3×3 eigensystems per
- * corner: 5–10% of its Hessian time), with the same result */
+/* the cyclic Jacobi method for any n (the 3×3 closed form below falls back on it) */
 static inline void sym_eigen_jacobi(int n, double *a, double *v, double off_abs, double off_rel) {
   for (int i = 0; i < n; i++)
     for (int j = 0; j < n; j++) v[i * n + j] = i == j;
@@ -43,8 +41,7 @@ static inline void sym_eigen_jacobi(int n, double *a, double *v, double off_abs,
 }
 
 void dense_sym_eigen(int n, double *a, double *v, double off_abs, double off_rel) {
-  if (n == 3) sym_eigen_jacobi(3, a, v, off_abs, off_rel);
-  else sym_eigen_jacobi(n, a, v, off_abs, off_rel);
+  sym_eigen_jacobi(n, a, v, off_abs, off_rel);
 }
 
 /* ---------------------------------------------------------------- 3×3 in closed form */

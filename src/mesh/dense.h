@@ -13,13 +13,13 @@
  * (dense_sym_eigen3 scales first). */
 void dense_sym_eigen(int n, double *a, double *v, double off_abs, double off_rel);
 
-/* The same for a symmetric 3×3 matrix a (row-major, kept), in closed form: the eigenvalues
- * from the characteristic cubic's trigonometric solution, the eigenvector of the one
- * farthest from the other two by the largest cross product of two rows of a − λI, the second
- * as the null vector of a − λI in the first's complement, the third their cross product
- * (orthonormal to rounding; a multiple of I to rounding gets I). w the eigenvalues, as the
- * Rayleigh quotients of those vectors, in ascending order, the columns of v the vectors.
- * Backward stable: |a v_k − w_k v_k| is a rounding error of |a|, repeated eigenvalues too. */
+/* The same for a symmetric 3×3 matrix a (row-major, kept), in closed form: the eigenvalue
+ * farthest from the other two from the characteristic cubic's trigonometric solution, its
+ * eigenvector as the largest cross product of two rows of a − λI, the other two by one
+ * Jacobi rotation in its complement (a multiple of I to rounding gets the axes). w the
+ * eigenvalues, as the Rayleigh quotients of those vectors, in ascending order, the columns of
+ * v the vectors (orthonormal to rounding). Backward stable: |a v_k − w_k v_k| is a rounding
+ * error of |a|, for repeated and nearly repeated eigenvalues too. */
 void dense_sym_eigen3(const double *a, double *w, double *v);
 
 #endif

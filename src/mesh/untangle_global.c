@@ -292,10 +292,10 @@ static void sym_psd_modes(int n, double *a, double *lam, double m[9][9]) {
  * 2F_A ± F_D σ_k ({i, j, k} = {1, 2, 3}); the scaling modes Σ c_i u_i v_iᵀ are the
  * eigenvectors c of the 3×3 Hessian in (σ1, σ2, σ3). The nine eigenvalues go to lam, and for
  * each mode M_e its gradient in the corner's vertices 1..3, g[(k − 1) 3 + a][e] = (M_e w_k)_a
- * (w_k row k − 1 of W⁻¹), straight from u and z_ik = v_i · w_k without forming M_e: the
+ * (w_k row k − 1 of W⁻¹, winv), straight from u and z_ik = v_i · w_k without forming M_e: the
  * projected Hessian is Σ_{λ_e > 0} λ_e g_e g_eᵀ (corner_from_modes). 1 when J is too close
  * to singular for U = J V Σ⁻¹: the caller projects the 9×9 Hessian numerically. */
-static int hessian_3d_modes(double J[3][3], double fA, double fD, double fAD, double fDD, double w[4][3], double *lam,
+static int hessian_3d_modes(double J[3][3], double fA, double fD, double fAD, double fDD, const double *winv, double *lam,
                             double g[9][9]) {
   double S[9], V[9], ev[3], sg[3], U[3][3];
   for (int i = 0; i < 3; i++)
@@ -319,9 +319,9 @@ static int hessian_3d_modes(double J[3][3], double fA, double fD, double fAD, do
     for (int j = 0; j < 3; j++)
       Hs[i * 3 + j] = (i == j ? 2 * fA : fD * sg[3 - i - j]) + 2 * fAD * (sg[i] * kk[j] + kk[i] * sg[j]) + fDD * kk[i] * kk[j];
   dense_sym_eigen3(Hs, lam, cs);
-  double z[3][3]; /* z[i][k] = v_i · w_{k+1} */
+  double z[3][3]; /* z[i][k] = v_i · w_{k+1}, w_{k+1} row k of W⁻¹ */
   for (int i = 0; i < 3; i++)
-    for (int k = 0; k < 3; k++) z[i][k] = V[0 * 3 + i] * w[k + 1][0] + V[1 * 3 + i] * w[k + 1][1] + V[2 * 3 + i] * w[k + 1][2];
+    for (int k = 0; k < 3; k++) z[i][k] = V[0 * 3 + i] * winv[k * 3] + V[1 * 3 + i] * winv[k * 3 + 1] + V[2 * 3 + i] * winv[k * 3 + 2];
   for (int e = 0; e < 3; e++) { /* scaling: Σ_i c_i u_i (v_i · w_k) */
     double y[3][3];
     for (int i = 0; i < 3; i++)
@@ -402,14 +402,14 @@ static void hessian_3d_numeric(double J[3][3], double fA, double fD, double fAD,
 }
 
 /* the gradients in the corner's vertices 1..d of the modes M_e of its Hessian in J (m,
- * row-major d×d): g[(k − 1) d + a][e] = Σ_b M_e[a][b] w_k[b] (the 2D closed form and the
- * numeric 3D fallback; the 3D closed form writes g itself) */
-static inline void modes_g(int d, int nm, double m[9][9], double w[4][3], double g[9][9]) {
+ * row-major d×d): g[(k − 1) d + a][e] = Σ_b M_e[a][b] w_k[b], w_k row k − 1 of W⁻¹ (the 2D
+ * closed form and the numeric 3D fallback; the 3D closed form writes g itself) */
+static inline void modes_g(int d, int nm, double m[9][9], const double *winv, double g[9][9]) {
   for (int e = 0; e < nm; e++) {
     for (int k = 1; k <= d; k++)
       for (int a = 0; a < d; a++) {
         double t = 0;
-        for (int b = 0; b < d; b++) t += m[e][a * d + b] * w[k][b];
+        for (int b = 0; b < d; b++) t += m[e][a * d + b] * winv[(k - 1) * d + b];
         g[(k - 1) * d + a][e] = t;
       }
   }
@@ -477,24 +477,20 @@ static int corner_hessian(const objective *o, const double *x, int i, int kc, do
          t2 = 2 / ch - 4 * D * c1 / (ch * ch) - N * c2 / (ch * ch) + 2 * N * c1 * c1 / (ch * ch * ch);
   double fA = (1 - theta) * s, fD = (1 - theta) * A * s1 + theta * t1, fAD = (1 - theta) * s1,
          fDD = (1 - theta) * A * s2 + theta * t2;
-  /* ∂J_ab/∂x_kc = δ_ac w_k[b]: w_k row k − 1 of W⁻¹, w_0 minus their sum */
-  double w[4][3];
-  for (int b = 0; b < d; b++) {
-    w[0][b] = 0;
-    for (int k = 1; k <= d; k++) { w[k][b] = winv[(k - 1) * d + b]; w[0][b] -= w[k][b]; }
-  }
+  /* ∂J_ab/∂x_kc = δ_ac w_k[b]: w_k row k − 1 of W⁻¹ for k ≥ 1, w_0 minus their sum (vertex 0
+   * is derived in corner_from_modes) */
   /* the modes of the projected Hessian in J, mapped one by one to the corner's vertices: half
    * the operations of forming the d²×d² Hessian and mapping it (the twisted bar's Newton
    * steps spent a quarter of their time there: add_mode 7%, corner_hessian 16%) */
   double lam[9], m[9][9], g[9][9];
   if (d == 2) {
     hessian_2d_modes(J, fA, fD, fAD, fDD, lam, m);
-    modes_g(2, 4, m, w, g);
+    modes_g(2, 4, m, winv, g);
     corner_from_modes(2, 4, lam, g, hk);
   } else {
-    if (!(D > 0) || hessian_3d_modes(J, fA, fD, fAD, fDD, w, lam, g)) {
+    if (!(D > 0) || hessian_3d_modes(J, fA, fD, fAD, fDD, winv, lam, g)) {
       hessian_3d_numeric(J, fA, fD, fAD, fDD, lam, m);
-      modes_g(3, 9, m, w, g);
+      modes_g(3, 9, m, winv, g);
     }
     corner_from_modes(3, 9, lam, g, hk);
   }

@@ -21,47 +21,65 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* y = H x on the pattern, rows on threads; d = 2 and 3 written out (the general loop's
- * accumulator went through memcpy: a fifth of the smoother's time on a 24 000-vertex strip).
- * d is 2 or 3: smoothing refuses intervals (smooth.c) */
+/* y = H x on the pattern, rows on threads, blocks of type T: double, or float for the
+ * cycle's products (a preconditioner needs no more, and these products were most of the
+ * Newton smoother's memory traffic). Each output sums its row's products in D chains, one
+ * per column of the blocks, added at the end: a single chain in the row's order waited on
+ * the adder's latency (two dependent additions per 2×2 block). The order is fixed, so the
+ * bits do not depend on the number of threads. D is a constant in the loop itself (OpenMP's
+ * outlined body takes a function's parameter d as a variable, and unrolls nothing) */
+#ifdef _OPENMP
+#define UT_PAR_ROWS _Pragma("omp parallel for schedule(static) if (nrow > 2048)")
+#else
+#define UT_PAR_ROWS
+#endif
+#define BSR_MULT_D(name, T, D)                                                                       \
+  static void name(const ut_bsr *P, const T *val, int nrow, const double *x, double *y) {            \
+    UT_PAR_ROWS for (int fi = 0; fi < nrow; fi++) {                                                  \
+      double s[D][D];                                                                                \
+      for (int a = 0; a < D; a++)                                                                    \
+        for (int e = 0; e < D; e++) s[a][e] = 0;                                                     \
+      for (int q = P->off[fi]; q < P->off[fi + 1]; q++) {                                            \
+        const T *b = val + (size_t)q * (D * D);                                                      \
+        const double *xc = x + (size_t)P->col[q] * D;                                                \
+        for (int a = 0; a < D; a++)                                                                  \
+          for (int e = 0; e < D; e++) s[a][e] += (double)b[a * D + e] * xc[e];                       \
+      }                                                                                              \
+      for (int a = 0; a < D; a++) {                                                                  \
+        double t = s[a][0];                                                                          \
+        for (int e = 1; e < D; e++) t += s[a][e];                                                    \
+        y[(size_t)fi * D + a] = t;                                                                   \
+      }                                                                                              \
+    }                                                                                                \
+  }
+BSR_MULT_D(bsr_mult_2, double, 2)
+BSR_MULT_D(bsr_mult_3, double, 3)
+BSR_MULT_D(bsr_mult_f2, float, 2)
+BSR_MULT_D(bsr_mult_f3, float, 3)
+
+/* d is 2 or 3: smoothing refuses intervals (smooth.c) */
 void ut_bsr_mult(const ut_bsr *P, const double *val, int nrow, int d, const double *x, double *y) {
-  if (d == 2) {
-#ifdef _OPENMP
-#pragma omp parallel for schedule(static) if (nrow > 2048)
-#endif
-    for (int fi = 0; fi < nrow; fi++) {
-      double s0 = 0, s1 = 0;
-      for (int q = P->off[fi]; q < P->off[fi + 1]; q++) {
-        const double *b = val + (size_t)q * 4, *xc = x + (size_t)P->col[q] * 2;
-        s0 += b[0] * xc[0]; /* one product at a time: the general loop's order and bits */
-        s0 += b[1] * xc[1];
-        s1 += b[2] * xc[0];
-        s1 += b[3] * xc[1];
-      }
-      y[(size_t)fi * 2] = s0;
-      y[(size_t)fi * 2 + 1] = s1;
-    }
-    return;
-  }
-#ifdef _OPENMP
-#pragma omp parallel for schedule(static) if (nrow > 2048)
-#endif
-  for (int fi = 0; fi < nrow; fi++) {
-    double s0 = 0, s1 = 0, s2 = 0;
-    for (int q = P->off[fi]; q < P->off[fi + 1]; q++) {
-      const double *b = val + (size_t)q * 9, *xc = x + (size_t)P->col[q] * 3;
-      s0 += b[0] * xc[0]; s0 += b[1] * xc[1]; s0 += b[2] * xc[2];
-      s1 += b[3] * xc[0]; s1 += b[4] * xc[1]; s1 += b[5] * xc[2];
-      s2 += b[6] * xc[0]; s2 += b[7] * xc[1]; s2 += b[8] * xc[2];
-    }
-    y[(size_t)fi * 3] = s0;
-    y[(size_t)fi * 3 + 1] = s1;
-    y[(size_t)fi * 3 + 2] = s2;
-  }
+  if (d == 2) bsr_mult_2(P, val, nrow, x, y);
+  else bsr_mult_3(P, val, nrow, x, y);
+}
+
+/* the cycle's products in single precision */
+static void bsr_mult_f(const ut_bsr *P, const float *val, int nrow, int d, const double *x, double *y) {
+  if (d == 2) bsr_mult_f2(P, val, nrow, x, y);
+  else bsr_mult_f3(P, val, nrow, x, y);
+}
+
+/* a level's product in the cycle: its single-precision copy where there is one */
+static void level_mult(const ut_amg_level *L, int d, const double *x, double *y) {
+  if (L->valf) bsr_mult_f(&L->P, L->valf, L->n, d, x, y);
+  else ut_bsr_mult(&L->P, L->val, L->n, d, x, y);
 }
 
 void ut_block_jacobi(double *val, const int *dpos, int nrow, int d, double *dinv) {
   int dd = d * d;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (nrow > 2048)
+#endif
   for (int fi = 0; fi < nrow; fi++) {
     double *b = val + (size_t)dpos[fi] * dd, *w = dinv + (size_t)fi * dd, tr = 0;
     for (int a = 0; a < d; a++) tr += b[a * d + a];
@@ -85,18 +103,25 @@ void ut_block_jacobi(double *val, const int *dpos, int nrow, int d, double *dinv
   }
 }
 
-void ut_block_apply(const double *dinv, int nrow, int d, const double *r, double *z) {
-  int dd = d * d;
-  long n = (long)nrow * d;
-  UT_PAR_FOR
-  for (int fi = 0; fi < nrow; fi++) {
-    const double *w = dinv + (size_t)fi * dd, *rr = r + (size_t)fi * d;
-    for (int a = 0; a < d; a++) {
-      double s = 0;
-      for (int e = 0; e < d; e++) s += w[a * d + e] * rr[e];
-      z[(size_t)fi * d + a] = s;
-    }
+/* z = D⁻¹ r row by row, for a constant D (a variable d's loops were not unrolled: 8% of a
+ * 200 000-triangle spiral's smoothing in instructions) */
+#define BLOCK_APPLY_D(name, D)                                                             \
+  static void name(const double *dinv, int nrow, const double *r, double *z) {             \
+    UT_PAR_ROWS for (int fi = 0; fi < nrow; fi++) {                                        \
+      const double *w = dinv + (size_t)fi * (D * D), *rr = r + (size_t)fi * D;              \
+      for (int a = 0; a < D; a++) {                                                        \
+        double s = 0;                                                                      \
+        for (int e = 0; e < D; e++) s += w[a * D + e] * rr[e];                             \
+        z[(size_t)fi * D + a] = s;                                                         \
+      }                                                                                    \
+    }                                                                                      \
   }
+BLOCK_APPLY_D(block_apply_2, 2)
+BLOCK_APPLY_D(block_apply_3, 3)
+
+void ut_block_apply(const double *dinv, int nrow, int d, const double *r, double *z) {
+  if (d == 2) block_apply_2(dinv, nrow, r, z);
+  else block_apply_3(dinv, nrow, r, z);
 }
 
 /* ---------------------------------------------------------------- the hierarchy */
@@ -195,6 +220,7 @@ static int level_buffers(ut_amg_level *L, int d, int owns_values) {
   size_t n = (size_t)L->n * d + 1, nb = (size_t)L->P.off[L->n];
   L->owns = owns_values;
   if (owns_values && !(L->val = malloc(sizeof(double) * (nb * d * d + 1)))) return 1;
+  L->valf = malloc(sizeof(float) * (nb * d * d + 1)); /* NULL: the products in double */
   L->dpos = malloc(sizeof(int) * ((size_t)L->n + 1));
   if (owns_values) L->dinv = malloc(sizeof(double) * ((size_t)L->n * d * d + 1));
   /* every level smooths in t and v1; the K-cycle's four and the restricted residual and
@@ -241,7 +267,7 @@ void ut_amg_free(ut_amg *A) {
     ut_amg_level *L = &A->L[l];
     if (l) { free(L->P.off); free(L->P.col); }
     if (L->owns) { free(L->val); free(L->dinv); }
-    free(L->dpos); free(L->agg); free(L->mem_off); free(L->mem); free(L->cpos);
+    free(L->valf); free(L->dpos); free(L->agg); free(L->mem_off); free(L->mem); free(L->cpos);
     free(L->t); free(L->v1); free(L->w1); free(L->v2); free(L->w2); free(L->r1); free(L->in); free(L->out);
   }
   free(A->chol);
@@ -251,28 +277,39 @@ void ut_amg_free(ut_amg *A) {
 
 /* a bound of the largest eigenvalue of D⁻¹A (Gershgorin on the block rows of D⁻¹A) and the
  * smoother's damping 4/(3 λ) */
-static double jacobi_damping(const ut_amg_level *L, int d) {
-  double lam = 0;
-  int dd = d * d, nr = L->n;
-  /* a maximum: the same for any thread count */
 #ifdef _OPENMP
-#pragma omp parallel for schedule(static) reduction(max : lam) if (nr > 2048)
+#define UT_PAR_ROWS_MAX _Pragma("omp parallel for schedule(static) reduction(max : lam) if (nr > 2048)")
+#else
+#define UT_PAR_ROWS_MAX
 #endif
-  for (int i = 0; i < nr; i++) {
-    const double *w = L->dinv + (size_t)i * dd;
-    double rs[3] = {0, 0, 0};
-    for (int q = L->P.off[i]; q < L->P.off[i + 1]; q++) {
-      const double *b = L->val + (size_t)q * dd;
-      for (int a = 0; a < d; a++)
-        for (int c = 0; c < d; c++) {
-          double s = 0;
-          for (int e = 0; e < d; e++) s += w[a * d + e] * b[e * d + c];
-          rs[a] += fabs(s);
-        }
-    }
-    for (int a = 0; a < d; a++) lam = fmax(lam, rs[a]);
+/* for a constant D (see BSR_MULT_D); the maximum over the rows (lam): the same for any
+ * thread count */
+#define JACOBI_DAMPING_D(name, D)                                                \
+  static double name(const ut_amg_level *L) {                                    \
+    double lam = 0;                                                              \
+    int nr = L->n;                                                               \
+    UT_PAR_ROWS_MAX for (int i = 0; i < nr; i++) {                          \
+      const double *w = L->dinv + (size_t)i * (D * D);                           \
+      double rs[D];                                                              \
+      for (int a = 0; a < D; a++) rs[a] = 0;                                     \
+      for (int q = L->P.off[i]; q < L->P.off[i + 1]; q++) {                      \
+        const double *b = L->val + (size_t)q * (D * D);                          \
+        for (int a = 0; a < D; a++)                                              \
+          for (int c = 0; c < D; c++) {                                          \
+            double s = 0;                                                        \
+            for (int e = 0; e < D; e++) s += w[a * D + e] * b[e * D + c];        \
+            rs[a] += fabs(s);                                                    \
+          }                                                                      \
+      }                                                                          \
+      for (int a = 0; a < D; a++) lam = fmax(lam, rs[a]);                        \
+    }                                                                            \
+    return lam > 0 && isfinite(lam) ? 4.0 / (3.0 * lam) : 0.5;                   \
   }
-  return lam > 0 && isfinite(lam) ? 4.0 / (3.0 * lam) : 0.5;
+JACOBI_DAMPING_D(jacobi_damping_2, 2)
+JACOBI_DAMPING_D(jacobi_damping_3, 3)
+
+static double jacobi_damping(const ut_amg_level *L, int d) {
+  return d == 2 ? jacobi_damping_2(L) : jacobi_damping_3(L);
 }
 
 /* the coarsest level's matrix, dense, factored by Cholesky with a growing diagonal shift
@@ -311,22 +348,46 @@ static void coarsest_factor(ut_amg *A) {
   for (int k = 0; k < m; k++) c[(size_t)k * m + k] = tr > 0 ? sqrt(tr / m) : 1;
 }
 
+/* the level's values in single precision (after block Jacobi's shift of the diagonal) */
+static void single_copy(ut_amg_level *L, int dd) {
+  if (!L->valf) return;
+  long n = (long)L->P.off[L->n] * dd;
+  const double *v = L->val;
+  float *f = L->valf;
+  UT_PAR_FOR
+  for (long i = 0; i < n; i++) f[i] = (float)v[i];
+}
+
 void ut_amg_values(ut_amg *A, double *val, const double *dinv) {
   int d = A->d, dd = d * d;
   A->L[0].val = val;
   A->L[0].dinv = (double *)dinv;
   A->L[0].omega = jacobi_damping(&A->L[0], d);
+  single_copy(&A->L[0], dd);
   for (int l = 0; l + 1 < A->nlev; l++) {
     ut_amg_level *F = &A->L[l], *Cl = &A->L[l + 1];
-    memset(Cl->val, 0, sizeof(double) * (size_t)Cl->P.off[Cl->n] * dd);
-    for (size_t q = 0; q < (size_t)F->P.off[F->n]; q++) {
-      double *t = Cl->val + F->cpos[q] * dd;
-      const double *s = F->val + q * dd;
-      for (int k = 0; k < dd; k++) t[k] += s[k];
+    /* coarse row by coarse row on threads: its blocks are the sums of its members' rows'
+     * blocks, the members in row order, so every coarse block receives its terms in the
+     * order of one loop over the fine blocks (the same bits for any number of threads) */
+    int nc = Cl->n;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (nc > 2048)
+#endif
+    for (int c = 0; c < nc; c++) {
+      memset(Cl->val + (size_t)Cl->P.off[c] * dd, 0, sizeof(double) * (size_t)(Cl->P.off[c + 1] - Cl->P.off[c]) * dd);
+      for (int k = F->mem_off[c]; k < F->mem_off[c + 1]; k++) {
+        int i = F->mem[k];
+        for (int q = F->P.off[i]; q < F->P.off[i + 1]; q++) {
+          double *t = Cl->val + F->cpos[q] * dd;
+          const double *s = F->val + (size_t)q * dd;
+          for (int e = 0; e < dd; e++) t[e] += s[e];
+        }
+      }
     }
     if (l + 2 < A->nlev) {
       ut_block_jacobi(Cl->val, Cl->dpos, Cl->n, d, Cl->dinv);
       Cl->omega = jacobi_damping(Cl, d);
+      single_copy(Cl, dd);
     }
   }
   coarsest_factor(A);
@@ -360,7 +421,7 @@ static void vcycle(ut_amg *A, int l, const double *r, double *z) {
   ut_block_apply(L->dinv, L->n, d, r, z);
   UT_PAR_FOR
   for (long i = 0; i < n; i++) z[i] *= om;
-  ut_bsr_mult(&L->P, L->val, L->n, d, z, t);
+  level_mult(L, d, z, t);
   UT_PAR_FOR
   for (long i = 0; i < n; i++) t[i] = r[i] - t[i];
   /* restriction: each aggregate sums its members' residuals, in row order */
@@ -382,7 +443,7 @@ static void vcycle(ut_amg *A, int l, const double *r, double *z) {
 #endif
   for (int i = 0; i < nr; i++)
     for (int a = 0; a < d; a++) z[(size_t)i * d + a] += Cl->out[(size_t)L->agg[i] * d + a];
-  ut_bsr_mult(&L->P, L->val, L->n, d, z, t);
+  level_mult(L, d, z, t);
   UT_PAR_FOR
   for (long i = 0; i < n; i++) t[i] = r[i] - t[i];
   ut_block_apply(L->dinv, L->n, d, t, L->v1); /* v1 is free here: kcycle(l) is not running */
@@ -399,7 +460,7 @@ static void kcycle(ut_amg *A, int l, const double *b, double *x) {
   /* vcycle(l) works in L->t and L->v1: these two steps use the other buffers */
   double *v1 = L->v2, *w1 = L->w1, *v2 = L->r1, *w2 = L->w2;
   vcycle(A, l, b, v1);
-  ut_bsr_mult(&L->P, L->val, L->n, d, v1, w1);
+  level_mult(L, d, v1, w1);
   double rho1 = ut_dot(v1, w1, n, A->part), a1 = ut_dot(v1, b, n, A->part);
   if (!(rho1 > 0)) {
     memcpy(x, v1, sizeof(double) * n);
@@ -415,7 +476,7 @@ static void kcycle(ut_amg *A, int l, const double *b, double *x) {
     return;
   }
   vcycle(A, l, x, v2);
-  ut_bsr_mult(&L->P, L->val, L->n, d, v2, w2);
+  level_mult(L, d, v2, w2);
   double g = ut_dot(v2, w1, n, A->part), be = ut_dot(v2, w2, n, A->part), a2 = ut_dot(v2, x, n, A->part);
   double rho2 = be - g * g / rho1;
   if (!(rho2 > 0)) {

@@ -546,6 +546,7 @@ void ut_energy_release(ut_energy_buf *b) {
   free(b->slot);
   free(b->touch_off);
   free(b->touch);
+  free(b->bpos);
   memset(b, 0, sizeof *b);
 }
 
@@ -689,6 +690,59 @@ static void add_row_blocks(const objective *o, const ut_bsr *P, double *val, con
   }
 }
 
+/* the block positions' memory limit (b->bpos: (d + 1) per slot, 64 bytes per tetrahedron, a
+ * hexahedron's 512); above it each term finds its block in the row */
+#define BLOCKPOS_MAX ((size_t)256 << 20)
+/* the longest row the Hessian's gather sums on the stack (blocks; a vertex's neighbours and
+ * itself: 7 in a regular triangle grid, 15 in a tetrahedral box, 27 in a hexahedral one) */
+#define ROW_BUF_BLOCKS 64
+
+/* b->bpos for pattern P: the gather's search of each term's block in its row (a binary search
+ * per block, mispredicted) cost more instructions than the corner Hessians themselves (a
+ * 200 000-triangle spiral's smoothing: 3.6 G against 3.4 G) */
+static void block_positions(ut_energy_buf *b, const objective *o, const ut_bsr *P, int nfree) {
+  const ctx *C = o->C;
+  int d = C->d, nk = C->ncorner;
+  size_t ns = (size_t)b->off[nfree];
+  if ((size_t)P->off[nfree] > (size_t)INT_MAX || sizeof(int) * ns * (size_t)(d + 1) > BLOCKPOS_MAX ||
+      !(b->bpos = malloc(sizeof(int) * (ns * (size_t)(d + 1) + 1))))
+    return;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (nfree > 2048)
+#endif
+  for (int fi = 0; fi < nfree; fi++)
+    for (int q = b->off[fi]; q < b->off[fi + 1]; q++) {
+      size_t cq = (size_t)b->slot[q] / (size_t)(d + 1);
+      int i = (int)(cq / (size_t)nk), kc = (int)(cq % (size_t)nk);
+      const int *v = cell_of(C, o->cells[i]);
+      for (int m = 0; m <= d; m++) {
+        int fm = o->fidx[v[C->ct[kc][m]]];
+        b->bpos[(size_t)q * (d + 1) + m] = fm < 0 ? -1 : (int)ut_bsr_find(P, fi, fm);
+      }
+    }
+}
+
+void ut_energy_release_blocks(ut_energy_buf *b) {
+  if (!b) return;
+  free(b->bpos);
+  b->bpos = NULL;
+}
+
+/* add_row_blocks with the blocks' positions bp (b->bpos of the slot) less base, for a
+ * constant d */
+static inline void add_row_blocks_at(int d, double *val, const int *bp, int base, int k, const double *h) {
+  int nx = (d + 1) * d, dd = d * d;
+#pragma GCC unroll 4
+  for (int m = 0; m <= d; m++) {
+    if (bp[m] < 0) continue;
+    double *blk = val + (size_t)(bp[m] - base) * dd;
+#pragma GCC unroll 3
+    for (int a = 0; a < d; a++)
+#pragma GCC unroll 3
+      for (int e = 0; e < d; e++) blk[a * d + e] += h[(k * d + a) * nx + m * d + e];
+  }
+}
+
 /* The projected Hessian of the energy in the free vertices' coordinates, d×d blocks on
  * pattern P. The cells go in chunks (HESS_CHUNK_BYTES): the chunk's corner Hessians are
  * computed on threads, then each free vertex with slots in the chunk (b->touch) gathers them
@@ -702,13 +756,20 @@ static int hessian_assemble(const objective *o, const double *x, const ut_bsr *P
   int d = C->d, nk = C->ncorner, n = o->ncell, nx = (d + 1) * d, dd = d * d;
   size_t hs = (size_t)nx * nx, per_cell = sizeof(double) * hs * (size_t)nk;
   int chunk = HESS_CHUNK_BYTES / per_cell < (size_t)n ? (int)(HESS_CHUNK_BYTES / per_cell) : n;
-  memset(val, 0, sizeof(double) * (size_t)P->off[nfree] * dd);
   ut_energy_buf *b = o->eb;
   int *cur = NULL;
   if (b && chunk > 0 && !energy_prepare(o, nfree) && (b->hc || (b->hc = malloc(per_cell * (size_t)chunk + 1))) &&
       (b->touch || !chunk_touch(b, nfree, n, chunk, nk * (d + 1))) && (cur = malloc(sizeof(int) * ((size_t)nfree + 1)))) {
     int bad = 0;
+    if (!b->bpos) block_positions(b, o, P, nfree);
+    const int *bpos = b->bpos;
     memcpy(cur, b->off, sizeof(int) * (size_t)nfree);
+    /* no zeroing of the whole matrix first (on one thread: a quarter of the million-triangle
+     * spiral's Hessians): a row whose slots all lie in one chunk (nearly all) is summed in
+     * a local buffer and stored once, another is zeroed where its first slot comes, on its
+     * thread; a row without slots (a free vertex in no cell) here */
+    for (int fi = 0; fi < nfree; fi++)
+      if (b->off[fi] == b->off[fi + 1]) memset(val + (size_t)P->off[fi] * dd, 0, sizeof(double) * (size_t)(P->off[fi + 1] - P->off[fi]) * dd);
     for (int c0 = 0; c0 < n && !bad; c0 += chunk) {
       int c1 = n - c0 > chunk ? c0 + chunk : n, ch = c0 / chunk, t0 = b->touch_off[ch], t1 = b->touch_off[ch + 1];
       size_t send = (size_t)c1 * nk * (size_t)(d + 1); /* the first slot past the chunk */
@@ -722,18 +783,30 @@ static int hessian_assemble(const objective *o, const double *x, const ut_bsr *P
 #pragma omp parallel for schedule(static) if (n > 1024)
 #endif
       for (int t = t0; t < t1; t++) {
-        int fi = b->touch[t], q = cur[fi];
+        int fi = b->touch[t], q = cur[fi], r0 = P->off[fi], nbr = P->off[fi + 1] - r0;
+        size_t rbytes = sizeof(double) * (size_t)nbr * dd;
+        double acc[ROW_BUF_BLOCKS * 9];
+        /* the whole row in this chunk: in acc, with the same additions in the same order */
+        int local = bpos && q == b->off[fi] && nbr <= ROW_BUF_BLOCKS && (size_t)b->slot[b->off[fi + 1] - 1] < send;
+        double *dst = local ? acc : val;
+        int base = local ? r0 : 0;
+        if (q == b->off[fi]) memset(local ? acc : val + (size_t)r0 * dd, 0, rbytes);
         for (; q < b->off[fi + 1] && (size_t)b->slot[q] < send; q++) {
           size_t sl = (size_t)b->slot[q], cq = sl / (size_t)(d + 1);
           int k = (int)(sl % (size_t)(d + 1)), i = (int)(cq / (size_t)nk), kc = (int)(cq % (size_t)nk);
-          add_row_blocks(o, P, val, cell_of(C, o->cells[i]), kc, k, fi, b->hc + (cq - (size_t)c0 * nk) * hs);
+          const double *h = b->hc + (cq - (size_t)c0 * nk) * hs;
+          if (!bpos) add_row_blocks(o, P, val, cell_of(C, o->cells[i]), kc, k, fi, h);
+          else if (d == 2) add_row_blocks_at(2, dst, bpos + (size_t)q * 3, base, k, h);
+          else add_row_blocks_at(3, dst, bpos + (size_t)q * 4, base, k, h);
         }
+        if (local) memcpy(val + (size_t)r0 * dd, acc, rbytes);
         cur[fi] = q;
       }
     }
     free(cur);
     return bad;
   }
+  memset(val, 0, sizeof(double) * (size_t)P->off[nfree] * dd);
   double h[144];
   for (int i = 0; i < n; i++) {
     const int *v = cell_of(C, o->cells[i]);

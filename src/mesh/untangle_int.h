@@ -96,7 +96,14 @@ typedef struct ut_energy_buf {
   double *hc; /* a chunk of cells' corner Hessians (ut_energy_hessian), or NULL */
   int *off, *slot;
   int *touch_off, *touch; /* per chunk of hc: the free vertices with slots in it, ascending */
+  /* per slot q (off/slot order) and vertex m of its corner: the block of the Hessian's row
+   * (the slot's free vertex) and column (vertex m's) on the pattern of the Newton run that
+   * built it, −1 for a fixed vertex; NULL when over the memory limit. ut_newton frees it with
+   * its pattern (ut_energy_release_blocks) */
+  int *bpos;
 } ut_energy_buf;
+/* frees b->bpos: the pattern it refers to goes */
+void ut_energy_release_blocks(ut_energy_buf *b);
 /* frees what ut_energy_eval allocated in b (the struct itself is the caller's) */
 void ut_energy_release(ut_energy_buf *b);
 
@@ -142,6 +149,7 @@ typedef struct {
   int n;              /* block rows */
   ut_bsr P;           /* pattern */
   double *val, *dinv; /* blocks and inverse diagonal blocks */
+  float *valf;        /* val in single precision for the cycle's products (owned; NULL: val) */
   int *dpos, owns;    /* each row's diagonal block; val and dinv are this level's */
   double omega;       /* the Jacobi smoother's damping */
   int *agg;           /* row -> the next level's row (its aggregate) */

@@ -271,6 +271,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
   }
 done:
   ut_amg_free(&amg);
+  ut_energy_release_blocks(o->eb); /* its positions are on P */
   *fout = f;
   free(P.off); free(P.col); free(val); free(dinv); free(g); free(gn); free(s); free(r); free(z); free(pd); free(q);
   free(x0); free(part); free(dpos); free(xkeep);

@@ -28,9 +28,9 @@ A.cases2d_large = {
 -- solved exactly (two discrete Laplace problems on the strip's parameter grid, whose P1
 -- stencil on unit squares is the four-neighbour mean) instead of hard_meshes.lua's 2000
 -- Gauss-Seidel sweeps in Lua, which would take minutes at this size and not converge.
-function A.spiral_tutte(ns, nt, width, turns)
+function A.spiral_tutte(ns, nt, width, turns, cell)
   turns = turns or 1.5
-  local _, rest = H.spiral(ns, nt, width, turns, "triangle", 0)
+  local _, rest = H.spiral(ns, nt, width, turns, cell or "triangle", 0)
   local grid = lg.mesh.rectangle{nx = ns, ny = nt, x1 = ns, y1 = nt}
   local s, t = lg.x/ns, lg.y/nt
   local th, r = 2*math.pi*turns*s, 0.3 + 1.2*s + width*t

@@ -17,6 +17,8 @@ have_fenicsx=0
 # untangling (issue 4): tangled meshes at 1k / 10k / 100k vertices, and placement in stage 1
 "$ROOT/build/lugal" "$ROOT/bench/untangle.lua" 3
 "$ROOT/build/lugal" "$ROOT/bench/placement.lua"
+# issue 13's 100 000-vertex hard classes: untangle + energy smoothing, every case under 2 s?
+"$ROOT/build/lugal" "$ROOT/bench/untangle_100k.lua"
 # smoothing (issue 4): local against global, two sizes
 "$ROOT/build/lugal" "$ROOT/bench/smooth.lua"
 "$ROOT/build/lugal" "$ROOT/bench/smooth.lua" 100 16

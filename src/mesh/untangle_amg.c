@@ -493,3 +493,63 @@ void ut_amg_apply(ut_amg *A, const double *r, double *z) {
   if (A->nlev == 1) { coarsest_solve(A, r, z); return; }
   vcycle(A, 0, r, z);
 }
+
+int ut_amg_pcg(const ut_bsr *P, double *val, int n, int d, const double *b, double *x, int maxit, double tol,
+               int *iters, double *res) {
+  long m = (long)n * d;
+  int dd = d * d, status = 1, it = 0;
+  ut_amg A;
+  memset(&A, 0, sizeof A);
+  int *dpos = malloc(sizeof(int) * ((size_t)n + 1));
+  double *dinv = malloc(sizeof(double) * ((size_t)n * dd + 1)), *r = malloc(sizeof(double) * (m + 1)),
+         *z = malloc(sizeof(double) * (m + 1)), *p = malloc(sizeof(double) * (m + 1)), *q = malloc(sizeof(double) * (m + 1)),
+         *part = malloc(sizeof(double) * ((size_t)m / UT_DOT_CHUNK + 2));
+  *iters = 0;
+  *res = 0;
+  if (!dpos || !dinv || !r || !z || !p || !q || !part) goto done;
+  for (int i = 0; i < n; i++) {
+    int k = P->off[i];
+    while (k < P->off[i + 1] && P->col[k] != i) k++;
+    if (k == P->off[i + 1]) goto done; /* every row holds its diagonal */
+    dpos[i] = k;
+  }
+  ut_block_jacobi(val, dpos, n, d, dinv);
+  if (ut_amg_build(&A, P, n, d)) goto done;
+  ut_amg_values(&A, val, dinv);
+  status = 2;
+  double bn = sqrt(ut_dot(b, b, m, part)), lim = tol * fmax(bn, 1e-300), rz, rn;
+  ut_bsr_mult(P, val, n, d, x, q);
+  {
+    UT_PAR_FOR
+    for (long i = 0; i < m; i++) r[i] = b[i] - q[i];
+  }
+  rn = sqrt(ut_dot(r, r, m, part));
+  if (rn <= lim) { status = 0; goto report; }
+  ut_amg_apply(&A, r, z);
+  memcpy(p, z, sizeof(double) * (size_t)m);
+  rz = ut_dot(r, z, m, part);
+  while (it < maxit) {
+    ut_bsr_mult(P, val, n, d, p, q);
+    double pq = ut_dot(p, q, m, part);
+    if (!(pq > 0)) break;
+    double al = rz / pq;
+    UT_PAR_FOR
+    for (long i = 0; i < m; i++) { x[i] += al * p[i]; r[i] -= al * q[i]; }
+    it++;
+    rn = sqrt(ut_dot(r, r, m, part));
+    if (rn <= lim) { status = 0; break; }
+    ut_amg_apply(&A, r, z);
+    /* flexible (the K-cycle is not a fixed linear map): β from z·(r_new − r_old) = −α z·q */
+    double be = -al * ut_dot(z, q, m, part) / rz;
+    rz = ut_dot(r, z, m, part);
+    UT_PAR_FOR
+    for (long i = 0; i < m; i++) p[i] = z[i] + be * p[i];
+  }
+report:
+  *iters = it;
+  *res = bn > 0 ? rn / bn : rn;
+done:
+  ut_amg_free(&A);
+  free(dpos); free(dinv); free(r); free(z); free(p); free(q); free(part);
+  return status;
+}

@@ -3,7 +3,7 @@
  * corners finite): each step solves H p = −g, H the energy's Hessian in the free
  * vertices with every corner's part made positive semidefinite (ut_energy_hessian), by
  * conjugate gradients preconditioned with H's diagonal d×d blocks (block Jacobi) or, once
- * those need more than AMG_SWITCH_ITS iterations on a mesh of AMG_MIN_ROWS free vertices or
+ * those need more than AMG_SWITCH_ITS iterations on a mesh of UT_AMG_MIN_ROWS free vertices or
  * more, with the aggregation multigrid of untangle_amg.c, to the relative
  * residual min(1/2, max(1/10, sqrt(|g|/|g₀|))) (an inexact Newton method's forcing term,
  * Eisenstat and Walker 1996), then backtracks on the energy (Armijo; at ε = 0 the barrier makes every
@@ -80,7 +80,6 @@ static int build_pattern(const ctx *C, const int *fidx, const int *freev, int nf
 }
 
 /* the preconditioner: the multigrid above this many free vertices, block Jacobi below */
-#define AMG_MIN_ROWS 32768
 #define AMG_SWITCH_ITS 40
 #define PRECOND(r, z) (use_amg ? ut_amg_apply(&amg, r, z) : ut_block_apply(dinv, nfree, d, r, z))
 
@@ -123,7 +122,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
    * earlier one took it: the same mesh and pattern, and the same (tenfold) tolerance, which
    * block Jacobi's first steps, back at 1e-5, had met on the Tutte-started 160 × 500 strip
    * (160 000 triangles) with its minimum at 0.0131 instead of 0.0197 (bench/RESULTS.md) */
-  if (o->amg_used && *o->amg_used && nfree >= AMG_MIN_ROWS && !o->no_multigrid) {
+  if (o->amg_used && *o->amg_used && nfree >= UT_AMG_MIN_ROWS && !o->no_multigrid) {
     if (ut_amg_build(&amg, &P, nfree, d)) { ut_amg_free(&amg); amg_failed = 1; }
     else use_amg = 1;
   }
@@ -167,7 +166,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
      * Block Jacobi's count grows with the mesh where the error is smooth (a million-triangle
      * spiral: 50–240 per step), while perturbed grids, whose error is local, need few and
      * were faster without the multigrid's five products per cycle */
-    if (!use_amg && !amg_failed && k > AMG_SWITCH_ITS && nfree >= AMG_MIN_ROWS && !o->no_multigrid) {
+    if (!use_amg && !amg_failed && k > AMG_SWITCH_ITS && nfree >= UT_AMG_MIN_ROWS && !o->no_multigrid) {
       if (ut_amg_build(&amg, &P, nfree, d)) { ut_amg_free(&amg); amg_failed = 1; }
       else {
         use_amg = 1;

@@ -8,11 +8,12 @@
  * Checks: the multigrid solves to a 1e-8 relative residual in a count of iterations that
  * grows little with n, where block Jacobi's grows about in proportion to n; the solution solves the system
  * (its residual recomputed); coarse levels are built; the result has the same bits on 1, 2
- * and 3 threads. */
+ * and 3 threads. ut_amg_pcg, the same solve with its own hierarchy, on fresh matrices. */
 #include "../../src/mesh/untangle_int.h"
 
 #include "check.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 #ifdef _OPENMP
@@ -143,8 +144,31 @@ static void run(int n, int d, int *its_amg, int *its_bj, int *levels) {
   bmat_free(&A);
 }
 
+/* ut_amg_pcg (the untangler's harmonic restarts of large pieces): from x = 0 to a 1e-8
+ * relative residual, recomputed here, in few iterations; with too few it says so */
+static void run_pcg(int n, int d, int maxits) {
+  bmat A;
+  build(&A, n, d);
+  long nn = (long)A.nrow * A.d;
+  double *b = malloc(sizeof(double) * nn), *x = calloc(nn, sizeof(double)), res;
+  unsigned s = 11;
+  for (long i = 0; i < nn; i++) { s = s * 1103515245u + 12345u; b[i] = (double)((s >> 8) & 0xffff) / 65536.0 - 0.5; }
+  int its, st = ut_amg_pcg(&A.P, A.val, A.nrow, d, b, x, 1000, 1e-8, &its, &res);
+  printf("ut_amg_pcg n %d d %d: status %d, %d iterations, residual %.3g\n", n, d, st, its, res);
+  CHECK(st == 0 && its > 0 && its <= maxits && res <= 1e-8 && residual(&A, b, x) <= 1.01e-8,
+        "ut_amg_pcg n %d d %d: status %d, %d iterations (at most %d), residual %.3g", n, d, st, its, maxits, residual(&A, b, x));
+  memset(x, 0, sizeof(double) * nn);
+  st = ut_amg_pcg(&A.P, A.val, A.nrow, d, b, x, 3, 1e-8, &its, &res);
+  CHECK(st == 2 && its == 3 && res > 1e-8 && res < 1, "ut_amg_pcg n %d d %d, 3 iterations: status %d, %d, residual %.3g", n, d,
+        st, its, res);
+  free(b); free(x);
+  bmat_free(&A);
+}
+
 int main(void) {
   int a1, j1, l1, a2, j2, l2;
+  run_pcg(256, 2, 60);
+  run_pcg(40, 3, 25);
   run(64, 2, &a1, &j1, &l1);
   run(256, 2, &a2, &j2, &l2);
   printf("2D: n 64: multigrid %d iterations (%d levels), block Jacobi %d; n 256: %d (%d levels), %d\n", a1, l1, j1, a2, l2, j2);

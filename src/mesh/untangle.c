@@ -382,40 +382,43 @@ int ut_cells_around(const ctx *C, work *W, const int *freev, int nfree) {
  * The operator is assembled once (CSR over the free vertices, a row per vertex built from
  * its cells, so a shared edge is one entry), then Jacobi-preconditioned CG solves one
  * component at a time; the fixed neighbours' values go into the right-hand sides. */
-/* laplace_solve's system (rows rp/col/val off the diagonal dg, right sides b, d per row) by
- * ut_amg_pcg from z's values: 0 done (z written, converged or not), 1 no multigrid */
+/* laplace_solve's system (rows rp/col/val off the diagonal dg; right sides b, d per row) by
+ * ut_amg_pcg, one hierarchy of the scalar operator for the d coordinates, from z's values:
+ * 0 done (z written, converged or not), 1 no multigrid */
 static int laplace_multigrid(int d, int nfree, const int *rp, const int *col, const double *val, const double *dg,
                              const double *b, double *z, const int *freev, int maxit, double tol, int *iters, double *res) {
-  int dd = d * d, status = 1;
-  size_t nb = (size_t)rp[nfree] + (size_t)nfree;
-  ut_bsr P = {malloc(sizeof(int) * ((size_t)nfree + 1)), malloc(sizeof(int) * (nb + 1))};
-  double *bv = calloc(nb * dd + 1, sizeof(double)), *x = malloc(sizeof(double) * ((size_t)nfree * d + 1));
-  if (!P.off || !P.col || !bv || !x) goto out;
+  int status = 1;
+  size_t nb = (size_t)rp[nfree] + (size_t)nfree, n = (size_t)nfree;
+  ut_bsr P = {malloc(sizeof(int) * (n + 1)), malloc(sizeof(int) * (nb + 1))};
+  double *v = malloc(sizeof(double) * (nb + 1)), *bs = malloc(sizeof(double) * (n * d + 1)),
+         *xs = malloc(sizeof(double) * (n * d + 1));
+  if (!P.off || !P.col || !v || !bs || !xs) goto out;
   P.off[0] = 0;
   for (int i = 0; i < nfree; i++) { /* the row's entries and its diagonal, by column (rows are short) */
     int o = P.off[i], len = 0;
-    double *v = bv;
     for (int k = rp[i] - 1; k < rp[i + 1]; k++) {
       int c = k < rp[i] ? i : col[k], j = len++;
       double w = k < rp[i] ? dg[i] : val[k];
-      while (j > 0 && P.col[o + j - 1] > c) {
+      for (; j > 0 && P.col[o + j - 1] > c; j--) {
         P.col[o + j] = P.col[o + j - 1];
-        for (int a = 0; a < d; a++) v[(size_t)(o + j) * dd + a * (d + 1)] = v[(size_t)(o + j - 1) * dd + a * (d + 1)];
-        j--;
+        v[o + j] = v[o + j - 1];
       }
       P.col[o + j] = c;
-      for (int a = 0; a < d; a++) v[(size_t)(o + j) * dd + a * (d + 1)] = w;
+      v[o + j] = w;
     }
     P.off[i + 1] = o + len;
   }
-  for (int i = 0; i < nfree; i++)
-    for (int a = 0; a < d; a++) x[(size_t)i * d + a] = z[(size_t)freev[i] * d + a];
-  if (ut_amg_pcg(&P, bv, nfree, d, b, x, maxit, tol, iters, res) == 1) goto out;
-  for (int i = 0; i < nfree; i++)
-    for (int a = 0; a < d; a++) z[(size_t)freev[i] * d + a] = x[(size_t)i * d + a];
+  for (size_t i = 0; i < n; i++)
+    for (int a = 0; a < d; a++) {
+      bs[(size_t)a * n + i] = b[i * d + a];
+      xs[(size_t)a * n + i] = z[(size_t)freev[i] * d + a];
+    }
+  if (ut_amg_pcg(&P, v, nfree, 1, d, bs, xs, maxit, tol, iters, res) == 1) goto out;
+  for (size_t i = 0; i < n; i++)
+    for (int a = 0; a < d; a++) z[(size_t)freev[i] * d + a] = xs[(size_t)a * n + i];
   status = 0;
 out:
-  free(P.off); free(P.col); free(bv); free(x);
+  free(P.off); free(P.col); free(v); free(bs); free(xs);
   return status;
 }
 
@@ -469,9 +472,10 @@ static int laplace_solve(const ctx *C, work *W, double *z, const int *freev, int
     }
   }
   rp[nfree] = (int)nnz;
-  /* large pieces: all components at once on the multigrid (the operator ⊗ the d×d identity);
-   * Jacobi's iterations grow with the piece (the random star's whole interior, 101 761
-   * vertices: 710 iterations, 1.0 s of a 1.6 s untangle) */
+  /* large pieces on the multigrid of the scalar operator: Jacobi's iterations grow with the
+   * piece (the random star's whole interior, 101 761 vertices: 710 iterations, 1.0 s of a
+   * 1.6 s untangle). The operator ⊗ the d×d identity in d×d blocks cost 4–9 times the memory
+   * traffic: the twisted million-tetrahedron bar's restarts took 4 s more than by Jacobi */
   if (nfree >= UT_AMG_MIN_ROWS && d >= 2 && !laplace_multigrid(d, nfree, rp, col, val, dg, b, z, freev, maxit, tol, iters, res))
     goto done;
 #define SPMV(in, out)                                              \

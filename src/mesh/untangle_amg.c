@@ -52,20 +52,24 @@
       }                                                                                              \
     }                                                                                                \
   }
+BSR_MULT_D(bsr_mult_1, double, 1)
 BSR_MULT_D(bsr_mult_2, double, 2)
 BSR_MULT_D(bsr_mult_3, double, 3)
+BSR_MULT_D(bsr_mult_f1, float, 1)
 BSR_MULT_D(bsr_mult_f2, float, 2)
 BSR_MULT_D(bsr_mult_f3, float, 3)
 
-/* d is 2 or 3: smoothing refuses intervals (smooth.c) */
+/* d is 1 (the untangler's harmonic systems), 2 or 3 (the smoother's Hessians) */
 void ut_bsr_mult(const ut_bsr *P, const double *val, int nrow, int d, const double *x, double *y) {
-  if (d == 2) bsr_mult_2(P, val, nrow, x, y);
+  if (d == 1) bsr_mult_1(P, val, nrow, x, y);
+  else if (d == 2) bsr_mult_2(P, val, nrow, x, y);
   else bsr_mult_3(P, val, nrow, x, y);
 }
 
 /* the cycle's products in single precision */
 static void bsr_mult_f(const ut_bsr *P, const float *val, int nrow, int d, const double *x, double *y) {
-  if (d == 2) bsr_mult_f2(P, val, nrow, x, y);
+  if (d == 1) bsr_mult_f1(P, val, nrow, x, y);
+  else if (d == 2) bsr_mult_f2(P, val, nrow, x, y);
   else bsr_mult_f3(P, val, nrow, x, y);
 }
 
@@ -86,7 +90,10 @@ void ut_block_jacobi(double *val, const int *dpos, int nrow, int d, double *dinv
     double mu = tr > 0 ? 1e-10 * tr / d : 1e-300;
     for (int a = 0; a < d; a++) b[a * d + a] += mu;
     double det;
-    if (d == 2) {
+    if (d == 1) {
+      det = b[0];
+      w[0] = 1 / det;
+    } else if (d == 2) {
       det = b[0] * b[3] - b[1] * b[2];
       w[0] = b[3] / det; w[1] = -b[1] / det; w[2] = -b[2] / det; w[3] = b[0] / det;
     } else {
@@ -116,11 +123,13 @@ void ut_block_jacobi(double *val, const int *dpos, int nrow, int d, double *dinv
       }                                                                                    \
     }                                                                                      \
   }
+BLOCK_APPLY_D(block_apply_1, 1)
 BLOCK_APPLY_D(block_apply_2, 2)
 BLOCK_APPLY_D(block_apply_3, 3)
 
 void ut_block_apply(const double *dinv, int nrow, int d, const double *r, double *z) {
-  if (d == 2) block_apply_2(dinv, nrow, r, z);
+  if (d == 1) block_apply_1(dinv, nrow, r, z);
+  else if (d == 2) block_apply_2(dinv, nrow, r, z);
   else block_apply_3(dinv, nrow, r, z);
 }
 
@@ -305,11 +314,12 @@ void ut_amg_free(ut_amg *A) {
     }                                                                            \
     return lam > 0 && isfinite(lam) ? 4.0 / (3.0 * lam) : 0.5;                   \
   }
+JACOBI_DAMPING_D(jacobi_damping_1, 1)
 JACOBI_DAMPING_D(jacobi_damping_2, 2)
 JACOBI_DAMPING_D(jacobi_damping_3, 3)
 
 static double jacobi_damping(const ut_amg_level *L, int d) {
-  return d == 2 ? jacobi_damping_2(L) : jacobi_damping_3(L);
+  return d == 1 ? jacobi_damping_1(L) : d == 2 ? jacobi_damping_2(L) : jacobi_damping_3(L);
 }
 
 /* the coarsest level's matrix, dense, factored by Cholesky with a growing diagonal shift
@@ -494,19 +504,60 @@ void ut_amg_apply(ut_amg *A, const double *r, double *z) {
   vcycle(A, 0, r, z);
 }
 
-int ut_amg_pcg(const ut_bsr *P, double *val, int n, int d, const double *b, double *x, int maxit, double tol,
+/* one right side of ut_amg_pcg (w: its four work vectors r, z, p, q): 1 when converged;
+ * its iterations and relative residual in *its and *rel */
+static int pcg_solve(ut_amg *A, const ut_bsr *P, const double *val, int n, int d, const double *b, double *x, int maxit,
+                     double tol, double *part, double *w[4], int *its, double *rel) {
+  long m = (long)n * d;
+  double *r = w[0], *z = w[1], *p = w[2], *q = w[3];
+  double bn = sqrt(ut_dot(b, b, m, part)), lim = tol * fmax(bn, 1e-300), rz, rn;
+  int it = 0, conv;
+  ut_bsr_mult(P, val, n, d, x, q);
+  UT_PAR_FOR
+  for (long i = 0; i < m; i++) r[i] = b[i] - q[i];
+  rn = sqrt(ut_dot(r, r, m, part));
+  conv = rn <= lim;
+  if (!conv) {
+    ut_amg_apply(A, r, z);
+    memcpy(p, z, sizeof(double) * (size_t)m);
+    rz = ut_dot(r, z, m, part);
+    while (it < maxit) {
+      ut_bsr_mult(P, val, n, d, p, q);
+      double pq = ut_dot(p, q, m, part);
+      if (!(pq > 0)) break;
+      double al = rz / pq;
+      UT_PAR_FOR
+      for (long i = 0; i < m; i++) { x[i] += al * p[i]; r[i] -= al * q[i]; }
+      it++;
+      rn = sqrt(ut_dot(r, r, m, part));
+      if ((conv = rn <= lim)) break;
+      ut_amg_apply(A, r, z);
+      /* flexible (the K-cycle is not a fixed linear map): β from z·(r_new − r_old) = −α z·q */
+      double be = -al * ut_dot(z, q, m, part) / rz;
+      rz = ut_dot(r, z, m, part);
+      UT_PAR_FOR
+      for (long i = 0; i < m; i++) p[i] = z[i] + be * p[i];
+    }
+  }
+  *its = it;
+  *rel = bn > 0 ? rn / bn : rn;
+  return conv;
+}
+
+int ut_amg_pcg(const ut_bsr *P, double *val, int n, int d, int nrhs, const double *bs, double *xs, int maxit, double tol,
                int *iters, double *res) {
   long m = (long)n * d;
-  int dd = d * d, status = 1, it = 0;
+  int dd = d * d, status = 1;
   ut_amg A;
   memset(&A, 0, sizeof A);
   int *dpos = malloc(sizeof(int) * ((size_t)n + 1));
-  double *dinv = malloc(sizeof(double) * ((size_t)n * dd + 1)), *r = malloc(sizeof(double) * (m + 1)),
-         *z = malloc(sizeof(double) * (m + 1)), *p = malloc(sizeof(double) * (m + 1)), *q = malloc(sizeof(double) * (m + 1)),
+  double *dinv = malloc(sizeof(double) * ((size_t)n * dd + 1)), *w[4],
          *part = malloc(sizeof(double) * ((size_t)m / UT_DOT_CHUNK + 2));
+  int nw = 0;
+  for (; nw < 4 && (w[nw] = malloc(sizeof(double) * (m + 1))); nw++) {}
   *iters = 0;
   *res = 0;
-  if (!dpos || !dinv || !r || !z || !p || !q || !part) goto done;
+  if (!dpos || !dinv || !part || nw < 4) goto done;
   for (int i = 0; i < n; i++) {
     int k = P->off[i];
     while (k < P->off[i + 1] && P->col[k] != i) k++;
@@ -516,40 +567,17 @@ int ut_amg_pcg(const ut_bsr *P, double *val, int n, int d, const double *b, doub
   ut_block_jacobi(val, dpos, n, d, dinv);
   if (ut_amg_build(&A, P, n, d)) goto done;
   ut_amg_values(&A, val, dinv);
-  status = 2;
-  double bn = sqrt(ut_dot(b, b, m, part)), lim = tol * fmax(bn, 1e-300), rz, rn;
-  ut_bsr_mult(P, val, n, d, x, q);
-  {
-    UT_PAR_FOR
-    for (long i = 0; i < m; i++) r[i] = b[i] - q[i];
+  status = 0;
+  for (int k = 0; k < nrhs; k++) { /* one hierarchy for every right side */
+    int its;
+    double rel;
+    if (!pcg_solve(&A, P, val, n, d, bs + (size_t)k * m, xs + (size_t)k * m, maxit, tol, part, w, &its, &rel)) status = 2;
+    if (its > *iters) *iters = its;
+    *res = fmax(*res, rel);
   }
-  rn = sqrt(ut_dot(r, r, m, part));
-  if (rn <= lim) { status = 0; goto report; }
-  ut_amg_apply(&A, r, z);
-  memcpy(p, z, sizeof(double) * (size_t)m);
-  rz = ut_dot(r, z, m, part);
-  while (it < maxit) {
-    ut_bsr_mult(P, val, n, d, p, q);
-    double pq = ut_dot(p, q, m, part);
-    if (!(pq > 0)) break;
-    double al = rz / pq;
-    UT_PAR_FOR
-    for (long i = 0; i < m; i++) { x[i] += al * p[i]; r[i] -= al * q[i]; }
-    it++;
-    rn = sqrt(ut_dot(r, r, m, part));
-    if (rn <= lim) { status = 0; break; }
-    ut_amg_apply(&A, r, z);
-    /* flexible (the K-cycle is not a fixed linear map): β from z·(r_new − r_old) = −α z·q */
-    double be = -al * ut_dot(z, q, m, part) / rz;
-    rz = ut_dot(r, z, m, part);
-    UT_PAR_FOR
-    for (long i = 0; i < m; i++) p[i] = z[i] + be * p[i];
-  }
-report:
-  *iters = it;
-  *res = bn > 0 ? rn / bn : rn;
 done:
   ut_amg_free(&A);
-  free(dpos); free(dinv); free(r); free(z); free(p); free(q); free(part);
+  for (int k = 0; k < nw; k++) free(w[k]);
+  free(dpos); free(dinv); free(part);
   return status;
 }

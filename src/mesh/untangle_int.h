@@ -171,11 +171,13 @@ void ut_amg_apply(ut_amg *A, const double *r, double *z);
 void ut_amg_free(ut_amg *A);
 /* the multigrid above this many block rows, block Jacobi (or Jacobi) below */
 #define UT_AMG_MIN_ROWS 32768
-/* A x = b on pattern P (n block rows of d, val: its blocks, whose diagonal gets block
- * Jacobi's shift) by flexible conjugate gradients on the multigrid, from x, until the
- * residual is at most tol |b|: 0 solved, 1 out of memory or no hierarchy (x unchanged), 2 not
- * converged in maxit iterations (x the last iterate); iters and res (|r| / |b|) reported */
-int ut_amg_pcg(const ut_bsr *P, double *val, int n, int d, const double *b, double *x, int maxit, double tol,
+/* A x = b on pattern P (n block rows of d = 1, 2 or 3; val: its blocks, whose diagonal gets
+ * block Jacobi's shift) for nrhs right sides (bs and xs: nrhs vectors of n d, one after the
+ * other) by flexible conjugate gradients on one multigrid hierarchy, from x, until the
+ * residual is at most tol |b|: 0 solved, 1 out of memory or no hierarchy (x unchanged), 2 one
+ * not converged in maxit iterations (x the last iterate); iters (the most) and res (the
+ * largest |r| / |b|) reported */
+int ut_amg_pcg(const ut_bsr *P, double *val, int n, int d, int nrhs, const double *bs, double *xs, int maxit, double tol,
                int *iters, double *res);
 /* a · b in fixed chunks of UT_DOT_CHUNK entries summed in order (threads over the chunks
  * when n is large): the same bits for any thread count; part holds n / UT_DOT_CHUNK + 1 */

@@ -153,15 +153,43 @@ static void run_pcg(int n, int d, int maxits) {
   double *b = malloc(sizeof(double) * nn), *x = calloc(nn, sizeof(double)), res;
   unsigned s = 11;
   for (long i = 0; i < nn; i++) { s = s * 1103515245u + 12345u; b[i] = (double)((s >> 8) & 0xffff) / 65536.0 - 0.5; }
-  int its, st = ut_amg_pcg(&A.P, A.val, A.nrow, d, b, x, 1000, 1e-8, &its, &res);
+  int its, st = ut_amg_pcg(&A.P, A.val, A.nrow, d, 1, b, x, 1000, 1e-8, &its, &res);
   printf("ut_amg_pcg n %d d %d: status %d, %d iterations, residual %.3g\n", n, d, st, its, res);
   CHECK(st == 0 && its > 0 && its <= maxits && res <= 1e-8 && residual(&A, b, x) <= 1.01e-8,
         "ut_amg_pcg n %d d %d: status %d, %d iterations (at most %d), residual %.3g", n, d, st, its, maxits, residual(&A, b, x));
   memset(x, 0, sizeof(double) * nn);
-  st = ut_amg_pcg(&A.P, A.val, A.nrow, d, b, x, 3, 1e-8, &its, &res);
+  st = ut_amg_pcg(&A.P, A.val, A.nrow, d, 1, b, x, 3, 1e-8, &its, &res);
   CHECK(st == 2 && its == 3 && res > 1e-8 && res < 1, "ut_amg_pcg n %d d %d, 3 iterations: status %d, %d, residual %.3g", n, d,
         st, its, res);
   free(b); free(x);
+  bmat_free(&A);
+}
+
+/* the scalar operator (d = 1: each 2×2 block's first entry, an anisotropic 5-point
+ * Laplacian) with two right sides on one hierarchy, as the untangler's harmonic systems */
+static void run_pcg_scalar(int n, int maxits) {
+  bmat A;
+  build(&A, n, 2);
+  int nrow = A.nrow, nb = A.P.off[nrow];
+  double *v = malloc(sizeof(double) * nb), *b = malloc(sizeof(double) * 2 * nrow), *x = calloc(2 * (size_t)nrow, sizeof(double)),
+         *y = malloc(sizeof(double) * nrow), res;
+  for (int q = 0; q < nb; q++) v[q] = A.val[(size_t)q * 4];
+  unsigned s = 5;
+  for (int i = 0; i < 2 * nrow; i++) { s = s * 1103515245u + 12345u; b[i] = (double)((s >> 8) & 0xffff) / 65536.0 - 0.5; }
+  int its, st = ut_amg_pcg(&A.P, v, nrow, 1, 2, b, x, 1000, 1e-8, &its, &res);
+  printf("ut_amg_pcg n %d d 1, two right sides: status %d, at most %d iterations, residual %.3g\n", n, st, its, res);
+  CHECK(st == 0 && its > 0 && its <= maxits && res <= 1e-8, "scalar n %d: status %d, %d iterations, residual %.3g", n, st, its, res);
+  for (int k = 0; k < 2; k++) {
+    double rr = 0, bb = 0;
+    ut_bsr_mult(&A.P, v, nrow, 1, x + (size_t)k * nrow, y);
+    for (int i = 0; i < nrow; i++) {
+      double e = b[(size_t)k * nrow + i] - y[i];
+      rr += e * e;
+      bb += b[(size_t)k * nrow + i] * b[(size_t)k * nrow + i];
+    }
+    CHECK(sqrt(rr / bb) <= 1.01e-8, "scalar n %d, right side %d: residual recomputed %.3g", n, k, sqrt(rr / bb));
+  }
+  free(v); free(b); free(x); free(y);
   bmat_free(&A);
 }
 
@@ -169,6 +197,7 @@ int main(void) {
   int a1, j1, l1, a2, j2, l2;
   run_pcg(256, 2, 60);
   run_pcg(40, 3, 25);
+  run_pcg_scalar(256, 60);
   run(64, 2, &a1, &j1, &l1);
   run(256, 2, &a2, &j2, &l2);
   printf("2D: n 64: multigrid %d iterations (%d levels), block Jacobi %d; n 256: %d (%d levels), %d\n", a1, l1, j1, a2, l2, j2);

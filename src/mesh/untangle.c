@@ -377,11 +377,6 @@ int ut_cells_around(const ctx *C, work *W, const int *freev, int nfree) {
   return n;
 }
 
-/* Σ_k σ_0k (z_k − z_0) = 0 at the free vertices (eq. 1.2 of the morphing paper), z given
- * elsewhere; σ_0k = Σ τ_j over the cells j that have the edge 0k (τ = 1 when tau is NULL).
- * The operator is assembled once (CSR over the free vertices, a row per vertex built from
- * its cells, so a shared edge is one entry), then Jacobi-preconditioned CG solves one
- * component at a time; the fixed neighbours' values go into the right-hand sides. */
 /* laplace_solve's system (rows rp/col/val off the diagonal dg; right sides b, d per row) by
  * ut_amg_pcg, one hierarchy of the scalar operator for the d coordinates, from z's values:
  * 0 done (z written, converged or not), 1 no multigrid */
@@ -422,6 +417,12 @@ out:
   return status;
 }
 
+/* Σ_k σ_0k (z_k − z_0) = 0 at the free vertices (eq. 1.2 of the morphing paper), z given
+ * elsewhere; σ_0k = Σ τ_j over the cells j that have the edge 0k (τ = 1 when tau is NULL).
+ * The operator is assembled once (CSR over the free vertices, a row per vertex built from
+ * its cells, so a shared edge is one entry), then Jacobi-preconditioned CG solves one
+ * component at a time (on a piece of UT_AMG_MIN_ROWS free vertices or more, the multigrid's
+ * conjugate gradients above); the fixed neighbours' values go into the right-hand sides. */
 static int laplace_solve(const ctx *C, work *W, double *z, const int *freev, int nfree, const double *tau,
                          int maxit, double tol, int *iters, double *res) {
   int d = C->d, ne = cell_nedges(C->m->type), status = 0;
@@ -476,7 +477,7 @@ static int laplace_solve(const ctx *C, work *W, double *z, const int *freev, int
    * piece (the random star's whole interior, 101 761 vertices: 710 iterations, 1.0 s of a
    * 1.6 s untangle). The operator ⊗ the d×d identity in d×d blocks cost 4–9 times the memory
    * traffic: the twisted million-tetrahedron bar's restarts took 4 s more than by Jacobi */
-  if (nfree >= UT_AMG_MIN_ROWS && d >= 2 && !laplace_multigrid(d, nfree, rp, col, val, dg, b, z, freev, maxit, tol, iters, res))
+  if (nfree >= UT_AMG_MIN_ROWS && !laplace_multigrid(d, nfree, rp, col, val, dg, b, z, freev, maxit, tol, iters, res))
     goto done;
 #define SPMV(in, out)                                              \
   for (int i = 0; i < nfree; i++) {                                \

@@ -504,80 +504,74 @@ void ut_amg_apply(ut_amg *A, const double *r, double *z) {
   vcycle(A, 0, r, z);
 }
 
-/* one right side of ut_amg_pcg (w: its four work vectors r, z, p, q): 1 when converged;
- * its iterations and relative residual in *its and *rel */
-static int pcg_solve(ut_amg *A, const ut_bsr *P, const double *val, int n, int d, const double *b, double *x, int maxit,
-                     double tol, double *part, double *w[4], int *its, double *rel) {
+int ut_fcg(const ut_bsr *P, const double *val, int n, int d, ut_amg *M, const double *dinv, const double *b, double *x,
+           int x0, int maxit, double lim2, double *part, double *w[4], int *conv) {
   long m = (long)n * d;
-  double *r = w[0], *z = w[1], *p = w[2], *q = w[3];
-  double bn = sqrt(ut_dot(b, b, m, part)), lim = tol * fmax(bn, 1e-300), rz, rn;
-  int it = 0, conv;
-  ut_bsr_mult(P, val, n, d, x, q);
-  UT_PAR_FOR
-  for (long i = 0; i < m; i++) r[i] = b[i] - q[i];
-  rn = sqrt(ut_dot(r, r, m, part));
-  conv = rn <= lim;
-  if (!conv) {
-    ut_amg_apply(A, r, z);
-    memcpy(p, z, sizeof(double) * (size_t)m);
-    rz = ut_dot(r, z, m, part);
-    while (it < maxit) {
-      ut_bsr_mult(P, val, n, d, p, q);
-      double pq = ut_dot(p, q, m, part);
-      if (!(pq > 0)) break;
-      double al = rz / pq;
-      UT_PAR_FOR
-      for (long i = 0; i < m; i++) { x[i] += al * p[i]; r[i] -= al * q[i]; }
-      it++;
-      rn = sqrt(ut_dot(r, r, m, part));
-      if ((conv = rn <= lim)) break;
-      ut_amg_apply(A, r, z);
-      /* flexible (the K-cycle is not a fixed linear map): β from z·(r_new − r_old) = −α z·q */
-      double be = -al * ut_dot(z, q, m, part) / rz;
-      rz = ut_dot(r, z, m, part);
-      UT_PAR_FOR
-      for (long i = 0; i < m; i++) p[i] = z[i] + be * p[i];
-    }
+  double *r = w[0], *z = w[1], *p = w[2], *q = w[3], rz;
+  int it = 0;
+  if (x0) {
+    UT_PAR_FOR
+    for (long i = 0; i < m; i++) { x[i] = 0; r[i] = b[i]; }
+  } else {
+    ut_bsr_mult(P, val, n, d, x, q);
+    UT_PAR_FOR
+    for (long i = 0; i < m; i++) r[i] = b[i] - q[i];
   }
-  *its = it;
-  *rel = bn > 0 ? rn / bn : rn;
-  return conv;
+  if ((*conv = ut_dot(r, r, m, part) <= lim2)) return 0;
+#define PRECOND(rr, zz) (M ? ut_amg_apply(M, rr, zz) : ut_block_apply(dinv, n, d, rr, zz))
+  PRECOND(r, z);
+  memcpy(p, z, sizeof(double) * (size_t)m);
+  rz = ut_dot(r, z, m, part);
+  while (it < maxit) {
+    ut_bsr_mult(P, val, n, d, p, q);
+    double pq = ut_dot(p, q, m, part);
+    if (!(pq > 0)) break;
+    double al = rz / pq;
+    UT_PAR_FOR
+    for (long i = 0; i < m; i++) { x[i] += al * p[i]; r[i] -= al * q[i]; }
+    it++;
+    if ((*conv = ut_dot(r, r, m, part) <= lim2)) break;
+    PRECOND(r, z);
+    /* flexible with the multigrid (its K-cycle is not a fixed linear map): β from
+     * z·(r_new − r_old) = −α z·q */
+    double rz1 = ut_dot(r, z, m, part), be = M ? -al * ut_dot(z, q, m, part) / rz : rz1 / rz;
+    rz = rz1;
+    UT_PAR_FOR
+    for (long i = 0; i < m; i++) p[i] = z[i] + be * p[i];
+  }
+#undef PRECOND
+  return it;
 }
 
 int ut_amg_pcg(const ut_bsr *P, double *val, int n, int d, int nrhs, const double *bs, double *xs, int maxit, double tol,
                int *iters, double *res) {
   long m = (long)n * d;
-  int dd = d * d, status = 1;
+  int status = 1;
   ut_amg A;
   memset(&A, 0, sizeof A);
-  int *dpos = malloc(sizeof(int) * ((size_t)n + 1));
-  double *dinv = malloc(sizeof(double) * ((size_t)n * dd + 1)), *w[4],
+  double *dinv = malloc(sizeof(double) * ((size_t)n * d * d + 1)), *w[4],
          *part = malloc(sizeof(double) * ((size_t)m / UT_DOT_CHUNK + 2));
   int nw = 0;
   for (; nw < 4 && (w[nw] = malloc(sizeof(double) * (m + 1))); nw++) {}
   *iters = 0;
   *res = 0;
-  if (!dpos || !dinv || !part || nw < 4) goto done;
-  for (int i = 0; i < n; i++) {
-    int k = P->off[i];
-    while (k < P->off[i + 1] && P->col[k] != i) k++;
-    if (k == P->off[i + 1]) goto done; /* every row holds its diagonal */
-    dpos[i] = k;
-  }
-  ut_block_jacobi(val, dpos, n, d, dinv);
-  if (ut_amg_build(&A, P, n, d)) goto done;
+  /* the hierarchy first: its finest level finds each row's diagonal block (or fails) */
+  if (!dinv || !part || nw < 4 || ut_amg_build(&A, P, n, d)) goto done;
+  ut_block_jacobi(val, A.L[0].dpos, n, d, dinv);
   ut_amg_values(&A, val, dinv);
   status = 0;
   for (int k = 0; k < nrhs; k++) { /* one hierarchy for every right side */
-    int its;
-    double rel;
-    if (!pcg_solve(&A, P, val, n, d, bs + (size_t)k * m, xs + (size_t)k * m, maxit, tol, part, w, &its, &rel)) status = 2;
+    const double *b = bs + (size_t)k * m;
+    double bn = sqrt(ut_dot(b, b, m, part)), lim = tol * fmax(bn, 1e-300);
+    int conv, its = ut_fcg(P, val, n, d, &A, dinv, b, xs + (size_t)k * m, 0, maxit, lim * lim, part, w, &conv);
+    double rn = sqrt(ut_dot(w[0], w[0], m, part));
+    if (!conv) status = 2;
     if (its > *iters) *iters = its;
-    *res = fmax(*res, rel);
+    *res = fmax(*res, bn > 0 ? rn / bn : rn);
   }
 done:
   ut_amg_free(&A);
   for (int k = 0; k < nw; k++) free(w[k]);
-  free(dpos); free(dinv); free(part);
+  free(dinv); free(part);
   return status;
 }

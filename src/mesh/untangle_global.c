@@ -675,27 +675,22 @@ static int chunk_touch(ut_energy_buf *b, int nfree, int n, int chunk, int slots_
   return 0;
 }
 
-/* row fk (the free vertex at corner kc's vertex k of cell vertices v) of the corner Hessian
- * h added into its blocks */
-static void add_row_blocks(const objective *o, const ut_bsr *P, double *val, const int *v, int kc, int k, int fk,
-                           const double *h) {
-  const ctx *C = o->C;
-  int d = C->d, nx = (d + 1) * d;
-  for (int m = 0; m <= d; m++) {
-    int fm = o->fidx[v[C->ct[kc][m]]];
-    if (fm < 0) continue;
-    double *blk = val + ut_bsr_find(P, fk, fm) * (size_t)(d * d);
-    for (int a = 0; a < d; a++)
-      for (int e = 0; e < d; e++) blk[a * d + e] += h[(k * d + a) * nx + m * d + e];
-  }
-}
-
 /* the block positions' memory limit (b->bpos: (d + 1) per slot, 64 bytes per tetrahedron, a
  * hexahedron's 512); above it each term finds its block in the row */
 #define BLOCKPOS_MAX ((size_t)256 << 20)
 /* the longest row the Hessian's gather sums on the stack (blocks; a vertex's neighbours and
  * itself: 7 in a regular triangle grid, 15 in a tetrahedral box, 27 in a hexahedral one) */
 #define ROW_BUF_BLOCKS 64
+
+/* the blocks of row fk (a free vertex of corner kc of cell vertices v) against the corner's
+ * vertices, in its row of P; −1 for a fixed vertex */
+static void row_positions(const objective *o, const ut_bsr *P, const int *v, int kc, int fk, int *bp) {
+  const ctx *C = o->C;
+  for (int m = 0; m <= C->d; m++) {
+    int fm = o->fidx[v[C->ct[kc][m]]];
+    bp[m] = fm < 0 ? -1 : (int)ut_bsr_find(P, fk, fm);
+  }
+}
 
 /* b->bpos for pattern P: the gather's search of each term's block in its row (a binary search
  * per block, mispredicted) cost more instructions than the corner Hessians themselves (a
@@ -714,11 +709,7 @@ static void block_positions(ut_energy_buf *b, const objective *o, const ut_bsr *
     for (int q = b->off[fi]; q < b->off[fi + 1]; q++) {
       size_t cq = (size_t)b->slot[q] / (size_t)(d + 1);
       int i = (int)(cq / (size_t)nk), kc = (int)(cq % (size_t)nk);
-      const int *v = cell_of(C, o->cells[i]);
-      for (int m = 0; m <= d; m++) {
-        int fm = o->fidx[v[C->ct[kc][m]]];
-        b->bpos[(size_t)q * (d + 1) + m] = fm < 0 ? -1 : (int)ut_bsr_find(P, fi, fm);
-      }
+      row_positions(o, P, cell_of(C, o->cells[i]), kc, fi, b->bpos + (size_t)q * (d + 1));
     }
 }
 
@@ -741,6 +732,17 @@ static inline void add_row_blocks_at(int d, double *val, const int *bp, int base
 #pragma GCC unroll 3
       for (int e = 0; e < d; e++) blk[a * d + e] += h[(k * d + a) * nx + m * d + e];
   }
+}
+
+/* row fk (the free vertex at corner kc's vertex k of cell vertices v) of the corner Hessian
+ * h added into its blocks, found in the row (without b->bpos) */
+static void add_row_blocks(const objective *o, const ut_bsr *P, double *val, const int *v, int kc, int k, int fk,
+                           const double *h) {
+  const ctx *C = o->C;
+  int bp[4];
+  row_positions(o, P, v, kc, fk, bp);
+  if (C->d == 2) add_row_blocks_at(2, val, bp, 0, k, h);
+  else add_row_blocks_at(3, val, bp, 0, k, h);
 }
 
 /* The projected Hessian of the energy in the free vertices' coordinates, d×d blocks on

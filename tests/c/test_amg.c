@@ -63,32 +63,15 @@ static void build(bmat *A, int n, int d) {
   }
 }
 
-/* flexible CG on A x = b from x = 0 to |r| ≤ 1e-8 |b|; iterations (−1: none converged) */
+/* ut_fcg on A x = b from x = 0 to |r| ≤ 1e-8 |b|; iterations (−1: none converged) */
 static int fcg(bmat *A, ut_amg *M, const double *dinv, const double *b, double *x) {
-  int d = A->d, nrow = A->nrow, its = -1;
-  long n = (long)nrow * d;
-  double *r = malloc(sizeof(double) * n), *z = malloc(sizeof(double) * n), *p = malloc(sizeof(double) * n),
-         *q = malloc(sizeof(double) * n), *part = malloc(sizeof(double) * (n / UT_DOT_CHUNK + 2));
-  memset(x, 0, sizeof(double) * n);
-  memcpy(r, b, sizeof(double) * n);
-  double bb = ut_dot(b, b, n, part);
-#define PREC(rr, zz) (M ? ut_amg_apply(M, rr, zz) : ut_block_apply(dinv, nrow, d, rr, zz))
-  PREC(r, z);
-  memcpy(p, z, sizeof(double) * n);
-  double rz = ut_dot(r, z, n, part);
-  for (int k = 0; k < 5000; k++) {
-    ut_bsr_mult(&A->P, A->val, nrow, d, p, q);
-    double al = rz / ut_dot(p, q, n, part);
-    for (long i = 0; i < n; i++) { x[i] += al * p[i]; r[i] -= al * q[i]; }
-    if (ut_dot(r, r, n, part) <= 1e-16 * bb) { its = k + 1; break; }
-    PREC(r, z);
-    double rz1 = ut_dot(r, z, n, part), be = -al * ut_dot(z, q, n, part) / rz;
-    rz = rz1;
-    for (long i = 0; i < n; i++) p[i] = z[i] + be * p[i];
-  }
-#undef PREC
-  free(r); free(z); free(p); free(q); free(part);
-  return its;
+  long n = (long)A->nrow * A->d;
+  double *w[4], *part = malloc(sizeof(double) * (n / UT_DOT_CHUNK + 2));
+  for (int k = 0; k < 4; k++) w[k] = malloc(sizeof(double) * n);
+  int conv, its = ut_fcg(&A->P, A->val, A->nrow, A->d, M, dinv, b, x, 1, 5000, 1e-16 * ut_dot(b, b, n, part), part, w, &conv);
+  for (int k = 0; k < 4; k++) free(w[k]);
+  free(part);
+  return conv ? its : -1;
 }
 
 /* |b − A x| / |b| */

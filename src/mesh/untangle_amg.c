@@ -4,9 +4,10 @@
  *
  * Block Jacobi's conjugate gradients need more iterations as the mesh grows (50–240 per
  * Newton step on a million-triangle spiral, three quarters of the smoother's time). The
- * multigrid keeps the count nearly flat: aggregates of a vertex and its neighbours (Vaněk's
- * plain aggregation on the Hessian's block graph, so the hierarchy is built once per Newton
- * run: the pattern does not change between steps), coarse matrices as sums of the fine
+ * multigrid keeps the count nearly flat: aggregates of a vertex and its strongly coupled
+ * neighbours (Vaněk's plain aggregation on the Hessian's block graph, its weak couplings
+ * dropped, built once per Newton run from the values of the step that builds it: the pattern
+ * does not change between steps, and the couplings' strengths little), coarse matrices as sums of the fine
  * blocks (the Galerkin product with piecewise constant prolongation, d×d identity blocks),
  * one damped block Jacobi sweep before and after each coarse correction, and on every coarse
  * level two flexible conjugate-gradient steps preconditioned by the next (Notay and
@@ -138,33 +139,78 @@ void ut_block_apply(const double *dinv, int nrow, int d, const double *r, double
 /* the coarsest level: at most this many block rows, solved by a dense Cholesky factor */
 #define AMG_COARSEST 200
 
-/* aggregates of the block graph P (n rows): a row none of whose neighbours is taken yet
- * starts an aggregate with all of them; a row left over joins the first neighbouring
- * aggregate of that first pass; what remains groups with its untaken neighbours. Returns
- * the number of aggregates */
-static int aggregate(const ut_bsr *P, int n, int *agg, int *first) {
+/* the strong couplings of a level's values: block q of row i, column j, is strong when its
+ * Frobenius norm is at least θ √(|A_ii| |A_jj|) (Vaněk, Mandel and Brezina's strength of
+ * connection, their θ = 0.08). A barrier's Hessian grows as 1/h² in a cell of size h, and a
+ * random star's untangled mesh mixes sizes: there aggregates across the weak couplings made
+ * the multigrid's conjugate gradients take 50–90 iterations per Newton step, 4–19 without
+ * them (bench/RESULTS.md); on the spirals' even cells every coupling is strong. A stronger
+ * θ = 0.25 left the star's coarsening stalled above the dense solve (block Jacobi kept) */
+#define AMG_STRENGTH 0.08
+static unsigned char *strength(const ut_bsr *P, const double *val, int n, int d, const int *dpos, double theta) {
+  size_t nb = (size_t)P->off[n];
+  int dd = d * d;
+  unsigned char *st = malloc(nb + 1);
+  double *nd = malloc(sizeof(double) * ((size_t)n + 1));
+  if (!st || !nd) { free(st); free(nd); return NULL; }
+  for (int i = 0; i < n; i++) {
+    const double *b = val + (size_t)dpos[i] * dd;
+    double t = 0;
+    for (int e = 0; e < dd; e++) t += b[e] * b[e];
+    nd[i] = sqrt(t);
+  }
+  for (int i = 0; i < n; i++)
+    for (int q = P->off[i]; q < P->off[i + 1]; q++) {
+      const double *b = val + (size_t)q * dd;
+      double t = 0;
+      for (int e = 0; e < dd; e++) t += b[e] * b[e];
+      st[q] = P->col[q] == i || t >= theta * theta * nd[i] * nd[P->col[q]];
+    }
+  free(nd);
+  return st;
+}
+
+/* aggregates of the block graph P (n rows), through its strong couplings (st; NULL: all):
+ * a row with a strong neighbour none of whose strong neighbours is taken yet starts an
+ * aggregate with all of them; a row left over joins the first strongly coupled aggregate of
+ * that first pass (a row without strong neighbours: the first coupled one); what remains
+ * groups with its untaken strong neighbours. Returns the number of aggregates */
+static int aggregate(const ut_bsr *P, int n, const unsigned char *st, int *agg, int *first) {
   int nc = 0;
+#define STRONG(q) (!st || st[q])
   for (int i = 0; i < n; i++) agg[i] = -1;
   for (int i = 0; i < n; i++) {
     if (agg[i] >= 0) continue;
-    int free = 1;
-    for (int q = P->off[i]; q < P->off[i + 1] && free; q++) free = agg[P->col[q]] < 0;
-    if (!free) continue;
-    for (int q = P->off[i]; q < P->off[i + 1]; q++) agg[P->col[q]] = nc;
+    int free = 1, nstrong = 0;
+    for (int q = P->off[i]; q < P->off[i + 1] && free; q++)
+      if (STRONG(q)) { free = agg[P->col[q]] < 0; nstrong++; }
+    if (!free || nstrong < 2) continue;
+    for (int q = P->off[i]; q < P->off[i + 1]; q++)
+      if (STRONG(q)) agg[P->col[q]] = nc;
     agg[i] = nc++;
   }
   memcpy(first, agg, sizeof(int) * (size_t)n);
   for (int i = 0; i < n; i++) {
     if (agg[i] >= 0) continue;
+    int any = -1;
     for (int q = P->off[i]; q < P->off[i + 1]; q++)
-      if (first[P->col[q]] >= 0) { agg[i] = first[P->col[q]]; break; }
+      if (first[P->col[q]] >= 0) {
+        if (STRONG(q)) { agg[i] = first[P->col[q]]; break; }
+        if (any < 0) any = first[P->col[q]];
+      }
+    if (agg[i] < 0) {
+      int isolated = 1;
+      for (int q = P->off[i]; q < P->off[i + 1] && isolated; q++) isolated = P->col[q] == i || !STRONG(q);
+      if (isolated) agg[i] = any;
+    }
   }
   for (int i = 0; i < n; i++) {
     if (agg[i] >= 0) continue;
     for (int q = P->off[i]; q < P->off[i + 1]; q++)
-      if (agg[P->col[q]] < 0) agg[P->col[q]] = nc;
+      if (STRONG(q) && agg[P->col[q]] < 0) agg[P->col[q]] = nc;
     agg[i] = nc++;
   }
+#undef STRONG
   return nc;
 }
 
@@ -172,14 +218,16 @@ static int int_cmp(const void *a, const void *b) { return (*(const int *)a > *(c
 
 /* level l + 1 from level l's pattern: its aggregates, their members, the coarse pattern and
  * where each fine block adds in it */
-static int coarsen(ut_amg *A, int l) {
+static int coarsen(ut_amg *A, int l, const double *val) {
   ut_amg_level *F = &A->L[l], *Cl = &A->L[l + 1];
   int n = F->n;
   int *first = malloc(sizeof(int) * ((size_t)n + 1));
   F->agg = malloc(sizeof(int) * ((size_t)n + 1));
-  if (!first || !F->agg) { free(first); return 1; }
-  int nc = aggregate(&F->P, n, F->agg, first);
+  unsigned char *st = val ? strength(&F->P, val, n, A->d, F->dpos, AMG_STRENGTH) : NULL;
+  if (!first || !F->agg) { free(first); free(st); return 1; }
+  int nc = aggregate(&F->P, n, st, F->agg, first);
   free(first);
+  free(st);
   Cl->n = nc;
   F->mem_off = calloc((size_t)nc + 1, sizeof(int));
   F->mem = malloc(sizeof(int) * ((size_t)n + 1));
@@ -225,6 +273,28 @@ static int coarsen(ut_amg *A, int l) {
   return 0;
 }
 
+/* the coarse level's blocks from the fine values fv: coarse row by coarse row on threads,
+ * each the sum of its members' rows' blocks, the members in row order, so every coarse block
+ * receives its terms in the order of one loop over the fine blocks (the same bits for any
+ * number of threads) */
+static void coarse_sums(const ut_amg_level *F, ut_amg_level *Cl, const double *fv, int dd) {
+  int nc = Cl->n;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (nc > 2048)
+#endif
+  for (int c = 0; c < nc; c++) {
+    memset(Cl->val + (size_t)Cl->P.off[c] * dd, 0, sizeof(double) * (size_t)(Cl->P.off[c + 1] - Cl->P.off[c]) * dd);
+    for (int k = F->mem_off[c]; k < F->mem_off[c + 1]; k++) {
+      int i = F->mem[k];
+      for (int q = F->P.off[i]; q < F->P.off[i + 1]; q++) {
+        double *t = Cl->val + F->cpos[q] * dd;
+        const double *s = fv + (size_t)q * dd;
+        for (int e = 0; e < dd; e++) t[e] += s[e];
+      }
+    }
+  }
+}
+
 static int level_buffers(ut_amg_level *L, int d, int owns_values) {
   size_t n = (size_t)L->n * d + 1, nb = (size_t)L->P.off[L->n];
   L->owns = owns_values;
@@ -247,7 +317,7 @@ static int level_buffers(ut_amg_level *L, int d, int owns_values) {
   return 0;
 }
 
-int ut_amg_build(ut_amg *A, const ut_bsr *P, int n, int d) {
+int ut_amg_build(ut_amg *A, const ut_bsr *P, const double *val, int n, int d) {
   memset(A, 0, sizeof *A);
   A->d = d;
   A->L[0].n = n;
@@ -256,8 +326,12 @@ int ut_amg_build(ut_amg *A, const ut_bsr *P, int n, int d) {
   int l = 0;
   while (A->L[l].n > AMG_COARSEST && l + 1 < UT_AMG_MAXLEV) {
     A->nlev = l + 2; /* ut_amg_free releases level l + 1 from here on */
-    if (coarsen(A, l)) return 1;
+    if (coarsen(A, l, val)) return 1;
     if (level_buffers(&A->L[l + 1], d, 1)) return 1;
+    if (val) { /* the coarse values, for the next level's strong couplings */
+      coarse_sums(&A->L[l], &A->L[l + 1], val, d * d);
+      val = A->L[l + 1].val;
+    }
     l++;
     if (A->L[l].n * 10 > A->L[l - 1].n * 9) break; /* no longer coarsening */
   }
@@ -379,21 +453,7 @@ void ut_amg_values(ut_amg *A, double *val, const double *dinv) {
     /* coarse row by coarse row on threads: its blocks are the sums of its members' rows'
      * blocks, the members in row order, so every coarse block receives its terms in the
      * order of one loop over the fine blocks (the same bits for any number of threads) */
-    int nc = Cl->n;
-#ifdef _OPENMP
-#pragma omp parallel for schedule(static) if (nc > 2048)
-#endif
-    for (int c = 0; c < nc; c++) {
-      memset(Cl->val + (size_t)Cl->P.off[c] * dd, 0, sizeof(double) * (size_t)(Cl->P.off[c + 1] - Cl->P.off[c]) * dd);
-      for (int k = F->mem_off[c]; k < F->mem_off[c + 1]; k++) {
-        int i = F->mem[k];
-        for (int q = F->P.off[i]; q < F->P.off[i + 1]; q++) {
-          double *t = Cl->val + F->cpos[q] * dd;
-          const double *s = F->val + (size_t)q * dd;
-          for (int e = 0; e < dd; e++) t[e] += s[e];
-        }
-      }
-    }
+    coarse_sums(F, Cl, F->val, dd);
     if (l + 2 < A->nlev) {
       ut_block_jacobi(Cl->val, Cl->dpos, Cl->n, d, Cl->dinv);
       Cl->omega = jacobi_damping(Cl, d);
@@ -522,8 +582,11 @@ int ut_fcg(const ut_bsr *P, const double *val, int n, int d, ut_amg *M, const do
   PRECOND(r, z);
   memcpy(p, z, sizeof(double) * (size_t)m);
   rz = ut_dot(r, z, m, part);
+  /* the products in single precision with a multigrid that asks for it (M->single): they
+   * read half the bytes, and were a tenth of a random star's smoothing; the same steps */
   while (it < maxit) {
-    ut_bsr_mult(P, val, n, d, p, q);
+    if (M && M->single) level_mult(&M->L[0], d, p, q);
+    else ut_bsr_mult(P, val, n, d, p, q);
     double pq = ut_dot(p, q, m, part);
     if (!(pq > 0)) break;
     double al = rz / pq;
@@ -556,7 +619,7 @@ int ut_amg_pcg(const ut_bsr *P, double *val, int n, int d, int nrhs, const doubl
   *iters = 0;
   *res = 0;
   /* the hierarchy first: its finest level finds each row's diagonal block (or fails) */
-  if (!dinv || !part || nw < 4 || ut_amg_build(&A, P, n, d)) goto done;
+  if (!dinv || !part || nw < 4 || ut_amg_build(&A, P, NULL, n, d)) goto done;
   ut_block_jacobi(val, A.L[0].dpos, n, d, dinv);
   ut_amg_values(&A, val, dinv);
   status = 0;

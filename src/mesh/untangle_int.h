@@ -161,11 +161,15 @@ typedef struct {
   int nlev, d;
   ut_amg_level L[UT_AMG_MAXLEV];
   double *chol, *part; /* the coarsest level's Cholesky factor; ut_dot's partial sums */
+  /* ut_fcg's own products in single precision too (the finest level's copy): for Newton's
+   * inexact directions, not for the harmonic solves' 1e-8 to 1e-12 residuals */
+  int single;
 } ut_amg;
-/* the hierarchy's patterns from the Hessian's (n block rows of d); 1 out of memory (then
- * ut_amg_free); ut_amg_values: the values for one Newton step (val: the Hessian's, dinv:
+/* the hierarchy's patterns from the Hessian's (n block rows of d), its aggregates through
+ * the strong couplings of the values val (NULL: through every coupling); 1 out of memory or
+ * a stalled coarsening (then ut_amg_free); ut_amg_values: the values for one Newton step (val: the Hessian's, dinv:
  * its inverse diagonal blocks, both kept by pointer); ut_amg_apply: z from one cycle on r */
-int ut_amg_build(ut_amg *A, const ut_bsr *P, int n, int d);
+int ut_amg_build(ut_amg *A, const ut_bsr *P, const double *val, int n, int d);
 void ut_amg_values(ut_amg *A, double *val, const double *dinv);
 void ut_amg_apply(ut_amg *A, const double *r, double *z);
 void ut_amg_free(ut_amg *A);

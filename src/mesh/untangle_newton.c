@@ -81,6 +81,9 @@ static int build_pattern(const ctx *C, const int *fidx, const int *freev, int nf
 
 /* the preconditioner: the multigrid above this many free vertices, block Jacobi below */
 #define AMG_SWITCH_ITS 40
+/* the relative rise of the minimum quality per step below which the multigrid's run ends at
+ * block Jacobi's tolerance (below) */
+#define QMIN_RISE 1e-3
 
 int ut_newton(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout) {
   const ctx *C = o->C;
@@ -100,7 +103,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
   memset(&amg, 0, sizeof amg);
   int use_amg = 0, amg_failed = 0;
   int ok = val && dinv && g && gn && s && r && z && pd && q && x0 && part && dpos && (xkeep || !(o->keepq > 0)), below = 0;
-  double f = INFINITY, g0 = 0;
+  double f = INFINITY, g0 = 0, qmin = 0;
   if (!ok) { it = -1; goto done; }
   for (int fi = 0; fi < nfree; fi++) {
     int lo = P.off[fi];
@@ -120,11 +123,9 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
   /* a later round of the same smoothing takes the multigrid from its first step when an
    * earlier one took it: the same mesh and pattern, and the same (tenfold) tolerance, which
    * block Jacobi's first steps, back at 1e-5, had met on the Tutte-started 160 × 500 strip
-   * (160 000 triangles) with its minimum at 0.0131 instead of 0.0197 (bench/RESULTS.md) */
-  if (o->amg_used && *o->amg_used && nfree >= UT_AMG_MIN_ROWS && !o->no_multigrid) {
-    if (ut_amg_build(&amg, &P, nfree, d)) { ut_amg_free(&amg); amg_failed = 1; }
-    else use_amg = 1;
-  }
+   * (160 000 triangles) with its minimum at 0.0131 instead of 0.0197 (bench/RESULTS.md).
+   * Built at that step, from its Hessian (the strong couplings, untangle_amg.c) */
+  int want_amg = o->amg_used && *o->amg_used && nfree >= UT_AMG_MIN_ROWS && !o->no_multigrid;
   for (it = 0; it < maxit && isfinite(f) && f > 0; it++) {
     double gg = ut_dot(g, g, n, part);
     if (!it) g0 = sqrt(gg);
@@ -133,6 +134,10 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
       for (int fi = 0; fi < nfree; fi++)
         for (int a = 0; a < d; a++) val[(size_t)dpos[fi] * dd + a * d + a] += 2 * C->anchor;
     ut_block_jacobi(val, dpos, nfree, d, dinv);
+    if (want_amg && !use_amg && !amg_failed) {
+      if (ut_amg_build(&amg, &P, val, nfree, d)) { ut_amg_free(&amg); amg_failed = 1; }
+      else use_amg = amg.single = 1;
+    }
     if (use_amg) ut_amg_values(&amg, val, dinv);
     /* preconditioned conjugate gradients for H s' = g from s' = 0, then s = −s' (the same
      * bits as solving for −g: every operation is odd in the right side) */
@@ -143,15 +148,16 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     UT_PAR_FOR
     for (long i = 0; i < n; i++) s[i] = -s[i];
     /* block Jacobi needed many iterations on a large mesh: the multigrid from the next step
-     * on (its hierarchy depends on the pattern only; out of memory: block Jacobi stays).
+     * on (its hierarchy is built from this step's Hessian: its pattern and strong couplings;
+     * out of memory or a stalled coarsening: block Jacobi stays).
      * Block Jacobi's count grows with the mesh where the error is smooth (a million-triangle
      * spiral: 50–240 per step), while perturbed grids, whose error is local, need few and
      * were faster without the multigrid's five products per cycle (k − conv: the count
      * before the converging iteration, as the rule was measured) */
     if (!use_amg && !amg_failed && k - conv > AMG_SWITCH_ITS && nfree >= UT_AMG_MIN_ROWS && !o->no_multigrid) {
-      if (ut_amg_build(&amg, &P, nfree, d)) { ut_amg_free(&amg); amg_failed = 1; }
+      if (ut_amg_build(&amg, &P, val, nfree, d)) { ut_amg_free(&amg); amg_failed = 1; }
       else {
-        use_amg = 1;
+        use_amg = amg.single = 1;
         if (o->amg_used) *o->amg_used = 1;
       }
     }
@@ -228,9 +234,11 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     double *gt = g; /* the accepted point's gradient becomes the current one */
     g = gn;
     gn = gt;
+    double qlast = qmin;
     if (xkeep) { /* the last iterate that keeps the smallest quality (to rounding: a minimum
                   * no vertex can move, measured by the caller in other arithmetic, is kept) */
-      below = ut_energy_qmin(o, x) < o->keepq * (1 - 1e-12);
+      qmin = ut_energy_qmin(o, x);
+      below = qmin < o->keepq * (1 - 1e-12);
       if (!below)
         ut_gather(xkeep, x, freev, nfree, d);
     }
@@ -238,8 +246,12 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
      * the first step's (Newton near its minimum). Where it has not, a step's small gain says
      * little: the strip's steps after the first round gained 1e-5, 5e-6, then 7e-5 of f,
      * zigzagging with |g| at 0.7–1.3 of the round's first; there the last three steps'
-     * gains together (those there are) must be at most 3 tol·f */
-    double tl = use_amg ? tol_amg : tol;
+     * gains together (those there are) must be at most 3 tol·f. The multigrid's tenfold
+     * smaller tolerance (above: for the worst cells) only while the minimum quality still
+     * rises by more than QMIN_RISE a step: a random star's smoothing, its minimum held by the
+     * fixed boundary's cells, spent its last seven steps (a quarter of its time) on gains of
+     * 1e-5 to 1e-6 that moved the minimum by 1e-4 of itself (bench/RESULTS.md) */
+    double tl = use_amg && !(xkeep && qlast > 0 && qmin <= (1 + QMIN_RISE) * qlast) ? tol_amg : tol;
     gain[it % 3] = (fprev - f) / fprev;
     if (gain[it % 3] <= tl && (ut_dot(g, g, n, part) <= 0.01 * g0 * g0 || gain[0] + gain[1] + gain[2] <= 3 * tl)) {
       it++;

@@ -101,7 +101,7 @@ static void run(int n, int d, int *its_amg, int *its_bj, int *levels) {
   }
   ut_block_jacobi(A.val, dpos, A.nrow, d, dinv);
   ut_amg M;
-  int bad = ut_amg_build(&M, &A.P, A.nrow, d);
+  int bad = ut_amg_build(&M, &A.P, NULL, A.nrow, d);
   CHECK(!bad, "n %d d %d: hierarchy built", n, d);
   ut_amg_values(&M, A.val, dinv);
   *levels = M.nlev;
@@ -176,6 +176,85 @@ static void run_pcg_scalar(int n, int maxits) {
   bmat_free(&A);
 }
 
+/* the 5-point operator of an n×n grid (interior vertices) whose y couplings are wy times
+ * the x ones, in 1×1 blocks; its multigrid from the pattern alone (plain aggregation) and
+ * from the values (aggregates through the strong couplings only, the x lines when wy is
+ * small): iterations of each to a 1e-8 residual; levels of the second */
+static void run_strength(int n, double wy, int *its_plain, int *its_strong, int *levels) {
+  int m = n - 1, nrow = m * m;
+  bmat A = {{calloc((size_t)nrow + 1, sizeof(int)), malloc(sizeof(int) * 5 * (size_t)nrow)}, malloc(sizeof(double) * 5 * (size_t)nrow), nrow, 1};
+  int nb = 0;
+  for (int r = 0; r < nrow; r++) {
+    int i = r % m, j = r / m;
+    int cand[5][2] = {{0, -1}, {-1, 0}, {0, 0}, {1, 0}, {0, 1}};
+    for (int c = 0; c < 5; c++) {
+      int ii = i + cand[c][0], jj = j + cand[c][1];
+      if (ii < 0 || jj < 0 || ii >= m || jj >= m) continue;
+      A.P.col[nb] = jj * m + ii;
+      A.val[nb++] = c == 2 ? 2 + 2 * wy : cand[c][0] ? -1 : -wy;
+    }
+    A.P.off[r + 1] = nb;
+  }
+  double *b = malloc(sizeof(double) * nrow), *x = malloc(sizeof(double) * nrow), *dinv = malloc(sizeof(double) * nrow);
+  int *dpos = malloc(sizeof(int) * nrow);
+  unsigned s = 3;
+  for (int i = 0; i < nrow; i++) { s = s * 1103515245u + 12345u; b[i] = (double)((s >> 8) & 0xffff) / 65536.0 - 0.5; }
+  for (int i = 0; i < nrow; i++) {
+    int q = A.P.off[i];
+    while (A.P.col[q] != i) q++;
+    dpos[i] = q;
+  }
+  ut_block_jacobi(A.val, dpos, nrow, 1, dinv);
+  for (int strong = 0; strong < 2; strong++) {
+    ut_amg M;
+    int bad = ut_amg_build(&M, &A.P, strong ? A.val : NULL, nrow, 1);
+    CHECK(!bad, "n %d, y couplings %g, %s: hierarchy built", n, wy, strong ? "strong couplings" : "plain");
+    if (bad) { ut_amg_free(&M); continue; }
+    ut_amg_values(&M, A.val, dinv);
+    int its = fcg(&A, &M, dinv, b, x);
+    CHECK(its > 0 && residual(&A, b, x) <= 1.01e-8, "n %d, y couplings %g: residual %.3g", n, wy, residual(&A, b, x));
+    if (strong) { *its_strong = its; *levels = M.nlev; }
+    else *its_plain = its;
+    ut_amg_free(&M);
+  }
+  free(b); free(x); free(dinv); free(dpos);
+  bmat_free(&A);
+}
+
+/* the Newton smoother's products in single precision (M->single): its inexact directions
+ * need no more; the same count of iterations to within two, a residual recomputed in double
+ * of at most 1e-6 */
+static void run_single(int n) {
+  bmat A;
+  build(&A, n, 2);
+  long nn = (long)A.nrow * 2;
+  double *b = malloc(sizeof(double) * nn), *x = malloc(sizeof(double) * nn), *dinv = malloc(sizeof(double) * nn * 2);
+  int *dpos = malloc(sizeof(int) * A.nrow), its[2];
+  unsigned s = 9;
+  for (long i = 0; i < nn; i++) { s = s * 1103515245u + 12345u; b[i] = (double)((s >> 8) & 0xffff) / 65536.0 - 0.5; }
+  for (int i = 0; i < A.nrow; i++) {
+    int q = A.P.off[i];
+    while (A.P.col[q] != i) q++;
+    dpos[i] = q;
+  }
+  ut_block_jacobi(A.val, dpos, A.nrow, 2, dinv);
+  ut_amg M;
+  CHECK(!ut_amg_build(&M, &A.P, A.val, A.nrow, 2), "n %d: hierarchy built", n);
+  ut_amg_values(&M, A.val, dinv);
+  for (int single = 0; single < 2; single++) {
+    M.single = single;
+    its[single] = fcg(&A, &M, dinv, b, x);
+    double res = residual(&A, b, x);
+    CHECK(its[single] > 0 && res <= (single ? 1e-6 : 1.01e-8), "n %d, single %d: %d iterations, residual %.3g", n, single,
+          its[single], res);
+  }
+  printf("single-precision products, n %d: %d iterations (double: %d)\n", n, its[1], its[0]);
+  CHECK(abs(its[1] - its[0]) <= 2, "n %d: single %d against double %d iterations", n, its[1], its[0]);
+  ut_amg_free(&M);
+  free(b); free(x); free(dinv); free(dpos);
+  bmat_free(&A);
+}
+
 int main(void) {
   int a1, j1, l1, a2, j2, l2;
   run_pcg(256, 2, 60);
@@ -193,5 +272,11 @@ int main(void) {
   printf("3D: n 16: multigrid %d iterations (%d levels), block Jacobi %d; n 40: %d (%d levels), %d\n", a1, l1, j1, a2, l2, j2);
   CHECK(a2 <= 25 && 2 * a2 <= 3 * a1, "3D multigrid iterations %d (n 16: %d)", a2, a1);
   CHECK(j2 >= 5 * a2 && j2 >= 2 * j1, "3D block Jacobi iterations %d (n 16: %d), multigrid %d", j2, j1, a2);
+  /* strongly anisotropic couplings: aggregates across the weak ones stall plain aggregation */
+  int p1, s1, lv;
+  run_strength(128, 1e-3, &p1, &s1, &lv);
+  printf("y couplings 1e-3, n 128: plain aggregation %d iterations, strong couplings %d (%d levels)\n", p1, s1, lv);
+  CHECK(lv >= 3 && 3 * s1 <= p1, "strong couplings %d iterations (%d levels), plain %d", s1, lv, p1);
+  run_single(256);
   return CHECK_DONE();
 }

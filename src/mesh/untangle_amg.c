@@ -35,21 +35,21 @@
 #define UT_PAR_ROWS
 #endif
 #define BSR_MULT_D(name, T, D)                                                                       \
-  static void name(const ut_bsr *P, const T *val, int nrow, const double *x, double *y) {            \
+  static void name(const ut_bsr *P, const T *val, int nrow, const double *b, const double *x, double *y) { \
     UT_PAR_ROWS for (int fi = 0; fi < nrow; fi++) {                                                  \
       double s[D][D];                                                                                \
       for (int a = 0; a < D; a++)                                                                    \
         for (int e = 0; e < D; e++) s[a][e] = 0;                                                     \
       for (int q = P->off[fi]; q < P->off[fi + 1]; q++) {                                            \
-        const T *b = val + (size_t)q * (D * D);                                                      \
+        const T *bl = val + (size_t)q * (D * D);                                                     \
         const double *xc = x + (size_t)P->col[q] * D;                                                \
         for (int a = 0; a < D; a++)                                                                  \
-          for (int e = 0; e < D; e++) s[a][e] += (double)b[a * D + e] * xc[e];                       \
+          for (int e = 0; e < D; e++) s[a][e] += (double)bl[a * D + e] * xc[e];                      \
       }                                                                                              \
       for (int a = 0; a < D; a++) {                                                                  \
         double t = s[a][0];                                                                          \
         for (int e = 1; e < D; e++) t += s[a][e];                                                    \
-        y[(size_t)fi * D + a] = t;                                                                   \
+        y[(size_t)fi * D + a] = b ? b[(size_t)fi * D + a] - t : t;                                   \
       }                                                                                              \
     }                                                                                                \
   }
@@ -62,22 +62,26 @@ BSR_MULT_D(bsr_mult_f3, float, 3)
 
 /* d is 1 (the untangler's harmonic systems), 2 or 3 (the smoother's Hessians) */
 void ut_bsr_mult(const ut_bsr *P, const double *val, int nrow, int d, const double *x, double *y) {
-  if (d == 1) bsr_mult_1(P, val, nrow, x, y);
-  else if (d == 2) bsr_mult_2(P, val, nrow, x, y);
-  else bsr_mult_3(P, val, nrow, x, y);
+  if (d == 1) bsr_mult_1(P, val, nrow, NULL, x, y);
+  else if (d == 2) bsr_mult_2(P, val, nrow, NULL, x, y);
+  else bsr_mult_3(P, val, nrow, NULL, x, y);
 }
 
-/* the cycle's products in single precision */
-static void bsr_mult_f(const ut_bsr *P, const float *val, int nrow, int d, const double *x, double *y) {
-  if (d == 1) bsr_mult_f1(P, val, nrow, x, y);
-  else if (d == 2) bsr_mult_f2(P, val, nrow, x, y);
-  else bsr_mult_f3(P, val, nrow, x, y);
+/* the cycle's products in single precision; b: y = b − H x (the residual in the same pass:
+ * the same bits as the product followed by the subtraction, one pass less over memory) */
+static void bsr_mult_f(const ut_bsr *P, const float *val, int nrow, int d, const double *b, const double *x, double *y) {
+  if (d == 1) bsr_mult_f1(P, val, nrow, b, x, y);
+  else if (d == 2) bsr_mult_f2(P, val, nrow, b, x, y);
+  else bsr_mult_f3(P, val, nrow, b, x, y);
 }
 
-/* a level's product in the cycle: its single-precision copy where there is one */
-static void level_mult(const ut_amg_level *L, int d, const double *x, double *y) {
-  if (L->valf) bsr_mult_f(&L->P, L->valf, L->n, d, x, y);
-  else ut_bsr_mult(&L->P, L->val, L->n, d, x, y);
+/* a level's product in the cycle (b: the residual b − A x): its single-precision copy where
+ * there is one */
+static void level_mult(const ut_amg_level *L, int d, const double *b, const double *x, double *y) {
+  if (L->valf) bsr_mult_f(&L->P, L->valf, L->n, d, b, x, y);
+  else if (d == 1) bsr_mult_1(&L->P, L->val, L->n, b, x, y);
+  else if (d == 2) bsr_mult_2(&L->P, L->val, L->n, b, x, y);
+  else bsr_mult_3(&L->P, L->val, L->n, b, x, y);
 }
 
 void ut_block_jacobi(double *val, const int *dpos, int nrow, int d, double *dinv) {
@@ -112,27 +116,32 @@ void ut_block_jacobi(double *val, const int *dpos, int nrow, int d, double *dinv
 }
 
 /* z = D⁻¹ r row by row, for a constant D (a variable d's loops were not unrolled: 8% of a
- * 200 000-triangle spiral's smoothing in instructions) */
-#define BLOCK_APPLY_D(name, D)                                                             \
-  static void name(const double *dinv, int nrow, const double *r, double *z) {             \
-    UT_PAR_ROWS for (int fi = 0; fi < nrow; fi++) {                                        \
-      const double *w = dinv + (size_t)fi * (D * D), *rr = r + (size_t)fi * D;              \
-      for (int a = 0; a < D; a++) {                                                        \
-        double s = 0;                                                                      \
-        for (int e = 0; e < D; e++) s += w[a * D + e] * rr[e];                             \
-        z[(size_t)fi * D + a] = s;                                                         \
-      }                                                                                    \
-    }                                                                                      \
+ * 200 000-triangle spiral's smoothing in instructions); the smoother's z = ω D⁻¹ r (acc 0)
+ * and z += ω D⁻¹ r (acc 1) in the same pass, with the same roundings as the separate ones */
+#define BLOCK_APPLY_D(name, D)                                                                    \
+  static void name(const double *dinv, int nrow, const double *r, double *z, double om, int acc) { \
+    UT_PAR_ROWS for (int fi = 0; fi < nrow; fi++) {                                               \
+      const double *w = dinv + (size_t)fi * (D * D), *rr = r + (size_t)fi * D;                     \
+      for (int a = 0; a < D; a++) {                                                               \
+        double s = 0;                                                                             \
+        for (int e = 0; e < D; e++) s += w[a * D + e] * rr[e];                                    \
+        double *zz = z + (size_t)fi * D + a;                                                      \
+        if (acc) *zz += om * s;                                                                   \
+        else *zz = s * om; /* om 1: s itself */                                                   \
+      }                                                                                           \
+    }                                                                                             \
   }
 BLOCK_APPLY_D(block_apply_1, 1)
 BLOCK_APPLY_D(block_apply_2, 2)
 BLOCK_APPLY_D(block_apply_3, 3)
 
-void ut_block_apply(const double *dinv, int nrow, int d, const double *r, double *z) {
-  if (d == 1) block_apply_1(dinv, nrow, r, z);
-  else if (d == 2) block_apply_2(dinv, nrow, r, z);
-  else block_apply_3(dinv, nrow, r, z);
+static void block_apply(const double *dinv, int nrow, int d, const double *r, double *z, double om, int acc) {
+  if (d == 1) block_apply_1(dinv, nrow, r, z, om, acc);
+  else if (d == 2) block_apply_2(dinv, nrow, r, z, om, acc);
+  else block_apply_3(dinv, nrow, r, z, om, acc);
 }
+
+void ut_block_apply(const double *dinv, int nrow, int d, const double *r, double *z) { block_apply(dinv, nrow, d, r, z, 1, 0); }
 
 /* ---------------------------------------------------------------- the hierarchy */
 
@@ -486,14 +495,9 @@ static void kcycle(ut_amg *A, int l, const double *b, double *x);
 static void vcycle(ut_amg *A, int l, const double *r, double *z) {
   ut_amg_level *L = &A->L[l], *Cl = &A->L[l + 1];
   int d = A->d;
-  long n = (long)L->n * d;
   double om = L->omega, *t = L->t;
-  ut_block_apply(L->dinv, L->n, d, r, z);
-  UT_PAR_FOR
-  for (long i = 0; i < n; i++) z[i] *= om;
-  level_mult(L, d, z, t);
-  UT_PAR_FOR
-  for (long i = 0; i < n; i++) t[i] = r[i] - t[i];
+  block_apply(L->dinv, L->n, d, r, z, om, 0);
+  level_mult(L, d, r, z, t);
   /* restriction: each aggregate sums its members' residuals, in row order */
   int nc = Cl->n;
 #ifdef _OPENMP
@@ -513,12 +517,8 @@ static void vcycle(ut_amg *A, int l, const double *r, double *z) {
 #endif
   for (int i = 0; i < nr; i++)
     for (int a = 0; a < d; a++) z[(size_t)i * d + a] += Cl->out[(size_t)L->agg[i] * d + a];
-  level_mult(L, d, z, t);
-  UT_PAR_FOR
-  for (long i = 0; i < n; i++) t[i] = r[i] - t[i];
-  ut_block_apply(L->dinv, L->n, d, t, L->v1); /* v1 is free here: kcycle(l) is not running */
-  UT_PAR_FOR
-  for (long i = 0; i < n; i++) z[i] += om * L->v1[i];
+  level_mult(L, d, r, z, t);
+  block_apply(L->dinv, L->n, d, t, z, om, 1);
 }
 
 /* level l ≥ 1: x ≈ A_l⁻¹ b by two flexible conjugate-gradient steps preconditioned with the
@@ -530,7 +530,7 @@ static void kcycle(ut_amg *A, int l, const double *b, double *x) {
   /* vcycle(l) works in L->t and L->v1: these two steps use the other buffers */
   double *v1 = L->v2, *w1 = L->w1, *v2 = L->r1, *w2 = L->w2;
   vcycle(A, l, b, v1);
-  level_mult(L, d, v1, w1);
+  level_mult(L, d, NULL, v1, w1);
   double rho1 = ut_dot(v1, w1, n, A->part), a1 = ut_dot(v1, b, n, A->part);
   if (!(rho1 > 0)) {
     memcpy(x, v1, sizeof(double) * n);
@@ -546,7 +546,7 @@ static void kcycle(ut_amg *A, int l, const double *b, double *x) {
     return;
   }
   vcycle(A, l, x, v2);
-  level_mult(L, d, v2, w2);
+  level_mult(L, d, NULL, v2, w2);
   double g = ut_dot(v2, w1, n, A->part), be = ut_dot(v2, w2, n, A->part), a2 = ut_dot(v2, x, n, A->part);
   double rho2 = be - g * g / rho1;
   if (!(rho2 > 0)) {
@@ -562,6 +562,53 @@ static void kcycle(ut_amg *A, int l, const double *b, double *x) {
 void ut_amg_apply(ut_amg *A, const double *r, double *z) {
   if (A->nlev == 1) { coarsest_solve(A, r, z); return; }
   vcycle(A, 0, r, z);
+}
+
+/* ut_fcg's vector passes fused, each sum in ut_dot's chunks and order (the same bits as the
+ * separate loops; a million-triangle spiral's conjugate gradients are bound by memory) */
+#ifdef _OPENMP
+#define UT_PAR_CHUNKS _Pragma("omp parallel for schedule(static) if (n > 4 * UT_DOT_CHUNK)")
+#else
+#define UT_PAR_CHUNKS
+#endif
+#define CHUNK_END(c) ((c) * UT_DOT_CHUNK + UT_DOT_CHUNK < n ? (c) * UT_DOT_CHUNK + UT_DOT_CHUNK : n)
+
+/* x += al p, r −= al q; returns the new r · r */
+static double update_dot(double *x, double *r, const double *p, const double *q, double al, long n, double *part) {
+  long nch = (n + UT_DOT_CHUNK - 1) / UT_DOT_CHUNK;
+  UT_PAR_CHUNKS
+  for (long c = 0; c < nch; c++) {
+    double s = 0;
+    for (long i = c * UT_DOT_CHUNK; i < CHUNK_END(c); i++) {
+      x[i] += al * p[i];
+      r[i] -= al * q[i];
+      s += r[i] * r[i];
+    }
+    part[c] = s;
+  }
+  double s = 0;
+  for (long c = 0; c < nch; c++) s += part[c];
+  return s;
+}
+
+/* r · z and z · q in one pass (part: two chunk arrays) */
+static void dot2(const double *r, const double *z, const double *q, long n, double *part, double *rz, double *zq) {
+  long nch = (n + UT_DOT_CHUNK - 1) / UT_DOT_CHUNK;
+  UT_PAR_CHUNKS
+  for (long c = 0; c < nch; c++) {
+    double s = 0, t = 0;
+    for (long i = c * UT_DOT_CHUNK; i < CHUNK_END(c); i++) {
+      s += r[i] * z[i];
+      t += z[i] * q[i];
+    }
+    part[c] = s;
+    part[nch + c] = t;
+  }
+  double s = 0, t = 0;
+  for (long c = 0; c < nch; c++) s += part[c];
+  for (long c = 0; c < nch; c++) t += part[nch + c];
+  *rz = s;
+  *zq = t;
 }
 
 int ut_fcg(const ut_bsr *P, const double *val, int n, int d, ut_amg *M, const double *dinv, const double *b, double *x,
@@ -585,19 +632,20 @@ int ut_fcg(const ut_bsr *P, const double *val, int n, int d, ut_amg *M, const do
   /* the products in single precision with a multigrid that asks for it (M->single): they
    * read half the bytes, and were a tenth of a random star's smoothing; the same steps */
   while (it < maxit) {
-    if (M && M->single) level_mult(&M->L[0], d, p, q);
+    if (M && M->single) level_mult(&M->L[0], d, NULL, p, q);
     else ut_bsr_mult(P, val, n, d, p, q);
     double pq = ut_dot(p, q, m, part);
     if (!(pq > 0)) break;
     double al = rz / pq;
-    UT_PAR_FOR
-    for (long i = 0; i < m; i++) { x[i] += al * p[i]; r[i] -= al * q[i]; }
     it++;
-    if ((*conv = ut_dot(r, r, m, part) <= lim2)) break;
+    if ((*conv = update_dot(x, r, p, q, al, m, part) <= lim2)) break;
     PRECOND(r, z);
     /* flexible with the multigrid (its K-cycle is not a fixed linear map): β from
      * z·(r_new − r_old) = −α z·q */
-    double rz1 = ut_dot(r, z, m, part), be = M ? -al * ut_dot(z, q, m, part) / rz : rz1 / rz;
+    double rz1, zq = 0;
+    if (M) dot2(r, z, q, m, part, &rz1, &zq);
+    else rz1 = ut_dot(r, z, m, part);
+    double be = M ? -al * zq / rz : rz1 / rz;
     rz = rz1;
     UT_PAR_FOR
     for (long i = 0; i < m; i++) p[i] = z[i] + be * p[i];
@@ -613,7 +661,7 @@ int ut_amg_pcg(const ut_bsr *P, double *val, int n, int d, int nrhs, const doubl
   ut_amg A;
   memset(&A, 0, sizeof A);
   double *dinv = malloc(sizeof(double) * ((size_t)n * d * d + 1)), *w[4],
-         *part = malloc(sizeof(double) * ((size_t)m / UT_DOT_CHUNK + 2));
+         *part = malloc(sizeof(double) * (2 * ((size_t)m / UT_DOT_CHUNK) + 4));
   int nw = 0;
   for (; nw < 4 && (w[nw] = malloc(sizeof(double) * (m + 1))); nw++) {}
   *iters = 0;

@@ -187,7 +187,8 @@ int ut_amg_pcg(const ut_bsr *P, double *val, int n, int d, int nrhs, const doubl
  * val, n rows of d) preconditioned by the multigrid M (flexible) or, M NULL, by block Jacobi
  * (dinv), from x (x0: from x = 0, without a product), until |r|² ≤ lim2, at most maxit
  * iterations, stopping where pᵀAp ≤ 0; w: four work vectors of n d (w[0] ends as the residual),
- * part: ut_dot's. Returns the iterations done; *conv 1 where |r|² ≤ lim2 */
+ * part: 2 (n d / UT_DOT_CHUNK + 2) doubles (two of ut_dot's). Returns the iterations done;
+ * *conv 1 where |r|² ≤ lim2 */
 int ut_fcg(const ut_bsr *P, const double *val, int n, int d, ut_amg *M, const double *dinv, const double *b, double *x,
            int x0, int maxit, double lim2, double *part, double *w[4], int *conv);
 /* a · b in fixed chunks of UT_DOT_CHUNK entries summed in order (threads over the chunks

@@ -96,7 +96,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
   double *g = malloc(sizeof(double) * (n + 1)), *gn = malloc(sizeof(double) * (n + 1)), *s = malloc(sizeof(double) * (n + 1)),
          *r = malloc(sizeof(double) * (n + 1)), *z = malloc(sizeof(double) * (n + 1)), *pd = malloc(sizeof(double) * (n + 1)),
          *q = malloc(sizeof(double) * (n + 1)), *x0 = malloc(sizeof(double) * (n + 1)),
-         *part = malloc(sizeof(double) * ((size_t)n / UT_DOT_CHUNK + 2));
+         *part = malloc(sizeof(double) * (2 * ((size_t)n / UT_DOT_CHUNK) + 4)); /* ut_fcg's two */
   int *dpos = malloc(sizeof(int) * ((size_t)nfree + 1));
   double *xkeep = o->keepq > 0 ? malloc(sizeof(double) * (n + 1)) : NULL;
   ut_amg amg;

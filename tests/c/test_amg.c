@@ -66,7 +66,7 @@ static void build(bmat *A, int n, int d) {
 /* ut_fcg on A x = b from x = 0 to |r| ≤ 1e-8 |b|; iterations (−1: none converged) */
 static int fcg(bmat *A, ut_amg *M, const double *dinv, const double *b, double *x) {
   long n = (long)A->nrow * A->d;
-  double *w[4], *part = malloc(sizeof(double) * (n / UT_DOT_CHUNK + 2));
+  double *w[4], *part = malloc(sizeof(double) * (2 * (n / UT_DOT_CHUNK) + 4));
   for (int k = 0; k < 4; k++) w[k] = malloc(sizeof(double) * n);
   int conv, its = ut_fcg(&A->P, A->val, A->nrow, A->d, M, dinv, b, x, 1, 5000, 1e-16 * ut_dot(b, b, n, part), part, w, &conv);
   for (int k = 0; k < 4; k++) free(w[k]);

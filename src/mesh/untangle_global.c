@@ -421,7 +421,8 @@ static inline void modes_g(int d, int nm, double m[9][9], const double *winv, do
  * modes' rank-one updates one by one took twice the instructions), and vertex 0's rows and
  * columns from w_0 = −Σ_k w_k: its gradient is minus the sum of the others', so its blocks are
  * minus the sums of theirs (half the products of summing over all d + 1 vertices); called with
- * a constant d, whose loops the compiler unrolls */
+ * a constant d, whose loops the compiler unrolls (the upper triangle as a square loop that
+ * skips c < r: a loop from r was not unrolled, 7% of a tetrahedron's instructions) */
 static inline void corner_from_modes(int d, int nm, const double *lam, double g[9][9], double *hk) {
   int n = d * d, nx = n + d;
   double lp[9], gl[9][9];
@@ -429,8 +430,11 @@ static inline void corner_from_modes(int d, int nm, const double *lam, double g[
   for (int r = 0; r < n; r++)
 #pragma GCC unroll 9
     for (int e = 0; e < nm; e++) gl[r][e] = lp[e] * g[r][e];
+#pragma GCC unroll 9
   for (int r = 0; r < n; r++) /* vertices 1..d */
-    for (int c = r; c < n; c++) {
+#pragma GCC unroll 9
+    for (int c = 0; c < n; c++) {
+      if (c < r) continue;
       double t = 0;
 #pragma GCC unroll 9
       for (int e = 0; e < nm; e++) t += gl[r][e] * g[c][e];

@@ -566,12 +566,6 @@ void ut_amg_apply(ut_amg *A, const double *r, double *z) {
 
 /* ut_fcg's vector passes fused, each sum in ut_dot's chunks and order (the same bits as the
  * separate loops; a million-triangle spiral's conjugate gradients are bound by memory) */
-#ifdef _OPENMP
-#define UT_PAR_CHUNKS _Pragma("omp parallel for schedule(static) if (n > 4 * UT_DOT_CHUNK)")
-#else
-#define UT_PAR_CHUNKS
-#endif
-#define CHUNK_END(c) ((c) * UT_DOT_CHUNK + UT_DOT_CHUNK < n ? (c) * UT_DOT_CHUNK + UT_DOT_CHUNK : n)
 
 /* x += al p, r −= al q; returns the new r · r */
 static double update_dot(double *x, double *r, const double *p, const double *q, double al, long n, double *part) {
@@ -579,16 +573,14 @@ static double update_dot(double *x, double *r, const double *p, const double *q,
   UT_PAR_CHUNKS
   for (long c = 0; c < nch; c++) {
     double s = 0;
-    for (long i = c * UT_DOT_CHUNK; i < CHUNK_END(c); i++) {
+    for (long i = c * UT_DOT_CHUNK; i < UT_CHUNK_END(c); i++) {
       x[i] += al * p[i];
       r[i] -= al * q[i];
       s += r[i] * r[i];
     }
     part[c] = s;
   }
-  double s = 0;
-  for (long c = 0; c < nch; c++) s += part[c];
-  return s;
+  return ut_chunk_sum(part, nch);
 }
 
 /* r · z and z · q in one pass (part: two chunk arrays) */
@@ -597,18 +589,15 @@ static void dot2(const double *r, const double *z, const double *q, long n, doub
   UT_PAR_CHUNKS
   for (long c = 0; c < nch; c++) {
     double s = 0, t = 0;
-    for (long i = c * UT_DOT_CHUNK; i < CHUNK_END(c); i++) {
+    for (long i = c * UT_DOT_CHUNK; i < UT_CHUNK_END(c); i++) {
       s += r[i] * z[i];
       t += z[i] * q[i];
     }
     part[c] = s;
     part[nch + c] = t;
   }
-  double s = 0, t = 0;
-  for (long c = 0; c < nch; c++) s += part[c];
-  for (long c = 0; c < nch; c++) t += part[nch + c];
-  *rz = s;
-  *zq = t;
+  *rz = ut_chunk_sum(part, nch);
+  *zq = ut_chunk_sum(part + nch, nch);
 }
 
 int ut_fcg(const ut_bsr *P, const double *val, int n, int d, ut_amg *M, const double *dinv, const double *b, double *x,

@@ -195,6 +195,19 @@ int ut_fcg(const ut_bsr *P, const double *val, int n, int d, ut_amg *M, const do
  * when n is large): the same bits for any thread count; part holds n / UT_DOT_CHUNK + 1 */
 #define UT_DOT_CHUNK 4096
 double ut_dot(const double *a, const double *b, long n, double *part);
+/* loops fused with sums in ut_dot's chunks (threads over the chunks c of n entries, each
+ * from c·UT_DOT_CHUNK to UT_CHUNK_END(c), summed by ut_chunk_sum in order): the same bits */
+#ifdef _OPENMP
+#define UT_PAR_CHUNKS _Pragma("omp parallel for schedule(static) if (n > 4 * UT_DOT_CHUNK)")
+#else
+#define UT_PAR_CHUNKS
+#endif
+#define UT_CHUNK_END(c) ((c) * UT_DOT_CHUNK + UT_DOT_CHUNK < n ? (c) * UT_DOT_CHUNK + UT_DOT_CHUNK : n)
+static inline double ut_chunk_sum(const double *part, long nch) {
+  double s = 0;
+  for (long c = 0; c < nch; c++) s += part[c];
+  return s;
+}
 
 /* the free vertices' coordinates (freev, d each) copied out of x into buf, in free-vertex order */
 static inline void ut_gather(double *buf, const double *x, const int *freev, int nfree, int d) {

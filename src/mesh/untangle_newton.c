@@ -31,9 +31,7 @@ double ut_dot(const double *a, const double *b, long n, double *part) {
     for (long i = c * UT_DOT_CHUNK; i < hi; i++) s += a[i] * b[i];
     part[c] = s;
   }
-  double s = 0;
-  for (long c = 0; c < nch; c++) s += part[c];
-  return s;
+  return ut_chunk_sum(part, nch);
 }
 
 /* the conjugate gradients' element-wise updates run on threads (UT_PAR_FOR): on one

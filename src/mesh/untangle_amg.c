@@ -441,14 +441,14 @@ static void coarsest_factor(ut_amg *A) {
   for (int k = 0; k < m; k++) c[(size_t)k * m + k] = tr > 0 ? sqrt(tr / m) : 1;
 }
 
-/* the level's values in single precision (after block Jacobi's shift of the diagonal) */
-static void single_copy(ut_amg_level *L, int dd) {
-  if (!L->valf) return;
-  long n = (long)L->P.off[L->n] * dd;
-  const double *v = L->val;
-  float *f = L->valf;
+void ut_to_single(const double *v, float *f, long n) {
   UT_PAR_FOR
   for (long i = 0; i < n; i++) f[i] = (float)v[i];
+}
+
+/* the level's values in single precision (after block Jacobi's shift of the diagonal) */
+static void single_copy(ut_amg_level *L, int dd) {
+  if (L->valf) ut_to_single(L->val, L->valf, (long)L->P.off[L->n] * dd);
 }
 
 void ut_amg_values(ut_amg *A, double *val, const double *dinv) {
@@ -600,15 +600,17 @@ static void dot2(const double *r, const double *z, const double *q, long n, doub
   *zq = ut_chunk_sum(part + nch, nch);
 }
 
-int ut_fcg(const ut_bsr *P, const double *val, int n, int d, ut_amg *M, const double *dinv, const double *b, double *x,
-           int x0, int maxit, double lim2, double *part, double *w[4], int *conv) {
+int ut_fcg(const ut_bsr *P, const double *val, const float *valf, int n, int d, ut_amg *M, const double *dinv,
+           const double *b, double *x, int x0, int maxit, double lim2, double *part, double *w[4], int *conv) {
   long m = (long)n * d;
   double *r = w[0], *z = w[1], *p = w[2], *q = w[3], rz;
   int it = 0;
   if (x0) {
     UT_PAR_FOR
     for (long i = 0; i < m; i++) { x[i] = 0; r[i] = b[i]; }
-  } else {
+  } else if (valf)
+    bsr_mult_f(P, valf, n, d, b, x, r);
+  else {
     ut_bsr_mult(P, val, n, d, x, q);
     UT_PAR_FOR
     for (long i = 0; i < m; i++) r[i] = b[i] - q[i];
@@ -618,10 +620,10 @@ int ut_fcg(const ut_bsr *P, const double *val, int n, int d, ut_amg *M, const do
   PRECOND(r, z);
   memcpy(p, z, sizeof(double) * (size_t)m);
   rz = ut_dot(r, z, m, part);
-  /* the products in single precision with a multigrid that asks for it (M->single): they
-   * read half the bytes, and were a tenth of a random star's smoothing; the same steps */
+  /* the products in single precision where the caller gives the copy (valf): they read half
+   * the bytes, and were a tenth of a random star's smoothing; the same steps */
   while (it < maxit) {
-    if (M && M->single) level_mult(&M->L[0], d, NULL, p, q);
+    if (valf) bsr_mult_f(P, valf, n, d, NULL, p, q);
     else ut_bsr_mult(P, val, n, d, p, q);
     double pq = ut_dot(p, q, m, part);
     if (!(pq > 0)) break;
@@ -663,7 +665,7 @@ int ut_amg_pcg(const ut_bsr *P, double *val, int n, int d, int nrhs, const doubl
   for (int k = 0; k < nrhs; k++) { /* one hierarchy for every right side */
     const double *b = bs + (size_t)k * m;
     double bn = sqrt(ut_dot(b, b, m, part)), lim = tol * fmax(bn, 1e-300);
-    int conv, its = ut_fcg(P, val, n, d, &A, dinv, b, xs + (size_t)k * m, 0, maxit, lim * lim, part, w, &conv);
+    int conv, its = ut_fcg(P, val, NULL, n, d, &A, dinv, b, xs + (size_t)k * m, 0, maxit, lim * lim, part, w, &conv);
     double rn = sqrt(ut_dot(w[0], w[0], m, part));
     if (!conv) status = 2;
     if (its > *iters) *iters = its;

@@ -161,9 +161,6 @@ typedef struct {
   int nlev, d;
   ut_amg_level L[UT_AMG_MAXLEV];
   double *chol, *part; /* the coarsest level's Cholesky factor; ut_dot's partial sums */
-  /* ut_fcg's own products in single precision too (the finest level's copy): for Newton's
-   * inexact directions, not for the harmonic solves' 1e-8 to 1e-12 residuals */
-  int single;
 } ut_amg;
 /* the hierarchy's patterns from the Hessian's (n block rows of d), its aggregates through
  * the strong couplings of the values val (NULL: through every coupling); 1 out of memory or
@@ -184,13 +181,17 @@ void ut_amg_free(ut_amg *A);
 int ut_amg_pcg(const ut_bsr *P, double *val, int n, int d, int nrhs, const double *bs, double *xs, int maxit, double tol,
                int *iters, double *res);
 /* the conjugate gradients of ut_amg_pcg and the Newton smoother: A x = b (pattern P, blocks
- * val, n rows of d) preconditioned by the multigrid M (flexible) or, M NULL, by block Jacobi
+ * val, n rows of d; its products with valf, the same in single precision, where not NULL)
+ * preconditioned by the multigrid M (flexible) or, M NULL, by block Jacobi
  * (dinv), from x (x0: from x = 0, without a product), until |r|² ≤ lim2, at most maxit
  * iterations, stopping where pᵀAp ≤ 0; w: four work vectors of n d (w[0] ends as the residual),
  * part: 2 (n d / UT_DOT_CHUNK + 2) doubles (two of ut_dot's). Returns the iterations done;
  * *conv 1 where |r|² ≤ lim2 */
-int ut_fcg(const ut_bsr *P, const double *val, int n, int d, ut_amg *M, const double *dinv, const double *b, double *x,
-           int x0, int maxit, double lim2, double *part, double *w[4], int *conv);
+int ut_fcg(const ut_bsr *P, const double *val, const float *valf, int n, int d, ut_amg *M, const double *dinv,
+           const double *b, double *x, int x0, int maxit, double lim2, double *part, double *w[4], int *conv);
+/* f = v in single precision (n entries): ut_fcg's valf, for Newton's inexact directions (not
+ * for the harmonic solves' 1e-8 to 1e-12 residuals) */
+void ut_to_single(const double *v, float *f, long n);
 /* a · b in fixed chunks of UT_DOT_CHUNK entries summed in order (threads over the chunks
  * when n is large): the same bits for any thread count; part holds n / UT_DOT_CHUNK + 1 */
 #define UT_DOT_CHUNK 4096

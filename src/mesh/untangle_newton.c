@@ -97,6 +97,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
          *part = malloc(sizeof(double) * (2 * ((size_t)n / UT_DOT_CHUNK) + 4)); /* ut_fcg's two */
   int *dpos = malloc(sizeof(int) * ((size_t)nfree + 1));
   double *xkeep = o->keepq > 0 ? malloc(sizeof(double) * (n + 1)) : NULL;
+  float *bjf = NULL; /* block Jacobi's single-precision copy of the Hessian (below) */
   ut_amg amg;
   memset(&amg, 0, sizeof amg);
   int use_amg = 0, amg_failed = 0;
@@ -134,7 +135,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     ut_block_jacobi(val, dpos, nfree, d, dinv);
     if (want_amg && !use_amg && !amg_failed) {
       if (ut_amg_build(&amg, &P, val, nfree, d)) { ut_amg_free(&amg); amg_failed = 1; }
-      else use_amg = amg.single = 1;
+      else use_amg = 1;
     }
     if (use_amg) ut_amg_values(&amg, val, dinv);
     /* preconditioned conjugate gradients for H s' = g from s' = 0, then s = −s' (the same
@@ -142,7 +143,16 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     /* the forcing term: at least 0.1 (0.01 cost the star 40x200 twice the CG iterations for
      * the same Newton steps) */
     double eta = fmin(0.5, fmax(0.1, sqrt(sqrt(gg) / g0))), *cw[4] = {r, z, pd, q};
-    int conv, k = ut_fcg(&P, val, nfree, d, use_amg ? &amg : NULL, dinv, g, s, 1, 1000, eta * eta * gg, part, cw, &conv);
+    /* the products in single precision: the multigrid's finest copy, or on a mesh where block
+     * Jacobi's conjugate gradients may take dozens of iterations (the multigrid's size) a copy
+     * of its own (the 100 000-vertex spiral's smoothing took 137 of them before the switch) */
+    const float *valf = NULL;
+    if (use_amg) valf = amg.L[0].valf;
+    else if (nfree >= UT_AMG_MIN_ROWS && (bjf || (bjf = malloc(sizeof(float) * ((size_t)P.off[nfree] * dd + 1))))) {
+      ut_to_single(val, bjf, (long)P.off[nfree] * dd);
+      valf = bjf;
+    }
+    int conv, k = ut_fcg(&P, val, valf, nfree, d, use_amg ? &amg : NULL, dinv, g, s, 1, 1000, eta * eta * gg, part, cw, &conv);
     UT_PAR_FOR
     for (long i = 0; i < n; i++) s[i] = -s[i];
     /* block Jacobi needed many iterations on a large mesh: the multigrid from the next step
@@ -155,7 +165,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     if (!use_amg && !amg_failed && k - conv > AMG_SWITCH_ITS && nfree >= UT_AMG_MIN_ROWS && !o->no_multigrid) {
       if (ut_amg_build(&amg, &P, val, nfree, d)) { ut_amg_free(&amg); amg_failed = 1; }
       else {
-        use_amg = amg.single = 1;
+        use_amg = 1;
         if (o->amg_used) *o->amg_used = 1;
       }
     }
@@ -265,6 +275,6 @@ done:
   ut_energy_release_blocks(o->eb); /* its positions are on P */
   *fout = f;
   free(P.off); free(P.col); free(val); free(dinv); free(g); free(gn); free(s); free(r); free(z); free(pd); free(q);
-  free(x0); free(part); free(dpos); free(xkeep);
+  free(x0); free(part); free(dpos); free(xkeep); free(bjf);
   return it;
 }

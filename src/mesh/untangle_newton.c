@@ -167,6 +167,8 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
       else {
         use_amg = 1;
         if (o->amg_used) *o->amg_used = 1;
+        free(bjf); /* the multigrid's finest level has its own copy */
+        bjf = NULL;
       }
     }
     /* sliding vertices: the multigrid's coarse corrections leave the normal components of an

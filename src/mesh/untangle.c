@@ -402,25 +402,37 @@ static int slide_boundary(ctx *C, double *x, double beta, const unsigned char *r
   return total;
 }
 
-/* the region of stage 2: the vertices of invalid cells grown by `rings` layers of cells */
+/* the region of stage 2: the vertices of invalid cells grown by `rings` layers of cells, ring
+ * by ring from the vertices the last ring added (a pass over every vertex per ring had been
+ * 5% of the million-triangle spiral's untangling at 64 rings) */
 static void grow_region(const ctx *C, const double *x, int rings, unsigned char *region) {
   mesh *m = C->m;
   memset(region, 0, (size_t)m->nvert);
+  int *front = malloc(sizeof(int) * ((size_t)m->nvert + 1)), *added = malloc(sizeof(int) * ((size_t)m->nvert + 1)), nf = 0;
   for (int c = 0; c < m->ncell; c++)
     if (!(ut_cell_min_jac(C, x, c) > C->jtol))
-      for (int i = 0; i < C->nvc; i++) region[cell_of(C, c)[i]] = 1;
-  unsigned char *next = malloc((size_t)m->nvert);
-  if (!next) return;
-  for (int r = 0; r < rings; r++) {
-    memcpy(next, region, (size_t)m->nvert);
-    for (int v = 0; v < m->nvert; v++) {
-      if (!region[v]) continue;
+      for (int i = 0; i < C->nvc; i++) {
+        int v = cell_of(C, c)[i];
+        if (!region[v] && front) front[nf++] = v;
+        region[v] = 1;
+      }
+  for (int r = 0; r < rings && front && added && nf; r++) {
+    int na = 0;
+    for (int k = 0; k < nf; k++) {
+      int v = front[k];
       for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++)
-        for (int i = 0; i < C->nvc; i++) next[cell_of(C, C->vc[p])[i]] = 1;
+        for (int i = 0; i < C->nvc; i++) {
+          int u = cell_of(C, C->vc[p])[i];
+          if (!region[u]) { region[u] = 1; added[na++] = u; }
+        }
     }
-    memcpy(region, next, (size_t)m->nvert);
+    int *t = front;
+    front = added;
+    added = t;
+    nf = na;
   }
-  free(next);
+  free(front);
+  free(added);
 }
 
 

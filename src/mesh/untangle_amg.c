@@ -60,28 +60,30 @@ BSR_MULT_D(bsr_mult_f1, float, 1)
 BSR_MULT_D(bsr_mult_f2, float, 2)
 BSR_MULT_D(bsr_mult_f3, float, 3)
 
-/* d is 1 (the untangler's harmonic systems), 2 or 3 (the smoother's Hessians) */
+/* y = H x, or with b the residual y = b − H x in the same pass (the same bits as the product
+ * followed by the subtraction, one pass less over memory); with valf, H's single-precision
+ * copy, the products in single precision (a preconditioner's or Newton's inexact solves need
+ * no more, and these products were most of the Newton smoother's memory traffic). d is 1
+ * (the untangler's harmonic systems), 2 or 3 (the smoother's Hessians) */
+static void bsr_mult(const ut_bsr *P, const double *val, const float *valf, int nrow, int d, const double *b,
+                     const double *x, double *y) {
+  if (valf) {
+    if (d == 1) bsr_mult_f1(P, valf, nrow, b, x, y);
+    else if (d == 2) bsr_mult_f2(P, valf, nrow, b, x, y);
+    else bsr_mult_f3(P, valf, nrow, b, x, y);
+  } else if (d == 1) bsr_mult_1(P, val, nrow, b, x, y);
+  else if (d == 2) bsr_mult_2(P, val, nrow, b, x, y);
+  else bsr_mult_3(P, val, nrow, b, x, y);
+}
+
 void ut_bsr_mult(const ut_bsr *P, const double *val, int nrow, int d, const double *x, double *y) {
-  if (d == 1) bsr_mult_1(P, val, nrow, NULL, x, y);
-  else if (d == 2) bsr_mult_2(P, val, nrow, NULL, x, y);
-  else bsr_mult_3(P, val, nrow, NULL, x, y);
+  bsr_mult(P, val, NULL, nrow, d, NULL, x, y);
 }
 
-/* the cycle's products in single precision; b: y = b − H x (the residual in the same pass:
- * the same bits as the product followed by the subtraction, one pass less over memory) */
-static void bsr_mult_f(const ut_bsr *P, const float *val, int nrow, int d, const double *b, const double *x, double *y) {
-  if (d == 1) bsr_mult_f1(P, val, nrow, b, x, y);
-  else if (d == 2) bsr_mult_f2(P, val, nrow, b, x, y);
-  else bsr_mult_f3(P, val, nrow, b, x, y);
-}
-
-/* a level's product in the cycle (b: the residual b − A x): its single-precision copy where
- * there is one */
+/* a level's product in the cycle (b: the residual b − A x), with its single-precision copy
+ * where there is one */
 static void level_mult(const ut_amg_level *L, int d, const double *b, const double *x, double *y) {
-  if (L->valf) bsr_mult_f(&L->P, L->valf, L->n, d, b, x, y);
-  else if (d == 1) bsr_mult_1(&L->P, L->val, L->n, b, x, y);
-  else if (d == 2) bsr_mult_2(&L->P, L->val, L->n, b, x, y);
-  else bsr_mult_3(&L->P, L->val, L->n, b, x, y);
+  bsr_mult(&L->P, L->val, L->valf, L->n, d, b, x, y);
 }
 
 void ut_block_jacobi(double *val, const int *dpos, int nrow, int d, double *dinv) {
@@ -608,13 +610,8 @@ int ut_fcg(const ut_bsr *P, const double *val, const float *valf, int n, int d, 
   if (x0) {
     UT_PAR_FOR
     for (long i = 0; i < m; i++) { x[i] = 0; r[i] = b[i]; }
-  } else if (valf)
-    bsr_mult_f(P, valf, n, d, b, x, r);
-  else {
-    ut_bsr_mult(P, val, n, d, x, q);
-    UT_PAR_FOR
-    for (long i = 0; i < m; i++) r[i] = b[i] - q[i];
-  }
+  } else
+    bsr_mult(P, val, valf, n, d, b, x, r);
   if ((*conv = ut_dot(r, r, m, part) <= lim2)) return 0;
 #define PRECOND(rr, zz) (M ? ut_amg_apply(M, rr, zz) : ut_block_apply(dinv, n, d, rr, zz))
   PRECOND(r, z);
@@ -623,8 +620,7 @@ int ut_fcg(const ut_bsr *P, const double *val, const float *valf, int n, int d, 
   /* the products in single precision where the caller gives the copy (valf): they read half
    * the bytes, and were a tenth of a random star's smoothing; the same steps */
   while (it < maxit) {
-    if (valf) bsr_mult_f(P, valf, n, d, NULL, p, q);
-    else ut_bsr_mult(P, val, n, d, p, q);
+    bsr_mult(P, val, valf, n, d, NULL, p, q);
     double pq = ut_dot(p, q, m, part);
     if (!(pq > 0)) break;
     double al = rz / pq;

@@ -114,6 +114,15 @@ lg_mesh *lg_mesh_distribute(lg_env *env, mesh *whole);
  * NULL with *whole = 1 on every rank: rank 0 then generates the whole mesh for
  * lg_mesh_distribute. NULL with *whole = 0 and the reason in env->err on failure */
 lg_mesh *lg_mesh_generate_part(lg_env *env, const mesh_box_opts *o, int *whole);
+/* read_dist.c: a Gmsh file read in parallel, no rank reading the whole file or holding the
+ * whole mesh: each rank's part, the one lg_mesh_distribute would send it with the same
+ * partition (to the byte; PTScotch's partition is computed in parallel, so it may differ);
+ * collective. NULL on every rank where this path cannot take the file (its layout, its
+ * contents, -lugal_read_parts 0): rank 0 then reads it whole for lg_mesh_distribute, which
+ * reads what can be read and gives the whole reader's messages */
+lg_mesh *lg_mesh_read_parts(lg_env *env, const char *path);
+/* -lugal_read_parts (default 1): 0 keeps the whole-file read on rank 0 */
+int lg_read_parts_wanted(void);
 /* the whole mesh and the fields' whole arrays (point or cell data of fl) on rank 0, from
  * every rank's owned cells and vertices (for output); other ranks get NULLs; collective */
 int lg_dist_gather(lg_env *env, lg_mesh *lm, int nf, const mesh_field *fl, mesh **whole, double ***vals);

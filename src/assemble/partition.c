@@ -66,6 +66,47 @@ oom:
   return 1;
 }
 
+int lg_partition_graph(lg_env *env, MPI_Comm comm, int nrows, int ncols, PetscInt *ia, PetscInt *ja, int nparts,
+                       const char *method, int *vpart) {
+  Mat adj = NULL;
+  MatPartitioning mp = NULL;
+  IS is = NULL;
+  PetscErrorCode ierr = MatCreateMPIAdj(comm, nrows, ncols, ia, ja, NULL, &adj);
+  if (ierr) { PetscFree(ia); PetscFree(ja); }
+  if (!ierr) ierr = MatPartitioningCreate(comm, &mp);
+  if (!ierr) ierr = MatPartitioningSetAdjacency(mp, adj);
+  if (!ierr) ierr = MatPartitioningSetNParts(mp, nparts);
+  if (!ierr) ierr = MatPartitioningSetType(mp, method);
+  if (!ierr) ierr = MatPartitioningApply(mp, &is);
+  const PetscInt *pv = NULL;
+  if (!ierr) ierr = ISGetIndices(is, &pv);
+  int bad = 0;
+  for (int v = 0; !ierr && v < nrows; v++) {
+    vpart[v] = (int)pv[v];
+    if (!bad && (pv[v] < 0 || pv[v] >= nparts)) {
+      lg_seterr(env, "the partitioner %s put vertex %d in part %d of %d", method, v + 1, (int)pv[v], nparts);
+      bad = 1;
+    }
+  }
+  if (pv) ISRestoreIndices(is, &pv);
+  ISDestroy(&is);
+  MatPartitioningDestroy(&mp);
+  MatDestroy(&adj);
+  if (bad) return 1;
+  if (ierr) return lg_petsc_fail(env, ierr, "the partition of the mesh (-lugal_partitioner)");
+  return 0;
+}
+
+int lg_majority_part(const int *p, int n) {
+  int best = p[0], nb = 0;
+  for (int j = 0; j < n; j++) {
+    int m = 0;
+    for (int k = 0; k < n; k++) m += p[k] == p[j];
+    if (m > nb || (m == nb && p[j] < best)) { best = p[j]; nb = m; }
+  }
+  return best;
+}
+
 /* rank 0's part of the work: the partition of m into nparts by the method (a
  * MatPartitioningType) into part: its vertices are partitioned, and each cell goes to the
  * part that holds most of its vertices (the lowest of those that tie) */
@@ -74,42 +115,15 @@ static int partition_cells(lg_env *env, mesh *m, int nparts, const char *method,
   double tg = now_ms();
   if (vertex_graph(env, m, &ia, &ja)) return 1;
   if (env->verbose) fprintf(stderr, "[lugal] partition: the vertex graph in %.1f ms\n", now_ms() - tg);
-  Mat adj = NULL;
-  MatPartitioning mp = NULL;
-  IS is = NULL;
-  PetscErrorCode ierr = MatCreateMPIAdj(PETSC_COMM_SELF, m->nvert, m->nvert, ia, ja, NULL, &adj);
-  if (ierr) { PetscFree(ia); PetscFree(ja); }
-  if (!ierr) ierr = MatPartitioningCreate(PETSC_COMM_SELF, &mp);
-  if (!ierr) ierr = MatPartitioningSetAdjacency(mp, adj);
-  if (!ierr) ierr = MatPartitioningSetNParts(mp, nparts);
-  if (!ierr) ierr = MatPartitioningSetType(mp, method);
-  if (!ierr) ierr = MatPartitioningApply(mp, &is);
-  const PetscInt *pv = NULL;
-  if (!ierr) ierr = ISGetIndices(is, &pv);
-  int bad = 0;
-  if (!ierr) {
-    for (int v = 0; v < m->nvert && !bad; v++)
-      if (pv[v] < 0 || pv[v] >= nparts) {
-        lg_seterr(env, "the partitioner %s put vertex %d in part %d of %d", method, v + 1, (int)pv[v], nparts);
-        bad = 1;
-      }
-    for (int c = 0; !bad && c < m->ncell; c++) {
-      const int *cv = m->cells + (size_t)c * (size_t)m->nvc;
-      int best = (int)pv[cv[0]], nb = 0;
-      for (int j = 0; j < m->nvc; j++) {
-        int pj = (int)pv[cv[j]], n = 0;
-        for (int k = 0; k < m->nvc; k++) n += pv[cv[k]] == pj;
-        if (n > nb || (n == nb && pj < best)) { best = pj; nb = n; }
-      }
-      part[c] = best;
-    }
-    ISRestoreIndices(is, &pv);
+  int *vp = malloc(sizeof(int) * ((size_t)m->nvert + 1)), pc[8];
+  if (!vp) { PetscFree(ia); PetscFree(ja); lg_seterr(env, "out of memory for the partition"); return 1; }
+  if (lg_partition_graph(env, PETSC_COMM_SELF, m->nvert, m->nvert, ia, ja, nparts, method, vp)) { free(vp); return 1; }
+  for (int c = 0; c < m->ncell; c++) {
+    const int *cv = m->cells + (size_t)c * (size_t)m->nvc;
+    for (int j = 0; j < m->nvc; j++) pc[j] = vp[cv[j]];
+    part[c] = lg_majority_part(pc, m->nvc);
   }
-  ISDestroy(&is);
-  MatPartitioningDestroy(&mp);
-  MatDestroy(&adj);
-  if (bad) return 1;
-  if (ierr) return lg_petsc_fail(env, ierr, "the partition of the mesh (-lugal_partitioner)");
+  free(vp);
   return 0;
 }
 

@@ -228,6 +228,12 @@ static inline void lg_vote(int *owner, int *cnt, int node, int part) {
  * cells, whose parts are part[] (a whole mesh's partition, or a distributed mesh's local
  * cells' owners); owner[] holds Nn = N / B entries; 1 when out of memory */
 int lg_problem_node_owners(const lg_problem *p, int B, const int *part, int *owner);
+/* partition.c: a graph's rows (nrows here of ncols, CSR ia/ja PetscMalloc'ed, given up) partitioned by
+ * the MatPartitioningType method into nparts on comm: each row's part into vpart; and the part
+ * of most of n parts (the lowest of those that tie), a cell's from its vertices' */
+int lg_partition_graph(lg_env *env, MPI_Comm comm, int nrows, int ncols, PetscInt *ia, PetscInt *ja, int nparts,
+                       const char *method, int *vpart);
+int lg_majority_part(const int *p, int n);
 /* distribute.c: perm, iperm, lo, hi, Nglob and ioff of a problem on a distributed mesh,
  * nodes of B dofs; collective */
 int lg_dist_number_nodes(lg_env *env, lg_problem *p, int B);

@@ -120,12 +120,21 @@ static int l_box(lua_State *L) {
   return 1;
 }
 
-/* lg.mesh.read(path); under mpiexec rank 0 parses the file and sends the mesh to the
- * others (mesh_pack), which neither read nor parse it */
+/* lg.mesh.read(path); under mpiexec with distributed meshes each rank reads its part of the
+ * file (read_dist.c), or where that cannot be (the file's layout, a mesh the whole reader
+ * refuses, -lugal_read_parts 0) rank 0 parses the file and sends each rank its part; with
+ * -lugal_distribute 0 it sends every rank the whole mesh (mesh_pack) */
 static int l_read(lua_State *L) {
   const char *path = luaL_checkstring(L, 1);
   char err[MESH_ERRLEN] = "";
   int root = lg_mpi_rank() == 0;
+  if (lg_distribute_wanted() && lg_read_parts_wanted()) {
+    lg_mesh *lm = lg_mesh_read_parts(get_env(L), path);
+    if (lm) {
+      push_mesh_part(L, lm);
+      return 1;
+    }
+  }
   mesh *m = root ? mesh_read_gmsh(path, err) : NULL;
   if (lg_distribute_wanted()) { /* rank 0 sends each rank its part only (push_mesh) */
     if (lg_root_result(m == NULL, err, sizeof err)) return luaL_error(L, "lg.mesh.read: %s", err);

@@ -97,6 +97,16 @@ static char *tok(lex *l) {
 static int64_t tok_int(lex *l, const char *what, int64_t lo, int64_t hi) {
   char *t = tok(l);
   if (!t) { lex_err(l, "file ends early: expected %s", what); return 0; }
+  /* the common token, an optional sign and up to 18 digits, without strtoll (a fifth of a
+   * large file's parsing); anything else takes strtoll's path and messages */
+  const char *p = t + (*t == '-' || *t == '+');
+  int nd = 0;
+  int64_t u = 0;
+  while (nd < 18 && p[nd] >= '0' && p[nd] <= '9') u = u * 10 + (p[nd++] - '0');
+  if (nd && !p[nd]) { /* 18 digits at most: no overflow */
+    int64_t v = *t == '-' ? -u : u;
+    if (v >= lo && v <= hi) return v;
+  }
   char *end;
   errno = 0;
   long long v = strtoll(t, &end, 10);
@@ -955,6 +965,579 @@ mesh *mesh_read_gmsh(const char *path, char *err) {
   mesh *m = parse(buf, len, path, err);
   free(buf);
   return m;
+}
+
+/* ---------------------------------------------------------------- a file read in parts */
+
+int mesh_gmsh_type_dim(int type) { return gmsh_dim(type); }
+int mesh_gmsh_type_nodes(int type) { return gmsh_nnodes(type); }
+cell_type mesh_gmsh_type_cell(int type) { return gmsh_cell(type); }
+
+/* the layout's line reader: a file's lines through one buffer, each up to LR_CHUNK bytes */
+#define LR_CHUNK ((size_t)4 << 20)
+typedef struct {
+  int fd, eof;
+  char *buf;
+  size_t lo, hi;
+  long long off, line; /* file offset of buf[lo], lines returned so far */
+} lreader;
+
+/* the next line (*s, *n bytes without its newline, from file offset *off, line r->line):
+ * 1, or 0 at the end, -1 on a read error or a line longer than the buffer */
+static int lr_next(lreader *r, const char **s, size_t *n, long long *off) {
+  for (;;) {
+    char *nl = r->hi > r->lo ? memchr(r->buf + r->lo, '\n', r->hi - r->lo) : NULL;
+    if (nl || (r->eof && r->hi > r->lo)) {
+      size_t len = nl ? (size_t)(nl - (r->buf + r->lo)) : r->hi - r->lo, adv = len + (nl != NULL);
+      *s = r->buf + r->lo;
+      *n = len;
+      *off = r->off;
+      r->lo += adv;
+      r->off += (long long)adv;
+      r->line++;
+      return 1;
+    }
+    if (r->eof) return 0;
+    if (r->lo) {
+      memmove(r->buf, r->buf + r->lo, r->hi - r->lo);
+      r->hi -= r->lo;
+      r->lo = 0;
+    }
+    if (r->hi == LR_CHUNK) return -1;
+    ssize_t got = read(r->fd, r->buf + r->hi, LR_CHUNK - r->hi);
+    if (got < 0 && errno == EINTR) continue;
+    if (got < 0) return -1;
+    if (got == 0) r->eof = 1;
+    else r->hi += (size_t)got;
+  }
+}
+
+/* the line without surrounding white space: empty, or at most max integers read into v
+ * (returns how many; -1 when something else is on the line) */
+static int line_ints(const char *s, size_t n, long long *v, int max) {
+  char tmp[256];
+  while (n && isspace((unsigned char)s[n - 1])) n--;
+  while (n && isspace((unsigned char)*s)) { s++; n--; }
+  if (n >= sizeof tmp) return -1;
+  memcpy(tmp, s, n);
+  tmp[n] = 0;
+  char *p = tmp;
+  int k = 0;
+  for (;;) {
+    while (isspace((unsigned char)*p)) p++;
+    if (!*p) return k;
+    if (k == max) return -1;
+    char *end;
+    errno = 0;
+    v[k] = strtoll(p, &end, 10);
+    if (end == p || errno || (*end && !isspace((unsigned char)*end))) return -1;
+    k++;
+    p = end;
+  }
+}
+static int blank(const char *s, size_t n) {
+  for (size_t i = 0; i < n; i++)
+    if (!isspace((unsigned char)s[i])) return 0;
+  return 1;
+}
+static int is_word(const char *s, size_t n, const char *w) {
+  while (n && isspace((unsigned char)s[n - 1])) n--;
+  while (n && isspace((unsigned char)*s)) { s++; n--; }
+  return n == strlen(w) && !memcmp(s, w, n);
+}
+
+typedef struct {
+  lreader r;
+  gmsh_layout *L;
+  const char *s;
+  size_t n;
+  long long off;
+} lscan;
+
+/* the next non-blank line: 1, or 0 (the reason in L->why) */
+static int ls_line(lscan *S) {
+  int rc;
+  while ((rc = lr_next(&S->r, &S->s, &S->n, &S->off)) == 1)
+    if (!blank(S->s, S->n)) return 1;
+  snprintf(S->L->why, sizeof S->L->why, rc < 0 ? "a read error or a line over 4 MB" : "the file ends inside a section");
+  return 0;
+}
+
+/* item k's index among total in nparts even runs */
+static long long run_start(long long total, int nparts, int k) { return total * k / nparts; }
+
+/* `count` item lines of a block from item `first` on: their span, and the positions of the
+ * runs that start there (*k: the next run to place; b: the second span of MSH 4 nodes) */
+static int scan_items(lscan *S, long long first, long long count, long long total, int *k, gmsh_pos *pos, int second,
+                      gmsh_span *sp) {
+  int P = S->L->nparts;
+  sp->off = sp->end = S->r.off;
+  sp->line = S->r.line + 1;
+  for (long long j = 0; j < count; j++) {
+    if (!ls_line(S)) return 1;
+    if (!j) { sp->off = S->off; sp->line = S->r.line; }
+    while (*k <= P && run_start(total, P, *k) == first + j) {
+      if (second) { pos[*k].boff = S->off; pos[*k].bline = S->r.line; }
+      else { pos[*k].aoff = S->off; pos[*k].aline = S->r.line; }
+      (*k)++;
+    }
+    sp->end = S->r.off;
+  }
+  return 0;
+}
+
+static int grow_blocks(gmsh_block **b, int n, int *cap) {
+  if (n < *cap) return 0;
+  if (n > 1 << 24) return 1;
+  int c = *cap ? 2 * *cap : 64;
+  gmsh_block *q = realloc(*b, sizeof(gmsh_block) * (size_t)c);
+  if (!q) return 1;
+  *b = q;
+  *cap = c;
+  return 0;
+}
+
+/* $Nodes (elems 0) or $Elements (1), after its name's line */
+static int scan_section(lscan *S, int elems) {
+  gmsh_layout *L = S->L;
+  long long h[4];
+  int P = L->nparts, cap = 0, k = 0, k2 = 0;
+  gmsh_block **bl = elems ? &L->eb : &L->nb;
+  int *nbl = elems ? &L->neb : &L->nnb;
+  gmsh_pos *pos = calloc((size_t)P + 1, sizeof(gmsh_pos));
+  if (!pos) { snprintf(L->why, sizeof L->why, "out of memory"); return 1; }
+  if (elems) L->ep = pos;
+  else L->np = pos;
+  if (!ls_line(S)) return 1;
+  long long nb = 1, total;
+  if (L->version == 2) {
+    if (line_ints(S->s, S->n, h, 1) != 1 || h[0] < 0) { snprintf(L->why, sizeof L->why, "an unusual section header"); return 1; }
+    total = h[0];
+  } else {
+    if (line_ints(S->s, S->n, h, 4) != 4 || h[0] < 0 || h[1] < 0) { snprintf(L->why, sizeof L->why, "an unusual section header"); return 1; }
+    nb = h[0];
+    total = h[1];
+  }
+  long long seen = 0;
+  for (long long b = 0; b < nb; b++) {
+    if (grow_blocks(bl, *nbl, &cap)) { snprintf(L->why, sizeof L->why, "too many blocks"); return 1; }
+    gmsh_block *B = &(*bl)[*nbl];
+    memset(B, 0, sizeof *B);
+    B->type = -1;
+    B->first = seen;
+    if (L->version == 2) B->count = total;
+    else {
+      if (!ls_line(S)) return 1;
+      if (line_ints(S->s, S->n, h, 4) != 4 || h[3] < 0) { snprintf(L->why, sizeof L->why, "an unusual block header"); return 1; }
+      B->edim = (int)h[0];
+      B->etag = h[1];
+      if (elems) B->type = (int)h[2];
+      else B->par = (int)h[2];
+      B->count = h[3];
+    }
+    if (B->count > total - seen) { snprintf(L->why, sizeof L->why, "blocks beyond the section's count"); return 1; }
+    (*nbl)++;
+    if (scan_items(S, seen, B->count, total, &k, pos, 0, &B->a)) return 1;
+    B->b = B->a;
+    if (!elems && L->version == 4 && scan_items(S, seen, B->count, total, &k2, pos, 1, &B->b)) return 1;
+    seen += B->count;
+  }
+  if (seen != total) { snprintf(L->why, sizeof L->why, "blocks that do not add up to the section's count"); return 1; }
+  if (!ls_line(S)) return 1;
+  if (!is_word(S->s, S->n, elems ? "$EndElements" : "$EndNodes")) { snprintf(L->why, sizeof L->why, "more lines than items"); return 1; }
+  /* the runs that start at the end (more parts than items) */
+  for (; k <= P; k++) { pos[k].aoff = pos[k].boff = S->r.off; pos[k].aline = pos[k].bline = S->r.line; }
+  if (elems) L->nelems = total;
+  else L->nnodes = total;
+  return 0;
+}
+
+int mesh_gmsh_layout(const char *path, int nparts, gmsh_layout *L) {
+  memset(L, 0, sizeof *L);
+  L->nparts = nparts;
+  lscan S = {{-1, 0, NULL, 0, 0, 0, 0}, L, NULL, 0, 0};
+  struct stat st;
+  int have_nodes = 0, have_elems = 0;
+  if (nparts < 1) { snprintf(L->why, sizeof L->why, "no parts"); return 0; }
+  S.r.fd = open(path, O_RDONLY | O_CLOEXEC);
+  if (S.r.fd < 0 || fstat(S.r.fd, &st) || !S_ISREG(st.st_mode)) {
+    snprintf(L->why, sizeof L->why, "not a regular file");
+    goto out;
+  }
+  if (!(S.r.buf = malloc(LR_CHUNK))) { snprintf(L->why, sizeof L->why, "out of memory"); goto out; }
+  for (;;) {
+    int rc = lr_next(&S.r, &S.s, &S.n, &S.off);
+    if (rc < 0) { snprintf(L->why, sizeof L->why, "a read error or a line over 4 MB"); goto out; }
+    if (!rc) break;
+    if (blank(S.s, S.n)) continue;
+    size_t a = 0, n = S.n;
+    while (isspace((unsigned char)S.s[a])) a++;
+    while (n > a && isspace((unsigned char)S.s[n - 1])) n--;
+    if (S.s[a] != '$') { snprintf(L->why, sizeof L->why, "data outside a section"); goto out; }
+    char name[80];
+    snprintf(name, sizeof name, "%.*s", (int)(n - a > 70 ? 70 : n - a), S.s + a);
+    int nodes = !strcmp(name, "$Nodes"), elems = !strcmp(name, "$Elements");
+    if (nodes || elems) {
+      if (!L->version || (nodes ? have_nodes : have_elems)) {
+        snprintf(L->why, sizeof L->why, "%s before $MeshFormat or twice", name);
+        goto out;
+      }
+      if (nodes) have_nodes = 1;
+      else have_elems = 1;
+      if (scan_section(&S, elems)) goto out;
+      continue;
+    }
+    /* a small section: its span, read by every process */
+    if (L->nsmall == GMSH_MAX_SMALL) { snprintf(L->why, sizeof L->why, "more than %d other sections", GMSH_MAX_SMALL); goto out; }
+    gmsh_span *sp = &L->small[L->nsmall++];
+    sp->off = S.off;
+    sp->line = S.r.line;
+    char end[96];
+    snprintf(end, sizeof end, "$End%s", name + 1);
+    int fmt = !strcmp(name, "$MeshFormat"), first = 1;
+    for (;;) {
+      if (!ls_line(&S)) goto out;
+      if (is_word(S.s, S.n, end)) break;
+      if (fmt && first) {
+        char v[16];
+        size_t b = 0;
+        while (b < S.n && isspace((unsigned char)S.s[b])) b++;
+        snprintf(v, sizeof v, "%.*s", (int)(S.n - b > 15 ? 15 : S.n - b), S.s + b);
+        L->version = !strncmp(v, "4.1", 3) ? 4 : v[0] == '2' ? 2 : 0;
+        if (!L->version) { snprintf(L->why, sizeof L->why, "MSH version %s", v); goto out; }
+      }
+      first = 0;
+    }
+    sp->end = S.r.off;
+    if (sp->end - sp->off > (64LL << 20)) { snprintf(L->why, sizeof L->why, "a section %s of over 64 MB", name); goto out; }
+  }
+  if (!have_nodes || !have_elems) { snprintf(L->why, sizeof L->why, "no $Nodes or no $Elements"); goto out; }
+  L->ok = 1;
+out:
+  if (S.r.fd >= 0) close(S.r.fd);
+  free(S.r.buf);
+  return L->ok;
+}
+
+void mesh_gmsh_layout_free(gmsh_layout *L) {
+  free(L->nb); free(L->eb); free(L->np); free(L->ep);
+  L->nb = L->eb = NULL;
+  L->np = L->ep = NULL;
+}
+
+int mesh_gmsh_layout_pack(const gmsh_layout *L, char **buf, size_t *len) {
+  size_t P = (size_t)L->nparts + 1;
+  size_t n = sizeof *L + sizeof(gmsh_block) * ((size_t)L->nnb + (size_t)L->neb) + 2 * P * sizeof(gmsh_pos);
+  char *b = malloc(n), *p = b;
+  if (!b) return 1;
+  memcpy(p, L, sizeof *L); p += sizeof *L;
+  if (L->nnb) memcpy(p, L->nb, sizeof(gmsh_block) * (size_t)L->nnb);
+  p += sizeof(gmsh_block) * (size_t)L->nnb;
+  if (L->neb) memcpy(p, L->eb, sizeof(gmsh_block) * (size_t)L->neb);
+  p += sizeof(gmsh_block) * (size_t)L->neb;
+  if (L->np) memcpy(p, L->np, P * sizeof(gmsh_pos));
+  else memset(p, 0, P * sizeof(gmsh_pos));
+  p += P * sizeof(gmsh_pos);
+  if (L->ep) memcpy(p, L->ep, P * sizeof(gmsh_pos));
+  else memset(p, 0, P * sizeof(gmsh_pos));
+  *buf = b;
+  *len = n;
+  return 0;
+}
+
+int mesh_gmsh_layout_unpack(const char *buf, size_t len, gmsh_layout *L) {
+  if (len < sizeof *L) return 1;
+  memcpy(L, buf, sizeof *L);
+  L->nb = L->eb = NULL;
+  L->np = L->ep = NULL;
+  size_t P = (size_t)L->nparts + 1;
+  if (L->nparts < 1 || L->nnb < 0 || L->neb < 0 ||
+      len != sizeof *L + sizeof(gmsh_block) * ((size_t)L->nnb + (size_t)L->neb) + 2 * P * sizeof(gmsh_pos))
+    return 1;
+  L->nb = malloc(sizeof(gmsh_block) * ((size_t)L->nnb + 1));
+  L->eb = malloc(sizeof(gmsh_block) * ((size_t)L->neb + 1));
+  L->np = malloc(sizeof(gmsh_pos) * P);
+  L->ep = malloc(sizeof(gmsh_pos) * P);
+  if (!L->nb || !L->eb || !L->np || !L->ep) { mesh_gmsh_layout_free(L); return 1; }
+  const char *p = buf + sizeof *L;
+  memcpy(L->nb, p, sizeof(gmsh_block) * (size_t)L->nnb); p += sizeof(gmsh_block) * (size_t)L->nnb;
+  memcpy(L->eb, p, sizeof(gmsh_block) * (size_t)L->neb); p += sizeof(gmsh_block) * (size_t)L->neb;
+  memcpy(L->np, p, sizeof(gmsh_pos) * P); p += sizeof(gmsh_pos) * P;
+  memcpy(L->ep, p, sizeof(gmsh_pos) * P);
+  return 0;
+}
+
+/* bytes off .. end - 1 of the file into a NUL-terminated buffer */
+static char *read_span(int fd, long long off, long long end) {
+  if (end < off) return NULL;
+  size_t n = (size_t)(end - off), got = 0;
+  char *b = malloc(n + 1);
+  while (b && got < n) {
+    ssize_t r = pread(fd, b + got, n - got, (off_t)(off + (long long)got));
+    if (r < 0 && errno == EINTR) continue;
+    if (r <= 0) { free(b); return NULL; }
+    got += (size_t)r;
+  }
+  if (b) b[n] = 0;
+  return b;
+}
+
+/* a lexer over one span; done: nothing may follow its items */
+static int span_lex(lex *l, char *buf, const gmsh_span *s, const char *path, char *err) {
+  *l = (lex){buf, (size_t)(s->end - s->off), 0, s->line, s->line, path, err, 0};
+  return 0;
+}
+static int span_done(lex *l) {
+  if (l->failed) return 1;
+  if (tok(l)) { lex_err(l, "more data than the layout's items"); return 1; }
+  return 0;
+}
+
+/* a span read in chunks of whole lines, each at most SPAN_CHUNK bytes (a line is at most
+ * the layout's 4 MB), so that a part's text is never in memory at once: each chunk a lexer
+ * and its count of non-blank lines, one item each as the layout counted them */
+#define SPAN_CHUNK ((size_t)8 << 20)
+typedef struct {
+  int fd;
+  long long off, end, line;
+  char *buf;
+  const char *path;
+  char *err;
+} spanrd;
+
+static long long span_next(spanrd *r, lex *l) {
+  if (r->off >= r->end) return 0;
+  if (!r->buf && !(r->buf = malloc(SPAN_CHUNK + 1))) { snprintf(r->err, MESH_ERRLEN, "%.200s: out of memory", r->path); return -1; }
+  size_t want = (size_t)(r->end - r->off) < SPAN_CHUNK ? (size_t)(r->end - r->off) : SPAN_CHUNK, got = 0;
+  while (got < want) {
+    ssize_t k = pread(r->fd, r->buf + got, want - got, (off_t)(r->off + (long long)got));
+    if (k < 0 && errno == EINTR) continue;
+    if (k <= 0) { snprintf(r->err, MESH_ERRLEN, "%.200s: cannot read", r->path); return -1; }
+    got += (size_t)k;
+  }
+  size_t len = want;
+  if (r->off + (long long)want < r->end) { /* whole lines only */
+    while (len && r->buf[len - 1] != '\n') len--;
+    if (!len) { snprintf(r->err, MESH_ERRLEN, "%.200s: a line over %zu bytes", r->path, SPAN_CHUNK); return -1; }
+  }
+  r->buf[len] = 0;
+  long long items = 0, lines = 0;
+  int text = 0;
+  for (size_t i = 0; i < len; i++) {
+    char c = r->buf[i];
+    if (c == '\n') { items += text; text = 0; lines++; }
+    else if (!isspace((unsigned char)c)) text = 1;
+  }
+  items += text;
+  *l = (lex){r->buf, len, 0, r->line, r->line, r->path, r->err, 0};
+  r->line += lines;
+  r->off += (long long)len;
+  return items;
+}
+
+/* the span of part p's run within block B (second: MSH 4 nodes' coordinates) */
+static int run_span(const gmsh_block *B, const gmsh_pos *pos, long long lo, long long hi, int p, int second,
+                    gmsh_span *s, long long *first, long long *count) {
+  long long a = lo > B->first ? lo : B->first, e = hi < B->first + B->count ? hi : B->first + B->count;
+  if (a >= e) return 0;
+  const gmsh_span *bs = second ? &B->b : &B->a;
+  s->off = a == B->first ? bs->off : second ? pos[p].boff : pos[p].aoff;
+  s->line = a == B->first ? bs->line : second ? pos[p].bline : pos[p].aline;
+  s->end = e == B->first + B->count ? bs->end : second ? pos[p + 1].boff : pos[p + 1].aoff;
+  *first = a;
+  *count = e - a;
+  return 1;
+}
+
+void mesh_gmsh_part_free(gmsh_part *g) {
+  free(g->ntag); free(g->nx); free(g->e); free(g->enodes); free(g->phys); free(g->name_dim);
+  for (int i = 0; i < g->nname; i++) free(g->names[i].name);
+  free(g->names);
+  memset(g, 0, sizeof *g);
+}
+
+int mesh_gmsh_read_part(const char *path, const gmsh_layout *L, int p, gmsh_part *out, char *err) {
+  memset(out, 0, sizeof *out);
+  err[0] = 0;
+  gfile g;
+  memset(&g, 0, sizeof g);
+  lex l = {NULL, 0, 0, 1, 1, path, err, 0};
+  int fd = open(path, O_RDONLY | O_CLOEXEC), rc = 1;
+  char *buf = NULL;
+  if (fd < 0) { snprintf(err, MESH_ERRLEN, "cannot open %.200s: %s", path, strerror(errno)); return 1; }
+  if (!L->ok || p < 0 || p >= L->nparts) { snprintf(err, MESH_ERRLEN, "%.200s: no layout for part %d", path, p); goto done; }
+  /* the small sections, as the whole reader takes them */
+  for (int i = 0; i < L->nsmall; i++) {
+    if (!(buf = read_span(fd, L->small[i].off, L->small[i].end))) { snprintf(err, MESH_ERRLEN, "%.200s: cannot read", path); goto done; }
+    span_lex(&l, buf, &L->small[i], path, err);
+    char *t;
+    while (!l.failed && (t = tok(&l))) {
+      if (!strcmp(t, "$MeshFormat")) read_format(&l, &g);
+      else if (!strcmp(t, "$PhysicalNames")) read_names(&l, &g);
+      else if (!strcmp(t, "$Entities") && g.version == 4) read_entities(&l, &g, 0);
+      else if (!strcmp(t, "$PartitionedEntities") && g.version == 4) read_entities(&l, &g, 1);
+      else if (t[0] == '$') skip_section(&l, t);
+      else lex_err(&l, "unexpected \"%.32s\" outside any section", t);
+    }
+    free(buf);
+    buf = NULL;
+    if (l.failed) goto done;
+  }
+  if (g.version != L->version) { snprintf(err, MESH_ERRLEN, "%.200s: the layout's version differs", path); goto done; }
+  if (g.nent) qsort(g.ent, g.nent, sizeof(gentity), ent_cmp);
+  for (size_t i = 1; i < g.nent; i++)
+    if (!ent_cmp(&g.ent[i], &g.ent[i - 1])) { snprintf(err, MESH_ERRLEN, "%.200s: an entity defined twice", path); goto done; }
+  /* the nodes of this part's run */
+  long long lo = run_start(L->nnodes, L->nparts, p), hi = run_start(L->nnodes, L->nparts, p + 1);
+  out->node_first = lo;
+  /* the runs' counts against their bytes before anything is allocated, as the whole reader
+   * checks its counts: a node takes 4 tokens (8 bytes), an element 2 at least (4 bytes) */
+  for (int pass = 0; pass < 2; pass++) {
+    long long a = run_start(pass ? L->nelems : L->nnodes, L->nparts, p), e = run_start(pass ? L->nelems : L->nnodes, L->nparts, p + 1),
+              bytes = 0, first, count;
+    for (int b = 0; b < (pass ? L->neb : L->nnb); b++) {
+      gmsh_span sa, sb;
+      const gmsh_block *B = pass ? &L->eb[b] : &L->nb[b];
+      const gmsh_pos *pos = pass ? L->ep : L->np;
+      if (!run_span(B, pos, a, e, p, 0, &sa, &first, &count)) continue;
+      bytes += sa.end - sa.off;
+      if (!pass && L->version == 4 && run_span(B, pos, a, e, p, 1, &sb, &first, &count)) bytes += sb.end - sb.off;
+    }
+    if ((e - a) * (pass ? 4 : 8) > bytes + 8) {
+      snprintf(err, MESH_ERRLEN, "%.200s: %lld %s in %lld bytes", path, e - a, pass ? "elements" : "nodes", bytes);
+      goto done;
+    }
+  }
+  if (node_reserve(&l, &g, (size_t)(hi - lo) + 1)) goto done;
+  for (int b = 0; b < L->nnb; b++) {
+    const gmsh_block *B = &L->nb[b];
+    gmsh_span s;
+    long long first, count;
+    if (!run_span(B, L->np, lo, hi, p, 0, &s, &first, &count)) continue;
+    size_t at = (size_t)(first - lo);
+    for (int second = 0; second <= (L->version == 4); second++) {
+      if (second) run_span(B, L->np, lo, hi, p, 1, &s, &first, &count);
+      spanrd sr = {fd, s.off, s.end, s.line, NULL, path, err};
+      long long k, i = 0;
+      while ((k = span_next(&sr, &l)) > 0) {
+        for (long long j = 0; j < k && i < count && !l.failed; j++, i++) {
+          size_t q = at + (size_t)i;
+          if (!second) {
+            g.ntag[q] = tok_int(&l, "node tag", 1, INT64_MAX);
+            if (L->version == 2) read_coords(&l, g.ntag[q], g.nx + 3 * q);
+          } else {
+            read_coords(&l, g.ntag[q], g.nx + 3 * q);
+            for (int d = 0; B->par && d < B->edim && !l.failed; d++) tok_real(&l, "parametric coordinate");
+          }
+        }
+        if (span_done(&l)) break;
+      }
+      free(sr.buf);
+      if (k < 0 || l.failed || i != count) {
+        if (!err[0]) snprintf(err, MESH_ERRLEN, "%.200s: a node run does not hold its nodes", path);
+        goto done;
+      }
+    }
+  }
+  g.nn = (size_t)(hi - lo);
+  /* the elements of this part's run, straight into out: their physical tags are the
+   * entities' (MSH 4: out->phys is the entities' list) or their own (MSH 2: one each) */
+  lo = run_start(L->nelems, L->nparts, p);
+  hi = run_start(L->nelems, L->nparts, p + 1);
+  out->version = g.version;
+  out->elem_first = lo;
+  out->e = malloc(sizeof(gmsh_elem) * ((size_t)(hi - lo) + 1));
+  out->phys = malloc(sizeof(int) * ((L->version == 2 ? (size_t)(hi - lo) : g.nphys) + 1));
+  size_t capn = 4 * (size_t)(hi - lo) + 16, nnodes = 0; /* grown for hexahedra */
+  out->enodes = malloc(sizeof(long long) * capn);
+  if (!out->e || !out->phys || !out->enodes) { snprintf(err, MESH_ERRLEN, "%.200s: out of memory", path); goto done; }
+  if (L->version == 4) memcpy(out->phys, g.phys, sizeof(int) * g.nphys);
+  int nph = 0;
+  for (int b = 0; b < L->neb; b++) {
+    const gmsh_block *B = &L->eb[b];
+    gmsh_span s;
+    long long first, count;
+    if (!run_span(B, L->ep, lo, hi, p, 0, &s, &first, &count)) continue;
+    gelem e;
+    memset(&e, 0, sizeof e);
+    int enp = 0, eoff = 0;
+    if (L->version == 4) {
+      e.edim = B->edim;
+      e.etag = B->etag;
+      e.nn = gmsh_nnodes(B->type);
+      if (!e.nn || gmsh_dim(B->type) != e.edim) {
+        snprintf(err, MESH_ERRLEN, "%.200s: an element block of type %d on an entity of dimension %d", path, B->type, B->edim);
+        goto done;
+      }
+      e.type = B->type;
+      int one;
+      const int *ph = elem_phys(&g, &e, &enp, &one);
+      eoff = enp ? (int)(ph - g.phys) : 0;
+    }
+    spanrd sr = {fd, s.off, s.end, s.line, NULL, path, err};
+    long long k, i = 0;
+    while ((k = span_next(&sr, &l)) > 0) {
+      for (long long j = 0; j < k && i < count && !l.failed; j++, i++) {
+        gmsh_elem *o = &out->e[out->ne];
+        memset(o, 0, sizeof *o);
+        if (L->version == 2) {
+          tok_int(&l, "element tag", 1, INT64_MAX);
+          int64_t type = tok_int(&l, "element type", 1, INT_MAX);
+          long nt = tok_count(&l, "number of element tags", 1);
+          int phys = 0;
+          for (long q = 0; q < nt && !l.failed; q++) {
+            int64_t v = tok_int(&l, "element tag", q == 0 ? 0 : INT_MIN, INT_MAX);
+            if (q == 0) phys = (int)v;
+          }
+          if (l.failed) break;
+          e.nn = gmsh_nnodes(type);
+          if (!e.nn && unsupported_type(&l, type)) break;
+          o->type = (int)type;
+          o->nphys = phys != 0;
+          o->phys = nph;
+          if (phys) out->phys[nph++] = phys;
+        } else {
+          tok_int(&l, "element tag", 1, INT64_MAX);
+          o->type = e.type;
+          o->nphys = enp;
+          o->phys = eoff;
+        }
+        if (nnodes + 8 > capn && GROW(&l, out->enodes, capn, nnodes + 8)) break;
+        o->node = (long long)nnodes;
+        for (int q = 0; q < e.nn && !l.failed; q++) out->enodes[nnodes++] = tok_int(&l, "element node", 1, INT64_MAX);
+        if (!l.failed) out->ne++;
+      }
+      if (span_done(&l)) break;
+    }
+    free(sr.buf);
+    if (k < 0 || l.failed || i != count) {
+      if (!err[0]) snprintf(err, MESH_ERRLEN, "%.200s: an element run does not hold its elements", path);
+      goto done;
+    }
+  }
+  /* out: the nodes as read, the names */
+  out->nn = (long long)g.nn;
+  out->ntag = (long long *)g.ntag; /* int64_t and long long: both 64 bits here */
+  out->nx = g.nx;
+  g.ntag = NULL;
+  g.nx = NULL;
+  out->names = calloc(g.nname + 1, sizeof(mesh_name));
+  out->name_dim = malloc(sizeof(int) * (g.nname + 1));
+  if (!out->names || !out->name_dim) { snprintf(err, MESH_ERRLEN, "%.200s: out of memory", path); goto done; }
+  for (size_t i = 0; i < g.nname; i++) {
+    out->names[i].tag = g.names[i].tag;
+    out->names[i].name = g.names[i].name;
+    out->name_dim[i] = g.names[i].dim;
+    g.names[i].name = NULL;
+    out->nname++;
+  }
+  rc = 0;
+done:
+  close(fd);
+  free(buf);
+  gfile_free(&g);
+  if (rc) mesh_gmsh_part_free(out);
+  return rc;
 }
 
 /* ---------------------------------------------------------------- writer */

@@ -39,7 +39,7 @@ const char *cell_plural(cell_type t) {
   static const char *n[] = {"triangles", "quadrilaterals", "tetrahedra", "hexahedra", "intervals"};
   return n[t];
 }
-static int cell_nvf(cell_type t) { static const int n[] = {2, 2, 3, 4, 1}; return n[t]; }
+int cell_nvf(cell_type t) { static const int n[] = {2, 2, 3, 4, 1}; return n[t]; }
 
 const int *cell_facet_verts(cell_type t, int f) {
   switch (t) {
@@ -622,13 +622,23 @@ int mesh_count_invalid(const mesh *m, int maxids, int *ids, int *ninv) {
   return 0;
 }
 
-int mesh_orient_consistently(mesh *m) {
-  if (m->ncell == 0) return 0;
+int mesh_cells_negative(const mesh *m, const char *which) {
   double x[8 * 3];
   for (int c = 0; c < m->ncell; c++) {
+    if (which && !which[c]) continue;
     mesh_cell_normalized(m, c, x);
     if (!(coords_signed_measure(m->type, x) < 0)) return 0;
   }
+  return 1;
+}
+
+int mesh_orient_consistently(mesh *m) {
+  if (m->ncell == 0 || !mesh_cells_negative(m, NULL)) return 0;
+  mesh_flip_cells(m);
+  return 1;
+}
+
+void mesh_flip_cells(mesh *m) {
   int nvc = m->nvc;
   for (int c = 0; c < m->ncell; c++) {
     int *v = m->cells + (size_t)c * (size_t)nvc, t;
@@ -644,7 +654,6 @@ int mesh_orient_consistently(mesh *m) {
       break;
     }
   }
-  return 1;
 }
 
 /* ---------------------------------------------------------------- adjacency */

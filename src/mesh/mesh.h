@@ -69,6 +69,7 @@ int cell_nfacets(cell_type t);
 int cell_nedges(cell_type t);
 int cell_dim(cell_type t);
 int cell_nverts(cell_type t);
+int cell_nvf(cell_type t); /* vertices per facet */
 const char *cell_name(cell_type t);
 /* "triangles", "quadrilaterals", "tetrahedra", "hexahedra" */
 const char *cell_plural(cell_type t);
@@ -157,6 +158,61 @@ mesh *mesh_read_gmsh_buffer(const char *buf, size_t len, const char *name, char 
  * and newlines escaped as the reader unescapes them) */
 int mesh_write_gmsh(mesh *m, const char *path);
 
+/* A file read in parts, one per process of a parallel run (src/assemble/read_dist.c joins
+ * them into each process's part of the mesh). One process scans the file's lines once with
+ * constant memory (mesh_gmsh_layout): where its sections are, the MSH 4 blocks, and where
+ * each of nparts even runs of the nodes and of the elements begins. Each process then reads
+ * its runs and the small sections only (mesh_gmsh_read_part), with the whole reader's checks.
+ * The layout does not judge the contents: a file it cannot cut (a pipe, repeated $Nodes or
+ * $Elements, a line over 4 MB, a count that does not match the lines) has ok = 0 and a
+ * reason, and is read whole; so is one whose part fails to parse, which then gets the whole
+ * reader's message. */
+#define GMSH_MAX_SMALL 16
+typedef struct { long long off, end, line; } gmsh_span;  /* bytes off .. end - 1, line of off */
+typedef struct {
+  long long first, count; /* items (nodes or elements) first .. first + count - 1 of the file */
+  int edim, par, type;    /* an MSH 4 block's entity dimension, parametric flag, element type */
+  long long etag;         /* and entity tag */
+  gmsh_span a, b;         /* the lines: MSH 4 nodes' tags (a) and coordinates (b), else a */
+} gmsh_block;
+typedef struct { long long aoff, aline, boff, bline; } gmsh_pos;
+typedef struct {
+  int ok, version, nparts;
+  char why[200];
+  int nsmall;
+  gmsh_span small[GMSH_MAX_SMALL]; /* the sections other than $Nodes and $Elements */
+  long long nnodes, nelems;
+  int nnb, neb;
+  gmsh_block *nb, *eb;
+  gmsh_pos *np, *ep; /* nparts + 1 each: where node / element (k * total / nparts) starts */
+} gmsh_layout;
+int mesh_gmsh_layout(const char *path, int nparts, gmsh_layout *L);
+int mesh_gmsh_layout_pack(const gmsh_layout *L, char **buf, size_t *len);
+int mesh_gmsh_layout_unpack(const char *buf, size_t len, gmsh_layout *L);
+void mesh_gmsh_layout_free(gmsh_layout *L);
+typedef struct {
+  int type, nphys, phys;     /* Gmsh type; physical tags: nphys at gmsh_part.phys + phys */
+  long long node;            /* its node tags: gmsh_part.enodes + node, as many as the type has */
+} gmsh_elem;
+typedef struct {
+  int version;
+  long long node_first, nn; /* nodes node_first .. node_first + nn - 1 of the file */
+  long long *ntag;
+  double *nx;               /* 3 per node */
+  long long elem_first, ne; /* elements elem_first .. elem_first + ne - 1 of the file */
+  gmsh_elem *e;             /* in the file's order */
+  long long *enodes;
+  int *phys;
+  int nname, *name_dim;     /* $PhysicalNames: dimension, tag, name */
+  mesh_name *names;
+} gmsh_part;
+int mesh_gmsh_read_part(const char *path, const gmsh_layout *L, int p, gmsh_part *out, char *err);
+void mesh_gmsh_part_free(gmsh_part *g);
+/* a Gmsh element type's dimension, nodes (0: not read by lugal) and cell type */
+int mesh_gmsh_type_dim(int type);
+int mesh_gmsh_type_nodes(int type);
+cell_type mesh_gmsh_type_cell(int type);
+
 /* VTU output (vtk.c): point and cell data arrays of ncomp components (1 or 3). Every
  * writer of the mesh layer writes to a temporary file renamed over the target (outfile.h). */
 typedef struct {
@@ -225,6 +281,10 @@ const int *hex_corner_neighbors(int i);
  * reverse their cycle, hexahedra swap their bottom and top faces). A mixed mesh is left as
  * it is (it is tangled). Returns 1 when it flipped the cells. */
 int mesh_orient_consistently(mesh *m);
+/* its two steps: 1 when every cell (with `which`, every cell c with which[c]) is negatively
+ * oriented; every cell reversed */
+int mesh_cells_negative(const mesh *m, const char *which);
+void mesh_flip_cells(mesh *m);
 
 /* part.c: one part of a mesh whose cells are split into parts, as a process of a
  * distributed run holds it: the cells of the part (owned) and every cell sharing a vertex

@@ -15,6 +15,7 @@
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
+#include <unistd.h>
 
 static double total(const mesh *m) {
   double s = 0;
@@ -319,12 +320,84 @@ static void windows(void) {
   CHECK(mesh_rectangle(&x, err) == NULL && strstr(err, "window"), "a window past the top refused: %s", err);
 }
 
+/* the file read in nparts parts (mesh_gmsh_layout, mesh_gmsh_read_part): the parts,
+ * joined, are the one-part read, item for item (nodes, elements with their physical tags),
+ * and the one-part read holds the whole reader's cells; a layout survives packing; files
+ * the layout cannot cut say why */
+static void read_parts(const char *data) {
+  const char *files[] = {"square_unstructured.msh", "square_unstructured_v22.msh", "cube_unstructured.msh", "../../examples/domain.msh"};
+  char path[1024], err[MESH_ERRLEN];
+  for (int f = 0; f < 4; f++) {
+    snprintf(path, sizeof path, "%s/%s", data, files[f]);
+    mesh *m = mesh_read_gmsh(path, err);
+    CHECK(m != NULL, "%s", err);
+    if (!m) continue;
+    gmsh_layout L1;
+    CHECK(mesh_gmsh_layout(path, 1, &L1), "%s: %s", path, L1.why);
+    gmsh_part W;
+    CHECK(mesh_gmsh_read_part(path, &L1, 0, &W, err) == 0, "%s", err);
+    int cdim = 0;
+    long long ncells = 0;
+    for (long long i = 0; i < W.ne; i++) cdim = mesh_gmsh_type_dim(W.e[i].type) > cdim ? mesh_gmsh_type_dim(W.e[i].type) : cdim;
+    for (long long i = 0; i < W.ne; i++) ncells += mesh_gmsh_type_dim(W.e[i].type) == cdim;
+    CHECK(ncells == m->ncell && W.nn >= m->nvert && W.nn == L1.nnodes, "%s: %lld cells, %lld nodes", path, ncells, W.nn);
+    for (int np = 2; np <= 7; np++) {
+      gmsh_layout L, L2;
+      CHECK(mesh_gmsh_layout(path, np, &L), "%s: %s", path, L.why);
+      char *buf;
+      size_t len;
+      CHECK(mesh_gmsh_layout_pack(&L, &buf, &len) == 0 && mesh_gmsh_layout_unpack(buf, len, &L2) == 0, "pack");
+      free(buf);
+      long long nn = 0, ne = 0, bad = 0;
+      for (int p = 0; p < np; p++) {
+        gmsh_part G;
+        if (mesh_gmsh_read_part(path, &L2, p, &G, err)) { CHECK(0, "%s part %d of %d: %s", path, p, np, err); continue; }
+        bad += G.node_first != nn || G.nname != W.nname;
+        for (long long i = 0; i < G.nn; i++, nn++)
+          bad += G.ntag[i] != W.ntag[nn] || memcmp(G.nx + 3 * i, W.nx + 3 * nn, 3 * sizeof(double));
+        bad += G.elem_first != ne;
+        for (long long i = 0; i < G.ne; i++, ne++) {
+          const gmsh_elem *a = &G.e[i], *b = &W.e[ne];
+          bad += a->type != b->type || a->nphys != b->nphys ||
+                 memcmp(G.enodes + a->node, W.enodes + b->node, sizeof(long long) * (size_t)mesh_gmsh_type_nodes(a->type)) ||
+                 memcmp(G.phys + a->phys, W.phys + b->phys, sizeof(int) * (size_t)a->nphys);
+        }
+        mesh_gmsh_part_free(&G);
+      }
+      CHECK(!bad && nn == W.nn && ne == W.ne, "%s in %d parts: %lld differences, %lld of %lld nodes, %lld of %lld elements", path,
+            np, bad, nn, W.nn, ne, W.ne);
+      mesh_gmsh_layout_free(&L);
+      mesh_gmsh_layout_free(&L2);
+    }
+    mesh_gmsh_part_free(&W);
+    mesh_gmsh_layout_free(&L1);
+    mesh_free(m);
+  }
+  /* what the layout does not cut: a pipe, repeated sections, counts beyond the lines */
+  gmsh_layout L;
+  CHECK(!mesh_gmsh_layout("/dev/null", 2, &L) && strstr(L.why, "regular"), "%s", L.why);
+  mesh_gmsh_layout_free(&L);
+  const char *bad[] = {"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n3\n1 0 0 0\n2 1 0 0\n$EndNodes\n$Elements\n0\n$EndElements\n",
+                       "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n0\n$EndNodes\n$Nodes\n0\n$EndNodes\n$Elements\n0\n$EndElements\n",
+                       "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n1\n1 0 0 0\n2 0 0 0\n$EndNodes\n$Elements\n0\n$EndElements\n"};
+  for (int i = 0; i < 3; i++) {
+    snprintf(path, sizeof path, "/tmp/lugal_layout_%d.msh", (int)getpid());
+    FILE *fp = fopen(path, "w");
+    fputs(bad[i], fp);
+    fclose(fp);
+    CHECK(!mesh_gmsh_layout(path, 2, &L) && L.why[0], "bad layout %d accepted", i);
+    mesh_gmsh_layout_free(&L);
+    remove(path);
+  }
+}
+
 int main(int argc, char **argv) {
   const char *data = argc > 1 ? argv[1] : "tests/data";
   untangle_option_defaults();
   pack(data);
   parts(data);
   windows();
+  read_parts(data);
   char err[MESH_ERRLEN], path[1024];
   mesh_box_opts o = {3, 2, 2, 0, 2, 0, 1, 0, 1, CELL_TRIANGLE, 0, 0, 0};
   for (int dg = 0; dg < 3; dg++) {

@@ -39,7 +39,7 @@ typedef struct {
 static char fuzz_dir[256];
 
 static void fuzz_cleanup(void) {
-  static const char *files[] = {"m.msh", "m.vtu", "m.pvd", "m.svg", "h.svg"};
+  static const char *files[] = {"m.msh", "m.vtu", "m.pvd", "m.svg", "h.svg", "in.msh"};
   char p[400];
   for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {
     snprintf(p, sizeof p, "%s/%s", fuzz_dir, files[i]);
@@ -170,9 +170,45 @@ static void exercise(mesh *m, fuzz_mesh_result *res) {
   }
 }
 
+/* the file read in 3 parts (the parallel reader's layout and parts, gmsh.c): no crash, a
+ * message for a part refused, and the parts of a layout hold its counts; where the whole
+ * reader took the file, the parts hold at least its cells (repeats merge) */
+static void read_in_parts(const uint8_t *data, size_t size, const mesh *m) {
+  char path[400], err[MESH_ERRLEN];
+  snprintf(path, sizeof path, "%s/in.msh", fuzz_tmpdir());
+  FILE *f = fopen(path, "wb");
+  if (!f) return;
+  fwrite(data, 1, size, f);
+  fclose(f);
+  gmsh_layout L;
+  if (mesh_gmsh_layout(path, 3, &L)) {
+    long long nn = 0, ne = 0, ncell = 0;
+    int all = 1;
+    for (int p = 0; p < 3; p++) {
+      gmsh_part G;
+      err[0] = 0;
+      if (mesh_gmsh_read_part(path, &L, p, &G, err)) {
+        FUZZ_CHECK(err[0] != 0, "a refused part has a message");
+        all = 0;
+        continue;
+      }
+      nn += G.nn;
+      ne += G.ne;
+      for (long long i = 0; m && i < G.ne; i++) ncell += mesh_gmsh_type_dim(G.e[i].type) == m->dim;
+      mesh_gmsh_part_free(&G);
+    }
+    FUZZ_CHECK(!all || (nn == L.nnodes && ne == L.nelems), "the parts hold the layout's nodes and elements");
+    FUZZ_CHECK(!all || !m || ncell >= m->ncell, "the parts hold the whole reader's cells");
+  } else
+    FUZZ_CHECK(L.why[0] != 0, "a layout refused has a reason");
+  mesh_gmsh_layout_free(&L);
+  unlink(path);
+}
+
 int fuzz_mesh_run(const uint8_t *data, size_t size, fuzz_mesh_result *res) {
   memset(res, 0, sizeof *res);
   mesh *m = mesh_read_gmsh_buffer((const char *)data, size, "input.msh", res->err);
+  read_in_parts(data, size, m);
   if (!m) {
     FUZZ_CHECK(res->err[0] != 0, "a refused mesh has a message");
     return 0;

@@ -1,8 +1,8 @@
 # mpi_lib.sh — sourced by the parallel tests (test_mpi.sh, test_mpi_dist.sh) with BUILD set:
 # a scratch folder T removed at exit, fail(), Open MPI's settings for root and for more
 # ranks than cores, ROOT and LUGAL.
-T=$(mktemp -d)
-trap 'rm -rf "$T"' EXIT
+T=${KEEP_T:-$(mktemp -d)}
+[ -n "$KEEP_T" ] || trap 'rm -rf "$T"' EXIT
 fail() { echo "FAIL: $*"; exit 1; }
 command -v mpiexec > /dev/null 2>&1 || fail "mpiexec not found (Debian's openmpi-bin comes with petsc-dev)"
 # Open MPI refuses root unless told, and a 2-core machine has 2 slots

@@ -1,6 +1,7 @@
 # mpi_lib.sh — sourced by the parallel tests (test_mpi.sh, test_mpi_dist.sh) with BUILD set:
 # a scratch folder T removed at exit, fail(), Open MPI's settings for root and for more
-# ranks than cores, ROOT and LUGAL.
+# ranks than cores, ROOT and LUGAL. KEEP_T=DIR (an existing folder) keeps the scratch files
+# there to look at after a failure.
 T=${KEEP_T:-$(mktemp -d)}
 [ -n "$KEEP_T" ] || trap 'rm -rf "$T"' EXIT
 fail() { echo "FAIL: $*"; exit 1; }

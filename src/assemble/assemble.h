@@ -121,6 +121,12 @@ lg_mesh *lg_mesh_generate_part(lg_env *env, const mesh_box_opts *o, int *whole);
  * contents, -lugal_read_parts 0): rank 0 then reads it whole for lg_mesh_distribute, which
  * reads what can be read and gives the whole reader's messages */
 lg_mesh *lg_mesh_read_parts(lg_env *env, const char *path);
+/* a generated box or rectangle partitioned by a graph partitioner on every rank: each rank
+ * passes its window m of the mesh (its run's cells and every cell around their vertices: the
+ * window lg_mesh_generate_part makes) with global numbers vglob, cglob of nvg vertices and ncg
+ * cells; the run's cells enter the reader's pipeline (partition, ghost layers, facets, part)
+ * as if read from a file. Collective; NULL on every rank where any failed */
+lg_mesh *lg_mesh_parts_from_window(lg_env *env, mesh *m, const int *vglob, const int *cglob, int nvg, int ncg, int layers);
 /* -lugal_read_parts (default 1): 0 keeps the whole-file read on rank 0 */
 int lg_read_parts_wanted(void);
 /* the whole mesh and the fields' whole arrays (point or cell data of fl) on rank 0, from

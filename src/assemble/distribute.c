@@ -136,8 +136,7 @@ lg_mesh *lg_mesh_generate_part(lg_env *env, const mesh_box_opts *o, int *whole) 
   *whole = 1;
   long vlo, vhi;
   mesh_box_opts w;
-  if (!nvg || layers < 0 || (!natural && strcmp(method, "auto")) || o->hi || mesh_box_part_window(o, size, rank, layers, &w, &vlo, &vhi))
-    return NULL;
+  if (!nvg || layers < 0 || o->hi || mesh_box_part_window(o, size, rank, layers, &w, &vlo, &vhi)) return NULL;
   char err[MESH_ERRLEN] = "";
   mesh *m = box ? mesh_box(&w, err) : mesh_rectangle(&w, err);
   int *vglob = m ? malloc(sizeof(int) * ((size_t)m->nvert + 1)) : NULL, *cglob = m ? malloc(sizeof(int) * ((size_t)m->ncell + 1)) : NULL;
@@ -157,6 +156,15 @@ lg_mesh *lg_mesh_generate_part(lg_env *env, const mesh_box_opts *o, int *whole) 
   lg_mesh *lm = NULL;
   mesh_part *P = NULL;
   if ((rc = lg_any_result(rc, err, sizeof err))) goto done;
+  /* a graph partitioner on every rank, from the windows' runs (lg_mesh_parts_from_window), from
+   * 4 ranks on; on 2 or 3, rank 0 makes the whole mesh, partitions and cuts it: the box of
+   * 1.57 M tetrahedra with PTScotch on 2 ranks took 0.73 s and 183 MB on rank 0 that way
+   * against 1.06 s and 248 MB a rank, on 4 ranks 188 MB against 155 (bench/RESULTS.md) */
+  int on_ranks = size >= 4;
+  if (!natural && strcmp(method, "auto")) { /* a partitioner asked for */
+    if (on_ranks && (lm = lg_mesh_parts_from_window(env, m, vglob, cglob, (int)nvg, (int)ncg, layers))) *whole = 0;
+    goto done;
+  }
   if (!natural) { /* auto: the runs where rank 0, cutting the whole mesh, would keep them */
     long have = 0, fewest = 0;
     int fail = MPI_Allreduce(&cnt[0], &have, 1, MPI_LONG, MPI_SUM, PETSC_COMM_WORLD) != MPI_SUCCESS ||
@@ -165,7 +173,10 @@ lg_mesh *lg_mesh_generate_part(lg_env *env, const mesh_box_opts *o, int *whole) 
     env->verbose = verbose && rank == 0;
     int keep = !fail && lg_runs_kept(env, have, lg_runs_cut_little(have, nvg, d, size) ? fewest : -1, nvg, ncg, d, size);
     env->verbose = verbose;
-    if (!keep) goto done; /* *whole stays 1 */
+    if (!keep) { /* PTScotch (where the ranks' run fails, rank 0 makes the whole mesh) */
+      if (on_ranks && (lm = lg_mesh_parts_from_window(env, m, vglob, cglob, (int)nvg, (int)ncg, layers))) *whole = 0;
+      goto done;
+    }
   }
   if (mesh_vertex_owners(m, part, vown)) { snprintf(err, sizeof err, "out of memory for the vertices' owners"); rc = 1; }
   else if (!(P = mesh_part_extract_window(m, vglob, cglob, (int)nvg, (int)ncg, part, vown, rank, layers, err))) rc = 1;

@@ -203,6 +203,8 @@ RADIX_SORT(sort_kv, kv, KV_KEY)
 RADIX_SORT(sort_u64, uint64_t, SELF_KEY)
 RADIX_SORT(sort_u32, unsigned, SELF_KEY)
 
+static int cmp_int(const void *a, const void *b) { int x = *(const int *)a, y = *(const int *)b; return (x > y) - (x < y); }
+
 /* non-negative ints, sorted and made unique in place; -1 when out of memory */
 static long unique_ints(int *a, long n) {
   if (sort_u32((unsigned *)a, n)) return -1;
@@ -284,6 +286,8 @@ typedef struct {
   int *ctag, *keep, *cidx, ncl;
   int *fv, *fidx, nfl; /* the local tagged facets: vertices (-1: a node of no cell), element */
   int *fph, *fnp;      /* and their physical tags (at G.phys + fph, fnp of them) */
+  int *cglob;          /* the local cells' numbers where they are not cbase + c (a generated mesh) */
+  mesh *names;         /* where the names come from where not the file (a generated mesh) */
   long long efirst;    /* the file's index of this rank's first element */
   /* after the cells' numbering */
   int ncg, cbase;
@@ -697,7 +701,7 @@ static void partition(reader *R) {
   double t0 = now_ms();
   /* the vertex graph's rows at their homes: each cell to the homes of its vertices */
   int lo = vlo(R->rank, nvg, P), nloc = vlo(R->rank + 1, nvg, P) - lo;
-  box b = {sizeof(int) * 8, 0, 0, NULL, NULL};
+  box b = {sizeof(int) * (size_t)nvc, 0, 0, NULL, NULL};
   for (int c = 0; !R->bad && c < R->ncl; c++) {
     const int *v = R->cv + (size_t)nvc * (size_t)c;
     for (int k = 0; k < nvc; k++) {
@@ -710,33 +714,49 @@ static void partition(reader *R) {
   long n = 0;
   int *cells = (int *)box_send(&b, cnt, rcnt, NULL, &n, &R->bad);
   box_free(&b);
-  long np = 0;
-  long long *pairs = malloc(sizeof(long long) * ((size_t)n * (size_t)nvc * (size_t)(nvc - 1) + 1));
-  if (!pairs) R->bad = 1;
-  for (long i = 0; !R->bad && i < n; i++) {
-    const int *v = cells + 8 * i;
-    for (int a = 0; a < nvc; a++) {
-      if (v[a] < lo || v[a] >= lo + nloc) continue;
-      for (int e = 0; e < nvc; e++)
-        if (e != a) pairs[np++] = (long long)(v[a] - lo) << 32 | (unsigned)v[e];
-    }
-  }
-  free(cells);
+  /* each row's cells (vs, vc), then its neighbours: the other vertices of those cells,
+   * sorted and unique, counted in a first pass and written in a second (the pairs of a
+   * sorted list had held 12 long integers a tetrahedron) */
+  int *vs = calloc((size_t)nloc + 2, sizeof(int)), *vc = malloc(sizeof(int) * ((size_t)n * nvc + 1)), *nb = NULL, cap = 0;
   PetscInt *ia = NULL, *ja = NULL;
-  if (!R->bad) {
-    if (sort_u64((uint64_t *)pairs, np)) R->bad = 1;
-    long k = 0;
-    for (long i = 0; i < np; i++)
-      if (!k || pairs[i] != pairs[k - 1]) pairs[k++] = pairs[i];
-    np = k;
-    if (PetscMalloc1(nloc + 1, &ia) || PetscMalloc1(np + 1, &ja)) R->bad = 1;
-    for (int r = 0, i = 0; !R->bad && r <= nloc; r++) {
-      while (i < np && (int)(pairs[i] >> 32) < r) i++;
-      ia[r] = i;
+  if (!vs || !vc || PetscMalloc1(nloc + 1, &ia)) R->bad = 1;
+  for (long i = 0; !R->bad && i < n; i++)
+    for (int k = 0; k < nvc; k++)
+      if (cells[(size_t)nvc * i + k] >= lo && cells[(size_t)nvc * i + k] < lo + nloc) vs[cells[(size_t)nvc * i + k] - lo + 2]++;
+  for (int v = 0; !R->bad && v < nloc; v++) vs[v + 2] += vs[v + 1];
+  for (long i = 0; !R->bad && i < n; i++)
+    for (int k = 0; k < nvc; k++) {
+      int v = cells[(size_t)nvc * i + k];
+      if (v >= lo && v < lo + nloc) vc[vs[v - lo + 1]++] = (int)i;
     }
-    for (long i = 0; !R->bad && i < np; i++) ja[i] = (PetscInt)(pairs[i] & 0xffffffff);
+  for (int pass = 0; pass < 2 && !R->bad; pass++) {
+    long at = 0;
+    for (int v = 0; v < nloc && !R->bad; v++) {
+      int m = 0, need = (vs[v + 1] - vs[v]) * nvc;
+      if (need > cap) {
+        int *q = realloc(nb, sizeof(int) * (size_t)(cap = 2 * need));
+        if (!q) { R->bad = 1; break; }
+        nb = q;
+      }
+      for (int i = vs[v]; i < vs[v + 1]; i++)
+        for (int k = 0; k < nvc; k++) {
+          int w = cells[(size_t)nvc * vc[i] + k];
+          if (w != v + lo) nb[m++] = w;
+        }
+      qsort(nb, (size_t)m, sizeof(int), cmp_int);
+      int u = 0;
+      for (int i = 0; i < m; i++)
+        if (!u || nb[i] != nb[u - 1]) nb[u++] = nb[i];
+      if (pass) for (int i = 0; i < u; i++) ja[at + i] = nb[i];
+      else ia[v] = (PetscInt)at;
+      at += u;
+    }
+    if (!pass && !R->bad) {
+      ia[nloc] = (PetscInt)at;
+      if (PetscMalloc1(at + 1, &ja)) R->bad = 1;
+    }
   }
-  free(pairs);
+  free(cells); free(vs); free(vc); free(nb);
   /* every rank creates the graph and partitions (the others wait for a failed one) */
   int *vpart = NULL;
   if (any(R)) { PetscFree(ia); PetscFree(ja); return; }
@@ -859,7 +879,7 @@ static void home_cells(reader *R, vhomes *H, window *W) {
       for (int i = 0; k < nvc && i < k; i++) seen |= vhome(v[i], nvg, P) == h;
       int *x = seen ? NULL : box_add(k < nvc ? &bh : &bo, h, &R->bad);
       if (!x) continue;
-      CG(x) = R->cbase + c;
+      CG(x) = R->cglob ? R->cglob[c] : R->cbase + c;
       CP(x) = R->cpart[c];
       CT(x) = R->ctag[c];
       memcpy(CV(x), v, sizeof(int) * (size_t)nvc);
@@ -1003,33 +1023,40 @@ static void window_layers(reader *R, vhomes *H, window *W, int layers) {
   free(asked);
 }
 
-/* the tagged facets at their keys' homes, each (facet, tag) once: the first in the file;
- * their vertices flagged at the vertex homes (only faces of flagged vertices are asked for) */
-static rfacet *facet_homes(reader *R, vhomes *H, long *nfh) {
-  int P = R->P, nvf = R->nvf, nvg = R->nvg;
-  int *cnt = R->cnt, *rcnt = cnt + P;
-  box bf = {sizeof(rfacet), 0, 0, NULL, NULL};
+/* the file's tagged facets of this rank's run as records (vertices, tag, place in the file) */
+static void file_facets(reader *R, box *bf) {
+  int nvf = R->nvf;
   for (int i = 0; !R->bad && i < R->nfl; i++) {
     const int *v = R->fv + 4 * (size_t)i;
     int ok = 1;
     for (int k = 0; k < nvf; k++) ok &= v[k] >= 0;
     if (!ok) continue; /* a tagged facet away from the cells carries nothing */
-    int key[4] = {0, 0, 0, 0};
-    memcpy(key, v, sizeof(int) * (size_t)nvf);
-    sort_small(key, nvf);
-    int h = hash_rank(key, 4, P);
     for (int j = 0; j < R->fnp[i]; j++) {
-      rfacet *x = box_add(&bf, h, &R->bad);
+      rfacet *x = box_add(bf, 0, &R->bad);
       if (!x) break;
-      memcpy(x->key, key, sizeof key);
       memcpy(x->v, v, sizeof(int) * (size_t)nvf);
       x->tag = R->G.phys[R->fph[i] + j];
       x->j = j;
       x->index = R->efirst + R->fidx[i];
     }
   }
+}
+
+/* the tagged facets (the records of bf, keyed and sent here) at their keys' homes, each
+ * (facet, tag) once: the first in the file; their vertices flagged at the vertex homes (only
+ * faces of flagged vertices are asked for) */
+static rfacet *facet_homes(reader *R, vhomes *H, box *bf, long *nfh) {
+  int P = R->P, nvf = R->nvf, nvg = R->nvg;
+  int *cnt = R->cnt, *rcnt = cnt + P;
+  for (long i = 0; !R->bad && i < bf->n; i++) {
+    rfacet *x = (rfacet *)(bf->data + sizeof(rfacet) * (size_t)i);
+    memset(x->key, 0, sizeof x->key);
+    memcpy(x->key, x->v, sizeof(int) * (size_t)nvf);
+    sort_small(x->key, nvf);
+    bf->dest[i] = hash_rank(x->key, 4, P);
+  }
   long nf = 0;
-  rfacet *fs = (rfacet *)box_send(&bf, cnt, rcnt, NULL, &nf, &R->bad);
+  rfacet *fs = (rfacet *)box_send(bf, cnt, rcnt, NULL, &nf, &R->bad);
   if (!R->bad) {
     qsort(fs, (size_t)nf, sizeof(rfacet), cmp_rfacet);
     long k = 0;
@@ -1206,14 +1233,19 @@ static mesh_part *make_part(reader *R, window *W, int layers) {
     }
     if (!R->bad) m->nbf = (int)W->nf;
   }
-  /* the names as the whole reader sets them: the file's, then the unnamed boundary tags' */
-  for (int i = 0; m && !R->bad && i < R->G.nname; i++) {
+  /* the names as the whole reader sets them: the file's, then the unnamed boundary tags';
+   * a generated mesh's own */
+  for (int i = 0; m && !R->bad && R->names && i < R->names->nbname; i++)
+    if (mesh_set_boundary_name(m, R->names->bnames[i].tag, R->names->bnames[i].name)) R->bad = 1;
+  for (int i = 0; m && !R->bad && R->names && i < R->names->ncname; i++)
+    if (mesh_set_region_name(m, R->names->cnames[i].tag, R->names->cnames[i].name)) R->bad = 1;
+  for (int i = 0; m && !R->bad && !R->names && i < R->G.nname; i++) {
     int rc = 0;
     if (R->G.name_dim[i] == dim) rc = mesh_set_region_name(m, R->G.names[i].tag, R->G.names[i].name);
     else if (R->G.name_dim[i] == dim - 1) rc = mesh_set_boundary_name(m, R->G.names[i].tag, R->G.names[i].name);
     if (rc) R->bad = 1;
   }
-  for (int t = 0; m && !R->bad && t < W->nbt; t++) {
+  for (int t = 0; m && !R->bad && !R->names && t < W->nbt; t++) {
     int named = 0;
     for (int i = 0; i < m->nbname && !named; i++) named = m->bnames[i].tag == W->btags[t];
     char nm[16];
@@ -1231,9 +1263,35 @@ static void reader_free(reader *R, window *W) {
   mesh_gmsh_layout_free(&R->L);
   mesh_gmsh_part_free(&R->G);
   free(R->ux); free(R->cv); free(R->ctag); free(R->keep); free(R->cidx); free(R->fv); free(R->fidx); free(R->cpart);
-  free(R->fph); free(R->fnp); free(R->cnt);
+  free(R->fph); free(R->fnp); free(R->cnt); free(R->cglob);
   free(W->c); free(W->v); free(W->vx); free(W->f); free(W->btags);
   vmap_free(&W->map);
+}
+
+/* from the cells numbered on the ranks that hold them on: the partition, the vertex homes,
+ * the ghost layers, the tagged facets (bf: this rank's, as records), the window's vertices,
+ * the part; ts[0..3]: when each phase ended. NULL on every rank where any failed */
+static mesh_part *finish(reader *R, window *W, box *bf, int layers, double *ts) {
+  vhomes H;
+  memset(&H, 0, sizeof H);
+  rfacet *fh = NULL;
+  long nfh = 0;
+  if (!any(R)) partition(R);
+  ts[0] = now_ms();
+  if (!any(R)) home_cells(R, &H, W);
+  if (!any(R)) window_layers(R, &H, W, layers);
+  ts[1] = now_ms();
+  if (!any(R)) fh = facet_homes(R, &H, bf, &nfh);
+  box_free(bf);
+  if (!any(R)) window_vertices(R, &H, W);
+  vhomes_free(&H);
+  if (!any(R)) window_facets(R, fh, nfh, W);
+  free(fh);
+  ts[2] = now_ms();
+  mesh_part *P = NULL;
+  if (!any(R)) P = make_part(R, W, layers);
+  ts[3] = now_ms();
+  return P;
 }
 
 int lg_read_parts_wanted(void) {
@@ -1303,24 +1361,9 @@ lg_mesh *lg_mesh_read_parts(lg_env *env, const char *path) {
   if (!any(&R)) number_cells(&R);
   ts[2] = now_ms();
   if (!any(&R) && R.ncg < 8 * R.P) why(&R, "%s", "few cells for the ranks"); /* rank 0 cuts such a mesh */
-  if (!any(&R)) partition(&R);
-  ts[3] = now_ms();
-  vhomes H;
-  memset(&H, 0, sizeof H);
-  rfacet *fh = NULL;
-  long nfh = 0;
-  if (!any(&R)) home_cells(&R, &H, &W);
-  if (!any(&R)) window_layers(&R, &H, &W, layers);
-  ts[4] = now_ms();
-  if (!any(&R)) fh = facet_homes(&R, &H, &nfh);
-  if (!any(&R)) window_vertices(&R, &H, &W);
-  vhomes_free(&H);
-  if (!any(&R)) window_facets(&R, fh, nfh, &W);
-  free(fh);
-  ts[5] = now_ms();
-  mesh_part *P = NULL;
-  if (!any(&R)) P = make_part(&R, &W, layers);
-  ts[6] = now_ms();
+  box bf = {sizeof(rfacet), 0, 0, NULL, NULL};
+  if (!any(&R)) file_facets(&R, &bf);
+  mesh_part *P = finish(&R, &W, &bf, layers, ts + 3);
   lg_mesh *lm = NULL;
   if (!any(&R) && !(lm = lg_mesh_wrap_part(P))) why(&R, "%s", "out of memory");
   if (any(&R)) {
@@ -1334,6 +1377,85 @@ lg_mesh *lg_mesh_read_parts(lg_env *env, const char *path) {
                     "part %.1f\n",
             R.rank, P->m->ncell, P->nown_cell, P->m->ncell - P->nown_cell, P->m->nvert, P->nvert_global, R.G.node_first, R.efirst,
             now_ms() - t0, t1 - t0, ts[1] - ts[0], ts[2] - ts[1], ts[3] - ts[2], ts[4] - ts[3], ts[5] - ts[4], ts[6] - ts[5]);
+  reader_free(&R, &W);
+  return lm;
+}
+
+lg_mesh *lg_mesh_parts_from_window(lg_env *env, mesh *m, const int *vglob, const int *cglob, int nvg, int ncg, int layers) {
+  double t0 = now_ms();
+  reader R;
+  window W;
+  memset(&R, 0, sizeof R);
+  memset(&W, 0, sizeof W);
+  R.env = env;
+  R.rank = lg_mpi_rank();
+  R.P = lg_mpi_size();
+  R.cdim = m->dim;
+  R.ct = m->type;
+  R.nvc = m->nvc;
+  R.nvf = m->nvf;
+  R.nvg = nvg;
+  R.ncg = ncg;
+  R.names = m;
+  int P = R.P, nvc = R.nvc, lo = vlo(R.rank, nvg, P), hi = vlo(R.rank + 1, nvg, P);
+  /* this rank's run: the cells whose lowest vertex is in its run of the numbering (each
+   * cell in exactly one run), and the run's vertices, as if read */
+  int *part = malloc(sizeof(int) * ((size_t)m->ncell + 1));
+  char *have = calloc((size_t)(hi - lo) + 1, 1);
+  R.cnt = malloc(sizeof(int) * 6 * (size_t)P);
+  if (!part || !have || !R.cnt || mesh_build_boundary_cells(m)) R.bad = 1;
+  if (!R.bad) {
+    mesh_vertex_runs(m, vglob, nvg, P, part);
+    for (int c = 0; c < m->ncell; c++) R.ncl += part[c] == R.rank;
+    R.cv = malloc(sizeof(int) * (size_t)nvc * ((size_t)R.ncl + 1));
+    R.ctag = malloc(sizeof(int) * ((size_t)R.ncl + 1));
+    R.cglob = malloc(sizeof(int) * ((size_t)R.ncl + 1));
+    R.ux = calloc(3 * ((size_t)(hi - lo) + 1), sizeof(double));
+    if (!R.cv || !R.ctag || !R.cglob || !R.ux) R.bad = 1;
+  }
+  for (int c = 0, k = 0; !R.bad && c < m->ncell; c++) {
+    if (part[c] != R.rank) continue;
+    for (int j = 0; j < nvc; j++) R.cv[(size_t)nvc * k + j] = vglob[m->cells[(size_t)nvc * c + j]];
+    R.ctag[k] = m->cell_tag[c];
+    R.cglob[k++] = cglob[c];
+  }
+  for (int v = 0; !R.bad && v < m->nvert; v++)
+    if (vglob[v] >= lo && vglob[v] < hi) {
+      memcpy(R.ux + 3 * (size_t)(vglob[v] - lo), m->x + (size_t)m->dim * v, sizeof(double) * (size_t)m->dim);
+      have[vglob[v] - lo] = 1;
+    }
+  for (int v = 0; !R.bad && v < hi - lo; v++)
+    if (!have[v]) why(&R, "%s", "a run's vertex outside the window");
+  R.vbase = lo;
+  R.nused = hi - lo;
+  /* the tagged facets of the run's cells, in the order of their cells' numbers and places */
+  box bf = {sizeof(rfacet), 0, 0, NULL, NULL};
+  for (int b = 0; !R.bad && b < m->nbf; b++) {
+    int c = m->bf_cell[b];
+    if (c < 0 || part[c] != R.rank) continue;
+    rfacet *x = box_add(&bf, 0, &R.bad);
+    if (!x) break;
+    for (int k = 0; k < m->nvf; k++) x->v[k] = vglob[m->bf_verts[(size_t)m->nvf * b + k]];
+    x->tag = m->bf_tag[b];
+    x->index = (long long)cglob[c] * 8 + m->bf_local[b];
+    x->j = 0;
+  }
+  free(part);
+  free(have);
+  double ts[4];
+  mesh_part *Pt = finish(&R, &W, &bf, layers, ts);
+  lg_mesh *lm = NULL;
+  if (!any(&R) && !(lm = lg_mesh_wrap_part(Pt))) why(&R, "%s", "out of memory");
+  if (any(&R)) {
+    if (lm) lg_mesh_free(lm);
+    else mesh_part_free(Pt);
+    lm = NULL;
+    if (env->verbose && R.rank == 0) fprintf(stderr, "[lugal] distribute: the mesh generated whole on rank 0 (%s)\n", R.why);
+  } else if (env->verbose)
+    fprintf(stderr, "[lugal] distribute: rank %d holds %d cells (%d owned, %d ghosts) and %d vertices of %d, generated here and partitioned "
+                    "on every rank in %.1f ms: partition %.1f, ghost layers %.1f, facets %.1f, part %.1f\n",
+            R.rank, Pt->m->ncell, Pt->nown_cell, Pt->m->ncell - Pt->nown_cell, Pt->m->nvert, Pt->nvert_global, now_ms() - t0, ts[0] - t0,
+            ts[1] - ts[0], ts[2] - ts[1], ts[3] - ts[2]);
   reader_free(&R, &W);
   return lm;
 }

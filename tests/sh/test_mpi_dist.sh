@@ -28,7 +28,8 @@ for n in 2 3 2p 3p; do
     { k++; own += $8; if ($6 + 0 >= 1152) whole = 1 }
     END { if (k != n || own != 1152 || whole) { print "FAIL: the parts of " n " ranks: " k " reports, " own " owned cells, whole " whole; exit 1 } }' || exit 1
   # the generated mesh made rank by rank (its window of rows), not cut from a whole mesh on
-  # rank 0, where the numbering's runs are the partition; with PTScotch's, rank 0 cuts it
+  # rank 0, where the numbering's runs are the partition; with PTScotch's on 2 and 3 ranks,
+  # rank 0 cuts it (from 4 ranks on the ranks partition it: test_mpi_read.sh)
   made=$(grep "distribute: rank [0-9]* holds" "$T/err$n" | head -n ${n%p} | grep -c "generated here")
   case $n in
     *p) [ "$made" = 0 ] || fail "$n ranks: PTScotch's partition, yet $made ranks generated their own parts" ;;

@@ -7,7 +7,8 @@
 # clockwise file, which is reversed); with the numbering's runs as the partition the parts
 # are those rank 0 cuts from the whole mesh, to the byte (the .pvtu pieces compared with
 # cmp against -lugal_read_parts 0); a file whose layout the parallel path does not take
-# (two nodes on a line) read whole by rank 0, with the same answers; a bad file ending the
+# (two nodes on a line) read whole by rank 0, with the same answers; generated meshes that
+# PTScotch partitions on 4 ranks made and partitioned rank by rank; a bad file ending the
 # run with the whole reader's message and line.
 BUILD=$1
 . "$(dirname "$0")/mpi_lib.sh"
@@ -88,6 +89,27 @@ for case in "cube_unstructured.msh 1" "dup.msh 1" "cw.msh 1" "dup.msh 2"; do
     cmp -s "$T/p1/$p" "$T/p0/$p" || fail "$1, $2 ghost layers: piece $p read in parallel differs from the one rank 0 cut"
   done
 done
+# generated meshes partitioned by PTScotch on 4 ranks: each rank generates its window and the
+# ranks partition the vertex graph together (no whole mesh on rank 0); the serial answers
+cat > "$T/gen4.lua" <<'LUA'
+local lg = require "lugal"
+local x, y, z = lg.x, lg.y, lg.z
+for _, mesh in ipairs{lg.mesh.box{nx = 10}, lg.mesh.rectangle{nx = 40, cell = "quadrilateral"}} do
+  local P1 = lg.lagrange(1)
+  local u, v = lg.unknown(P1, "u"), lg.test(P1, "v")
+  local uh = lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) - (1 + x)*v),
+                               bc = lg.essential_bc(mesh:boundary("left", "right"), v*u), test = v, unknown = u}:solve()
+  print(string.format("gen%d_poisson direct %.17g", mesh:info().dim, lg.integrate(mesh, uh*uh)))
+  print(string.format("gen%d_top direct %.17g", mesh:info().dim, lg.integrate(mesh:boundary("top"), uh + 1)))
+  print(string.format("gen%d_ndof count %d", mesh:info().dim, uh:ndof()))
+end
+LUA
+run 1 "$T/gen4.lua" > "$T/g1" 2> "$T/e" || { cat "$T/e"; fail "generated meshes serially"; }
+run 4 "$T/gen4.lua" -lugal_partitioner ptscotch -lugal_verbose > "$T/g4" 2> "$T/e" || { tail -n 20 "$T/e"; fail "generated meshes on 4 ranks"; }
+paste "$T/g1" "$T/g4" | awk -v what="4 ranks, generated meshes partitioned on every rank" -f "$ROOT/tests/sh/compare_ranks.awk" || exit 1
+[ "$(grep -c "generated here and partitioned on every rank" "$T/e")" = 8 ] ||
+  fail "4 ranks: the generated meshes not partitioned on every rank: $(grep distribute "$T/e")"
+
 # a bad file: the whole reader's message, with its line, and a failed run
 awk '/^\$Elements/ { e = 1 } e && NF == 8 && $2 == 2 && !done { $8 = 9000; done = 1; id = $1 } { print } END { print id > "/dev/stderr" }' \
   "$T/base.msh" > "$T/bad.msh" 2> "$T/badid"

@@ -1294,6 +1294,27 @@ static mesh_part *finish(reader *R, window *W, box *bf, int layers, double *ts) 
   return P;
 }
 
+/* a reader and its window, empty, for this rank (out of memory: R->bad, which
+ * every rank learns at the first any()) */
+static void reader_init(reader *R, window *W, lg_env *env) {
+  memset(R, 0, sizeof *R);
+  memset(W, 0, sizeof *W);
+  R->env = env;
+  R->rank = lg_mpi_rank();
+  R->P = lg_mpi_size();
+  if (!(R->cnt = malloc(sizeof(int) * 6 * (size_t)R->P))) R->bad = 1;
+}
+
+/* the part as the lg_mesh of every rank, or NULL on every rank where any failed */
+static lg_mesh *wrap(reader *R, mesh_part *P) {
+  lg_mesh *lm = NULL;
+  if (!any(R) && !(lm = lg_mesh_wrap_part(P))) why(R, "%s", "out of memory");
+  if (!any(R)) return lm;
+  if (lm) lg_mesh_free(lm);
+  else mesh_part_free(P);
+  return NULL;
+}
+
 int lg_read_parts_wanted(void) {
   PetscBool on = PETSC_TRUE, set = PETSC_FALSE;
   PetscOptionsGetBool(NULL, NULL, "-lugal_read_parts", &on, &set);
@@ -1302,17 +1323,12 @@ int lg_read_parts_wanted(void) {
 
 lg_mesh *lg_mesh_read_parts(lg_env *env, const char *path) {
   double t0 = now_ms();
-  reader R;
-  window W;
-  memset(&R, 0, sizeof R);
-  memset(&W, 0, sizeof W);
-  R.env = env;
-  R.path = path;
-  R.rank = lg_mpi_rank();
-  R.P = lg_mpi_size();
   int layers = lg_ghost_layers();
   if (layers < 0) return NULL; /* the whole path gives the message */
-  if (!(R.cnt = malloc(sizeof(int) * 6 * (size_t)R.P))) R.bad = 1; /* every rank learns it at the first any() */
+  reader R;
+  window W;
+  reader_init(&R, &W, env);
+  R.path = path;
   /* the layout: rank 0's scan, sent to every rank */
   char *buf = NULL;
   size_t len = 0;
@@ -1364,12 +1380,8 @@ lg_mesh *lg_mesh_read_parts(lg_env *env, const char *path) {
   box bf = {sizeof(rfacet), 0, 0, NULL, NULL};
   if (!any(&R)) file_facets(&R, &bf);
   mesh_part *P = finish(&R, &W, &bf, layers, ts + 3);
-  lg_mesh *lm = NULL;
-  if (!any(&R) && !(lm = lg_mesh_wrap_part(P))) why(&R, "%s", "out of memory");
-  if (any(&R)) {
-    if (lm) lg_mesh_free(lm);
-    else mesh_part_free(P);
-    lm = NULL;
+  lg_mesh *lm = wrap(&R, P);
+  if (!lm) {
     if (env->verbose && R.rank == 0) fprintf(stderr, "[lugal] read: %s read whole by rank 0 (%s)\n", path, R.why);
   } else if (env->verbose)
     fprintf(stderr, "[lugal] distribute: rank %d holds %d cells (%d owned, %d ghosts) and %d vertices of %d, read here (nodes %lld.., "
@@ -1385,11 +1397,7 @@ lg_mesh *lg_mesh_parts_from_window(lg_env *env, mesh *m, const int *vglob, const
   double t0 = now_ms();
   reader R;
   window W;
-  memset(&R, 0, sizeof R);
-  memset(&W, 0, sizeof W);
-  R.env = env;
-  R.rank = lg_mpi_rank();
-  R.P = lg_mpi_size();
+  reader_init(&R, &W, env);
   R.cdim = m->dim;
   R.ct = m->type;
   R.nvc = m->nvc;
@@ -1402,8 +1410,7 @@ lg_mesh *lg_mesh_parts_from_window(lg_env *env, mesh *m, const int *vglob, const
    * cell in exactly one run), and the run's vertices, as if read */
   int *part = malloc(sizeof(int) * ((size_t)m->ncell + 1));
   char *have = calloc((size_t)(hi - lo) + 1, 1);
-  R.cnt = malloc(sizeof(int) * 6 * (size_t)P);
-  if (!part || !have || !R.cnt || mesh_build_boundary_cells(m)) R.bad = 1;
+  if (!part || !have || mesh_build_boundary_cells(m)) R.bad = 1;
   if (!R.bad) {
     mesh_vertex_runs(m, vglob, nvg, P, part);
     for (int c = 0; c < m->ncell; c++) R.ncl += part[c] == R.rank;
@@ -1444,12 +1451,8 @@ lg_mesh *lg_mesh_parts_from_window(lg_env *env, mesh *m, const int *vglob, const
   free(have);
   double ts[4];
   mesh_part *Pt = finish(&R, &W, &bf, layers, ts);
-  lg_mesh *lm = NULL;
-  if (!any(&R) && !(lm = lg_mesh_wrap_part(Pt))) why(&R, "%s", "out of memory");
-  if (any(&R)) {
-    if (lm) lg_mesh_free(lm);
-    else mesh_part_free(Pt);
-    lm = NULL;
+  lg_mesh *lm = wrap(&R, Pt);
+  if (!lm) {
     if (env->verbose && R.rank == 0) fprintf(stderr, "[lugal] distribute: the mesh generated whole on rank 0 (%s)\n", R.why);
   } else if (env->verbose)
     fprintf(stderr, "[lugal] distribute: rank %d holds %d cells (%d owned, %d ghosts) and %d vertices of %d, generated here and partitioned "

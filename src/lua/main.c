@@ -85,7 +85,12 @@ int main(int argc, char **argv) {
     snprintf(msg, sizeof msg, "lugal: %s", lua_tostring(L, -1));
     lg_abort_run(msg);
     status = 1;
+  } else if (!lua_checkstack(L, argc)) { /* the script's arguments are pushed as its "...": room for them */
+    lg_abort_run("lugal: too many arguments for the script's Lua stack");
+    status = 1;
   } else {
+    /* (without the room, more than about 40 arguments wrote past the Lua stack, and the run
+     * ended in a crash in MPI_Finalize) */
     for (int i = 2; i < argc; i++) lua_pushstring(L, argv[i]);
     int rc = lua_pcall(L, argc - 2, 0, want_tb ? msgh : 0);
     if (rc != LUA_OK) {

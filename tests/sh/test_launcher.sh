@@ -4,7 +4,8 @@
 # overriding a glibc.malloc.hugetlb the user chose, left out with -lugal_hugepages 0; the
 # core's exit status and arguments pass through; where the kernel offers transparent huge
 # pages, a problem's large arrays land on them (AnonHugePages in /proc/self/smaps_rollup);
-# the single-process MPI settings are made unless the user made them.
+# the single-process MPI settings are made unless the user made them; 2000 arguments reach
+# the script.
 BUILD=$1
 T=$(mktemp -d)
 trap 'rm -rf "$T"' EXIT
@@ -14,6 +15,12 @@ printf 'print(os.getenv("GLIBC_TUNABLES") or "(unset)")\nprint(arg[1], arg[2], a
 out=$(env -u GLIBC_TUNABLES "$BUILD/lugal" "$T/env.lua" a b 2>&1) || fail "status $?: $out"
 [ "$(echo "$out" | sed -n 1p)" = "glibc.malloc.hugetlb=1" ] || fail "unset: got '$out'"
 [ "$(echo "$out" | sed -n 2p)" = "a	b	nil" ] || fail "arguments: got '$(echo "$out" | sed -n 2p)'"
+
+# many arguments: all in arg and in the script's "..." (over about 40 had written past the
+# Lua stack, and the run crashed in MPI_Finalize)
+printf 'local n = select("#", ...)\nprint(#arg, n, arg[2000], (select(n, ...)))\n' > "$T/many.lua"
+out=$("$BUILD/lugal" "$T/many.lua" $(seq 1 2000) 2>&1) || fail "2000 arguments: status $?: $out"
+[ "$out" = "2000	2000	2000	2000" ] || fail "2000 arguments: got '$out'"
 
 out=$(GLIBC_TUNABLES=glibc.malloc.arena_max=2 "$BUILD/lugal" "$T/env.lua" | sed -n 1p)
 [ "$out" = "glibc.malloc.arena_max=2:glibc.malloc.hugetlb=1" ] || fail "appended: got '$out'"

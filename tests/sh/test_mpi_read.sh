@@ -8,8 +8,8 @@
 # are those rank 0 cuts from the whole mesh, to the byte (the .pvtu pieces compared with
 # cmp against -lugal_read_parts 0); a file whose layout the parallel path does not take
 # (two nodes on a line) read whole by rank 0, with the same answers; generated meshes that
-# PTScotch partitions on 4 ranks made and partitioned rank by rank; a bad file ending the
-# run with the whole reader's message and line.
+# PTScotch partitions on 4 ranks made and partitioned rank by rank; the hostile corpus on 2
+# ranks as serially; a bad file ending the run with the whole reader's message and line.
 BUILD=$1
 . "$(dirname "$0")/mpi_lib.sh"
 run() { rn=$1; shift; if [ "$rn" = 1 ]; then "$LUGAL" "$@"; else timeout 300 mpiexec -n "$rn" "$LUGAL" "$@"; fi; }
@@ -109,6 +109,32 @@ run 4 "$T/gen4.lua" -lugal_partitioner ptscotch -lugal_verbose > "$T/g4" 2> "$T/
 paste "$T/g1" "$T/g4" | awk -v what="4 ranks, generated meshes partitioned on every rank" -f "$ROOT/tests/sh/compare_ranks.awk" || exit 1
 [ "$(grep -c "generated here and partitioned on every rank" "$T/e")" = 8 ] ||
   fail "4 ranks: the generated meshes not partitioned on every rank: $(grep distribute "$T/e")"
+
+# the hostile corpus (tests/data/hostile/mesh): every file on 2 ranks, read in parts even when
+# tiny (-lugal_read_parts_min 0), accepted or refused as serially, with the same cells,
+# vertices, boundary facets and names, or the same message
+cat > "$T/hostile.lua" <<'LUA'
+local lg = require "lugal"
+for i = 1, #arg do
+  local f = arg[i]
+  if f:match("%.msh$") then
+    local ok, m = pcall(lg.mesh.read, f)
+    local name = f:match("[^/]+$")
+    if ok then
+      local info = m:info()
+      print(name, "ok", m:ncells(), info.vertices, info.boundary_facets, table.concat(info.boundaries, ","))
+    else
+      print(name, "error", (tostring(m):gsub("^.-lg%.mesh%.read: ", "")))
+    end
+  end
+end
+LUA
+run 1 "$T/hostile.lua" "$ROOT"/tests/data/hostile/mesh/*.msh > "$T/h1" 2> "$T/e" || { cat "$T/e"; fail "the hostile corpus serially"; }
+run 2 "$T/hostile.lua" "$ROOT"/tests/data/hostile/mesh/*.msh -lugal_read_parts_min 0 -lugal_verbose > "$T/h2" 2> "$T/e" ||
+  { tail -n 20 "$T/e"; fail "the hostile corpus on 2 ranks"; }
+cmp -s "$T/h1" "$T/h2" || fail "the hostile corpus on 2 ranks: $(diff -a "$T/h1" "$T/h2" | head -n 5)"
+parts=$(grep -ac "distribute: rank 0 holds .* read here" "$T/e")
+[ "$parts" -ge 15 ] || fail "the hostile corpus: only $parts files read in parts"
 
 # a bad file: the whole reader's message, with its line, and a failed run
 awk '/^\$Elements/ { e = 1 } e && NF == 8 && $2 == 2 && !done { $8 = 9000; done = 1; id = $1 } { print } END { print id > "/dev/stderr" }' \

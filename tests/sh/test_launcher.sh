@@ -19,7 +19,7 @@ out=$(env -u GLIBC_TUNABLES "$BUILD/lugal" "$T/env.lua" a b 2>&1) || fail "statu
 # many arguments: all in arg and in the script's "..." (over about 40 had written past the
 # Lua stack, and the run crashed in MPI_Finalize)
 printf 'local n = select("#", ...)\nprint(#arg, n, arg[2000], (select(n, ...)))\n' > "$T/many.lua"
-out=$("$BUILD/lugal" "$T/many.lua" $(seq 1 2000) 2>&1) || fail "2000 arguments: status $?: $out"
+out=$("$BUILD/lugal" "$T/many.lua" $(seq 1 2000) 2> "$T/many.err") || fail "2000 arguments: status $?: $out $(cat "$T/many.err")"
 [ "$out" = "2000	2000	2000	2000" ] || fail "2000 arguments: got '$out'"
 
 out=$(GLIBC_TUNABLES=glibc.malloc.arena_max=2 "$BUILD/lugal" "$T/env.lua" | sed -n 1p)

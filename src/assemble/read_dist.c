@@ -939,14 +939,14 @@ static void home_cells(reader *R, vhomes *H, window *W) {
 static void window_layers(reader *R, vhomes *H, window *W, int layers) {
   int P = R->P, nvc = R->nvc, nvg = R->nvg, w = 3 + nvc, lo = H->lo;
   int *cnt = R->cnt, *rcnt = cnt + P;
-  long nasked = 0, from = 0; /* the cells from `from` on are the last round's */
+  long nasked = 0; /* the vertices asked for so far, sorted */
   int *asked = NULL;
   for (int round = 0; round < layers; round++) {
     long nfr = 0;
-    int *fr = malloc(sizeof(int) * ((size_t)(W->nc - from) * nvc + 1));
+    int *fr = malloc(sizeof(int) * ((size_t)W->nc * nvc + 1));
     if (!fr) R->bad = 1;
-    for (long i = from; !R->bad && i < W->nc; i++) memcpy(fr + (size_t)nvc * (i - from), CV(W->c + (size_t)w * i), sizeof(int) * (size_t)nvc);
-    if (!R->bad) nfr = unique_ints(fr, (W->nc - from) * nvc);
+    for (long i = 0; !R->bad && i < W->nc; i++) memcpy(fr + (size_t)nvc * i, CV(W->c + (size_t)w * i), sizeof(int) * (size_t)nvc);
+    if (!R->bad) nfr = unique_ints(fr, W->nc * nvc);
     if (nfr < 0) R->bad = 1;
     /* minus those asked before (both sorted), then added to them */
     long k = 0;
@@ -1016,7 +1016,6 @@ static void window_layers(reader *R, vhomes *H, window *W, int layers) {
       free(W->c);
       W->c = all;
       W->nc = m;
-      from = 0; /* the next round asks for every vertex not asked yet */
     }
     free(got);
   }

@@ -29,6 +29,7 @@ int lg_distribute_wanted(void) {
   PetscBool on = PETSC_TRUE, set = PETSC_FALSE;
   PetscOptionsGetBool(NULL, NULL, "-lugal_distribute", &on, &set);
   (void)lg_ghost_layers();
+  (void)lg_read_parts_wanted(); /* and the parallel reader's (read_dist.c) */
   return lg_mpi_size() > 1 && on;
 }
 

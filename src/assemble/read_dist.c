@@ -1316,7 +1316,9 @@ static lg_mesh *wrap(reader *R, mesh_part *P) {
 
 int lg_read_parts_wanted(void) {
   PetscBool on = PETSC_TRUE, set = PETSC_FALSE;
+  PetscInt least = 8;
   PetscOptionsGetBool(NULL, NULL, "-lugal_read_parts", &on, &set);
+  PetscOptionsGetInt(NULL, NULL, "-lugal_read_parts_min", &least, NULL); /* read here too: used on one rank as well */
   return on;
 }
 

@@ -136,6 +136,11 @@ cmp -s "$T/h1" "$T/h2" || fail "the hostile corpus on 2 ranks: $(diff -a "$T/h1"
 parts=$(grep -ac "distribute: rank 0 holds .* read here" "$T/e")
 [ "$parts" -ge 15 ] || fail "the hostile corpus: only $parts files read in parts"
 
+# the reader's options in a serial run (a script written for mpiexec): taken, not reported unused
+run 1 "$T/hostile.lua" "$ROOT/examples/domain.msh" -lugal_read_parts 0 -lugal_read_parts_min 3 > /dev/null 2> "$T/e" ||
+  { cat "$T/e"; fail "the reader's options serially"; }
+! grep -q "was not used" "$T/e" || fail "the reader's options reported unused serially: $(cat "$T/e")"
+
 # a bad file: the whole reader's message, with its line, and a failed run
 awk '/^\$Elements/ { e = 1 } e && NF == 8 && $2 == 2 && !done { $8 = 9000; done = 1; id = $1 } { print } END { print id > "/dev/stderr" }' \
   "$T/base.msh" > "$T/bad.msh" 2> "$T/badid"

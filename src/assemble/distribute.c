@@ -247,47 +247,6 @@ static int cmp_key(const void *a, const void *b) {
   return 0;
 }
 
-/* an all-to-all of records of w ints: send[] holds cnt[r] records for rank r one rank after
- * another; returns the received records (*nrecv of them, from rank 0 up, rcnt[r] each) */
-static int *exchange(const int *send, const int *cnt, int w, int *rcnt, int *nrecv) {
-  int size = lg_mpi_size();
-  int *sc = malloc(sizeof(int) * 4 * (size_t)size);
-  if (!sc) return NULL;
-  int *sd = sc + size, *rc = sd + size, *rd = rc + size;
-  if (MPI_Alltoall((void *)cnt, 1, MPI_INT, rcnt, 1, MPI_INT, PETSC_COMM_WORLD) != MPI_SUCCESS) { free(sc); return NULL; }
-  long st = 0, rt = 0;
-  for (int r = 0; r < size; r++) {
-    sc[r] = cnt[r] * w; sd[r] = (int)st; st += sc[r];
-    rc[r] = rcnt[r] * w; rd[r] = (int)rt; rt += rc[r];
-  }
-  int *recv = st > INT32_MAX || rt > INT32_MAX ? NULL : malloc(sizeof(int) * ((size_t)rt + 1));
-  if (recv && MPI_Alltoallv((void *)send, sc, sd, MPI_INT, recv, rc, rd, MPI_INT, PETSC_COMM_WORLD) != MPI_SUCCESS) {
-    free(recv);
-    recv = NULL;
-  }
-  free(sc);
-  *nrecv = (int)(rt / w);
-  return recv;
-}
-
-/* records of w ints sorted by destination rank: counts per rank, then places */
-typedef struct {
-  int w, n, *rank, *data;
-} outbox;
-
-static int outbox_sort(outbox *o, int size, int *cnt, int **sorted) {
-  int *at = calloc((size_t)size + 1, sizeof(int));
-  *sorted = malloc(sizeof(int) * ((size_t)o->n * (size_t)o->w + 1));
-  if (!at || !*sorted) { free(at); free(*sorted); *sorted = NULL; return 1; }
-  for (int r = 0; r < size; r++) cnt[r] = 0;
-  for (int i = 0; i < o->n; i++) cnt[o->rank[i]]++;
-  for (int r = 1; r < size; r++) at[r] = at[r - 1] + cnt[r - 1];
-  for (int i = 0; i < o->n; i++)
-    memcpy(*sorted + (size_t)at[o->rank[i]]++ * (size_t)o->w, o->data + (size_t)i * (size_t)o->w, sizeof(int) * (size_t)o->w);
-  free(at);
-  return 0;
-}
-
 /* the vertices of this part's cells of other parts (a rank holding an owned node holds a
  * cell through it, which shares a vertex with an owned cell of it, or is one), and with more
  * ghost layers the vertices of every cell within the further layers of those (another rank's
@@ -330,74 +289,60 @@ typedef void (*node_key_fn)(const void *ctx, int node, int *key);
 static int rendezvous_number(int bad, int Nn, const int *owner, const char *shared, node_key_fn key, const void *ctx,
                              int *perm, int *first, int *nown_out, int *total_out) {
   int rank = lg_mpi_rank(), size = lg_mpi_size();
-  int nown = 0, nreg = 0, nask = 0;
+  int nown = 0, nask = 0;
   for (int i = 0; !bad && i < Nn; i++) {
     nown += owner[i] == rank;
-    nreg += owner[i] == rank && shared[i];
     nask += owner[i] != rank;
   }
   int f0 = 0, total = 0; /* every rank reduces, failed or not */
   MPI_Exscan(&nown, &f0, 1, MPI_INT, MPI_SUM, PETSC_COMM_WORLD);
   if (rank == 0) f0 = 0;
   MPI_Allreduce(&nown, &total, 1, MPI_INT, MPI_SUM, PETSC_COMM_WORLD);
-  outbox reg = {KEYLEN + 1, 0, malloc(sizeof(int) * ((size_t)nreg + 1)), malloc(sizeof(int) * (KEYLEN + 1) * ((size_t)nreg + 1))};
-  outbox ask = {KEYLEN, 0, malloc(sizeof(int) * ((size_t)nask + 1)), malloc(sizeof(int) * KEYLEN * ((size_t)nask + 1))};
-  int *askn = malloc(sizeof(int) * ((size_t)nask + 1)); /* the node of each question, in the order asked */
-  bad |= !perm || !reg.rank || !reg.data || !ask.rank || !ask.data || !askn;
+  /* registrations of the shared owned nodes (key, number) and questions (key) to the key's
+   * hash's rank (rendezvous.c: a failed rank takes part with empty messages) */
+  lg_box reg = {sizeof(int) * (KEYLEN + 1), 0, 0, NULL, NULL}, ask = {sizeof(int) * KEYLEN, 0, 0, NULL, NULL};
+  int *askn = malloc(sizeof(int) * ((size_t)nask + 1)), *cnt = malloc(sizeof(int) * 4 * (size_t)size); /* the node of each question */
+  int nomem = !askn || !cnt, anynomem = 1; /* every rank skips the exchanges where any cannot count */
+  MPI_Allreduce(&nomem, &anynomem, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
+  bad |= !perm || anynomem;
   for (int i = 0, k = 0; !bad && i < Nn; i++) {
+    int kb[KEYLEN];
     if (owner[i] == rank) {
       perm[i] = f0 + k++;
       if (!shared[i]) continue;
-      int *r = reg.data + (size_t)reg.n * (KEYLEN + 1);
-      key(ctx, i, r);
-      r[KEYLEN] = perm[i];
-      reg.rank[reg.n++] = key_rank(r, size);
+      key(ctx, i, kb);
+      int *r = lg_box_add(&reg, key_rank(kb, size), &bad);
+      if (r) { memcpy(r, kb, sizeof kb); r[KEYLEN] = perm[i]; }
     } else {
       perm[i] = -1;
-      int *q = ask.data + (size_t)ask.n * KEYLEN;
-      key(ctx, i, q);
-      askn[ask.n] = i;
-      ask.rank[ask.n++] = key_rank(q, size);
+      key(ctx, i, kb);
+      int *q = lg_box_add(&ask, key_rank(kb, size), &bad);
+      if (q) { memcpy(q, kb, sizeof kb); askn[ask.n - 1] = i; }
     }
   }
-  int *cnt1 = malloc(sizeof(int) * 4 * (size_t)size), *sreg = NULL, *sask = NULL, *dir = NULL, *qs = NULL, *ans = NULL, *back = NULL;
-  int ndir = 0, nq = 0, nback = 0, lost = 0;
-  bad |= !cnt1;
-  int *rcnt1 = cnt1 + size, *cnt2 = rcnt1 + size, *rcnt2 = cnt2 + size;
-  /* every rank takes part in every exchange, a failed one with empty messages */
-  if (bad || outbox_sort(&reg, size, cnt1, &sreg)) { bad = 1; if (cnt1) memset(cnt1, 0, sizeof(int) * (size_t)size); }
-  dir = cnt1 ? exchange(sreg, cnt1, KEYLEN + 1, rcnt1, &ndir) : NULL;
-  if (!dir) bad = 1;
-  if (bad || outbox_sort(&ask, size, cnt2, &sask)) { bad = 1; if (cnt1) memset(cnt2, 0, sizeof(int) * (size_t)size); }
-  qs = cnt1 ? exchange(sask, cnt2, KEYLEN, rcnt2, &nq) : NULL;
-  if (!qs) bad = 1;
-  if (!bad) {
-    qsort(dir, (size_t)ndir, sizeof(int) * (KEYLEN + 1), cmp_key);
-    ans = malloc(sizeof(int) * ((size_t)nq + 1));
-    bad = !ans;
-    for (int i = 0; !bad && i < nq; i++) {
+  int lost = 0;
+  long ndir = 0, nq = 0, *ord = NULL;
+  int *dir = NULL, *qs = NULL, *ans = NULL, *back = NULL;
+  if (!anynomem) {
+    int *rcnt1 = cnt + size, *cnt2 = rcnt1 + size, *rcnt2 = cnt2 + size;
+    dir = (int *)lg_box_send(&reg, cnt, rcnt1, NULL, &ndir, &bad);
+    qs = (int *)lg_box_send(&ask, cnt2, rcnt2, &ord, &nq, &bad);
+    if (!(ans = malloc(sizeof(int) * ((size_t)nq + 1)))) bad = 1;
+    if (!bad) qsort(dir, (size_t)ndir, sizeof(int) * (KEYLEN + 1), cmp_key);
+    for (long i = 0; !bad && i < nq; i++) {
       const int *f = bsearch(qs + (size_t)i * KEYLEN, dir, (size_t)ndir, sizeof(int) * (KEYLEN + 1), cmp_key);
       ans[i] = f ? f[KEYLEN] : -1;
     }
+    /* the answers back in the order asked */
+    back = (int *)lg_reply((char *)ans, sizeof(int), rcnt2, cnt2, &bad);
   }
-  /* the answers go back in the order asked, rank by rank (rcnt2 of them to each) */
-  if (bad && cnt1) memset(rcnt2, 0, sizeof(int) * (size_t)size);
-  back = cnt1 ? exchange(ans, rcnt2, 1, cnt2, &nback) : NULL;
-  if (!back) bad = 1;
-  if (!bad) {
-    /* the questions were sent sorted by rank, stably: the same order here */
-    int *at = calloc((size_t)size + 1, sizeof(int));
-    if (!at) bad = 1;
-    for (int r = 1; !bad && r < size; r++) at[r] = at[r - 1] + cnt2[r - 1];
-    for (int i = 0; !bad && i < ask.n; i++) {
-      int g = back[at[ask.rank[i]]++];
-      perm[askn[i]] = g;
-      lost += g < 0;
-    }
-    free(at);
+  for (long k = 0; !bad && k < ask.n; k++) {
+    perm[askn[ord[k]]] = back[k];
+    lost += back[k] < 0;
   }
-  free(cnt1); free(sreg); free(sask); free(dir); free(qs); free(ans); free(back);
-  free(reg.rank); free(reg.data); free(ask.rank); free(ask.data); free(askn);
+  free(dir); free(qs); free(ans); free(back); free(ord); free(askn); free(cnt);
+  lg_box_free(&reg);
+  lg_box_free(&ask);
   int fail[2] = {bad, lost}, any[2];
   MPI_Allreduce(fail, any, 2, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
   *first = f0;

@@ -228,6 +228,22 @@ static inline void lg_vote(int *owner, int *cnt, int node, int part) {
  * cells, whose parts are part[] (a whole mesh's partition, or a distributed mesh's local
  * cells' owners); owner[] holds Nn = N / B entries; 1 when out of memory */
 int lg_problem_node_owners(const lg_problem *p, int B, const int *part, int *owner);
+/* rendezvous.c: records of rec bytes, each for a rank (dest), sent through one all-to-all
+ * (lg_box_send: the records received, rcnt[r] from rank r in rank order; cnt[r] sent to rank
+ * r; *order[k] the box index of the k-th record sent, for answers; the box's storage is
+ * freed, its n kept), and answers of rec bytes each to records received with counts rcnt,
+ * back to their senders, who sent cnt (lg_reply: the k-th answers their k-th record sent).
+ * Collective; bad: this rank failed, set on every rank where any rank cannot exchange */
+typedef struct {
+  size_t rec;
+  long n, cap;
+  int *dest;
+  char *data;
+} lg_box;
+void *lg_box_add(lg_box *b, int dest, int *bad);
+void lg_box_free(lg_box *b);
+char *lg_box_send(lg_box *b, int *cnt, int *rcnt, long **order, long *nrecv, int *bad);
+char *lg_reply(const char *ans, size_t rec, int *rcnt, int *cnt, int *bad);
 /* partition.c: a graph's rows (nrows here of ncols, CSR ia/ja PetscMalloc'ed, given up) partitioned by
  * the MatPartitioningType method into nparts on comm: each row's part into vpart; and the part
  * of most of n parts (the lowest of those that tie), a cell's from its vertices' */

@@ -27,129 +27,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* ---------------------------------------------------------------- records to other ranks */
-
-/* records of rec bytes, each for a rank */
-typedef struct {
-  size_t rec;
-  long n, cap;
-  int *dest;
-  char *data;
-} box;
-
-static void *box_add(box *b, int dest, int *bad) {
-  if (*bad) return NULL;
-  if (b->n == b->cap) {
-    long c = b->cap ? 2 * b->cap : 1024;
-    int *d = realloc(b->dest, sizeof(int) * (size_t)c);
-    if (d) b->dest = d;
-    char *x = d ? realloc(b->data, b->rec * (size_t)c) : NULL;
-    if (!x) { *bad = 1; return NULL; }
-    b->data = x;
-    b->cap = c;
-  }
-  b->dest[b->n] = dest;
-  return memset(b->data + b->rec * (size_t)b->n++, 0, b->rec);
-}
-
-static void box_free(box *b) {
-  free(b->dest);
-  free(b->data);
-  b->dest = NULL;
-  b->data = NULL;
-  b->n = b->cap = 0;
-}
-
-static MPI_Datatype rec_type(size_t rec) {
-  MPI_Datatype t;
-  (void)MPI_Type_contiguous((int)rec, MPI_BYTE, &t);
-  (void)MPI_Type_commit(&t);
-  return t;
-}
-
-/* an all-to-all of rec-byte records: cnt[r] of them for rank r from send, rcnt[r] from rank
- * r into the returned buffer (*nrecv in all, rank by rank); NULL sets *bad. Collective: a rank
- * that failed already sends nothing, and still takes part; where any rank cannot (counts over
- * 2^31, no memory for what it receives) no rank exchanges and every one is bad */
-static char *alltoall(const char *send, size_t rec, int *cnt, int *rcnt, long *nrecv, int *bad) {
-  int P = lg_mpi_size();
-  if (*bad) memset(cnt, 0, sizeof(int) * (size_t)P);
-  *nrecv = 0;
-  int *sd = malloc(sizeof(int) * 2 * (size_t)P), *rd = sd ? sd + P : NULL;
-  int fail = !sd;
-  if (MPI_Alltoall(cnt, 1, MPI_INT, rcnt, 1, MPI_INT, PETSC_COMM_WORLD) != MPI_SUCCESS) fail = 1;
-  long st = 0, rt = 0;
-  for (int r = 0; !fail && r < P; r++) {
-    sd[r] = (int)st;
-    rd[r] = (int)rt;
-    st += cnt[r];
-    rt += rcnt[r];
-  }
-  char *recv = fail || st > INT32_MAX || rt > INT32_MAX ? NULL : malloc(rec * (size_t)rt + 1);
-  int f = !recv, anyf = 1;
-  if (MPI_Allreduce(&f, &anyf, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD) != MPI_SUCCESS) anyf = 1;
-  if (anyf) {
-    free(recv);
-    free(sd);
-    *bad = 1;
-    return NULL;
-  }
-  MPI_Datatype t = rec_type(rec);
-  if (MPI_Alltoallv((void *)send, cnt, sd, t, recv, rcnt, rd, t, PETSC_COMM_WORLD) != MPI_SUCCESS) {
-    free(recv);
-    recv = NULL;
-    *bad = 1;
-    rt = 0;
-  }
-  (void)MPI_Type_free(&t);
-  free(sd);
-  *nrecv = rt;
-  return recv;
-}
-
-/* a box sent: its records sorted by rank (*order[k]: the box index of the k-th sent, so that
- * answers in the order received map back), cnt per rank; the records received */
-static char *box_send(box *b, int *cnt, int *rcnt, long **order, long *nrecv, int *bad) {
-  int P = lg_mpi_size();
-  long *at = calloc((size_t)P + 1, sizeof(long)), *ord = malloc(sizeof(long) * ((size_t)b->n + 1));
-  char *sorted = malloc(b->rec * (size_t)b->n + 1);
-  if (!at || !ord || !sorted) *bad = 1;
-  for (int r = 0; r < P; r++) cnt[r] = 0;
-  for (long i = 0; !*bad && i < b->n; i++) cnt[b->dest[i]]++;
-  for (int r = 1; !*bad && r < P; r++) at[r] = at[r - 1] + cnt[r - 1];
-  for (long i = 0; !*bad && i < b->n; i++) {
-    long k = at[b->dest[i]]++;
-    ord[k] = i;
-    memcpy(sorted + b->rec * (size_t)k, b->data + b->rec * (size_t)i, b->rec);
-  }
-  /* the box's own copy goes before the exchange (b->n stays): one copy less at the peak */
-  free(b->data);
-  free(b->dest);
-  b->data = NULL;
-  b->dest = NULL;
-  char *recv = alltoall(sorted, b->rec, cnt, rcnt, nrecv, bad);
-  free(at);
-  free(sorted);
-  if (order) *order = ord;
-  else free(ord);
-  return recv;
-}
-
-/* answers (rec bytes each) to records received with the counts rcnt, back to their senders,
- * who sent cnt: the k-th returned answers their k-th sent record */
-static char *reply(const char *ans, size_t rec, int *rcnt, int *cnt, int *bad) {
-  int P = lg_mpi_size();
-  int *c1 = malloc(sizeof(int) * 2 * (size_t)P);
-  if (!c1) { *bad = 1; return NULL; }
-  memcpy(c1, rcnt, sizeof(int) * (size_t)P);
-  long n;
-  char *back = alltoall(ans, rec, c1, c1 + P, &n, bad);
-  for (int r = 0; !*bad && r < P; r++)
-    if (c1[P + r] != cnt[r]) *bad = 1;
-  free(c1);
-  return back;
-}
-
 /* ---------------------------------------------------------------- keys, homes, sorting */
 
 static uint64_t mix(uint64_t h) {
@@ -159,11 +36,12 @@ static uint64_t mix(uint64_t h) {
   h *= 0xc4ceb9fe1a85ec53ull;
   return h ^ (h >> 33);
 }
-static int hash_rank(const int *k, int n, int P) {
+static uint64_t key_hash(const int *k, int n) {
   uint64_t h = 1469598103934665603ull;
   for (int i = 0; i < n; i++) h = mix(h ^ (uint32_t)k[i]);
-  return (int)(h % (uint64_t)P);
+  return h;
 }
+static int hash_rank(const int *k, int n, int P) { return (int)(key_hash(k, n) % (uint64_t)P); }
 static int tag_rank(long long tag, int P) { return (int)(mix((uint64_t)tag) % (uint64_t)P); }
 
 /* vertex v's home: the rank of its run of the numbering (mesh_vertex_runs' parts) */
@@ -230,20 +108,16 @@ static int cmp_rnode(const void *a, const void *b) {
   if (x->tag != y->tag) return x->tag < y->tag ? -1 : 1;
   return (x->F > y->F) - (x->F < y->F);
 }
-static int nvc_cmp; /* the key length of the records compared below (one reader at a time) */
-static int cmp_rdup(const void *a, const void *b) {
-  const rdup *x = a, *y = b;
-  int c = memcmp(x->key, y->key, sizeof(int) * (size_t)nvc_cmp);
-  if (c) {
-    for (int i = 0; i < nvc_cmp; i++)
-      if (x->key[i] != y->key[i]) return x->key[i] < y->key[i] ? -1 : 1;
-  }
-  return (x->index > y->index) - (x->index < y->index);
-}
 static int key_cmp(const int *x, const int *y, int n) {
   for (int i = 0; i < n; i++)
     if (x[i] != y[i]) return x[i] < y[i] ? -1 : 1;
   return 0;
+}
+/* by key (its unused places are 0), then by place in the file */
+static int cmp_rdup(const void *a, const void *b) {
+  const rdup *x = a, *y = b;
+  int c = key_cmp(x->key, y->key, 8);
+  return c ? c : (x->index > y->index) - (x->index < y->index);
 }
 static int cmp_rfacet(const void *a, const void *b) {
   const rfacet *x = a, *y = b;
@@ -268,7 +142,6 @@ static int cmp_rface_at(const void *a, const void *b) {
 
 /* ---------------------------------------------------------------- the reader */
 
-
 typedef struct {
   lg_env *env;
   const char *path;
@@ -282,8 +155,8 @@ typedef struct {
   /* after the node numbering */
   int nvg, vbase, nused;
   double *ux;    /* this rank's used nodes' coordinates, numbers vbase .. vbase + nused - 1 */
-  int *cv;       /* the local cells' vertices (ncl of them), then their tags, kept flags */
-  int *ctag, *keep, *cidx, ncl;
+  int *cv;       /* the local cells' vertices (ncl cells, nvc each) */
+  int *ctag, *keep, *cidx, ncl; /* their region tags, kept flags (repeats: 0), elements */
   int *fv, *fidx, nfl; /* the local tagged facets: vertices (-1: a node of no cell), element */
   int *fph, *fnp;      /* and their physical tags (at G.phys + fph, fnp of them) */
   int *cglob;          /* the local cells' numbers where they are not cbase + c (a generated mesh) */
@@ -294,8 +167,8 @@ typedef struct {
   int *cpart;
 } reader;
 
-static void why(reader *R, const char *fmt, const char *s) {
-  if (!R->bad) snprintf(R->why, sizeof R->why, fmt, s);
+static void why(reader *R, const char *reason) {
+  if (!R->bad) snprintf(R->why, sizeof R->why, "%s", reason);
   R->bad = 1;
 }
 static int any(reader *R) {
@@ -331,14 +204,14 @@ static long answer_of(const uint64_t *ut, long n, const long *ans, long long t) 
 static void number_nodes(reader *R) {
   int P = R->P, *cnt = R->cnt, *rcnt = cnt + P, *qcnt = cnt + 2 * P, *qrcnt = cnt + 3 * P;
   gmsh_part *G = &R->G;
-  box bn = {sizeof(rnode), 0, 0, NULL, NULL}, bq = {sizeof(rask), 0, 0, NULL, NULL};
+  lg_box bn = {sizeof(rnode), 0, 0, NULL, NULL}, bq = {sizeof(rask), 0, 0, NULL, NULL};
   for (long long i = 0; !R->bad && i < G->nn; i++) {
-    rnode *r = box_add(&bn, tag_rank(G->ntag[i], P), &R->bad);
+    rnode *r = lg_box_add(&bn, tag_rank(G->ntag[i], P), &R->bad);
     if (r) { r->tag = G->ntag[i]; r->F = G->node_first + i; memcpy(r->x, G->nx + 3 * i, sizeof r->x); }
   }
   long nn = 0, nq = 0, *qord = NULL;
-  rnode *nodes = (rnode *)box_send(&bn, cnt, rcnt, NULL, &nn, &R->bad);
-  box_free(&bn);
+  rnode *nodes = (rnode *)lg_box_send(&bn, cnt, rcnt, NULL, &nn, &R->bad);
+  lg_box_free(&bn);
   /* the questions: each distinct node tag of the local cells (used) and tagged facets once,
    * found through a hash set of tag << 1 | used (0: empty), then sorted: a 5.3 M-cell
    * file's 21 M node references are 0.9 M tags, and sorting the references had held them
@@ -353,7 +226,7 @@ static void number_nodes(reader *R) {
     if (!cell && !(d == R->cdim - 1 && e->nphys > 0)) continue;
     for (int j = 0; !R->bad && j < mesh_gmsh_type_nodes(e->type); j++) {
       long long t = G->enodes[e->node + j];
-      if (t >= (1LL << 62)) { why(R, "%s", "a node tag over 2^62"); break; }
+      if (t >= (1LL << 62)) { why(R, "a node tag over 2^62"); break; }
       if (2 * (size_t)(nut + 1) > cap) { /* rehash into twice the room */
         uint64_t *nt = calloc(2 * cap, sizeof(uint64_t));
         if (!nt) { R->bad = 1; break; }
@@ -380,10 +253,10 @@ static void number_nodes(reader *R) {
     if (sort_u64(ut, nut)) R->bad = 1;
   }
   for (long i = 0; !R->bad && i < nut; i++) {
-    rask *q = box_add(&bq, tag_rank((long long)(ut[i] >> 1), P), &R->bad);
+    rask *q = lg_box_add(&bq, tag_rank((long long)(ut[i] >> 1), P), &R->bad);
     if (q) { q->tag = (long long)(ut[i] >> 1); q->used = (int)(ut[i] & 1); }
   }
-  rask *asks = (rask *)box_send(&bq, qcnt, qrcnt, &qord, &nq, &R->bad);
+  rask *asks = (rask *)lg_box_send(&bq, qcnt, qrcnt, &qord, &nq, &R->bad);
   /* the tags' homes: unique tags (the first of equal nodes; the same tag at other
    * coordinates is the whole reader's error), each question's node, the used ones marked */
   long nu = 0;
@@ -391,7 +264,7 @@ static void number_nodes(reader *R) {
     qsort(nodes, (size_t)nn, sizeof(rnode), cmp_rnode);
     for (long i = 0; i < nn; i++) {
       if (nu && nodes[i].tag == nodes[nu - 1].tag) {
-        if (memcmp(nodes[i].x, nodes[nu - 1].x, sizeof nodes[i].x)) why(R, "%s", "a node defined twice");
+        if (memcmp(nodes[i].x, nodes[nu - 1].x, sizeof nodes[i].x)) why(R, "a node defined twice");
         continue;
       }
       nodes[nu++] = nodes[i];
@@ -408,19 +281,19 @@ static void number_nodes(reader *R) {
       else hi = c;
     }
     which[i] = lo < nu && nodes[lo].tag == asks[i].tag ? lo : -1;
-    if (which[i] < 0) why(R, "%s", "an element refers to a node not in $Nodes");
+    if (which[i] < 0) why(R, "an element refers to a node not in $Nodes");
     else if (asks[i].used) used[which[i]] = 1;
   }
   /* the used nodes' indices to their readers, who number them in the file's order */
-  box bu = {sizeof(long long), 0, 0, NULL, NULL};
+  lg_box bu = {sizeof(long long), 0, 0, NULL, NULL};
   for (long u = 0; !R->bad && u < nu; u++)
     if (used[u]) {
-      long long *f = box_add(&bu, node_reader(&R->L, nodes[u].F), &R->bad);
+      long long *f = lg_box_add(&bu, node_reader(&R->L, nodes[u].F), &R->bad);
       if (f) *f = nodes[u].F;
     }
   int *ucnt = cnt + 4 * P, *urcnt = cnt + 5 * P;
   long nf = 0, *uord = NULL;
-  long long *fs = (long long *)box_send(&bu, ucnt, urcnt, &uord, &nf, &R->bad);
+  long long *fs = (long long *)lg_box_send(&bu, ucnt, urcnt, &uord, &nf, &R->bad);
   char *mine = calloc((size_t)G->nn + 1, 1);
   int *num = malloc(sizeof(int) * ((size_t)G->nn + 1));
   if (!mine || !num) R->bad = 1;
@@ -445,13 +318,13 @@ static void number_nodes(reader *R) {
       /* a 1D mesh on the x axis, a 2D one in the plane z = 0 (the whole reader's checks) */
       if ((R->cdim == 1 && (fabs(p[1]) > 1e-12 * (1 + fabs(p[0])) || fabs(p[2]) > 1e-12 * (1 + fabs(p[0])))) ||
           (R->cdim == 2 && fabs(p[2]) > 1e-12 * (1 + fabs(p[0]) + fabs(p[1]))))
-        why(R, "%s", "a node off the mesh's line or plane");
+        why(R, "a node off the mesh's line or plane");
     }
   /* the numbers back to the tags' homes, then to the questions */
   int *ans = malloc(sizeof(int) * ((size_t)nf + 1));
   if (!ans) R->bad = 1;
   for (long i = 0; !R->bad && i < nf; i++) ans[i] = num[fs[i] - G->node_first];
-  int *unum = (int *)reply((char *)ans, sizeof(int), urcnt, ucnt, &R->bad);
+  int *unum = (int *)lg_reply((char *)ans, sizeof(int), urcnt, ucnt, &R->bad);
   int *vnum = malloc(sizeof(int) * ((size_t)nu + 1)), *uat = malloc(sizeof(int) * ((size_t)bu.n + 1));
   if (!vnum || !uat) R->bad = 1;
   for (long k = 0; !R->bad && k < bu.n; k++) uat[uord[k]] = unum[k]; /* back in the box's order */
@@ -459,7 +332,7 @@ static void number_nodes(reader *R) {
   int *qa = malloc(sizeof(int) * ((size_t)nq + 1));
   if (!qa) R->bad = 1;
   for (long i = 0; !R->bad && i < nq; i++) qa[i] = vnum[which[i]];
-  int *back = (int *)reply((char *)qa, sizeof(int), qrcnt, qcnt, &R->bad);
+  int *back = (int *)lg_reply((char *)qa, sizeof(int), qrcnt, qcnt, &R->bad);
   /* the local cells and tagged facets in vertex numbers (each tag's answer found among the
    * sorted distinct tags) */
   long *at = malloc(sizeof(long) * ((size_t)bq.n + 1));
@@ -497,15 +370,15 @@ static void number_nodes(reader *R) {
       for (int j = 0; j < nn1; j++) {
         v[j] = (int)TAG_ANSWER(G->enodes[e->node + j]);
         for (int k = 0; k < j; k++)
-          if (v[k] == v[j]) why(R, "%s", "a collapsed cell");
+          if (v[k] == v[j]) why(R, "a collapsed cell");
       }
       for (int j = 1; j < e->nphys; j++)
-        if (G->phys[e->phys + j] != G->phys[e->phys]) why(R, "%s", "a cell in two physical groups");
+        if (G->phys[e->phys + j] != G->phys[e->phys]) why(R, "a cell in two physical groups");
       R->ctag[R->ncl] = e->nphys ? G->phys[e->phys] : 0;
       R->cidx[R->ncl++] = (int)i;
     } else if (d == R->cdim - 1 && e->nphys > 0) {
       int *v = R->fv + 4 * (size_t)R->nfl;
-      if (e->type != ftype) why(R, "%s", "a tagged facet of another type than the cells'");
+      if (e->type != ftype) why(R, "a tagged facet of another type than the cells'");
       for (int j = 0; j < nn1; j++) v[j] = (int)TAG_ANSWER(G->enodes[e->node + j]);
       R->fph[R->nfl] = e->phys;
       R->fnp[R->nfl] = e->nphys;
@@ -525,7 +398,7 @@ static void number_nodes(reader *R) {
   G->ntag = NULL;
   G->nx = NULL;
   free(unum); free(vnum); free(uat); free(uord); free(qa); free(back); free(at); free(ut);
-  box_free(&bq); box_free(&bu);
+  lg_box_free(&bq); lg_box_free(&bu);
 }
 
 /* step 2: cells repeated in the file are one (the first; its region the last nonzero tag,
@@ -534,25 +407,23 @@ static void number_nodes(reader *R) {
 static uint64_t cell_hash(const int *v, int nvc, int *sorted) {
   memcpy(sorted, v, sizeof(int) * (size_t)nvc);
   sort_small(sorted, nvc);
-  uint64_t x = 1469598103934665603ull;
-  for (int k = 0; k < nvc; k++) x = mix(x ^ (uint32_t)sorted[k]);
-  return x;
+  return key_hash(sorted, nvc);
 }
 
 static void number_cells(reader *R) {
   int P = R->P, nvc = R->nvc, *cnt = R->cnt, *rcnt = cnt + P;
-  if (R->L.nelems > INT32_MAX) why(R, "%s", "over 2^31 elements");
+  if (R->L.nelems > INT32_MAX) why(R, "over 2^31 elements");
   /* each cell's key hash, place in the file and tag to the hash's home; only where hashes
    * meet (a repeated cell, or a collision) the keys themselves follow, in a second round */
-  box b = {sizeof(rhash), 0, 0, NULL, NULL};
+  lg_box b = {sizeof(rhash), 0, 0, NULL, NULL};
   int k8[8];
   for (int c = 0; !R->bad && c < R->ncl; c++) {
     uint64_t x = cell_hash(R->cv + (size_t)nvc * c, nvc, k8);
-    rhash *r = box_add(&b, (int)(x % (uint64_t)P), &R->bad);
+    rhash *r = lg_box_add(&b, (int)(x % (uint64_t)P), &R->bad);
     if (r) { r->h = x; r->index = (int)(R->efirst + R->cidx[c]); r->tag = R->ctag[c]; }
   }
   long n = 0, *ord = NULL;
-  rhash *d = (rhash *)box_send(&b, cnt, rcnt, &ord, &n, &R->bad);
+  rhash *d = (rhash *)lg_box_send(&b, cnt, rcnt, &ord, &n, &R->bad);
   /* the homes: by hash (radix); a lone hash is a cell kept with its tag; a shared one asks
    * for the keys (answer 2, with the record's place here) */
   int *ans = malloc(sizeof(int) * 3 * ((size_t)n + 1));
@@ -560,7 +431,6 @@ static void number_cells(reader *R) {
   if (!ans || !h) R->bad = 1;
   for (long i = 0; !R->bad && i < n; i++) h[i] = (kv){d[i].h, i};
   if (!R->bad && sort_kv(h, n)) R->bad = 1;
-  long nshared = 0;
   for (long i = 0; !R->bad && i < n;) {
     long j = i + 1;
     while (j < n && h[j].k == h[i].k) j++;
@@ -569,15 +439,14 @@ static void number_cells(reader *R) {
       ans[3 * h[k].i + 1] = d[h[k].i].tag;
       ans[3 * h[k].i + 2] = (int)h[k].i;
     }
-    nshared += j - i > 1 ? j - i : 0;
     i = j;
   }
   free(h);
-  int *back = (int *)reply((char *)ans, 3 * sizeof(int), rcnt, cnt, &R->bad);
+  int *back = (int *)lg_reply((char *)ans, 3 * sizeof(int), rcnt, cnt, &R->bad);
   free(ans);
   R->keep = malloc(sizeof(int) * ((size_t)R->ncl + 1));
   if (!R->keep) R->bad = 1;
-  box bk = {sizeof(rdup), 0, 0, NULL, NULL};
+  lg_box bk = {sizeof(rdup), 0, 0, NULL, NULL};
   long *kcell = malloc(sizeof(long) * ((size_t)b.n + 1)); /* the cell of each key sent */
   if (!kcell) R->bad = 1;
   for (long k = 0; !R->bad && k < b.n; k++) {
@@ -585,13 +454,13 @@ static void number_cells(reader *R) {
     R->keep[c] = back[3 * k];
     R->ctag[c] = back[3 * k + 1];
     if (back[3 * k] != 2) continue;
-    rdup *r = box_add(&bk, (int)(cell_hash(R->cv + (size_t)nvc * c, nvc, k8) % (uint64_t)P), &R->bad);
+    rdup *r = lg_box_add(&bk, (int)(cell_hash(R->cv + (size_t)nvc * c, nvc, k8) % (uint64_t)P), &R->bad);
     if (r) { memset(r->key, 0, sizeof r->key); memcpy(r->key, k8, sizeof(int) * (size_t)nvc); r->index = back[3 * k + 2]; kcell[bk.n - 1] = c; }
   }
   free(back);
   long nk = 0, *kord = NULL;
   int *kcnt = cnt + 2 * P, *krcnt = cnt + 3 * P;
-  rdup *keys = (rdup *)box_send(&bk, kcnt, krcnt, &kord, &nk, &R->bad);
+  rdup *keys = (rdup *)lg_box_send(&bk, kcnt, krcnt, &kord, &nk, &R->bad);
   /* the shared hashes' keys: equal keys by place in the file, the first kept, its region the
    * last nonzero tag (two different ones: the whole reader's error) */
   int *kans = malloc(sizeof(int) * 2 * ((size_t)nk + 1));
@@ -604,14 +473,13 @@ static void number_cells(reader *R) {
     g[i].index = d[keys[i].index].index;
     g[i].pad = (int)i; /* the place received */
   }
-  nvc_cmp = nvc;
   if (!R->bad) qsort(g, (size_t)nk, sizeof(rdup), cmp_rdup);
   for (long a0 = 0; !R->bad && a0 < nk;) {
     long a1 = a0;
     int tag = g[a0].tag;
     while (a1 + 1 < nk && !key_cmp(g[a1 + 1].key, g[a0].key, nvc)) {
       a1++;
-      if (g[a1].tag && tag && g[a1].tag != tag) why(R, "%s", "a cell repeated in another physical group");
+      if (g[a1].tag && tag && g[a1].tag != tag) why(R, "a cell repeated in another physical group");
       if (g[a1].tag) tag = g[a1].tag;
     }
     for (long k = a0; k <= a1; k++) {
@@ -620,16 +488,15 @@ static void number_cells(reader *R) {
     }
     a0 = a1 + 1;
   }
-  int *kback = (int *)reply((char *)kans, 2 * sizeof(int), krcnt, kcnt, &R->bad);
+  int *kback = (int *)lg_reply((char *)kans, 2 * sizeof(int), krcnt, kcnt, &R->bad);
   for (long k = 0; !R->bad && k < bk.n; k++) {
     long c = kcell[kord[k]]; /* the asking cell */
     R->keep[c] = kback[2 * k];
     R->ctag[c] = kback[2 * k + 1];
   }
-  (void)nshared;
   free(d); free(ord); free(keys); free(kord); free(kans); free(g); free(kback); free(kcell);
-  box_free(&b);
-  box_free(&bk);
+  lg_box_free(&b);
+  lg_box_free(&bk);
   int kept = 0, base = 0, total = 0;
   for (int c = 0; !R->bad && c < R->ncl; c++) kept += R->keep[c];
   (void)MPI_Exscan(&kept, &base, 1, MPI_INT, MPI_SUM, PETSC_COMM_WORLD);
@@ -645,147 +512,6 @@ static void number_cells(reader *R) {
   R->ncl = kept;
   R->cbase = base;
   R->ncg = total;
-}
-
-/* each cell's part: the numbering's runs (each cell with its lowest vertex), kept by auto
- * where they cut little as for a whole mesh, or a graph partitioner on the vertex graph
- * distributed by the runs, each cell then in the part of most of its vertices */
-static void partition(reader *R) {
-  int P = R->P, nvc = R->nvc, nvg = R->nvg, d = R->cdim;
-  lg_env *env = R->env;
-  R->cpart = malloc(sizeof(int) * ((size_t)R->ncl + 1));
-  int *cnt = R->cnt, *rcnt = cnt + P;
-  if (!R->cpart) { R->bad = 1; return; } /* before any collective: every rank returns (any() next) */
-  for (int c = 0; c < R->ncl; c++) {
-    int lo = R->cv[(size_t)nvc * c];
-    for (int k = 1; k < nvc; k++) lo = R->cv[(size_t)nvc * c + k] < lo ? R->cv[(size_t)nvc * c + k] : lo;
-    R->cpart[c] = vhome(lo, nvg, P);
-  }
-  char method[64] = "auto";
-  PetscOptionsGetString(NULL, NULL, "-lugal_partitioner", method, sizeof method, NULL);
-  if (!strcmp(method, "natural")) return;
-  if (!strcmp(method, "auto")) {
-    /* the vertices the runs cut, counted at their homes; the runs' smallest part */
-    box b = {sizeof(int), 0, 0, NULL, NULL};
-    long *pc = calloc((size_t)P, sizeof(long)), *pt = calloc((size_t)P, sizeof(long));
-    if (!pc || !pt) R->bad = 1;
-    for (int c = 0; !R->bad && c < R->ncl; c++) {
-      const int *v = R->cv + (size_t)nvc * (size_t)c;
-      int cut = 0;
-      pc[R->cpart[c]]++;
-      for (int k = 1; k < nvc; k++) cut |= vhome(v[k], nvg, P) != vhome(v[0], nvg, P);
-      for (int k = 0; cut && k < nvc; k++) {
-        int *x = box_add(&b, vhome(v[k], nvg, P), &R->bad);
-        if (x) *x = v[k];
-      }
-    }
-    long n = 0;
-    int *got = (int *)box_send(&b, cnt, rcnt, NULL, &n, &R->bad);
-    long have = R->bad ? 0 : unique_ints(got, n), all = 0, fewest = -1;
-    (void)MPI_Allreduce(&have, &all, 1, MPI_LONG, MPI_SUM, PETSC_COMM_WORLD);
-    if (pc && pt) MPI_Allreduce(pc, pt, P, MPI_LONG, MPI_SUM, PETSC_COMM_WORLD);
-    for (int r = 0; pt && r < P; r++) fewest = fewest < 0 || pt[r] < fewest ? pt[r] : fewest;
-    int verbose = env->verbose;
-    env->verbose = verbose && R->rank == 0;
-    int keep = lg_runs_kept(env, all, lg_runs_cut_little(all, nvg, d, P) ? fewest : -1, nvg, R->ncg, d, P);
-    env->verbose = verbose;
-    free(got); free(pc); free(pt);
-    box_free(&b);
-    if (keep) return;
-#ifdef PETSC_HAVE_PTSCOTCH
-    strcpy(method, MATPARTITIONINGPTSCOTCH);
-#else
-    strcpy(method, MATPARTITIONINGCURRENT);
-#endif
-  }
-  double t0 = now_ms();
-  /* the vertex graph's rows at their homes: each cell to the homes of its vertices */
-  int lo = vlo(R->rank, nvg, P), nloc = vlo(R->rank + 1, nvg, P) - lo;
-  box b = {sizeof(int) * (size_t)nvc, 0, 0, NULL, NULL};
-  for (int c = 0; !R->bad && c < R->ncl; c++) {
-    const int *v = R->cv + (size_t)nvc * (size_t)c;
-    for (int k = 0; k < nvc; k++) {
-      int h = vhome(v[k], nvg, P), seen = 0;
-      for (int i = 0; i < k; i++) seen |= vhome(v[i], nvg, P) == h;
-      int *x = seen ? NULL : box_add(&b, h, &R->bad);
-      if (x) memcpy(x, v, (size_t)nvc * sizeof(int));
-    }
-  }
-  long n = 0;
-  int *cells = (int *)box_send(&b, cnt, rcnt, NULL, &n, &R->bad);
-  box_free(&b);
-  /* each row's cells (vs, vc), then its neighbours: the other vertices of those cells,
-   * sorted and unique, counted in a first pass and written in a second (the pairs of a
-   * sorted list had held 12 long integers a tetrahedron) */
-  int *vs = calloc((size_t)nloc + 2, sizeof(int)), *vc = malloc(sizeof(int) * ((size_t)n * nvc + 1)), *nb = NULL, cap = 0;
-  PetscInt *ia = NULL, *ja = NULL;
-  if (!vs || !vc || PetscMalloc1(nloc + 1, &ia)) R->bad = 1;
-  for (long i = 0; !R->bad && i < n; i++)
-    for (int k = 0; k < nvc; k++)
-      if (cells[(size_t)nvc * i + k] >= lo && cells[(size_t)nvc * i + k] < lo + nloc) vs[cells[(size_t)nvc * i + k] - lo + 2]++;
-  for (int v = 0; !R->bad && v < nloc; v++) vs[v + 2] += vs[v + 1];
-  for (long i = 0; !R->bad && i < n; i++)
-    for (int k = 0; k < nvc; k++) {
-      int v = cells[(size_t)nvc * i + k];
-      if (v >= lo && v < lo + nloc) vc[vs[v - lo + 1]++] = (int)i;
-    }
-  for (int pass = 0; pass < 2 && !R->bad; pass++) {
-    long at = 0;
-    for (int v = 0; v < nloc && !R->bad; v++) {
-      int m = 0, need = (vs[v + 1] - vs[v]) * nvc;
-      if (need > cap) {
-        int *q = realloc(nb, sizeof(int) * (size_t)(cap = 2 * need));
-        if (!q) { R->bad = 1; break; }
-        nb = q;
-      }
-      for (int i = vs[v]; i < vs[v + 1]; i++)
-        for (int k = 0; k < nvc; k++) {
-          int w = cells[(size_t)nvc * vc[i] + k];
-          if (w != v + lo) nb[m++] = w;
-        }
-      qsort(nb, (size_t)m, sizeof(int), cmp_int);
-      int u = 0;
-      for (int i = 0; i < m; i++)
-        if (!u || nb[i] != nb[u - 1]) nb[u++] = nb[i];
-      if (pass) for (int i = 0; i < u; i++) ja[at + i] = nb[i];
-      else ia[v] = (PetscInt)at;
-      at += u;
-    }
-    if (!pass && !R->bad) {
-      ia[nloc] = (PetscInt)at;
-      if (PetscMalloc1(at + 1, &ja)) R->bad = 1;
-    }
-  }
-  free(cells); free(vs); free(vc); free(nb);
-  /* every rank creates the graph and partitions (the others wait for a failed one) */
-  int *vpart = NULL;
-  if (any(R)) { PetscFree(ia); PetscFree(ja); return; }
-  if (!(vpart = malloc(sizeof(int) * ((size_t)nloc + 1)))) { PetscFree(ia); PetscFree(ja); ia = ja = NULL; }
-  int nfail = !vpart, fail = 0;
-  (void)MPI_Allreduce(&nfail, &fail, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
-  if (fail || lg_partition_graph(env, PETSC_COMM_WORLD, nloc, nvg, ia, ja, P, method, vpart)) {
-    if (!fail) { PetscFree(ia); PetscFree(ja); } /* given up to the graph above, freed with it */
-    why(R, "%s", "the partitioner failed");
-  }
-  /* each cell in the part of most of its vertices (the lowest of those that tie) */
-  box q = {sizeof(int), 0, 0, NULL, NULL};
-  for (int c = 0; !R->bad && c < R->ncl; c++)
-    for (int k = 0; k < nvc; k++) {
-      int *x = box_add(&q, vhome(R->cv[(size_t)nvc * c + k], nvg, P), &R->bad);
-      if (x) *x = R->cv[(size_t)nvc * c + k];
-    }
-  long nq = 0, *ord = NULL;
-  int *qs = (int *)box_send(&q, cnt, rcnt, &ord, &nq, &R->bad);
-  for (long i = 0; !R->bad && i < nq; i++) qs[i] = vpart[qs[i] - lo];
-  int *back = (int *)reply((char *)qs, sizeof(int), rcnt, cnt, &R->bad), *at = malloc(sizeof(int) * ((size_t)q.n + 1));
-  if (!at) R->bad = 1;
-  for (long k = 0; !R->bad && k < q.n; k++) at[ord[k]] = back[k];
-  for (int c = 0; !R->bad && c < R->ncl; c++) R->cpart[c] = lg_majority_part(at + (size_t)c * nvc, nvc);
-  if (env->verbose && R->rank == 0 && !R->bad)
-    fprintf(stderr, "[lugal] partition: %d cells into %d parts by %s on the distributed vertex graph in %.1f ms\n", R->ncg, P,
-            method, now_ms() - t0);
-  free(vpart); free(ord); free(qs); free(back); free(at);
-  box_free(&q);
 }
 
 /* the window: the cells this rank owns, its ghost layers (each time every cell around the
@@ -864,32 +590,52 @@ static int sort_records(int *r, long n, int w) {
   return 0;
 }
 
-/* the cells to the homes of their vertices and to their owners; the homes' lists, votes and
- * coordinates */
-static void home_cells(reader *R, vhomes *H, window *W) {
+/* the home of a cell's vertex k (v: its vertices), or -1 where an earlier vertex has the
+ * same home: a cell goes to each of its vertices' homes once */
+static int new_home(const int *v, int k, int nvg, int P) {
+  int h = vhome(v[k], nvg, P);
+  for (int i = 0; i < k; i++)
+    if (vhome(v[i], nvg, P) == h) return -1;
+  return h;
+}
+/* local cell c's number in the whole mesh */
+static int cell_number(const reader *R, int c) { return R->cglob ? R->cglob[c] : R->cbase + c; }
+
+/* each cell's part in the numbering's runs: that of its lowest vertex (mesh_vertex_runs) */
+static void runs_parts(reader *R) {
+  int nvc = R->nvc;
+  if (!(R->cpart = malloc(sizeof(int) * ((size_t)R->ncl + 1)))) { R->bad = 1; return; }
+  for (int c = 0; c < R->ncl; c++) {
+    const int *v = R->cv + (size_t)nvc * c;
+    int lo = v[0];
+    for (int k = 1; k < nvc; k++) lo = v[k] < lo ? v[k] : lo;
+    R->cpart[c] = vhome(lo, R->nvg, R->P);
+  }
+}
+
+/* the cells (with their runs' parts) to the homes of their vertices, each home's list of its
+ * vertices' cells, and the coordinates from the nodes' readers */
+static void home_cells(reader *R, vhomes *H) {
   int P = R->P, nvc = R->nvc, nvg = R->nvg, w = 3 + nvc;
   int *cnt = R->cnt, *rcnt = cnt + P;
   H->lo = vlo(R->rank, nvg, P);
   H->n = vlo(R->rank + 1, nvg, P) - H->lo;
-  box bh = {sizeof(int) * (size_t)w, 0, 0, NULL, NULL}, bo = {sizeof(int) * (size_t)w, 0, 0, NULL, NULL};
+  lg_box bh = {sizeof(int) * (size_t)w, 0, 0, NULL, NULL};
   for (int c = 0; !R->bad && c < R->ncl; c++) {
     const int *v = R->cv + (size_t)nvc * (size_t)c;
-    for (int k = 0; k <= nvc; k++) {
-      int h = k < nvc ? vhome(v[k], nvg, P) : R->cpart[c], seen = 0;
-      for (int i = 0; k < nvc && i < k; i++) seen |= vhome(v[i], nvg, P) == h;
-      int *x = seen ? NULL : box_add(k < nvc ? &bh : &bo, h, &R->bad);
+    for (int k = 0; k < nvc; k++) {
+      int h = new_home(v, k, nvg, P), *x = h < 0 ? NULL : lg_box_add(&bh, h, &R->bad);
       if (!x) continue;
-      CG(x) = R->cglob ? R->cglob[c] : R->cbase + c;
+      CG(x) = cell_number(R, c);
       CP(x) = R->cpart[c];
       CT(x) = R->ctag[c];
       memcpy(CV(x), v, sizeof(int) * (size_t)nvc);
     }
   }
-  /* the readers' cells are in the file's order and ranks send in rank order: both arrive
+  /* the readers' cells are in the file's order and ranks send in rank order: they arrive
    * sorted by number (sort_records checks) */
-  H->cells = (int *)box_send(&bh, cnt, rcnt, NULL, &H->ncells, &R->bad);
-  W->c = (int *)box_send(&bo, cnt, rcnt, NULL, &W->nc, &R->bad);
-  if (!R->bad && (sort_records(H->cells, H->ncells, w) || sort_records(W->c, W->nc, w))) R->bad = 1;
+  H->cells = (int *)lg_box_send(&bh, cnt, rcnt, NULL, &H->ncells, &R->bad);
+  if (!R->bad && sort_records(H->cells, H->ncells, w)) R->bad = 1;
   int lo = H->lo, n = H->n;
   H->vs = calloc((size_t)n + 2, sizeof(int));
   H->vc = malloc(sizeof(int) * ((size_t)H->ncells * nvc + 1));
@@ -909,22 +655,14 @@ static void home_cells(reader *R, vhomes *H, window *W) {
         int v = CV(H->cells + (size_t)w * i)[k];
         if (v >= lo && v < lo + n) H->vc[H->vs[v - lo + 1]++] = (int)i;
       }
-    int *votes = calloc((size_t)n + 1, sizeof(int)); /* lg_vote's counts */
-    if (!votes) R->bad = 1;
-    for (int v = 0; votes && v < n; v++) {
-      H->own[v] = -1;
-      for (int i = H->vs[v]; i < H->vs[v + 1]; i++) lg_vote(H->own, votes, v, CP(H->cells + (size_t)w * H->vc[i]));
-      if (H->own[v] < 0) why(R, "%s", "a vertex of no cell");
-    }
-    free(votes);
   }
-  box bx = {sizeof(rcoord), 0, 0, NULL, NULL};
+  lg_box bx = {sizeof(rcoord), 0, 0, NULL, NULL};
   for (int k = 0; !R->bad && k < R->nused; k++) {
-    rcoord *x = box_add(&bx, vhome(R->vbase + k, nvg, P), &R->bad);
+    rcoord *x = lg_box_add(&bx, vhome(R->vbase + k, nvg, P), &R->bad);
     if (x) { x->v = R->vbase + k; memcpy(x->x, R->ux + 3 * (size_t)k, sizeof x->x); }
   }
   long nx = 0;
-  rcoord *xs = (rcoord *)box_send(&bx, cnt, rcnt, NULL, &nx, &R->bad);
+  rcoord *xs = (rcoord *)lg_box_send(&bx, cnt, rcnt, NULL, &nx, &R->bad);
   for (long i = 0; !R->bad && i < nx; i++) {
     if (xs[i].v < lo || xs[i].v >= lo + n) { R->bad = 1; break; }
     memcpy(H->x + 3 * (size_t)(xs[i].v - lo), xs[i].x, sizeof xs[i].x);
@@ -932,6 +670,167 @@ static void home_cells(reader *R, vhomes *H, window *W) {
   free(xs);
   free(R->ux); /* the homes have the coordinates now */
   R->ux = NULL;
+}
+
+/* the vertex graph's row of home vertex v (lo + v): the other vertices of its cells, sorted
+ * and unique, into nb (grown); their count */
+static int graph_row(const vhomes *H, int w, int v, int **nb, int *cap) {
+  int nvc = w - 3, m = 0, need = (H->vs[v + 1] - H->vs[v]) * nvc;
+  if (need > *cap) {
+    int *q = realloc(*nb, sizeof(int) * (size_t)(*cap = 2 * need));
+    if (!q) return -1;
+    *nb = q;
+  }
+  for (int i = H->vs[v]; i < H->vs[v + 1]; i++)
+    for (int k = 0; k < nvc; k++) {
+      int u = CV(H->cells + (size_t)w * H->vc[i])[k];
+      if (u != v + H->lo) (*nb)[m++] = u;
+    }
+  qsort(*nb, (size_t)m, sizeof(int), cmp_int);
+  int u = 0;
+  for (int i = 0; i < m; i++)
+    if (!u || (*nb)[i] != (*nb)[u - 1]) (*nb)[u++] = (*nb)[i];
+  return u;
+}
+
+/* each cell's part: the numbering's runs (runs_parts), kept by auto where they cut little as
+ * for a whole mesh, or a graph partitioner on the vertex graph, whose rows are the vertex
+ * homes' (from their cells' lists), each cell then in the part of most of its vertices, which
+ * the homes' copies of the cells learn too */
+static void partition(reader *R, vhomes *H) {
+  int P = R->P, nvc = R->nvc, nvg = R->nvg, d = R->cdim, w = 3 + nvc, lo = H->lo, nloc = H->n;
+  int *cnt = R->cnt, *rcnt = cnt + P;
+  lg_env *env = R->env;
+  char method[64] = "auto";
+  PetscOptionsGetString(NULL, NULL, "-lugal_partitioner", method, sizeof method, NULL);
+  if (!strcmp(method, "natural")) return;
+  if (!strcmp(method, "auto")) {
+    /* the vertices the runs cut, counted at their homes; the runs' smallest part */
+    lg_box b = {sizeof(int), 0, 0, NULL, NULL};
+    long *pc = calloc((size_t)P, sizeof(long)), *pt = calloc((size_t)P, sizeof(long));
+    if (!pc || !pt) R->bad = 1;
+    for (int c = 0; !R->bad && c < R->ncl; c++) {
+      const int *v = R->cv + (size_t)nvc * (size_t)c;
+      int cut = 0;
+      pc[R->cpart[c]]++;
+      for (int k = 1; k < nvc; k++) cut |= vhome(v[k], nvg, P) != vhome(v[0], nvg, P);
+      for (int k = 0; cut && k < nvc; k++) {
+        int *x = lg_box_add(&b, vhome(v[k], nvg, P), &R->bad);
+        if (x) *x = v[k];
+      }
+    }
+    long n = 0;
+    int *got = (int *)lg_box_send(&b, cnt, rcnt, NULL, &n, &R->bad);
+    long have = R->bad ? 0 : unique_ints(got, n), all = 0, fewest = -1;
+    if (have < 0) R->bad = 1;
+    (void)MPI_Allreduce(&have, &all, 1, MPI_LONG, MPI_SUM, PETSC_COMM_WORLD);
+    if (pc && pt) MPI_Allreduce(pc, pt, P, MPI_LONG, MPI_SUM, PETSC_COMM_WORLD);
+    for (int r = 0; pt && r < P; r++) fewest = fewest < 0 || pt[r] < fewest ? pt[r] : fewest;
+    int verbose = env->verbose;
+    env->verbose = verbose && R->rank == 0;
+    int keep = lg_runs_kept(env, all, lg_runs_cut_little(all, nvg, d, P) ? fewest : -1, nvg, R->ncg, d, P);
+    env->verbose = verbose;
+    free(got); free(pc); free(pt);
+    lg_box_free(&b);
+    if (keep) return;
+#ifdef PETSC_HAVE_PTSCOTCH
+    strcpy(method, MATPARTITIONINGPTSCOTCH);
+#else
+    strcpy(method, MATPARTITIONINGCURRENT);
+#endif
+  }
+  double t0 = now_ms();
+  /* the rows, counted in a first pass and written in a second */
+  int *nb = NULL, cap = 0;
+  PetscInt *ia = NULL, *ja = NULL;
+  if (!R->bad && PetscMalloc1(nloc + 1, &ia)) R->bad = 1;
+  for (int pass = 0; pass < 2 && !R->bad; pass++) {
+    long at = 0;
+    for (int v = 0; v < nloc && !R->bad; v++) {
+      int u = graph_row(H, w, v, &nb, &cap);
+      if (u < 0) { R->bad = 1; break; }
+      if (pass) for (int i = 0; i < u; i++) ja[at + i] = nb[i];
+      else ia[v] = (PetscInt)at;
+      at += u;
+    }
+    if (!pass && !R->bad) {
+      ia[nloc] = (PetscInt)at;
+      if (PetscMalloc1(at + 1, &ja)) R->bad = 1;
+    }
+  }
+  free(nb);
+  /* every rank creates the graph and partitions (the others wait for a failed one) */
+  int *vpart = NULL;
+  if (any(R)) { PetscFree(ia); PetscFree(ja); return; }
+  if (!(vpart = malloc(sizeof(int) * ((size_t)nloc + 1)))) { PetscFree(ia); PetscFree(ja); ia = ja = NULL; }
+  int nfail = !vpart, fail = 0;
+  (void)MPI_Allreduce(&nfail, &fail, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
+  if (fail || lg_partition_graph(env, PETSC_COMM_WORLD, nloc, nvg, ia, ja, P, method, vpart)) {
+    if (!fail) { PetscFree(ia); PetscFree(ja); } /* given up to the graph above, freed with it */
+    why(R, "the partitioner failed");
+  }
+  /* each cell in the part of most of its vertices (the lowest of those that tie) */
+  lg_box q = {sizeof(int), 0, 0, NULL, NULL};
+  for (int c = 0; !R->bad && c < R->ncl; c++)
+    for (int k = 0; k < nvc; k++) {
+      int *x = lg_box_add(&q, vhome(R->cv[(size_t)nvc * c + k], nvg, P), &R->bad);
+      if (x) *x = R->cv[(size_t)nvc * c + k];
+    }
+  long nq = 0, *ord = NULL;
+  int *qs = (int *)lg_box_send(&q, cnt, rcnt, &ord, &nq, &R->bad);
+  for (long i = 0; !R->bad && i < nq; i++) qs[i] = vpart[qs[i] - lo];
+  int *back = (int *)lg_reply((char *)qs, sizeof(int), rcnt, cnt, &R->bad), *at = malloc(sizeof(int) * ((size_t)q.n + 1));
+  if (!at) R->bad = 1;
+  for (long k = 0; !R->bad && k < q.n; k++) at[ord[k]] = back[k];
+  for (int c = 0; !R->bad && c < R->ncl; c++) R->cpart[c] = lg_majority_part(at + (size_t)c * nvc, nvc);
+  free(vpart); free(ord); free(qs); free(back); free(at);
+  lg_box_free(&q);
+  /* the homes' copies of the cells take their parts: (number, part) to the homes they went to */
+  lg_box bp = {2 * sizeof(int), 0, 0, NULL, NULL};
+  for (int c = 0; !R->bad && c < R->ncl; c++) {
+    const int *v = R->cv + (size_t)nvc * (size_t)c;
+    for (int k = 0; k < nvc; k++) {
+      int h = new_home(v, k, nvg, P), *x = h < 0 ? NULL : lg_box_add(&bp, h, &R->bad);
+      if (x) { x[0] = cell_number(R, c); x[1] = R->cpart[c]; }
+    }
+  }
+  long ng = 0;
+  int *gp = (int *)lg_box_send(&bp, cnt, rcnt, NULL, &ng, &R->bad);
+  for (long i = 0, j = 0; !R->bad && i < ng; i++) { /* both by number */
+    while (j < H->ncells && CG(H->cells + (size_t)w * j) < gp[2 * i]) j++;
+    if (j == H->ncells || CG(H->cells + (size_t)w * j) != gp[2 * i]) { R->bad = 1; break; }
+    CP(H->cells + (size_t)w * j) = gp[2 * i + 1];
+  }
+  free(gp);
+  if (env->verbose && R->rank == 0 && !R->bad)
+    fprintf(stderr, "[lugal] partition: %d cells into %d parts by %s on the distributed vertex graph in %.1f ms\n", R->ncg, P,
+            method, now_ms() - t0);
+}
+
+/* the owners of the homes' vertices (mesh_vertex_owners' vote, in cell order), and each
+ * rank's own cells, the window's start */
+static void owners(reader *R, vhomes *H, window *W) {
+  int P = R->P, nvc = R->nvc, w = 3 + nvc;
+  int *cnt = R->cnt, *rcnt = cnt + P;
+  int *votes = calloc((size_t)H->n + 1, sizeof(int)); /* lg_vote's counts */
+  if (!votes) R->bad = 1;
+  for (int v = 0; votes && !R->bad && v < H->n; v++) {
+    H->own[v] = -1;
+    for (int i = H->vs[v]; i < H->vs[v + 1]; i++) lg_vote(H->own, votes, v, CP(H->cells + (size_t)w * H->vc[i]));
+    if (H->own[v] < 0) why(R, "a vertex of no cell");
+  }
+  free(votes);
+  lg_box bo = {sizeof(int) * (size_t)w, 0, 0, NULL, NULL};
+  for (int c = 0; !R->bad && c < R->ncl; c++) {
+    int *x = lg_box_add(&bo, R->cpart[c], &R->bad);
+    if (!x) break;
+    CG(x) = cell_number(R, c);
+    CP(x) = R->cpart[c];
+    CT(x) = R->ctag[c];
+    memcpy(CV(x), R->cv + (size_t)nvc * (size_t)c, sizeof(int) * (size_t)nvc);
+  }
+  W->c = (int *)lg_box_send(&bo, cnt, rcnt, NULL, &W->nc, &R->bad);
+  if (!R->bad && sort_records(W->c, W->nc, w)) R->bad = 1;
 }
 
 /* the ghost layers: each round the cells around the window's vertices not asked for yet,
@@ -965,16 +864,16 @@ static void window_layers(reader *R, vhomes *H, window *W, int layers) {
       asked = na;
       nasked = m;
     }
-    box bq = {sizeof(int), 0, 0, NULL, NULL};
+    lg_box bq = {sizeof(int), 0, 0, NULL, NULL};
     for (long i = 0; !R->bad && i < nfr; i++) {
-      int *x = box_add(&bq, vhome(fr[i], nvg, P), &R->bad);
+      int *x = lg_box_add(&bq, vhome(fr[i], nvg, P), &R->bad);
       if (x) *x = fr[i];
     }
     free(fr);
     long nq = 0;
-    int *qs = (int *)box_send(&bq, cnt, rcnt, NULL, &nq, &R->bad);
+    int *qs = (int *)lg_box_send(&bq, cnt, rcnt, NULL, &nq, &R->bad);
     /* the answers: per asking rank the cells around its vertices, each once */
-    box ba = {sizeof(int) * (size_t)w, 0, 0, NULL, NULL};
+    lg_box ba = {sizeof(int) * (size_t)w, 0, 0, NULL, NULL};
     long at = 0;
     for (int src = 0; !R->bad && src < P; src++) {
       long n = 0;
@@ -986,9 +885,9 @@ static void window_layers(reader *R, vhomes *H, window *W, int layers) {
       for (long i = at; i < at + rcnt[src]; i++)
         for (int j = H->vs[qs[i] - lo]; j < H->vs[qs[i] - lo + 1]; j++)
           if (CP(H->cells + (size_t)w * H->vc[j]) != src) cl[n++] = H->vc[j];
-      n = unique_ints(cl, n);
+      if ((n = unique_ints(cl, n)) < 0) R->bad = 1;
       for (long i = 0; i < n; i++) {
-        int *x = box_add(&ba, src, &R->bad);
+        int *x = lg_box_add(&ba, src, &R->bad);
         if (x) memcpy(x, H->cells + (size_t)w * cl[i], sizeof(int) * (size_t)w);
       }
       free(cl);
@@ -996,9 +895,8 @@ static void window_layers(reader *R, vhomes *H, window *W, int layers) {
     }
     free(qs);
     long ng = 0;
-    int *got = (int *)box_send(&ba, cnt, rcnt, NULL, &ng, &R->bad);
-    /* the new cells (sorted) merged with the window's, the new ones after the old: the
-     * window is sorted once at the end */
+    int *got = (int *)lg_box_send(&ba, cnt, rcnt, NULL, &ng, &R->bad);
+    /* the new cells, sorted, merged into the window's by number */
     if (!R->bad && sort_records(got, ng, w)) R->bad = 1;
     int *all = R->bad ? NULL : malloc(sizeof(int) * (size_t)w * ((size_t)(W->nc + ng) + 1));
     if (!all) R->bad = 1;
@@ -1023,7 +921,7 @@ static void window_layers(reader *R, vhomes *H, window *W, int layers) {
 }
 
 /* the file's tagged facets of this rank's run as records (vertices, tag, place in the file) */
-static void file_facets(reader *R, box *bf) {
+static void file_facets(reader *R, lg_box *bf) {
   int nvf = R->nvf;
   for (int i = 0; !R->bad && i < R->nfl; i++) {
     const int *v = R->fv + 4 * (size_t)i;
@@ -1031,7 +929,7 @@ static void file_facets(reader *R, box *bf) {
     for (int k = 0; k < nvf; k++) ok &= v[k] >= 0;
     if (!ok) continue; /* a tagged facet away from the cells carries nothing */
     for (int j = 0; j < R->fnp[i]; j++) {
-      rfacet *x = box_add(bf, 0, &R->bad);
+      rfacet *x = lg_box_add(bf, 0, &R->bad);
       if (!x) break;
       memcpy(x->v, v, sizeof(int) * (size_t)nvf);
       x->tag = R->G.phys[R->fph[i] + j];
@@ -1044,7 +942,7 @@ static void file_facets(reader *R, box *bf) {
 /* the tagged facets (the records of bf, keyed and sent here) at their keys' homes, each
  * (facet, tag) once: the first in the file; their vertices flagged at the vertex homes (only
  * faces of flagged vertices are asked for) */
-static rfacet *facet_homes(reader *R, vhomes *H, box *bf, long *nfh) {
+static rfacet *facet_homes(reader *R, vhomes *H, lg_box *bf, long *nfh) {
   int P = R->P, nvf = R->nvf, nvg = R->nvg;
   int *cnt = R->cnt, *rcnt = cnt + P;
   for (long i = 0; !R->bad && i < bf->n; i++) {
@@ -1055,7 +953,7 @@ static rfacet *facet_homes(reader *R, vhomes *H, box *bf, long *nfh) {
     bf->dest[i] = hash_rank(x->key, 4, P);
   }
   long nf = 0;
-  rfacet *fs = (rfacet *)box_send(bf, cnt, rcnt, NULL, &nf, &R->bad);
+  rfacet *fs = (rfacet *)lg_box_send(bf, cnt, rcnt, NULL, &nf, &R->bad);
   if (!R->bad) {
     qsort(fs, (size_t)nf, sizeof(rfacet), cmp_rfacet);
     long k = 0;
@@ -1063,14 +961,14 @@ static rfacet *facet_homes(reader *R, vhomes *H, box *bf, long *nfh) {
       if (!k || key_cmp(fs[i].key, fs[k - 1].key, 4) || fs[i].tag != fs[k - 1].tag) fs[k++] = fs[i];
     nf = k;
   }
-  box bv = {sizeof(int), 0, 0, NULL, NULL};
+  lg_box bv = {sizeof(int), 0, 0, NULL, NULL};
   for (long i = 0; !R->bad && i < nf; i++)
     for (int k = 0; k < nvf; k++) {
-      int *x = box_add(&bv, vhome(fs[i].v[k], nvg, P), &R->bad);
+      int *x = lg_box_add(&bv, vhome(fs[i].v[k], nvg, P), &R->bad);
       if (x) *x = fs[i].v[k];
     }
   long nv = 0;
-  int *vs = (int *)box_send(&bv, cnt, rcnt, NULL, &nv, &R->bad);
+  int *vs = (int *)lg_box_send(&bv, cnt, rcnt, NULL, &nv, &R->bad);
   for (long i = 0; !R->bad && i < nv; i++) H->onf[vs[i] - H->lo] = 1;
   free(vs);
   *nfh = nf;
@@ -1086,13 +984,13 @@ static void window_vertices(reader *R, vhomes *H, window *W) {
   for (long i = 0; !R->bad && i < W->nc; i++) memcpy(W->v + (size_t)nvc * i, CV(W->c + (size_t)w * i), sizeof(int) * (size_t)nvc);
   if (!R->bad && (W->nv = unique_ints(W->v, W->nc * nvc)) < 0) R->bad = 1;
   if (!R->bad && vmap_build(&W->map, W->v, W->nv)) R->bad = 1;
-  box bv = {sizeof(int), 0, 0, NULL, NULL};
+  lg_box bv = {sizeof(int), 0, 0, NULL, NULL};
   for (long i = 0; !R->bad && i < W->nv; i++) {
-    int *x = box_add(&bv, vhome(W->v[i], nvg, P), &R->bad);
+    int *x = lg_box_add(&bv, vhome(W->v[i], nvg, P), &R->bad);
     if (x) *x = W->v[i];
   }
   long nq = 0, *ord = NULL;
-  int *qs = (int *)box_send(&bv, cnt, rcnt, &ord, &nq, &R->bad);
+  int *qs = (int *)lg_box_send(&bv, cnt, rcnt, &ord, &nq, &R->bad);
   rvert *ans = malloc(sizeof(rvert) * ((size_t)nq + 1));
   if (!ans) R->bad = 1;
   for (long i = 0; !R->bad && i < nq; i++) {
@@ -1100,7 +998,7 @@ static void window_vertices(reader *R, vhomes *H, window *W) {
     ans[i].pad = H->onf[qs[i] - lo];
     memcpy(ans[i].x, H->x + 3 * (size_t)(qs[i] - lo), sizeof ans[i].x);
   }
-  rvert *back = (rvert *)reply((char *)ans, sizeof(rvert), rcnt, cnt, &R->bad);
+  rvert *back = (rvert *)lg_reply((char *)ans, sizeof(rvert), rcnt, cnt, &R->bad);
   W->vx = malloc(sizeof(rvert) * ((size_t)W->nv + 1));
   if (!W->vx) R->bad = 1;
   for (long k = 0; !R->bad && k < bv.n; k++) W->vx[ord[k]] = back[k];
@@ -1113,7 +1011,7 @@ static void window_vertices(reader *R, vhomes *H, window *W) {
 static void window_facets(reader *R, rfacet *fs, long nf, window *W) {
   int P = R->P, nvf = R->nvf, nvc = R->nvc, w = 3 + nvc, nfc = cell_nfacets(R->ct);
   int *cnt = R->cnt, *rcnt = cnt + P;
-  box bq = {sizeof(rface), 0, 0, NULL, NULL};
+  lg_box bq = {sizeof(rface), 0, 0, NULL, NULL};
   for (long i = 0; !R->bad && i < W->nc; i++) {
     const int *c = W->c + (size_t)w * i;
     for (int f = 0; f < nfc; f++) {
@@ -1125,12 +1023,12 @@ static void window_facets(reader *R, rfacet *fs, long nf, window *W) {
       }
       if (!all) continue;
       sort_small(key, nvf);
-      rface *x = box_add(&bq, hash_rank(key, 4, P), &R->bad);
+      rface *x = lg_box_add(&bq, hash_rank(key, 4, P), &R->bad);
       if (x) { memcpy(x->key, key, sizeof key); x->g = CG(c); }
     }
   }
   long nq = 0;
-  rface *qs = (rface *)box_send(&bq, cnt, rcnt, NULL, &nq, &R->bad);
+  rface *qs = (rface *)lg_box_send(&bq, cnt, rcnt, NULL, &nq, &R->bad);
   rface_at *qa = malloc(sizeof(rface_at) * ((size_t)nq + 1));
   if (!qa) R->bad = 1;
   for (int src = 0, at = 0; !R->bad && src < P; src++)
@@ -1140,7 +1038,7 @@ static void window_facets(reader *R, rfacet *fs, long nf, window *W) {
       qa[at].src = src;
     }
   free(qs);
-  box ba = {sizeof(rfacet), 0, 0, NULL, NULL};
+  lg_box ba = {sizeof(rfacet), 0, 0, NULL, NULL};
   if (!R->bad) {
     qsort(qa, (size_t)nq, sizeof(rface_at), cmp_rface_at);
     long a = 0;
@@ -1148,17 +1046,17 @@ static void window_facets(reader *R, rfacet *fs, long nf, window *W) {
       while (a < nq && key_cmp(qa[a].key, fs[i].key, 4) < 0) a++;
       long b = a;
       while (b < nq && !key_cmp(qa[b].key, fs[i].key, 4)) b++;
-      if (a == b) { why(R, "%s", "a tagged facet of no cell"); break; }
+      if (a == b) { why(R, "a tagged facet of no cell"); break; }
       int gmax = qa[b - 1].g;
       for (long k = a; k < b; k++)
         if (qa[k].g == gmax) {
-          rfacet *x = box_add(&ba, qa[k].src, &R->bad);
+          rfacet *x = lg_box_add(&ba, qa[k].src, &R->bad);
           if (x) *x = fs[i];
         }
     }
   }
   free(qa);
-  W->f = (rfacet *)box_send(&ba, cnt, rcnt, NULL, &W->nf, &R->bad);
+  W->f = (rfacet *)lg_box_send(&ba, cnt, rcnt, NULL, &W->nf, &R->bad);
   if (!R->bad) qsort(W->f, (size_t)W->nf, sizeof(rfacet), cmp_rfacet_order);
   /* the boundary tags: each home's, gathered */
   int nt = 0, *tags = malloc(sizeof(int) * ((size_t)nf + 1)), *counts = malloc(sizeof(int) * 2 * (size_t)P), total = 0;
@@ -1194,7 +1092,7 @@ static mesh_part *make_part(reader *R, window *W, int layers) {
   mesh *m = NULL;
   mesh_part *P = NULL;
   if (!x || !cells || !cglob || !part || !vown || !owned) R->bad = 1;
-  if (!R->bad && (W->nc == 0 || W->nv == 0)) why(R, "%s", "a rank with no cells");
+  if (!R->bad && (W->nc == 0 || W->nv == 0)) why(R, "a rank with no cells");
   for (long i = 0; !R->bad && i < W->nv; i++) {
     memcpy(x + (size_t)dim * i, W->vx[i].x, sizeof(double) * (size_t)dim);
     vown[i] = W->vx[i].owner;
@@ -1207,7 +1105,7 @@ static mesh_part *make_part(reader *R, window *W, int layers) {
     owned[i] = part[i] == R->rank;
     nown += owned[i];
   }
-  if (!R->bad && !(m = mesh_create(R->ct, (int)W->nv, x, (int)W->nc, cells, err))) why(R, "%s", err);
+  if (!R->bad && !(m = mesh_create(R->ct, (int)W->nv, x, (int)W->nc, cells, err))) why(R, err);
   free(x);
   free(cells);
   for (long i = 0; m && i < W->nc; i++) m->cell_tag[i] = CT(W->c + (size_t)w * i);
@@ -1225,7 +1123,7 @@ static mesh_part *make_part(reader *R, window *W, int layers) {
     for (long b = 0; !R->bad && b < W->nf; b++) {
       for (int k = 0; k < nvf; k++) {
         long lv = vmap_get(&W->map, W->f[b].v[k]);
-        if (lv < 0) { why(R, "%s", "a facet outside its window"); break; }
+        if (lv < 0) { why(R, "a facet outside its window"); break; }
         m->bf_verts[(size_t)nvf * b + k] = (int)lv;
       }
       m->bf_tag[b] = W->f[b].tag;
@@ -1252,7 +1150,7 @@ static mesh_part *make_part(reader *R, window *W, int layers) {
     if (!named && mesh_set_boundary_name(m, W->btags[t], nm)) R->bad = 1;
   }
   if (m && !R->bad && !(P = mesh_part_extract_window(m, vglob, cglob, R->nvg, R->ncg, part, vown, R->rank, layers, err)))
-    why(R, "%s", err);
+    why(R, err);
   mesh_free(m);
   free(cglob); free(part); free(vown); free(owned);
   return P;
@@ -1270,18 +1168,20 @@ static void reader_free(reader *R, window *W) {
 /* from the cells numbered on the ranks that hold them on: the partition, the vertex homes,
  * the ghost layers, the tagged facets (bf: this rank's, as records), the window's vertices,
  * the part; ts[0..3]: when each phase ended. NULL on every rank where any failed */
-static mesh_part *finish(reader *R, window *W, box *bf, int layers, double *ts) {
+static mesh_part *finish(reader *R, window *W, lg_box *bf, int layers, double *ts) {
   vhomes H;
   memset(&H, 0, sizeof H);
   rfacet *fh = NULL;
   long nfh = 0;
-  if (!any(R)) partition(R);
+  if (!any(R)) runs_parts(R);
+  if (!any(R)) home_cells(R, &H);
+  if (!any(R)) partition(R, &H);
   ts[0] = now_ms();
-  if (!any(R)) home_cells(R, &H, W);
+  if (!any(R)) owners(R, &H, W);
   if (!any(R)) window_layers(R, &H, W, layers);
   ts[1] = now_ms();
   if (!any(R)) fh = facet_homes(R, &H, bf, &nfh);
-  box_free(bf);
+  lg_box_free(bf);
   if (!any(R)) window_vertices(R, &H, W);
   vhomes_free(&H);
   if (!any(R)) window_facets(R, fh, nfh, W);
@@ -1307,18 +1207,24 @@ static void reader_init(reader *R, window *W, lg_env *env) {
 /* the part as the lg_mesh of every rank, or NULL on every rank where any failed */
 static lg_mesh *wrap(reader *R, mesh_part *P) {
   lg_mesh *lm = NULL;
-  if (!any(R) && !(lm = lg_mesh_wrap_part(P))) why(R, "%s", "out of memory");
+  if (!any(R) && !(lm = lg_mesh_wrap_part(P))) why(R, "out of memory");
   if (!any(R)) return lm;
   if (lm) lg_mesh_free(lm);
   else mesh_part_free(P);
   return NULL;
 }
 
+/* -lugal_read_parts_min: the least cells a rank below which rank 0 reads the file whole */
+static PetscInt read_parts_min(void) {
+  PetscInt least = 8;
+  PetscOptionsGetInt(NULL, NULL, "-lugal_read_parts_min", &least, NULL);
+  return least;
+}
+
 int lg_read_parts_wanted(void) {
   PetscBool on = PETSC_TRUE, set = PETSC_FALSE;
-  PetscInt least = 8;
   PetscOptionsGetBool(NULL, NULL, "-lugal_read_parts", &on, &set);
-  PetscOptionsGetInt(NULL, NULL, "-lugal_read_parts_min", &least, NULL); /* read here too: used on one rank as well */
+  (void)read_parts_min(); /* read on one rank too, so that a serial run does not report it unused */
   return on;
 }
 
@@ -1335,7 +1241,7 @@ lg_mesh *lg_mesh_read_parts(lg_env *env, const char *path) {
   size_t len = 0;
   if (R.rank == 0) {
     mesh_gmsh_layout(path, R.P, &R.L);
-    if (!R.L.ok) why(&R, "%s", R.L.why);
+    if (!R.L.ok) why(&R, R.L.why);
     else if (mesh_gmsh_layout_pack(&R.L, &buf, &len)) R.bad = 1;
     mesh_gmsh_layout_free(&R.L);
   }
@@ -1345,7 +1251,7 @@ lg_mesh *lg_mesh_read_parts(lg_env *env, const char *path) {
   else if (lg_bcast_bytes(&buf, &len) || mesh_gmsh_layout_unpack(buf, len, &R.L)) R.bad = 1;
   free(buf);
   char err[MESH_ERRLEN] = "";
-  if (!R.bad && mesh_gmsh_read_part(path, &R.L, R.rank, &R.G, err)) why(&R, "%s", err);
+  if (!R.bad && mesh_gmsh_read_part(path, &R.L, R.rank, &R.G, err)) why(&R, err);
   R.efirst = R.L.nelems * R.rank / R.P;
   double t1 = now_ms();
   if (!any(&R)) {
@@ -1362,7 +1268,7 @@ lg_mesh *lg_mesh_read_parts(lg_env *env, const char *path) {
     t[1] = tmax;
     int tg[2];
     (void)MPI_Allreduce(t, tg, 2, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
-    if (d < 1 || -tg[0] != tg[1]) why(&R, "%s", "no cells, or cells of two types");
+    if (d < 1 || -tg[0] != tg[1]) why(&R, "no cells, or cells of two types");
     else {
       R.cdim = d;
       R.ctype = tg[1];
@@ -1380,10 +1286,8 @@ lg_mesh *lg_mesh_read_parts(lg_env *env, const char *path) {
   /* fewer than 8 cells a rank (-lugal_read_parts_min): rank 0 cuts such a mesh, as it does a
    * generated one (runs, some parts maybe empty); 0 lets the ranks take tiny files too (the
    * tests' hostile corpus) */
-  PetscInt least = 8;
-  PetscOptionsGetInt(NULL, NULL, "-lugal_read_parts_min", &least, NULL);
-  if (!any(&R) && R.ncg < least * R.P) why(&R, "%s", "few cells for the ranks");
-  box bf = {sizeof(rfacet), 0, 0, NULL, NULL};
+  if (!any(&R) && R.ncg < read_parts_min() * R.P) why(&R, "few cells for the ranks");
+  lg_box bf = {sizeof(rfacet), 0, 0, NULL, NULL};
   if (!any(&R)) file_facets(&R, &bf);
   mesh_part *P = finish(&R, &W, &bf, layers, ts + 3);
   lg_mesh *lm = wrap(&R, P);
@@ -1438,15 +1342,15 @@ lg_mesh *lg_mesh_parts_from_window(lg_env *env, mesh *m, const int *vglob, const
       have[vglob[v] - lo] = 1;
     }
   for (int v = 0; !R.bad && v < hi - lo; v++)
-    if (!have[v]) why(&R, "%s", "a run's vertex outside the window");
+    if (!have[v]) why(&R, "a run's vertex outside the window");
   R.vbase = lo;
   R.nused = hi - lo;
   /* the tagged facets of the run's cells, in the order of their cells' numbers and places */
-  box bf = {sizeof(rfacet), 0, 0, NULL, NULL};
+  lg_box bf = {sizeof(rfacet), 0, 0, NULL, NULL};
   for (int b = 0; !R.bad && b < m->nbf; b++) {
     int c = m->bf_cell[b];
     if (c < 0 || part[c] != R.rank) continue;
-    rfacet *x = box_add(&bf, 0, &R.bad);
+    rfacet *x = lg_box_add(&bf, 0, &R.bad);
     if (!x) break;
     for (int k = 0; k < m->nvf; k++) x->v[k] = vglob[m->bf_verts[(size_t)m->nvf * b + k]];
     x->tag = m->bf_tag[b];

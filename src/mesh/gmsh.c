@@ -420,26 +420,32 @@ static int unsupported_type(lex *l, int64_t type) {
   return 1;
 }
 
+/* an MSH 2 element's tag, type and tags into e (its nodes follow); 1 on an error */
+static int read_elem2_head(lex *l, gelem *e) {
+  memset(e, 0, sizeof *e);
+  e->id = tok_int(l, "element tag", 1, INT64_MAX);
+  e->line = l->tline;
+  int64_t type = tok_int(l, "element type", 1, INT_MAX);
+  long nt = tok_count(l, "number of element tags", 1);
+  for (long j = 0; j < nt && !l->failed; j++) {
+    int64_t v = tok_int(l, "element tag", j == 0 ? 0 : INT_MIN, INT_MAX);
+    if (j == 0) e->phys = (int)v;
+  }
+  if (l->failed) return 1;
+  e->nn = gmsh_nnodes(type);
+  if (!e->nn && unsupported_type(l, type)) return 1;
+  e->type = (int)type;
+  e->edim = -1;
+  return 0;
+}
+
 static void read_elements(lex *l, gfile *g) {
   g->have_elems = 1;
   if (g->version == 2) {
     long n = tok_count(l, "number of elements", 4);
     for (long i = 0; i < n && !l->failed; i++) {
       gelem e;
-      memset(&e, 0, sizeof e);
-      e.id = tok_int(l, "element tag", 1, INT64_MAX);
-      e.line = l->tline;
-      int64_t type = tok_int(l, "element type", 1, INT_MAX);
-      long nt = tok_count(l, "number of element tags", 1);
-      for (long j = 0; j < nt && !l->failed; j++) {
-        int64_t v = tok_int(l, "element tag", j == 0 ? 0 : INT_MIN, INT_MAX);
-        if (j == 0) e.phys = (int)v;
-      }
-      if (l->failed) break;
-      e.nn = gmsh_nnodes(type);
-      if (!e.nn && unsupported_type(l, type)) break;
-      e.type = (int)type;
-      e.edim = -1;
+      if (read_elem2_head(l, &e)) break;
       for (int j = 0; j < e.nn && !l->failed; j++) e.nodes[j] = tok_int(l, "element node", 1, INT64_MAX);
       if (l->failed) break;
       /* points are the facets of a 1D mesh (and carry nothing in 2D and 3D) */
@@ -867,23 +873,28 @@ fail:
 }
 
 /* the reader proper, on a NUL-terminated copy it may modify */
+/* the sections the lexer holds, into g (the whole file; or a part's small sections) */
+static void read_sections(lex *l, gfile *g) {
+  char *t;
+  while (!l->failed && (t = tok(l))) {
+    if (!strcmp(t, "$MeshFormat")) read_format(l, g);
+    else if (t[0] == '$' && !g->version) lex_err(l, "%.40s before $MeshFormat: not a Gmsh MSH file", t);
+    else if (!strcmp(t, "$PhysicalNames")) read_names(l, g);
+    else if (!strcmp(t, "$Entities") && g->version == 4) read_entities(l, g, 0);
+    else if (!strcmp(t, "$PartitionedEntities") && g->version == 4) read_entities(l, g, 1);
+    else if (!strcmp(t, "$Nodes")) read_nodes(l, g);
+    else if (!strcmp(t, "$Elements")) read_elements(l, g);
+    else if (t[0] == '$') skip_section(l, t);
+    else if (!g->version) lex_err(l, "not a Gmsh MSH file (it does not start with $MeshFormat)");
+    else lex_err(l, "unexpected \"%.32s\" outside any section", t);
+  }
+}
+
 static mesh *parse(char *buf, size_t len, const char *path, char *err) {
   lex l = {buf, len, 0, 1, 1, path, err, 0};
   gfile g;
   memset(&g, 0, sizeof g);
-  char *t;
-  while (!l.failed && (t = tok(&l))) {
-    if (!strcmp(t, "$MeshFormat")) read_format(&l, &g);
-    else if (t[0] == '$' && !g.version) lex_err(&l, "%.40s before $MeshFormat: not a Gmsh MSH file", t);
-    else if (!strcmp(t, "$PhysicalNames")) read_names(&l, &g);
-    else if (!strcmp(t, "$Entities") && g.version == 4) read_entities(&l, &g, 0);
-    else if (!strcmp(t, "$PartitionedEntities") && g.version == 4) read_entities(&l, &g, 1);
-    else if (!strcmp(t, "$Nodes")) read_nodes(&l, &g);
-    else if (!strcmp(t, "$Elements")) read_elements(&l, &g);
-    else if (t[0] == '$') skip_section(&l, t);
-    else if (!g.version) lex_err(&l, "not a Gmsh MSH file (it does not start with $MeshFormat)");
-    else lex_err(&l, "unexpected \"%.32s\" outside any section", t);
-  }
+  read_sections(&l, &g);
   mesh *m = l.failed ? NULL : build_mesh(&g, path, err);
   gfile_free(&g);
   return m;
@@ -1268,25 +1279,26 @@ int mesh_gmsh_layout_unpack(const char *buf, size_t len, gmsh_layout *L) {
 }
 
 /* bytes off .. end - 1 of the file into a NUL-terminated buffer */
-static char *read_span(int fd, long long off, long long end) {
-  if (end < off) return NULL;
-  size_t n = (size_t)(end - off), got = 0;
-  char *b = malloc(n + 1);
-  while (b && got < n) {
+/* n bytes of the file from off into b; 1 on a read error or an early end */
+static int pread_all(int fd, char *b, size_t n, long long off) {
+  for (size_t got = 0; got < n;) {
     ssize_t r = pread(fd, b + got, n - got, (off_t)(off + (long long)got));
     if (r < 0 && errno == EINTR) continue;
-    if (r <= 0) { free(b); return NULL; }
+    if (r <= 0) return 1;
     got += (size_t)r;
   }
+  return 0;
+}
+static char *read_span(int fd, long long off, long long end) {
+  if (end < off) return NULL;
+  size_t n = (size_t)(end - off);
+  char *b = malloc(n + 1);
+  if (b && pread_all(fd, b, n, off)) { free(b); return NULL; }
   if (b) b[n] = 0;
   return b;
 }
 
-/* a lexer over one span; done: nothing may follow its items */
-static int span_lex(lex *l, char *buf, const gmsh_span *s, const char *path, char *err) {
-  *l = (lex){buf, (size_t)(s->end - s->off), 0, s->line, s->line, path, err, 0};
-  return 0;
-}
+/* a chunk's items parsed: nothing may follow them */
 static int span_done(lex *l) {
   if (l->failed) return 1;
   if (tok(l)) { lex_err(l, "more data than the layout's items"); return 1; }
@@ -1308,13 +1320,8 @@ typedef struct {
 static long long span_next(spanrd *r, lex *l) {
   if (r->off >= r->end) return 0;
   if (!r->buf && !(r->buf = malloc(SPAN_CHUNK + 1))) { snprintf(r->err, MESH_ERRLEN, "%.200s: out of memory", r->path); return -1; }
-  size_t want = (size_t)(r->end - r->off) < SPAN_CHUNK ? (size_t)(r->end - r->off) : SPAN_CHUNK, got = 0;
-  while (got < want) {
-    ssize_t k = pread(r->fd, r->buf + got, want - got, (off_t)(r->off + (long long)got));
-    if (k < 0 && errno == EINTR) continue;
-    if (k <= 0) { snprintf(r->err, MESH_ERRLEN, "%.200s: cannot read", r->path); return -1; }
-    got += (size_t)k;
-  }
+  size_t want = (size_t)(r->end - r->off) < SPAN_CHUNK ? (size_t)(r->end - r->off) : SPAN_CHUNK;
+  if (pread_all(r->fd, r->buf, want, r->off)) { snprintf(r->err, MESH_ERRLEN, "%.200s: cannot read", r->path); return -1; }
   size_t len = want;
   if (r->off + (long long)want < r->end) { /* whole lines only */
     while (len && r->buf[len - 1] != '\n') len--;
@@ -1368,17 +1375,10 @@ int mesh_gmsh_read_part(const char *path, const gmsh_layout *L, int p, gmsh_part
   if (!L->ok || p < 0 || p >= L->nparts) { snprintf(err, MESH_ERRLEN, "%.200s: no layout for part %d", path, p); goto done; }
   /* the small sections, as the whole reader takes them */
   for (int i = 0; i < L->nsmall; i++) {
-    if (!(buf = read_span(fd, L->small[i].off, L->small[i].end))) { snprintf(err, MESH_ERRLEN, "%.200s: cannot read", path); goto done; }
-    span_lex(&l, buf, &L->small[i], path, err);
-    char *t;
-    while (!l.failed && (t = tok(&l))) {
-      if (!strcmp(t, "$MeshFormat")) read_format(&l, &g);
-      else if (!strcmp(t, "$PhysicalNames")) read_names(&l, &g);
-      else if (!strcmp(t, "$Entities") && g.version == 4) read_entities(&l, &g, 0);
-      else if (!strcmp(t, "$PartitionedEntities") && g.version == 4) read_entities(&l, &g, 1);
-      else if (t[0] == '$') skip_section(&l, t);
-      else lex_err(&l, "unexpected \"%.32s\" outside any section", t);
-    }
+    const gmsh_span *sp = &L->small[i];
+    if (!(buf = read_span(fd, sp->off, sp->end))) { snprintf(err, MESH_ERRLEN, "%.200s: cannot read", path); goto done; }
+    l = (lex){buf, (size_t)(sp->end - sp->off), 0, sp->line, sp->line, path, err, 0};
+    read_sections(&l, &g);
     free(buf);
     buf = NULL;
     if (l.failed) goto done;
@@ -1481,21 +1481,11 @@ int mesh_gmsh_read_part(const char *path, const gmsh_layout *L, int p, gmsh_part
         gmsh_elem *o = &out->e[out->ne];
         memset(o, 0, sizeof *o);
         if (L->version == 2) {
-          tok_int(&l, "element tag", 1, INT64_MAX);
-          int64_t type = tok_int(&l, "element type", 1, INT_MAX);
-          long nt = tok_count(&l, "number of element tags", 1);
-          int phys = 0;
-          for (long q = 0; q < nt && !l.failed; q++) {
-            int64_t v = tok_int(&l, "element tag", q == 0 ? 0 : INT_MIN, INT_MAX);
-            if (q == 0) phys = (int)v;
-          }
-          if (l.failed) break;
-          e.nn = gmsh_nnodes(type);
-          if (!e.nn && unsupported_type(&l, type)) break;
-          o->type = (int)type;
-          o->nphys = phys != 0;
+          if (read_elem2_head(&l, &e)) break;
+          o->type = e.type;
+          o->nphys = e.phys != 0;
           o->phys = nph;
-          if (phys) out->phys[nph++] = phys;
+          if (e.phys) out->phys[nph++] = e.phys;
         } else {
           tok_int(&l, "element tag", 1, INT64_MAX);
           o->type = e.type;

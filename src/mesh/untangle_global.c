@@ -203,7 +203,9 @@ static inline double corner_energy_d(int d, const objective *o, const double *x,
   for (int a = 0; a < d; a++)
 #pragma GCC unroll 4
     for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
-  if (eps == 0 && !(D > 0)) return INFINITY; /* ε = 0: the pure barrier (smoothing a valid mesh) */
+  if (o->soft_eps) eps = o->soft_eps[(size_t)c * C->ncorner + kc];
+  /* ε = 0: the pure barrier (smoothing a valid mesh); a softened one keeps every corner valid too */
+  if ((eps == 0 || o->soft_eps) && !(D > 0)) return INFINITY;
   double ch = chi(D, eps), chp = dchi(D, eps), cs = pow_m2d(ch, d);
   double f = (1 - theta) * A * cs + theta * (D * D + 1) / ch;
   if (!gk) return f;
@@ -474,7 +476,8 @@ static int corner_hessian(const objective *o, const double *x, int i, int kc, do
   double D = cell_map(C, x, c, kc, winv, J, &v), A = 0;
   for (int a = 0; a < d; a++)
     for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
-  if (eps == 0 && !(D > 0)) return 1;
+  if (o->soft_eps) eps = o->soft_eps[(size_t)c * C->ncorner + kc];
+  if ((eps == 0 || o->soft_eps) && !(D > 0)) return 1;
   /* χ and its derivatives in D; s, t and theirs */
   double r = sqrt(eps * eps + D * D), ch = 0.5 * (D + r), c1 = 0.5 * (1 + D / r), c2 = 0.5 * eps * eps / (r * r * r);
   double p = 2.0 / d, s = pow_m2d(ch, d), s1 = -p * s / ch * c1, s2 = p * (p + 1) * s / (ch * ch) * c1 * c1 - p * s / ch * c2;
@@ -625,6 +628,24 @@ double ut_energy_vertex(const objective *o, const double *x, int v, double *gv) 
     }
   }
   return f;
+}
+
+void ut_energy_soft_eps(const objective *o, const double *x, double c, double *soft_eps) {
+  const ctx *C = o->C;
+  int d = C->d, nk = C->ncorner, n = o->ncell;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (n > 2048)
+#endif
+  for (int i = 0; i < n; i++)
+    for (int kc = 0; kc < nk; kc++) {
+      int cell = o->cells[i];
+      double J[3][3], A = 0;
+      const int *v;
+      cell_map(C, x, cell, kc, corner_winv(C, o->cwinv, o->winv, cell, kc), J, &v);
+      for (int a = 0; a < d; a++)
+        for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
+      soft_eps[(size_t)cell * nk + kc] = pow(c * A / d, 0.5 * d); /* D of mean ratio c: q = d D^(2/d) / |J|² */
+    }
 }
 
 double ut_energy_qmin(const objective *o, const double *x) {

@@ -72,6 +72,10 @@ typedef struct {
   const double *hv; /* per free vertex: its shortest edge, for the difference step */
   /* smooth == 2: the global untangling energy (untangle_global.c), analytic gradient */
   double eps, theta, winv[9];
+  /* smoothing's first Newton steps (ut_newton): per corner (cell * ncorner + corner) the ε of a
+   * softened barrier χ(D, ε) in place of D, every corner still kept valid; NULL: eps */
+  const double *soft_eps;
+  int soft_start; /* smoothing's first Newton run: it may begin with the softened steps */
   const double *cwinv; /* per corner W⁻¹ (ncell*ncorner*d*d) of its reference shape, or NULL: winv */
   struct ut_energy_buf *eb; /* smooth == 2: the threaded evaluation's buffers (ut_energy_eval) */
   int stall;        /* smooth == 2 (the energy smoother): a window of this many iterations that
@@ -129,6 +133,9 @@ int ut_energy_hessian(const objective *o, const double *x, const ut_bsr *P, doub
 /* the smallest corner quality d det(J)^(2/d) / |J|² of a smooth == 2 objective's cells
  * (0 where a corner is invalid): the mean ratio, relative to the reference shapes if any */
 double ut_energy_qmin(const objective *o, const double *x);
+/* soft_eps for the cells of o at x: per corner (c |J|²/d)^(d/2), the determinant a corner of J's
+ * size has at mean ratio c (the corners below mean ratio c see a softened barrier) */
+void ut_energy_soft_eps(const objective *o, const double *x, double c, double *soft_eps);
 /* the energy of a smooth == 2 objective over the corners of v's cells (all of them, not only
  * o->cells), and into gv its gradient in v; +∞ where a corner is invalid */
 double ut_energy_vertex(const objective *o, const double *x, int v, double *gv);

@@ -82,6 +82,11 @@ static int build_pattern(const ctx *C, const int *fidx, const int *freev, int nf
 /* the relative rise of the minimum quality per step below which the multigrid's run ends at
  * block Jacobi's tolerance (below) */
 #define QMIN_RISE 1e-3
+/* smoothing's softened first steps (ut_newton): how many, and the mean ratio below which a
+ * corner's barrier is softened. 2 and 0.2 measured on the million-triangle spiral (12 Newton
+ * steps before): 0.1 took 9, 0.2 and 0.3 took 7; one softened step 10, three 7 */
+#define SOFT_STEPS 2
+#define SOFT_Q 0.2
 
 int ut_newton(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout) {
   const ctx *C = o->C;
@@ -98,6 +103,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
   int *dpos = malloc(sizeof(int) * ((size_t)nfree + 1));
   double *xkeep = o->keepq > 0 ? malloc(sizeof(double) * (n + 1)) : NULL;
   float *bjf = NULL; /* block Jacobi's single-precision copy of the Hessian (below) */
+  double *soft_eps = NULL, *xsoft = NULL; /* the softened barrier's first steps (below) */
   ut_amg amg;
   memset(&amg, 0, sizeof amg);
   int use_amg = 0, amg_failed = 0;
@@ -112,6 +118,36 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
   f = ut_eval(o, x, g, nfree);
   if (xkeep)
     ut_gather(xkeep, x, freev, nfree, d);
+  /* smoothing's barrier (ε = 0) and corners far below the good shapes: Newton on 1/D moves a
+   * corner's D by half of itself per unit step (f = 1/D: −f'/f'' = D/2), so a corner that
+   * starts at mean ratio 0.006 took a step for every doubling of its quality while the rest of
+   * the mesh had converged (the million-triangle spiral's smoothing: 12 steps, its minimum
+   * 0.0056 -> 0.0116 -> 0.020 -> 0.041 -> 0.072 -> 0.15 -> 0.26 -> 0.35 -> 0.42 -> 0.445; its
+   * first two steps' full steps inverted cells). The first SOFT_STEPS steps minimize the energy
+   * with each corner's barrier softened, χ(D, ε) in place of D as the untangler's global
+   * energy (foldover-free maps') does, ε the D of a corner of its size at mean ratio SOFT_Q
+   * (ut_energy_soft_eps), every corner still kept valid: the corners far below SOFT_Q move as
+   * far as their shapes ask in one step. Kept when they raised the minimum quality and lowered
+   * the barrier's energy, else the run restarts from where it began (a random star's
+   * smoothing, its minimum held by the fixed boundary's cells: the softened steps let those
+   * fall from 0.0103 to 0.0004). Measured (bench/RESULTS.md): the spiral 12 -> 7 steps,
+   * 0.0056 -> 0.125 in the two softened steps */
+  const objective *real = o;
+  objective soft;
+  double qstart = 0, qgood = 0, fgood = f; /* the start's minimum; the last kept state's minimum and energy */
+  int soft_left = 0;
+  if (o->soft_start && o->smooth == 2 && o->eps == 0 && !o->soft_eps && isfinite(f) && (qstart = ut_energy_qmin(o, x)) < SOFT_Q &&
+      (soft_eps = malloc(sizeof(double) * ((size_t)C->m->ncell * C->ncorner + 1))) &&
+      (xsoft = malloc(sizeof(double) * (n + 1)))) {
+    ut_energy_soft_eps(o, x, SOFT_Q, soft_eps);
+    ut_gather(xsoft, x, freev, nfree, d);
+    qgood = qstart;
+    soft = *o;
+    soft.soft_eps = soft_eps;
+    o = &soft;
+    soft_left = SOFT_STEPS;
+    f = ut_eval(o, x, g, nfree);
+  }
   double tol = o->ftol > 0 ? o->ftol : 1e-9;
   /* with the multigrid, a tenth of that: its steps resolve every scale alike where block
    * Jacobi's resolve the local ones first, and at the same gain its runs had left the
@@ -263,16 +299,43 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
      * 1e-5 to 1e-6 that moved the minimum by 1e-4 of itself (bench/RESULTS.md) */
     double tl = use_amg && !(xkeep && qlast > 0 && qmin <= (1 + QMIN_RISE) * qlast) ? tol_amg : tol;
     gain[it % 3] = (fprev - f) / fprev;
+    if (o != real) { /* a softened step: kept (in xsoft) when it lowered the barrier's energy and
+                      * left the minimum quality at least the start's */
+      double qs = ut_energy_qmin(real, x), fr = qs >= qstart ? ut_eval(real, x, NULL, nfree) : INFINITY;
+      int kept = qs >= qstart && fr < fgood;
+      if (kept) {
+        ut_gather(xsoft, x, freev, nfree, d);
+        qgood = qs;
+        fgood = fr;
+      }
+      if (--soft_left > 0 && kept) continue;
+      o = real; /* back to the barrier, from the last kept state */
+      if (!kept) ut_place(x, xsoft, NULL, 0, freev, nfree, d);
+      f = ut_eval(o, x, g, nfree);
+      qmin = qgood;
+      if (xkeep) ut_gather(xkeep, x, freev, nfree, d);
+      below = 0;
+      g0 = sqrt(ut_dot(g, g, n, part)); /* the end test's and the forcing term's reference */
+      gain[0] = gain[1] = gain[2] = 1;
+      continue;
+    }
     if (gain[it % 3] <= tl && (ut_dot(g, g, n, part) <= 0.01 * g0 * g0 || gain[0] + gain[1] + gain[2] <= 3 * tl)) {
       it++;
       break;
     }
+  }
+  if (o != real) { /* stopped within the softened steps: their last kept state */
+    o = real;
+    ut_place(x, xsoft, NULL, 0, freev, nfree, d);
+    f = ut_eval(o, x, NULL, nfree);
+    below = 0;
   }
   if (below) {
     ut_place(x, xkeep, NULL, 0, freev, nfree, d);
     f = ut_eval(o, x, NULL, nfree);
   }
 done:
+  free(soft_eps); free(xsoft);
   ut_amg_free(&amg);
   ut_energy_release_blocks(o->eb); /* its positions are on P */
   *fout = f;

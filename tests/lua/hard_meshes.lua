@@ -81,4 +81,32 @@ function M.twisted_bar(n, L, turns)
   return mesh, ref
 end
 
+-- M.spiral's strip with its Tutte embedding solved exactly (two discrete Laplace problems on
+-- the strip's parameter grid, whose P1 stencil on unit squares is the four-neighbour mean)
+-- instead of M.spiral's Gauss-Seidel sweeps in Lua, which would take minutes at a million
+-- cells and not converge (bench/anchor_cases.lua's large cases)
+function M.spiral_tutte(ns, nt, width, turns, cell)
+  turns = turns or 1.5
+  local _, rest = M.spiral(ns, nt, width, turns, cell or "triangle", 0)
+  local grid = lg.mesh.rectangle{nx = ns, ny = nt, x1 = ns, y1 = nt}
+  local s, t = lg.x/ns, lg.y/nt
+  local th, r = 2*math.pi*turns*s, 0.3 + 1.2*s + width*t
+  local P = lg.lagrange(1)
+  local u, v = lg.unknown(P, "u"), lg.test(P, "v")
+  local X = {}
+  for c, g in ipairs{r*lg.cos(th), r*lg.sin(th)} do
+    local prob = lg.linear_problem{mesh = grid, test = v, unknown = u,
+      eqn = lg.integral(grid:cells(), lg.dot(lg.grad(v), lg.grad(u))),
+      bc = lg.essential_bc(grid:boundary("left", "right", "bottom", "top"), v*(u - g))}
+    X[c] = prob:solve():values()
+  end
+  local tangled = rest:copy()
+  for k = 1, grid:nvertices() do
+    local a, b = grid:coordinates(k)
+    local i, j = math.floor(a + 0.5), math.floor(b + 0.5)
+    if i > 0 and i < ns and j > 0 and j < nt then tangled:set_coordinates(j*(ns + 1) + i + 1, X[1][k], X[2][k]) end
+  end
+  return tangled, rest
+end
+
 return M

@@ -149,8 +149,9 @@ static int smooth_pass(ctx *C, const smooth_opts *o, const double *cwinv, int sl
   ut_energy_buf eb = {0};
   double fprev = INFINITY;
   ob.qfloor = INFINITY;
-  for (int i = 0; i < ncell && !cwinv; i++) ob.qfloor = fmin(ob.qfloor, mesh_cell_quality(m, cells[i], o->measure));
   if (o->energy) ob.qfloor = 0; /* the barrier alone: 1/q is infinite on degenerate cells */
+  else
+    for (int i = 0; i < ncell && !cwinv; i++) ob.qfloor = fmin(ob.qfloor, mesh_cell_quality(m, cells[i], o->measure));
   if (o->energy && (cwinv || o->measure == smooth_energy_measure(m->type))) {
     /* Σ 1/q of the mean ratio is (1/d) Σ |J|²/det(J)^(2/d), J relative to a regular simplex:
      * the untangling energy's shape term at ε = 0 (a strict barrier), with its analytic

@@ -19,6 +19,8 @@ have_fenicsx=0
 "$ROOT/build/lugal" "$ROOT/bench/placement.lua"
 # issue 13's 100 000-vertex hard classes: untangle + energy smoothing, every case under 2 s?
 "$ROOT/build/lugal" "$ROOT/bench/untangle_100k.lua"
+# the energy smoother's Newton steps on Tutte-solved spirals (the softened first steps)
+"$ROOT/build/lugal" "$ROOT/bench/smooth_tutte_steps.lua"
 # smoothing (issue 4): local against global, two sizes
 "$ROOT/build/lugal" "$ROOT/bench/smooth.lua"
 "$ROOT/build/lugal" "$ROOT/bench/smooth.lua" 100 16

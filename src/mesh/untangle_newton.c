@@ -127,11 +127,12 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
    * with each corner's barrier softened, χ(D, ε) in place of D as the untangler's global
    * energy (foldover-free maps') does, ε the D of a corner of its size at mean ratio SOFT_Q
    * (ut_energy_soft_eps), every corner still kept valid: the corners far below SOFT_Q move as
-   * far as their shapes ask in one step. Kept when they raised the minimum quality and lowered
-   * the barrier's energy, else the run restarts from where it began (a random star's
-   * smoothing, its minimum held by the fixed boundary's cells: the softened steps let those
-   * fall from 0.0103 to 0.0004). Measured (bench/RESULTS.md): the spiral 12 -> 7 steps,
-   * 0.0056 -> 0.125 in the two softened steps */
+   * far as their shapes ask in one step. Each softened step is kept when it lowered the
+   * barrier's energy and left the minimum quality at least the start's; at the first that
+   * does not, the barrier's steps go on from the last kept state (a random star's smoothing,
+   * its minimum held by the fixed boundary's cells: the first softened step let those fall
+   * from 0.0103 to 0.0011, and the run is the barrier's alone). Measured (bench/RESULTS.md):
+   * the spiral 12 -> 7 steps, 0.0056 -> 0.125 in the two softened steps */
   const objective *real = o;
   objective soft;
   double qstart = 0, qgood = 0, fgood = f; /* the start's minimum; the last kept state's minimum and energy */

@@ -160,7 +160,7 @@ int mesh_write_gmsh(mesh *m, const char *path);
 
 /* A file read in parts, one per process of a parallel run (src/assemble/read_dist.c joins
  * them into each process's part of the mesh). One process scans the file's lines once with
- * constant memory (mesh_gmsh_layout): where its sections are, the MSH 4 blocks, and where
+ * constant memory (mesh_gmsh_layout, gmsh_layout.c): where its sections are, the MSH 4 blocks, and where
  * each of nparts even runs of the nodes and of the elements begins. Each process then reads
  * its runs and the small sections only (mesh_gmsh_read_part), with the whole reader's checks.
  * The layout does not judge the contents: a file it cannot cut (a pipe, repeated $Nodes or
@@ -187,6 +187,8 @@ typedef struct {
   gmsh_pos *np, *ep; /* nparts + 1 each: where node / element (k * total / nparts) starts */
 } gmsh_layout;
 int mesh_gmsh_layout(const char *path, int nparts, gmsh_layout *L);
+/* where run k of nparts even runs of total items starts (the layout's and the part reader's) */
+static inline long long gmsh_run_start(long long total, int nparts, int k) { return total * k / nparts; }
 int mesh_gmsh_layout_pack(const gmsh_layout *L, char **buf, size_t *len);
 int mesh_gmsh_layout_unpack(const char *buf, size_t len, gmsh_layout *L);
 void mesh_gmsh_layout_free(gmsh_layout *L);

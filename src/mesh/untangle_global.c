@@ -190,9 +190,19 @@ void ut_relative_mean_ratio(const ctx *C, const double *cwinv, double *out) {
 
 /* One corner's energy (a simplex has one corner), and with gk its gradient in each of the
  * corner's d + 1 vertices (C->ct[kc] order, d each); +∞ for an invalid corner at ε = 0 */
+/* corner kc of cell c's ε: the objective's, or the softened barrier's (o->soft_eps); *strict:
+ * an invalid corner is infinite (ε = 0, and the softened barrier, which keeps every corner
+ * valid) */
+static inline double corner_eps(const objective *o, int c, int kc, int *strict) {
+  double eps = o->soft_eps ? o->soft_eps[(size_t)c * o->C->ncorner + kc] : o->eps;
+  *strict = eps == 0 || o->soft_eps;
+  return eps;
+}
+
 static inline double corner_energy_d(int d, const objective *o, const double *x, int c, int kc, double *gk) {
   const ctx *C = o->C;
-  double theta = o->theta, eps = o->eps;
+  int strict;
+  double theta = o->theta, eps = corner_eps(o, c, kc, &strict);
   double J[3][3] = {{0}}, K[3][3] = {{0}}; /* zeros: d = 2 leaves row and column 2 unused */
   const int *v;
   /* reference shapes per corner (a simplex has one); without them a quadrilateral's or
@@ -203,9 +213,7 @@ static inline double corner_energy_d(int d, const objective *o, const double *x,
   for (int a = 0; a < d; a++)
 #pragma GCC unroll 4
     for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
-  if (o->soft_eps) eps = o->soft_eps[(size_t)c * C->ncorner + kc];
-  /* ε = 0: the pure barrier (smoothing a valid mesh); a softened one keeps every corner valid too */
-  if ((eps == 0 || o->soft_eps) && !(D > 0)) return INFINITY;
+  if (strict && !(D > 0)) return INFINITY; /* the barrier (smoothing a valid mesh) */
   double ch = chi(D, eps), chp = dchi(D, eps), cs = pow_m2d(ch, d);
   double f = (1 - theta) * A * cs + theta * (D * D + 1) / ch;
   if (!gk) return f;
@@ -469,15 +477,15 @@ static inline void corner_from_modes(int d, int nm, const double *lam, double g[
 static int corner_hessian(const objective *o, const double *x, int i, int kc, double *hk) {
   const ctx *C = o->C;
   int d = C->d, c = o->cells[i];
-  double theta = o->theta, eps = o->eps;
+  int strict;
+  double theta = o->theta, eps = corner_eps(o, c, kc, &strict);
   double J[3][3];
   const int *v;
   const double *winv = corner_winv(C, o->cwinv, o->winv, c, kc);
   double D = cell_map(C, x, c, kc, winv, J, &v), A = 0;
   for (int a = 0; a < d; a++)
     for (int b = 0; b < d; b++) A += J[a][b] * J[a][b];
-  if (o->soft_eps) eps = o->soft_eps[(size_t)c * C->ncorner + kc];
-  if ((eps == 0 || o->soft_eps) && !(D > 0)) return 1;
+  if (strict && !(D > 0)) return 1;
   /* χ and its derivatives in D; s, t and theirs */
   double r = sqrt(eps * eps + D * D), ch = 0.5 * (D + r), c1 = 0.5 * (1 + D / r), c2 = 0.5 * eps * eps / (r * r * r);
   double p = 2.0 / d, s = pow_m2d(ch, d), s1 = -p * s / ch * c1, s2 = p * (p + 1) * s / (ch * ch) * c1 * c1 - p * s / ch * c2;

@@ -138,7 +138,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
   double qstart = 0, qgood = 0, fgood = f; /* the start's minimum; the last kept state's minimum and energy */
   int soft_left = 0;
   if (o->soft_start && o->smooth == 2 && o->eps == 0 && !o->soft_eps && isfinite(f) && (qstart = ut_energy_qmin(o, x)) < SOFT_Q &&
-      (soft_eps = malloc(sizeof(double) * ((size_t)C->m->ncell * C->ncorner + 1))) &&
+      (soft_eps = calloc((size_t)C->m->ncell * C->ncorner + 1, sizeof(double))) && /* 0: the cells not in o */
       (xsoft = malloc(sizeof(double) * (n + 1)))) {
     ut_energy_soft_eps(o, x, SOFT_Q, soft_eps);
     ut_gather(xsoft, x, freev, nfree, d);
@@ -302,7 +302,9 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     gain[it % 3] = (fprev - f) / fprev;
     if (o != real) { /* a softened step: kept (in xsoft) when it lowered the barrier's energy and
                       * left the minimum quality at least the start's */
-      double qs = ut_energy_qmin(real, x), fr = qs >= qstart ? ut_eval(real, x, NULL, nfree) : INFINITY;
+      /* (the quality does not depend on ε: xkeep's pass above measured it; gn, the last
+       * point's gradient, is free) */
+      double qs = xkeep ? qmin : ut_energy_qmin(real, x), fr = qs >= qstart ? ut_eval(real, x, gn, nfree) : INFINITY;
       int kept = qs >= qstart && fr < fgood;
       if (kept) {
         ut_gather(xsoft, x, freev, nfree, d);
@@ -311,8 +313,15 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
       }
       if (--soft_left > 0 && kept) continue;
       o = real; /* back to the barrier, from the last kept state */
-      if (!kept) ut_place(x, xsoft, NULL, 0, freev, nfree, d);
-      f = ut_eval(o, x, g, nfree);
+      if (kept) { /* here: the barrier's energy and gradient just evaluated */
+        double *gt = g;
+        g = gn;
+        gn = gt;
+        f = fr;
+      } else {
+        ut_place(x, xsoft, NULL, 0, freev, nfree, d);
+        f = ut_eval(o, x, g, nfree);
+      }
       qmin = qgood;
       if (xkeep) ut_gather(xkeep, x, freev, nfree, d);
       below = 0;

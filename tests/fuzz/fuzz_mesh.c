@@ -170,7 +170,7 @@ static void exercise(mesh *m, fuzz_mesh_result *res) {
   }
 }
 
-/* the file read in 3 parts (the parallel reader's layout and parts, gmsh.c): no crash, a
+/* the file read in 3 parts (the parallel reader's layout and parts, gmsh_layout.c and gmsh.c): no crash, a
  * message for a part refused, and the parts of a layout hold its counts; where the whole
  * reader took the file, the parts hold at least its cells (repeats merge) */
 static void read_in_parts(const uint8_t *data, size_t size, const mesh *m) {

@@ -4,7 +4,8 @@
  * vertices with every corner's part made positive semidefinite (ut_energy_hessian), by
  * conjugate gradients preconditioned with H's diagonal d×d blocks (block Jacobi) or, once
  * those need more than AMG_SWITCH_ITS iterations on a mesh of UT_AMG_MIN_ROWS free vertices or
- * more, with the aggregation multigrid of untangle_amg.c, to the relative
+ * more (from the first step where softened steps start on AMG_FIRST_ROWS), with the
+ * aggregation multigrid of untangle_amg.c, to the relative
  * residual min(1/2, max(1/10, sqrt(|g|/|g₀|))) (an inexact Newton method's forcing term,
  * Eisenstat and Walker 1996), then backtracks on the energy (Armijo; at ε = 0 the barrier makes every
  * inverted trial infinite), or doubles a full step that the energy's curvature along it
@@ -87,6 +88,8 @@ static int build_pattern(const ctx *C, const int *fidx, const int *freev, int nf
  * steps before): 0.1 took 9, 0.2 and 0.3 took 7; one softened step 10, three 7 */
 #define SOFT_STEPS 2
 #define SOFT_Q 0.2
+/* softened steps on this many free vertices or more: the multigrid from the first step (below) */
+#define AMG_FIRST_ROWS (4 * UT_AMG_MIN_ROWS)
 
 int ut_newton(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout) {
   const ctx *C = o->C;
@@ -161,7 +164,15 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
    * block Jacobi's first steps, back at 1e-5, had met on the Tutte-started 160 × 500 strip
    * (160 000 triangles) with its minimum at 0.0131 instead of 0.0197 (bench/RESULTS.md).
    * Built at that step, from its Hessian (the strong couplings, untangle_amg.c) */
-  int want_amg = o->amg_used && *o->amg_used && nfree >= UT_AMG_MIN_ROWS && !o->no_multigrid;
+  /* so does a run that starts with softened steps on AMG_FIRST_ROWS free vertices or more:
+   * block Jacobi's first step there needs more than AMG_SWITCH_ITS iterations, its count
+   * growing with the mesh (the million-triangle spiral's: 67 iterations and 0.45 s, then
+   * the hierarchy built anyway, 0.27 s), and the multigrid's softened steps also took the
+   * Tutte-solved spirals of 500 000 and a million triangles 7 -> 6 Newton steps
+   * (bench/RESULTS.md). Below it (100 000 vertices) the hierarchy's build costs what it saves,
+   * and a random star, whose softened step is not kept, smoothed in 1.6 s against 1.8 s */
+  int want_amg = ((o->amg_used && *o->amg_used) || (soft_left && nfree >= AMG_FIRST_ROWS)) && nfree >= UT_AMG_MIN_ROWS &&
+                 !o->no_multigrid;
   for (it = 0; it < maxit && isfinite(f) && f > 0; it++) {
     double gg = ut_dot(g, g, n, part);
     if (!it) g0 = sqrt(gg);
@@ -172,7 +183,10 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     ut_block_jacobi(val, dpos, nfree, d, dinv);
     if (want_amg && !use_amg && !amg_failed) {
       if (ut_amg_build(&amg, &P, val, nfree, d)) { ut_amg_free(&amg); amg_failed = 1; }
-      else use_amg = 1;
+      else {
+        use_amg = 1;
+        if (o->amg_used) *o->amg_used = 1;
+      }
     }
     if (use_amg) ut_amg_values(&amg, val, dinv);
     /* preconditioned conjugate gradients for H s' = g from s' = 0, then s = −s' (the same

@@ -586,6 +586,13 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
         s->moved += got;
       }
       int left = piece_invalid(&C, &W, m->x, pv, n);
+      /* a knot's harmonic restart has already failed (knot_stuck): the knot is left alone until
+       * the rings have grown around it enough that it is no longer one (a quarter of its
+       * piece's cells), and the optimizer above takes it. The million-triangle spiral's
+       * restarts at rings 4–32 each gave back a state with more invalid cells than the knot's
+       * 32 704 (0.35–0.45 s of its untangle, the same mesh to the bit without them); on the
+       * 36 hard tangles of bench/RESULTS.md the minima after smoothing moved by -0.5% to +0.1% */
+      if (left && knot && knot_stuck) { all = 0; continue; }
       if (left) {
         /* the optimizer is stuck in a local minimum of (3.3) or a knot: restart the piece
          * from the harmonic (Tutte) position of its interior vertices — valid for triangles

@@ -81,6 +81,21 @@ typedef struct {
   int id;
 } fkey;
 static int fkey_cmp(const void *a, const void *b) { return memcmp(a, b, sizeof(int) * 3); }
+/* fkey_cmp's order (memcmp's, which the boundary facets' order, and so the order of a 2D
+ * boundary vertex's neighbours, has always followed) without the calls: the keys' bytes in
+ * memory order, as one unsigned number per int */
+static inline unsigned fkey_word(int k) {
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+  return __builtin_bswap32((unsigned)k);
+#else
+  return (unsigned)k;
+#endif
+}
+static inline int fkey_after(const fkey *a, const fkey *b) {
+  for (int i = 0; i < 3; i++)
+    if (a->k[i] != b->k[i]) return fkey_word(a->k[i]) > fkey_word(b->k[i]);
+  return 0;
+}
 
 /* the boundary facets of m (cell * nfacets + facet: those of one cell only), from its vertex ->
  * cells map (voff, vcl; built here when NULL) */
@@ -127,10 +142,20 @@ static int boundary_facets(const mesh *m, const int *voff, const int *vcl, int *
         keys[n++] = key;
       }
     }
-    qsort(keys, (size_t)n, sizeof(fkey), fkey_cmp);
+    /* a vertex has a few facets: an insertion sort (qsort's calls were 0.1 s of a million
+     * triangles' 0.12 s); only a key's count is read, and that does not depend on the order
+     * of equal keys */
+    if (n > 32) qsort(keys, (size_t)n, sizeof(fkey), fkey_cmp);
+    else
+      for (int i = 1; i < n; i++)
+        for (int j = i; j > 0 && fkey_after(keys + j - 1, keys + j); j--) {
+          fkey t = keys[j];
+          keys[j] = keys[j - 1];
+          keys[j - 1] = t;
+        }
     for (int i = 0; i < n;) {
       int j = i + 1;
-      while (j < n && !fkey_cmp(keys + i, keys + j)) j++;
+      while (j < n && keys[i].k[0] == keys[j].k[0] && keys[i].k[1] == keys[j].k[1] && keys[i].k[2] == keys[j].k[2]) j++;
       if (j == i + 1) {
         if (n_out == cap) {
           int *nr = realloc(res, sizeof(int) * (size_t)(cap *= 2));

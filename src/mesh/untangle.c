@@ -529,7 +529,9 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
   int *list = malloc(sizeof(int) * ((size_t)m->nvert + 1)), *off = malloc(sizeof(int) * ((size_t)m->nvert + 2));
   double *save = malloc(sizeof(double) * (nx + 1));
   unsigned char *trial = calloc((size_t)m->nvert + 1, 1);
-  if (!W.fidx || !W.cmark || !W.cells || !list || !off || !save || !trial) {
+  /* the interior vertices of knots whose harmonic restart failed (below) */
+  unsigned char *held = calloc((size_t)m->nvert + 1, 1);
+  if (!W.fidx || !W.cmark || !W.cells || !list || !off || !save || !trial || !held) {
     snprintf(err, MESH_ERRLEN, "out of memory");
     ninv = 0;
   } else
@@ -586,13 +588,17 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
         s->moved += got;
       }
       int left = piece_invalid(&C, &W, m->x, pv, n);
-      /* a knot's harmonic restart has already failed (knot_stuck): the knot is left alone until
-       * the rings have grown around it enough that it is no longer one (a quarter of its
-       * piece's cells), and the optimizer above takes it. The million-triangle spiral's
-       * restarts at rings 4–32 each gave back a state with more invalid cells than the knot's
-       * 32 704 (0.35–0.45 s of its untangle, the same mesh to the bit without them); on the
-       * 36 hard tangles of bench/RESULTS.md the minima after smoothing moved by -0.5% to +0.1% */
-      if (left && knot && knot_stuck) { all = 0; continue; }
+      /* a piece around a knot whose harmonic restart has failed (its vertices held) is not
+       * restarted again: a knot waits until the rings have grown around it enough that it is
+       * no longer one (a quarter of its piece's cells), and then the optimizer above takes it.
+       * The million-triangle spiral's restarts at rings 4–64 each gave back more invalid cells
+       * than they started from (0.5–0.7 s of its untangle, the same mesh to the bit without
+       * them); on the 36 hard tangles of bench/RESULTS.md the minima after smoothing moved by
+       * -0.5% to +0.1% (a ring-4 restart that had repaired the Tutte spiral 200 x 25 is not
+       * tried: the optimizer repairs it at ring 8) */
+      int around = 0;
+      for (int i = 0; i < n && left && !around; i++) around = held[pv[i]];
+      if (around) { all = 0; continue; }
       if (left) {
         /* the optimizer is stuck in a local minimum of (3.3) or a knot: restart the piece
          * from the harmonic (Tutte) position of its interior vertices — valid for triangles
@@ -609,7 +615,10 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
         int its = 0;
         optimize_vertices(&C, &W, m->x, beta, 0, pv, nf, 10 * maxit, trial, &its);
         int after_restart = piece_invalid(&C, &W, m->x, pv, nf);
-        if (knot && after_restart >= left) knot_stuck = 1;
+        if (knot && after_restart >= left) {
+          knot_stuck = 1;
+          for (int i = 0; i < nf; i++) held[pv[i]] = 1;
+        }
         if (after_restart <= left) {
           s->iterations += its;
           for (int i = 0; i < nf; i++) {
@@ -730,7 +739,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
       free(q);
     }
   }
-  free(W.fidx); free(W.cmark); free(W.cells); free(list); free(off); free(save); free(trial);
+  free(W.fidx); free(W.cmark); free(W.cells); free(list); free(off); free(save); free(trial); free(held);
   r->nstage = 3;
   r->invalid_after = s->invalid_after;
   if (best.x && best.stage >= 0 && best.stage < 3) {

@@ -21,6 +21,8 @@ have_fenicsx=0
 "$ROOT/build/lugal" "$ROOT/bench/untangle_100k.lua"
 # the energy smoother's Newton steps on Tutte-solved spirals (the softened first steps)
 "$ROOT/build/lugal" "$ROOT/bench/smooth_tutte_steps.lua"
+# 36 hard tangles in many sizes and shapes: untangle + energy smoothing, quality and steps
+"$ROOT/build/lugal" "$ROOT/bench/untangle_sweep.lua"
 # smoothing (issue 4): local against global, two sizes
 "$ROOT/build/lugal" "$ROOT/bench/smooth.lua"
 "$ROOT/build/lugal" "$ROOT/bench/smooth.lua" 100 16

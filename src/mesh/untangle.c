@@ -593,9 +593,9 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
        * no longer one (a quarter of its piece's cells), and then the optimizer above takes it.
        * The million-triangle spiral's restarts at rings 4–64 each gave back more invalid cells
        * than they started from (0.5–0.7 s of its untangle, the same mesh to the bit without
-       * them); on the 36 hard tangles of bench/RESULTS.md the minima after smoothing moved by
-       * -0.5% to +0.1% (a ring-4 restart that had repaired the Tutte spiral 200 x 25 is not
-       * tried: the optimizer repairs it at ring 8) */
+       * them); on the 36 hard tangles of bench/untangle_sweep.lua the minima after smoothing
+       * moved by -0.5% to +0.02% (a ring-4 restart that had repaired the Tutte spiral 200 x 25
+       * is not tried: the optimizer repairs it at ring 8) */
       int around = 0;
       for (int i = 0; i < n && left && !around; i++) around = held[pv[i]];
       if (around) { all = 0; continue; }

@@ -124,6 +124,9 @@ int smooth_has_sliding_passes(const mesh *m, const smooth_opts *o) {
  * local steps between rounds (SMOOTH_SLIDE_LOCAL), or slides inside the optimizer
  * (SMOOTH_SLIDE_INNER, the energy method with its own measure: the sliding boundary vertices
  * are free vertices that move along their line or plane, ob.slide) */
+/* 3D energy smoothing by L-BFGS on this many cells or more may hand over to Newton (below) */
+#define HANDOVER_CELLS 500000
+
 static int smooth_pass(ctx *C, const smooth_opts *o, const double *cwinv, int slide, int rounds, smooth_report *r,
                        char *err) {
   mesh *m = C->m;
@@ -148,6 +151,7 @@ static int smooth_pass(ctx *C, const smooth_opts *o, const double *cwinv, int sl
                   .freev = freev, .hv = hv, .cwinv = cwinv, .amg_used = &r->multigrid};
   ut_energy_buf eb = {0};
   double fprev = INFINITY;
+  int handover = 0;
   ob.qfloor = INFINITY;
   if (o->energy) ob.qfloor = 0; /* the barrier alone: 1/q is infinite on degenerate cells */
   else
@@ -186,6 +190,15 @@ static int smooth_pass(ctx *C, const smooth_opts *o, const double *cwinv, int sl
     /* Newton ends at a 1e-5 gain: its last steps, at linear speed (the projected Hessian
      * is not the true one), changed the minimum by less than 1e-4 */
     if (r->optimizer == SMOOTH_NEWTON) ob.ftol = 1e-5;
+    /* 3D on HANDOVER_CELLS cells or more, the optimizer not asked for: L-BFGS hands over to
+     * Newton when its iterations 10–19 still descend steadily (ut_lbfgs). L-BFGS is the
+     * faster on perturbed grids, whose error is local (a perturbed tetrahedral box of a
+     * million cells: 3.1 s in 40 iterations against 10.9 s by Newton), Newton on the
+     * untangled twisted bars, whose error spans the bar, from about half a million cells
+     * (bar 32, 589 824 tetrahedra: 9.2 s against 6.7 s; bar 40, 1 152 000: 16.1 against 7.9 s;
+     * bar 24, 248 832: 0.88 against 1.29 s), bench/RESULTS.md */
+    if (o->optimizer == SMOOTH_AUTO && r->optimizer == SMOOTH_LBFGS && m->dim == 3 && ncell >= HANDOVER_CELLS)
+      ob.handover = &handover;
     if (simplex) ut_regular_winv(m->dim, 1.0, ob.winv);
     else
       for (int i = 0; i < m->dim; i++) ob.winv[i * m->dim + i] = 1;
@@ -232,18 +245,25 @@ static int smooth_pass(ctx *C, const smooth_opts *o, const double *cwinv, int sl
         slid = 0;
     double gain = 0;
     if (its < 0) { snprintf(err, MESH_ERRLEN, "out of memory"); status = 1; break; }
+    const char *used = r->optimizer == SMOOTH_NEWTON ? "Newton" : "L-BFGS";
+    int handed = handover && r->optimizer == SMOOTH_LBFGS;
+    if (handed) { /* Newton from the next round on */
+      r->optimizer = SMOOTH_NEWTON;
+      ob.ftol = 1e-5;
+      ob.handover = NULL;
+    }
     if (slide == SMOOTH_SLIDE_LOCAL)
       for (int v = 0; v < m->nvert; v++)
         if (C->bnd[v]) slid += smooth_vertex(C, v, o->measure, slide_ob, &gain);
     r->sweeps++;
     if (its > 0) r->iterations += its;
     if (o->verbose) printf("smooth: round %d, %d %s iterations, sum 1/q %.6g -> %.6g, %d boundary vertices slid\n",
-                           round + 1, its, r->optimizer == SMOOTH_NEWTON ? "Newton" : "L-BFGS", f0, f, slid);
+                           round + 1, its, used, f0, f, slid);
     if (!its && !slid) break;
     /* the energy method's optimizer stopped by its own test and nothing slid since: a new
      * round would restart it where it converged (the twisted bars' second rounds: 20 more
      * L-BFGS iterations or one more Newton step, 15% of the million-cell bar's smoothing) */
-    if (ob.smooth == 2 && !slid && its < maxit) break;
+    if (ob.smooth == 2 && !slid && its < maxit && !handed) break;
   }
   ut_energy_release(&eb);
   free(freev); free(fidx); free(cells); free(cmark); free(hv);

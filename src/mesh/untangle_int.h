@@ -87,6 +87,8 @@ typedef struct {
                      * tangents (C->tan) inside the optimizer: ut_eval projects their gradients,
                      * ut_energy_hessian their rows and columns, ut_newton and ut_lbfgs their steps */
   int *amg_used;    /* ut_newton sets *amg_used when it takes the multigrid (NULL: not asked) */
+  int *handover;    /* smooth == 2, ut_lbfgs: set, and the run ended, when its iterations 10–19
+                     * still gained over 1e-4 of f each on average (NULL: not asked; smooth.c) */
   int no_multigrid; /* ut_newton: block Jacobi throughout. Plain aggregation follows the graph,
                      * not the anisotropy: on the Tutte-disk run of a 160 000-triangle strip it
                      * made the run take twice as long (128 s against 64 s), and forced on a

@@ -114,6 +114,9 @@ int smooth_has_sliding_passes(const mesh *m, const smooth_opts *o) {
   return o->energy && o->slide && !o->xref && o->measure == smooth_energy_measure(m->type);
 }
 
+/* 3D energy smoothing by L-BFGS on this many cells or more may hand over to Newton (smooth_pass) */
+#define HANDOVER_CELLS 500000
+
 /* global smoothing: L-BFGS on Σ 1/q over all interior vertices together (Mesquite's
  * inverse-mean-ratio objective when q is the mean ratio), rounds of up to 20 iterations;
  * a step is taken only when every cell stays valid and no q falls below the mesh's
@@ -124,9 +127,6 @@ int smooth_has_sliding_passes(const mesh *m, const smooth_opts *o) {
  * local steps between rounds (SMOOTH_SLIDE_LOCAL), or slides inside the optimizer
  * (SMOOTH_SLIDE_INNER, the energy method with its own measure: the sliding boundary vertices
  * are free vertices that move along their line or plane, ob.slide) */
-/* 3D energy smoothing by L-BFGS on this many cells or more may hand over to Newton (below) */
-#define HANDOVER_CELLS 500000
-
 static int smooth_pass(ctx *C, const smooth_opts *o, const double *cwinv, int slide, int rounds, smooth_report *r,
                        char *err) {
   mesh *m = C->m;

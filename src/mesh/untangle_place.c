@@ -264,8 +264,8 @@ int ut_feasible_passes(ctx *C, double *x, double target, int stage3, const unsig
   int *mv = malloc(sizeof(int) * ((size_t)m->nvert + 1)), *dl = malloc(sizeof(int) * ((size_t)m->nvert + 1)), ndl = -1;
   unsigned char *dirty = calloc((size_t)m->nvert + 1, 1);
   if (!list || !nbad || !mv || !dl || !dirty) { free(list); free(nbad); free(mv); free(dl); free(dirty); return 0; }
-  /* the threaded placement's buffers: a position per candidate, whether it has one, and per
-   * vertex the pass in which it moved */
+  /* the threaded placement's buffers, per vertex: a position, whether it has one, whether
+   * those are known (below), and the pass in which it moved */
   double *pos = NULL;
   unsigned char *has = NULL, *known = NULL; /* known: pos and has hold the vertex's answer */
   int *stamp = NULL;

@@ -97,6 +97,28 @@ static inline int fkey_after(const fkey *a, const fkey *b) {
   return 0;
 }
 
+/* the vertex -> cells map of m: vertex v's cells, ascending, are vc[off[v] .. off[v + 1]); both
+ * malloc'ed (NULL and 1 when out of memory) */
+static int vertex_cells(const mesh *m, int **offp, int **vcp) {
+  int nv = m->nvert, nvc = m->nvc;
+  int *off = calloc((size_t)nv + 1, sizeof(int)), *vc = malloc(sizeof(int) * ((size_t)m->ncell * nvc + 1)),
+      *pos = malloc(sizeof(int) * ((size_t)nv + 1));
+  *offp = off;
+  *vcp = vc;
+  if (!off || !vc || !pos) {
+    free(off); free(vc); free(pos);
+    *offp = *vcp = NULL;
+    return 1;
+  }
+  for (size_t i = 0; i < (size_t)m->ncell * nvc; i++) off[m->cells[i] + 1]++;
+  for (int v = 0; v < nv; v++) off[v + 1] += off[v];
+  memcpy(pos, off, sizeof(int) * (size_t)nv);
+  for (int c = 0; c < m->ncell; c++)
+    for (int i = 0; i < nvc; i++) vc[pos[m->cells[(size_t)c * nvc + i]]++] = c;
+  free(pos);
+  return 0;
+}
+
 /* the boundary facets of m (cell * nfacets + facet: those of one cell only), from its vertex ->
  * cells map (voff, vcl; built here when NULL) */
 static int boundary_facets(const mesh *m, const int *voff, const int *vcl, int **out, int *nout, char *err) {
@@ -106,15 +128,7 @@ static int boundary_facets(const mesh *m, const int *voff, const int *vcl, int *
   fkey *keys = NULL;
   if (!res) goto oom;
   if (!voff) {
-    off = calloc((size_t)nv + 2, sizeof(int));
-    vc = malloc(sizeof(int) * ((size_t)m->ncell * nvc + 1));
-    if (!off || !vc) goto oom;
-    for (size_t i = 0; i < (size_t)m->ncell * nvc; i++) off[m->cells[i] + 1]++;
-    for (int v = 0; v < nv; v++) off[v + 1] += off[v];
-    for (int c = 0; c < m->ncell; c++)
-      for (int i = 0; i < nvc; i++) vc[off[m->cells[(size_t)c * nvc + i]]++] = c;
-    for (int v = nv; v > 0; v--) off[v] = off[v - 1];
-    off[0] = 0;
+    if (vertex_cells(m, &off, &vc)) goto oom;
     voff = off;
     vcl = vc;
   }
@@ -430,19 +444,9 @@ int ut_ctx_init(ctx *C, mesh *m, int slide, char *err) {
     break;
   }
   int nv = m->nvert;
-  C->vc_off = calloc((size_t)nv + 1, sizeof(int));
-  C->vc = malloc(sizeof(int) * ((size_t)m->ncell * m->nvc + 1));
   C->bnd = malloc((size_t)nv + 1);
   C->fixed = malloc((size_t)nv + 1);
-  if (!C->vc_off || !C->vc || !C->bnd || !C->fixed) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
-  for (size_t i = 0; i < (size_t)m->ncell * m->nvc; i++) C->vc_off[m->cells[i] + 1]++;
-  for (int v = 0; v < nv; v++) C->vc_off[v + 1] += C->vc_off[v];
-  int *pos = malloc(sizeof(int) * ((size_t)nv + 1));
-  if (!pos) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
-  memcpy(pos, C->vc_off, sizeof(int) * (size_t)nv);
-  for (int c = 0; c < m->ncell; c++)
-    for (int i = 0; i < m->nvc; i++) C->vc[pos[m->cells[(size_t)c * m->nvc + i]]++] = c;
-  free(pos);
+  if (vertex_cells(m, &C->vc_off, &C->vc) || !C->bnd || !C->fixed) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
   /* the boundary facets once, from the map just built: for the boundary vertices and the 2D
    * and 3D boundary structures (each had found them again: 0.08 s per search on a million
    * triangles) */

@@ -2,7 +2,8 @@
  * untangle_ctx.c (the context), untangle_place.c (stages 1 and 3), untangle_global.c (the
  * global stage's energy, its gradient and projected Hessian), untangle_newton.c (projected
  * Newton on it), untangle_lbfgs.c (the objective's evaluation and L-BFGS) and smooth.c
- * (smoothing) share inside src/mesh: the corner and adjacency context, the L-BFGS and Newton objective, the unit frame for meshes far from unit size.
+ * (smoothing) share inside src/mesh: the corner and adjacency context, the L-BFGS and Newton
+ * objective, the unit frame for meshes far from unit size.
  * Not an interface of the mesh layer: see untangle.h. */
 #ifndef LUGAL_UNTANGLE_INT_H
 #define LUGAL_UNTANGLE_INT_H

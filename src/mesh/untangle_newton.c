@@ -4,12 +4,12 @@
  * vertices with every corner's part made positive semidefinite (ut_energy_hessian), by
  * conjugate gradients preconditioned with H's diagonal d×d blocks (block Jacobi) or, once
  * those need more than AMG_SWITCH_ITS iterations on a mesh of UT_AMG_MIN_ROWS free vertices or
- * more (from the first step where softened steps start on AMG_FIRST_ROWS), with the
+ * more (from the first step where softened steps start), with the
  * aggregation multigrid of untangle_amg.c, to the relative
  * residual min(1/2, max(1/10, sqrt(|g|/|g₀|))) (an inexact Newton method's forcing term,
- * Eisenstat and Walker 1996), then backtracks on the energy (Armijo; at ε = 0 the barrier makes every
- * inverted trial infinite), or doubles a full step that the energy's curvature along it
- * shows to be too short (below). On anisotropic meshes the energy's condition number is what slows
+ * Eisenstat and Walker 1996; at most 1/5 on the barrier with the multigrid), then backtracks
+ * on the energy (Armijo; at ε = 0 the barrier makes every inverted trial infinite), or
+ * doubles a full step that the energy's curvature along it shows to be too short (below). On anisotropic meshes the energy's condition number is what slows
  * L-BFGS: the Tutte-started spiral strip took 360 L-BFGS iterations, a random star 1 200
  * without converging. Results do not depend on the number of threads: sums are taken in
  * fixed chunks, in order. */
@@ -88,8 +88,8 @@ static int build_pattern(const ctx *C, const int *fidx, const int *freev, int nf
  * steps before): 0.1 took 9, 0.2 and 0.3 took 7; one softened step 10, three 7 */
 #define SOFT_STEPS 2
 #define SOFT_Q 0.2
-/* softened steps on this many free vertices or more: the multigrid from the first step (below) */
-#define AMG_FIRST_ROWS (4 * UT_AMG_MIN_ROWS)
+/* the forcing term's cap on the barrier (ε = 0) with the multigrid (below) */
+#define ETA_AMG 0.2
 
 int ut_newton(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout) {
   const ctx *C = o->C;
@@ -131,14 +131,20 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
    * energy (foldover-free maps') does, ε the D of a corner of its size at mean ratio SOFT_Q
    * (ut_energy_soft_eps), every corner still kept valid: the corners far below SOFT_Q move as
    * far as their shapes ask in one step. Each softened step is kept when it lowered the
-   * barrier's energy and left the minimum quality at least the start's; at the first that
-   * does not, the barrier's steps go on from the last kept state (a random star's smoothing,
-   * its minimum held by the fixed boundary's cells: the first softened step let those fall
-   * from 0.0103 to 0.0011, and the run is the barrier's alone). Measured (bench/RESULTS.md):
-   * the spiral 12 -> 7 steps, 0.0056 -> 0.125 in the two softened steps */
+   * barrier's energy and left the minimum quality at least the start's times the barrier
+   * energy's ratio to the start's (capped at 1); at the first that does not, the barrier's
+   * steps go on from the last kept state. A random star's smoothing, its minimum held by the
+   * fixed boundary's cells: its first softened step had let those fall from 0.0080 to 0.0011
+   * and lowered the barrier's energy by 1.3%, a step for nothing. The 400 × 60 spiral's
+   * (boundary fixed) let its minimum fall from 0.0071 to 0.0065 and lowered the energy 2.3
+   * times: kept since, its smoothing took 18 -> 10 steps, and the sliding one 51 -> 42. The
+   * minimum may then be below the start's: the steps after restore it (xkeep keeps the last
+   * iterate at keepq or above, the start's until then). Measured (bench/RESULTS.md): the
+   * spiral 12 -> 7 steps, 0.0056 -> 0.125 in the two softened steps */
   const objective *real = o;
   objective soft;
-  double qstart = 0, qgood = 0, fgood = f; /* the start's minimum; the last kept state's minimum and energy */
+  /* the start's minimum and barrier energy; the last kept state's minimum and energy */
+  double qstart = 0, fstart = f, qgood = 0, fgood = f;
   int soft_left = 0;
   if (o->soft_start && o->smooth == 2 && o->eps == 0 && !o->soft_eps && isfinite(f) && (qstart = ut_energy_qmin(o, x)) < SOFT_Q &&
       (soft_eps = calloc((size_t)C->m->ncell * C->ncorner + 1, sizeof(double))) && /* 0: the cells not in o */
@@ -164,15 +170,14 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
    * block Jacobi's first steps, back at 1e-5, had met on the Tutte-started 160 × 500 strip
    * (160 000 triangles) with its minimum at 0.0131 instead of 0.0197 (bench/RESULTS.md).
    * Built at that step, from its Hessian (the strong couplings, untangle_amg.c) */
-  /* so does a run that starts with softened steps on AMG_FIRST_ROWS free vertices or more:
+  /* so does a run that starts with softened steps (on UT_AMG_MIN_ROWS free vertices or more):
    * block Jacobi's first step there needs more than AMG_SWITCH_ITS iterations, its count
    * growing with the mesh (the million-triangle spiral's: 67 iterations and 0.45 s, then
    * the hierarchy built anyway, 0.27 s), and the multigrid's softened steps also took the
-   * Tutte-solved spirals of 500 000 and a million triangles 7 -> 6 Newton steps
-   * (bench/RESULTS.md). Below it (100 000 vertices) the hierarchy's build costs what it saves,
-   * and a random star, whose softened step is not kept, smoothed in 1.6 s against 1.8 s */
-  int want_amg = ((o->amg_used && *o->amg_used) || (soft_left && nfree >= AMG_FIRST_ROWS)) && nfree >= UT_AMG_MIN_ROWS &&
-                 !o->no_multigrid;
+   * Tutte-solved spirals of 500 000 and a million triangles 7 -> 6 Newton steps. On the
+   * 100 000-vertex random star, with the forcing term's cap below, its softened steps are
+   * kept where block Jacobi's were not (bench/RESULTS.md) */
+  int want_amg = ((o->amg_used && *o->amg_used) || soft_left) && nfree >= UT_AMG_MIN_ROWS && !o->no_multigrid;
   for (it = 0; it < maxit && isfinite(f) && f > 0; it++) {
     double gg = ut_dot(g, g, n, part);
     if (!it) g0 = sqrt(gg);
@@ -193,7 +198,11 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
      * bits as solving for −g: every operation is odd in the right side) */
     /* the forcing term: at least 0.1 (0.01 cost the star 40x200 twice the CG iterations for
      * the same Newton steps) */
-    double eta = fmin(0.5, fmax(0.1, sqrt(sqrt(gg) / g0))), *cw[4] = {r, z, pd, q};
+    /* on the barrier with the multigrid, at most ETA_AMG: the multigrid's count grows
+     * slowly with the tolerance (the random star's steps: 4–12 iterations at 0.2, 3–8 at
+     * 0.5), and the closer steps keep its softened steps, whose minimum is checked, and end
+     * the halved steps whose full steps crossed the barrier (17 -> 13 steps, bench/RESULTS.md) */
+    double eta = fmin(use_amg && o->eps == 0 ? ETA_AMG : 0.5, fmax(0.1, sqrt(sqrt(gg) / g0))), *cw[4] = {r, z, pd, q};
     /* the products in single precision: the multigrid's finest copy, or on a mesh where block
      * Jacobi's conjugate gradients may take dozens of iterations (the multigrid's size) a copy
      * of its own (the 100 000-vertex spiral's smoothing took 137 of them before the switch) */
@@ -286,6 +295,25 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
           ut_place(x, x0, s, t, freev, nfree, d);
       }
     }
+    /* a backtracked step on the barrier (the longer trial crossed it or gained too little):
+     * one more trial half-way to that longer one, kept when lower. The random star's
+     * smoothing: its steps at t = 1/2 after an inverted full step, each halving g·s, became
+     * steps at 3/4 (13 -> 12 steps, bench/RESULTS.md). Not in the softened steps, which are
+     * judged by the minimum they leave: the first of a 300 × 45 spiral's (Gauss-Seidel
+     * start), backtracked to 1/2, left it at 0.0056, and at 3/4 at 0.0005 */
+    else if (o == real && o->eps == 0 && ls > 0 && ls < 50) {
+      double tm = 1.5 * t;
+      ut_place(x, x0, s, tm, freev, nfree, d);
+      double f2 = ut_eval(o, x, q, nfree);
+      if (f2 < fn) {
+        t = tm;
+        fn = f2;
+        double *tq = gn; /* q holds the trial's gradient: it becomes the accepted point's */
+        gn = q;
+        q = tq;
+      } else
+        ut_place(x, x0, s, t, freev, nfree, d);
+    }
     if (ls == 50) { /* no decrease: restore and stop */
       ut_place(x, x0, NULL, 0, freev, nfree, d);
       break;
@@ -315,11 +343,12 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     double tl = use_amg && !(xkeep && qlast > 0 && qmin <= (1 + QMIN_RISE) * qlast) ? tol_amg : tol;
     gain[it % 3] = (fprev - f) / fprev;
     if (o != real) { /* a softened step: kept (in xsoft) when it lowered the barrier's energy and
-                      * left the minimum quality at least the start's */
+                      * left the minimum quality at least the start's times the energy's ratio
+                      * to the start's (above) */
       /* (the quality does not depend on ε: xkeep's pass above measured it; gn, the last
        * point's gradient, is free) */
-      double qs = xkeep ? qmin : ut_energy_qmin(real, x), fr = qs >= qstart ? ut_eval(real, x, gn, nfree) : INFINITY;
-      int kept = qs >= qstart && fr < fgood;
+      double qs = xkeep ? qmin : ut_energy_qmin(real, x), fr = qs > 0 ? ut_eval(real, x, gn, nfree) : INFINITY;
+      int kept = qs >= qstart * fmin(1, fr / fstart) && fr < fgood;
       if (kept) {
         ut_gather(xsoft, x, freev, nfree, d);
         qgood = qs;
@@ -337,8 +366,8 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
         f = ut_eval(o, x, g, nfree);
       }
       qmin = qgood;
-      if (xkeep) ut_gather(xkeep, x, freev, nfree, d);
-      below = 0;
+      below = xkeep && qmin < o->keepq * (1 - 1e-12);
+      if (xkeep && !below) ut_gather(xkeep, x, freev, nfree, d);
       g0 = sqrt(ut_dot(g, g, n, part)); /* the end test's and the forcing term's reference */
       gain[0] = gain[1] = gain[2] = 1;
       continue;
@@ -352,7 +381,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     o = real;
     ut_place(x, xsoft, NULL, 0, freev, nfree, d);
     f = ut_eval(o, x, NULL, nfree);
-    below = 0;
+    below = xkeep && qgood < o->keepq * (1 - 1e-12);
   }
   if (below) {
     ut_place(x, xkeep, NULL, 0, freev, nfree, d);

@@ -27,15 +27,21 @@ function M.spiral(ns, nt, width, turns, cell, sweeps)
   for j = 0, nt - 1 do bnd[#bnd + 1] = {id(0, j), id(0, j + 1)}; bnd[#bnd + 1] = {id(ns, j), id(ns, j + 1)} end
   local mesh = lg.mesh.new{cell = cell, vertices = verts, cells = cells, boundary = {wall = bnd}}
   local ref = mesh:copy()
-  local X = {}
-  for k, v in ipairs(verts) do X[k] = {v[1], v[2]} end
+  -- the sweeps on two flat arrays: a table per vertex and update made the 400 x 60 strip's
+  -- 2000 sweeps take 30 s
+  local X, Y, w = {}, {}, ns + 1
+  for k, v in ipairs(verts) do X[k], Y[k] = v[1], v[2] end
   for _ = 1, sweeps or 2000 do
-    for j = 1, nt - 1 do for i = 1, ns - 1 do
-      local a, b, c, d = X[id(i - 1, j)], X[id(i + 1, j)], X[id(i, j - 1)], X[id(i, j + 1)]
-      X[id(i, j)] = {(a[1] + b[1] + c[1] + d[1])/4, (a[2] + b[2] + c[2] + d[2])/4}
-    end end
+    for j = 1, nt - 1 do
+      local k = j*w + 1
+      for _ = 1, ns - 1 do
+        k = k + 1
+        X[k] = (X[k - 1] + X[k + 1] + X[k - w] + X[k + w])/4
+        Y[k] = (Y[k - 1] + Y[k + 1] + Y[k - w] + Y[k + w])/4
+      end
+    end
   end
-  for j = 1, nt - 1 do for i = 1, ns - 1 do local k = id(i, j); mesh:set_coordinates(k, X[k][1], X[k][2]) end end
+  for j = 1, nt - 1 do for i = 1, ns - 1 do local k = id(i, j); mesh:set_coordinates(k, X[k], Y[k]) end end
   return mesh, ref
 end
 

@@ -89,6 +89,20 @@ for _, case in ipairs{{8, 40, 1}, {12, 60, 7}} do
   end
   T.check(bmax == 0, "star: the boundary stayed (moved by %g)", bmax)
 end
+-- the smoother's softened first step is kept when the minimum it leaves is at least the
+-- start's times the barrier energy's fall: on this 300 x 45 spiral (a thousand Gauss-Seidel
+-- sweeps from the straight strip, boundary fixed) it takes the energy to 0.43 of the start's
+-- and the minimum to 0.88 of it. Kept, the smoothing takes 10 Newton steps; rejected (the
+-- rule before: never below the start's minimum), 16
+do
+  local m = H.spiral(300, 45, 0.75, nil, nil, 1000)
+  local r = m:untangle{quiet = true, boundary = "fixed"}
+  local s = m:smooth{quiet = true, method = "energy", iterations = 50, boundary = "fixed"}
+  print(string.format("spiral 300x45 (1000 sweeps): smoothed %.4f -> %.4f in %d Newton steps", s.min_before, s.min_after,
+                      s.iterations))
+  T.check(r.success and s.optimizer == "newton" and s.iterations <= 12 and s.min_after > 0.38,
+          "spiral 300x45: smoothed in %d Newton steps (at most 12), minimum %.4f (> 0.38)", s.iterations, s.min_after)
+end
 -- sliding boundaries in the energy smoother: from one round with the boundary fixed, a pass
 -- where the boundary vertices slide along their straight pieces inside Newton and one where
 -- they take guarded local steps between rounds; the higher minimum is kept, the higher mean
@@ -427,6 +441,20 @@ do
   T.check(s.iterations <= 9 and q:min() > 0.44 and q:mean() > 0.665,
           "Tutte-solved spiral 200x25: smoothing in %d Newton steps (at most 9), minimum %.4f (> 0.44), mean %.4f (> 0.665)",
           s.iterations, q:min(), q:mean())
+end
+-- on 32 768 free vertices or more (UT_AMG_MIN_ROWS) the softened steps start with the
+-- multigrid, whose steps are solved to at most a fifth of the gradient on the barrier: the
+-- 600 x 75 Tutte-solved spiral (45 000 vertices) smooths in 6 Newton steps, where block
+-- Jacobi's first steps at half the gradient took 9
+do
+  local m = H.spiral_tutte(600, 75, 0.75)
+  local r = m:untangle{quiet = true, boundary = "fixed"}
+  local s = m:smooth{quiet = true, method = "energy", boundary = "fixed"}
+  print(string.format("Tutte-solved spiral 600x75: smoothed in %d Newton steps (%s) to %.4f", s.iterations, s.preconditioner,
+                      s.min_after))
+  T.check(r.success and s.preconditioner == "multigrid" and s.iterations <= 7 and s.min_after > 0.445,
+          "Tutte-solved spiral 600x75: %d Newton steps (at most 7) with the %s, minimum %.4f (> 0.445)", s.iterations,
+          s.preconditioner, s.min_after)
 end
 -- 3D smoothing's handover from L-BFGS to Newton (smooth.c, untangle_lbfgs.c): the untangled
 -- twisted bar of 536 238 tetrahedra (over HANDOVER_CELLS) descends steadily through L-BFGS's

@@ -198,11 +198,15 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
      * bits as solving for −g: every operation is odd in the right side) */
     /* the forcing term: at least 0.1 (0.01 cost the star 40x200 twice the CG iterations for
      * the same Newton steps) */
-    /* on the barrier with the multigrid, at most ETA_AMG: the multigrid's count grows
-     * slowly with the tolerance (the random star's steps: 4–12 iterations at 0.2, 3–8 at
-     * 0.5), and the closer steps keep its softened steps, whose minimum is checked, and end
-     * the halved steps whose full steps crossed the barrier (17 -> 13 steps, bench/RESULTS.md) */
-    double eta = fmin(use_amg && o->eps == 0 ? ETA_AMG : 0.5, fmax(0.1, sqrt(sqrt(gg) / g0))), *cw[4] = {r, z, pd, q};
+    /* on the barrier with the multigrid, in the softened steps and while the minimum quality
+     * is below SOFT_Q, at most ETA_AMG: the multigrid's count grows slowly with the tolerance
+     * (the random star's steps: 4–12 iterations at 0.2, 3–8 at 0.5), and the closer steps
+     * keep its softened steps, whose minimum is checked, and end the halved steps whose full
+     * steps crossed the barrier (17 -> 13 steps). Not above SOFT_Q, far from the barrier,
+     * where the steps were the same at more iterations (the 100 000-vertex quadrilateral
+     * spiral, minimum 0.27: 5 a step instead of 3; bench/RESULTS.md) */
+    int near = o != real || (xkeep && qmin > 0 && qmin < SOFT_Q);
+    double eta = fmin(use_amg && o->eps == 0 && near ? ETA_AMG : 0.5, fmax(0.1, sqrt(sqrt(gg) / g0))), *cw[4] = {r, z, pd, q};
     /* the products in single precision: the multigrid's finest copy, or on a mesh where block
      * Jacobi's conjugate gradients may take dozens of iterations (the multigrid's size) a copy
      * of its own (the 100 000-vertex spiral's smoothing took 137 of them before the switch) */

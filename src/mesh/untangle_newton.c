@@ -163,7 +163,10 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
    * Jacobi's resolve the local ones first, and at the same gain its runs had left the
    * worst cells behind (multigrid from the first step: a 250 000-triangle spiral's minimum
    * 0.4354 at 1e-5, 0.4411 at 1e-6, block Jacobi's 0.4452; the million-triangle spiral
-   * 0.4443 and 0.4455, block Jacobi's 0.4452) */
+   * 0.4443 and 0.4455, block Jacobi's 0.4452). Smoothing's barrier only: the untangler's
+   * rounds at ε > 0 end at their own tolerance, the next round re-solving at a smaller ε
+   * (the 640 × 160 Tutte-solved spiral's global stage: 10 -> 8 steps, minimum 0.0852 ->
+   * 0.0850, the same smoothed mesh's minimum) */
   double tol_amg = 0.1 * tol, gain[3] = {0, 0, 0};
   /* a later round of the same smoothing takes the multigrid from its first step when an
    * earlier one took it: the same mesh and pattern, and the same (tenfold) tolerance, which
@@ -344,7 +347,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
      * rises by more than QMIN_RISE a step: a random star's smoothing, its minimum held by the
      * fixed boundary's cells, spent its last seven steps (a quarter of its time) on gains of
      * 1e-5 to 1e-6 that moved the minimum by 1e-4 of itself (bench/RESULTS.md) */
-    double tl = use_amg && !(xkeep && qlast > 0 && qmin <= (1 + QMIN_RISE) * qlast) ? tol_amg : tol;
+    double tl = use_amg && o->eps == 0 && !(xkeep && qlast > 0 && qmin <= (1 + QMIN_RISE) * qlast) ? tol_amg : tol;
     gain[it % 3] = (fprev - f) / fprev;
     if (o != real) { /* a softened step: kept (in xsoft) when it lowered the barrier's energy and
                       * left the minimum quality at least the start's times the energy's ratio

@@ -621,7 +621,11 @@ int mesh_quality(const mesh *m, int q, const quality_metric *metric, double *out
   int d = m->dim, nvc = m->nvc;
   double N[3][3];
   int kind = metric ? metric->kind : 0;
-  if (!kind) {
+  if (!kind) { /* cells on threads, each writing its own: the smoother measures a million-triangle
+                * mesh before and after, 0.06 s each on one thread */
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (m->ncell > 4096)
+#endif
     for (int c = 0; c < m->ncell; c++) out[c] = mesh_cell_quality(m, c, q);
     return 0;
   }

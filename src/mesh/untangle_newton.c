@@ -4,13 +4,13 @@
  * vertices with every corner's part made positive semidefinite (ut_energy_hessian), by
  * conjugate gradients preconditioned with H's diagonal d×d blocks (block Jacobi) or, once
  * those need more than AMG_SWITCH_ITS iterations on a mesh of UT_AMG_MIN_ROWS free vertices or
- * more (from the first step where softened steps start), with the
- * aggregation multigrid of untangle_amg.c, to the relative
- * residual min(1/2, max(1/10, sqrt(|g|/|g₀|))) (an inexact Newton method's forcing term,
- * Eisenstat and Walker 1996; at most 1/5 on the barrier with the multigrid), then backtracks
- * on the energy (Armijo; at ε = 0 the barrier makes every inverted trial infinite), or
- * doubles a full step that the energy's curvature along it shows to be too short (below). On anisotropic meshes the energy's condition number is what slows
- * L-BFGS: the Tutte-started spiral strip took 360 L-BFGS iterations, a random star 1 200
+ * more (from the first step where softened steps start), with the aggregation multigrid of
+ * untangle_amg.c, to the relative residual min(1/2, max(1/10, sqrt(|g|/|g₀|))) (an inexact
+ * Newton method's forcing term, Eisenstat and Walker 1996; at most 1/5 near the barrier with
+ * the multigrid), then backtracks on the energy (Armijo; at ε = 0 the barrier makes every
+ * inverted trial infinite), or doubles a full step that the energy's curvature along it
+ * shows to be too short (below). On anisotropic meshes the energy's condition number is what
+ * slows L-BFGS: the Tutte-started spiral strip took 360 L-BFGS iterations, a random star 1 200
  * without converging. Results do not depend on the number of threads: sums are taken in
  * fixed chunks, in order. */
 #include "untangle_int.h"
@@ -280,20 +280,32 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
       }
       ut_place(x, x0, s, t, freev, nfree, d);
     }
-    /* a full step that lowered f by 0.55–0.75 of g·s: the energy along s is flatter than the
+    /* one more trial at tt, kept when lower, in two cases (else tt = 0):
+     * a full step that lowered f by 0.55–0.75 of g·s: the energy along s is flatter than the
      * model (at its minimum ½ g·s) and its minimum lies past t = 1. With the barrier alone
-     * (ε = 0: smoothing) one more trial, at the minimum of the parabola through f, g·s and
-     * the full step's value (t* = −g·s / (2 (f(1) − f − g·s)), up to 2), kept when lower.
+     * (ε = 0: smoothing) the trial at the minimum of the parabola through f, g·s and
+     * the full step's value (t* = −g·s / (2 (f(1) − f − g·s)), up to 2).
      * The million-triangle spiral's smoothing: 15 → 12 steps, 9.5–11.6 → 7.8 s, the same
      * minimum (its steps gained two thirds of g·s at t = 1, t* 1.4–1.5). Not with ε > 0: the
-     * untangler's global energy then zigzagged (the 100 000-vertex Tutte spiral 9 → 14 steps) */
-    else if (o->eps == 0 && ls == 0 && f - fn > 0.55 * -gp) {
-      double c = 2 * (fn - f - gp), ts = c > 0 ? fmin(2, -gp / c) : 2;
-      if (ts > 1.15) {
-        ut_place(x, x0, s, ts, freev, nfree, d);
+     * untangler's global energy then zigzagged (the 100 000-vertex Tutte spiral 9 → 14 steps);
+     * a backtracked step on the barrier (the longer trial crossed it or gained too little):
+     * the trial half-way to that longer one. The random star's smoothing: its steps at
+     * t = 1/2 after an inverted full step, each halving g·s, became steps at 3/4 (13 -> 12
+     * steps, bench/RESULTS.md). Not in the softened steps, which are judged by the minimum
+     * they leave: the first of a 300 × 45 spiral's (Gauss-Seidel start), backtracked to 1/2,
+     * left it at 0.0056, and at 3/4 at 0.0005 */
+    else {
+      double tt = 0;
+      if (o->eps == 0 && ls == 0 && f - fn > 0.55 * -gp) {
+        double c = 2 * (fn - f - gp), ts = c > 0 ? fmin(2, -gp / c) : 2;
+        if (ts > 1.15) tt = ts;
+      } else if (o == real && o->eps == 0 && ls > 0 && ls < 50)
+        tt = 1.5 * t;
+      if (tt > 0) {
+        ut_place(x, x0, s, tt, freev, nfree, d);
         double f2 = ut_eval(o, x, q, nfree);
         if (f2 < fn) {
-          t = ts;
+          t = tt;
           fn = f2;
           double *tq = gn; /* q holds the trial's gradient: it becomes the accepted point's */
           gn = q;
@@ -301,25 +313,6 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
         } else
           ut_place(x, x0, s, t, freev, nfree, d);
       }
-    }
-    /* a backtracked step on the barrier (the longer trial crossed it or gained too little):
-     * one more trial half-way to that longer one, kept when lower. The random star's
-     * smoothing: its steps at t = 1/2 after an inverted full step, each halving g·s, became
-     * steps at 3/4 (13 -> 12 steps, bench/RESULTS.md). Not in the softened steps, which are
-     * judged by the minimum they leave: the first of a 300 × 45 spiral's (Gauss-Seidel
-     * start), backtracked to 1/2, left it at 0.0056, and at 3/4 at 0.0005 */
-    else if (o == real && o->eps == 0 && ls > 0 && ls < 50) {
-      double tm = 1.5 * t;
-      ut_place(x, x0, s, tm, freev, nfree, d);
-      double f2 = ut_eval(o, x, q, nfree);
-      if (f2 < fn) {
-        t = tm;
-        fn = f2;
-        double *tq = gn; /* q holds the trial's gradient: it becomes the accepted point's */
-        gn = q;
-        q = tq;
-      } else
-        ut_place(x, x0, s, t, freev, nfree, d);
     }
     if (ls == 50) { /* no decrease: restore and stop */
       ut_place(x, x0, NULL, 0, freev, nfree, d);

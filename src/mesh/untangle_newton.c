@@ -145,7 +145,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
   objective soft;
   /* the start's minimum and barrier energy; the last kept state's minimum and energy */
   double qstart = 0, fstart = f, qgood = 0, fgood = f;
-  int soft_left = 0;
+  int soft_left = 0, soft_close = 0; /* soft_close: the softened steps solved at ETA_AMG (below) */
   if (o->soft_start && o->smooth == 2 && o->eps == 0 && !o->soft_eps && isfinite(f) && (qstart = ut_energy_qmin(o, x)) < SOFT_Q &&
       (soft_eps = calloc((size_t)C->m->ncell * C->ncorner + 1, sizeof(double))) && /* 0: the cells not in o */
       (xsoft = malloc(sizeof(double) * (n + 1)))) {
@@ -201,14 +201,17 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
      * bits as solving for −g: every operation is odd in the right side) */
     /* the forcing term: at least 0.1 (0.01 cost the star 40x200 twice the CG iterations for
      * the same Newton steps) */
-    /* on the barrier with the multigrid, in the softened steps and while the minimum quality
-     * is below SOFT_Q, at most ETA_AMG: the multigrid's count grows slowly with the tolerance
-     * (the random star's steps: 4–12 iterations at 0.2, 3–8 at 0.5), and the closer steps
-     * keep its softened steps, whose minimum is checked, and end the halved steps whose full
-     * steps crossed the barrier (17 -> 13 steps). Not above SOFT_Q, far from the barrier,
-     * where the steps were the same at more iterations (the 100 000-vertex quadrilateral
-     * spiral, minimum 0.27: 5 a step instead of 3; bench/RESULTS.md) */
-    int near = o != real || (xkeep && qmin > 0 && qmin < SOFT_Q);
+    /* on the barrier with the multigrid while the minimum quality is below SOFT_Q, at most
+     * ETA_AMG: the multigrid's count grows slowly with the tolerance (the random star's
+     * steps: 4–12 iterations at 0.2, 3–8 at 0.5), and the closer steps end the halved steps
+     * whose full steps crossed the barrier. Not above SOFT_Q, far from the barrier, where the
+     * steps were the same at more iterations (the 100 000-vertex quadrilateral spiral,
+     * minimum 0.27: 5 a step instead of 3). A softened step, whose minimum is checked, is
+     * solved at 0.5 first and, when not kept, once more from its start at ETA_AMG, as are the
+     * softened steps after it: the random star's first is kept only at 0.2 (17 -> 13 steps
+     * with the cap), and the million-triangle spiral's are kept at 0.5 (7 + 5 iterations,
+     * 10 + 7 at 0.2; bench/RESULTS.md) */
+    int near = o != real ? soft_close : xkeep && qmin > 0 && qmin < SOFT_Q;
     double eta = fmin(use_amg && o->eps == 0 && near ? ETA_AMG : 0.5, fmax(0.1, sqrt(sqrt(gg) / g0))), *cw[4] = {r, z, pd, q};
     /* the products in single precision: the multigrid's finest copy, or on a mesh where block
      * Jacobi's conjugate gradients may take dozens of iterations (the multigrid's size) a copy
@@ -353,6 +356,13 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
         ut_gather(xsoft, x, freev, nfree, d);
         qgood = qs;
         fgood = fr;
+      } else if (use_amg && !soft_close) { /* solved again from its start, closer (above) */
+        soft_close = 1;
+        ut_place(x, xsoft, NULL, 0, freev, nfree, d);
+        f = ut_eval(o, x, g, nfree);
+        qmin = qgood;
+        below = xkeep && qmin < o->keepq * (1 - 1e-12);
+        continue;
       }
       if (--soft_left > 0 && kept) continue;
       o = real; /* back to the barrier, from the last kept state */

@@ -443,9 +443,9 @@ do
           s.iterations, q:min(), q:mean())
 end
 -- on 32 768 free vertices or more (UT_AMG_MIN_ROWS) the softened steps start with the
--- multigrid, whose steps are solved to at most a fifth of the gradient on the barrier: the
--- 600 x 75 Tutte-solved spiral (45 000 vertices) smooths in 6 Newton steps, where block
--- Jacobi's first steps at half the gradient took 9
+-- multigrid, and a softened step not kept is solved again to a fifth of the gradient: the
+-- 600 x 75 Tutte-solved spiral (45 000 vertices) smooths in 7 Newton steps (its first
+-- softened step solved twice), where block Jacobi's first steps at half the gradient took 9
 do
   local m = H.spiral_tutte(600, 75, 0.75)
   local r = m:untangle{quiet = true, boundary = "fixed"}

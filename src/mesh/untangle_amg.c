@@ -158,27 +158,22 @@ void ut_block_apply(const double *dinv, int nrow, int d, const double *r, double
  * them (bench/RESULTS.md); on the spirals' even cells every coupling is strong. A stronger
  * θ = 0.25 left the star's coarsening stalled above the dense solve (block Jacobi kept) */
 #define AMG_STRENGTH 0.08
-/* the build's row-wise loops on threads (each row writes its own entries: the same result
- * for any thread count); the million-triangle spiral's strength and coarse positions took
- * 0.04 and 0.07 s of its 0.41 s build on one */
-#ifdef _OPENMP
-#define UT_PAR_ROWS_N _Pragma("omp parallel for schedule(static) if (n > 2048)")
-#else
-#define UT_PAR_ROWS_N
-#endif
+/* the strength, and coarsen's block positions below, row by row on threads (UT_PAR_FOR: each
+ * row writes its own entries, the same result for any thread count; the million-triangle
+ * spiral's took 0.04 and 0.07 s of its 0.41 s build on one) */
 static unsigned char *strength(const ut_bsr *P, const double *val, int n, int d, const int *dpos, double theta) {
   size_t nb = (size_t)P->off[n];
   int dd = d * d;
   unsigned char *st = malloc(nb + 1);
   double *nd = malloc(sizeof(double) * ((size_t)n + 1));
   if (!st || !nd) { free(st); free(nd); return NULL; }
-  UT_PAR_ROWS_N for (int i = 0; i < n; i++) {
+  UT_PAR_FOR for (int i = 0; i < n; i++) {
     const double *b = val + (size_t)dpos[i] * dd;
     double t = 0;
     for (int e = 0; e < dd; e++) t += b[e] * b[e];
     nd[i] = sqrt(t);
   }
-  UT_PAR_ROWS_N for (int i = 0; i < n; i++)
+  UT_PAR_FOR for (int i = 0; i < n; i++)
     for (int q = P->off[i]; q < P->off[i + 1]; q++) {
       const double *b = val + (size_t)q * dd;
       double t = 0;
@@ -287,7 +282,7 @@ static int coarsen(ut_amg *A, int l, const double *val) {
   free(mark);
   size_t nb = (size_t)F->P.off[n];
   if (!(F->cpos = malloc(sizeof(size_t) * (nb + 1)))) return 1;
-  UT_PAR_ROWS_N for (int i = 0; i < n; i++)
+  UT_PAR_FOR for (int i = 0; i < n; i++)
     for (int q = F->P.off[i]; q < F->P.off[i + 1]; q++) F->cpos[q] = ut_bsr_find(&Cl->P, F->agg[i], F->agg[F->P.col[q]]);
   return 0;
 }

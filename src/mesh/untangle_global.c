@@ -188,8 +188,6 @@ void ut_relative_mean_ratio(const ctx *C, const double *cwinv, double *out) {
   }
 }
 
-/* One corner's energy (a simplex has one corner), and with gk its gradient in each of the
- * corner's d + 1 vertices (C->ct[kc] order, d each); +∞ for an invalid corner at ε = 0 */
 /* corner kc of cell c's ε: the objective's, or the softened barrier's (o->soft_eps); *strict:
  * an invalid corner is infinite (ε = 0, and the softened barrier, which keeps every corner
  * valid) */
@@ -198,6 +196,9 @@ static inline double corner_eps(const objective *o, int c, int kc, int *strict) 
   *strict = eps == 0 || o->soft_eps;
   return eps;
 }
+
+/* One corner's energy (a simplex has one corner), and with gk its gradient in each of the
+ * corner's d + 1 vertices (C->ct[kc] order, d each); +∞ for an invalid corner at ε = 0 */
 
 static inline double corner_energy_d(int d, const objective *o, const double *x, int c, int kc, double *gk) {
   const ctx *C = o->C;

@@ -442,7 +442,7 @@ int lg_assemble_chunks(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, 
                  (size_t)k->nq * (size_t)k->ncache, cm, size};
   kernel_fn fn = jit_current(env->jit, k->jid, k->fn);
   if (chunk < 1) chunk = 1;
-  int nchunk = total ? (total - 1) / chunk + 1 : 0, stop = 0, fail = 0;
+  int nchunk = total ? (total - 1) / chunk + 1 : 0, stop = 0, fail = 0, quit = 0;
   struct timespec t0, t1;
   clock_gettime(CLOCK_MONOTONIC, &t0);
   if (k->arity == 0) {
@@ -506,8 +506,13 @@ int lg_assemble_chunks(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, 
           jit_account(env->jit, k->jid, elapsed_ms(&t0, &t1));
           t0 = t1;
           fn = jit_current(env->jit, k->jid, k->fn);
+          quit = stop || fail;
         }
-        if (stop || fail) break;
+        /* every thread leaves at the same chunk: quit is written only here, between the
+         * barrier above and the single's own, so no thread can read it while another has
+         * gone on to the next chunk's use() (which sets stop; a thread that saw stop set
+         * there would leave while the others wait at the next barrier: the hang) */
+        if (quit) break;
       }
       free(W);
     }

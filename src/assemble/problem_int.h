@@ -130,9 +130,11 @@ struct lg_problem {
   double *state;      /* current iterate (N) */
   double *solution;   /* the last solution (N), for adjoints */
   int have_solution;
+  unsigned long solved_geometry; /* the mesh's geometry count at the last solve */
   form *eqn, *bcf;    /* copies of the forms, for derived operators */
   int test[KER_MAXFIELD], unk[KER_MAXFIELD];
   int matrix_ready;   /* lg_problem_solve_vector: the matrix is assembled and factored */
+  uint64_t ready_fp;  /* ... from the data of this fingerprint (matrix_fingerprint) */
   int adj_stale;      /* A does not hold the Jacobian at the last solution, factored by the
                        * SNES's solver (nonlinear problems: the adjoint makes it so, and a
                        * Newton solve warm-started at the solution then reuses it) */
@@ -151,6 +153,7 @@ struct lg_problem {
   int null_const[KER_MAXFIELD]; /* fields whose constants are in it: their mean is set to 0 */
   int null_rigid;     /* it is the rigid body modes */
   int near_done;      /* the rigid body modes are the matrix's near null space */
+  unsigned long modes_geometry; /* the mesh's geometry count the rigid body modes were made for */
   char prefix[64];
 };
 
@@ -265,5 +268,8 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p);
 int lg_problem_near_nullspace(lg_env *env, lg_problem *p, KSP ksp);
 /* nullspace= */
 int lg_problem_setup_nullspace(lg_env *env, lg_problem *p, const lg_problem_spec *s);
+/* the rigid body modes (null space, near null space) made again when the mesh has moved
+ * since they were made: they are the moved nodes' rotations; collective */
+int lg_problem_follow_geometry(lg_env *env, lg_problem *p);
 
 #endif

@@ -107,6 +107,14 @@ static void null_mean_zero(lg_env *env, lg_problem *p, double *x) {
   (void)env;
 }
 
+/* a 64-bit finalizer (splitmix64's): every input bit moves every output bit */
+static uint64_t splitmix(uint64_t x) {
+  x += 0x9E3779B97F4A7C15ull;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
 /* what a linear problem's matrix depends on: the values of the discrete functions and the
  * parameters its kernels read, and the mesh's geometry. Equal fingerprints: the matrix, its
  * essential rows and its factorization are still valid (a control that enters only the
@@ -139,17 +147,18 @@ static uint64_t matrix_fingerprint(lg_env *env, lg_problem *p) {
       MIX(bind[k].vals, sizeof(double) * (size_t)bind[k].dm->ndof);
     }
   }
-#undef MIX
   if (h) h |= 1;
   if (p->lm->dist) {
     /* a distributed mesh's ranks hash their own parts: they decide together (whether to
-     * assemble, which is collective), on the combination of their hashes, 0 if any has none */
-    uint64_t v[2] = {h, h == 0}, all[2] = {0, 0};
-    if (MPI_Allreduce(v, all, 1, MPI_UINT64_T, MPI_BXOR, PETSC_COMM_WORLD) != MPI_SUCCESS ||
-        MPI_Allreduce(v + 1, all + 1, 1, MPI_UINT64_T, MPI_MAX, PETSC_COMM_WORLD) != MPI_SUCCESS || all[1])
-      return 0;
+     * assemble, which is collective), on the sum of their hashes each first mixed with its
+     * rank (0 if any has none). An XOR of the plain hashes cancelled between ranks whose parts
+     * hash alike: a parameter or the geometry's count, the same on every rank, never changed
+     * the fingerprint of an even number of ranks, and the first matrix stayed. */
+    uint64_t v[2] = {splitmix(h ^ splitmix((uint64_t)lg_mpi_rank() + 1)), h == 0}, all[2] = {0, 0};
+    if (MPI_Allreduce(v, all, 2, MPI_UINT64_T, MPI_SUM, PETSC_COMM_WORLD) != MPI_SUCCESS || all[1]) return 0;
     h = all[0] | 1;
   }
+#undef MIX
   return h;
 }
 
@@ -457,6 +466,7 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
       return 1;
     }
   p->have_solution = 1;
+  p->solved_geometry = p->lm->geometry;
   p->matrix_fp = fp;
   return out ? make_outputs(env, p, p->solution, out) : 0;
 }
@@ -640,6 +650,7 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
   if (!p->null_rigid && remove_null(env, p)) return 1;
   if (lg_problem_vec_get(env, p, p->x, p->solution)) return 1;
   p->have_solution = 1;
+  p->solved_geometry = p->lm->geometry;
   p->adj_stale = 1;
   return out ? make_outputs(env, p, p->solution, out) : 0;
 }
@@ -647,13 +658,13 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
 int lg_problem_solve(lg_env *env, lg_problem *p, lg_function **initial, lg_function **out,
                      lg_solve_info *info) {
   memset(info, 0, sizeof *info);
-  if (lg_mesh_check(env, p->lm)) return 1;
+  if (lg_mesh_check(env, p->lm) || lg_problem_follow_geometry(env, p)) return 1;
   return p->nonlinear ? solve_nonlinear(env, p, initial, out, info, 0) : solve_linear(env, p, out, info);
 }
 
 int lg_problem_resolve(lg_env *env, lg_problem *p, lg_solve_info *info) {
   memset(info, 0, sizeof *info);
-  if (lg_mesh_check(env, p->lm)) return 1;
+  if (lg_mesh_check(env, p->lm) || lg_problem_follow_geometry(env, p)) return 1;
   return p->nonlinear ? solve_nonlinear(env, p, NULL, NULL, info, 1) : solve_linear(env, p, NULL, info);
 }
 
@@ -666,6 +677,11 @@ int lg_problem_resolve(lg_env *env, lg_problem *p, lg_solve_info *info) {
  * nonlinear problem's Jacobian assembled at the solution and factored once per solution */
 static int jacobian_solver(lg_env *env, lg_problem *p, KSP *out) {
   if (!p->have_solution) { lg_seterr(env, "the adjoint or sensitivity needs a solved state: solve the problem first"); return 1; }
+  if (p->solved_geometry != p->lm->geometry) {
+    lg_seterr(env, "the mesh has moved since the problem's last solve, whose state and Jacobian are the old mesh's: solve "
+                   "it again first");
+    return 1;
+  }
   KSP ksp = p->ksp;
   if (p->nonlinear) {
     /* the SNES's own solver, so that the next Newton solve, warm-started at this solution,
@@ -744,8 +760,12 @@ int lg_problem_tangent(lg_env *env, lg_problem *p, const double *rhs, double *du
 }
 
 static int prepare_matrix(lg_env *env, lg_problem *p) {
+  /* ready for the data it was made from: a parameter it reads, a discrete function or the
+   * mesh's geometry changed since makes it again (a Riesz map's mass matrix on a moved mesh) */
+  uint64_t fp = p->matrix_ready ? matrix_fingerprint(env, p) : 0;
+  if (!fp || fp != p->ready_fp) p->matrix_ready = 0;
   if (!p->matrix_ready) {
-    if (lg_mesh_check(env, p->lm)) return 1;
+    if (lg_mesh_check(env, p->lm) || lg_problem_follow_geometry(env, p)) return 1;
     memset(p->state, 0, sizeof(double) * (size_t)p->N);
     p->matrix_fp = 0; /* A no longer holds the last solve's matrix */
     p->keep.stale = 0; /* its next solve refactors it */
@@ -756,6 +776,7 @@ static int prepare_matrix(lg_env *env, lg_problem *p) {
     PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
     PCHK(lg_lu_prepare(p->ksp, p->A, p->own_rows, p->nown, p->prefix, !p->nonlinear), "the factorization's choice");
     p->matrix_ready = 1;
+    p->ready_fp = matrix_fingerprint(env, p);
     p->adj_stale = 1; /* a nonlinear problem's A no longer holds its Jacobian */
   }
   return 0;

@@ -246,6 +246,17 @@ static int node_coordinates(lg_env *env, lg_problem *p, Vec *out) {
   return 0;
 }
 
+/* the rigid body modes of the mesh's current geometry (translations, rotations about its
+ * node coordinates) */
+static int rigid_modes(lg_env *env, lg_problem *p, MatNullSpace *ns) {
+  Vec X;
+  if (node_coordinates(env, p, &X)) return 1;
+  PetscErrorCode ierr = MatNullSpaceCreateRigidBody(X, ns);
+  VecDestroy(&X);
+  if (ierr) return lg_petsc_fail(env, ierr, "the rigid body modes");
+  return 0;
+}
+
 int lg_problem_near_nullspace(lg_env *env, lg_problem *p, KSP ksp) {
   int dim = p->lm->m->dim;
   if (p->near_done || p->cols.n != 1 || p->rows.n != 1 || lg_matrix_block_size(p) != dim || dim < 2 ||
@@ -259,14 +270,32 @@ int lg_problem_near_nullspace(lg_env *env, lg_problem *p, KSP ksp) {
   PCHK(PCGetType(pc, &type), "PCGetType");
   if (type && (!strcmp(type, PCLU) || !strcmp(type, PCCHOLESKY))) return 0;
   p->near_done = 1;
-  Vec X;
-  if (node_coordinates(env, p, &X)) return 1;
+  p->modes_geometry = p->lm->geometry;
   MatNullSpace ns;
-  PetscErrorCode ierr = MatNullSpaceCreateRigidBody(X, &ns);
-  if (!ierr) ierr = MatSetNearNullSpace(p->A, ns);
-  if (!ierr) ierr = MatNullSpaceDestroy(&ns);
-  VecDestroy(&X);
+  if (rigid_modes(env, p, &ns)) return 1;
+  PetscErrorCode ierr = MatSetNearNullSpace(p->A, ns);
+  MatNullSpaceDestroy(&ns);
   if (ierr) return lg_petsc_fail(env, ierr, "the rigid body modes (near null space)");
+  return 0;
+}
+
+int lg_problem_follow_geometry(lg_env *env, lg_problem *p) {
+  if (p->modes_geometry == p->lm->geometry || (!p->null_rigid && !p->near_done)) return 0;
+  p->modes_geometry = p->lm->geometry;
+  MatNullSpace ns;
+  if (rigid_modes(env, p, &ns)) return 1;
+  PetscErrorCode ierr = 0;
+  if (p->null_rigid) {
+    ierr = MatSetNullSpace(p->A, ns);
+    if (!ierr) {
+      MatNullSpaceDestroy(&p->null);
+      p->null = ns;
+      PetscObjectReference((PetscObject)ns);
+    }
+  }
+  if (!ierr && p->near_done) ierr = MatSetNearNullSpace(p->A, ns);
+  MatNullSpaceDestroy(&ns);
+  if (ierr) return lg_petsc_fail(env, ierr, "the rigid body modes of the moved mesh");
   return 0;
 }
 
@@ -542,10 +571,8 @@ int lg_problem_setup_nullspace(lg_env *env, lg_problem *p, const lg_problem_spec
       lg_seterr(env, "nullspace = \"rigid\": the problem has essential conditions, which already fix the rigid motions");
       return 1;
     }
-    Vec X;
-    if (node_coordinates(env, p, &X)) return 1;
-    ierr = MatNullSpaceCreateRigidBody(X, &ns);
-    VecDestroy(&X);
+    if (rigid_modes(env, p, &ns)) return 1;
+    p->modes_geometry = p->lm->geometry;
     p->nnull = dim == 2 ? 3 : 6;
     p->null_rigid = 1;
   } else {

@@ -593,9 +593,11 @@ static int mesh_set_coordinates(lua_State *L) {
                         luaL_typename(L, 3 + d));
     if (!isfinite(v[d])) return luaL_error(L, "mesh:set_coordinates: argument %d is not finite (%f)", 3 + d, v[d]);
   }
+  /* the geometry's count moves on every rank (a collective call), so that the ranks' caches
+   * (the matrix fingerprints, the rigid body modes) stay in step */
+  lg_mesh_changed(u->lm);
   if (!i) return 0; /* another rank's vertex: that rank moves it */
   for (int d = 0; d < m->dim; d++) m->x[(size_t)(i - 1) * m->dim + d] = v[d];
-  lg_mesh_changed(u->lm);
   return 0;
 }
 

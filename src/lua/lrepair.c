@@ -137,11 +137,15 @@ int lmesh_untangle(lua_State *L) {
     int rc = dist_repair(L, u, refl, &o.xref, repair_untangle, &o, &both.r, sizeof both, err);
     if (!rc && lg_mpi_rank() == 0) for (int i = 0; i < both.r.nstage && i < 3; i++) snprintf(both.names[i], 64, "%s", both.r.stage[i].name);
     if (!rc && MPI_Bcast(both.names, (int)sizeof both.names, MPI_CHAR, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) rc = 1;
+    lg_mesh_changed(u->lm); /* also on failure: the vertices may have moved */
     if (rc) return luaL_error(L, "%s: %s", fn, err);
     r = both.r;
     for (int i = 0; i < r.nstage && i < 3; i++) r.stage[i].name = both.names[i];
-  } else if (mesh_untangle(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
-  lg_mesh_changed(u->lm);
+  } else {
+    int rc = mesh_untangle(m, &o, &r, err);
+    lg_mesh_changed(u->lm);
+    if (rc) return luaL_error(L, "%s: %s", fn, err);
+  }
   char text[2048];
   size_t n = (size_t)snprintf(text, sizeof text,
                               "untangle: %d %s, beta %.3g: invalid %d -> %d (%s), %d vertices moved (mean %.3g, max "
@@ -263,10 +267,10 @@ int lmesh_smooth(lua_State *L) {
   }
   smooth_report r;
   char err[MESH_ERRLEN];
-  if (u->lm->dist) {
-    if (dist_repair(L, u, refl, &o.xref, repair_smooth, &o, &r, sizeof r, err)) return luaL_error(L, "%s: %s", fn, err);
-  } else if (mesh_smooth(m, &o, &r, err)) return luaL_error(L, "%s: %s", fn, err);
+  /* the geometry's count moves also on failure: the vertices may have moved */
+  int rc = u->lm->dist ? dist_repair(L, u, refl, &o.xref, repair_smooth, &o, &r, sizeof r, err) : mesh_smooth(m, &o, &r, err);
   lg_mesh_changed(u->lm);
+  if (rc) return luaL_error(L, "%s: %s", fn, err);
   char text[512];
   snprintf(text, sizeof text, "smooth (%s%s): %s%s min %.4g -> %.4g, mean %.4g -> %.4g, %d vertices moved, %d %s, %.3f s",
            smooth_method_label(&o, &r), smooth_sliding_label(&r), quality_name(o.measure), ref ? " relative to the reference" : "",
@@ -391,14 +395,16 @@ int lmesh_move(lua_State *L) {
     if (!rc && MPI_Bcast(&r, (int)sizeof r, MPI_BYTE, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) { snprintf(err, sizeof err, "sending the report failed"); rc = 1; }
     if (!rc && lg_dist_scatter_coords(env, u->lm, W)) { snprintf(err, sizeof err, "%.*s", (int)sizeof err - 1, env->err); rc = 1; }
     mesh_free(W);
+    lg_mesh_changed(u->lm); /* also on failure: the coordinates may have come back in part */
     if (rc) return luaL_error(L, "%s: %s", fn, err);
   } else {
     if (mesh_boundary_vertices(m, fixed, err)) return luaL_error(L, "%s: %s", fn, err);
     memset(disp, 0, sizeof(double) * (size_t)m->nvert * m->dim);
     displacement_field(L, idx, u, fixed, disp, fn);
-    if (mesh_move(m, disp, fixed, &r, err)) return luaL_error(L, "%s: %s", fn, err);
+    int rc = mesh_move(m, disp, fixed, &r, err);
+    lg_mesh_changed(u->lm);
+    if (rc) return luaL_error(L, "%s: %s", fn, err);
   }
-  lg_mesh_changed(u->lm);
   char text[512];
   snprintf(text, sizeof text, "move: Laplacian motion, tau_max %.3g, %d CG iterations (residual %.1e), %d invalid cells after, %.3f s",
            r.tau_max, r.iterations, r.residual, r.invalid_after, r.seconds);

@@ -38,7 +38,8 @@ static void tcc_delete(TCCState *s) { (void)s; }
 
 /* a system-compiler build: where its files are */
 typedef struct {
-  char dir[600], cpath[800], sopath[800], tmpso[840];
+  char dir[4200], cpath[4300], sopath[4300], tmpso[4340];
+  char key[34]; /* "k" and 32 hex digits: the object's name, sealed into it (cache_seal) */
   int temp; /* no disk cache: a private folder removed after loading */
   int huge;
 } cc_job;
@@ -53,7 +54,7 @@ typedef struct {
   double ms;     /* time spent in assemblies with this kernel */
   int tier;      /* JIT_TIER_* */
   pid_t pid;     /* the background compiler */
-  cc_job job;
+  cc_job *job;   /* the background build's files (JIT_TIER_COMPILING) */
 } jit_entry;
 
 enum { JIT_TIER_TCC, JIT_TIER_COMPILING, JIT_TIER_CC, JIT_TIER_STAYS };
@@ -65,6 +66,7 @@ struct lg_jit {
   jit_entry *e;
   double tier_ms;
   int verbose;
+  int cc_failed_told; /* the system compiler's failure was reported (once a run) */
 };
 
 lg_jit *jit_new(jit_backend b, const char *libdir) {
@@ -80,6 +82,7 @@ lg_jit *jit_new(jit_backend b, const char *libdir) {
 }
 
 static void job_cleanup(cc_job *c) {
+  if (!c) return;
   unlink(c->tmpso);
   if (c->temp) { unlink(c->sopath); unlink(c->cpath); rmdir(c->dir); }
 }
@@ -91,8 +94,9 @@ void jit_free(lg_jit *j) {
     if (e->tier == JIT_TIER_COMPILING) { /* a background compiler still running */
       kill(e->pid, SIGTERM);
       while (waitpid(e->pid, NULL, 0) < 0 && errno == EINTR) {}
-      job_cleanup(&e->job);
+      job_cleanup(e->job);
     }
+    free(e->job);
     if (e->tcc) tcc_delete(e->tcc);
     if (e->dl) dlclose(e->dl);
     free(e->src);
@@ -244,9 +248,14 @@ static int private_dir(const char *dir, char *err, size_t errlen) {
  * password database); 0 and an empty dir when there is no home */
 static int cache_dir(char *dir, size_t len, char *err, size_t errlen) {
   const char *xdg = getenv("XDG_CACHE_HOME"), *home = getenv("HOME");
-  char parent[512];
+  char parent[4096];
   dir[0] = 0;
   if (xdg && xdg[0] == '/') {
+    if (strlen(xdg) >= sizeof parent) {
+      snprintf(err, errlen, "XDG_CACHE_HOME is %zu bytes long, longer than a path can be (%zu): no kernel cache there", strlen(xdg),
+               sizeof parent - 1);
+      return 1;
+    }
     snprintf(parent, sizeof parent, "%s", xdg);
     mkdir(parent, 0700); /* the XDG base folder may not exist yet */
   } else {
@@ -254,13 +263,83 @@ static int cache_dir(char *dir, size_t len, char *err, size_t errlen) {
       struct passwd *pw = getpwuid(geteuid());
       home = pw && pw->pw_dir && pw->pw_dir[0] == '/' ? pw->pw_dir : NULL;
     }
-    if (!home) return 0;
+    if (!home || strlen(home) + 8 >= sizeof parent) return 0;
     snprintf(parent, sizeof parent, "%s/.cache", home);
     if (mkdir(parent, 0700) && errno != EEXIST) return 0;
   }
-  if (strlen(parent) + 8 >= len) { snprintf(err, errlen, "the cache path %.100s is too long", parent); return 1; }
+  if (strlen(parent) + 8 >= len) { snprintf(err, errlen, "the cache path %.100s... is too long", parent); return 1; }
   snprintf(dir, len, "%s/lugal", parent);
   return private_dir(dir, err, errlen);
+}
+
+/* The seal of a cached object: a line appended after the ELF image (the loader maps only
+ * what the program headers name, so it reads past it) holding the key the object was
+ * compiled for, the image's length and its hash. Checked before dlopen: another kernel's
+ * object under this name, a truncated one (a power cut after the rename) or flipped bytes
+ * are found before any of their code runs, and the entry is discarded and built again. */
+#define SEAL_LEN 80 /* "\nLUGALSEAL1 " key(33) " " length(16) " " hash(16) padding "\n" */
+
+static int seal_line(char *line, const char *key, unsigned long long len, unsigned long long hash) {
+  char tmp[SEAL_LEN + 32];
+  int n = snprintf(tmp, sizeof tmp, "\nLUGALSEAL1 %s %016llx %016llx", key, len, hash);
+  if (n < 0 || n >= SEAL_LEN) return 1;
+  memset(line, ' ', SEAL_LEN);
+  memcpy(line, tmp, (size_t)n);
+  line[SEAL_LEN - 1] = '\n';
+  return 0;
+}
+
+/* the hash of the first len bytes of fd (from its start); 1 when they cannot be read */
+static int hash_fd(int fd, unsigned long long len, unsigned long long *h) {
+  unsigned char buf[65536];
+  uint64_t a = 1469598103934665603ull;
+  if (lseek(fd, 0, SEEK_SET) != 0) return 1;
+  for (unsigned long long left = len; left;) {
+    ssize_t got = read(fd, buf, left < sizeof buf ? (size_t)left : sizeof buf);
+    if (got < 0 && errno == EINTR) continue;
+    if (got <= 0) return 1;
+    a = fnv(a, buf, (size_t)got);
+    left -= (unsigned long long)got;
+  }
+  *h = a;
+  return 0;
+}
+
+/* append the seal to the freshly built object and make it durable (fsync) */
+static int cache_seal(const char *path, const char *key, char *err, size_t errlen) {
+  int fd = open(path, O_RDWR | O_CLOEXEC);
+  struct stat st;
+  unsigned long long h;
+  char line[SEAL_LEN];
+  int bad = fd < 0 || fstat(fd, &st) || hash_fd(fd, (unsigned long long)st.st_size, &h) ||
+            seal_line(line, key, (unsigned long long)st.st_size, h) || lseek(fd, 0, SEEK_END) < 0 ||
+            write(fd, line, SEAL_LEN) != SEAL_LEN || fsync(fd);
+  if (bad) snprintf(err, errlen, "cannot seal the compiled kernel %s: %s", path, strerror(errno ? errno : EIO));
+  if (fd >= 0) close(fd);
+  return bad;
+}
+
+/* 0 when path is an object sealed for key, intact */
+static int cache_check(const char *path, const char *key) {
+  int fd = open(path, O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return 1;
+  struct stat st;
+  char got[SEAL_LEN], want[SEAL_LEN];
+  unsigned long long len, h;
+  int bad = fstat(fd, &st) || st.st_size <= SEAL_LEN;
+  if (!bad) {
+    len = (unsigned long long)st.st_size - SEAL_LEN;
+    bad = pread(fd, got, SEAL_LEN, (off_t)len) != SEAL_LEN || hash_fd(fd, len, &h) || seal_line(want, key, len, h) ||
+          memcmp(got, want, SEAL_LEN);
+  }
+  close(fd);
+  return bad;
+}
+
+/* the folder's entry made durable too (the rename of an object into it) */
+static void sync_dir(const char *dir) {
+  int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd >= 0) { fsync(fd); close(fd); }
 }
 
 /* run the compiler on cpath into sopath; its messages into out */
@@ -310,6 +389,19 @@ static int cc_run(const cc_job *c, char *out, size_t outlen) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
+/* the source of a build: the kernel and its key as a symbol (checked after loading) */
+static int cc_write_source(const cc_job *c, const char *src, char *err, size_t errlen) {
+  outfile o;
+  if (outfile_open(&o, c->cpath, err, errlen)) return 1;
+  fprintf(o.f, "const char lugal_kernel_key[] = \"%s\";\n", c->key);
+  fputs("double lugal_sign(double x) { return (x > 0) - (x < 0); }\n", o.f);
+  fputs(src, o.f);
+  return outfile_commit(&o, err, errlen);
+}
+
+/* a damaged cache entry is worth a line: it is removed and built again */
+static void jit_note_damaged(const char *why) { fprintf(stderr, "lugal: %s: removed, compiling it again\n", why); }
+
 /* the files of a build, and the source written unless the object is cached: 1 when the
  * object is there already, 0 when it must be compiled, -1 on an error */
 static int cc_prepare(const char *src, uint64_t h1, uint64_t h2, cc_job *c, char *err, size_t errlen) {
@@ -318,17 +410,17 @@ static int cc_prepare(const char *src, uint64_t h1, uint64_t h2, cc_job *c, char
   c->temp = !c->dir[0];
   if (c->temp) {
     const char *t = getenv("TMPDIR");
-    snprintf(c->dir, sizeof c->dir, "%s/lugal-kernel-XXXXXX", t && t[0] == '/' ? t : "/tmp");
+    if (!t || t[0] != '/' || strlen(t) > 1024) t = "/tmp";
+    snprintf(c->dir, sizeof c->dir, "%s/lugal-kernel-XXXXXX", t);
     if (!mkdtemp(c->dir)) { snprintf(err, errlen, "cannot create a temporary folder for a kernel: %s", strerror(errno)); return -1; }
   }
   /* a huge kernel (a very deep expression) takes gcc minutes at -O1 and up, and seconds
    * at -O0 (an 8 MB kernel: > 5 min and 12 s here) */
   c->huge = strlen(src) > CC_HUGE;
   uint64_t mk = machine_key() ^ (c->huge ? 0x9e3779b97f4a7c15ull : 0);
-  char base[700];
-  snprintf(base, sizeof base, "%s/k%016llx%016llx", c->dir, (unsigned long long)(h1 ^ mk), (unsigned long long)h2);
-  snprintf(c->cpath, sizeof c->cpath, "%s.c", base);
-  snprintf(c->sopath, sizeof c->sopath, "%s.so", base);
+  snprintf(c->key, sizeof c->key, "k%016llx%016llx", (unsigned long long)(h1 ^ mk), (unsigned long long)h2);
+  snprintf(c->cpath, sizeof c->cpath, "%s/%s.c", c->dir, c->key);
+  snprintf(c->sopath, sizeof c->sopath, "%s/%s.so", c->dir, c->key);
   static unsigned seq;
   snprintf(c->tmpso, sizeof c->tmpso, "%s.%ld.%u.tmp", c->sopath, (long)getpid(), seq++);
   struct stat st;
@@ -338,49 +430,68 @@ static int cc_prepare(const char *src, uint64_t h1, uint64_t h2, cc_job *c, char
     return -1;
   }
   if (have) return 1;
-  outfile o;
-  if (outfile_open(&o, c->cpath, err, errlen)) return -1;
-  fputs("double lugal_sign(double x) { return (x > 0) - (x < 0); }\n", o.f);
-  fputs(src, o.f);
-  if (outfile_commit(&o, err, errlen)) return -1;
-  return 0;
+  return cc_write_source(c, src, err, errlen) ? -1 : 0;
 }
 
-/* a finished build: the object under its name (others may be loading the same one: rename
- * is atomic), then loaded */
-static kernel_fn cc_finish(cc_job *c, int built, jit_entry *ent, char *err, size_t errlen) {
+/* A finished build: the object sealed and put under its name (others may be loading the same
+ * one: rename is atomic), then checked and loaded. A cached object that is not the kernel
+ * asked for, or not intact, is removed: NULL with *damaged = 1, and the caller builds it
+ * again. */
+static kernel_fn cc_finish(cc_job *c, int built, jit_entry *ent, int *damaged, char *err, size_t errlen) {
+  *damaged = 0;
   if (built) {
+    if (cache_seal(c->tmpso, c->key, err, errlen)) { job_cleanup(c); return NULL; }
     chmod(c->tmpso, 0700);
     if (rename(c->tmpso, c->sopath)) {
       snprintf(err, errlen, "cannot rename %s: %s", c->tmpso, strerror(errno));
       job_cleanup(c);
       return NULL;
     }
+    sync_dir(c->dir);
   }
-  void *dl = dlopen(c->sopath, RTLD_NOW | RTLD_LOCAL);
+  void *dl = NULL;
+  kernel_fn fn = NULL;
+  const char *key = NULL;
+  if (cache_check(c->sopath, c->key))
+    snprintf(err, errlen, "the cached kernel %s is damaged or another kernel's (its seal does not match)", c->sopath);
+  else if (!(dl = dlopen(c->sopath, RTLD_NOW | RTLD_LOCAL)))
+    snprintf(err, errlen, "cannot load %s: %s", c->sopath, dlerror());
+  else if (!(key = dlsym(dl, "lugal_kernel_key")) || strcmp(key, c->key))
+    snprintf(err, errlen, "the cached kernel %s is another kernel's", c->sopath);
+  else if (!(fn = (kernel_fn)(uintptr_t)dlsym(dl, "lugal_kernel")))
+    snprintf(err, errlen, "%s has no kernel", c->sopath);
+  if (!fn) {
+    if (dl) dlclose(dl);
+    unlink(c->sopath); /* never loaded again; the next build replaces it */
+    *damaged = !built;
+  }
   if (c->temp) { unlink(c->sopath); unlink(c->cpath); rmdir(c->dir); }
-  if (!dl) { snprintf(err, errlen, "cannot load %s: %s", c->sopath, dlerror()); return NULL; }
-  kernel_fn fn = (kernel_fn)(uintptr_t)dlsym(dl, "lugal_kernel");
-  if (!fn) { dlclose(dl); snprintf(err, errlen, "%s has no kernel", c->sopath); return NULL; }
+  if (!fn) return NULL;
   set_vmath(dlsym(dl, "lugal_vmath"));
   ent->dl = dl;
   return fn;
 }
 
+/* build the object and load it; a cached object found damaged is built again, once */
 static kernel_fn compile_cc(const char *src, uint64_t h1, uint64_t h2, jit_entry *ent, char *err, size_t errlen) {
   cc_job c;
-  int have = cc_prepare(src, h1, h2, &c, err, errlen);
-  if (have < 0) return NULL;
-  if (!have) {
-    char out[512];
-    int rc = cc_run(&c, out, sizeof out);
-    if (rc != 0) {
-      job_cleanup(&c);
-      snprintf(err, errlen, "the C compiler failed on a generated kernel (%s): %s", c.cpath, out);
-      return NULL;
+  for (int attempt = 0; attempt < 2; attempt++) {
+    int have = cc_prepare(src, h1, h2, &c, err, errlen), damaged;
+    if (have < 0) return NULL;
+    if (!have) {
+      char out[512];
+      int rc = cc_run(&c, out, sizeof out);
+      if (rc != 0) {
+        job_cleanup(&c);
+        snprintf(err, errlen, "the C compiler failed on a generated kernel (%s): %s", c.cpath, out);
+        return NULL;
+      }
     }
+    kernel_fn f = cc_finish(&c, !have, ent, &damaged, err, errlen);
+    if (f || !damaged) return f;
+    jit_note_damaged(err);
   }
-  return cc_finish(&c, !have, ent, err, errlen);
+  return NULL;
 }
 
 int jit_compile(lg_jit *j, const char *src, kernel_fn *fn, int *id, double *ms, int *cached, char *err, size_t errlen) {
@@ -413,6 +524,11 @@ int jit_compile(lg_jit *j, const char *src, kernel_fn *fn, int *id, double *ms, 
 #else
   kernel_fn f = j->backend == JIT_CC ? compile_cc(src, h1, h2, &ent, err, errlen) : compile_tcc(j, src, &ent, err, errlen);
   ent.tier = j->backend == JIT_CC ? JIT_TIER_CC : j->backend == JIT_AUTO ? JIT_TIER_TCC : JIT_TIER_STAYS;
+  if (!f && j->backend == JIT_CC) { /* the system compiler or its cache failed: libtcc's code, the same bits */
+    if (!j->cc_failed_told++) fprintf(stderr, "lugal: %s; kernels run libtcc's code instead\n", err);
+    f = compile_tcc(j, src, &ent, err, errlen);
+    ent.tier = JIT_TIER_STAYS;
+  }
   if (f && j->backend == JIT_AUTO && !(ent.src = strdup(src))) ent.tier = JIT_TIER_STAYS;
 #endif
   if (!f) return 1;
@@ -431,13 +547,16 @@ static int tier_poll(lg_jit *j, jit_entry *e, int blocking) {
   pid_t r;
   while ((r = waitpid(e->pid, &status, blocking ? 0 : WNOHANG)) < 0 && errno == EINTR) {}
   if (r == 0) return 0;
-  char err[512] = "";
+  char err[1024] = "";
   kernel_fn f = NULL;
-  if (r == e->pid && WIFEXITED(status) && WEXITSTATUS(status) == 0) f = cc_finish(&e->job, 1, e, err, sizeof err);
+  int damaged;
+  if (r == e->pid && WIFEXITED(status) && WEXITSTATUS(status) == 0) f = cc_finish(e->job, 1, e, &damaged, err, sizeof err);
   else {
-    job_cleanup(&e->job);
+    job_cleanup(e->job);
     snprintf(err, sizeof err, "the C compiler failed (status %d)", status);
   }
+  free(e->job);
+  e->job = NULL;
   if (f) {
     e->fn = f;
     e->tier = JIT_TIER_CC;
@@ -462,20 +581,32 @@ void jit_account(lg_jit *j, int id, double ms) {
   jit_entry *e = &j->e[id];
   e->ms += ms;
   if (e->tier != JIT_TIER_TCC || e->ms < j->tier_ms || !e->src) return;
-  char err[512];
+  char err[1024];
+  if (!(e->job = malloc(sizeof *e->job))) { e->tier = JIT_TIER_STAYS; return; }
   /* the name the cc backend gives the same source: both share the disk cache */
-  int have = cc_prepare(e->src, e->h1, e->h2 ^ (uint64_t)JIT_AUTO ^ (uint64_t)JIT_CC, &e->job, err, sizeof err);
-  if (have < 0) { e->tier = JIT_TIER_STAYS; return; }
-  if (have) { /* compiled before (this run or an earlier one): load it now */
-    kernel_fn f = cc_finish(&e->job, 0, e, err, sizeof err);
-    e->tier = f ? JIT_TIER_CC : JIT_TIER_STAYS;
-    if (f) e->fn = f;
-    if (j->verbose && f) fprintf(stderr, "lugal: kernel %d now runs the system compiler's cached code\n", (int)id);
+  uint64_t h2 = e->h2 ^ (uint64_t)JIT_AUTO ^ (uint64_t)JIT_CC;
+  int have = cc_prepare(e->src, e->h1, h2, e->job, err, sizeof err), damaged = 0;
+  if (have > 0) { /* compiled before (this run or an earlier one): load it now */
+    kernel_fn f = cc_finish(e->job, 0, e, &damaged, err, sizeof err);
+    if (f) {
+      e->fn = f;
+      e->tier = JIT_TIER_CC;
+      if (j->verbose) fprintf(stderr, "lugal: kernel %d now runs the system compiler's cached code\n", (int)id);
+    }
+    if (damaged) {
+      jit_note_damaged(err);
+      have = cc_prepare(e->src, e->h1, h2, e->job, err, sizeof err); /* built again below */
+    }
+  }
+  if (have || cc_spawn(e->job, -1, &e->pid, err, sizeof err)) {
+    if (!have) job_cleanup(e->job);
+    if (e->tier != JIT_TIER_CC) e->tier = JIT_TIER_STAYS;
+    free(e->job);
+    e->job = NULL;
     free(e->src);
     e->src = NULL;
     return;
   }
-  if (cc_spawn(&e->job, -1, &e->pid, err, sizeof err)) { job_cleanup(&e->job); e->tier = JIT_TIER_STAYS; return; }
   e->tier = JIT_TIER_COMPILING;
   if (j->verbose) fprintf(stderr, "lugal: kernel %d: %.0f ms in libtcc code, compiling it in the background\n", (int)id, e->ms);
 }

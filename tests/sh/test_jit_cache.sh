@@ -17,9 +17,44 @@ n=$(ls "$C/lugal" | grep -c '\.so$')
 XDG_CACHE_HOME="$C" "$BUILD/lugal" "$ROOT/examples/poisson.lua" 8 -lugal_jit cc > out2 2>&1 || { cat out2; exit 1; }
 [ "$(ls "$C/lugal" | grep -c '\.so$')" = "$n" ] || { echo "FAIL: the second run compiled again"; exit 1; }
 grep -q "L2 error" out2
+# a cached object that is not the kernel asked for, cut short (a power cut after the rename)
+# or with flipped bytes is found by its seal before any of its code runs: removed, compiled
+# again, the same answer (another kernel's object gave 0 with exit 0, a truncated one failed
+# every later run, flipped bytes crashed)
+D="$T/plain"
+XDG_CACHE_HOME="$D" "$BUILD/lugal" "$ROOT/examples/poisson.lua" 8 -lugal_jit cc > out2 2>&1 || { cat out2; exit 1; }
+set -- "$D"/lugal/*.so
+cp "$1" "$T/first.so"
+cp "$2" "$1"
+XDG_CACHE_HOME="$D" "$BUILD/lugal" "$ROOT/examples/poisson.lua" 8 -lugal_jit cc > out4 2>&1 || { cat out4; exit 1; }
+grep -q "damaged or another kernel's (its seal does not match): removed, compiling it again" out4 || { echo "FAIL: a swapped object"; cat out4; exit 1; }
+[ "$(grep "L2 error" out4)" = "$(grep "L2 error" out2)" ] || { echo "FAIL: a swapped object changed the answer"; cat out4; exit 1; }
+cmp -s "$1" "$T/first.so" || { echo "FAIL: the swapped object was not built again"; exit 1; }
+head -c 3000 "$T/first.so" > "$1"
+XDG_CACHE_HOME="$D" "$BUILD/lugal" "$ROOT/examples/poisson.lua" 8 -lugal_jit cc > out5 2>&1 || { cat out5; exit 1; }
+[ "$(grep "L2 error" out5)" = "$(grep "L2 error" out2)" ] || { echo "FAIL: a truncated object"; cat out5; exit 1; }
+cmp -s "$1" "$T/first.so" || { echo "FAIL: the truncated object was not built again"; exit 1; }
+size=$(stat -c %s "$1")
+for at in 200 $((size / 2)) $((size - 200)); do
+  cp "$T/first.so" "$1"
+  printf '\377\377\377\377' | dd of="$1" bs=1 seek=$at conv=notrunc 2> /dev/null
+  XDG_CACHE_HOME="$D" "$BUILD/lugal" "$ROOT/examples/poisson.lua" 8 -lugal_jit cc > out6 2>&1 || { echo "FAIL: flipped bytes at $at"; cat out6; exit 1; }
+  [ "$(grep "L2 error" out6)" = "$(grep "L2 error" out2)" ] || { echo "FAIL: flipped bytes at $at"; cat out6; exit 1; }
+  grep -q "removed, compiling it again" out6 || { echo "FAIL: flipped bytes at $at not found"; cat out6; exit 1; }
+done
+# the default tiers load cached objects too: a swapped one there is found the same way
+cp "$2" "$1"
+XDG_CACHE_HOME="$D" "$BUILD/lugal" "$ROOT/examples/poisson.lua" 8 -lugal_jit_tier_ms 0 > out7 2>&1 || { cat out7; exit 1; }
+[ "$(grep "L2 error" out7)" = "$(grep "L2 error" out2)" ] || { echo "FAIL: a swapped object in the tiers"; cat out7; exit 1; }
+# a folder that others can write to is not loaded from: libtcc's code, the same answer
 chmod 777 "$C/lugal"
-if XDG_CACHE_HOME="$C" "$BUILD/lugal" "$ROOT/examples/poisson.lua" 8 -lugal_jit cc > out3 2>&1; then
-  echo "FAIL: a world-writable cache was used"; exit 1
-fi
-grep -q "is not a private folder of this user" out3 || { cat out3; exit 1; }
+XDG_CACHE_HOME="$C" "$BUILD/lugal" "$ROOT/examples/poisson.lua" 8 -lugal_jit cc > out3 2>&1 || { cat out3; exit 1; }
+grep -q "is not a private folder of this user.*kernels run libtcc's code instead" out3 || { cat out3; exit 1; }
+[ "$(grep -c "kernels run libtcc" out3)" = 1 ] || { echo "FAIL: the fallback told more than once"; cat out3; exit 1; }
+[ "$(grep "L2 error" out3)" = "$(grep "L2 error" out2)" ] || { echo "FAIL: the fallback's answer"; cat out3; exit 1; }
+# an XDG_CACHE_HOME longer than a path can be is refused with its length, not cut short
+chmod 700 "$C/lugal"
+long=/$(head -c 5000 /dev/zero | tr '\0' a)
+XDG_CACHE_HOME="$long" "$BUILD/lugal" "$ROOT/examples/poisson.lua" 8 -lugal_jit cc > out8 2>&1 || { cat out8; exit 1; }
+grep -q "XDG_CACHE_HOME is 5001 bytes long" out8 || { echo "FAIL: a long XDG_CACHE_HOME"; cat out8; exit 1; }
 echo "jit cache: ok"

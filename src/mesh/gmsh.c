@@ -292,8 +292,12 @@ static void read_entity(lex *l, gfile *g, int d, int partitioned) {
   gentity en = {d, partitioned, 0, g->nphys, 0, l->line};
   en.tag = tok_int(l, "entity tag", 1, INT_MAX);
   en.line = l->tline;
+  /* an entity of a partitioned file whose parent has a higher dimension is an interface
+   * between partitions (gmsh -part gives it the parent's physical tags): its elements are
+   * not boundary facets, whatever tags it carries */
+  int interface = 0;
   if (partitioned) {
-    tok_int(l, "parent dimension", 0, 3);
+    interface = tok_int(l, "parent dimension", 0, 3) > d;
     tok_int(l, "parent tag", INT_MIN, INT_MAX);
     long np = tok_count(l, "number of partitions", 1);
     for (long j = 0; j < np && !l->failed; j++) tok_int(l, "partition tag", INT_MIN, INT_MAX);
@@ -307,6 +311,7 @@ static void read_entity(lex *l, gfile *g, int d, int partitioned) {
     if (p == 0) { lex_err(l, "physical tag 0 of entity %lld (tags are nonzero)", (long long)en.tag); return; }
     /* a negative physical tag marks a reversed orientation: the group is the same */
     if (p < 0) p = -p;
+    if (interface) continue;
     if (GROW(l, g->phys, g->capphys, g->nphys + 1)) return;
     g->phys[g->nphys++] = p;
     en.nphys++;

@@ -608,10 +608,12 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
       rc = 1;
       goto done;
     }
-    if (reason < 0) {
-      lg_seterr(env, "the optimization did not converge: %s after %d iterations (J = %g, |g| = %.3e)", info->reason, (int)it,
-                f, gnorm);
-      rc = 1;
+    if (reason < 0 && lg_mpi_rank() == 0) {
+      /* the controls hold TAO's last iterate, a usable point (a line search that failed at
+       * rounding level, the iteration limit): returned with converged = false, not raised */
+      fprintf(stderr, "lg.minimize: stopped without converging: %s after %d iterations (J = %g, |g| = %.3e)%s%s; the controls "
+                      "hold the last iterate (info.converged = false)\n", info->reason, (int)it, info->J, gnorm,
+              C.failed ? "; the last trial point failed: " : "", C.failed ? env->err : "");
     }
   }
 done:

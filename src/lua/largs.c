@@ -203,7 +203,18 @@ double opt_num(lua_State *L, int t, const char *key, double def, const char *fn)
   int ty = lua_getfield(L, t, key);
   if (ty == LUA_TNUMBER) v = lua_tonumber(L, -1);
   else if (ty != LUA_TNIL) luaL_error(L, "%s: option '%s' must be a number, got %s", fn, key, luaL_typename(L, -1));
+  /* NaN is no setting of anything (and passes every comparison a range check makes) */
+  if (isnan(v)) luaL_error(L, "%s: option '%s' must be a number, got nan", fn, key);
   lua_pop(L, 1);
+  return v;
+}
+
+double opt_tolerance(lua_State *L, int t, const char *key, double def, const char *fn) {
+  int given = lua_getfield(L, t, key) != LUA_TNIL;
+  lua_pop(L, 1);
+  double v = opt_num(L, t, key, def, fn);
+  if (given && !(v >= 0 && isfinite(v)))
+    luaL_error(L, "%s: option '%s' must be a finite number >= 0 (a tolerance), got %f", fn, key, v);
   return v;
 }
 
@@ -251,7 +262,26 @@ const char *opt_str(lua_State *L, int t, const char *key, const char *def, const
   return v; /* valid while the table holds it */
 }
 
+#define MT_INFO "lugal.info"
+
+void push_info_table(lua_State *L, int nrec) {
+  lua_createtable(L, 0, nrec);
+  luaL_newmetatable(L, MT_INFO);
+  lua_setmetatable(L, -2);
+}
+
+int is_info_table(lua_State *L, int idx) {
+  if (!lua_istable(L, idx) || !lua_getmetatable(L, idx)) return 0;
+  luaL_getmetatable(L, MT_INFO);
+  int same = lua_rawequal(L, -1, -2);
+  lua_pop(L, 2);
+  return same;
+}
+
 void check_keys(lua_State *L, int t, const char *fn, const char *const *allowed) {
+  if (is_info_table(L, t))
+    luaL_error(L, "%s: an options table was expected, got the info table a solve or lg.minimize returns after its results: "
+                  "keep the results in locals first (local uh = problem:solve())", fn);
   lua_pushnil(L);
   while (lua_next(L, t)) {
     lua_pop(L, 1);

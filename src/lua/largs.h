@@ -72,7 +72,13 @@ ud_mesh *check_mesh(lua_State *L, int idx, const char *fn);
 void push_mesh(lua_State *L, mesh *m);
 /* a rank's part of a distributed mesh, made on that rank (lg_mesh_generate_part) */
 void push_mesh_part(lua_State *L, lg_mesh *lm);
+/* the info table of a solve or a minimization (problem:solve, lg.minimize: returned after
+ * the results), marked so that it is never taken for an options table */
+void push_info_table(lua_State *L, int nrec);
+int is_info_table(lua_State *L, int idx);
 double opt_num(lua_State *L, int t, const char *key, double def, const char *fn);
+/* a tolerance option: a finite number >= 0, or absent (def) */
+double opt_tolerance(lua_State *L, int t, const char *key, double def, const char *fn);
 /* integers checked as the C int they become (lo..hi within the int range): a float with an
  * integral value is accepted, 2.5 is "a fraction", 2^32 + 2 "too large" */
 lua_Integer check_int_value(lua_State *L, int idx, lua_Integer lo, lua_Integer hi, const char *fn, const char *what);

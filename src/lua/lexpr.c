@@ -471,7 +471,8 @@ static int l_list(lua_State *L) {
 }
 
 static int quad_order(lua_State *L, int idx, const char *fn) {
-  if (lua_isnoneornil(L, idx)) return -1;
+  /* lg.integrate(mesh, problem:solve()): the solve's info table follows the solution */
+  if (lua_isnoneornil(L, idx) || is_info_table(L, idx)) return -1;
   if (!lua_istable(L, idx)) return typeerror(L, fn, idx, "a table of options {order=}");
   static const char *const keys[] = {"order", NULL};
   check_keys(L, idx, fn, keys);

@@ -534,6 +534,20 @@ static const double *bound_values(lua_State *L, lg_reduced *rf, int i, int idx, 
   return v;
 }
 
+/* the bounds of control i: no NaN, lower <= upper everywhere (either may be absent; ±math.huge
+ * is no bound). A box with lower above upper has no point: TAO's bounded methods returned one
+ * side with converged = true after 0 iterations */
+static void check_bounds(lua_State *L, lg_reduced *rf, int i, const double *lo, const double *up, const char *fn) {
+  int n = lg_reduced_control_size(rf, i);
+  for (int k = 0; k < n; k++) {
+    if ((lo && isnan(lo[k])) || (up && isnan(up[k])))
+      luaL_error(L, "%s: the %s bound of control %d is nan at dof %d", fn, lo && isnan(lo[k]) ? "lower" : "upper", i + 1, k + 1);
+    if (lo && up && lo[k] > up[k])
+      luaL_error(L, "%s: the lower bound of control %d is above its upper bound at dof %d (%f > %f): bounds = {lower, upper}", fn,
+                 i + 1, k + 1, lo[k], up[k]);
+  }
+}
+
 /* lg.minimize(rf, {method=, bounds={lower, upper}, gatol=, grtol=, gttol=, maxit=, monitor=, series=,
  * inner_product=}) */
 static int l_minimize(lua_State *L) {
@@ -565,9 +579,9 @@ static int l_minimize(lua_State *L) {
       return luaL_error(L, "%s: method \"almm\" needs constraints = {{g, \"<=\", c}, ...}", fn);
     if (has_cons && strcmp(o.method, "almm"))
       return luaL_error(L, "%s: constraints need method \"almm\" (the augmented Lagrangian), got \"%s\"", fn, o.method);
-    o.gatol = opt_num(L, 2, "gatol", -1, fn);
-    o.grtol = opt_num(L, 2, "grtol", -1, fn);
-    o.gttol = opt_num(L, 2, "gttol", -1, fn);
+    o.gatol = opt_tolerance(L, 2, "gatol", -1, fn);
+    o.grtol = opt_tolerance(L, 2, "grtol", -1, fn);
+    o.gttol = opt_tolerance(L, 2, "gttol", -1, fn);
     o.maxit = opt_int(L, 2, "maxit", 0, fn);
     if (o.maxit < 0) return luaL_error(L, "%s: option 'maxit' must be >= 0", fn);
     lua_getfield(L, 2, "monitor");
@@ -639,6 +653,7 @@ static int l_minimize(lua_State *L) {
         }
         lua_pop(L, 1);
       }
+      for (int i = 0; i < nc; i++) check_bounds(L, u->rf, i, o.lower[i], o.upper[i], fn);
     }
   }
   lg_env *env = get_env(L);
@@ -670,7 +685,7 @@ static int l_minimize(lua_State *L) {
     }
     if (!found) lua_pushnil(L);
   }
-  lua_createtable(L, 0, 6);
+  push_info_table(L, 6);
   lua_pushinteger(L, info.iterations); lua_setfield(L, -2, "iterations");
   lua_pushinteger(L, info.evaluations); lua_setfield(L, -2, "evaluations");
   lua_pushinteger(L, info.hessian_products); lua_setfield(L, -2, "hessian_products");

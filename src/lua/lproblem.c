@@ -52,9 +52,28 @@ static int func_values(lua_State *L) {
   return 1;
 }
 
+/* a table given to f:assign is a vector expression ({e1, e2[, e3]}: as many entries as
+ * the function has components, or any entry not a number), else the dof values */
+static int table_is_vector_expr(lua_State *L, int idx, int ncomp) {
+  lua_Integer n = luaL_len(L, idx);
+  if (ncomp > 1 && n == ncomp) return 1;
+  for (lua_Integer i = 1; i <= n; i++) {
+    int number = lua_geti(L, idx, i) == LUA_TNUMBER;
+    lua_pop(L, 1);
+    if (!number) return 1;
+  }
+  return 0;
+}
+
 static int func_assign(lua_State *L) {
   ud_func *u = check_func(L, 1, "f:assign");
   ud_func *g = luaL_testudata(L, 2, MT_FUNC);
+  if (lua_istable(L, 2) && table_is_vector_expr(L, 2, u->f->dm->bs)) {
+    lg_env *env = get_env(L);
+    expr *e = check_expr(L, 2, "f:assign");
+    if (lg_interpolate(env, u->f, e)) return lgerror(L, "f:assign", env);
+    return 0;
+  }
   if (g) {
     if (g->f->dm != u->f->dm)
       return luaL_error(L, "f:assign: argument 1 must be a discrete function of the same basis and mesh");
@@ -439,7 +458,7 @@ static int prob_solve(lua_State *L) {
   int base = lua_gettop(L);
   push_functions_of(L, 1, out, u->nfield);
   /* info table */
-  lua_createtable(L, 0, 8);
+  push_info_table(L, 8);
   lua_pushinteger(L, info.iterations); lua_setfield(L, -2, "iterations");
   lua_pushinteger(L, info.linear_iterations); lua_setfield(L, -2, "linear_iterations");
   lua_pushstring(L, info.reason); lua_setfield(L, -2, "reason");

@@ -253,10 +253,28 @@ int check_int_arg(lua_State *L, int arg, lua_Integer lo, lua_Integer hi, const c
   return (int)check_int_value(L, arg, lo, hi, fn, what);
 }
 
+const char *check_cstring(lua_State *L, int idx, const char *fn, const char *what) {
+  size_t len;
+  const char *s = lua_tolstring(L, idx, &len);
+  if (!s) luaL_error(L, "%s: %s must be a string, got %s", fn, what, luaL_typename(L, idx));
+  if (strlen(s) != len)
+    luaL_error(L, "%s: %s \"%s...\" holds a zero byte (\\0): names and paths end at the first one, so two names "
+                  "would be one", fn, what, s);
+  return s;
+}
+
+const char *opt_cstring(lua_State *L, int idx, const char *def, const char *fn, const char *what) {
+  return lua_isnoneornil(L, idx) ? def : check_cstring(L, idx, fn, what);
+}
+
 const char *opt_str(lua_State *L, int t, const char *key, const char *def, const char *fn) {
   const char *v = def;
   int ty = lua_getfield(L, t, key);
-  if (ty == LUA_TSTRING) v = lua_tostring(L, -1);
+  if (ty == LUA_TSTRING) {
+    char what[96];
+    snprintf(what, sizeof what, "option '%s'", key);
+    v = check_cstring(L, -1, fn, what);
+  }
   else if (ty != LUA_TNIL) luaL_error(L, "%s: option '%s' must be a string, got %s", fn, key, luaL_typename(L, -1));
   lua_pop(L, 1);
   return v; /* valid while the table holds it */
@@ -286,7 +304,7 @@ void check_keys(lua_State *L, int t, const char *fn, const char *const *allowed)
   while (lua_next(L, t)) {
     lua_pop(L, 1);
     if (lua_type(L, -1) != LUA_TSTRING) luaL_error(L, "%s: options must be named (key = value)", fn);
-    const char *k = lua_tostring(L, -1);
+    const char *k = check_cstring(L, -1, fn, "an option's name");
     int ok = 0;
     for (int i = 0; allowed[i]; i++) ok |= !strcmp(allowed[i], k);
     if (!ok) {

@@ -76,6 +76,11 @@ void push_mesh_part(lua_State *L, lg_mesh *lm);
  * the results), marked so that it is never taken for an options table */
 void push_info_table(lua_State *L, int nrec);
 int is_info_table(lua_State *L, int idx);
+/* the string at idx (what: "argument 2", "field name", for the message), which must hold no
+ * zero byte: C strings end there ("p\0x" and "p\0y" were written as one field "p") */
+const char *check_cstring(lua_State *L, int idx, const char *fn, const char *what);
+/* the same, or def where the argument is absent or nil */
+const char *opt_cstring(lua_State *L, int idx, const char *def, const char *fn, const char *what);
 double opt_num(lua_State *L, int t, const char *key, double def, const char *fn);
 /* a tolerance option: a finite number >= 0, or absent (def) */
 double opt_tolerance(lua_State *L, int t, const char *key, double def, const char *fn);

@@ -221,7 +221,7 @@ static int l_vector(lua_State *L) {
 static int new_symbol(lua_State *L, func_kind kind, const char *fn) {
   ud_basis *b = luaL_testudata(L, 1, MT_BASIS);
   if (!b) return typeerror(L, fn, 1, "a basis (lg.lagrange(p))");
-  const char *name = luaL_optstring(L, 2, kind == FK_TEST ? "v" : "u");
+  const char *name = opt_cstring(L, 2, kind == FK_TEST ? "v" : "u", fn, "argument 2 (the name)");
   if (lua_gettop(L) > 2) return luaL_error(L, "%s: takes a basis and a name, got %d arguments", fn, lua_gettop(L));
   lg_env *env = get_env(L);
   int id = expr_func_new(env->c, kind, name, b->degree, b->ncomp, NULL);
@@ -252,7 +252,7 @@ static int l_normal(lua_State *L) {
 }
 
 static int l_parameter(lua_State *L) {
-  const char *name = luaL_checkstring(L, 1);
+  const char *name = check_cstring(L, 1, "lg.parameter", "argument 1 (the name)");
   double v = luaL_optnumber(L, 2, 0);
   if (!isfinite(v)) return luaL_error(L, "lg.parameter: argument 2 (the value of %s) must be a finite number, got %f", name, v);
   lg_env *env = get_env(L);

@@ -125,7 +125,7 @@ static int l_box(lua_State *L) {
  * refuses, -lugal_read_parts 0) rank 0 parses the file and sends each rank its part; with
  * -lugal_distribute 0 it sends every rank the whole mesh (mesh_pack) */
 static int l_read(lua_State *L) {
-  const char *path = luaL_checkstring(L, 1);
+  const char *path = check_cstring(L, 1, "lg.mesh.read", "argument 1 (the path)");
   char err[MESH_ERRLEN] = "";
   int root = lg_mpi_rank() == 0;
   if (lg_distribute_wanted() && lg_read_parts_wanted()) {
@@ -232,6 +232,7 @@ static int l_mesh_new(lua_State *L) {
     while (lua_next(L, bt)) {
       if (lua_type(L, -2) != LUA_TSTRING || lua_type(L, -1) != LUA_TTABLE)
         return luaL_error(L, "%s: 'boundary' maps names to tables of facets", fn);
+      check_cstring(L, -2, fn, "boundary name");
       lua_pop(L, 1);
       nnames++;
     }
@@ -321,7 +322,7 @@ static int region_new(lua_State *L, region_kind kind, const char *fn) {
       }
       region_add_tag(L, &r, (int)t, fn);
     } else if (lua_type(L, arg) == LUA_TSTRING) {
-      const char *name = lua_tostring(L, arg);
+      const char *name = check_cstring(L, arg, fn, "the name");
       int tags[REGION_MAXTAGS];
       int k = kind == REGION_BOUNDARY ? mesh_boundary_tags(m, name, tags, REGION_MAXTAGS) : mesh_region_tags(m, name, tags, REGION_MAXTAGS);
       if (k == 0) {
@@ -646,7 +647,7 @@ static int write_fields(lua_State *L, mesh *m, lg_mesh *lm, const char *path, in
     lua_pushnil(L);
     while (lua_next(L, tidx)) {
       if (lua_type(L, -2) != LUA_TSTRING) return luaL_error(L, "%s: field names must be strings, got %s", fn, luaL_typename(L, -2));
-      const char *name = lua_tostring(L, -2);
+      const char *name = check_cstring(L, -2, fn, "field name");
       ud_func *uf = luaL_testudata(L, -1, MT_FUNC);
       ud_qarray *qa = luaL_testudata(L, -1, MT_QARRAY);
       if (qa) {
@@ -741,7 +742,7 @@ static int write_svg(lua_State *L, mesh *m, lg_mesh *lm, const char *path, const
   lua_pushnil(L);
   if (!lua_next(L, 3)) return luaL_error(L, "%s: an SVG picture needs one per-cell field", fn);
   if (lua_type(L, -2) != LUA_TSTRING) return luaL_error(L, "%s: field names must be strings", fn);
-  const char *name = lua_tostring(L, -2);
+  const char *name = check_cstring(L, -2, fn, "field name");
   int vidx = lua_gettop(L);
   lua_pushvalue(L, -2);
   if (lua_next(L, 3)) return luaL_error(L, "%s: an SVG picture shows one field, the table has more", fn);
@@ -808,7 +809,7 @@ static int write_svg(lua_State *L, mesh *m, lg_mesh *lm, const char *path, const
 static int mesh_write(lua_State *L) {
   const char *fn = "mesh:write";
   ud_mesh *u = check_mesh(L, 1, fn);
-  const char *path = luaL_checkstring(L, 2);
+  const char *path = check_cstring(L, 2, fn, "argument 1 (the path)");
   size_t l = strlen(path);
   if (l > 4 && !strcmp(path + l - 4, ".msh") && u->lm->dist) { /* gathered and written by rank 0 */
     lg_env *env = get_env(L);
@@ -965,7 +966,7 @@ static ud_qarray *push_quality(lua_State *L, int midx, const char *name, int tid
 }
 
 static int mesh_quality_l(lua_State *L) {
-  push_quality(L, 1, luaL_checkstring(L, 2), 3, "mesh:quality");
+  push_quality(L, 1, check_cstring(L, 2, "mesh:quality", "argument 1 (the measure)"), 3, "mesh:quality");
   return 1;
 }
 
@@ -1181,7 +1182,7 @@ static int mesh_quality_report(lua_State *L) {
 /* ---------------------------------------------------------------- series */
 
 static int l_series(lua_State *L) {
-  const char *path = luaL_checkstring(L, 1);
+  const char *path = check_cstring(L, 1, "lg.series", "argument 1 (the path)");
   size_t l = strlen(path);
   if (l < 5 || strcmp(path + l - 4, ".pvd")) return luaL_error(L, "lg.series: argument 1 must be a path ending in .pvd, got \"%s\"", path);
   if (l >= 500) return luaL_error(L, "lg.series: path too long");

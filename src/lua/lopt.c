@@ -20,7 +20,7 @@ static int l_control(lua_State *L) {
   ud_basis *b = luaL_testudata(L, 1, MT_BASIS);
   if (!b) return typeerror(L, fn, 1, "a basis (lg.lagrange(p))");
   ud_mesh *um = check_mesh(L, 2, fn);
-  const char *name = luaL_optstring(L, 3, "m");
+  const char *name = opt_cstring(L, 3, "m", fn, "argument 3 (the name)");
   lg_env *env = get_env(L);
   lg_function *f = lg_function_new(env, um->lm, lg_mesh_dofmap(env, um->lm, b->degree, b->ncomp, b->disc), name);
   if (!f) return lgerror(L, fn, env);

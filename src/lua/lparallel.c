@@ -24,7 +24,7 @@ static int l_allreduce(lua_State *L) {
   int op = 0;
   if (!lua_isnoneornil(L, 2)) {
     if (lua_type(L, 2) != LUA_TSTRING) return typeerror(L, fn, 2, "\"sum\", \"max\" or \"min\"");
-    const char *s = lua_tostring(L, 2);
+    const char *s = check_cstring(L, 2, fn, "argument 2");
     for (op = 0; ops[op] && strcmp(ops[op], s); op++) {}
     if (!ops[op]) return luaL_error(L, "%s: argument 2 must be \"sum\", \"max\" or \"min\", got \"%s\"", fn, s);
   }

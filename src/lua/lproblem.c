@@ -262,7 +262,7 @@ static int l_interpolate(lua_State *L) {
   ud_mesh *um = check_mesh(L, 2, fn);
   expr *e = check_expr(L, 3, fn);
   lg_env *env = get_env(L);
-  const char *name = luaL_optstring(L, 4, "f");
+  const char *name = opt_cstring(L, 4, "f", fn, "argument 4 (the name)");
   lg_function *f = lg_function_new(env, um->lm, lg_mesh_dofmap(env, um->lm, b->degree, b->ncomp, b->disc), name);
   if (!f) return lgerror(L, fn, env);
   push_function(L, f, 2);
@@ -278,7 +278,8 @@ static int l_function(lua_State *L) {
   if (!b) return typeerror(L, fn, 1, "a basis (lg.lagrange(p))");
   ud_mesh *um = check_mesh(L, 2, fn);
   lg_env *env = get_env(L);
-  lg_function *f = lg_function_new(env, um->lm, lg_mesh_dofmap(env, um->lm, b->degree, b->ncomp, b->disc), luaL_optstring(L, 3, "f"));
+  lg_function *f = lg_function_new(env, um->lm, lg_mesh_dofmap(env, um->lm, b->degree, b->ncomp, b->disc),
+                                 opt_cstring(L, 3, "f", fn, "argument 3 (the name)"));
   if (!f) return lgerror(L, fn, env);
   push_function(L, f, 2);
   return 1;
@@ -548,7 +549,7 @@ static int prob_ownership(lua_State *L) {
 }
 
 static int l_options(lua_State *L) {
-  const char *s = luaL_checkstring(L, 1);
+  const char *s = check_cstring(L, 1, "lg.options", "argument 1");
   if (PetscOptionsInsertString(NULL, s)) return luaL_error(L, "lg.options: PETSc could not parse \"%s\"", s);
   return 0;
 }
@@ -557,7 +558,7 @@ static int l_options(lua_State *L) {
 static int l_jit(lua_State *L) {
   const char *fn = "lg.jit";
   if (lua_type(L, 1) != LUA_TSTRING) return typeerror(L, fn, 1, "\"tcc\", \"cc\" or \"auto\"");
-  const char *b = lua_tostring(L, 1);
+  const char *b = check_cstring(L, 1, fn, "argument 1");
   lg_env *env = get_env(L);
   jit_backend kind;
   if (!strcmp(b, "tcc")) kind = JIT_TCC;

@@ -66,8 +66,25 @@ oom:
   return 1;
 }
 
+/* is method a partitioner of this PETSc? If not, the message lists those it has */
+static int known_partitioner(lg_env *env, const char *method) {
+  void (*f)(void) = NULL;
+  if (!MatInitializePackage() && !PetscFunctionListFind(MatPartitioningList, method, &f) && f) return 1;
+  const char **names = NULL;
+  int n = 0;
+  char list[512] = "";
+  size_t used = 0;
+  if (!PetscFunctionListGet(MatPartitioningList, &names, &n))
+    for (int i = 0; i < n && used < sizeof list; i++)
+      if (names[i]) used += (size_t)snprintf(list + used, sizeof list - used, "%s, ", names[i]);
+  PetscFree(names);
+  lg_seterr(env, "-lugal_partitioner %s: this PETSc has no such partitioner (it has %sand lugal's auto and natural)", method, list);
+  return 0;
+}
+
 int lg_partition_graph(lg_env *env, MPI_Comm comm, int nrows, int ncols, PetscInt *ia, PetscInt *ja, int nparts,
                        const char *method, int *vpart) {
+  if (!known_partitioner(env, method)) { PetscFree(ia); PetscFree(ja); return 1; }
   Mat adj = NULL;
   MatPartitioning mp = NULL;
   IS is = NULL;

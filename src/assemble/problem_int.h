@@ -247,7 +247,8 @@ void *lg_box_add(lg_box *b, int dest, int *bad);
 void lg_box_free(lg_box *b);
 char *lg_box_send(lg_box *b, int *cnt, int *rcnt, long **order, long *nrecv, int *bad);
 char *lg_reply(const char *ans, size_t rec, int *rcnt, int *cnt, int *bad);
-/* partition.c: a graph's rows (nrows here of ncols, CSR ia/ja PetscMalloc'ed, given up) partitioned by
+/* partition.c: a graph's rows (nrows here of ncols, CSR ia/ja PetscMalloc'ed, given up: freed by
+ * the call, failed or not) partitioned by
  * the MatPartitioningType method into nparts on comm: each row's part into vpart; and the part
  * of most of n parts (the lowest of those that tie), a cell's from its vertices' */
 int lg_partition_graph(lg_env *env, MPI_Comm comm, int nrows, int ncols, PetscInt *ia, PetscInt *ja, int nparts,

@@ -765,10 +765,10 @@ static void partition(reader *R, vhomes *H) {
   if (!(vpart = malloc(sizeof(int) * ((size_t)nloc + 1)))) { PetscFree(ia); PetscFree(ja); ia = ja = NULL; }
   int nfail = !vpart, fail = 0;
   (void)MPI_Allreduce(&nfail, &fail, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
-  if (fail || lg_partition_graph(env, PETSC_COMM_WORLD, nloc, nvg, ia, ja, P, method, vpart)) {
-    if (!fail) { PetscFree(ia); PetscFree(ja); } /* given up to the graph above, freed with it */
-    why(R, "the partitioner failed");
-  }
+  /* lg_partition_graph owns ia and ja from the call on, failed or not (it freed them: freeing
+   * them here too aborted the run with "double free or corruption" on an unknown
+   * -lugal_partitioner) */
+  if (fail || lg_partition_graph(env, PETSC_COMM_WORLD, nloc, nvg, ia, ja, P, method, vpart)) why(R, "the partitioner failed");
   /* each cell in the part of most of its vertices (the lowest of those that tie) */
   lg_box q = {sizeof(int), 0, 0, NULL, NULL};
   for (int c = 0; !R->bad && c < R->ncl; c++)

@@ -156,4 +156,16 @@ lg.mesh.read(arg[1])
 LUA
 if run 2 "$T/bad.lua" "$T/bad.msh" > "$T/o" 2> "$T/e"; then fail "a bad file read on 2 ranks"; fi
 grep -q "bad.msh:[0-9]*: element $(cat "$T/badid") refers to node 9000, which is not in \$Nodes" "$T/e" || fail "bad file: $(cat "$T/e")"
+
+# a partitioner this PETSc lacks (or a typo), on a parallel read and on a generated mesh on 4
+# ranks: the run ends with a message naming the partitioners there are (it aborted with
+# "double free or corruption": the graph's arrays were freed twice)
+printf 'local lg = require "lugal"\nlg.mesh.rectangle{nx = 16}\n' > "$T/gen16.lua"
+for p in parmetis chaco typo; do
+  if run 2 "$T/bad.lua" "$ROOT/tests/data/square_unstructured.msh" -lugal_partitioner $p > "$T/o" 2> "$T/e"; then fail "-lugal_partitioner $p accepted"; fi
+  grep -q "lugal_partitioner $p: this PETSc has no such partitioner (it has .*ptscotch" "$T/e" || fail "-lugal_partitioner $p: $(head -n 3 "$T/e")"
+  ! grep -q "double free\|signal" "$T/e" || fail "-lugal_partitioner $p crashed: $(head -n 3 "$T/e")"
+done
+if run 4 "$T/gen16.lua" -lugal_partitioner parmetis > "$T/o" 2> "$T/e"; then fail "-lugal_partitioner parmetis accepted on 4 ranks"; fi
+grep -q "no such partitioner" "$T/e" && ! grep -q "double free\|signal" "$T/e" || fail "-lugal_partitioner parmetis on 4 ranks: $(head -n 3 "$T/e")"
 echo "ok"

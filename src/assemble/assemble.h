@@ -37,6 +37,8 @@ typedef struct {
   kernel_pcache_group pcache; /* the point caches' groups (kernel.h): the list's sentinel */
   unsigned long pcache_uses[3]; /* assemblies with a point cache by mode: computed, stored, read */
   unsigned long gc_points;      /* the Lua module's collection points passed (largs.c, gc_point) */
+  unsigned long collective_seq; /* the Lua module's collective calls so far (lparallel.c) */
+  int collective_wait_s;        /* -lugal_collective_wait: seconds a rank waits at one before it says so */
   char err[LG_ERRLEN];
 } lg_env;
 

@@ -418,7 +418,8 @@ static int checked_call(lua_State *L) {
 }
 
 /* luaL_setfuncs(L, lib, 0) into the table on top, the functions of `table` listed above
- * wrapped by their argument count check */
+ * wrapped by their argument count check, and the collective ones by the check that every
+ * rank makes them (lparallel.c) */
 void set_funcs_checked(lua_State *L, const luaL_Reg *lib, const char *table) {
   int self = strcmp(table, "lg") && strcmp(table, "lg.mesh");
   for (; lib->name; lib++) {
@@ -433,6 +434,7 @@ void set_funcs_checked(lua_State *L, const luaL_Reg *lib, const char *table) {
       lua_pushinteger(L, self);
       lua_pushcclosure(L, checked_call, 4);
     }
+    lg_lua_collective_wrap(L, table, lib->name);
     lua_setfield(L, -2, lib->name);
   }
 }

@@ -132,6 +132,13 @@ void lg_lua_opt_register(lua_State *L);
 extern const luaL_Reg lg_opt_lib[];
 void lg_lua_operator_register(lua_State *L);
 extern const luaL_Reg lg_parallel_lib[]; /* lg.rank, lg.size, lg.allreduce */
+/* lparallel.c: the function on the top of the stack replaced by one that first checks, in a
+ * parallel run, that every rank makes this collective call (where it is one: the table
+ * collectives there); nothing for a function that is not collective */
+void lg_lua_collective_wrap(lua_State *L, const char *table, const char *name);
+/* the end of a script as a collective call: a rank still waiting in a collective call that
+ * another rank never made gets the message instead of a hang (lua_CFunction; the runner's) */
+int lg_lua_end_check(lua_State *L);
 void lg_lua_parallel_register(lua_State *L); /* print on rank 0 under mpiexec (lg on top) */
 extern const luaL_Reg lg_operator_lib[]; /* lg.assemble */     /* lg.control, lg.functional, lg.reduced_functional, lg.taylor_test */
 

@@ -73,6 +73,10 @@ int luaopen_lugal(lua_State *L) {
     PetscBool vmath = PETSC_TRUE;
     PetscOptionsGetBool(NULL, NULL, "-lugal_vector_math", &vmath, NULL);
     ue->env->no_vector_math = !vmath;
+    PetscInt wait_s = 10;
+    PetscOptionsGetInt(NULL, NULL, "-lugal_collective_wait", &wait_s, NULL);
+    if (wait_s < 1) return luaL_error(L, "lugal: -lugal_collective_wait must be >= 1 (seconds), got %d", (int)wait_s);
+    ue->env->collective_wait_s = (int)wait_s;
     PetscBool keep = PETSC_TRUE;
     PetscOptionsGetBool(NULL, NULL, "-lugal_keep_factor", &keep, NULL);
     ue->env->no_keep_factor = !keep;

@@ -34,6 +34,8 @@ static void usage(FILE *f) {
           "                        (by default it is solved by CG or GMRES with its\n"
           "                        last factorization while that costs less)\n"
           "  -lugal_traceback      print a Lua traceback with errors\n"
+          "  -lugal_collective_wait S  under mpiexec, a rank that waits S seconds (default\n"
+          "                        10) at a collective call for the others says so\n"
           "  -lugal_hugepages 0    leave glibc's malloc on 4 KiB pages (by default the\n"
           "                        `lugal` command lets it use transparent huge pages)\n");
 }
@@ -93,6 +95,10 @@ int main(int argc, char **argv) {
      * ended in a crash in MPI_Finalize) */
     for (int i = 2; i < argc; i++) lua_pushstring(L, argv[i]);
     int rc = lua_pcall(L, argc - 2, 0, want_tb ? msgh : 0);
+    if (rc == LUA_OK) { /* every rank at the end: none still waits in a collective call */
+      lua_pushcfunction(L, lg_lua_end_check);
+      rc = lua_pcall(L, 0, 0, 0);
+    }
     if (rc != LUA_OK) {
       const char *msg = lua_tostring(L, -1);
       /* under mpiexec the other ranks may be waiting for this one: end them all */

@@ -139,6 +139,40 @@ rc=$?
 grep -q "rank 1 of 2: .*err.lua:2: rank one gives up" "$T/e" || { cat "$T/e"; fail "the message of rank 1"; }
 [ $(( $(date +%s) - start )) -lt 60 ] || fail "the run took more than a minute to end"
 
+# a collective call on one rank only (q:min under `if lg.rank() == 0`, lg.allreduce): the run
+# ends at once with a message naming what each rank called, where it hung with no output;
+# distributed and with whole meshes (q:min is collective only on distributed ones: there the
+# allreduce meets the end of the script)
+cat > "$T/coll.lua" <<'LUA'
+local lg = require "lugal"
+local mesh = lg.mesh.rectangle{nx = 8}
+local q = mesh:quality("mean_ratio")
+if lg.rank() == 0 then print(q:min()) end
+if lg.rank() == 1 then print(lg.allreduce(1)) end
+local uh = lg.interpolate(lg.lagrange(1), mesh, lg.x, "w")
+LUA
+for opt in "" "-lugal_distribute 0"; do
+  start=$(date +%s)
+  (cd "$T" && timeout 120 mpiexec -n 2 "$LUGAL" coll.lua $opt > o 2> e) && fail "a collective call on one rank ran through ($opt)"
+  case "$opt" in
+    "") want="rank 0 is at q:min (collective call #2, coll.lua:4), rank 1 is at lg.allreduce (collective call #2, coll.lua:5)" ;;
+    *) want="rank 0 is at lg.interpolate (collective call #2, coll.lua:6), rank 1 is at lg.allreduce (collective call #2, coll.lua:5)" ;;
+  esac
+  grep -qF "collective calls out of step: $want" "$T/e" || { cat "$T/e"; fail "the message of a collective call on one rank ($opt)"; }
+  [ $(( $(date +%s) - start )) -lt 60 ] || fail "a collective call on one rank took more than a minute to end ($opt)"
+done
+# a call collective only with some arguments (mesh:vertices{near =} on a distributed mesh)
+# made on one rank: the other rank, waiting at its next collective call, says so
+cat > "$T/near.lua" <<'LUA'
+local lg = require "lugal"
+local mesh = lg.mesh.rectangle{nx = 8}
+if lg.rank() == 0 then mesh:vertices{near = {0.5, 0.5}} end
+lg.integrate(mesh, 1)
+LUA
+(cd "$T" && timeout 20 mpiexec -n 2 "$LUGAL" near.lua -lugal_collective_wait 2 > o 2> e)
+grep -q "rank 1 has waited 2 s at lg.integrate (collective call #2, near.lua:4) for the other ranks" "$T/e" ||
+  { cat "$T/e"; fail "no word from a rank waiting at a collective call"; }
+
 # Lua garbage on one rank only: its collector must not destroy a parallel factorization
 # (collective) while the other rank waits elsewhere. Parallel runs collect only at points
 # every rank passes; with the automatic collector restarted (what the module stops) the

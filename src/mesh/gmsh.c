@@ -917,6 +917,19 @@ mesh *mesh_read_gmsh_buffer(const char *data, size_t len, const char *name, char
 
 /* the whole file: a regular file by its size, a pipe or device until its end */
 #define PIPE_LIMIT ((size_t)8 << 30)
+#define HEAD_BYTES 4096 /* what a pipe or device must start like a mesh file within */
+
+/* do the first n bytes of a stream start like an MSH file: text whose first word is a
+ * section ($MeshFormat, or $Comments and the like)? /dev/zero and endless pipes of anything
+ * else were read for gigabytes before the parser saw them */
+static int head_like_msh(const char *b, size_t n) {
+  size_t i = 0;
+  if (n >= 3 && !memcmp(b, "\xef\xbb\xbf", 3)) i = 3; /* a UTF-8 byte order mark */
+  while (i < n && (b[i] == ' ' || b[i] == '\t' || b[i] == '\r' || b[i] == '\n')) i++;
+  if (i < n && b[i] != '$') return 0;
+  return memchr(b, 0, n) == NULL;
+}
+
 static char *read_all(const char *path, size_t *len, char *err) {
   int fd = open(path, O_RDONLY | O_CLOEXEC);
   if (fd < 0) { snprintf(err, MESH_ERRLEN, "cannot open %.200s: %s", path, strerror(errno)); return NULL; }
@@ -965,8 +978,17 @@ static char *read_all(const char *path, size_t *len, char *err) {
       close(fd);
       return NULL;
     }
+    size_t before = n;
+    if (got > 0) n += (size_t)got;
+    if (!S_ISREG(st.st_mode) && before < HEAD_BYTES && (n >= HEAD_BYTES || got == 0) &&
+        !head_like_msh(buf, n < HEAD_BYTES ? n : HEAD_BYTES)) {
+      snprintf(err, MESH_ERRLEN, "cannot read %.200s: it does not start like a Gmsh MSH file (its first %d bytes are not "
+                                 "text opening with a $MeshFormat section)", path, HEAD_BYTES);
+      free(buf);
+      close(fd);
+      return NULL;
+    }
     if (got == 0) break;
-    n += (size_t)got;
   }
   close(fd);
   buf[n] = 0;

@@ -157,6 +157,10 @@ LUA
 if run 2 "$T/bad.lua" "$T/bad.msh" > "$T/o" 2> "$T/e"; then fail "a bad file read on 2 ranks"; fi
 grep -q "bad.msh:[0-9]*: element $(cat "$T/badid") refers to node 9000, which is not in \$Nodes" "$T/e" || fail "bad file: $(cat "$T/e")"
 
+# /dev/zero on 2 ranks: refused after its first 4 KB (it was read for 2 GiB)
+if run 2 "$T/bad.lua" /dev/zero > "$T/o" 2> "$T/e"; then fail "/dev/zero read on 2 ranks"; fi
+grep -q "/dev/zero: it does not start like a Gmsh MSH file" "$T/e" || fail "/dev/zero on 2 ranks: $(head -n 3 "$T/e")"
+
 # a partitioner this PETSc lacks (or a typo), on a parallel read and on a generated mesh on 4
 # ranks: the run ends with a message naming the partitioners there are (it aborted with
 # "double free or corruption": the graph's arrays were freed twice)

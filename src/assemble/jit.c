@@ -40,6 +40,7 @@ static void tcc_delete(TCCState *s) { (void)s; }
 typedef struct {
   char dir[4200], cpath[4300], sopath[4300], tmpso[4340];
   char key[34]; /* "k" and 32 hex digits: the object's name, sealed into it (cache_seal) */
+  int slot;     /* tmpso among the temporary files a signal removes (outfile_track), or -1 */
   int temp; /* no disk cache: a private folder removed after loading */
   int huge;
 } cc_job;
@@ -83,6 +84,8 @@ lg_jit *jit_new(jit_backend b, const char *libdir) {
 
 static void job_cleanup(cc_job *c) {
   if (!c) return;
+  outfile_untrack(c->slot);
+  c->slot = -1;
   unlink(c->tmpso);
   if (c->temp) { unlink(c->sopath); unlink(c->cpath); rmdir(c->dir); }
 }
@@ -347,7 +350,7 @@ static void sync_dir(const char *dir) {
 
 /* run the compiler on cpath into sopath; its messages into out */
 /* start the compiler on c->cpath into c->tmpso; its messages into outfd (-1: /dev/null) */
-static int cc_spawn(const cc_job *c, int outfd, pid_t *pid, char *err, size_t errlen) {
+static int cc_spawn(cc_job *c, int outfd, pid_t *pid, char *err, size_t errlen) {
   char *opt[] = {(char *)LUGAL_CC, "-O3", "-march=native", "-ffp-contract=off", "-fPIC", "-shared", "-o",
                  (char *)c->tmpso, (char *)c->cpath, "-lm", NULL};
   char *noopt[] = {(char *)LUGAL_CC, "-O0", "-fPIC", "-shared", "-o", (char *)c->tmpso, (char *)c->cpath, "-lm", NULL};
@@ -364,11 +367,14 @@ static int cc_spawn(const cc_job *c, int outfd, pid_t *pid, char *err, size_t er
   int rc = posix_spawnp(pid, LUGAL_CC, &fa, NULL, c->huge ? noopt : opt, environ);
   posix_spawn_file_actions_destroy(&fa);
   if (rc) snprintf(err, errlen, "cannot run the C compiler %s: %s", LUGAL_CC, strerror(rc));
+  /* a run ended by a signal ends the compiler and removes its output (Ctrl-C during a
+   * background build left gcc's temporary object in the cache for good) */
+  else c->slot = outfile_track(c->tmpso, *pid);
   return rc;
 }
 
 /* run the compiler and wait; its messages into out */
-static int cc_run(const cc_job *c, char *out, size_t outlen) {
+static int cc_run(cc_job *c, char *out, size_t outlen) {
   int pfd[2];
   if (pipe(pfd)) { snprintf(out, outlen, "cannot make a pipe: %s", strerror(errno)); return -1; }
   fcntl(pfd[0], F_SETFD, FD_CLOEXEC);
@@ -409,6 +415,7 @@ static void jit_note_damaged(const char *why) { fprintf(stderr, "lugal: %s: remo
  * object is there already, 0 when it must be compiled, -1 on an error */
 static int cc_prepare(const char *src, uint64_t h1, uint64_t h2, cc_job *c, char *err, size_t errlen) {
   memset(c, 0, sizeof *c);
+  c->slot = -1;
   if (cache_dir(c->dir, sizeof c->dir, err, errlen)) return -1;
   c->temp = !c->dir[0];
   if (c->temp) {
@@ -443,6 +450,8 @@ static int cc_prepare(const char *src, uint64_t h1, uint64_t h2, cc_job *c, char
 static kernel_fn cc_finish(cc_job *c, int built, jit_entry *ent, int *damaged, char *err, size_t errlen) {
   *damaged = 0;
   if (built) {
+    outfile_untrack(c->slot); /* renamed below, or removed */
+    c->slot = outfile_track(c->tmpso, 0);
     if (cache_seal(c->tmpso, c->key, err, errlen)) { job_cleanup(c); return NULL; }
     chmod(c->tmpso, 0700);
     if (rename(c->tmpso, c->sopath)) {
@@ -450,6 +459,8 @@ static kernel_fn cc_finish(cc_job *c, int built, jit_entry *ent, int *damaged, c
       job_cleanup(c);
       return NULL;
     }
+    outfile_untrack(c->slot);
+    c->slot = -1;
     sync_dir(c->dir);
   }
   void *dl = NULL;

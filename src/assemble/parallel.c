@@ -165,6 +165,20 @@ static char **piece_names(const char *path, int npiece) {
   return names;
 }
 
+/* A .pvtu and its pieces are one dataset: each rank's pieces and rank 0's .pvtu are written
+ * under temporary names (staged: n files here, the .pvtu last), and put in place only when
+ * every rank wrote all of its files, else all removed, so that a write failing part way (a
+ * full disk at piece 2) leaves the earlier dataset of the same name whole instead of new
+ * pieces 0-1 beside old pieces 2-3. rc: this rank's outcome so far */
+static int publish_collection(outfile *staged, int n, int rc, char *err) {
+  rc = lg_any_result(rc, err, MESH_ERRLEN);
+  for (int i = 0; i < n; i++) {
+    if (rc) outfile_abort(&staged[i]);
+    else rc = outfile_publish(&staged[i], err, MESH_ERRLEN);
+  }
+  return lg_any_result(rc, err, MESH_ERRLEN);
+}
+
 /* a distributed mesh: a .pvtu is a piece per rank, its owned cells; a .vtu is gathered on
  * rank 0 (lg_dist_gather) and written whole */
 static int dist_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_field *fl, int format, int npiece, char *err) {
@@ -193,14 +207,16 @@ static int dist_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, co
   }
   const mesh_part *P = lm->dist;
   char **names = piece_names(path, npiece);
-  int *cells = malloc(sizeof(int) * ((size_t)P->m->ncell + 1)), nc = 0;
+  int *cells = malloc(sizeof(int) * ((size_t)P->m->ncell + 1)), nc = 0, ns = 0;
+  outfile staged[2];
   if (!names || !cells) rc = 1, snprintf(err, MESH_ERRLEN, "out of memory for %d pieces", npiece);
   for (int c = 0; !rc && c < P->m->ncell; c++)
     if (P->cowner[c] == rank) cells[nc++] = c;
-  if (!rc && (rc = mesh_write_vtu_piece(P->m, names[rank], nf, fl, format, cells, nc))) snprintf(err, MESH_ERRLEN, "%s", P->m->err);
+  if (!rc && (rc = mesh_write_vtu_piece(P->m, names[rank], nf, fl, format, cells, nc, &staged[ns]))) snprintf(err, MESH_ERRLEN, "%s", P->m->err);
+  else if (!rc) ns++;
   free(cells);
-  rc = lg_any_result(rc, err, MESH_ERRLEN);
-  if (!rc) rc = lg_root_result(rank == 0 ? mesh_write_pvtu(path, nf, fl, npiece, names, err) : 0, err, MESH_ERRLEN);
+  if (!rc && rank == 0 && !(rc = mesh_write_pvtu(path, nf, fl, npiece, names, err, &staged[ns]))) ns++;
+  rc = publish_collection(staged, ns, rc, err);
   for (int k = 0; names && k < npiece; k++) free(names[k]);
   free(names);
   return rc;
@@ -233,13 +249,19 @@ int lg_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_
     for (int c = 0; c < m->ncell; c++) cells[start[pc[c] + 1]++] = c;
   }
   free(runs);
+  /* this rank's pieces (every size-th) and rank 0's .pvtu, staged (publish_collection) */
+  int ns = 0;
+  outfile *staged = malloc(sizeof(outfile) * ((size_t)(npiece / size) + 2));
+  if (!staged && !rc) rc = 1, snprintf(err, MESH_ERRLEN, "out of memory for %d pieces", npiece);
   for (int k = rank; k < npiece && !rc; k += size)
-    if ((rc = mesh_write_vtu_piece(m, names[k], nf, fl, format, cells + start[k], start[k + 1] - start[k])))
+    if ((rc = mesh_write_vtu_piece(m, names[k], nf, fl, format, cells + start[k], start[k + 1] - start[k], &staged[ns])))
       snprintf(err, MESH_ERRLEN, "%s", m->err);
+    else ns++;
   free(cells);
   free(start);
-  rc = lg_any_result(rc, err, MESH_ERRLEN);
-  if (!rc) rc = lg_root_result(rank == 0 ? mesh_write_pvtu(path, nf, fl, npiece, names, err) : 0, err, MESH_ERRLEN);
+  if (!rc && rank == 0 && !(rc = mesh_write_pvtu(path, nf, fl, npiece, names, err, &staged[ns]))) ns++;
+  rc = publish_collection(staged, ns, rc, err);
+  free(staged);
   for (int k = 0; names && k < npiece; k++) free(names[k]);
   free(names);
   return rc;

@@ -59,6 +59,8 @@ int main(int argc, char **argv) {
   int pargc = argc;
   char **pargv = argv;
   if (lg_petsc_init(&pargc, &pargv)) { fprintf(stderr, "lugal: PETSc failed to initialize\n"); return 1; }
+  /* a run ended by a signal removes its temporary files; a write past ulimit -f is an error */
+  outfile_on_signals();
   PetscBool want_tb = PETSC_FALSE;
   PetscOptionsHasName(NULL, NULL, "-lugal_traceback", &want_tb);
   PetscBool seen; /* read by the launcher (launch.c): used, not a misspelling */

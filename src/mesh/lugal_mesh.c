@@ -290,6 +290,7 @@ int main(int argc, char **argv) {
   if (argc < 2) { usage(stderr); return 2; }
   if (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) { usage(stdout); return 0; }
   if (!strcmp(argv[1], "--version")) { printf("lugal-mesh %s\n", LUGAL_VERSION); return 0; }
+  outfile_on_signals(); /* a signal removes the temporary files; ulimit -f gives EFBIG */
   if (!strcmp(argv[1], "quality")) return quality_cmd(argc - 2, argv + 2);
   if (!strcmp(argv[1], "untangle") || !strcmp(argv[1], "smooth")) return repair_cmd(argv[1], argc - 2, argv + 2);
   fprintf(stderr, "lugal-mesh: unknown command %s\n", argv[1]);

@@ -9,6 +9,7 @@
 #ifndef LUGAL_MESH_H
 #define LUGAL_MESH_H
 
+#include "outfile.h"
 #include <stddef.h>
 
 typedef enum {
@@ -231,11 +232,14 @@ int mesh_write_vtu(mesh *m, const char *path, int nfield, const mesh_field *f);
 enum { VTU_BINARY = 0, VTU_ASCII = 1, VTU_ZLIB = 2 };
 int mesh_write_vtu_format(mesh *m, const char *path, int nfield, const mesh_field *f, int format);
 /* a piece of the mesh: the nc cells listed (0-based) and the vertices they use (numbered
- * in increasing order), with the fields' values there */
-int mesh_write_vtu_piece(mesh *m, const char *path, int nfield, const mesh_field *f, int format, const int *cells, int nc);
+ * in increasing order), with the fields' values there. With staged (an outfile, outfile.h)
+ * the file is left finished under its temporary name, for the caller to publish with the
+ * other files of its collection once all are written (or to abort), else it is put in place */
+int mesh_write_vtu_piece(mesh *m, const char *path, int nfield, const mesh_field *f, int format, const int *cells, int nc,
+                         outfile *staged);
 /* the .pvtu collection of npiece piece files (named relative to its folder) of the fields
- * (their names and components; the pieces hold the values) */
-int mesh_write_pvtu(const char *path, int nfield, const mesh_field *f, int npiece, char **pieces, char *err);
+ * (their names and components; the pieces hold the values); staged as above */
+int mesh_write_pvtu(const char *path, int nfield, const mesh_field *f, int npiece, char **pieces, char *err, outfile *staged);
 /* append (time, file) to a .pvd collection, rewriting it; step 0 starts a new file */
 int mesh_write_pvd(const char *pvd, int nstep, const double *times, char **files,
                    char *err);

@@ -192,7 +192,8 @@ static int any_field_on(int nfield, const mesh_field *fl, int on_cells) {
   return 0;
 }
 
-static int write_piece(mesh *m, const char *path, int nfield, const mesh_field *fl, int format, piece *pc) {
+/* the file written whole and put in place, or finished into *staged (outfile.h) */
+static int write_piece(mesh *m, const char *path, int nfield, const mesh_field *fl, int format, piece *pc, outfile *staged) {
   outfile o;
   if (format != VTU_BINARY && format != VTU_ASCII && format != VTU_ZLIB) {
     snprintf(m->err, MESH_ERRLEN, "unknown VTU format %d", format);
@@ -235,15 +236,19 @@ static int write_piece(mesh *m, const char *path, int nfield, const mesh_field *
     snprintf(m->err, MESH_ERRLEN, "out of memory compressing %s", path);
     return 1;
   }
-  return outfile_commit(&o, m->err, MESH_ERRLEN);
+  if (!staged) return outfile_commit(&o, m->err, MESH_ERRLEN);
+  int rc = outfile_finish(&o, m->err, MESH_ERRLEN);
+  *staged = o;
+  return rc;
 }
 
 int mesh_write_vtu_format(mesh *m, const char *path, int nfield, const mesh_field *fl, int format) {
   piece pc = {m, m->ncell, m->nvert, NULL, NULL, NULL, NULL};
-  return write_piece(m, path, nfield, fl, format, &pc);
+  return write_piece(m, path, nfield, fl, format, &pc, NULL);
 }
 
-int mesh_write_vtu_piece(mesh *m, const char *path, int nfield, const mesh_field *fl, int format, const int *cells, int nc) {
+int mesh_write_vtu_piece(mesh *m, const char *path, int nfield, const mesh_field *fl, int format, const int *cells, int nc,
+                         outfile *staged) {
   for (int i = 0; i < nc; i++)
     if (cells[i] < 0 || cells[i] >= m->ncell) {
       snprintf(m->err, MESH_ERRLEN, "cell %d of a piece is not a cell of a mesh of %d", cells[i] + 1, m->ncell);
@@ -261,7 +266,7 @@ int mesh_write_vtu_piece(mesh *m, const char *path, int nfield, const mesh_field
   for (int v = 0; v < m->nvert; v++)
     if (!lv[v]) { lv[v] = nv; pv[nv++] = v; }
   piece pc = {m, nc, nv, cells, pv, lv, NULL};
-  int rc = write_piece(m, path, nfield, fl, format, &pc);
+  int rc = write_piece(m, path, nfield, fl, format, &pc, staged);
   free(lv);
   free(pv);
   return rc;
@@ -273,7 +278,7 @@ static const char *base_name(const char *path) {
   return slash ? slash + 1 : path;
 }
 
-int mesh_write_pvtu(const char *path, int nfield, const mesh_field *fl, int npiece, char **pieces, char *err) {
+int mesh_write_pvtu(const char *path, int nfield, const mesh_field *fl, int npiece, char **pieces, char *err, outfile *staged) {
   outfile o;
   if (outfile_open(&o, path, err, MESH_ERRLEN)) return 1;
   FILE *f = o.f;
@@ -297,7 +302,10 @@ int mesh_write_pvtu(const char *path, int nfield, const mesh_field *fl, int npie
     fprintf(f, "\"/>\n");
   }
   fprintf(f, "</PUnstructuredGrid>\n</VTKFile>\n");
-  return outfile_commit(&o, err, MESH_ERRLEN);
+  if (!staged) return outfile_commit(&o, err, MESH_ERRLEN);
+  int rc = outfile_finish(&o, err, MESH_ERRLEN);
+  *staged = o;
+  return rc;
 }
 
 int mesh_write_vtu(mesh *m, const char *path, int nfield, const mesh_field *fl) {

@@ -777,8 +777,8 @@ static int write_svg(lua_State *L, mesh *m, lg_mesh *lm, const char *path, const
       lua_pop(L, 1);
     }
     v = own;
-  } else return luaL_error(L, "%s: field '%s' must be a P0 function, a quality array or %ld numbers (one per cell)", fn, name,
-                           lg_mesh_global_cells(lm));
+  } else return luaL_error(L, "%s: field '%s' must be a P0 function, a quality array or %I numbers (one per cell)", fn, name,
+                           (lua_Integer)lg_mesh_global_cells(lm));
   char err[MESH_ERRLEN] = "";
   mesh *W = NULL; /* a distributed mesh's whole, with the values, on rank 0 */
   double **vals = NULL;

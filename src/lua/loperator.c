@@ -85,14 +85,14 @@ static const double *values_of(lua_State *L, int idx, const op_space *sp, const 
   }
   if (lua_istable(L, idx) && distributed(sp)) {
     long whole = space_size(L, sp, fn), k = (long)luaL_len(L, idx);
-    if (k != whole) luaL_error(L, "%s: the table has %ld entries, %ld expected", fn, k, whole);
+    if (k != whole) luaL_error(L, "%s: the table has %I entries, %I expected", fn, (lua_Integer)k, (lua_Integer)whole);
     double *t = lua_newuserdatauv(L, sizeof(double) * ((size_t)whole + 1), 0);
     for (long i = 0; i < whole; i++) {
       lua_geti(L, idx, i + 1);
       int isnum;
       t[i] = lua_tonumberx(L, -1, &isnum);
       lua_pop(L, 1);
-      if (!isnum) luaL_error(L, "%s: entry %ld of the table must be a number", fn, i + 1);
+      if (!isnum) luaL_error(L, "%s: entry %I of the table must be a number", fn, (lua_Integer)(i + 1));
     }
     *own = malloc(sizeof(double) * ((size_t)n + 1));
     if (!*own) luaL_error(L, "%s: out of memory", fn);

@@ -259,7 +259,8 @@ static int l_allreduce(lua_State *L) {
   /* every rank must pass as many: the count first */
   double cnt[2] = {(double)n, -(double)n};
   if (lg_allreduce(cnt, 2, LG_MAX)) return luaL_error(L, "%s: the reduction failed", fn);
-  if (cnt[0] != -cnt[1]) return luaL_error(L, "%s: the ranks passed arrays of different lengths (%.0f to %.0f)", fn, -cnt[1], cnt[0]);
+  if (cnt[0] != -cnt[1])
+    return luaL_error(L, "%s: the ranks passed arrays of different lengths (%I to %I)", fn, (lua_Integer)-cnt[1], (lua_Integer)cnt[0]);
   if (lg_allreduce(v, (int)n, opv[op])) return luaL_error(L, "%s: the reduction failed", fn);
   lua_createtable(L, (int)n, 0);
   for (lua_Integer i = 0; i < n; i++) {

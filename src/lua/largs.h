@@ -33,7 +33,7 @@ typedef struct { lg_function *f; } ud_func;
 typedef struct { form *f; } ud_form;
 typedef struct { lg_problem *p; int nfield; int nonlinear; } ud_prob;
 /* format: VTU_*; pieces: 0 for .vtu steps, else .pvtu steps of so many pieces */
-typedef struct { char path[512]; int n, cap; double *t; char **files; int format, pieces; } ud_series;
+typedef struct { char *path; int n, cap; double *t; char **files; int format, pieces; } ud_series;
 typedef struct { lg_env *env; int owns_petsc; } ud_env;
 /* a quality array: v (mesh_big_alloc) per cell; on a distributed mesh the owned cells' only,
  * gid their global numbers and loc their local ones (malloc'ed; NULL on a whole mesh), of

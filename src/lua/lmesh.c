@@ -1185,10 +1185,10 @@ static int l_series(lua_State *L) {
   const char *path = check_cstring(L, 1, "lg.series", "argument 1 (the path)");
   size_t l = strlen(path);
   if (l < 5 || strcmp(path + l - 4, ".pvd")) return luaL_error(L, "lg.series: argument 1 must be a path ending in .pvd, got \"%s\"", path);
-  if (l >= 500) return luaL_error(L, "lg.series: path too long");
+
   int pieces, format = vtu_format_opt(L, 2, "lg.series", 2, &pieces);
   ud_series *u = new_ud(L, sizeof *u, MT_SERIES, 0, NULL);
-  snprintf(u->path, sizeof u->path, "%s", path);
+  if (!(u->path = strdup(path))) return luaL_error(L, "lg.series: out of memory");
   u->format = format;
   /* under mpiexec each step is a .pvtu of a piece per rank */
   u->pieces = pieces ? pieces : lg_mpi_size() > 1 ? lg_mpi_size() : 0;
@@ -1200,6 +1200,7 @@ static int series_write(lua_State *L) {
   ud_series *u = luaL_checkudata(L, 1, MT_SERIES);
   ud_mesh *um = check_mesh(L, 2, fn);
   double t = luaL_optnumber(L, 4, u->n);
+  if (!isfinite(t)) return luaL_error(L, "%s: argument 3 (the time) must be a finite number, got %f", fn, t);
   if (u->n == u->cap) {
     int cap = u->cap ? 2 * u->cap : 16;
     double *nt = realloc(u->t, sizeof(double) * (size_t)cap);
@@ -1210,8 +1211,13 @@ static int series_write(lua_State *L) {
     u->files = nf;
     u->cap = cap;
   }
-  char file[600];
-  snprintf(file, sizeof file, "%.*s_%04d.%s", (int)(strlen(u->path) - 4), u->path, u->n, u->pieces ? "pvtu" : "vtu");
+  /* the step's file: the .pvd's path without ".pvd", "_NNNN.vtu" (held on the stack) */
+  char suffix[32];
+  snprintf(suffix, sizeof suffix, "_%04d.%s", u->n, u->pieces ? "pvtu" : "vtu");
+  lua_pushlstring(L, u->path, strlen(u->path) - 4);
+  lua_pushstring(L, suffix);
+  lua_concat(L, 2);
+  const char *file = lua_tostring(L, -1);
   write_fields(L, um->lm->m, um->lm, file, 3, fn, u->format, u->pieces);
   u->files[u->n] = strdup(file);
   u->t[u->n] = t;
@@ -1229,8 +1235,10 @@ static int series_gc(lua_State *L) {
   for (int i = 0; i < u->n; i++) free(u->files[i]);
   free(u->files);
   free(u->t);
+  free(u->path);
   u->files = NULL;
   u->t = NULL;
+  u->path = NULL;
   u->n = 0;
   return 0;
 }

@@ -671,7 +671,11 @@ static int bind_all_discrete(lg_env *env, lg_mesh *lm, expr_tape *t, coef_bindin
     }
     lg_function *fn = fi->user;
     if (fn->mesh != lm) { lg_seterr(env, "the discrete function %s lives on a different mesh", fi->name); return 1; }
-    if (*nb >= KER_MAXCOEF) { lg_seterr(env, "too many functions in one expression"); return 1; }
+    if (*nb >= KER_MAXCOEF) {
+      lg_seterr(env, "an integrand reads more than %d discrete functions (coefficients, controls), the most a kernel takes: split "
+                     "the integral into several (docs/lua-api.md, \"Limits\")", KER_MAXCOEF);
+      return 1;
+    }
     bind[*nb].func = e->i0;
     bind[*nb].dm = fn->dm;
     bind[*nb].vals = fn->x;

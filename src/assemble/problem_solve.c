@@ -209,6 +209,12 @@ static int linear_solve_checked(lg_env *env, lg_problem *p, lg_solve_info *info)
   info->iterations = info->linear_iterations = (int)its;
   snprintf(info->reason, sizeof info->reason, "%s", ksp_reason_name(reason));
   if (reason < 0 && native) return 2;
+  char why[512];
+  lg_solve_failure(p->ksp, why, sizeof why);
+  if (reason < 0 && why[0]) {
+    lg_seterr(env, "the linear solve failed: %s after %d iterations%s", info->reason, info->iterations, why);
+    return 1;
+  }
   if (reason < 0) {
     const char *hint = "";
     if (reason == KSP_DIVERGED_PC_FAILED) {
@@ -237,7 +243,9 @@ static int linear_solve_checked(lg_env *env, lg_problem *p, lg_solve_info *info)
     VecDestroy(&r);
     if (!(rn <= 1e-8 * (bn > 0 ? bn : 1))) {
       if (native) return 2;
-      if (p->nnull)
+      if (why[0])
+        lg_seterr(env, "the linear solve failed (its residual is %.2e relative to the right side)%s", bn > 0 ? rn / bn : rn, why);
+      else if (p->nnull)
         lg_seterr(env, "the linear solve failed: the right side is not compatible with the null space given (the residual "
                        "is %.2e relative to it): the data must be orthogonal to the null space (for a pure Neumann "
                        "problem, the sources must balance the boundary fluxes)", bn > 0 ? rn / bn : rn);
@@ -552,6 +560,39 @@ static PetscErrorCode snes_jacobian(SNES snes, Vec X, Mat J, Mat P, void *ctx) {
   return 0;
 }
 
+/* what to try when Newton stops without converging (": ...", appended to the message) */
+static void newton_advice(SNESConvergedReason reason, KSP ksp, char *out, size_t len) {
+  switch (reason) {
+  case SNES_DIVERGED_LINEAR_SOLVE:
+    lg_solve_failure(ksp, out, len);
+    if (!out[0]) snprintf(out, len, ": a linear solve with the Jacobian failed (singular there? the initial guess may sit on a "
+                                    "degenerate point: try another initial=)");
+    break;
+  case SNES_DIVERGED_FNORM_NAN:
+    snprintf(out, len, ": the residual became NaN or infinite at a Newton step (a step left the domain of the equation, "
+                       "e.g. a square root or log of a negative value): try a damped search (-snes_linesearch_type bt), a "
+                       "better initial guess (initial=), or continuation in a parameter");
+    break;
+  case SNES_DIVERGED_FUNCTION_DOMAIN:
+    snprintf(out, len, ": a step left the domain of the equation: try -snes_linesearch_type bt or a better initial guess");
+    break;
+  case SNES_DIVERGED_MAX_IT:
+    snprintf(out, len, ": try a better initial guess (initial=), continuation in a parameter (solve for easier values "
+                       "first, each solution the next guess), a damped search (-snes_linesearch_type bt), or more "
+                       "iterations (-snes_max_it)");
+    break;
+  case SNES_DIVERGED_LINE_SEARCH:
+    snprintf(out, len, ": the line search found no decrease: try -snes_linesearch_type basic (full steps) or l2, or a "
+                       "better initial guess");
+    break;
+  case SNES_DIVERGED_DTOL:
+    snprintf(out, len, ": the residual grew past -snes_divergence_tolerance times its first value: try a damped search "
+                       "(-snes_linesearch_type bt), or no divergence test (-snes_divergence_tolerance -1, the default)");
+    break;
+  default: break;
+  }
+}
+
 static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg_function **out,
                            lg_solve_info *info, int warm) {
   double t0 = now_ms();
@@ -591,6 +632,10 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
     SNESLineSearch ls;
     PCHK(SNESGetLineSearch(p->snes, &ls), "SNESGetLineSearch");
     PCHK(SNESLineSearchSetType(ls, SNESLINESEARCHBASIC), "SNESLineSearchSetType");
+    /* no divergence test by default, as DOLFIN's Newton has none: PETSc's stops when |F|
+     * passes 1e4 |F0|, and the p-Laplacian from zero stopped with DIVERGED_DTOL after one
+     * step where it converges in 14 (-snes_divergence_tolerance restores it) */
+    PCHK(SNESSetDivergenceTolerance(p->snes, -1), "SNESSetDivergenceTolerance");
     PCHK(SNESSetFromOptions(p->snes), "SNESSetFromOptions");
     if (lg_problem_near_nullspace(env, p, ksp)) return 1;
   }
@@ -639,8 +684,10 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
     return solve_nonlinear(env, p, initial, out, info, warm);
   }
   if (reason < 0) {
-    lg_seterr(env, "the nonlinear solve did not converge: %s after %d Newton iterations (residual %.3e)",
-              info->reason, info->iterations, info->nres ? info->res[info->nres - 1] : NAN);
+    char why[600] = "";
+    newton_advice(reason, sksp, why, sizeof why);
+    lg_seterr(env, "the nonlinear solve did not converge: %s after %d Newton iterations (residual %.3e)%s", info->reason,
+              info->iterations, info->nres ? info->res[info->nres - 1] : NAN, why);
     return 1;
   }
   /* a constant null space: the solution with ∫p = 0, as a linear problem's (Newton's steps
@@ -745,7 +792,12 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   VecDestroy(&l);
   const char *what = transpose ? "the adjoint solve" : "the sensitivity solve";
   if (ierr) return lg_petsc_fail(env, ierr, what);
-  if (reason < 0) { lg_seterr(env, "%s failed: %s", what, ksp_reason_name(reason)); return 1; }
+  if (reason < 0) {
+    char why[512];
+    lg_solve_failure(ksp, why, sizeof why);
+    lg_seterr(env, "%s failed: %s%s", what, ksp_reason_name(reason), why);
+    return 1;
+  }
   for (int i = 0; i < p->N; i++)
     if (!isfinite(lam[i])) { lg_seterr(env, "%s produced non-finite values", what); return 1; }
   return 0;

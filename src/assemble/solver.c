@@ -248,6 +248,43 @@ PetscInt lg_mumps_null_pivots(KSP ksp) {
   return n;
 }
 
+/* the sizes MUMPS reports: INFOG(2) < 0 counts millions */
+static double mumps_count(PetscInt v) { return v < 0 ? -1e6 * (double)v : (double)v; }
+
+void lg_solve_failure(KSP ksp, char *out, size_t len) {
+  out[0] = 0;
+  PC pc;
+  PCType pt = NULL;
+  KSPType kt = NULL;
+  if (KSPGetPC(ksp, &pc) || PCGetType(pc, &pt) || KSPGetType(ksp, &kt) || !pt || !kt) return;
+  Mat F = mumps_factor(ksp, 0);
+  PetscInt i1 = 0, i2 = 0, mb = 0, tot = 0;
+  if (F && !MatMumpsGetInfog(F, 1, &i1) && i1 < 0) {
+    MatMumpsGetInfog(F, 2, &i2);
+    MatMumpsGetInfog(F, 16, &mb);  /* the estimated working memory, MB on the largest process */
+    MatMumpsGetInfog(F, 17, &tot); /* and in all */
+    const char *what = i1 == -13   ? "could not allocate memory"
+                       : i1 == -9  ? "ran out of its workspace"
+                       : i1 == -19 ? "was given less working memory than it needs (ICNTL(23))"
+                       : i1 == -8 || i1 == -14 || i1 == -15 || i1 == -11 ? "ran out of an internal array"
+                                                                          : NULL;
+    char need[96] = "";
+    if (mb > 0) snprintf(need, sizeof need, "; it estimated %ld MB on the largest process, %ld MB in all", (long)mb, (long)tot);
+    if (what)
+      snprintf(out, len, ": the direct solver MUMPS %s (INFOG(1) = %ld, INFOG(2) = %.0f%s): the factorization needs more "
+                         "memory than it can have; an iterative solver needs far less (-ksp_type cg -pc_type gamg for a "
+                         "symmetric positive definite problem, -ksp_type gmres -pc_type gamg otherwise)",
+               what, (long)i1, mumps_count(i2), need);
+    else snprintf(out, len, ": the direct solver MUMPS failed (INFOG(1) = %ld, INFOG(2) = %ld)", (long)i1, (long)i2);
+    return;
+  }
+  /* a preconditioner alone (preonly) that is no factorization solves nothing */
+  if (!strcmp(kt, KSPPREONLY) && strcmp(pt, PCLU) && strcmp(pt, PCCHOLESKY) && strcmp(pt, PCQR) && strcmp(pt, PCSVD) &&
+      strcmp(pt, PCREDUNDANT) && strcmp(pt, PCTELESCOPE))
+    snprintf(out, len, ": -ksp_type preonly applies the preconditioner %s once, which is no solver of this matrix; give it a "
+                       "Krylov method (-ksp_type cg or gmres), or a factorization (-pc_type lu)", pt);
+}
+
 void lg_solver_name(KSP ksp, char *out, size_t len) {
   PC pc;
   MatSolverType st;

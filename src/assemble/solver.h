@@ -30,6 +30,11 @@ void lg_mumps_detect_null_pivots(KSP ksp);
 /* the null pivots of MUMPS's last factorization, or 0 for other solvers */
 PetscInt lg_mumps_null_pivots(KSP ksp);
 
+/* why a solve with ksp failed, where the solver can tell (": ..." to append to a message; ""
+ * when it cannot): MUMPS's own reason (INFOG(1), INFOG(2), the memory it wanted) instead of
+ * DIVERGED_PC_FAILED, or a preconditioner used alone (-ksp_type preonly -pc_type jacobi) */
+void lg_solve_failure(KSP ksp, char *out, size_t len);
+
 /* A factorization kept while the matrix changes: the state matrix of an optimization is
  * reassembled at every new control, and refactoring it was half of an L-BFGS run. While the
  * matrix stays close to the factored one, conjugate gradients preconditioned by the old

@@ -1,9 +1,10 @@
 /* deflate.c — zlib streams (RFC 1950) of DEFLATE data (RFC 1951) for compressed VTU output,
- * written here because the mesh layer uses libc and libm only. One fixed-Huffman block
- * (BTYPE 01) with LZ77 matches found through hash chains over a 32 KB window: simpler than
- * dynamic Huffman codes and within 10-30% of zlib's level 6 on mesh data (connectivity,
- * offsets and cell types compress to a few percent; coordinates and fields of doubles to
- * 60-90%). Decompressors (VTK's, zlib's) read any valid stream. */
+ * written here because the mesh layer uses no library but libc, libm and OpenMP. One
+ * fixed-Huffman block (BTYPE 01) with LZ77 matches found through hash chains over a 32 KB
+ * window: simpler than dynamic Huffman codes, and its output about 1.5 times zlib's level 6
+ * on mesh data (1.53 measured: fixed codes spend more bits on the doubles' bytes;
+ * connectivity, offsets and cell types compress to a few percent). Decompressors (VTK's,
+ * zlib's) read any valid stream. */
 #include "deflate.h"
 
 #include <stdint.h>

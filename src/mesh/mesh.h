@@ -2,7 +2,7 @@
  * derives from it: generators, Gmsh reader, VTU writer, uniform refinement, derived
  * adjacency (edges, faces, boundary facets) and the validity check.
  *
- * Depends on libc and libm only. Every fallible function returns 0 on success and a
+ * Depends on libc, libm and OpenMP only. Every fallible function returns 0 on success and a
  * nonzero code on failure, leaving a message in the mesh (or in the caller's buffer
  * for constructors).
  */

@@ -38,3 +38,25 @@ local uh2 = prob:solve(uh)
 local m2 = math.max(table.unpack(uh2:values()))
 print(string.format("max u: lambda 5 -> %.6f, lambda 6 -> %.6f", m1, m2))
 T.check(m2 > m1, "max u did not grow with lambda")
+
+-- the p-Laplacian (p = 4, regularized) from zero: PETSc's divergence test stopped the
+-- default Newton with DIVERGED_DTOL after one step (|F| grows 1e4-fold there first); with no
+-- divergence test by default, as DOLFIN's Newton, it converges (18 steps)
+do
+  local m = lg.mesh.rectangle{nx = 32}
+  local P1 = lg.lagrange(1)
+  local w, q = lg.unknown(P1, "w"), lg.test(P1, "q")
+  local g2 = lg.dot(lg.grad(w), lg.grad(w))
+  local Fp = lg.integral(m:cells(), (1e-2 + g2)*lg.dot(lg.grad(w), lg.grad(q)) - 10*q)
+  local function plap(prefix)
+    return lg.nonlinear_problem{mesh = m, eqn = Fp, bc = lg.essential_bc(m:boundary(), q*w), test = q, unknown = w, prefix = prefix}
+  end
+  local _, pinfo = plap("plap_"):solve()
+  print(string.format("p-Laplacian from zero: %s after %d Newton steps", pinfo.reason, pinfo.iterations))
+  T.check(pinfo.iterations >= 10 and pinfo.iterations <= 30, "p-Laplacian: %d Newton steps", pinfo.iterations)
+  -- the message says what to try
+  lg.options("-plapd_snes_divergence_tolerance 1e4")
+  T.fails(function() return plap("plapd_"):solve() end, "DIVERGED_DTOL after 1 Newton iterations", "try a damped search")
+  lg.options("-plapm_snes_max_it 3")
+  T.fails(function() return plap("plapm_"):solve() end, "DIVERGED_MAX_IT after 3 Newton iterations", "continuation in a parameter")
+end

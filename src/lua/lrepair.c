@@ -218,7 +218,7 @@ int lmesh_smooth(lua_State *L) {
   }
   lg_mesh *refl = opt_reference(L, t, u->lm, fn);
   const mesh *ref = refl ? refl->m : NULL;
-  smooth_opts o = {smooth_energy_measure(m->type), 20, 1, 0, 0, 0, NULL, SMOOTH_AUTO, SMOOTH_SLIDE_NONE};
+  smooth_opts o = {smooth_energy_measure(m->type), 20, 1, 0, 0, 0, NULL, SMOOTH_AUTO, SMOOTH_SLIDE_NONE, 1};
   int quiet = 0;
   if (t) {
     const char *name = opt_str(L, t, "measure", NULL, fn);
@@ -230,11 +230,12 @@ int lmesh_smooth(lua_State *L) {
         return luaL_error(L, "%s: unknown measure '%s' (measures: %s)", fn, name, names);
       }
     }
-    const char *method = opt_str(L, t, "method", "local", fn);
+    const char *method = opt_str(L, t, "method", "auto", fn);
+    o.then_energy = !strcmp(method, "auto");
     if (!strcmp(method, "global")) o.global = 1;
     else if (!strcmp(method, "energy")) o.global = o.energy = 1;
-    else if (strcmp(method, "local"))
-      return luaL_error(L, "%s: option 'method' must be \"local\", \"global\" or \"energy\", got '%s'", fn, method);
+    else if (strcmp(method, "local") && strcmp(method, "auto"))
+      return luaL_error(L, "%s: option 'method' must be \"auto\", \"local\", \"global\" or \"energy\", got '%s'", fn, method);
     o.iterations = opt_int(L, t, "iterations", 20, fn);
     if (o.iterations < 1) return luaL_error(L, "%s: option 'iterations' must be >= 1", fn);
     lua_getfield(L, t, "quiet");
@@ -279,15 +280,17 @@ int lmesh_smooth(lua_State *L) {
   lua_createtable(L, 0, 10);
   lua_pushstring(L, quality_name(o.measure));
   lua_setfield(L, -2, "measure");
-  lua_pushstring(L, o.energy ? "energy" : o.global ? "global" : "local");
+  /* the default ("auto") reports what ran: "local", or "local, then energy" */
+  lua_pushstring(L, r.then_energy ? "local, then energy" : o.energy ? "energy" : o.global ? "global" : "local");
   lua_setfield(L, -2, "method");
+  if (r.then_energy) set_num(L, "min_local", r.min_local);
   set_num(L, "min_before", r.min_before);
   set_num(L, "min_after", r.min_after);
   set_num(L, "mean_before", r.mean_before);
   set_num(L, "mean_after", r.mean_after);
   set_int(L, "moved", r.moved);
   set_int(L, "sweeps", r.sweeps);
-  if (o.energy) {
+  if (o.energy || r.then_energy) {
     lua_pushstring(L, smooth_optimizer_name(r.optimizer));
     lua_setfield(L, -2, "optimizer");
     set_int(L, "iterations", r.iterations);

@@ -20,7 +20,7 @@ static void usage(FILE *f) {
              "                  [--placement chebyshev|corners] [--max-iterations N] [--reference REST.msh]\n"
              "                  [--motion-weight W] [--no-global] [--report]\n"
              "       lugal-mesh smooth IN.msh OUT.msh [--measure NAME] [--iterations N]\n"
-             "                  [--method local|global|energy] [--reference REST.msh] [--boundary slide|fixed]\n"
+             "                  [--method auto|local|global|energy] [--reference REST.msh] [--boundary slide|fixed]\n"
              "                  [--optimizer auto|newton|lbfgs] [--sliding best|optimizer|local]\n"
              "       lugal-mesh --version | --help\n\n"
              "quality   prints min, mean, max and the worst cell of every measure that applies to\n"
@@ -37,7 +37,8 @@ static void usage(FILE *f) {
              "          --no-global keeps to the local stages.\n"
              "smooth    raises the quality (default mean_ratio, corner_condition for quads and\n"
              "          hexes) without ever lowering the minimum; the mesh must be valid;\n"
-             "          --method local (default) moves one vertex at a time, global all interior\n"
+             "          --method auto (default) runs local, then energy when the minimum stays\n"
+             "          below 0.3; local moves one vertex at a time, global all interior\n"
              "          vertices together by L-BFGS on the sum of 1/quality, energy the same\n"
              "          without the floor on the minimum during the descent (only validity), kept\n"
              "          when its minimum beats the input's: for bent and anisotropic meshes;\n"
@@ -169,7 +170,7 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
   const char *in = NULL, *out = NULL, *measure = NULL, *refpath = NULL;
   untangle_opts uo;
   untangle_defaults(&uo);
-  int report = 0, iterations = 20, slide = 1, global = 0, energy = 0, method_given = 0, optimizer = SMOOTH_AUTO,
+  int report = 0, iterations = 20, slide = 1, global = 0, energy = 0, method_given = 0, optimizer = SMOOTH_AUTO, then_energy = 1,
       sliding = -1;
   for (int i = 0; i < argc; i++) {
     const char *a = argv[i];
@@ -199,10 +200,11 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
     } else if (!strcmp(a, "--method") && has && !strcmp(cmd, "smooth")) {
       const char *v = argv[++i];
       method_given = 1;
-      if (!strcmp(v, "local")) global = 0;
+      then_energy = !strcmp(v, "auto");
+      if (!strcmp(v, "local") || !strcmp(v, "auto")) global = 0;
       else if (!strcmp(v, "global")) global = 1;
       else if (!strcmp(v, "energy")) global = energy = 1;
-      else { fprintf(stderr, "lugal-mesh smooth: --method must be local, global or energy\n"); return 2; }
+      else { fprintf(stderr, "lugal-mesh smooth: --method must be auto, local, global or energy\n"); return 2; }
     } else if (!strcmp(a, "--sliding") && has && !strcmp(cmd, "smooth")) {
       if ((sliding = smooth_sliding_from_name(argv[++i])) < 0) {
         fprintf(stderr, "lugal-mesh smooth: --sliding must be best, optimizer or local\n");
@@ -261,7 +263,7 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
       return 2;
     }
     smooth_opts so = {measure ? quality_from_name(measure) : smooth_energy_measure(m->type), iterations, slide, report, global,
-                      energy, ref ? ref->x : NULL, optimizer, sliding < 0 ? SMOOTH_SLIDE_NONE : sliding};
+                      energy, ref ? ref->x : NULL, optimizer, sliding < 0 ? SMOOTH_SLIDE_NONE : sliding, then_energy};
     if (so.measure < 0) { fprintf(stderr, "lugal-mesh smooth: unknown measure %s\n", measure); mesh_free(ref); mesh_free(m); return 2; }
     if (sliding >= 0 && !smooth_has_sliding_passes(m, &so)) {
       fprintf(stderr, "lugal-mesh smooth: --sliding needs --method energy with a sliding boundary, the measure %s and no "

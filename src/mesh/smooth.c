@@ -422,9 +422,40 @@ static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err
 }
 
 const char *smooth_method_label(const smooth_opts *o, const smooth_report *r) {
+  if (r->then_energy) {
+    if (r->optimizer != SMOOTH_NEWTON) return "local, then energy, L-BFGS";
+    return r->multigrid ? "local, then energy, Newton, multigrid" : "local, then energy, Newton";
+  }
   if (!o->energy) return o->global ? "global" : "local";
   if (r->optimizer != SMOOTH_NEWTON) return "energy, L-BFGS";
   return r->multigrid ? "energy, Newton, multigrid" : "energy, Newton";
+}
+
+/* "auto": the energy method from where the local one left the mesh, when its minimum stayed
+ * below SMOOTH_AUTO_MIN; one report for both (the energy run keeps its result only when it
+ * raises the minimum) */
+static int smooth_then_energy(mesh *m, const smooth_opts *o, const double *x0, smooth_report *r, char *err) {
+  if (!o->then_energy || o->energy || o->xref || m->type == CELL_INTERVAL || !(r->min_after < SMOOTH_AUTO_MIN)) return 0;
+  smooth_opts e = *o;
+  e.global = e.energy = 1;
+  e.then_energy = 0;
+  smooth_report re;
+  if (smooth_run(m, &e, &re, err)) return 1;
+  re.then_energy = 1;
+  re.min_local = r->min_after;
+  re.min_before = r->min_before;
+  re.mean_before = r->mean_before;
+  re.seconds += r->seconds;
+  re.sweeps = r->sweeps;
+  re.moved = 0;
+  size_t d = (size_t)m->dim;
+  for (int v = 0; v < m->nvert; v++) {
+    int ch = 0;
+    for (size_t j = 0; j < d; j++) ch |= m->x[(size_t)v * d + j] != x0[(size_t)v * d + j];
+    re.moved += ch;
+  }
+  *r = re;
+  return 0;
 }
 
 static const char *const optimizer_names[] = {"auto", "newton", "lbfgs"}; /* SMOOTH_AUTO, _NEWTON, _LBFGS */
@@ -479,7 +510,11 @@ int mesh_smooth(mesh *m, const smooth_opts *o, smooth_report *r, char *err) {
   memcpy(keep, m->x, sizeof(double) * nx);
   unit_frame f;
   if (ut_frame_enter(m, &f, 0, err)) { free(keep); return 1; }
-  int rc = smooth_run(m, o, r, err);
+  /* the input in the unit frame, for "auto"'s count of the vertices either method moved */
+  double *xin = o->then_energy ? malloc(sizeof(double) * (nx + 1)) : NULL;
+  if (xin) memcpy(xin, m->x, sizeof(double) * nx);
+  int rc = smooth_run(m, o, r, err) || (xin && smooth_then_energy(m, o, xin, r, err));
+  free(xin);
   ut_frame_leave(m, &f);
   if (!rc && !ut_finite_or_restore(m, keep)) {
     r->moved = 0;

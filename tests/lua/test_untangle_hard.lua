@@ -29,13 +29,20 @@ for _, case in ipairs{{30, 10, 0.7}, {40, 16, 0.75}} do
     if k <= case[1] + 1 or k > (case[1] + 1)*case[2] then bmax = math.max(bmax, math.abs(x1 - x0) + math.abs(y1 - y0)) end
   end
   T.check(bmax == 0, "boundary = \"fixed\" kept the strip's long sides (moved by %g)", bmax)
-  local loc = mesh:copy()
-  local sl = loc:smooth{quiet = true, iterations = 50}
+  local loc, auto = mesh:copy(), mesh:copy()
+  local sl = loc:smooth{quiet = true, iterations = 50, method = "local"}
   local se = mesh:smooth{quiet = true, method = "energy", iterations = 50}
-  print(string.format("spiral %dx%d: after untangle %.4f, local smoothing %.4f, energy smoothing %.4f, the strip's own %.4f",
-                      case[1], case[2], se.min_before, sl.min_after, se.min_after, qref))
+  -- the default ("auto"): the local method leaves the minimum below 0.3, the energy method
+  -- goes on from there (the local method alone was the default and stopped at 0.02-0.11)
+  local sa = auto:smooth{quiet = true, iterations = 50}
+  print(string.format("spiral %dx%d: after untangle %.4f, local smoothing %.4f, energy smoothing %.4f, default (%s) %.4f, the strip's own %.4f",
+                      case[1], case[2], se.min_before, sl.min_after, se.min_after, sa.method, sa.min_after, qref))
   T.check(se.min_after >= 0.9*qref, "energy smoothing reaches 0.9 of the strip's minimum quality (%.4f vs %.4f)", se.min_after, qref)
   T.check(se.min_after > sl.min_after, "energy smoothing beats the local smoother (%.4f vs %.4f)", se.min_after, sl.min_after)
+  if sl.min_after < 0.3 then
+    T.check(sa.method:find("local, then energy", 1, true) and sa.min_after >= 0.9*se.min_after,
+            "the default smoothing (%s) reaches %.4f against the energy method's %.4f", sa.method, sa.min_after, se.min_after)
+  end
 end
 -- the same spirals in quadrilaterals: the global stage sums the energy over each cell's
 -- four corners (it only took triangles and tetrahedra, and left 108 and 241 cells
@@ -52,7 +59,7 @@ for _, case in ipairs{{30, 10, 0.7}, {40, 16, 0.75}} do
   local rf = fixed:untangle{quiet = true, boundary = "fixed"}
   T.check(rf.success, "quadrilateral spiral %dx%d with the boundary fixed: untangled (%d left)", case[1], case[2], rf.invalid_after)
   local loc = mesh:copy()
-  local sl = loc:smooth{quiet = true, iterations = 50}
+  local sl = loc:smooth{quiet = true, iterations = 50, method = "local"}
   local se = mesh:smooth{quiet = true, method = "energy", iterations = 50}
   print(string.format("quadrilateral spiral %dx%d: after untangle %.4f, local smoothing %.4f, energy smoothing %.4f, the strip's own %.4f",
                       case[1], case[2], se.min_before, sl.min_after, se.min_after, qref))

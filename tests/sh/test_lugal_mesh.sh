@@ -88,7 +88,7 @@ grep -q "must be the same mesh" "$T/err"
 if "$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/x.msh" --reference "$T/rest.msh" --measure scaled_jacobian 2> "$T/err"; then exit 1; fi
 grep -q "reference shapes need" "$T/err"
 if "$BUILD/lugal-mesh" smooth "$T/fixed.msh" "$T/x.msh" --method newton 2> "$T/err"; then exit 1; fi
-grep -q "method must be local, global or energy" "$T/err"
+grep -q "method must be auto, local, global or energy" "$T/err"
 if "$BUILD/lugal-mesh" smooth "$T/tangled.msh" "$T/x.msh" 2> "$T/err"; then exit 1; fi
 grep -q "untangle it first" "$T/err"
 if "$BUILD/lugal-mesh" untangle "$T/tangled.msh" "$T/x.msh" --beta -1 2> "$T/err"; then exit 1; fi

@@ -83,6 +83,18 @@ static int dist_repair(lua_State *L, ud_mesh *u, lg_mesh *ref, const double **xr
   return rc;
 }
 
+/* progress = seconds between the progress lines of a long run (default 2; 0 or false: none) */
+static double opt_progress(lua_State *L, int t, const char *fn) {
+  if (!t) return 2;
+  int ty = lua_getfield(L, t, "progress");
+  double v = ty == LUA_TBOOLEAN ? (lua_toboolean(L, -1) ? 2 : 0) : ty == LUA_TNIL ? 2 : -1;
+  if (ty == LUA_TNUMBER) v = lua_tonumber(L, -1);
+  lua_pop(L, 1);
+  if (!(v >= 0) || !isfinite(v))
+    luaL_error(L, "%s: option 'progress' must be the seconds between progress lines (a number >= 0) or a boolean", fn);
+  return v;
+}
+
 int lmesh_untangle(lua_State *L) {
   const char *fn = "mesh:untangle";
   ud_mesh *u = check_mesh(L, 1, fn);
@@ -90,7 +102,7 @@ int lmesh_untangle(lua_State *L) {
   if (!lua_isnoneornil(L, 2)) {
     if (!lua_istable(L, 2))
       return typeerror(L, fn, 2, "an options table {beta=, max_iterations=, boundary=, placement=, reference=, motion_weight=, global=, quiet=}");
-    static const char *const keys[] = {"beta", "max_iterations", "boundary", "placement", "quiet", "reference",
+    static const char *const keys[] = {"beta", "max_iterations", "boundary", "placement", "quiet", "progress", "reference",
                                        "motion_weight", "global", NULL};
     check_keys(L, 2, fn, keys);
     t = 2;
@@ -123,6 +135,7 @@ int lmesh_untangle(lua_State *L) {
     lua_pop(L, 1);
   }
   o.slide = opt_boundary(L, t, fn);
+  o.progress = quiet ? 0 : opt_progress(L, t, fn); /* on the rank that runs it */
   mesh *m = u->lm->m;
   lg_mesh *refl = opt_reference(L, t, u->lm, fn);
   const mesh *ref = refl ? refl->m : NULL;
@@ -212,13 +225,14 @@ int lmesh_smooth(lua_State *L) {
   if (!lua_isnoneornil(L, 2)) {
     if (!lua_istable(L, 2))
       return typeerror(L, fn, 2, "an options table {measure=, method=, iterations=, boundary=, quiet=, reference=, optimizer=, sliding=}");
-    static const char *const keys[] = {"measure", "method", "iterations", "boundary", "quiet", "reference", "optimizer", "sliding", NULL};
+    static const char *const keys[] = {"measure", "method", "iterations", "boundary", "quiet", "progress", "reference", "optimizer",
+                                       "sliding", NULL};
     check_keys(L, 2, fn, keys);
     t = 2;
   }
   lg_mesh *refl = opt_reference(L, t, u->lm, fn);
   const mesh *ref = refl ? refl->m : NULL;
-  smooth_opts o = {smooth_energy_measure(m->type), 20, 1, 0, 0, 0, NULL, SMOOTH_AUTO, SMOOTH_SLIDE_NONE, 1};
+  smooth_opts o = {smooth_energy_measure(m->type), 20, 1, 0, 0, 0, NULL, SMOOTH_AUTO, SMOOTH_SLIDE_NONE, 1, 0};
   int quiet = 0;
   if (t) {
     const char *name = opt_str(L, t, "measure", NULL, fn);
@@ -242,6 +256,7 @@ int lmesh_smooth(lua_State *L) {
     quiet = lua_toboolean(L, -1);
     lua_pop(L, 1);
   }
+  o.progress = quiet ? 0 : opt_progress(L, t, fn); /* on the rank that runs it */
   o.slide = opt_boundary(L, t, fn);
   if (ref) {
     o.xref = ref->x;

@@ -18,11 +18,13 @@ static void usage(FILE *f) {
              "                  [--picture MESH.svg] [--vtu OUT.vtu] [--bins N]\n"
              "       lugal-mesh untangle IN.msh OUT.msh [--beta B] [--boundary slide|fixed]\n"
              "                  [--placement chebyshev|corners] [--max-iterations N] [--reference REST.msh]\n"
-             "                  [--motion-weight W] [--no-global] [--report]\n"
+             "                  [--motion-weight W] [--no-global] [--report] [--progress S]\n"
              "       lugal-mesh smooth IN.msh OUT.msh [--measure NAME] [--iterations N]\n"
              "                  [--method auto|local|global|energy] [--reference REST.msh] [--boundary slide|fixed]\n"
-             "                  [--optimizer auto|newton|lbfgs] [--sliding best|optimizer|local]\n"
+             "                  [--optimizer auto|newton|lbfgs] [--sliding best|optimizer|local] [--progress S]\n"
              "       lugal-mesh --version | --help\n\n"
+             "untangle and smooth print a progress line on stderr every S seconds (default 2; 0:\n"
+             "none) of a run that takes longer.\n\n"
              "quality   prints min, mean, max and the worst cell of every measure that applies to\n"
              "          the mesh's cells, and the number of inverted or degenerate cells;\n"
              "          --measure chooses the measure for the pictures (default mean_ratio for\n"
@@ -172,6 +174,7 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
   untangle_defaults(&uo);
   int report = 0, iterations = 20, slide = 1, global = 0, energy = 0, method_given = 0, optimizer = SMOOTH_AUTO, then_energy = 1,
       sliding = -1;
+  double progress = 2;
   for (int i = 0; i < argc; i++) {
     const char *a = argv[i];
     int has = i + 1 < argc;
@@ -186,6 +189,13 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
       uo.motion_weight = strtod(argv[++i], &end);
       if (end == argv[i] || *end || !(uo.motion_weight >= 0) || !isfinite(uo.motion_weight)) {
         fprintf(stderr, "lugal-mesh untangle: --motion-weight must be a finite number >= 0, got %s\n", argv[i]);
+        return 2;
+      }
+    } else if (!strcmp(a, "--progress") && has) {
+      progress = strtod(argv[++i], &end);
+      if (end == argv[i] || *end || !(progress >= 0) || !isfinite(progress)) {
+        fprintf(stderr, "lugal-mesh %s: --progress must be the seconds between progress lines (>= 0; 0: none), got %s\n", cmd,
+                argv[i]);
         return 2;
       }
     } else if (!strcmp(a, "--no-global") && !strcmp(cmd, "untangle")) {
@@ -248,6 +258,7 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
     untangle_report r;
     uo.slide = slide;
     uo.verbose = report;
+    uo.progress = progress; /* a line on stderr every so many seconds of a long run */
     uo.xref = ref ? ref->x : NULL;
     int bad = mesh_untangle(m, &uo, &r, err);
     mesh_free(ref);
@@ -263,7 +274,8 @@ static int repair_cmd(const char *cmd, int argc, char **argv) {
       return 2;
     }
     smooth_opts so = {measure ? quality_from_name(measure) : smooth_energy_measure(m->type), iterations, slide, report, global,
-                      energy, ref ? ref->x : NULL, optimizer, sliding < 0 ? SMOOTH_SLIDE_NONE : sliding, then_energy};
+                      energy, ref ? ref->x : NULL, optimizer, sliding < 0 ? SMOOTH_SLIDE_NONE : sliding, then_energy,
+                      progress};
     if (so.measure < 0) { fprintf(stderr, "lugal-mesh smooth: unknown measure %s\n", measure); mesh_free(ref); mesh_free(m); return 2; }
     if (sliding >= 0 && !smooth_has_sliding_passes(m, &so)) {
       fprintf(stderr, "lugal-mesh smooth: --sliding needs --method energy with a sliding boundary, the measure %s and no "

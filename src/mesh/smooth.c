@@ -345,6 +345,8 @@ static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err
   }
   ctx C;
   if (ut_ctx_init(&C, m, o->slide, err)) { ut_ctx_free(&C); return 1; }
+  ut_progress pg = {o->progress, "smooth", o->energy ? "energy" : o->global ? "global" : "local", t0, t0};
+  C.progress = &pg;
   int ninv;
   ut_count_cells(&C, m->x, 0, &ninv, NULL);
   if (ninv) {
@@ -383,6 +385,7 @@ static int smooth_run(mesh *m, const smooth_opts *o, smooth_report *r, char *err
       for (int c = 0; c < m->ncell; c++) total += 1 / mesh_cell_quality(m, c, o->measure);
       for (int v = 0; v < m->nvert; v++) changed += smooth_vertex(&C, v, o->measure, NULL, &gain);
       r->sweeps = sweep + 1;
+      ut_progress_tick(&pg, "sweep", sweep + 1, total - gain, 0);
       if (o->verbose) printf("smooth: sweep %d moved %d vertices, sum 1/q %.6g -> %.6g\n", sweep + 1, changed, total,
                              total - gain);
       /* converged: the sweep lowered Σ 1/q by less than 1e-4 of it */

@@ -393,7 +393,8 @@ static void stage_print(const untangle_stage *s) {
 }
 
 /* a stage starts from the previous one's invalid count and ends with fresh counts */
-static double stage_begin(untangle_stage *s, const char *name, int invalid_before) {
+static double stage_begin(ctx *C, untangle_stage *s, const char *name, int invalid_before) {
+  if (C->progress) C->progress->stage = name;
   s->name = name;
   s->invalid_before = invalid_before;
   return ut_now();
@@ -462,6 +463,8 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
   if (m->ncell == 0) { snprintf(err, MESH_ERRLEN, "the mesh has no cells"); return 1; }
   ctx C;
   if (ut_ctx_init(&C, m, o->slide, err)) { ut_ctx_free(&C); return 1; }
+  ut_progress pg = {o->progress, "untangle", NULL, t0, t0};
+  C.progress = &pg;
   double beta = o->beta < 0 ? untangle_default_beta(m) : o->beta;
   r->beta = beta;
   size_t nx = (size_t)m->nvert * m->dim;
@@ -511,7 +514,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
    * restart. Small tangles (up to 1000 invalid cells) keep the paper's stage 1: it is cheap
    * there and puts a single pulled vertex back exactly. */
   int knot = r->invalid_before > m->ncell / 4 && r->invalid_before > 1000;
-  double ts = stage_begin(s, knot ? "1 feasible set (knot: skip)" : "1 feasible set", r->invalid_before);
+  double ts = stage_begin(&C, s, knot ? "1 feasible set (knot: skip)" : "1 feasible set", r->invalid_before);
   s->moved = r->invalid_before && !knot
                  ? ut_feasible_passes(&C, m->x, 0, 0, NULL, o->placement, maxit, moved, &s->iterations) : 0;
   stage_end(&C, m->x, beta, s, ts, o->verbose);
@@ -520,7 +523,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
   /* stage 2: optimization of (3.3); boundary vertices one by one along the boundary, then
    * the interior vertices of a growing region around the invalid cells together */
   s = &r->stage[1];
-  ts = stage_begin(s, "2 optimization", r->stage[0].invalid_after);
+  ts = stage_begin(&C, s, "2 optimization", r->stage[0].invalid_after);
   int ninv = s->invalid_before;
   work W;
   W.fidx = malloc(sizeof(int) * ((size_t)m->nvert + 1));
@@ -663,7 +666,7 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
 
   /* stage 3: feasible set with J >= β, around what stages 1–2 touched */
   s = &r->stage[2];
-  ts = stage_begin(s, "3 feasible set (J >= beta)", r->stage[1].invalid_after);
+  ts = stage_begin(&C, s, "3 feasible set (J >= beta)", r->stage[1].invalid_after);
   for (int v = 0; v < m->nvert; v++) touched[v] |= moved[v];
   /* the neighbours of moved vertices too: their cells changed */
   size_t nvb = m->nvert > 0 ? (size_t)m->nvert : 0;

@@ -30,6 +30,8 @@ typedef struct {
                            fallback's disk shapes): the global stage minimizes by projected
                            Newton and ends at the first valid state, and no final move goes
                            towards those shapes (C only, not in Lua) */
+  double progress;      /* a line on stderr every so many seconds of a run longer than that
+                         * (2: the Lua and command-line default; 0: none) */
 } untangle_opts;
 
 typedef struct {
@@ -95,6 +97,8 @@ typedef struct {
   int then_energy; /* the default method ("auto"): local first, then the energy method from
                     * there when the minimum stays below SMOOTH_AUTO_MIN (kept only if it
                     * raises the minimum) */
+  double progress; /* a line on stderr every so many seconds of a run longer than that
+                    * (2: the Lua and command-line default; 0: none) */
 } smooth_opts;
 
 /* the minimum quality below which "auto" goes on from the local method to the energy

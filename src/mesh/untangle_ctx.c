@@ -419,6 +419,18 @@ int ut_slide_3d(const ctx *C, double *x, int v, vertex_penalty pen, vertex_gradi
   return moved;
 }
 
+void ut_progress_tick(ut_progress *p, const char *what, int it, double f, double qmin) {
+  if (!p || !(p->every > 0)) return;
+  double now = ut_now();
+  if (now - p->t0 < p->every || now - p->last < p->every) return;
+  p->last = now;
+  char qs[48] = "";
+  if (qmin > 0) snprintf(qs, sizeof qs, ", min quality %.4g", qmin);
+  fprintf(stderr, "%s: %s%s%s %d, objective %.6g%s, %.1f s\n", p->task, p->stage ? p->stage : "", p->stage ? ", " : "", what, it,
+          f, qs, now - p->t0);
+  fflush(stderr);
+}
+
 int ut_ctx_init(ctx *C, mesh *m, int slide, char *err) {
   memset(C, 0, sizeof *C);
   C->m = m;

@@ -13,8 +13,22 @@
 /* The corners of a cell (section 1: "an element is valid if each corner is valid"): the
  * corner vertex, then its d neighbours in right-handed order. A simplex has one corner (its
  * Jacobian is d! times the signed measure). */
+/* progress lines of a long run (untangle_opts.progress, smooth_opts.progress: every so many
+ * seconds, 0 none): one line on stderr at most every `every` seconds, the first after as many
+ * (a short run prints nothing): what runs, its iteration, the objective and the minimum
+ * quality when known, the seconds so far. A 180 000-triangle smoothing ran 128 s printing
+ * nothing */
+typedef struct {
+  double every;
+  const char *task;     /* "untangle" or "smooth" */
+  const char *stage;    /* "stage 2", "energy round 1", ... */
+  double t0, last;
+} ut_progress;
+void ut_progress_tick(ut_progress *p, const char *what, int it, double f, double qmin);
+
 typedef struct {
   mesh *m;
+  ut_progress *progress; /* the run's progress lines, or NULL */
   int d, nvc, ncorner;
   int ct[8][4];
   int *vc_off, *vc; /* vertex -> cells */

@@ -216,6 +216,7 @@ int ut_lbfgs(const objective *o, double *x, const int *freev, int nfree, int max
   int mem = 0, head = 0, best_bad = o->smooth ? 0 : obj_bad(o, x), start_bad = best_bad, stale = 0, worse = 0;
   double f = ut_eval(o, x, g, nfree), h0 = pow(o->S, 1.0 / d), fmark = f, f10 = f;
   for (it = 0; it < maxit && f > 0; it++) {
+    ut_progress_tick(o->C->progress, "L-BFGS iteration", it, f, 0);
     /* the two-loop recursion in one pass per pair, each sum in ut_dot's chunks and order (the
      * same bits as a pass for each update and each sum): the first pair's sum in p = −g's
      * pass, each pair's update with the next pair's sum, γ's scaling with the first sum of

@@ -182,6 +182,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
    * kept where block Jacobi's were not (bench/RESULTS.md) */
   int want_amg = ((o->amg_used && *o->amg_used) || soft_left) && nfree >= UT_AMG_MIN_ROWS && !o->no_multigrid;
   for (it = 0; it < maxit && isfinite(f) && f > 0; it++) {
+    ut_progress_tick(C->progress, "Newton step", it, f, qmin);
     double gg = ut_dot(g, g, n, part);
     if (!it) g0 = sqrt(gg);
     if (!(gg > 0) || ut_energy_hessian(o, x, &P, val, nfree)) break;

@@ -4,6 +4,30 @@ package.path = arg[0]:match("(.*/)") .. "?.lua;" .. arg[0]:match("(.*/)") .. "..
 local T = require "testlib"
 local lg = require "lugal"
 
+-- progress lines of long runs (stderr, every `progress` seconds of a run longer than that;
+-- a 180 000-triangle smoothing ran 128 s printing nothing): made visible here by a tiny
+-- interval in a child run; none by default on a short run, none with quiet = true
+if arg[1] == "progress" then
+  local H = require "hard_meshes"
+  local m = H.star(40, 80, 7)
+  local every = arg[2] == "default" and nil or tonumber(arg[2])
+  m:untangle{progress = every, quiet = arg[3] == "quiet"}
+  m:smooth{method = "energy", progress = every, quiet = arg[3] == "quiet"}
+  return
+end
+do
+  local out = T.child("progress 0.0001")
+  T.check(out:find("untangle: 2 optimization, Newton step %d+, objective [%d.e+]+, [%d.]+ s") or
+          out:find("untangle: 2 optimization, L%-BFGS iteration %d+, objective"), "no untangling progress line:\n%s", out)
+  T.check(out:find("smooth: energy, Newton step %d+, objective [%d.e+]+, min quality [%d.]+, [%d.]+ s"),
+          "no smoothing progress line:\n%s", out)
+  out = T.child("progress default")
+  T.check(not out:find("Newton step"), "progress lines from a short run by default:\n%s", out)
+  out = T.child("progress 0.0001 quiet")
+  T.check(out == "", "quiet = true printed:\n%s", out)
+  T.fails(function() lg.mesh.rectangle{nx = 2}:smooth{progress = -1} end, "mesh:smooth: option 'progress' must be the seconds")
+end
+
 local function coords(m)
   local c = {}
   for i = 1, m:nvertices() do c[i] = {m:coordinates(i)} end

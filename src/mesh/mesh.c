@@ -887,14 +887,15 @@ static int box_counts(const mesh_box_opts *o, long *nvert, long *ncell, int *lay
   if (box) {
     if (nx < 1 || ny < 1 || nz < 1) { seterr(err, "nx, ny and nz must be at least 1"); return 1; }
     if (!(o->x1 > o->x0) || !(o->y1 > o->y0) || !(o->z1 > o->z0)) { seterr(err, "need x0 < x1, y0 < y1 and z0 < z1"); return 1; }
-    double dv = ((double)nx + 1) * ((double)ny + 1) * ((double)nz + 1), dc = 6.0 * nx * ny * nz; /* no overflow */
-    long nv = dv > 4e9 ? 4000000000L : ((long)nx + 1) * ((long)ny + 1) * ((long)nz + 1);
-    long nc = dc > 4e9 ? 4000000000L : (long)nx * ny * nz * (o->type == CELL_TETRAHEDRON ? 6 : 1);
-    if (nv > 2000000000L || nc * 8 > 2000000000L) {
-      seterr(err, "a %d x %d x %d mesh is too large (%ld vertices and %ld cells; at most 2e9 vertices and 2.5e8 cells)", nx, ny,
-             nz, nv, nc);
+    /* the counts in doubles first (exact below 2^53, no overflow), reported as they are */
+    double dv = ((double)nx + 1) * ((double)ny + 1) * ((double)nz + 1),
+           dc = (double)nx * ny * nz * (o->type == CELL_TETRAHEDRON ? 6 : 1);
+    if (dv > 2e9 || dc * 8 > 2e9) {
+      seterr(err, "a %d x %d x %d mesh is too large (%.0f vertices and %.0f cells; at most 2e9 vertices and 2.5e8 cells)", nx, ny,
+             nz, dv, dc);
       return 1;
     }
+    long nv = (long)dv, nc = (long)dc;
     *nvert = nv;
     *ncell = nc;
     *layers = nz;
@@ -903,13 +904,13 @@ static int box_counts(const mesh_box_opts *o, long *nvert, long *ncell, int *lay
     if (nx < 1 || ny < 1) { seterr(err, "nx and ny must be at least 1 (got %d, %d)", nx, ny); return 1; }
     if (!(o->x1 > o->x0) || !(o->y1 > o->y0)) { seterr(err, "need x0 < x1 and y0 < y1"); return 1; }
     int crossed = o->type == CELL_TRIANGLE && o->diagonal == 2;
-    double dv = ((double)nx + 1) * ((double)ny + 1) + (double)nx * ny, dc = 4.0 * nx * ny; /* no overflow */
-    long nv = dv > 4e9 ? 4000000000L : ((long)nx + 1) * ((long)ny + 1) + (crossed ? (long)nx * ny : 0);
-    long nc = dc > 4e9 ? 4000000000L : (long)nx * ny * (o->type == CELL_QUADRILATERAL ? 1 : crossed ? 4 : 2);
-    if (nv > 2000000000L || nc * 4 > 2000000000L) {
-      seterr(err, "a %d x %d mesh is too large (%ld vertices and %ld cells; at most 2e9 vertices and 5e8 cells)", nx, ny, nv, nc);
+    double dv = ((double)nx + 1) * ((double)ny + 1) + (crossed ? (double)nx * ny : 0),
+           dc = (double)nx * ny * (o->type == CELL_QUADRILATERAL ? 1 : crossed ? 4 : 2); /* exact, no overflow */
+    if (dv > 2e9 || dc * 4 > 2e9) {
+      seterr(err, "a %d x %d mesh is too large (%.0f vertices and %.0f cells; at most 2e9 vertices and 5e8 cells)", nx, ny, dv, dc);
       return 1;
     }
+    long nv = (long)dv, nc = (long)dc;
     *nvert = nv;
     *ncell = nc;
     *layers = crossed ? 0 : ny;

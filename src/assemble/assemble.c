@@ -89,8 +89,24 @@ dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree, int ncomp, int disc
   return *v;
 }
 
+/* the cells' scale assembly can take: kernels compute in the mesh's units, and a cell's
+ * measure h^d (with quadrature weights and basis values around it) must stay well inside
+ * the doubles' range: h^d within 1e±280 (a 2D mesh scaled by 1e-155 gave NaN matrices, a 3D
+ * one at 1e-110 was reported "inverted or zero-size") */
+#define LG_SCALE_EXP 280
+
 int lg_mesh_check(lg_env *env, lg_mesh *lm) {
   if (lm->validated) return 0;
+  double h = lm->m->ncell ? mesh_hmax(lm->m) : 1;
+  int d = lm->m->dim;
+  if (h > 0 && isfinite(h) && fabs(d * log10(h)) > LG_SCALE_EXP) {
+    double lim = pow(10, floor((double)LG_SCALE_EXP / d));
+    lg_seterr(env, "the mesh's cells are about %.3g in size (their longest edge): assembly computes in the mesh's units, "
+                   "where a cell's measure (about 1e%+.0f) leaves the range of doubles; scale the coordinates to units where "
+                   "cells are between %.0g and %.0g in size (lg.mesh.* with other x1, y1, z1, or mesh:displace), and the "
+                   "equation's coefficients with them", h, floor(d * log10(h)), 1 / lim, lim);
+    return 1;
+  }
   int ids[5], n;
   mesh_count_invalid(lm->m, 5, ids, &n);
   if (n) {

@@ -527,6 +527,7 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
   p->lm = s->mesh;
   p->nonlinear = s->nonlinear;
   p->bc_symmetric = s->bc_symmetric;
+  p->bc_diag = 1;
   if (s->prefix) {
     /* PETSc option names: letters, digits and underscores, the prefix ends where the option
      * name starts (-<prefix>ksp_type) */

@@ -139,6 +139,9 @@ struct lg_problem {
                        * SNES's solver (nonlinear problems: the adjoint makes it so, and a
                        * Newton solve warm-started at the solution then reuses it) */
   uint64_t matrix_fp; /* linear problems: what the assembled, factored matrix was made from */
+  double bc_diag;     /* linear problems: the diagonal of the essential rows of A (their
+                       * equations are bc_diag (u_r - g_r) = 0: essential_diagonal); 1 for
+                       * nonlinear ones */
   uint64_t adj_fp;    /* nonlinear problems: what the adjoint's Jacobian was made from (besides the state) */
   int nmatpar, *matpar; /* the parameters the matrix terms read (their Jacobian tables): the
                          * only ones matrix_fingerprint mixes in */

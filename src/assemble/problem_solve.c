@@ -399,6 +399,43 @@ static int assemble_rhs(lg_env *env, lg_problem *p) {
   return rc;
 }
 
+/* The diagonal of a linear problem's essential rows: the mean |a_ii| of its other rows (1
+ * where there are none, or the mean is 0 or not finite). A row of 1 beside a diagonal of
+ * 1e200 (k = f = 1e200 in a well-posed Poisson problem) was taken by MUMPS for a null pivot
+ * and the problem refused as singular. Collective */
+static int essential_diagonal(lg_env *env, lg_problem *p, double *D) {
+  Vec d;
+  PCHK(VecDuplicate(p->x, &d), "VecDuplicate");
+  PetscErrorCode ierr = MatGetDiagonal(p->A, d);
+  PetscScalar *a = NULL;
+  if (!ierr) ierr = VecGetArray(d, &a);
+  double s[2] = {0, 0};
+  if (!ierr) {
+    for (int i = 0; i < p->nown; i++) a[p->own_rows[i] - p->lo] = NAN; /* the essential rows */
+    for (PetscInt i = 0; i < p->hi - p->lo; i++)
+      if (!isnan(a[i])) { s[0] += fabs(a[i]); s[1]++; }
+    VecRestoreArray(d, &a);
+  }
+  VecDestroy(&d);
+  if (ierr) return lg_petsc_fail(env, ierr, "the matrix's diagonal");
+  if (p->par && MPI_Allreduce(MPI_IN_PLACE, s, 2, MPI_DOUBLE, MPI_SUM, PetscObjectComm((PetscObject)p->A)) != MPI_SUCCESS) {
+    lg_seterr(env, "the sum over the ranks failed");
+    return 1;
+  }
+  *D = s[1] > 0 && s[0] > 0 && isfinite(s[0] / s[1]) ? s[0] / s[1] : 1;
+  return 0;
+}
+
+/* a vector's owned entries on the essential rows multiplied by s */
+static int scale_essential(lg_env *env, lg_problem *p, Vec v, double s) {
+  if (s == 1) return 0;
+  PetscScalar *a;
+  PCHK(VecGetArray(v, &a), "VecGetArray");
+  for (int i = 0; i < p->nown; i++) a[p->own_rows[i] - p->lo] *= s;
+  PCHK(VecRestoreArray(v, &a), "VecRestoreArray");
+  return 0;
+}
+
 static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_info *info) {
   double t0 = now_ms();
   memset(p->state, 0, sizeof(double) * (size_t)p->N);
@@ -407,7 +444,7 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
   p->matrix_fp = 0;
   if (!reuse) {
     p->matrix_ready = 0;
-    if (lg_problem_assemble_into(env, p, p->state, p->A)) return 1;
+    if (lg_problem_assemble_into(env, p, p->state, p->A) || essential_diagonal(env, p, &p->bc_diag)) return 1;
   }
   PetscScalar *b;
   int rc = assemble_rhs(env, p);
@@ -421,12 +458,12 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
                 * symmetric elimination the eliminated columns times the values */
     PCHK(VecGetArray(p->b, &b), "VecGetArray");
     for (size_t i = 0; i < p->bcc_n; i++) b[p->bcc_row[i] - p->lo] -= p->bcc_val[i] * p->bc_vals[p->bcc_col[i]];
-    for (int i = 0; i < p->nown; i++) b[p->own_rows[i] - p->lo] = p->own_vals[i];
+    for (int i = 0; i < p->nown; i++) b[p->own_rows[i] - p->lo] = p->bc_diag * p->own_vals[i];
     PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
   } else if (p->bc_symmetric) {
     if (keep_bc_columns(env, p)) return 1;
-    PCHK(MatZeroRowsColumns(p->A, p->nown, p->own_rows, 1.0, p->x, p->b), "MatZeroRowsColumns");
-  } else PCHK(MatZeroRows(p->A, p->nown, p->own_rows, 1.0, p->x, p->b), "MatZeroRows");
+    PCHK(MatZeroRowsColumns(p->A, p->nown, p->own_rows, p->bc_diag, p->x, p->b), "MatZeroRowsColumns");
+  } else PCHK(MatZeroRows(p->A, p->nown, p->own_rows, p->bc_diag, p->x, p->b), "MatZeroRows");
   info->assemble_ms = now_ms() - t0;
   t0 = now_ms();
   if (ensure_ksp(env, p)) return 1;
@@ -569,8 +606,9 @@ static void newton_advice(SNESConvergedReason reason, KSP ksp, char *out, size_t
                                     "degenerate point: try another initial=)");
     break;
   case SNES_DIVERGED_FNORM_NAN:
-    snprintf(out, len, ": the residual became NaN or infinite at a Newton step (a step left the domain of the equation, "
-                       "e.g. a square root or log of a negative value): try a damped search (-snes_linesearch_type bt), a "
+    snprintf(out, len, ": the residual or its norm became NaN or infinite (a step left the domain of the equation, e.g. a "
+                       "square root or log of a negative value; or the residual's entries pass 1e154, whose squares "
+                       "overflow: divide the equation by its scale): try a damped search (-snes_linesearch_type bt), a "
                        "better initial guess (initial=), or continuation in a parameter");
     break;
   case SNES_DIVERGED_FUNCTION_DOMAIN:
@@ -764,6 +802,11 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   PCHK(VecDuplicate(p->b, &r), "VecDuplicate");
   PCHK(VecDuplicate(p->b, &l), "VecDuplicate");
   if (lg_problem_vec_set(env, p, r, rhs)) { VecDestroy(&r); VecDestroy(&l); return 1; }
+  /* a linear problem's essential rows are bc_diag (u_r - g_r): a sensitivity's right side
+   * there scales with them, an adjoint's values there are bc_diag times those of the
+   * transposed solve (the rows are scaled: A_D = S A, A_D^T λ' = r gives λ = S λ') */
+  double D = p->nonlinear ? 1 : p->bc_diag;
+  if (!transpose && scale_essential(env, p, r, D)) { VecDestroy(&r); VecDestroy(&l); return 1; }
   PetscErrorCode ierr = 0;
   KSPConvergedReason reason = KSP_CONVERGED_ITS;
   PetscBool kept = PETSC_FALSE;
@@ -787,6 +830,7 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   /* the next solve's initial guess, where a factor may be kept */
   if (!ierr && !p->nonlinear && !env->no_keep_factor && lg_keep_applies(ksp, p->prefix))
     ierr = lg_keep_remember(&p->keep, transpose, l);
+  if (!ierr && reason >= 0 && transpose && scale_essential(env, p, l, D)) ierr = PETSC_ERR_LIB;
   if (!ierr && reason >= 0 && lg_problem_vec_get(env, p, l, lam)) ierr = PETSC_ERR_LIB;
   VecDestroy(&r);
   VecDestroy(&l);

@@ -160,7 +160,7 @@ static void exercise(mesh *m, fuzz_mesh_result *res) {
       if (!mesh_untangle(c, &o, &ur, err)) {
         check_untangled(c, &ur);
         if (!ur.invalid_after) {
-          smooth_opts so = {smooth_energy_measure(m->type), 2, 1, 0, 0, 0, NULL, SMOOTH_AUTO, SMOOTH_SLIDE_NONE};
+          smooth_opts so = {smooth_energy_measure(m->type), 2, 1, 0, 0, 0, NULL, SMOOTH_AUTO, SMOOTH_SLIDE_NONE, 1, 0};
           smooth_report sr;
           mesh_smooth(c, &so, &sr, err);
         }

@@ -93,7 +93,7 @@ int fuzz_untangle_run(const uint8_t *data, size_t size) {
       unsigned sflags = next(&b);
       smooth_opts so = {smooth_energy_measure(t), 1 + (int)(flags % 3),
                         uo.slide, 0, (flags >> 6) & 1, (flags >> 6) & (flags >> 7) & 1, NULL, (int)(sflags % 3),
-                        (int)((sflags / 3) % 3)};
+                        (int)((sflags / 3) % 3), (int)((sflags / 9) & 1), 0};
       smooth_report sr;
       if (!mesh_smooth(m, &so, &sr, err)) UFUZZ_CHECK(!(sr.min_after < sr.min_before * (1 - 1e-12)), "smoothing keeps the minimum");
     }

@@ -2,7 +2,8 @@
 -- the same chunk and reports the cell: the loop's threads once left it at different chunks
 -- (one saw the stop its neighbour set in the next chunk's scatter and left while the others
 -- waited at the barrier), and about half the runs hung with 2 threads, 35 of 40 with 4.
--- Each case runs in a child process many times, with 2 and with 4 threads, under a timeout.
+-- Each case runs in a child process many times, with 2 and with 4 threads, and on 2 ranks,
+-- under a timeout.
 package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
 local T = require "testlib"
 local lg = require "lugal"
@@ -38,5 +39,18 @@ for _, which in ipairs{"jacobian", "matrix", "vector"} do
               out == "" and "no output (killed by the timeout: a hang)" or out)
     end
   end
-  print(string.format("%s: %d runs with 2 and with 4 threads each reported the cell", which, runs))
+  -- two ranks of 2 threads each: every rank leaves the element loop and the run reports (the
+  -- child starts without this run's Open MPI singleton settings, which its environment holds)
+  local mpi = string.format("sh -c 'for v in $(env | sed -n \"s/^\\(OMPI_[A-Za-z_]*\\|PMIX_[A-Za-z_]*\\)=.*/\\1/p\"); do " ..
+                            "unset $v; done; export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 " ..
+                            "OMPI_MCA_rmaps_base_oversubscribe=1 OMP_NUM_THREADS=2; exec timeout 60 mpiexec -n 2 \"$0\" \"$@\"' '%s' '%s' case %s 2>&1",
+                            arg[-1], arg[0], which)
+  for r = 1, 3 do
+    local h = io.popen(mpi)
+    local out = h:read("a")
+    h:close()
+    T.check(out:find("not finite", 1, true), "%s on 2 ranks, run %d: %s", which, r,
+            out == "" and "no output (killed by the timeout: a hang)" or out)
+  end
+  print(string.format("%s: %d runs with 2 and with 4 threads, and 3 on 2 ranks, each reported the cell", which, runs))
 end

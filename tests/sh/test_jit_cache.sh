@@ -42,6 +42,13 @@ for at in 200 $((size / 2)) $((size - 200)); do
   [ "$(grep "L2 error" out6)" = "$(grep "L2 error" out2)" ] || { echo "FAIL: flipped bytes at $at"; cat out6; exit 1; }
   grep -q "removed, compiling it again" out6 || { echo "FAIL: flipped bytes at $at not found"; cat out6; exit 1; }
 done
+# two ranks sharing the cache, both finding the swapped object: each removes it and builds it
+# again (renames are atomic), the same answer
+cp "$2" "$1"
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
+XDG_CACHE_HOME="$D" timeout 120 mpiexec -n 2 "$BUILD/lugal" "$ROOT/examples/poisson.lua" 8 -lugal_jit cc > out9 2>&1 || { cat out9; exit 1; }
+[ "$(grep "L2 error" out9)" = "$(grep "L2 error" out2)" ] || { echo "FAIL: a swapped object on 2 ranks"; cat out9; exit 1; }
+cmp -s "$1" "$T/first.so" || { echo "FAIL: the swapped object was not built again on 2 ranks"; exit 1; }
 # the default tiers load cached objects too: a swapped one there is found the same way
 cp "$2" "$1"
 XDG_CACHE_HOME="$D" "$BUILD/lugal" "$ROOT/examples/poisson.lua" 8 -lugal_jit_tier_ms 0 > out7 2>&1 || { cat out7; exit 1; }

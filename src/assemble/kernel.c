@@ -312,7 +312,9 @@ char *kernel_source(expr_ctx *c, cell_type ct, int facet, int qdeg, const kernel
       if (d >= dim) KERR("the integrand differentiates %s in %c, but the mesh is %dD", fi->name, "xyz"[d], dim);
       int ci = coef_index(k, e->i0);
       if (ci < 0) {
-        if (k->ncoef == KER_MAXCOEF) KERR("too many coefficient functions in one form (max %d)", KER_MAXCOEF);
+        if (k->ncoef == KER_MAXCOEF)
+          KERR("an integrand reads more than %d discrete functions (coefficients, controls), the most a kernel takes: split "
+               "the integral into several (docs/lua-api.md, \"Limits\")", KER_MAXCOEF);
         ci = k->ncoef++;
         k->coef_func[ci] = e->i0;
         k->coef_degree[ci] = fi->degree;

@@ -145,3 +145,15 @@ do
   T.close(lg.integrate(m2, f), 0.5, 1e-14, "the checked functions still work")
 end
 print(n .. " bad inputs reported as errors")
+
+-- an integrand that reads more discrete functions than a kernel takes names the limit
+do
+  local mesh = lg.mesh.rectangle{nx = 2}
+  local P1 = lg.lagrange(1)
+  local u, v = lg.unknown(P1, "ucl"), lg.test(P1, "vcl")
+  local e = 0
+  for k = 1, 33 do e = e + lg.interpolate(P1, mesh, k*lg.x, "c" .. k) end
+  T.fails(function() return lg.linear_problem{mesh = mesh, eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(u), lg.grad(v)) - e*v),
+                                              bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}:solve() end,
+          "more than 32 discrete functions", "split the integral")
+end

@@ -123,4 +123,17 @@ for k = 0, 4 do Js[k] = rf:value(20 + 10*k*x*y) end          -- each a resolve f
 local J4 = rf_new():value(20 + 40*x*y)
 T.close(Js[4], J4, 1e-10, "J after four resolves with kept Jacobians = J of a fresh Newton solve")
 T.check(Js[4] ~= Js[3], "the resolves changed the state (J %.6e, %.6e)", Js[3], Js[4])
+-- a preconditioner used alone is named as no solver (it was blamed on a singular matrix);
+-- MUMPS's own errors: tests/data/hostile/lua/mumps_memory.lua
+do
+  local box = lg.mesh.box{nx = 6}
+  local P1b = lg.lagrange(1)
+  local ub, vb = lg.unknown(P1b, "ub"), lg.test(P1b, "vb")
+  local function poisson(prefix)
+    return lg.linear_problem{mesh = box, eqn = lg.integral(box:cells(), lg.dot(lg.grad(vb), lg.grad(ub)) - vb),
+                             bc = lg.essential_bc(box:boundary(), vb*ub), test = vb, unknown = ub, prefix = prefix}
+  end
+  lg.options("-pj_ksp_type preonly -pj_pc_type jacobi")
+  T.fails(function() return poisson("pj_"):solve() end, "-ksp_type preonly applies the preconditioner jacobi once")
+end
 print("solvers: all checks passed")

@@ -53,6 +53,28 @@ cmp -s "$1" "$T/first.so" || { echo "FAIL: the swapped object was not built agai
 cp "$2" "$1"
 XDG_CACHE_HOME="$D" "$BUILD/lugal" "$ROOT/examples/poisson.lua" 8 -lugal_jit_tier_ms 0 > out7 2>&1 || { cat out7; exit 1; }
 [ "$(grep "L2 error" out7)" = "$(grep "L2 error" out2)" ] || { echo "FAIL: a swapped object in the tiers"; cat out7; exit 1; }
+# a run ended by SIGTERM while its background builds run: the compilers are ended and their
+# outputs removed (a Ctrl-C left gcc's temporary object in the cache for good)
+E="$T/sig"
+cat > "$T/busy.lua" <<'LUA'
+local lg = require "lugal"
+local mesh = lg.mesh.rectangle{nx = 16}
+local P2 = lg.lagrange(2)
+local u, v = lg.unknown(P2, "u"), lg.test(P2, "v")
+for k = 1, 6 do -- six kernels for the background compiler
+  lg.integrate(mesh, lg.sin(k*lg.x)*lg.cos(lg.y))
+end
+io.stderr:write("started\n")
+local t0 = os.time()
+while os.time() - t0 < 20 do end
+LUA
+XDG_CACHE_HOME="$E" "$BUILD/lugal" "$T/busy.lua" -lugal_jit_tier_ms 0 2> "$T/busy.err" &
+pid=$!
+n=0; while ! grep -q started "$T/busy.err" 2> /dev/null && [ $n -lt 100 ]; do sleep 0.1; n=$((n + 1)); done
+kill -TERM $pid
+wait $pid 2> /dev/null
+left=$(find "$E" -name '*.tmp' 2> /dev/null | head -n 3)
+[ -z "$left" ] || { echo "FAIL: SIGTERM during background builds left $left"; exit 1; }
 # a folder that others can write to is not loaded from: libtcc's code, the same answer
 chmod 777 "$C/lugal"
 XDG_CACHE_HOME="$C" "$BUILD/lugal" "$ROOT/examples/poisson.lua" 8 -lugal_jit cc > out3 2>&1 || { cat out3; exit 1; }

@@ -9,31 +9,24 @@ local root = arg[0]:match("(.*/)tests/lua/") or "./"
 local files = {"largs.c", "lexpr.c", "lmesh.c", "lmodule.c", "loperator.c", "lopt.c", "lparallel.c", "lproblem.c", "lrepair.c",
                "launch.c", "main.c"}
 local bad, calls = {}, 0
-for _, f in ipairs(files) do
-  local s = T.slurp(root .. "src/lua/" .. f)
-  for at, args in s:gmatch("()luaL_error%s*(%b())") do
+-- every call of fn in the file s: its string literals (concatenated, as C does) checked
+local function scan(f, s, fn)
+  for at, args in s:gmatch("()" .. fn .. "%s*(%b())") do
     calls = calls + 1
     local lits = {}
     for lit in args:gmatch('"(.-[^\\])"') do lits[#lits + 1] = lit end
-    local text = table.concat(lits)
-    for spec in text:gmatch("%%([^%a%%]*%a?)") do
+    for spec in table.concat(lits):gmatch("%%([^%a%%]*%a?)") do
       if not spec:match("^[sdIfpcU]$") then
         local line = select(2, s:sub(1, at):gsub("\n", "")) + 1
         bad[#bad + 1] = string.format("src/lua/%s:%d: %%%s", f, line, spec)
       end
     end
   end
-  for at, args in s:gmatch("()lua_pushfstring%s*(%b())") do
-    calls = calls + 1
-    for lit in args:gmatch('"(.-[^\\])"') do
-      for spec in lit:gmatch("%%([^%a%%]*%a?)") do
-        if not spec:match("^[sdIfpcU]$") then
-          local line = select(2, s:sub(1, at):gsub("\n", "")) + 1
-          bad[#bad + 1] = string.format("src/lua/%s:%d: %%%s", f, line, spec)
-        end
-      end
-    end
-  end
+end
+for _, f in ipairs(files) do
+  local s = T.slurp(root .. "src/lua/" .. f)
+  scan(f, s, "luaL_error")
+  scan(f, s, "lua_pushfstring")
 end
 T.check(calls > 300, "only %d formatting calls found: the scan is broken", calls)
 T.check(#bad == 0, "conversions lua_pushfstring does not have:\n%s", table.concat(bad, "\n"))

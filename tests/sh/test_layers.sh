@@ -1,0 +1,75 @@
+#!/bin/sh
+# test_layers.sh BUILD — the arrows of docs/architecture.md: every room uses only the rooms
+# below it. Checked twice: the #include lines of src/ (a quoted include resolved to its
+# room; the bottom rooms include no PETSc, MPI, Lua or libtcc header), and the symbols of
+# the built objects (each undefined symbol of a room's objects is defined by that room or a
+# room below it, or outside lugal; the bottom rooms reference no PETSc, MPI, Lua or libtcc
+# symbol). A violation names the file and the include or symbol.
+BUILD=$1
+ROOT=$(cd "$(dirname "$0")/../.." && pwd)
+T=$(mktemp -d)
+trap 'rm -rf "$T"' EXIT
+cd "$ROOT" || exit 1
+# room: the rooms it may use (itself first). The order, lowest first, is docs/architecture.md's
+cat > "$T/rooms" <<'EOF'
+mesh mesh
+expr expr
+assemble assemble mesh expr
+lua lua assemble mesh expr
+EOF
+fails=0
+# 1. includes
+for f in src/*/*.c src/*/*.h; do
+  room=$(echo "$f" | cut -d/ -f2)
+  allowed=$(awk -v r="$room" '$1 == r { $1 = ""; print }' "$T/rooms")
+  [ -n "$allowed" ] || { echo "FAIL: $f is in a room docs/architecture.md does not list ($room)"; fails=$((fails + 1)); continue; }
+  dir=$(dirname "$f")
+  grep -n '^[[:space:]]*#[[:space:]]*include[[:space:]]*"' "$f" | sed 's/^\([0-9]*\):.*"\(.*\)".*/\1 \2/' | while read -r line inc; do
+    target=$(cd "$dir" && realpath -m "$inc")
+    case "$target" in
+      "$ROOT/src/config.h") continue ;;
+      "$ROOT"/src/*) troom=$(echo "${target#$ROOT/src/}" | cut -d/ -f1) ;;
+      *) echo "FAIL: $f:$line includes \"$inc\", outside src/"; echo x >> "$T/bad"; continue ;;
+    esac
+    case " $allowed " in
+      *" $troom "*) ;;
+      *) echo "FAIL: $f:$line includes \"$inc\": room $room may use only$allowed"; echo x >> "$T/bad" ;;
+    esac
+  done
+  case "$room" in
+    mesh | expr)
+      if grep -n '^[[:space:]]*#[[:space:]]*include[[:space:]]*<\(petsc\|mpi\|lua\|lauxlib\|lualib\|libtcc\)' "$f"; then
+        echo "FAIL: $f includes a PETSc, MPI, Lua or libtcc header: src/$room uses libc, libm and OpenMP only"; fails=$((fails + 1))
+      fi ;;
+  esac
+done
+[ -f "$T/bad" ] && fails=$((fails + $(wc -l < "$T/bad")))
+# 2. symbols of the built objects (the default build's, where the sources were built)
+if [ -d "$BUILD/src/mesh" ]; then
+  for room in mesh expr assemble lua; do
+    nm --defined-only "$BUILD/src/$room"/*.o 2> /dev/null | awk 'NF == 3 && $2 ~ /[TDBRC]/ { print $3 }' | sort -u > "$T/def.$room"
+  done
+  while read -r room allowed; do
+    nm -u "$BUILD/src/$room"/*.o 2> /dev/null | awk 'NF == 2 { print $2 }' | sort -u > "$T/und.$room"
+    for other in mesh expr assemble lua; do
+      case " $allowed " in *" $other "*) continue ;; esac
+      comm -12 "$T/und.$room" "$T/def.$other" > "$T/up"
+      if [ -s "$T/up" ]; then
+        echo "FAIL: src/$room's objects call up into src/$other: $(head -n 5 "$T/up" | tr '\n' ' ')"
+        fails=$((fails + 1))
+      fi
+    done
+    case "$room" in
+      mesh | expr)
+        grep -E '^(Petsc|PETSC|Mat[A-Z]|Vec[A-Z]|KSP|SNES|Tao|PC[A-Z]|MPI_|PMPI_|ompi_|lua_|luaL_|tcc_)' "$T/und.$room" > "$T/ext"
+        if [ -s "$T/ext" ]; then
+          echo "FAIL: src/$room's objects reference $(head -n 5 "$T/ext" | tr '\n' ' '): it uses libc, libm and OpenMP only"
+          fails=$((fails + 1))
+        fi ;;
+    esac
+  done < "$T/rooms"
+else
+  echo "FAIL: no objects in $BUILD/src/mesh (build first)"; fails=$((fails + 1))
+fi
+[ "$fails" -eq 0 ] || exit 1
+echo "layers: every include and every symbol reference goes down (mesh, expr < assemble < lua)"

@@ -309,6 +309,237 @@ static PetscErrorCode monitor(Tao tao, void *ud) {
   return 0;
 }
 
+/* TAO's vector on this rank: each control's entries (C->off, C->idx), n in all; collective
+ * on a distributed mesh (every rank numbers, failed or not) */
+static int number_controls(lg_env *env, opt_ctx *C, int *n) {
+  int rc = 0;
+  lg_mesh *lm = lg_problem_mesh(lg_reduced_problem(C->rf));
+  C->dist = lm->dist != NULL;
+  *n = 0;
+  for (int i = 0; i < C->nc; i++) {
+    C->off[i] = *n;
+    const lg_control *c = lg_reduced_control(C->rf, i);
+    if (!C->dist) *n += lg_reduced_control_size(C->rf, i);
+    else if (c->kind == LG_CONTROL_PARAM) *n += lg_mpi_rank() == 0;
+    else { /* the owned dofs */
+      int nown = 0, ni = lg_reduced_control_size(C->rf, i);
+      const char *own = lg_dist_owned(env, lm, c->f->dm, &nown);
+      C->idx[i] = own ? malloc(sizeof(int) * ((size_t)nown + 1)) : NULL;
+      if (!C->idx[i]) { if (own) lg_seterr(env, "out of memory"); rc = 1; continue; }
+      for (int k = 0, j = 0; k < ni; k++)
+        if (own[k]) C->idx[i][j++] = k;
+      *n += nown;
+    }
+  }
+  C->off[C->nc] = *n;
+  if (C->dist) {
+    double bad = rc;
+    if (lg_allreduce(&bad, 1, LG_MAX) || bad) {
+      if (!rc) lg_seterr(env, "another rank failed to number the controls' dofs");
+      rc = 1;
+    }
+  }
+  return rc;
+}
+
+/* the scaling of TAO's variables: the square root of the HRZ-lumped mass of each field
+ * control (its total kept), 1 for parameters and with inner_product = "dofs"; into C->sq */
+static int mass_scaling(lg_env *env, opt_ctx *C, int n) {
+  int rc = 0;
+  C->sq = malloc(sizeof(double) * ((size_t)n + 1));
+  if (!C->sq) { lg_seterr(env, "out of memory"); return 1; }
+  for (int i = 0; i < C->nc; i++) {
+    const lg_control *c = lg_reduced_control(C->rf, i);
+    int ni = lg_reduced_control_size(C->rf, i), nl = C->off[i + 1] - C->off[i];
+    double *q = C->sq + C->off[i];
+    if (c->kind == LG_CONTROL_PARAM || C->o->riesz == LG_RIESZ_NONE) {
+      for (int k = 0; k < nl; k++) q[k] = 1;
+      continue;
+    }
+    lg_problem *G = lg_reduced_gram(env, C->rf, i, 0);
+    double *dg = malloc(sizeof(double) * ((size_t)ni + 1)), *rs = malloc(sizeof(double) * ((size_t)ni + 1));
+    if (!G || !dg || !rs || lg_problem_matrix_diagonal(env, G, dg, rs)) {
+      if (!rs || !dg) lg_seterr(env, "out of memory");
+      free(rs);
+      free(dg);
+      return 1;
+    }
+    double sum[2] = {0, 0}; /* the row sums' and the diagonal's totals (over the ranks) */
+    for (int j = 0; j < nl; j++) {
+      sum[0] += rs[dof_at(C, i, j)];
+      sum[1] += dg[dof_at(C, i, j)];
+    }
+    if (C->dist && lg_allreduce(sum, 2, LG_SUM)) { lg_seterr(env, "the sum over the ranks failed"); rc = 1; }
+    for (int j = 0; j < nl && !rc; j++) {
+      q[j] = sqrt(dg[dof_at(C, i, j)] * sum[0] / sum[1]);
+      if (!(q[j] > 0)) { lg_seterr(env, "the mass matrix of control %d is not positive", i + 1); rc = 1; }
+    }
+    free(rs);
+    free(dg);
+    if (rc) return 1;
+  }
+  return 0;
+}
+
+/* the Newton methods' Hessian: a matrix-free operator (hessian_mult) into *H. Their Krylov
+ * solver answers to -tao_ksp_* and -tao_pc_* (not the state's -ksp_* and -pc_*); no
+ * preconditioner by default (the operator is matrix-free; in the scaled variables CG needs
+ * about 70 products on the Poisson mother problem at every resolution from 16^2 to 64^2, and
+ * -tao_pc_type lmvm did not lower that) */
+static PetscErrorCode setup_newton(Tao tao, opt_ctx *C, MPI_Comm comm, int n, PetscInt N, Mat *H) {
+  PetscCall(MatCreateShell(comm, n, n, N, N, C, H));
+  PetscCall(MatShellSetOperation(*H, MATOP_MULT, (void (*)(void))hessian_mult));
+  PetscCall(MatSetOption(*H, MAT_SYMMETRIC, PETSC_TRUE));
+  PetscCall(TaoSetHessian(tao, *H, *H, hessian_at, C));
+  KSP ksp;
+  PetscCall(TaoGetKSP(tao, &ksp));
+  if (!ksp) return 0;
+  PetscCall(KSPSetOptionsPrefix(ksp, "tao_"));
+  PetscBool set = PETSC_FALSE;
+  PetscOptionsHasName(NULL, NULL, "-tao_pc_type", &set);
+  PC pc;
+  PetscCall(KSPGetPC(ksp, &pc));
+  if (!set) PetscCall(PCSetType(pc, PCNONE));
+  return 0;
+}
+
+/* the m equality (eq) or inequality constraints' values and Jacobian for almm: their rows on
+ * the rank that holds them (r0), dense */
+static PetscErrorCode setup_constraints(Tao tao, opt_ctx *C, MPI_Comm comm, int n, PetscInt N, int m, int r0, int eq, Vec *V,
+                                        Mat *A) {
+  PetscCall(VecCreateMPI(comm, r0 ? m : 0, m, V));
+  PetscCall(MatCreateDense(comm, r0 ? m : 0, n, m, N, NULL, A));
+  if (eq) {
+    PetscCall(TaoSetEqualityConstraintsRoutine(tao, *V, eq_constraints, C));
+    PetscCall(TaoSetJacobianEqualityRoutine(tao, *A, *A, eq_jacobian, C));
+  } else {
+    PetscCall(TaoSetInequalityConstraintsRoutine(tao, *V, ineq_constraints, C));
+    PetscCall(TaoSetJacobianInequalityRoutine(tao, *A, *A, ineq_jacobian, C));
+  }
+  return 0;
+}
+
+/* the bounds in TAO's (scaled) variables, ±infinity where a control has none */
+static PetscErrorCode setup_bounds(Tao tao, opt_ctx *C, Vec X, Vec *XL, Vec *XU) {
+  const lg_minimize_opts *o = C->o;
+  PetscCall(VecDuplicate(X, XL));
+  PetscCall(VecDuplicate(X, XU));
+  PetscScalar *l, *u;
+  PetscCall(VecGetArray(*XL, &l));
+  PetscCall(VecGetArray(*XU, &u));
+  for (int i = 0; i < C->nc; i++)
+    for (int j = 0; j < C->off[i + 1] - C->off[i]; j++) {
+      int k = dof_at(C, i, j);
+      l[C->off[i] + j] = o->lower[i] ? o->lower[i][k] * C->sq[C->off[i] + j] : PETSC_NINFINITY;
+      u[C->off[i] + j] = o->upper[i] ? o->upper[i][k] * C->sq[C->off[i] + j] : PETSC_INFINITY;
+    }
+  PetscCall(VecRestoreArray(*XL, &l));
+  PetscCall(VecRestoreArray(*XU, &u));
+  return TaoSetVariableBounds(tao, *XL, *XU);
+}
+
+/* lugal's defaults for the quasi-Newton matrix, unless the user chose: a scalar (Shanno-Phua)
+ * initial scaling and 10 updates. PETSc 3.18's diagonal scaling stalled on the Poisson mother
+ * problem (alpha = 1e-6: over 2000 iterations; these: 149 at 32^2, 121 at 64^2, to 1e-8 of
+ * the first gradient) */
+static void lmvm_defaults(int almm, int bounded) {
+  const char *pre = almm ? "-tao_almm_subsolver_tao_bqnls_mat_lmvm_" : bounded ? "-tao_blmvm_mat_lmvm_" : "-tao_lmvm_mat_lmvm_";
+  static const char *const kv[][2] = {{"scale_type", "scalar"}, {"hist_size", "10"}};
+  for (int i = 0; i < 2; i++) {
+    char name[96];
+    snprintf(name, sizeof name, "%s%s", pre, kv[i][0]);
+    PetscBool set = PETSC_FALSE;
+    PetscOptionsHasName(NULL, NULL, name, &set);
+    if (!set) PetscOptionsSetValue(NULL, name, kv[i][1]);
+  }
+}
+
+/* after TaoSolve (ierr its result): the iterate into the controls, info filled (with the
+ * constraints' values and multipliers for almm), and the outcome: 0 with a usable iterate
+ * (converged or not: info->converged), 1 with the reason in env->err. nee, nie: the equality
+ * and inequality constraints; r0: this rank holds the constraints' rows */
+static int tao_results(lg_env *env, opt_ctx *C, Tao tao, PetscErrorCode ierr, int newton, int almm, int nee, int nie, int r0,
+                       lg_minimize_info *info) {
+  const lg_minimize_opts *o = C->o;
+  int rc = 0;
+  PetscInt it;
+  PetscReal f, gnorm, cnorm, step;
+  TaoConvergedReason reason;
+  TaoGetSolutionStatus(tao, &it, &f, &gnorm, &cnorm, &step, &reason);
+  info->iterations = (int)it;
+  info->J = f * C->fs;
+  info->gnorm = gnorm;
+  info->evaluations = C->evals;
+  info->hessian_products = C->hmults;
+  snprintf(info->reason, sizeof info->reason, "%s", TaoConvergedReasons[reason]);
+  info->converged = reason > 0;
+  info->cnorm = cnorm;
+  /* the controls hold the solution TAO returns (not its last trial point) */
+  const PetscScalar *xs;
+  Vec S;
+  TaoGetSolution(tao, &S);
+  VecGetArrayRead(S, &xs);
+  to_controls(C, xs);
+  VecRestoreArrayRead(S, &xs);
+  if (!ierr && almm) {
+    /* the constraints at the minimizer, and the multipliers in the user's convention:
+     * TAO's Lagrangian is J - y_E c_E - y_I c_I, so lambda = y for g <= c, -y otherwise */
+    Vec Y = NULL;
+    IS ise = NULL, isi = NULL;
+    const PetscScalar *y = NULL;
+    /* (PETSc 3.18 has the index sets only when there are both kinds) */
+    int have = !TaoALMMGetMultipliers(tao, &Y) && Y && (!(nee && nie) || !TaoALMMGetDualIS(tao, &ise, &isi)) &&
+               !VecGetArrayRead(Y, &y);
+    const PetscInt *ie = NULL, *ii = NULL;
+    if (have && ise) ISGetIndices(ise, &ie);
+    if (have && isi) ISGetIndices(isi, &ii);
+    int ke = 0, ki = 0;
+    for (int j = 0; j < o->ncons; j++) {
+      double g = NAN;
+      lg_reduced_changed(o->cons[j].rf);
+      if (lg_reduced_value(env, o->cons[j].rf, &g)) { rc = 1; break; }
+      info->g[j] = g;
+      int kind = o->cons[j].kind;
+      /* where each constraint's multiplier is in TAO's vector (equalities, inequalities) */
+      int k = kind == LG_CON_EQ ? ke++ : ki++;
+      const PetscInt *at = kind == LG_CON_EQ ? ie : ii;
+      PetscInt pos = at ? at[k] : (kind == LG_CON_EQ ? k : nee + k);
+      info->lambda[j] = have && r0 ? (kind == LG_CON_LE ? 1 : -1) * y[pos] * C->fs / C->cs[j] : NAN;
+    }
+    if (C->dist && MPI_Bcast(info->lambda, o->ncons, MPI_DOUBLE, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) rc = 1; /* rank 0 holds them */
+    if (ie) ISRestoreIndices(ise, &ie);
+    if (ii) ISRestoreIndices(isi, &ii);
+    if (have) VecRestoreArrayRead(Y, &y);
+    if (rc) return 1;
+  }
+  if (ierr && C->hess_failed) {
+    char why[LG_ERRLEN];
+    snprintf(why, sizeof why, "%s", env->err);
+    lg_seterr(env, "the optimization failed at iteration %d (a Hessian product): %s", (int)it, why);
+    return 1;
+  }
+  if (ierr && newton && ierr == PETSC_ERR_SUP) {
+    lg_seterr(env, "the optimization failed: the Hessian is matrix-free (products only), so -tao_pc_type must be none "
+                   "or lmvm, and -tao_ksp_type a Krylov method (stcg, nash, gltr, cg)");
+    return 1;
+  }
+  if (ierr) return tao_fail(env, ierr, "the optimization");
+  if (C->failed && (it == 0 || !isfinite(f))) {
+    char why[LG_ERRLEN];
+    snprintf(why, sizeof why, "%s", env->err);
+    lg_seterr(env, "the optimization failed at iteration %d: %s", (int)it, why);
+    return 1;
+  }
+  if (reason < 0 && lg_mpi_rank() == 0) {
+    /* the controls hold TAO's last iterate, a usable point (a line search that failed at
+     * rounding level, the iteration limit): returned with converged = false, not raised */
+    fprintf(stderr, "lg.minimize: stopped without converging: %s after %d iterations (J = %g, |g| = %.3e)%s%s; the controls "
+                    "hold the last iterate (info.converged = false)\n", info->reason, (int)it, info->J, gnorm,
+            C->failed ? "; the last trial point failed: " : "", C->failed ? env->err : "");
+  }
+  return rc;
+}
+
 int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minimize_info *info) {
   memset(info, 0, sizeof *info);
   opt_ctx C;
@@ -319,33 +550,8 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
   C.nc = lg_reduced_ncontrols(rf);
   C.fs = 1;
   for (int j = 0; j < LG_MAXCONS; j++) C.cs[j] = 1;
-  int n = 0, rc = 0;
-  lg_mesh *lm = lg_problem_mesh(lg_reduced_problem(rf));
-  C.dist = lm->dist != NULL;
-  for (int i = 0; i < C.nc; i++) {
-    C.off[i] = n;
-    const lg_control *c = lg_reduced_control(rf, i);
-    if (!C.dist) n += lg_reduced_control_size(rf, i);
-    else if (c->kind == LG_CONTROL_PARAM) n += lg_mpi_rank() == 0;
-    else { /* the owned dofs (every rank numbers them, failed or not) */
-      int nown = 0, ni = lg_reduced_control_size(rf, i);
-      const char *own = lg_dist_owned(env, lm, c->f->dm, &nown);
-      C.idx[i] = own ? malloc(sizeof(int) * ((size_t)nown + 1)) : NULL;
-      if (!C.idx[i]) { if (own) lg_seterr(env, "out of memory"); rc = 1; continue; }
-      for (int k = 0, j = 0; k < ni; k++)
-        if (own[k]) C.idx[i][j++] = k;
-      n += nown;
-    }
-  }
-  C.off[C.nc] = n;
-  if (C.dist) {
-    double bad = rc;
-    if (lg_allreduce(&bad, 1, LG_MAX) || bad) {
-      if (!rc) lg_seterr(env, "another rank failed to number the controls' dofs");
-      rc = 1;
-      goto done_early;
-    }
-  }
+  int n = 0, rc = number_controls(env, &C, &n);
+  if (rc) goto done_early;
   static const struct { const char *name; TaoType type; int bounded, newton; } methods[] = {
       {"lmvm", TAOLMVM, 0, 0}, {"blmvm", TAOBLMVM, 1, 0}, {"nls", TAONLS, 0, 1},
       {"ntr", TAONTR, 0, 1},   {"bnls", TAOBNLS, 1, 1},   {"bntr", TAOBNTR, 1, 1},
@@ -398,40 +604,7 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
     if (o->cons[j].kind == LG_CON_EQ) nee++;
     else nie++;
   }
-  /* the scaling: sqrt of the HRZ-lumped mass of each field control, 1 for parameters */
-  C.sq = malloc(sizeof(double) * ((size_t)n + 1));
-  if (!C.sq) { lg_seterr(env, "out of memory"); rc = 1; goto done; }
-  for (int i = 0; i < C.nc; i++) {
-    const lg_control *c = lg_reduced_control(rf, i);
-    int ni = lg_reduced_control_size(rf, i), nl = C.off[i + 1] - C.off[i];
-    double *q = C.sq + C.off[i];
-    if (c->kind == LG_CONTROL_PARAM || o->riesz == LG_RIESZ_NONE) {
-      for (int k = 0; k < nl; k++) q[k] = 1;
-      continue;
-    }
-    lg_problem *G = lg_reduced_gram(env, rf, i, 0);
-    double *dg = malloc(sizeof(double) * ((size_t)ni + 1)), *rs = malloc(sizeof(double) * ((size_t)ni + 1));
-    if (!G || !dg || !rs || lg_problem_matrix_diagonal(env, G, dg, rs)) {
-      if (!rs || !dg) lg_seterr(env, "out of memory");
-      free(rs);
-      free(dg);
-      rc = 1;
-      goto done;
-    }
-    double sum[2] = {0, 0}; /* the row sums' and the diagonal's totals (over the ranks) */
-    for (int j = 0; j < nl; j++) {
-      sum[0] += rs[dof_at(&C, i, j)];
-      sum[1] += dg[dof_at(&C, i, j)];
-    }
-    if (C.dist && lg_allreduce(sum, 2, LG_SUM)) { lg_seterr(env, "the sum over the ranks failed"); rc = 1; }
-    for (int j = 0; j < nl && !rc; j++) {
-      q[j] = sqrt(dg[dof_at(&C, i, j)] * sum[0] / sum[1]);
-      if (!(q[j] > 0)) { lg_seterr(env, "the mass matrix of control %d is not positive", i + 1); rc = 1; }
-    }
-    free(rs);
-    free(dg);
-    if (rc) goto done;
-  }
+  if (mass_scaling(env, &C, n)) { rc = 1; goto done; }
   MPI_Comm comm = C.dist ? PETSC_COMM_WORLD : PETSC_COMM_SELF;
   PetscInt N = C.dist ? PETSC_DETERMINE : n;
   int r0 = lg_mpi_rank() == 0 || !C.dist; /* holds the constraints */
@@ -446,26 +619,7 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
   C.outer = tao;
   TCHK(TaoSetSolution(tao, X), "TaoSetSolution");
   TCHK(TaoSetObjectiveAndGradient(tao, NULL, objective_gradient, &C), "TaoSetObjectiveAndGradient");
-  if (newton) {
-    TCHK(MatCreateShell(comm, n, n, N, N, &C, &H), "MatCreateShell");
-    TCHK(MatShellSetOperation(H, MATOP_MULT, (void (*)(void))hessian_mult), "MatShellSetOperation");
-    TCHK(MatSetOption(H, MAT_SYMMETRIC, PETSC_TRUE), "MatSetOption");
-    TCHK(TaoSetHessian(tao, H, H, hessian_at, &C), "TaoSetHessian");
-    /* the Newton systems' Krylov solver answers to -tao_ksp_* and -tao_pc_* (not the state's
-     * -ksp_* and -pc_*); no preconditioner by default (the operator is matrix-free; in the
-     * scaled variables CG needs about 70 products on the Poisson mother problem at every
-     * resolution from 16^2 to 64^2, and -tao_pc_type lmvm did not lower that) */
-    KSP ksp;
-    TCHK(TaoGetKSP(tao, &ksp), "TaoGetKSP");
-    if (ksp) {
-      TCHK(KSPSetOptionsPrefix(ksp, "tao_"), "KSPSetOptionsPrefix");
-      PetscBool set = PETSC_FALSE;
-      PetscOptionsHasName(NULL, NULL, "-tao_pc_type", &set);
-      PC pc;
-      TCHK(KSPGetPC(ksp, &pc), "KSPGetPC");
-      if (!set) TCHK(PCSetType(pc, PCNONE), "PCSetType");
-    }
-  }
+  if (newton) TCHK(setup_newton(tao, &C, comm, n, N, &H), "the Newton methods' Hessian");
   if (almm) {
     /* TAO's augmented Lagrangian starts its penalty at 10 whenever the constraints hold at
      * the start: with J ~ 1e-5 and g ~ 0.2 (the Poisson mother problem under a bound on int f)
@@ -481,35 +635,10 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
       C.cs[j] = sc > 0 && isfinite(sc) ? sc : 1;
     }
     /* few dense constraints: their Jacobians are small dense matrices */
-    if (nie) {
-      TCHK(VecCreateMPI(comm, r0 ? nie : 0, nie, &CI), "VecCreateMPI");
-      TCHK(MatCreateDense(comm, r0 ? nie : 0, n, nie, N, NULL, &AI), "MatCreateDense");
-      TCHK(TaoSetInequalityConstraintsRoutine(tao, CI, ineq_constraints, &C), "TaoSetInequalityConstraintsRoutine");
-      TCHK(TaoSetJacobianInequalityRoutine(tao, AI, AI, ineq_jacobian, &C), "TaoSetJacobianInequalityRoutine");
-    }
-    if (nee) {
-      TCHK(VecCreateMPI(comm, r0 ? nee : 0, nee, &CE), "VecCreateMPI");
-      TCHK(MatCreateDense(comm, r0 ? nee : 0, n, nee, N, NULL, &AE), "MatCreateDense");
-      TCHK(TaoSetEqualityConstraintsRoutine(tao, CE, eq_constraints, &C), "TaoSetEqualityConstraintsRoutine");
-      TCHK(TaoSetJacobianEqualityRoutine(tao, AE, AE, eq_jacobian, &C), "TaoSetJacobianEqualityRoutine");
-    }
+    if (nie) TCHK(setup_constraints(tao, &C, comm, n, N, nie, r0, 0, &CI, &AI), "the inequality constraints");
+    if (nee) TCHK(setup_constraints(tao, &C, comm, n, N, nee, r0, 1, &CE, &AE), "the equality constraints");
   }
-  if (bounded) {
-    TCHK(VecDuplicate(X, &XL), "VecDuplicate");
-    TCHK(VecDuplicate(X, &XU), "VecDuplicate");
-    PetscScalar *l, *u;
-    VecGetArray(XL, &l);
-    VecGetArray(XU, &u);
-    for (int i = 0; i < C.nc; i++)
-      for (int j = 0; j < C.off[i + 1] - C.off[i]; j++) {
-        int k = dof_at(&C, i, j);
-        l[C.off[i] + j] = o->lower[i] ? o->lower[i][k] * C.sq[C.off[i] + j] : PETSC_NINFINITY;
-        u[C.off[i] + j] = o->upper[i] ? o->upper[i][k] * C.sq[C.off[i] + j] : PETSC_INFINITY;
-      }
-    VecRestoreArray(XL, &l);
-    VecRestoreArray(XU, &u);
-    TCHK(TaoSetVariableBounds(tao, XL, XU), "TaoSetVariableBounds");
-  }
+  if (bounded) TCHK(setup_bounds(tao, &C, X, &XL, &XU), "the bounds");
   TCHK(TaoSetTolerances(tao, o->gatol >= 0 ? o->gatol : almm ? 1e-6 : PETSC_DEFAULT, o->grtol >= 0 ? o->grtol : PETSC_DEFAULT,
                         o->gttol >= 0 ? o->gttol : PETSC_DEFAULT), "TaoSetTolerances");
   if (o->maxit > 0) TCHK(TaoSetMaximumIterations(tao, o->maxit), "TaoSetMaximumIterations");
@@ -519,103 +648,10 @@ int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minim
     TCHK(PetscContainerSetPointer(mc, &C), "PetscContainerSetPointer");
     TCHK(TaoSetMonitor(tao, monitor, mc, monitor_ctx_destroy), "TaoSetMonitor"); /* the Tao owns it */
   }
-  if (!newton) {
-    /* lugal's defaults for the quasi-Newton matrix, unless the user chose: a scalar
-     * (Shanno-Phua) initial scaling and 10 updates. PETSc 3.18's diagonal scaling stalled on
-     * the Poisson mother problem (alpha = 1e-6: over 2000 iterations; these: 149 at 32^2,
-     * 121 at 64^2, to 1e-8 of the first gradient) */
-    const char *pre = almm ? "-tao_almm_subsolver_tao_bqnls_mat_lmvm_" : bounded ? "-tao_blmvm_mat_lmvm_" : "-tao_lmvm_mat_lmvm_";
-    static const char *const kv[][2] = {{"scale_type", "scalar"}, {"hist_size", "10"}};
-    for (int i = 0; i < 2; i++) {
-      char name[96];
-      snprintf(name, sizeof name, "%s%s", pre, kv[i][0]);
-      PetscBool set = PETSC_FALSE;
-      PetscOptionsHasName(NULL, NULL, name, &set);
-      if (!set) PetscOptionsSetValue(NULL, name, kv[i][1]);
-    }
-  }
+  if (!newton) lmvm_defaults(almm, bounded);
   TCHK(TaoSetFromOptions(tao), "TaoSetFromOptions");
   PetscErrorCode ierr = TaoSolve(tao);
-  {
-    PetscInt it;
-    PetscReal f, gnorm, cnorm, step;
-    TaoConvergedReason reason;
-    TaoGetSolutionStatus(tao, &it, &f, &gnorm, &cnorm, &step, &reason);
-    info->iterations = (int)it;
-    info->J = f * C.fs;
-    info->gnorm = gnorm;
-    info->evaluations = C.evals;
-    info->hessian_products = C.hmults;
-    snprintf(info->reason, sizeof info->reason, "%s", TaoConvergedReasons[reason]);
-    info->converged = reason > 0;
-    info->cnorm = cnorm;
-    /* the controls hold the solution TAO returns (not its last trial point) */
-    const PetscScalar *xs;
-    Vec S;
-    TaoGetSolution(tao, &S);
-    VecGetArrayRead(S, &xs);
-    to_controls(&C, xs);
-    VecRestoreArrayRead(S, &xs);
-    if (!ierr && almm) {
-      /* the constraints at the minimizer, and the multipliers in the user's convention:
-       * TAO's Lagrangian is J - y_E c_E - y_I c_I, so lambda = y for g <= c, -y otherwise */
-      Vec Y = NULL;
-      IS ise = NULL, isi = NULL;
-      const PetscScalar *y = NULL;
-      /* (PETSc 3.18 has the index sets only when there are both kinds) */
-      int have = !TaoALMMGetMultipliers(tao, &Y) && Y && (!(nee && nie) || !TaoALMMGetDualIS(tao, &ise, &isi)) &&
-                 !VecGetArrayRead(Y, &y);
-      const PetscInt *ie = NULL, *ii = NULL;
-      if (have && ise) ISGetIndices(ise, &ie);
-      if (have && isi) ISGetIndices(isi, &ii);
-      int ke = 0, ki = 0;
-      for (int j = 0; j < o->ncons; j++) {
-        double g = NAN;
-        lg_reduced_changed(o->cons[j].rf);
-        if (lg_reduced_value(env, o->cons[j].rf, &g)) { rc = 1; break; }
-        info->g[j] = g;
-        int kind = o->cons[j].kind;
-        /* where each constraint's multiplier is in TAO's vector (equalities, inequalities) */
-        int k = kind == LG_CON_EQ ? ke++ : ki++;
-        const PetscInt *at = kind == LG_CON_EQ ? ie : ii;
-        PetscInt pos = at ? at[k] : (kind == LG_CON_EQ ? k : nee + k);
-        info->lambda[j] = have && r0 ? (kind == LG_CON_LE ? 1 : -1) * y[pos] * C.fs / C.cs[j] : NAN;
-      }
-      if (C.dist && MPI_Bcast(info->lambda, o->ncons, MPI_DOUBLE, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) rc = 1; /* rank 0 holds them */
-      if (ie) ISRestoreIndices(ise, &ie);
-      if (ii) ISRestoreIndices(isi, &ii);
-      if (have) VecRestoreArrayRead(Y, &y);
-      if (rc) goto done;
-    }
-    if (ierr && C.hess_failed) {
-      char why[LG_ERRLEN];
-      snprintf(why, sizeof why, "%s", env->err);
-      lg_seterr(env, "the optimization failed at iteration %d (a Hessian product): %s", (int)it, why);
-      rc = 1;
-      goto done;
-    }
-    if (ierr && newton && ierr == PETSC_ERR_SUP) {
-      lg_seterr(env, "the optimization failed: the Hessian is matrix-free (products only), so -tao_pc_type must be none "
-                     "or lmvm, and -tao_ksp_type a Krylov method (stcg, nash, gltr, cg)");
-      rc = 1;
-      goto done;
-    }
-    if (ierr) { rc = tao_fail(env, ierr, "the optimization"); goto done; }
-    if (C.failed && (it == 0 || !isfinite(f))) {
-      char why[LG_ERRLEN];
-      snprintf(why, sizeof why, "%s", env->err);
-      lg_seterr(env, "the optimization failed at iteration %d: %s", (int)it, why);
-      rc = 1;
-      goto done;
-    }
-    if (reason < 0 && lg_mpi_rank() == 0) {
-      /* the controls hold TAO's last iterate, a usable point (a line search that failed at
-       * rounding level, the iteration limit): returned with converged = false, not raised */
-      fprintf(stderr, "lg.minimize: stopped without converging: %s after %d iterations (J = %g, |g| = %.3e)%s%s; the controls "
-                      "hold the last iterate (info.converged = false)\n", info->reason, (int)it, info->J, gnorm,
-              C.failed ? "; the last trial point failed: " : "", C.failed ? env->err : "");
-    }
-  }
+  rc = tao_results(env, &C, tao, ierr, newton, almm, nee, nie, r0, info);
 done:
   if (tao) TaoDestroy(&tao);
   if (X) VecDestroy(&X);

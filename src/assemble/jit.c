@@ -363,14 +363,27 @@ static int cc_spawn(cc_job *c, int outfd, pid_t *pid, char *err, size_t errlen) 
     posix_spawn_file_actions_addopen(&fa, 1, "/dev/null", O_WRONLY, 0);
     posix_spawn_file_actions_addopen(&fa, 2, "/dev/null", O_WRONLY, 0);
   }
+  /* its own process group: a signal that ends the run ends the compiler's whole group
+   * (outfile_on_signals), and a Ctrl-C at the terminal reaches lugal, which does that */
+  posix_spawnattr_t at;
+  posix_spawnattr_init(&at);
+  posix_spawnattr_setflags(&at, POSIX_SPAWN_SETPGROUP);
+  posix_spawnattr_setpgroup(&at, 0);
   extern char **environ;
-  int rc = posix_spawnp(pid, LUGAL_CC, &fa, NULL, c->huge ? noopt : opt, environ);
+  int rc = posix_spawnp(pid, LUGAL_CC, &fa, &at, c->huge ? noopt : opt, environ);
+  posix_spawnattr_destroy(&at);
   posix_spawn_file_actions_destroy(&fa);
   if (rc) snprintf(err, errlen, "cannot run the C compiler %s: %s", LUGAL_CC, strerror(rc));
   /* a run ended by a signal ends the compiler and removes its output (Ctrl-C during a
    * background build left gcc's temporary object in the cache for good) */
   else c->slot = outfile_track(c->tmpso, *pid);
   return rc;
+}
+
+/* a compiler reaped: its output stays tracked, its pid no longer (it may be reused) */
+static void track_done(cc_job *c) {
+  outfile_untrack(c->slot);
+  c->slot = outfile_track(c->tmpso, 0);
 }
 
 /* run the compiler and wait; its messages into out */
@@ -395,6 +408,7 @@ static int cc_run(cc_job *c, char *out, size_t outlen) {
   close(pfd[0]);
   int status;
   while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {}
+  track_done(c);
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
@@ -561,6 +575,7 @@ static int tier_poll(lg_jit *j, jit_entry *e, int blocking) {
   pid_t r;
   while ((r = waitpid(e->pid, &status, blocking ? 0 : WNOHANG)) < 0 && errno == EINTR) {}
   if (r == 0) return 0;
+  track_done(e->job);
   char err[1024] = "";
   kernel_fn f = NULL;
   int damaged;

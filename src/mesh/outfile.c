@@ -8,6 +8,8 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
 #include <unistd.h>
 
 /* ---------------------------------------------------------------- tracked temporary files */
@@ -40,12 +42,28 @@ void outfile_untrack(int slot) {
   free(p);
 }
 
+/* (async-signal-safe calls only: kill, waitpid, unlink, nanosleep, signal, raise) */
 static void on_signal(int sig) {
+  int waited = 0;
   for (int i = 0; i < TRACKED; i++) {
     pid_t pid = tracked_pid[i];
-    if (pid > 0) kill(pid, SIGTERM);
-    char *p = tracked_path[i];
-    if (p) unlink(p);
+    if (pid <= 0) continue;
+    /* the compiler's whole process group (its driver, the assembler, the linker), then the
+     * driver reaped, so that nothing writes the output after it is removed */
+    kill(-pid, SIGTERM);
+    kill(pid, SIGTERM);
+    while (waitpid(pid, NULL, 0) < 0 && errno == EINTR) {}
+    waited = 1;
+  }
+  for (int pass = 0; pass < 1 + waited; pass++) {
+    if (pass) { /* a killed linker may have created its output as it died */
+      struct timespec ts = {0, 20000000};
+      nanosleep(&ts, NULL);
+    }
+    for (int i = 0; i < TRACKED; i++) {
+      char *p = tracked_path[i];
+      if (p) unlink(p);
+    }
   }
   signal(sig, SIG_DFL);
   raise(sig);

@@ -80,8 +80,9 @@ for sig in TERM INT; do
   # (a background job of a script starts with SIGINT ignored: given back its default here)
   env --default-signal=INT "$LUGAL" "$T/loop.lua" "$T/sig$sig" 2> "$T/e" &
   pid=$!
-  n=0; while ! grep -q writing "$T/e" && [ $n -lt 100 ]; do sleep 0.1; n=$((n + 1)); done
-  sleep 0.7
+  # killed once a first file is whole (a loaded machine may take a while), during later writes
+  n=0; while [ ! -s "$T/sig$sig/loop.vtu" ] && [ $n -lt 600 ]; do sleep 0.1; n=$((n + 1)); done
+  sleep 0.3
   kill -$sig $pid
   wait $pid
   [ -z "$(leftovers "$T/sig$sig")" ] || fail "SIG$sig left temporary files: $(leftovers "$T/sig$sig")"

@@ -6,8 +6,8 @@
 #define LUGAL_ASSEMBLE_H
 
 #include "../expr/expr.h"
-#include "../mesh/mesh.h"
-#include "../mesh/quality.h"
+#include "../mesh/io/io.h"
+#include "../mesh/quality/quality.h"
 #include "fem.h"
 #include "kernel.h"
 

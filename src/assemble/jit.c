@@ -34,7 +34,7 @@ static void tcc_delete(TCCState *s) { (void)s; }
 #include <time.h>
 #include <unistd.h>
 
-#include "../mesh/outfile.h"
+#include "../mesh/io/outfile.h"
 
 /* a system-compiler build: where its files are */
 typedef struct {

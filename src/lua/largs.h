@@ -6,7 +6,7 @@
 #define LUGAL_LARGS_H
 
 #include "../assemble/assemble.h"
-#include "../mesh/quality.h"
+#include "../mesh/quality/quality.h"
 
 #include <lauxlib.h>
 #include <lua.h>

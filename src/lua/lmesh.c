@@ -2,7 +2,7 @@
  * (mesh:cells, mesh:boundary), output (VTU, MSH, .pvd series), quality arrays and reports.
  * The repairs (untangling, smoothing, motion) are lrepair.c's. */
 #include "largs.h"
-#include "../mesh/svg.h"
+#include "../mesh/io/svg.h"
 
 #include <lauxlib.h>
 #include <limits.h>

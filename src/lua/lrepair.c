@@ -3,7 +3,7 @@
  * one, on rank 0's gathered copy with the new coordinates sent back. */
 #include "largs.h"
 
-#include "../mesh/untangle.h"
+#include "../mesh/untangle/untangle.h"
 
 #include <lauxlib.h>
 #include <math.h>

@@ -9,7 +9,7 @@
  * grows little with n, where block Jacobi's grows about in proportion to n; the solution solves the system
  * (its residual recomputed); coarse levels are built; the result has the same bits on 1, 2
  * and 3 threads. ut_amg_pcg, the same solve with its own hierarchy, on fresh matrices. */
-#include "../../src/mesh/untangle_int.h"
+#include "../../src/mesh/untangle/untangle_int.h"
 
 #include "check.h"
 

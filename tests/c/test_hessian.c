@@ -10,9 +10,9 @@
  * and be positive semidefinite, for the smoother's energy (θ = 0, ε = 0) and the untangler's
  * (θ = 1/2, ε > 0, inverted corners too); and the closed-form 3×3 eigensystem behind the 3D
  * modes (dense_sym_eigen3) against known spectra. */
-#include "../../src/mesh/untangle_global.c"
+#include "../../src/mesh/untangle/untangle_global.c"
 
-#include "../../src/mesh/quality.h"
+#include "../../src/mesh/quality/quality.h"
 #include "check.h"
 
 static unsigned rng = 12345;

@@ -3,8 +3,8 @@
  * the Gmsh writer round trip, folders and pipes as input, escaped names, and writes that
  * fail (with the reason, leaving the old file), packing into bytes and back. argv[1] is
  * tests/data. */
-#include "../../src/mesh/mesh.h"
-#include "../../src/mesh/untangle.h"
+#include "../../src/mesh/io/io.h"
+#include "../../src/mesh/untangle/untangle.h"
 #include "check.h"
 
 #include <signal.h>

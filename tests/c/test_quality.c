@@ -3,7 +3,7 @@
  * translation, rotation, reflection and uniform scaling, the equivalence inequalities of
  * section 4.2 on random cells, Riemannian versions equal to the Euclidean ones after the
  * metric's square root is applied, and corner measures of quadrilaterals and hexahedra. */
-#include "../../src/mesh/quality.h"
+#include "../../src/mesh/quality/quality.h"
 #include "check.h"
 
 #include <stdlib.h>

@@ -7,10 +7,10 @@
  * mesh the reader accepts: cell and facet vertex ids in range, a written .msh reads back
  * the same, and an untangler report of "no invalid cells" is true of the mesh. A broken
  * invariant aborts (a finding). */
-#include "../../src/mesh/mesh.h"
-#include "../../src/mesh/quality.h"
-#include "../../src/mesh/svg.h"
-#include "../../src/mesh/untangle.h"
+#include "../../src/mesh/io/io.h"
+#include "../../src/mesh/quality/quality.h"
+#include "../../src/mesh/io/svg.h"
+#include "../../src/mesh/untangle/untangle.h"
 
 #include <math.h>
 #include <stdint.h>

@@ -8,9 +8,9 @@
  * invalid cells than it was given; smoothing never lowers the minimum quality; coordinates
  * stay finite. A broken invariant aborts (a finding). Built with libFuzzer by `make fuzz`
  * and replayed over tests/data/hostile/untangle by `make check` (tests/c/test_hostile.c). */
-#include "../../src/mesh/mesh.h"
-#include "../../src/mesh/quality.h"
-#include "../../src/mesh/untangle.h"
+#include "../../src/mesh/io/io.h"
+#include "../../src/mesh/quality/quality.h"
+#include "../../src/mesh/untangle/untangle.h"
 
 #include <math.h>
 #include <stdint.h>

@@ -218,6 +218,13 @@ int outfile_commit(outfile *o, char *err, size_t errlen) {
   return outfile_finish(o, err, errlen) || outfile_publish(o, err, errlen);
 }
 
+int outfile_end(outfile *o, outfile *staged, char *err, size_t errlen) {
+  if (!staged) return outfile_commit(o, err, errlen);
+  int rc = outfile_finish(o, err, errlen);
+  *staged = *o;
+  return rc;
+}
+
 void outfile_abort(outfile *o) {
   if (o->f) fclose(o->f);
   o->f = NULL;

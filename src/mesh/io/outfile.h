@@ -34,6 +34,9 @@ int outfile_finish(outfile *o, char *err, size_t errlen);
 int outfile_publish(outfile *o, char *err, size_t errlen);
 /* outfile_finish then outfile_publish */
 int outfile_commit(outfile *o, char *err, size_t errlen);
+/* a file of a collection: committed when staged is NULL, else finished and handed over in
+ * *staged, for the caller to publish with the others or abort */
+int outfile_end(outfile *o, outfile *staged, char *err, size_t errlen);
 /* give up: remove the temporary file (open or finished), leave the target as it was */
 void outfile_abort(outfile *o);
 

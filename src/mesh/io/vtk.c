@@ -236,10 +236,7 @@ static int write_piece(mesh *m, const char *path, int nfield, const mesh_field *
     snprintf(m->err, MESH_ERRLEN, "out of memory compressing %s", path);
     return 1;
   }
-  if (!staged) return outfile_commit(&o, m->err, MESH_ERRLEN);
-  int rc = outfile_finish(&o, m->err, MESH_ERRLEN);
-  *staged = o;
-  return rc;
+  return outfile_end(&o, staged, m->err, MESH_ERRLEN);
 }
 
 int mesh_write_vtu_format(mesh *m, const char *path, int nfield, const mesh_field *fl, int format) {
@@ -302,10 +299,7 @@ int mesh_write_pvtu(const char *path, int nfield, const mesh_field *fl, int npie
     fprintf(f, "\"/>\n");
   }
   fprintf(f, "</PUnstructuredGrid>\n</VTKFile>\n");
-  if (!staged) return outfile_commit(&o, err, MESH_ERRLEN);
-  int rc = outfile_finish(&o, err, MESH_ERRLEN);
-  *staged = o;
-  return rc;
+  return outfile_end(&o, staged, err, MESH_ERRLEN);
 }
 
 int mesh_write_vtu(mesh *m, const char *path, int nfield, const mesh_field *fl) {

@@ -5,7 +5,7 @@
 #ifndef LUGAL_LARGS_H
 #define LUGAL_LARGS_H
 
-#include "../assemble/assemble.h"
+#include "../assemble/optimize/optimize.h"
 #include "../mesh/quality/quality.h"
 
 #include <lauxlib.h>

@@ -482,7 +482,7 @@ static int lmesh_refine(lua_State *L) {
   if (u->lm->dist) { /* rank 0 refines the whole mesh and distributes the result (push_mesh) */
     lg_env *env = get_env(L);
     mesh *W = NULL, *r = NULL;
-    int rc = lg_dist_gather_mesh(env, u->lm, &W);
+    int rc = lg_dist_gather_mesh(env, u->lm->dist, &W);
     if (rc) snprintf(err, sizeof err, "%.*s", (int)sizeof err - 1, env->err);
     else if (lg_mpi_rank() == 0 && !(r = mesh_refine(W, err))) rc = 1;
     mesh_free(W);
@@ -786,7 +786,7 @@ static int write_svg(lua_State *L, mesh *m, lg_mesh *lm, const char *path, const
   if (lm->dist) {
     mesh_field f = {name, 1, 1, v};
     lg_env *env = get_env(L);
-    if ((rc = lg_dist_gather(env, lm, 1, &f, &W, &vals))) snprintf(err, sizeof err, "%.*s", (int)sizeof err - 1, env->err);
+    if ((rc = lg_dist_gather(env, lm->dist, 1, &f, &W, &vals))) snprintf(err, sizeof err, "%.*s", (int)sizeof err - 1, env->err);
     else if (W) {
       m = W;
       v = vals[0];
@@ -815,7 +815,7 @@ static int mesh_write(lua_State *L) {
     lg_env *env = get_env(L);
     mesh *W = NULL;
     char err[MESH_ERRLEN];
-    int rc = lg_dist_gather_mesh(env, u->lm, &W);
+    int rc = lg_dist_gather_mesh(env, u->lm->dist, &W);
     if (rc) snprintf(err, sizeof err, "%.*s", (int)sizeof err - 1, env->err);
     else if (lg_mpi_rank() == 0 && (rc = mesh_write_gmsh(W, path))) snprintf(err, sizeof err, "%s", W->err);
     mesh_free(W);

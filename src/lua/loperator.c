@@ -28,7 +28,7 @@ static ud_vector *push_vector(lua_State *L, op_space sp) {
 
 static int distributed(const op_space *sp) { return sp->lm && sp->lm->dist; }
 
-/* the space's values as a discrete function (for the gathering and counting of distribute.c) */
+/* the space's values as a discrete function (for the gathering and counting of distributed.c) */
 static lg_function as_function(const op_space *sp, double *v) {
   lg_function f = {sp->lm, (dofmap *)sp->dm, sp->dm ? sp->dm->degree : 0, v, -1};
   return f;

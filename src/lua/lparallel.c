@@ -1,4 +1,4 @@
-/* lparallel.c — the bindings of the process layout (src/assemble/parallel.c): lg.rank(),
+/* lparallel.c — the bindings of the process layout (src/assemble/process/process.c): lg.rank(),
  * lg.size(), lg.allreduce(x, op), under mpiexec a `print` that prints on rank 0 only
  * (every rank runs the same script; the original is kept as lg.print_all), and the check of
  * collective calls: each one is numbered, and the ranks compare number and name before it

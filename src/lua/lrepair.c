@@ -55,8 +55,8 @@ static int dist_repair(lua_State *L, ud_mesh *u, lg_mesh *ref, const double **xr
                        size_t rlen, char *err) {
   lg_env *env = get_env(L);
   mesh *W = NULL, *R = NULL;
-  int rc = lg_dist_gather_mesh(env, u->lm, &W);
-  if (!rc && ref) rc = lg_dist_gather_mesh(env, ref, &R);
+  int rc = lg_dist_gather_mesh(env, u->lm->dist, &W);
+  if (!rc && ref) rc = lg_dist_gather_mesh(env, ref->dist, &R);
   if (rc) snprintf(err, MESH_ERRLEN, "%.*s", MESH_ERRLEN - 1, env->err);
   else if (lg_mpi_rank() == 0) {
     if (R && (R->nvert != W->nvert || R->ncell != W->ncell ||
@@ -73,7 +73,7 @@ static int dist_repair(lua_State *L, ud_mesh *u, lg_mesh *ref, const double **xr
     snprintf(err, MESH_ERRLEN, "sending the report to every rank failed");
     rc = 1;
   }
-  if (!rc && lg_dist_scatter_coords(env, u->lm, W)) {
+  if (!rc && lg_dist_scatter_coords(env, u->lm->dist, W)) {
     snprintf(err, MESH_ERRLEN, "%.*s", MESH_ERRLEN - 1, env->err);
     rc = 1;
   }
@@ -396,7 +396,7 @@ int lmesh_move(lua_State *L) {
     mesh_field f = {"displacement", m->dim, 0, disp};
     mesh *W = NULL;
     double **vals = NULL;
-    int rc = lg_dist_gather(env, u->lm, 1, &f, &W, &vals);
+    int rc = lg_dist_gather(env, u->lm->dist, 1, &f, &W, &vals);
     if (rc) snprintf(err, sizeof err, "%.*s", (int)sizeof err - 1, env->err);
     else if (lg_mpi_rank() == 0) {
       unsigned char *wf = malloc((size_t)W->nvert + 1);
@@ -411,7 +411,7 @@ int lmesh_move(lua_State *L) {
     free(vals);
     rc = lg_root_result(rc, err, sizeof err);
     if (!rc && MPI_Bcast(&r, (int)sizeof r, MPI_BYTE, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) { snprintf(err, sizeof err, "sending the report failed"); rc = 1; }
-    if (!rc && lg_dist_scatter_coords(env, u->lm, W)) { snprintf(err, sizeof err, "%.*s", (int)sizeof err - 1, env->err); rc = 1; }
+    if (!rc && lg_dist_scatter_coords(env, u->lm->dist, W)) { snprintf(err, sizeof err, "%.*s", (int)sizeof err - 1, env->err); rc = 1; }
     mesh_free(W);
     lg_mesh_changed(u->lm); /* also on failure: the coordinates may have come back in part */
     if (rc) return luaL_error(L, "%s: %s", fn, err);

@@ -1,6 +1,6 @@
 /* dense.h — small dense symmetric matrices (libc and libm only): the cyclic Jacobi
  * eigenvalue method, shared by the untangler's projected Hessians (src/mesh) and the
- * Gauss–Jacobi quadrature rules (Golub–Welsch, src/assemble/fem.c), and a closed form for 3×3
+ * Gauss–Jacobi quadrature rules (Golub–Welsch, src/assemble/fem/fem.c), and a closed form for 3×3
  * (the smoother's per-corner singular values and scaling modes). */
 #ifndef LUGAL_DENSE_H
 #define LUGAL_DENSE_H

@@ -1,7 +1,7 @@
 /* test_fem.c — Gauss quadrature exact to its degree on the reference triangle and
  * tetrahedron (monomials against the exact Beta-function values) and Lagrange bases that
  * are nodal (Kronecker at the nodes) and sum to one, with gradients summing to zero. */
-#include "../../src/assemble/fem.h"
+#include "../../src/assemble/fem/fem.h"
 #include "check.h"
 
 /* exact ∫ x^a y^b z^c over the reference simplex = a! b! c! / (a+b+c+d)! */

@@ -1,7 +1,7 @@
-/* test_vmath.c — the kernels' vector math routine (src/assemble/vmath.c): every function
+/* test_vmath.c — the kernels' vector math routine (src/assemble/kernel/vmath.c): every function
  * within a few ulp of libm's over its domain, a value independent of its place in the
  * array (whole vectors and padded tails give the same bits), and the scalar path exact. */
-#include "../../src/assemble/vmath.h"
+#include "../../src/assemble/kernel/vmath.h"
 #include "../../src/expr/expr.h"
 #include "check.h"
 

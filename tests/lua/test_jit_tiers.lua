@@ -1,4 +1,4 @@
--- The tiered JIT (src/assemble/jit.c): kernels start in libtcc and move to the system
+-- The tiered JIT (src/assemble/kernel/jit.c): kernels start in libtcc and move to the system
 -- compiler's code once their assemblies have taken tier_ms; both tiers must give the same
 -- answers to the last bit (the system compiler runs with -ffp-contract=off: no fused
 -- multiply-adds, as libtcc), for matrices, right-hand sides, integrals, functionals and

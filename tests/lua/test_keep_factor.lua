@@ -1,4 +1,4 @@
--- A kept factorization (src/assemble/solver.c, lg_keep): a symmetric linear problem whose
+-- A kept factorization (src/assemble/problem/solver.c, lg_keep): a symmetric linear problem whose
 -- matrix changes (a coefficient, an optimization's control) is solved by CG preconditioned
 -- with its last Cholesky factor (GMRES with the LU factor of its first factorization) while
 -- that costs less than refactoring, and refactored when that fails. The answers must be those of a new problem factored afresh; the sequence of

@@ -1,4 +1,4 @@
--- The matrix scatter (src/assemble/sparsity.c, problem.c): each element entry is kept as
+-- The matrix scatter (src/assemble/problem/sparsity.c, problem.c): each element entry is kept as
 -- its column node's rank in its row node's row, 1 byte where rows have at most 256 nodes,
 -- 2 bytes beyond; B = 1 rows start from a per-element-row table, vector fields (B > 1)
 -- from their node. Each path is checked against the functional the matrix represents,

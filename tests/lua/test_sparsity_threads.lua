@@ -1,4 +1,4 @@
--- The sparsity pattern pass on OpenMP threads (src/assemble/sparsity.c, pattern_rows): the
+-- The sparsity pattern pass on OpenMP threads (src/assemble/problem/sparsity.c, pattern_rows): the
 -- node rows in contiguous blocks, one per thread, put end to end. Matrices big enough to
 -- take the threaded path (more than 200 000 element rows: a P1 Laplacian on 82 944
 -- tetrahedra, a vector P1 elasticity operator on the same mesh) must be the same to the bit

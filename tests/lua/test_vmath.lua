@@ -1,5 +1,5 @@
 -- Transcendental functions of the coordinates evaluated for all quadrature points of an
--- item at once (src/expr/codegen.c, expr_tape_vector_calls; src/assemble/vmath.c): known
+-- item at once (src/expr/codegen.c, expr_tape_vector_calls; src/assemble/kernel/vmath.c): known
 -- integrals on triangles, quadrilaterals, tetrahedra and boundary facets; nested calls (a
 -- call in another's argument, and a chain deeper than the vectorized levels); calls under
 -- the point cache; and the same numbers to 1e-14 as this script run again with

@@ -21,11 +21,13 @@ if command -v lua5.4 > /dev/null 2>&1; then
 fi
 [ -f "$T/d$prefix/share/doc/lugal/LICENSE" ] || fail "no LICENSE installed"
 inc="$T/d$prefix/include/lugal"
-for h in problem_int.h solver.h vmath.h; do [ ! -e "$inc/assemble/$h" ] || fail "internal header $h installed"; done
+for h in problem/problem_int.h problem/solver.h kernel/vmath.h parallel/parallel_int.h; do [ ! -e "$inc/assemble/$h" ] || fail "internal header $h installed"; done
 for h in untangle/untangle_int.h quality/quality_int.h tuplehash.h dense.h io/deflate.h; do [ ! -e "$inc/mesh/$h" ] || fail "internal header $h installed"; done
 [ ! -e "$inc/expr/expr_int.h" ] || fail "internal header expr_int.h installed"
 cflags=$(pkg-config --cflags PETSc 2> /dev/null || echo "-I/usr/lib/petscdir/petsc3.18/x86_64-linux-gnu-real/include")
-for h in mesh/mesh.h mesh/io/io.h mesh/io/svg.h mesh/quality/quality.h mesh/untangle/untangle.h expr/expr.h assemble/assemble.h; do
+for h in mesh/mesh.h mesh/io/io.h mesh/io/svg.h mesh/quality/quality.h mesh/untangle/untangle.h expr/expr.h assemble/assemble.h \
+  assemble/fem/fem.h assemble/kernel/kernel.h assemble/process/process.h assemble/parallel/parallel.h assemble/problem/problem.h \
+  assemble/optimize/optimize.h; do
   printf '#include <%s>\nint main(void) { return 0; }\n' "$h" > "$T/t.c"
   cc -std=c11 -fsyntax-only -I"$inc" $cflags "$T/t.c" 2> "$T/cc" || { cat "$T/cc"; fail "the installed $h does not compile on its own"; }
 done

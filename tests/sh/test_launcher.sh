@@ -33,7 +33,7 @@ out=$(env -u GLIBC_TUNABLES "$BUILD/lugal" "$T/env.lua" -lugal_hugepages 0 2>&1)
 echo "$out" | grep -q "was not used" && fail "-lugal_hugepages reported as unused: $out"
 
 # a single process sets Open MPI's and hwloc's in-process settings before PETSc starts
-# (src/assemble/parallel.c), keeping the user's own
+# (src/assemble/process/process.c), keeping the user's own
 printf 'print(os.getenv("HWLOC_COMPONENTS"), os.getenv("OMPI_MCA_coll"))\n' > "$T/mpienv.lua"
 out=$(env -u HWLOC_COMPONENTS -u OMPI_MCA_coll "$BUILD/lugal" "$T/mpienv.lua" 2>/dev/null)
 [ "$out" = "-linuxio	basic,self,libnbc" ] || fail "single-process settings: got '$out'"

@@ -18,8 +18,14 @@ mesh/quality mesh/quality mesh
 mesh/untangle mesh/untangle mesh/quality mesh
 mesh/tool mesh/tool mesh/untangle mesh/quality mesh/io mesh
 expr expr
-assemble assemble mesh/io mesh/quality mesh/untangle mesh expr
-lua lua assemble mesh/io mesh/quality mesh/untangle mesh expr
+assemble/fem assemble/fem mesh
+assemble/kernel assemble/kernel assemble/fem mesh/io mesh expr
+assemble/process assemble/process assemble/kernel assemble/fem mesh expr
+assemble/parallel assemble/parallel assemble/process assemble/kernel assemble/fem mesh/io mesh/quality mesh expr
+assemble assemble assemble/parallel assemble/process assemble/kernel assemble/fem mesh/io mesh/quality mesh/untangle mesh expr
+assemble/problem assemble/problem assemble assemble/parallel assemble/process assemble/kernel assemble/fem mesh/io mesh/quality mesh/untangle mesh expr
+assemble/optimize assemble/optimize assemble/problem assemble assemble/parallel assemble/process assemble/kernel assemble/fem mesh/io mesh/quality mesh/untangle mesh expr
+lua lua assemble/optimize assemble/problem assemble assemble/parallel assemble/process assemble/kernel assemble/fem mesh/io mesh/quality mesh/untangle mesh expr
 EOF
 fails=0
 # 1. includes
@@ -42,9 +48,13 @@ for f in src/*/*.c src/*/*.h src/*/*/*.c src/*/*/*.h; do
     esac
   done
   case "$room" in
-    mesh* | expr)
+    mesh* | expr | assemble/fem)
       if grep -n '^[[:space:]]*#[[:space:]]*include[[:space:]]*<\(petsc\|mpi\|lua\|lauxlib\|lualib\|libtcc\)' "$f"; then
         echo "FAIL: $f includes a PETSc, MPI, Lua or libtcc header: src/$room uses libc, libm and OpenMP only"; fails=$((fails + 1))
+      fi ;;
+    assemble/kernel)
+      if grep -n '^[[:space:]]*#[[:space:]]*include[[:space:]]*<\(petsc\|mpi\|lua\|lauxlib\|lualib\)' "$f"; then
+        echo "FAIL: $f includes a PETSc, MPI or Lua header: kernels are generated and compiled without them"; fails=$((fails + 1))
       fi ;;
   esac
 done
@@ -69,8 +79,10 @@ if [ -d "$BUILD/src/mesh" ]; then
       fi
     done
     case "$room" in
-      mesh* | expr)
-        grep -E '^(Petsc|PETSC|Mat[A-Z]|Vec[A-Z]|KSP|SNES|Tao|PC[A-Z]|MPI_|PMPI_|ompi_|lua_|luaL_|tcc_)' "$T/und.$r" > "$T/ext"
+      mesh* | expr | assemble/fem | assemble/kernel)
+        pat='^(Petsc|PETSC|Mat[A-Z]|Vec[A-Z]|KSP|SNES|Tao|PC[A-Z]|MPI_|PMPI_|ompi_|lua_|luaL_|tcc_)'
+        [ "$room" = assemble/kernel ] && pat='^(Petsc|PETSC|Mat[A-Z]|Vec[A-Z]|KSP|SNES|Tao|PC[A-Z]|MPI_|PMPI_|ompi_|lua_|luaL_)'
+        grep -E "$pat" "$T/und.$r" > "$T/ext"
         if [ -s "$T/ext" ]; then
           echo "FAIL: src/$room's objects reference $(head -n 5 "$T/ext" | tr '\n' ' '): it uses libc, libm and OpenMP only"
           fails=$((fails + 1))
@@ -81,4 +93,4 @@ else
   echo "FAIL: no objects in $BUILD/src/mesh (build first)"; fails=$((fails + 1))
 fi
 [ "$fails" -eq 0 ] || exit 1
-echo "layers: every include and every symbol reference goes down (mesh < mesh/io, mesh/quality < mesh/untangle < mesh/tool; mesh, expr < assemble < lua)"
+echo "layers: every include and every symbol reference goes down (mesh < mesh/io, mesh/quality < mesh/untangle < mesh/tool; mesh, expr < assemble/fem < kernel < process < parallel < assemble < problem < optimize < lua)"

@@ -17,7 +17,7 @@ mesh *mesh_read_gmsh_buffer(const char *buf, size_t len, const char *name, char 
  * and newlines escaped as the reader unescapes them) */
 int mesh_write_gmsh(mesh *m, const char *path);
 
-/* A file read in parts, one per process of a parallel run (src/assemble/read_dist.c joins
+/* A file read in parts, one per process of a parallel run (src/assemble/parallel/read_dist.c joins
  * them into each process's part of the mesh). One process scans the file's lines once with
  * constant memory (mesh_gmsh_layout, gmsh_layout.c): where its sections are, the MSH 4 blocks, and where
  * each of nparts even runs of the nodes and of the elements begins. Each process then reads

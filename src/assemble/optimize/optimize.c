@@ -16,7 +16,7 @@
  * Hessian as a matrix-free operator in the same variables, S^-1 H S^-1 with S = diag(sqrt(d)):
  * each product is one tangent-linear and one second-order adjoint solve at the point where
  * TAO last asked for the Hessian (lg_reduced_hessian). */
-#include "assemble.h"
+#include "optimize.h"
 
 #include <math.h>
 #include <petsctao.h>

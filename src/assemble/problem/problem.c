@@ -14,13 +14,6 @@
 #include <string.h>
 
 
-int lg_petsc_fail(lg_env *env, PetscErrorCode ierr, const char *what) {
-  const char *text = NULL;
-  PetscErrorMessage(ierr, &text, NULL);
-  lg_seterr(env, "%s failed: %s", what, text ? text : "PETSc error");
-  return 1;
-}
-
 /* ---------------------------------------------------------------- setup */
 
 static int layout(lg_env *env, lg_mesh *lm, int n, const int *funcs, field_layout *l, dofmap **dm,
@@ -429,69 +422,6 @@ int lg_problem_compute_bcs(lg_env *env, lg_problem *p) {
   return own_bcs(env, p);
 }
 
-/* the rows this rank owns: whole nodes (B rows each). A serial run owns them all; a
- * parallel one the nodes of its part of the mesh's cells (lg_mesh_partition; a node of
- * cells in several parts goes to the part of most of them), numbered part after part in
- * PETSc (perm), or with the cells in their order the nodes split evenly in the problem's
- * order */
-static int set_ownership(lg_env *env, lg_problem *p) {
-  int size = lg_mpi_size(), rank = lg_mpi_rank(), B = lg_matrix_block_size(p), Nn = p->N / B;
-  p->par = size > 1;
-  p->pB = B;
-  p->Nglob = p->N;
-  if (p->lm->dist) return lg_dist_number_nodes(env, p, B);
-  const int *part = NULL;
-  if (p->par && lg_mesh_partition(env, p->lm, size, &part)) return 1;
-  /* where the parts are the numbering's runs, one continuous P1 field (nodes = vertices)
-   * splits as well in its own order, which keeps the pattern on the dof map's own list;
-   * several fields, or P2 and up (vertex nodes first, then edges...), would give a rank
-   * rows from all over the mesh */
-  if (part && p->lm->part_runs && p->cols.n == 1 && p->cdm[0]->degree == 1 && !p->cdm[0]->disc) part = NULL;
-  if (!part) {
-    long first = (long)Nn * rank / size, last = (long)Nn * (rank + 1) / size;
-    p->lo = (int)first * B;
-    p->hi = (int)last * B;
-    return 0;
-  }
-  int *owner = malloc(sizeof(int) * ((size_t)Nn + 1)), *start = calloc((size_t)size + 1, sizeof(int));
-  p->perm = malloc(sizeof(int) * ((size_t)Nn + 1));
-  p->iperm = malloc(sizeof(int) * ((size_t)Nn + 1));
-  /* each node to the part of most of its cells: a node of a part's border goes to the side
-   * that holds it most, which keeps the parts' row counts near their cell counts (the lowest
-   * part took every shared node before: +20% rows on 16 parts) */
-  if (!owner || !start || !p->perm || !p->iperm || lg_problem_node_owners(p, B, part, owner)) {
-    free(owner); free(start);
-    lg_seterr(env, "out of memory for the rows' order of %d nodes", Nn);
-    return 1;
-  }
-  for (int i = 0; i < Nn; i++) start[owner[i] + 1]++;
-  for (int r = 0; r < size; r++) start[r + 1] += start[r];
-  p->lo = start[rank] * B;
-  p->hi = start[rank + 1] * B;
-  for (int i = 0; i < Nn; i++) {
-    p->perm[i] = start[owner[i]]++;
-    p->iperm[p->perm[i]] = i;
-  }
-  free(owner);
-  free(start);
-  return 0;
-}
-
-int lg_problem_node_owners(const lg_problem *p, int B, const int *part, int *owner) {
-  int Nn = p->N / B, *cnt = calloc((size_t)Nn + 1, sizeof(int));
-  if (!cnt) return 1;
-  for (int i = 0; i < Nn; i++) owner[i] = -1;
-  const mesh *m = p->lm->m;
-  for (int a = 0; a < p->cols.n; a++) {
-    const dofmap *dm = p->cdm[a];
-    for (int c = 0; c < m->ncell; c++)
-      for (int k = 0; k < dm->nloc; k += B) /* each node once (B > 1: its B dofs in a row) */
-        lg_vote(owner, cnt, (p->cglob[a] + dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k]) / B, part[c]);
-  }
-  free(cnt);
-  return 0;
-}
-
 /* a parallel run: each term keeps the items that touch an owned row (in their order, so
  * that each matrix entry sums its contributions in the serial run's order) */
 static void restrict_items(lg_problem *p) {
@@ -515,7 +445,7 @@ static void restrict_items(lg_problem *p) {
 }
 
 lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
-  double t0 = now_ms();
+  double t0 = lg_now_ms();
   if (s->nfield < 1 || s->nfield > KER_MAXFIELD) {
     lg_seterr(env, "a problem has 1 to %d unknowns (got %d)", KER_MAXFIELD, s->nfield);
     return NULL;
@@ -552,22 +482,22 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
     }
   }
   double ph[5];
-  ph[0] = now_ms();
+  ph[0] = lg_now_ms();
   if (layout(env, s->mesh, s->nfield, s->test, &p->rows, p->rdm, p->rglob, "test")) goto fail;
   if (layout(env, s->mesh, s->nfield, s->unknown, &p->cols, p->cdm, p->cglob, "unknown")) goto fail;
   p->N = p->rglob[s->nfield];
   if (!s->eqn || s->eqn->n == 0) { lg_seterr(env, "the equation has no integrals"); goto fail; }
-  ph[1] = now_ms();
-  if (set_ownership(env, p)) goto fail;
+  ph[1] = lg_now_ms();
+  if (lg_problem_set_ownership(env, p)) goto fail;
   if (setup_terms(env, p, s->eqn, s->test, s->unknown, s->nfield)) goto fail;
   if (matrix_params(env, p)) goto fail;
   if (p->par) restrict_items(p);
-  ph[2] = now_ms();
+  ph[2] = lg_now_ms();
   if (setup_bcs(env, p, s->bc, s->test, s->unknown, s->nfield)) goto fail;
-  ph[3] = now_ms();
+  ph[3] = lg_now_ms();
   if (lg_problem_setup_matrix(env, p)) goto fail;
   if (lg_problem_setup_nullspace(env, p, s)) goto fail;
-  ph[4] = now_ms();
+  ph[4] = lg_now_ms();
   p->state = calloc((size_t)p->N + 1, sizeof(double));
   p->solution = calloc((size_t)p->N + 1, sizeof(double));
   if (p->par && !(p->rwhole = calloc((size_t)p->N + 1, sizeof(double)))) { lg_seterr(env, "out of memory"); goto fail; }
@@ -579,7 +509,7 @@ lg_problem *lg_problem_new(lg_env *env, const lg_problem_spec *s) {
   if (env->verbose)
     fprintf(stderr, "[lugal] problem: %d dofs, %ld matrix entries before summation, %d kernels compiled in %.2f ms, setup %.2f ms "
                     "(dof maps %.2f, terms and kernels %.2f, essential conditions %.2f, sparsity and matrix %.2f)\n",
-            p->N, (long)p->ncoo, env->nkernels, env->kernel_ms, now_ms() - t0, ph[1] - ph[0], ph[2] - ph[1],
+            p->N, (long)p->ncoo, env->nkernels, env->kernel_ms, lg_now_ms() - t0, ph[1] - ph[0], ph[2] - ph[1],
             ph[3] - ph[2], ph[4] - ph[3]);
   if (env->verbose)
     fprintf(stderr, "[lugal] sparsity and matrix: pattern %.2f ms (%ld nonzeros, %d thread%s), PETSc matrix %.2f ms\n",
@@ -1021,11 +951,11 @@ int lg_problem_residual_into(lg_env *env, lg_problem *p, const double *state, do
 }
 
 int lg_problem_assemble_matrix(lg_env *env, lg_problem *p, double *ms) {
-  double t0 = now_ms();
+  double t0 = lg_now_ms();
   p->matrix_fp = 0;
   p->adj_stale = 1;
   if (lg_problem_assemble_into(env, p, p->state, p->A)) return 1;
-  if (ms) *ms = now_ms() - t0;
+  if (ms) *ms = lg_now_ms() - t0;
   return 0;
 }
 

@@ -13,8 +13,8 @@
 
 #include <stdint.h>
 
-#include "../expr/expr.h"
-#include "fem.h"
+#include "../../expr/expr.h"
+#include "../fem/fem.h"
 
 #define KER_MAXFIELD 8
 #define KER_MAXCOEF 32

@@ -3,7 +3,7 @@
  * node numbering, read_dist.c's parallel reader). A rank that failed already takes part with
  * empty messages; where any rank cannot receive, no rank exchanges and every one learns it
  * (the callers' "bad" flag), so that no rank is left waiting in a collective. */
-#include "problem_int.h"
+#include "parallel_int.h"
 
 #include <stdint.h>
 #include <stdlib.h>

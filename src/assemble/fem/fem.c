@@ -3,7 +3,7 @@
  * globally consistent edge orientation. */
 #include "fem.h"
 
-#include "../mesh/dense.h"
+#include "../../mesh/dense.h"
 
 #include <math.h>
 #include <stdio.h>

@@ -4,7 +4,7 @@
 #ifndef LUGAL_FEM_H
 #define LUGAL_FEM_H
 
-#include "../mesh/mesh.h"
+#include "../../mesh/mesh.h"
 
 #define FEM_MAXQ 1331
 #define FEM_MAXLOC 27 /* Q2 hexahedron */

@@ -10,7 +10,7 @@
  * where every vector is a generated kernel: dJ/du and dJ/dm are the gradient tables of J's
  * integrands (form_gradient_table), and lam^T dR/dm is the gradient with respect to m of the
  * equation with its test functions replaced by the adjoint (form_replace_function). */
-#include "assemble.h"
+#include "optimize.h"
 
 #include <math.h>
 #include <stdio.h>

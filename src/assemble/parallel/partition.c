@@ -8,7 +8,7 @@
  * hold the same partition (a box or rectangle generated rank by rank, distribute.c, takes
  * auto's test, lg_runs_kept, on counts reduced over the ranks instead). The problems number their rows part by part (problem.c), so that
  * a rank owns the rows of its cells. */
-#include "problem_int.h"
+#include "parallel_int.h"
 
 #include <math.h>
 #include <petscmat.h>
@@ -129,9 +129,9 @@ int lg_majority_part(const int *p, int n) {
  * part that holds most of its vertices (the lowest of those that tie) */
 static int partition_cells(lg_env *env, mesh *m, int nparts, const char *method, int *part) {
   PetscInt *ia, *ja;
-  double tg = now_ms();
+  double tg = lg_now_ms();
   if (vertex_graph(env, m, &ia, &ja)) return 1;
-  if (env->verbose) fprintf(stderr, "[lugal] partition: the vertex graph in %.1f ms\n", now_ms() - tg);
+  if (env->verbose) fprintf(stderr, "[lugal] partition: the vertex graph in %.1f ms\n", lg_now_ms() - tg);
   int *vp = malloc(sizeof(int) * ((size_t)m->nvert + 1)), pc[8];
   if (!vp) { PetscFree(ia); PetscFree(ja); lg_seterr(env, "out of memory for the partition"); return 1; }
   if (lg_partition_graph(env, PETSC_COMM_SELF, m->nvert, m->nvert, ia, ja, nparts, method, vp)) { free(vp); return 1; }
@@ -184,7 +184,7 @@ int lg_partition_cells(lg_env *env, mesh *m, int nparts, int *pt, int *runs) {
   /* a handful of cells per part is not worth a graph partitioner (nor safe: parts may be
    * empty); consecutive runs of cells are the identity numbering */
   if (!strcmp(method, "natural") || nparts < 2 || m->ncell < 8 * nparts) return -1;
-  double t0 = now_ms();
+  double t0 = lg_now_ms();
   if (!strcmp(method, "auto")) {
     long have = mesh_runs_interface(m, NULL, m->nvert, nparts, 0, m->nvert), fewest = -1;
     if (have >= 0 && lg_runs_cut_little(have, m->nvert, cell_dim(m->type), nparts)) {
@@ -206,40 +206,6 @@ int lg_partition_cells(lg_env *env, mesh *m, int nparts, int *pt, int *runs) {
   }
   if (partition_cells(env, m, nparts, method, pt)) return 1;
   if (env->verbose)
-    fprintf(stderr, "[lugal] partition: %d cells into %d parts by %s in %.1f ms\n", m->ncell, nparts, method, now_ms() - t0);
-  return 0;
-}
-
-int lg_mesh_partition(lg_env *env, lg_mesh *lm, int nparts, const int **part) {
-  *part = NULL;
-  if (lm->nparts == nparts) { *part = lm->part; return 0; }
-  mesh *m = lm->m;
-  int *pt = malloc(sizeof(int) * ((size_t)m->ncell + 1)), runs = 0;
-  if (!pt) { lg_seterr(env, "out of memory for the partition of %d cells", m->ncell); return 1; }
-  /* rank 0 partitions, every rank gets its outcome and the parts (a numbering's split is
-   * everyone's own: it reads the mesh only) */
-  int verbose = env->verbose;
-  env->verbose = verbose && lg_mpi_rank() == 0;
-  int rc = lg_mpi_rank() == 0 ? lg_partition_cells(env, m, nparts, pt, &runs) : 0;
-  env->verbose = verbose;
-  int keep = rc == -1;
-  if (keep) rc = 0;
-  if (lg_mpi_size() > 1) {
-    int st[3] = {rc, keep, runs};
-    if (MPI_Bcast(st, 3, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) st[0] = 1;
-    rc = lg_root_result(st[0], env->err, sizeof env->err);
-    keep = st[1];
-    runs = st[2];
-    if (!rc && !keep && MPI_Bcast(pt, m->ncell, MPI_INT, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) {
-      lg_seterr(env, "the partition could not be sent to every rank");
-      rc = 1;
-    }
-  }
-  if (rc || keep) { free(pt); return rc; }
-  free(lm->part);
-  lm->part = pt;
-  lm->nparts = nparts;
-  lm->part_runs = runs;
-  *part = pt;
+    fprintf(stderr, "[lugal] partition: %d cells into %d parts by %s in %.1f ms\n", m->ncell, nparts, method, lg_now_ms() - t0);
   return 0;
 }

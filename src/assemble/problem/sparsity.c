@@ -338,9 +338,110 @@ static int split_blocks(lg_env *env, lg_problem *p, int n) {
   return 0;
 }
 
-int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
-  double t0 = now_ms();
+/* the element rows of the matrix terms: every item's row and column nodes, once per term
+ * (rnod, cnod: the dof map's own list where it is that; rown, cown: the list is the term's
+ * own, to free), and the element rows of each node row, by their items (erow, from
+ * start[r + 1]; an element row is named by its item, numbered across terms from
+ * erow_off). 1 out of memory, 2 too many items */
+typedef struct {
+  size_t *erow_off, *start;
+  const PetscInt **rnod, **cnod;
+  int *rown, *cown;
+  uint32_t *erow;
+} elem_rows;
+
+static void elem_rows_free(const lg_problem *p, elem_rows *E) {
+  for (int i = 0; E->rnod && E->cnod && E->rown && E->cown && i < p->nterm; i++) {
+    if (E->cown[i]) free((void *)E->cnod[i]);
+    if (E->rown[i]) free((void *)E->rnod[i]);
+  }
+  free(E->rnod); free(E->cnod); free(E->rown); free(E->cown);
+  free(E->erow_off);
+  free(E->erow);
+  free(E->start);
+}
+
+static int element_rows(const lg_problem *p, int B, int local, int Nn, elem_rows *E) {
+  memset(E, 0, sizeof *E);
+  size_t *erow_off = E->erow_off = calloc((size_t)p->nterm + 1, sizeof(size_t)); /* each term's first item */
+  const PetscInt **rnod = E->rnod = calloc((size_t)p->nterm + 1, sizeof(PetscInt *));
+  const PetscInt **cnod = E->cnod = calloc((size_t)p->nterm + 1, sizeof(PetscInt *));
+  int *rown = E->rown = calloc((size_t)p->nterm + 1, sizeof(int)), *cown = E->cown = calloc((size_t)p->nterm + 1, sizeof(int));
+  size_t *start = E->start = calloc((size_t)Nn + 2, sizeof(size_t));
+  int bad = !erow_off || !rnod || !cnod || !rown || !cown || !start;
+  size_t nitem = 0;
+  for (int i = 0; i < p->nterm && !bad; i++) {
+    prob_term *t = &p->t[i];
+    erow_off[i] = nitem;
+    if (!t->have_mat) continue;
+    int rn = t->rl.size / B;
+    nitem += (size_t)t->nitems;
+    rnod[i] = term_node_lists(p, t, 1, B, !local, &rown[i]);
+    /* a square term (the same fields, dof maps and numbering for rows and columns, as a
+     * Laplacian's) shares one list */
+    int same = t->rl.n == t->cl.n && t->rl.size == t->cl.size && !memcmp(t->rl.nloc, t->cl.nloc, sizeof t->rl.nloc) &&
+               !memcmp(t->rl.off, t->cl.off, sizeof t->rl.off) && !memcmp(t->rl.bs, t->cl.bs, sizeof t->rl.bs) &&
+               p->rows.n == p->cols.n &&
+               !memcmp(p->rdm, p->cdm, sizeof(dofmap *) * (size_t)p->rows.n) &&
+               !memcmp(p->rglob, p->cglob, sizeof(int) * (size_t)(p->rows.n + 1));
+    cnod[i] = same ? rnod[i] : term_node_lists(p, t, 0, B, !local, &cown[i]);
+    if (!rnod[i] || !cnod[i]) { bad = 1; break; }
+    const PetscInt *rg = rnod[i];
+    for (size_t e = 0, ne = (size_t)t->nitems * (size_t)rn; e < ne; e++) start[rg[e] + 2]++;
+  }
+  if (erow_off) erow_off[p->nterm] = nitem;
+  if (nitem > UINT32_MAX) bad = 2;
+  /* the element rows of each node row, by their items */
+  uint32_t *erow = NULL;
+  if (!bad) {
+    for (int r = 0; r < Nn; r++) start[r + 2] += start[r + 1];
+    erow = E->erow = malloc(sizeof(uint32_t) * (start[Nn + 1] + 1));
+    bad = !erow;
+  }
+  for (int i = 0; i < p->nterm && !bad; i++) {
+    prob_term *t = &p->t[i];
+    if (!t->have_mat) continue;
+    int rn = t->rl.size / B;
+    const PetscInt *rg = rnod[i];
+    for (int it = 0; it < t->nitems; it++, rg += rn)
+      for (int r = 0; r < rn; r++) erow[start[rg[r] + 1]++] = (uint32_t)(erow_off[i] + (size_t)it);
+  }
+  return bad;
+}
+
+/* the PETSc matrix on the pattern ia, ja of the n owned rows (nnz entries), and its
+ * vectors */
+static int create_matrix(lg_env *env, lg_problem *p, int n, size_t nnz, PetscInt *ia, PetscInt *ja) {
   int N = p->N;
+  ia[n] = (PetscInt)nnz;
+  p->nnz = (PetscInt)nnz;
+  /* the matrix is made on these arrays, not a copy of them: PETSc's own preallocation from a
+   * CSR pattern inserts every entry through MatSetValues (a third of the setup of a vector
+   * P2 matrix) and holds a second pattern while ours is alive. The values start as zero
+   * pages, touched first by the first assembly */
+  p->csr_i = ia;
+  p->csr_j = ja;
+  if (!p->par && !(p->csr_a = calloc(nnz ? nnz : 1, sizeof(PetscScalar)))) {
+    lg_seterr(env, "out of memory for %ld matrix values", (long)nnz);
+    return 1;
+  }
+  int bs = lg_matrix_block_size(p);
+  if (p->par) {
+    if (split_blocks(env, p, n)) return 1;
+    PCHK(MatCreateMPIAIJWithSplitArrays(PETSC_COMM_WORLD, n, n, p->Nglob, p->Nglob, p->sd_i, p->sd_j, p->sd_a, p->so_i, p->so_j, p->so_a,
+                                        &p->A), "matrix creation");
+  } else PCHK(MatCreateSeqAIJWithArrays(PETSC_COMM_SELF, N, N, ia, ja, p->csr_a, &p->A), "matrix creation");
+  if (p->prefix[0]) PCHK(MatSetOptionsPrefix(p->A, p->prefix), "MatSetOptionsPrefix");
+  if (bs > 1) PCHK(MatSetBlockSize(p->A, bs), "MatSetBlockSize");
+  /* row replacement must keep the pattern: the element places are reused every assembly */
+  PCHK(MatSetOption(p->A, MAT_KEEP_NONZERO_PATTERN, PETSC_TRUE), "MatSetOption");
+  PCHK(MatSetOption(p->A, MAT_NEW_NONZERO_LOCATION_ERR, PETSC_TRUE), "MatSetOption");
+  PCHK(MatCreateVecs(p->A, &p->x, &p->b), "vector creation");
+  return 0;
+}
+
+int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
+  double t0 = lg_now_ms();
   PetscCount nentry = 0;
   for (int i = 0; i < p->nterm; i++) {
     prob_term *t = &p->t[i];
@@ -365,54 +466,11 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
     nrank += (size_t)t->nitems * (size_t)(t->rl.size / B) * (size_t)(t->cl.size / B);
     nerow += (size_t)t->nitems * (size_t)t->rl.size;
   }
-  /* every item's row and column nodes, once per term (the dof map's own list where it is
-   * that); an element row is named by its item, numbered across terms (erow_off) */
-  size_t *erow_off = calloc((size_t)p->nterm + 1, sizeof(size_t)); /* each term's first item */
-  const PetscInt **rnod = calloc((size_t)p->nterm + 1, sizeof(PetscInt *)), **cnod = calloc((size_t)p->nterm + 1, sizeof(PetscInt *));
-  int *rown = calloc((size_t)p->nterm + 1, sizeof(int)), *cown = calloc((size_t)p->nterm + 1, sizeof(int));
-  size_t *start = calloc((size_t)Nn + 2, sizeof(size_t));
+  elem_rows E;
+  int bad = element_rows(p, B, local, Nn, &E);
   int *mark = malloc(sizeof(int) * ((size_t)Nn + 1));
   PetscInt *nodes = malloc(sizeof(PetscInt) * ((size_t)Nn + 1)); /* one node row */
-  int bad = !erow_off || !rnod || !cnod || !rown || !cown || !start || !mark || !nodes;
-  size_t nitem = 0;
-  for (int i = 0; i < p->nterm && !bad; i++) {
-    prob_term *t = &p->t[i];
-    erow_off[i] = nitem;
-    if (!t->have_mat) continue;
-    int rn = t->rl.size / B;
-    nitem += (size_t)t->nitems;
-    rnod[i] = term_node_lists(p, t, 1, B, !local, &rown[i]);
-    /* a square term (the same fields, dof maps and numbering for rows and columns, as a
-     * Laplacian's) shares one list */
-    int same = t->rl.n == t->cl.n && t->rl.size == t->cl.size && !memcmp(t->rl.nloc, t->cl.nloc, sizeof t->rl.nloc) &&
-               !memcmp(t->rl.off, t->cl.off, sizeof t->rl.off) && !memcmp(t->rl.bs, t->cl.bs, sizeof t->rl.bs) &&
-               p->rows.n == p->cols.n &&
-               !memcmp(p->rdm, p->cdm, sizeof(dofmap *) * (size_t)p->rows.n) &&
-               !memcmp(p->rglob, p->cglob, sizeof(int) * (size_t)(p->rows.n + 1));
-    cnod[i] = same ? rnod[i] : term_node_lists(p, t, 0, B, !local, &cown[i]);
-    if (!rnod[i] || !cnod[i]) { bad = 1; break; }
-    const PetscInt *rg = rnod[i];
-    for (size_t e = 0, ne = (size_t)t->nitems * (size_t)rn; e < ne; e++) start[rg[e] + 2]++;
-  }
-  erow_off[p->nterm] = nitem;
-  if (nitem > UINT32_MAX) bad = 2;
-  /* the element rows of each node row, by their items */
-  size_t nent = 0;
-  uint32_t *erow = NULL;
-  if (!bad) {
-    for (int r = 0; r < Nn; r++) start[r + 2] += start[r + 1];
-    nent = start[Nn + 1];
-    erow = malloc(sizeof(uint32_t) * (nent + 1));
-    bad = !erow;
-  }
-  for (int i = 0; i < p->nterm && !bad; i++) {
-    prob_term *t = &p->t[i];
-    if (!t->have_mat) continue;
-    int rn = t->rl.size / B;
-    const PetscInt *rg = rnod[i];
-    for (int it = 0; it < t->nitems; it++, rg += rn)
-      for (int r = 0; r < rn; r++) erow[start[rg[r] + 1]++] = (uint32_t)(erow_off[i] + (size_t)it);
-  }
+  if (!bad && (!mark || !nodes)) bad = 1;
   /* each node row: the union of its element rows' column nodes (a marker per node, no
    * global sort), sorted, the diagonal always; its B rows are laid out one after another,
    * each the row's nodes times B columns. Two passes: the first counts each row, so that the
@@ -427,8 +485,8 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   /* the rows in contiguous blocks, one per OpenMP thread (balanced by element rows), each
    * with its own marker. The same pattern and ranks for any thread count */
   size_t nown = 0;
-  pattern_in in = {p, B, Nn, R0, local ? p->perm : NULL, local ? p->iperm : NULL, start, erow_off, erow, rnod, cnod, ia, NULL};
-  for (int R = R0; !bad && R < R1; R++) nown += start[ROW_NODE(&in, R) + 1] - start[ROW_NODE(&in, R)];
+  pattern_in in = {p, B, Nn, R0, local ? p->perm : NULL, local ? p->iperm : NULL, E.start, E.erow_off, E.erow, E.rnod, E.cnod, ia, NULL};
+  for (int R = R0; !bad && R < R1; R++) nown += E.start[ROW_NODE(&in, R) + 1] - E.start[ROW_NODE(&in, R)];
   int nb = 1;
 #ifdef _OPENMP
   if (nown > 200000) nb = omp_get_max_threads();
@@ -441,7 +499,7 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   for (int b = 0, R = R0; b < nb; b++) {
     blk[b].R0 = R;
     size_t goal = nown / (size_t)nb * (size_t)(b + 1);
-    while (R < R1 && (b == nb - 1 || acc < goal)) { acc += start[ROW_NODE(&in, R) + 1] - start[ROW_NODE(&in, R)]; R++; }
+    while (R < R1 && (b == nb - 1 || acc < goal)) { acc += E.start[ROW_NODE(&in, R) + 1] - E.start[ROW_NODE(&in, R)]; R++; }
     blk[b].R1 = b == nb - 1 ? R1 : R;
   }
   blk[0].mark = mark;
@@ -481,15 +539,8 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
     for (int b = 0; b < nb; b++) pattern_fill(&in, &blk[b]);
   }
   for (int b = 1; b < nb; b++) { free(blk[b].mark); free(blk[b].nodes); }
-  for (int i = 0; rnod && cnod && rown && cown && i < p->nterm; i++) {
-    if (cown[i]) free((void *)cnod[i]);
-    if (rown[i]) free((void *)rnod[i]);
-  }
-  free(rnod); free(cnod); free(rown); free(cown);
-  free(erow_off);
-  free(erow);
+  elem_rows_free(p, &E);
   free(nodes);
-  free(start);
   free(mark);
   if (bad) {
     free(ia); free(ja);
@@ -498,33 +549,10 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
     else lg_seterr(env, "out of memory for the sparsity pattern (%ld element matrix entries)", (long)nentry);
     return 1;
   }
-  ia[n] = (PetscInt)nnz;
-  p->nnz = (PetscInt)nnz;
-  /* the matrix is made on these arrays, not a copy of them: PETSc's own preallocation from a
-   * CSR pattern inserts every entry through MatSetValues (a third of the setup of a vector
-   * P2 matrix) and holds a second pattern while ours is alive. The values start as zero
-   * pages, touched first by the first assembly */
-  p->csr_i = ia;
-  p->csr_j = ja;
-  if (!p->par && !(p->csr_a = calloc(nnz ? nnz : 1, sizeof(PetscScalar)))) {
-    lg_seterr(env, "out of memory for %ld matrix values", (long)nnz);
-    return 1;
-  }
-  int bs = lg_matrix_block_size(p);
-  double t1 = now_ms();
-  if (p->par) {
-    if (split_blocks(env, p, n)) return 1;
-    PCHK(MatCreateMPIAIJWithSplitArrays(PETSC_COMM_WORLD, n, n, p->Nglob, p->Nglob, p->sd_i, p->sd_j, p->sd_a, p->so_i, p->so_j, p->so_a,
-                                        &p->A), "matrix creation");
-  } else PCHK(MatCreateSeqAIJWithArrays(PETSC_COMM_SELF, N, N, ia, ja, p->csr_a, &p->A), "matrix creation");
-  if (p->prefix[0]) PCHK(MatSetOptionsPrefix(p->A, p->prefix), "MatSetOptionsPrefix");
-  if (bs > 1) PCHK(MatSetBlockSize(p->A, bs), "MatSetBlockSize");
-  /* row replacement must keep the pattern: the element places are reused every assembly */
-  PCHK(MatSetOption(p->A, MAT_KEEP_NONZERO_PATTERN, PETSC_TRUE), "MatSetOption");
-  PCHK(MatSetOption(p->A, MAT_NEW_NONZERO_LOCATION_ERR, PETSC_TRUE), "MatSetOption");
-  PCHK(MatCreateVecs(p->A, &p->x, &p->b), "vector creation");
+  double t1 = lg_now_ms();
   p->setup_ms[0] = t1 - t0;
-  p->setup_ms[1] = now_ms() - t1;
+  if (create_matrix(env, p, n, nnz, ia, ja)) return 1;
+  p->setup_ms[1] = lg_now_ms() - t1;
   return 0;
 }
 

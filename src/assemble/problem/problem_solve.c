@@ -437,7 +437,7 @@ static int scale_essential(lg_env *env, lg_problem *p, Vec v, double s) {
 }
 
 static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_info *info) {
-  double t0 = now_ms();
+  double t0 = lg_now_ms();
   memset(p->state, 0, sizeof(double) * (size_t)p->N);
   uint64_t fp = matrix_fingerprint(env, p);
   int reuse = fp && fp == p->matrix_fp && p->ksp;
@@ -464,8 +464,8 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
     if (keep_bc_columns(env, p)) return 1;
     PCHK(MatZeroRowsColumns(p->A, p->nown, p->own_rows, p->bc_diag, p->x, p->b), "MatZeroRowsColumns");
   } else PCHK(MatZeroRows(p->A, p->nown, p->own_rows, p->bc_diag, p->x, p->b), "MatZeroRows");
-  info->assemble_ms = now_ms() - t0;
-  t0 = now_ms();
+  info->assemble_ms = lg_now_ms() - t0;
+  t0 = lg_now_ms();
   if (ensure_ksp(env, p)) return 1;
   PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
   int refactor = !reuse || p->keep.stale;
@@ -501,7 +501,7 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
     if (refactor && !rc) lg_keep_factored(&p->keep, p->ksp);
     lg_solver_name(p->ksp, info->solver, sizeof info->solver);
   }
-  info->solve_ms = now_ms() - t0;
+  info->solve_ms = lg_now_ms() - t0;
   if (rc) return 1;
   if (remove_null(env, p)) return 1;
   if (lg_problem_vec_get(env, p, p->x, p->solution)) return 1;
@@ -633,7 +633,7 @@ static void newton_advice(SNESConvergedReason reason, KSP ksp, char *out, size_t
 
 static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg_function **out,
                            lg_solve_info *info, int warm) {
-  double t0 = now_ms();
+  double t0 = lg_now_ms();
   if (lg_problem_compute_bcs(env, p)) return 1;
   double *x = p->state; /* the whole initial guess, then its owned part into p->x */
   for (int i = 0; i < p->N; i++) x[i] = warm && p->have_solution ? p->solution[i] : 0;
@@ -683,11 +683,11 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
   p->failed = 0;
   p->chord = warm && p->have_solution;
   p->lag_valid = 0;
-  info->setup_ms = now_ms() - t0;
-  t0 = now_ms();
+  info->setup_ms = lg_now_ms() - t0;
+  t0 = lg_now_ms();
   PetscErrorCode ierr = SNESSolve(p->snes, NULL, p->x);
   p->chord = 0;
-  info->solve_ms = now_ms() - t0;
+  info->solve_ms = lg_now_ms() - t0;
   if (p->failed) {
     /* a callback failed: at the initial guess that is the data's fault; later, Newton diverged */
     PetscInt its = 0;

@@ -1,12 +1,11 @@
 /* distribute.c — distributed meshes (under mpiexec, unless -lugal_distribute 0): rank 0 cuts the
  * whole mesh into one part per rank (lg_partition_cells) and sends each rank its part with
- * one layer of ghost cells, or more (-lugal_ghost_layers; mesh_part, src/mesh/part.c); the other ranks never hold the
- * whole mesh. And the global numbering of a problem's nodes on such a mesh: each rank
- * numbers the nodes it owns (a node goes to the part of most of its cells, as in a run on a
- * whole mesh) and learns the numbers of its ghost nodes from their owners through a
- * rendezvous on the nodes' keys (the global numbers of the vertices of the entity holding
- * the node), with no rank holding anything of the whole size. */
-#include "problem_int.h"
+ * one layer of ghost cells, or more (-lugal_ghost_layers; mesh_part, src/mesh/part.c); the
+ * other ranks never hold the whole mesh. A generated box or rectangle is cut rank by rank
+ * instead, each rank generating the window of its part. And what goes the other way: a
+ * part's mesh and fields gathered whole on rank 0 (output, repairs on one rank), the
+ * repaired coordinates sent back, per-cell values (quality) gathered on every rank. */
+#include "parallel_int.h"
 
 #include <math.h>
 #include <petscsys.h>
@@ -32,15 +31,6 @@ int lg_distribute_wanted(void) {
   (void)lg_read_parts_wanted(); /* and the parallel reader's (read_dist.c) */
   return lg_mpi_size() > 1 && on;
 }
-
-lg_mesh *lg_mesh_wrap_part(mesh_part *P) {
-  lg_mesh *lm = lg_mesh_wrap(P->m);
-  if (lm) lm->dist = P;
-  return lm;
-}
-
-long lg_mesh_global_cells(const lg_mesh *lm) { return lm->dist ? lm->dist->ncell_global : lm->m->ncell; }
-long lg_mesh_global_vertices(const lg_mesh *lm) { return lm->dist ? lm->dist->nvert_global : lm->m->nvert; }
 
 #define TAG_PART 7301
 
@@ -104,27 +94,23 @@ static int recv_part(lg_env *env, mesh_part **mine) {
   return 0;
 }
 
-lg_mesh *lg_mesh_distribute(lg_env *env, mesh *whole) {
-  double t0 = now_ms();
+mesh_part *lg_part_distribute(lg_env *env, mesh *whole) {
+  double t0 = lg_now_ms();
   int rank = lg_mpi_rank();
   mesh_part *P = NULL;
   int rc = rank == 0 ? send_parts(env, whole, &P) : recv_part(env, &P);
-  if (rank != 0) mesh_free(whole);
-  rc = lg_any_result(rc, env->err, sizeof env->err);
-  lg_mesh *lm = rc ? NULL : lg_mesh_wrap_part(P);
-  if (!rc && !lm) lg_seterr(env, "out of memory");
-  if (!lm) { mesh_part_free(P); if (rank == 0) mesh_free(whole); return NULL; }
-  if (rank == 0) mesh_free(whole);
+  mesh_free(whole);
+  if (lg_any_result(rc, env->err, sizeof env->err)) { mesh_part_free(P); return NULL; }
   if (env->verbose) {
     double own[2] = {P->nown_cell, P->m->ncell - P->nown_cell};
     fprintf(stderr, "[lugal] distribute: rank %d holds %d cells (%.0f owned, %.0f ghosts) and %d vertices of %d, %.1f ms\n", rank,
-            P->m->ncell, own[0], own[1], P->m->nvert, P->nvert_global, now_ms() - t0);
+            P->m->ncell, own[0], own[1], P->m->nvert, P->nvert_global, lg_now_ms() - t0);
   }
-  return lm;
+  return P;
 }
 
-lg_mesh *lg_mesh_generate_part(lg_env *env, const mesh_box_opts *o, int *whole) {
-  double t0 = now_ms();
+mesh_part *lg_part_generate(lg_env *env, const mesh_box_opts *o, int *whole) {
+  double t0 = lg_now_ms();
   int rank = lg_mpi_rank(), size = lg_mpi_size(), box = o->type == CELL_TETRAHEDRON || o->type == CELL_HEXAHEDRON;
   long nvg, ncg;
   mesh_box_counts(o, &nvg, &ncg, NULL, NULL);
@@ -154,16 +140,15 @@ lg_mesh *lg_mesh_generate_part(lg_env *env, const mesh_box_opts *o, int *whole) 
       rc = 1;
     }
   }
-  lg_mesh *lm = NULL;
   mesh_part *P = NULL;
   if ((rc = lg_any_result(rc, err, sizeof err))) goto done;
-  /* a graph partitioner on every rank, from the windows' runs (lg_mesh_parts_from_window), from
+  /* a graph partitioner on every rank, from the windows' runs (lg_part_from_window), from
    * 4 ranks on; on 2 or 3, rank 0 makes the whole mesh, partitions and cuts it: the box of
    * 1.57 M tetrahedra with PTScotch on 2 ranks took 0.73 s and 183 MB on rank 0 that way
    * against 1.06 s and 248 MB a rank, on 4 ranks 188 MB against 155 (bench/RESULTS.md) */
   int on_ranks = size >= 4;
   if (!natural && strcmp(method, "auto")) { /* a partitioner asked for */
-    if (on_ranks && (lm = lg_mesh_parts_from_window(env, m, vglob, cglob, (int)nvg, (int)ncg, layers))) *whole = 0;
+    if (on_ranks && (P = lg_part_from_window(env, m, vglob, cglob, (int)nvg, (int)ncg, layers))) *whole = 0;
     goto done;
   }
   if (!natural) { /* auto: the runs where rank 0, cutting the whole mesh, would keep them */
@@ -175,221 +160,26 @@ lg_mesh *lg_mesh_generate_part(lg_env *env, const mesh_box_opts *o, int *whole) 
     int keep = !fail && lg_runs_kept(env, have, lg_runs_cut_little(have, nvg, d, size) ? fewest : -1, nvg, ncg, d, size);
     env->verbose = verbose;
     if (!keep) { /* PTScotch (where the ranks' run fails, rank 0 makes the whole mesh) */
-      if (on_ranks && (lm = lg_mesh_parts_from_window(env, m, vglob, cglob, (int)nvg, (int)ncg, layers))) *whole = 0;
+      if (on_ranks && (P = lg_part_from_window(env, m, vglob, cglob, (int)nvg, (int)ncg, layers))) *whole = 0;
       goto done;
     }
   }
   if (mesh_vertex_owners(m, part, vown)) { snprintf(err, sizeof err, "out of memory for the vertices' owners"); rc = 1; }
   else if (!(P = mesh_part_extract_window(m, vglob, cglob, (int)nvg, (int)ncg, part, vown, rank, layers, err))) rc = 1;
-  else if (!(lm = lg_mesh_wrap_part(P))) { snprintf(err, sizeof err, "out of memory"); rc = 1; }
-  if (rc) { mesh_part_free(P); P = NULL; }
   if (lg_any_result(rc, err, sizeof err)) {
     rc = 1;
-    if (lm) lg_mesh_free(lm);
-    lm = NULL;
+    mesh_part_free(P);
+    P = NULL;
   } else if (env->verbose)
     fprintf(stderr, "[lugal] distribute: rank %d holds %d cells (%d owned, %d ghosts) and %d vertices of %ld, generated here from a window of %d cells and %d vertices, %.1f ms\n",
-            rank, P->m->ncell, P->nown_cell, P->m->ncell - P->nown_cell, P->m->nvert, nvg, m->ncell, m->nvert, now_ms() - t0);
+            rank, P->m->ncell, P->nown_cell, P->m->ncell - P->nown_cell, P->m->nvert, nvg, m->ncell, m->nvert, lg_now_ms() - t0);
 done:
   if (rc) {
     *whole = 0;
     lg_seterr(env, "generating this rank's part of the mesh: %s", err);
-  } else if (lm) *whole = 0;
+  } else if (P) *whole = 0;
   mesh_free(m); free(vglob); free(cglob); free(part); free(vown);
-  return lm;
-}
-
-/* ---------------------------------------------------------------- a problem's nodes */
-
-#define KEYLEN 8 /* field, component, entity kind, place j, up to four global vertex numbers */
-
-/* the key of dof d of dof map dm on the part P: field 0, its component, the entity that
- * holds its node and the node's place there, the entity's global vertex numbers sorted (a
- * cell's: its global number) */
-static void dof_key(const mesh_part *P, const dofmap *dm, int d, int *key) {
-  const mesh *m = P->m;
-  int kind, id, j;
-  dofmap_dof_entity(dm, d / dm->bs, &kind, &id, &j);
-  for (int i = 0; i < KEYLEN; i++) key[i] = -1;
-  key[0] = 0;
-  key[1] = d % dm->bs;
-  key[2] = kind;
-  key[3] = j;
-  int nv = 0, v[4];
-  if (kind == 0) v[nv++] = P->vglobal[id];
-  else if (kind == 1) for (int i = 0; i < 2; i++) v[nv++] = P->vglobal[m->edges[2 * (size_t)id + (size_t)i]];
-  else if (kind == 2) for (int i = 0; i < m->nvf; i++) v[nv++] = P->vglobal[m->faces[(size_t)id * (size_t)m->nvf + (size_t)i]];
-  else v[nv++] = P->cglobal[id];
-  for (int i = 1; i < nv; i++) /* sorted: an entity is its vertex set */
-    for (int k = i; k > 0 && v[k] < v[k - 1]; k--) { int t = v[k]; v[k] = v[k - 1]; v[k - 1] = t; }
-  for (int i = 0; i < nv; i++) key[4 + i] = v[i];
-}
-
-/* the key of a problem's node n (B dofs): its first dof's in its field's map, with the
- * field's number */
-static void node_key(const lg_problem *p, int n, int B, int *key) {
-  int dof = n * B, a = 0;
-  while (a + 1 < p->cols.n && dof >= p->cglob[a + 1]) a++;
-  dof_key(p->lm->dist, p->cdm[a], dof - p->cglob[a], key);
-  key[0] = a;
-}
-
-static int key_rank(const int *key, int size) {
-  uint64_t h = 1469598103934665603ull;
-  for (int i = 0; i < KEYLEN; i++) { h ^= (uint32_t)key[i]; h *= 1099511628211ull; h ^= h >> 29; }
-  return (int)(h % (uint64_t)size);
-}
-
-static int cmp_key(const void *a, const void *b) {
-  const int *x = a, *y = b;
-  for (int i = 0; i < KEYLEN; i++)
-    if (x[i] != y[i]) return x[i] < y[i] ? -1 : 1;
-  return 0;
-}
-
-/* the vertices of this part's cells of other parts (a rank holding an owned node holds a
- * cell through it, which shares a vertex with an owned cell of it, or is one), and with more
- * ghost layers the vertices of every cell within the further layers of those (another rank's
- * outer ghosts reach that far into this part); NULL when out of memory */
-static char *other_vertices(const mesh_part *P) {
-  const mesh *m = P->m;
-  size_t nvc = (size_t)m->nvc;
-  int rank = lg_mpi_rank();
-  char *iv = calloc((size_t)m->nvert + 1, 1);
-  for (int c = 0; iv && c < m->ncell; c++)
-    if (P->cowner[c] != rank)
-      for (size_t k = 0; k < nvc; k++) iv[m->cells[(size_t)c * nvc + k]] = 1;
-  if (iv && mesh_grow_vertex_layers(m, iv, P->layers - 1)) { free(iv); return NULL; }
-  return iv;
-}
-
-/* the nodes (B dofs from off on: dof map dm in a problem's vector) of owned cells with a
- * vertex in other_vertices: the owned nodes another rank may hold */
-static void mark_shared(const mesh_part *P, const char *ivert, const dofmap *dm, int off, int B, char *shared) {
-  const mesh *m = P->m;
-  int rank = lg_mpi_rank();
-  for (int c = 0; c < m->ncell; c++) {
-    if (P->cowner[c] != rank) continue;
-    int touch = 0;
-    for (int k = 0; k < m->nvc; k++) touch |= ivert[m->cells[(size_t)c * (size_t)m->nvc + (size_t)k]];
-    if (!touch) continue;
-    for (int k = 0; k < dm->nloc; k += B) shared[(off + dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k]) / B] = 1;
-  }
-}
-
-typedef void (*node_key_fn)(const void *ctx, int node, int *key);
-
-/* the global numbers perm[Nn] of a part's nodes: the owned ones (owner[i] == rank) after the
- * lower ranks' in the local order, the others the numbers their owners gave them, learnt
- * through a rendezvous on the nodes' keys (registrations of the shared owned nodes and
- * questions go to the rank of the key's hash, which answers). *first: this rank's first
- * number, *nown its count, *total all ranks'. Collective, bad = this rank failed already
- * (it still takes part); returns 0, or on every rank 1 (out of memory) or 2 (a ghost node
- * without an owner) */
-static int rendezvous_number(int bad, int Nn, const int *owner, const char *shared, node_key_fn key, const void *ctx,
-                             int *perm, int *first, int *nown_out, int *total_out) {
-  int rank = lg_mpi_rank(), size = lg_mpi_size();
-  int nown = 0, nask = 0;
-  for (int i = 0; !bad && i < Nn; i++) {
-    nown += owner[i] == rank;
-    nask += owner[i] != rank;
-  }
-  int f0 = 0, total = 0; /* every rank reduces, failed or not */
-  MPI_Exscan(&nown, &f0, 1, MPI_INT, MPI_SUM, PETSC_COMM_WORLD);
-  if (rank == 0) f0 = 0;
-  MPI_Allreduce(&nown, &total, 1, MPI_INT, MPI_SUM, PETSC_COMM_WORLD);
-  /* registrations of the shared owned nodes (key, number) and questions (key) to the key's
-   * hash's rank (rendezvous.c: a failed rank takes part with empty messages) */
-  lg_box reg = {sizeof(int) * (KEYLEN + 1), 0, 0, NULL, NULL}, ask = {sizeof(int) * KEYLEN, 0, 0, NULL, NULL};
-  int *askn = malloc(sizeof(int) * ((size_t)nask + 1)), *cnt = malloc(sizeof(int) * 4 * (size_t)size); /* the node of each question */
-  int nomem = !askn || !cnt, anynomem = 1; /* every rank skips the exchanges where any cannot count */
-  MPI_Allreduce(&nomem, &anynomem, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
-  bad |= !perm || anynomem;
-  for (int i = 0, k = 0; !bad && i < Nn; i++) {
-    int kb[KEYLEN];
-    if (owner[i] == rank) {
-      perm[i] = f0 + k++;
-      if (!shared[i]) continue;
-      key(ctx, i, kb);
-      int *r = lg_box_add(&reg, key_rank(kb, size), &bad);
-      if (r) { memcpy(r, kb, sizeof kb); r[KEYLEN] = perm[i]; }
-    } else {
-      perm[i] = -1;
-      key(ctx, i, kb);
-      int *q = lg_box_add(&ask, key_rank(kb, size), &bad);
-      if (q) { memcpy(q, kb, sizeof kb); askn[ask.n - 1] = i; }
-    }
-  }
-  int lost = 0;
-  long ndir = 0, nq = 0, *ord = NULL;
-  int *dir = NULL, *qs = NULL, *ans = NULL, *back = NULL;
-  if (!anynomem) {
-    int *rcnt1 = cnt + size, *cnt2 = rcnt1 + size, *rcnt2 = cnt2 + size;
-    dir = (int *)lg_box_send(&reg, cnt, rcnt1, NULL, &ndir, &bad);
-    qs = (int *)lg_box_send(&ask, cnt2, rcnt2, &ord, &nq, &bad);
-    if (!(ans = malloc(sizeof(int) * ((size_t)nq + 1)))) bad = 1;
-    if (!bad) qsort(dir, (size_t)ndir, sizeof(int) * (KEYLEN + 1), cmp_key);
-    for (long i = 0; !bad && i < nq; i++) {
-      const int *f = bsearch(qs + (size_t)i * KEYLEN, dir, (size_t)ndir, sizeof(int) * (KEYLEN + 1), cmp_key);
-      ans[i] = f ? f[KEYLEN] : -1;
-    }
-    /* the answers back in the order asked */
-    back = (int *)lg_reply((char *)ans, sizeof(int), rcnt2, cnt2, &bad);
-  }
-  for (long k = 0; !bad && k < ask.n; k++) {
-    perm[askn[ord[k]]] = back[k];
-    lost += back[k] < 0;
-  }
-  free(dir); free(qs); free(ans); free(back); free(ord); free(askn); free(cnt);
-  lg_box_free(&reg);
-  lg_box_free(&ask);
-  int fail[2] = {bad, lost}, any[2];
-  MPI_Allreduce(fail, any, 2, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
-  *first = f0;
-  *nown_out = nown;
-  *total_out = total;
-  return any[0] ? 1 : any[1] ? 2 : 0;
-}
-
-static void problem_node_key(const void *ctx, int n, int *key) {
-  const lg_problem *p = ctx;
-  node_key(p, n, p->pB, key);
-}
-
-int lg_dist_number_nodes(lg_env *env, lg_problem *p, int B) {
-  double t0 = now_ms();
-  const mesh_part *P = p->lm->dist;
-  int rank = lg_mpi_rank(), Nn = p->N / B;
-  int *owner = malloc(sizeof(int) * ((size_t)Nn + 1));
-  char *shared = calloc((size_t)Nn + 1, 1), *ivert = other_vertices(P);
-  /* each node to the part of most of its cells, the vote set_ownership takes on a whole
-   * mesh, in the whole mesh's cell order: exact for the nodes of owned cells, whose cells are
-   * all here; a node of ghost cells only is another rank's whatever the vote says */
-  int bad = !owner || !shared || !ivert || lg_problem_node_owners(p, B, P->cowner, owner);
-  for (int a = 0; !bad && a < p->cols.n; a++) mark_shared(P, ivert, p->cdm[a], p->cglob[a], B, shared);
-  free(ivert);
-  int first, nown = 0, total;
-  for (int i = 0; !bad && i < Nn; i++) nown += owner[i] == rank;
-  p->perm = malloc(sizeof(int) * ((size_t)Nn + 1));
-  p->iperm = malloc(sizeof(int) * ((size_t)nown + 1));
-  bad |= !p->iperm;
-  int rc = rendezvous_number(bad, Nn, owner, shared, problem_node_key, p, p->perm, &first, &nown, &total);
-  for (int i = 0; !rc && i < Nn; i++)
-    if (owner[i] == rank) p->iperm[p->perm[i] - first] = i;
-  free(owner);
-  free(shared);
-  if (rc) {
-    if (rc == 2) lg_seterr(env, "the global numbering of a distributed problem's nodes failed: a ghost node without an owner");
-    else lg_seterr(env, "out of memory numbering the nodes of a distributed problem");
-    return 1;
-  }
-  p->lo = first * B;
-  p->hi = (first + nown) * B;
-  p->Nglob = total * B;
-  p->ioff = first;
-  if (env->verbose && rank == 0)
-    fprintf(stderr, "[lugal] distributed nodes: %d in all, numbered in %.1f ms\n", total, now_ms() - t0);
-  return 0;
+  return P;
 }
 
 /* ---------------------------------------------------------------- gathering for output */
@@ -410,8 +200,7 @@ static int gatherv(const void *send, int count, int w, MPI_Datatype t, void *rec
   return bad;
 }
 
-int lg_dist_gather(lg_env *env, lg_mesh *lm, int nf, const mesh_field *fl, mesh **whole, double ***vals) {
-  const mesh_part *P = lm->dist;
+int lg_dist_gather(lg_env *env, const mesh_part *P, int nf, const mesh_field *fl, mesh **whole, double ***vals) {
   const mesh *m = P->m;
   int rank = lg_mpi_rank(), size = lg_mpi_size(), dim = m->dim, nvc = m->nvc;
   *whole = NULL;
@@ -520,308 +309,6 @@ oom:
   return 1;
 }
 
-/* ---------------------------------------------------------------- discrete functions */
-
-/* the owner of each node of dm (owner[nn]): the part of most of its cells, as a problem's
- * nodes */
-static int dof_owners(const lg_mesh *lm, const dofmap *dm, int *owner) {
-  const mesh_part *P = lm->dist;
-  int bs = dm->bs, nn = dm->ndof / bs;
-  int *cnt = calloc((size_t)nn + 1, sizeof(int));
-  if (!cnt) return 1;
-  for (int i = 0; i < nn; i++) owner[i] = -1; /* a tie leaves the count at 0, not the owner */
-  for (int c = 0; c < P->m->ncell; c++)
-    for (int k = 0; k < dm->nloc; k += bs) {
-      int node = dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k] / bs;
-      lg_vote(owner, cnt, node, P->cowner[c]);
-    }
-  free(cnt);
-  return 0;
-}
-
-/* the dofs of dm this rank owns (own[d] = 1) */
-static int owned_dofs(const lg_mesh *lm, const dofmap *dm, char *own) {
-  int rank = lg_mpi_rank(), bs = dm->bs, nn = dm->ndof / bs;
-  int *owner = malloc(sizeof(int) * ((size_t)nn + 1));
-  if (!owner || dof_owners(lm, dm, owner)) { free(owner); return 1; }
-  for (int d = 0; d < dm->ndof; d++) own[d] = owner[d / bs] == rank;
-  free(owner);
-  return 0;
-}
-
-/* ---------------------------------------------------------------- a dof map's layout */
-
-/* a dof map's dofs on a distributed mesh as a distributed vector: each rank's owned dofs
- * (in its local order, after the lower ranks'), and the scatter that brings every local
- * dof, owned or ghost, its owner's value. Built on first use, kept with the mesh */
-struct lg_dist_dofs {
-  const dofmap *dm;
-  const mesh_part *P;
-  int nown;   /* owned dofs */
-  char *own;  /* per local dof */
-  Vec g, l;   /* the owned dofs (all ranks': the global vector), the local ones */
-  VecScatter sc;
-  struct lg_dist_dofs *next;
-};
-
-void lg_dist_dofs_free(lg_dist_dofs *D) {
-  while (D) {
-    lg_dist_dofs *n = D->next;
-    free(D->own);
-    if (D->sc) VecScatterDestroy(&D->sc);
-    if (D->g) VecDestroy(&D->g);
-    if (D->l) VecDestroy(&D->l);
-    free(D);
-    D = n;
-  }
-}
-
-static void dm_node_key(const void *ctx, int n, int *key) {
-  const lg_dist_dofs *D = ctx;
-  dof_key(D->P, D->dm, n * D->dm->bs, key);
-}
-
-static lg_dist_dofs *dist_dofs(lg_env *env, lg_mesh *lm, const dofmap *dm) {
-  for (lg_dist_dofs *D = lm->ddofs; D; D = D->next)
-    if (D->dm == dm) return D;
-  const mesh_part *P = lm->dist;
-  int rank = lg_mpi_rank(), bs = dm->bs, nn = dm->ndof / bs;
-  lg_dist_dofs *D = calloc(1, sizeof *D);
-  int *owner = malloc(sizeof(int) * ((size_t)nn + 1)), *perm = malloc(sizeof(int) * ((size_t)nn + 1));
-  char *shared = calloc((size_t)nn + 1, 1), *ivert = other_vertices(P);
-  int bad = !D || !owner || !perm || !shared || !ivert || dof_owners(lm, dm, owner);
-  if (D) {
-    D->dm = dm;
-    D->P = P;
-    bad |= !(D->own = malloc((size_t)dm->ndof + 1));
-  }
-  if (!bad) mark_shared(P, ivert, dm, 0, bs, shared);
-  free(ivert);
-  int first = 0, nown = 0, total = 0;
-  int rc = rendezvous_number(bad, nn, owner, shared, dm_node_key, D, perm, &first, &nown, &total);
-  free(shared);
-  PetscInt *idx = rc ? NULL : malloc(sizeof(PetscInt) * ((size_t)dm->ndof + 1));
-  IS is = NULL;
-  PetscErrorCode ierr = !idx;
-  if (!ierr) {
-    for (int d = 0; d < dm->ndof; d++) {
-      D->own[d] = owner[d / bs] == rank;
-      idx[d] = (PetscInt)perm[d / bs] * bs + d % bs;
-    }
-    D->nown = nown * bs;
-    ierr = VecCreateMPI(PETSC_COMM_WORLD, D->nown, PETSC_DETERMINE, &D->g) ||
-           VecCreateSeq(PETSC_COMM_SELF, dm->ndof, &D->l) ||
-           ISCreateGeneral(PETSC_COMM_SELF, dm->ndof, idx, PETSC_COPY_VALUES, &is) ||
-           VecScatterCreate(D->g, is, D->l, NULL, &D->sc);
-  }
-  if (is) ISDestroy(&is);
-  free(idx);
-  free(owner);
-  free(perm);
-  if (rc || ierr) {
-    lg_dist_dofs_free(D);
-    lg_seterr(env, rc == 2 ? "the global numbering of a distributed function's dofs failed: a ghost dof without an owner"
-                           : "out of memory numbering the dofs of a distributed function");
-    return NULL;
-  }
-  D->next = lm->ddofs;
-  lm->ddofs = D;
-  return D;
-}
-
-const char *lg_dist_owned(lg_env *env, lg_mesh *lm, const dofmap *dm, int *nown) {
-  lg_dist_dofs *D = dist_dofs(env, lm, dm);
-  if (!D) return NULL;
-  if (nown) *nown = D->nown;
-  return D->own;
-}
-
-int lg_dist_ghosts(lg_env *env, lg_mesh *lm, const dofmap *dm, double *x) {
-  lg_dist_dofs *D = dist_dofs(env, lm, dm);
-  if (!D) return 1;
-  PetscScalar *a;
-  PCHK(VecGetArray(D->g, &a), "VecGetArray");
-  for (int d = 0, k = 0; d < dm->ndof; d++)
-    if (D->own[d]) a[k++] = x[d];
-  PCHK(VecRestoreArray(D->g, &a), "VecRestoreArray");
-  PCHK(VecScatterBegin(D->sc, D->g, D->l, INSERT_VALUES, SCATTER_FORWARD), "VecScatterBegin");
-  PCHK(VecScatterEnd(D->sc, D->g, D->l, INSERT_VALUES, SCATTER_FORWARD), "VecScatterEnd");
-  const PetscScalar *b;
-  PCHK(VecGetArrayRead(D->l, &b), "VecGetArrayRead");
-  if (dm->ndof) memcpy(x, b, sizeof(double) * (size_t)dm->ndof);
-  PCHK(VecRestoreArrayRead(D->l, &b), "VecRestoreArrayRead");
-  return 0;
-}
-
-double lg_dist_dot(const char *own, int n, const double *a, const double *b) {
-  double s = 0;
-  for (int d = 0; d < n; d++)
-    if (own[d]) s += a[d] * b[d];
-  return s;
-}
-
-long lg_function_global_ndof(lg_env *env, const lg_function *f) {
-  const dofmap *dm = f->dm;
-  if (!f->mesh->dist) return dm->ndof;
-  char *own = malloc((size_t)dm->ndof + 1);
-  int bad = !own || owned_dofs(f->mesh, dm, own);
-  double n = 0;
-  for (int d = 0; !bad && d < dm->ndof; d++) n += own[d];
-  double v[2] = {n, bad};
-  free(own);
-  if (lg_allreduce(v, 2, LG_SUM) || v[1]) { lg_seterr(env, "counting the dofs of a distributed function failed"); return -1; }
-  return (long)v[0];
-}
-
-/* a dof's place in the whole function's order: entity kind, its global vertices (or cell),
- * the node's place on it, the component; and its value or coordinates */
-typedef struct {
-  int k[7];
-  double v[3];
-} dof_rec;
-
-static int cmp_rec(const void *a, const void *b) {
-  const int *x = ((const dof_rec *)a)->k, *y = ((const dof_rec *)b)->k;
-  for (int i = 0; i < 7; i++)
-    if (x[i] != y[i]) return x[i] < y[i] ? -1 : 1;
-  return 0;
-}
-
-/* dof d's place in the whole function's order */
-static void rec_key(const mesh_part *P, const dofmap *dm, int d, dof_rec *r) {
-  int key[KEYLEN];
-  dof_key(P, dm, d, key);
-  r->k[0] = key[2];
-  memcpy(r->k + 1, key + 4, sizeof(int) * 4);
-  r->k[5] = key[3];
-  r->k[6] = key[1];
-}
-
-/* every rank's owned dofs of f with their values (coords = 0) or node coordinates, on
- * every rank, sorted into the whole function's order */
-static int gather_records(lg_env *env, const lg_function *f, int coords, dof_rec **out, long *n) {
-  const dofmap *dm = f->dm;
-  const mesh *m = dm->m;
-  int size = lg_mpi_size(), dim = m->dim;
-  *out = NULL;
-  *n = 0;
-  char *own = malloc((size_t)dm->ndof + 1);
-  double *xc = coords ? malloc(sizeof(double) * 3 * ((size_t)dm->ndof + 1)) : NULL;
-  int bad = !own || (coords && !xc) || owned_dofs(f->mesh, dm, own), nown = 0;
-  for (int d = 0; !bad && d < dm->ndof; d++) nown += own[d];
-  if (!bad && coords) /* each dof's node coordinates, from its first cell */
-    for (int c = 0; c < m->ncell; c++)
-      for (int k = 0; k < dm->nloc; k++) dofmap_node_coords(dm, c, k, xc + 3 * (size_t)dm->cell_dofs[(size_t)c * (size_t)dm->nloc + (size_t)k]);
-  dof_rec *mine = malloc(sizeof(dof_rec) * ((size_t)nown + 1));
-  bad |= !mine;
-  for (int d = 0, i = 0; !bad && d < dm->ndof; d++) {
-    if (!own[d]) continue;
-    dof_rec *r = mine + i++;
-    rec_key(f->mesh->dist, dm, d, r);
-    memset(r->v, 0, sizeof r->v);
-    if (coords) memcpy(r->v, xc + 3 * (size_t)d, sizeof(double) * (size_t)dim);
-    else r->v[0] = f->x[d];
-  }
-  free(own);
-  free(xc);
-  int *cnt = malloc(sizeof(int) * 2 * ((size_t)size + 1)), any = 0;
-  bad |= !cnt;
-  MPI_Allreduce(&bad, &any, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
-  long total = 0;
-  dof_rec *all = NULL;
-  if (!any) {
-    int *dsp = cnt + size, bytes = nown * (int)sizeof(dof_rec);
-    if (MPI_Allgather(&bytes, 1, MPI_INT, cnt, 1, MPI_INT, PETSC_COMM_WORLD) != MPI_SUCCESS) bytes = 0;
-    long at = 0;
-    for (int r = 0; r < size; r++) { dsp[r] = (int)at; at += cnt[r]; }
-    total = at / (long)sizeof(dof_rec);
-    all = at > INT32_MAX ? NULL : malloc((size_t)at + 1);
-    int none = all == NULL, anynone = 0;
-    MPI_Allreduce(&none, &anynone, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
-    if (anynone || MPI_Allgatherv(mine, bytes, MPI_BYTE, all, cnt, dsp, MPI_BYTE, PETSC_COMM_WORLD) != MPI_SUCCESS) any = 1;
-  }
-  free(mine);
-  free(cnt);
-  if (any) {
-    free(all);
-    lg_seterr(env, "gathering a distributed function's values failed (out of memory, or more than 2 GB of them)");
-    return 1;
-  }
-  qsort(all, (size_t)total, sizeof(dof_rec), cmp_rec);
-  *out = all;
-  *n = total;
-  return 0;
-}
-
-int lg_function_gather(lg_env *env, const lg_function *f, int coords, double **out, long *n) {
-  dof_rec *all;
-  long total;
-  *out = NULL;
-  if (gather_records(env, f, coords, &all, &total)) return 1;
-  int w = coords ? f->dm->m->dim : 1;
-  double *o = malloc(sizeof(double) * ((size_t)total * (size_t)w + 1));
-  if (!o) { free(all); lg_seterr(env, "out of memory for %ld values", total); return 1; }
-  for (long i = 0; i < total; i++) memcpy(o + (size_t)i * (size_t)w, all[i].v, sizeof(double) * (size_t)w);
-  free(all);
-  *out = o;
-  *n = total;
-  return 0;
-}
-
-int lg_function_assign_whole(lg_env *env, lg_function *f, const double *v, long n) {
-  dof_rec *all;
-  long total;
-  if (gather_records(env, f, 0, &all, &total)) return 1;
-  if (total != n) {
-    free(all);
-    lg_seterr(env, "the table has %ld values, the function %ld dofs", n, total);
-    return 1;
-  }
-  const dofmap *dm = f->dm;
-  for (int d = 0; d < dm->ndof; d++) { /* every local dof, owned or ghost, from its place */
-    dof_rec r;
-    rec_key(f->mesh->dist, dm, d, &r);
-    const dof_rec *at = bsearch(&r, all, (size_t)total, sizeof(dof_rec), cmp_rec);
-    if (at) f->x[d] = v[at - all];
-  }
-  free(all);
-  return 0;
-}
-
-int lg_dist_problem_order(lg_env *env, const lg_problem *p, int *order) {
-  int N = (int)p->Nglob, bad = 0, base = 0;
-  for (int g = 0; g < N; g++) order[g] = -1;
-  double *zero = calloc((size_t)p->N + 1, sizeof(double));
-  if (!zero) bad = 1;
-  for (int a = 0; a < p->cols.n; a++) {
-    const dofmap *dm = p->cdm[a];
-    lg_function f = {p->lm, (dofmap *)dm, dm->degree, zero, -1};
-    dof_rec *all = NULL;
-    long total = 0;
-    /* collective whatever this rank's state: every rank gathers every field */
-    if (gather_records(env, &f, 0, &all, &total)) { bad = 1; continue; }
-    for (int d = 0; !bad && d < dm->ndof; d++) {
-      PetscInt g = lg_petsc_row(p, p->cglob[a] + d);
-      if (g < p->lo || g >= p->hi) continue;
-      dof_rec r;
-      rec_key(p->lm->dist, dm, d, &r);
-      const dof_rec *at = bsearch(&r, all, (size_t)total, sizeof(dof_rec), cmp_rec);
-      if (at && g < N) order[g] = base + (int)(at - all);
-      else bad = 1;
-    }
-    free(all);
-    base += (int)total;
-  }
-  free(zero);
-  /* every rank's owned rows' places, on every rank (the others' entries are -1) */
-  if (MPI_Allreduce(MPI_IN_PLACE, order, N, MPI_INT, MPI_MAX, PETSC_COMM_WORLD) != MPI_SUCCESS ||
-      MPI_Allreduce(MPI_IN_PLACE, &bad, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD) != MPI_SUCCESS || bad || base != N) {
-    lg_seterr(env, "ordering a distributed problem's rows failed");
-    return 1;
-  }
-  return 0;
-}
-
 /* ---------------------------------------------------------------- per-cell values */
 
 /* every rank's n values v of cells with global numbers gid: all of them on every rank, as
@@ -923,14 +410,13 @@ int lg_dist_worst(lg_env *env, const double *v, const int *gid, int n, int k, in
 
 /* ---------------------------------------------------------------- repairs on rank 0 */
 
-int lg_dist_gather_mesh(lg_env *env, lg_mesh *lm, mesh **whole) {
+int lg_dist_gather_mesh(lg_env *env, const mesh_part *P, mesh **whole) {
   double **vals = NULL;
   *whole = NULL;
-  int rc = lg_dist_gather(env, lm, 0, NULL, whole, &vals);
+  int rc = lg_dist_gather(env, P, 0, NULL, whole, &vals);
   free(vals);
   /* the tagged boundary facets of owned cells (each facet of the whole mesh once), by
    * global vertex numbers, and every name */
-  const mesh_part *P = lm->dist;
   mesh *m = P->m;
   int rank = lg_mpi_rank(), size = lg_mpi_size(), nvf = m->nvf, bad = rc || mesh_build_boundary_cells(m);
   int nb = 0;
@@ -985,9 +471,8 @@ int lg_dist_gather_mesh(lg_env *env, lg_mesh *lm, mesh **whole) {
   return 0;
 }
 
-int lg_dist_scatter_coords(lg_env *env, lg_mesh *lm, const mesh *whole) {
+int lg_dist_scatter_coords(lg_env *env, mesh_part *P, const mesh *whole) {
   /* each rank's vertices to rank 0, which answers with their coordinates in W */
-  const mesh_part *P = lm->dist;
   mesh *m = P->m;
   int rank = lg_mpi_rank(), size = lg_mpi_size(), dim = m->dim, n = m->nvert;
   int *cnt = malloc(sizeof(int) * 4 * ((size_t)size + 1)), *ids = NULL, bad = !cnt, any = 0;

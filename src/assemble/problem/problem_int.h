@@ -1,20 +1,16 @@
-/* problem_int.h — the state of a linear or nonlinear problem, shared by problem.c
- * (setup, assembly, derived operators), problem_solve.c (solves) and sparsity.c (the matrix pattern and null
- * spaces). Internal to the assembly layer: the interface is assemble.h. */
+/* problem_int.h — the state of a linear or nonlinear problem, shared by problem.c (setup,
+ * assembly, derived operators), rows.c (the rows' owners and numbers), problem_solve.c
+ * (solves), sparsity.c (the matrix pattern and null spaces) and solver.c (solvers, kept
+ * factorizations). Internal to src/assemble/problem: the interface is problem.h. */
 #ifndef LUGAL_PROBLEM_INT_H
 #define LUGAL_PROBLEM_INT_H
 
-#include "assemble.h"
+#include "problem.h"
 #include "solver.h"
 
 #include <petscsnes.h>
 #include <time.h>
 
-static inline double now_ms(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
 
 typedef struct {
   region reg;
@@ -68,7 +64,7 @@ struct lg_problem {
   int *perm, *iperm, pB;
   /* on a distributed mesh (lm->dist) the problem's order is the local mesh's: N counts its
    * owned and ghost nodes' dofs, Nglob the whole problem's; perm gives every local node its
-   * PETSc node (distribute.c), iperm the owned ones' local nodes (PETSc node R at R - ioff),
+   * PETSc node (rows.c), iperm the owned ones' local nodes (PETSc node R at R - ioff),
    * and to_all brings a distributed vector's owned and ghost values to the local arrays */
   int Nglob, ioff;
   VecScatter to_all;    /* a distributed vector to every rank's whole copy */
@@ -213,54 +209,20 @@ int lg_problem_assemble_into(lg_env *env, lg_problem *p, const double *state, Ma
 int lg_problem_residual_into(lg_env *env, lg_problem *p, const double *state, double *r);
 int lg_problem_compute_bcs(lg_env *env, lg_problem *p);
 
-/* PETSc calls inside functions that return int: on error, record PETSc's message */
-int lg_petsc_fail(lg_env *env, PetscErrorCode ierr, const char *what);
-#define PCHK(call, what) do { PetscErrorCode ierr_ = (call); if (ierr_) { lg_petsc_fail(env, ierr_, what); return 1; } } while (0)
-
 /* sparsity.c */
 /* the global nodes (B components per node) of item it of term t, rows or columns, in the
  * problem's order (petsc = 0: the whole-length arrays') or PETSc's (1: the matrix's) */
 void lg_term_nodes(const lg_problem *p, const prob_term *t, int it, int rows, int B, int petsc, PetscInt *out);
 /* the number of components when every field has the same, else 1 */
 int lg_matrix_block_size(const lg_problem *p);
-/* Boyer-Moore's majority vote, one cell's ballot for a node: owner is the candidate, cnt
- * its count (0: none yet, or a tie so far); after all ballots in cell order owner is the
- * part of most of the node's cells where there is a majority */
-static inline void lg_vote(int *owner, int *cnt, int node, int part) {
-  if (!cnt[node]) { owner[node] = part; cnt[node] = 1; }
-  else cnt[node] += owner[node] == part ? 1 : -1;
-}
-/* problem.c: the part of each of the problem's nodes (B dofs each) by that vote over its
- * cells, whose parts are part[] (a whole mesh's partition, or a distributed mesh's local
- * cells' owners); owner[] holds Nn = N / B entries; 1 when out of memory */
+/* rows.c: the rows this rank owns (lo, hi; whole nodes of lg_matrix_block_size rows) and
+ * their PETSc numbers (perm, iperm; Nglob, ioff on a distributed mesh; collective) */
+int lg_problem_set_ownership(lg_env *env, lg_problem *p);
+/* rows.c: the part of each of the problem's nodes (B dofs each) by the majority vote over
+ * its cells (lg_vote), whose parts are part[] (a whole mesh's partition, or a distributed
+ * mesh's local cells' owners); owner[] holds Nn = N / B entries; 1 when out of memory */
 int lg_problem_node_owners(const lg_problem *p, int B, const int *part, int *owner);
-/* rendezvous.c: records of rec bytes, each for a rank (dest), sent through one all-to-all
- * (lg_box_send: the records received, rcnt[r] from rank r in rank order; cnt[r] sent to rank
- * r; *order[k] the box index of the k-th record sent, for answers; the box's storage is
- * freed, its n kept), and answers of rec bytes each to records received with counts rcnt,
- * back to their senders, who sent cnt (lg_reply: the k-th answers their k-th record sent).
- * Collective; bad: this rank failed, set on every rank where any rank cannot exchange */
-typedef struct {
-  size_t rec;
-  long n, cap;
-  int *dest;
-  char *data;
-} lg_box;
-void *lg_box_add(lg_box *b, int dest, int *bad);
-void lg_box_free(lg_box *b);
-char *lg_box_send(lg_box *b, int *cnt, int *rcnt, long **order, long *nrecv, int *bad);
-char *lg_reply(const char *ans, size_t rec, int *rcnt, int *cnt, int *bad);
-/* partition.c: a graph's rows (nrows here of ncols, CSR ia/ja PetscMalloc'ed, given up: freed by
- * the call, failed or not) partitioned by
- * the MatPartitioningType method into nparts on comm: each row's part into vpart; and the part
- * of most of n parts (the lowest of those that tie), a cell's from its vertices' */
-int lg_partition_graph(lg_env *env, MPI_Comm comm, int nrows, int ncols, PetscInt *ia, PetscInt *ja, int nparts,
-                       const char *method, int *vpart);
-int lg_majority_part(const int *p, int n);
-/* distribute.c: perm, iperm, lo, hi, Nglob and ioff of a problem on a distributed mesh,
- * nodes of B dofs; collective */
-int lg_dist_number_nodes(lg_env *env, lg_problem *p, int B);
-/* distribute.c: the place order[g] of each of a distributed problem's Nglob PETSc rows g in
+/* rows.c: the place order[g] of each of a distributed problem's Nglob PETSc rows g in
  * the order of its fields' gathered values (f:values()'s, field after field), on every
  * rank: for a whole dense matrix (collective) */
 int lg_dist_problem_order(lg_env *env, const lg_problem *p, int *order);

@@ -9,8 +9,8 @@
  * without AVX2, and from lg.interpolate's pointwise values. */
 #include "vmath.h"
 
-#include "../config.h"
-#include "../expr/expr.h"
+#include "../../config.h"
+#include "../../expr/expr.h"
 
 #include <math.h>
 #include <string.h>

@@ -18,8 +18,8 @@
  * A file this path cannot take (its layout, a part that does not parse, a mesh the whole
  * reader would refuse: a node missing or defined twice, mixed cells, a cell in two physical
  * groups, a tagged facet of no cell...) is read whole by rank 0 instead, which sends each
- * rank its part (distribute.c) or gives the whole reader's message. */
-#include "problem_int.h"
+ * rank its part (lg_part_distribute) or gives the whole reader's message. */
+#include "parallel_int.h"
 
 #include <petscmat.h>
 #include <stdint.h>
@@ -201,21 +201,12 @@ static long answer_of(const uint64_t *ut, long n, const long *ans, long long t) 
 }
 
 /* step 1: node tags to vertex numbers (the nodes of cells, in the file's order) */
-static void number_nodes(reader *R) {
-  int P = R->P, *cnt = R->cnt, *rcnt = cnt + P, *qcnt = cnt + 2 * P, *qrcnt = cnt + 3 * P;
+/* the questions of number_nodes: each distinct node tag of the local cells (used) and
+ * tagged facets once, found through a hash set of tag << 1 | used (0: empty), then sorted:
+ * a 5.3 M-cell file's 21 M node references are 0.9 M tags, and sorting the references had
+ * held them twice. The tags into *out (malloc'ed, *nout of them) */
+static void distinct_tags(reader *R, uint64_t **out, long *nout) {
   gmsh_part *G = &R->G;
-  lg_box bn = {sizeof(rnode), 0, 0, NULL, NULL}, bq = {sizeof(rask), 0, 0, NULL, NULL};
-  for (long long i = 0; !R->bad && i < G->nn; i++) {
-    rnode *r = lg_box_add(&bn, tag_rank(G->ntag[i], P), &R->bad);
-    if (r) { r->tag = G->ntag[i]; r->F = G->node_first + i; memcpy(r->x, G->nx + 3 * i, sizeof r->x); }
-  }
-  long nn = 0, nq = 0, *qord = NULL;
-  rnode *nodes = (rnode *)lg_box_send(&bn, cnt, rcnt, NULL, &nn, &R->bad);
-  lg_box_free(&bn);
-  /* the questions: each distinct node tag of the local cells (used) and tagged facets once,
-   * found through a hash set of tag << 1 | used (0: empty), then sorted: a 5.3 M-cell
-   * file's 21 M node references are 0.9 M tags, and sorting the references had held them
-   * twice */
   size_t cap = 1024;
   long nut = 0;
   uint64_t *ut = calloc(cap, sizeof(uint64_t));
@@ -252,6 +243,79 @@ static void number_nodes(reader *R) {
       if (ut[q]) ut[k++] = ut[q];
     if (sort_u64(ut, nut)) R->bad = 1;
   }
+  *out = ut;
+  *nout = nut;
+}
+
+/* the local cells and tagged facets in vertex numbers: at[u] the number of the u-th of
+ * the nut sorted distinct tags ut (distinct_tags); dense tags (Gmsh numbers nodes 1..n)
+ * through a table from the smallest, others by a binary search */
+static void local_elements(reader *R, const uint64_t *ut, long nut, const long *at) {
+  gmsh_part *G = &R->G;
+  long long tlo = nut ? (long long)(ut[0] >> 1) : 0, span = nut ? (long long)(ut[nut - 1] >> 1) - tlo + 1 : 0;
+  int *direct = !R->bad && span <= 4LL * nut + 1024 ? malloc(sizeof(int) * ((size_t)span + 1)) : NULL;
+  if (direct) {
+    for (long long t = 0; t < span; t++) direct[t] = -1;
+    for (long u = 0; u < nut; u++) direct[(long long)(ut[u] >> 1) - tlo] = (int)at[u];
+  }
+#define TAG_ANSWER(t) (direct ? direct[(t) - tlo] : answer_of(ut, nut, at, (t)))
+  long ncells = 0, nfacets = 0;
+  for (long long i = 0; i < G->ne; i++) {
+    int d = mesh_gmsh_type_dim(G->e[i].type);
+    ncells += d == R->cdim;
+    nfacets += d == R->cdim - 1 && G->e[i].nphys > 0;
+  }
+  int nvc = R->nvc;
+  R->cv = malloc(sizeof(int) * (size_t)nvc * ((size_t)ncells + 1));
+  R->ctag = malloc(sizeof(int) * ((size_t)ncells + 1));
+  R->cidx = malloc(sizeof(int) * ((size_t)ncells + 1));
+  R->fv = malloc(sizeof(int) * 4 * ((size_t)nfacets + 1));
+  R->fidx = malloc(sizeof(int) * ((size_t)nfacets + 1));
+  R->fph = malloc(sizeof(int) * ((size_t)nfacets + 1));
+  R->fnp = malloc(sizeof(int) * ((size_t)nfacets + 1));
+  if (!R->cv || !R->ctag || !R->cidx || !R->fv || !R->fidx || !R->fph || !R->fnp) R->bad = 1;
+  int ftype = R->cdim == 1 ? 15 : R->cdim == 2 ? 1 : R->ct == CELL_TETRAHEDRON ? 2 : 3;
+  for (long long i = 0; !R->bad && i < G->ne; i++) {
+    const gmsh_elem *e = &G->e[i];
+    int d = mesh_gmsh_type_dim(e->type), nn1 = mesh_gmsh_type_nodes(e->type);
+    if (d == R->cdim) {
+      int *v = R->cv + (size_t)nvc * (size_t)R->ncl;
+      for (int j = 0; j < nn1; j++) {
+        v[j] = (int)TAG_ANSWER(G->enodes[e->node + j]);
+        for (int k = 0; k < j; k++)
+          if (v[k] == v[j]) why(R, "a collapsed cell");
+      }
+      for (int j = 1; j < e->nphys; j++)
+        if (G->phys[e->phys + j] != G->phys[e->phys]) why(R, "a cell in two physical groups");
+      R->ctag[R->ncl] = e->nphys ? G->phys[e->phys] : 0;
+      R->cidx[R->ncl++] = (int)i;
+    } else if (d == R->cdim - 1 && e->nphys > 0) {
+      int *v = R->fv + 4 * (size_t)R->nfl;
+      if (e->type != ftype) why(R, "a tagged facet of another type than the cells'");
+      for (int j = 0; j < nn1; j++) v[j] = (int)TAG_ANSWER(G->enodes[e->node + j]);
+      R->fph[R->nfl] = e->phys;
+      R->fnp[R->nfl] = e->nphys;
+      R->fidx[R->nfl++] = (int)i;
+    }
+  }
+#undef TAG_ANSWER
+  free(direct);
+}
+
+static void number_nodes(reader *R) {
+  int P = R->P, *cnt = R->cnt, *rcnt = cnt + P, *qcnt = cnt + 2 * P, *qrcnt = cnt + 3 * P;
+  gmsh_part *G = &R->G;
+  lg_box bn = {sizeof(rnode), 0, 0, NULL, NULL}, bq = {sizeof(rask), 0, 0, NULL, NULL};
+  for (long long i = 0; !R->bad && i < G->nn; i++) {
+    rnode *r = lg_box_add(&bn, tag_rank(G->ntag[i], P), &R->bad);
+    if (r) { r->tag = G->ntag[i]; r->F = G->node_first + i; memcpy(r->x, G->nx + 3 * i, sizeof r->x); }
+  }
+  long nn = 0, nq = 0, *qord = NULL;
+  rnode *nodes = (rnode *)lg_box_send(&bn, cnt, rcnt, NULL, &nn, &R->bad);
+  lg_box_free(&bn);
+  long nut = 0;
+  uint64_t *ut = NULL;
+  distinct_tags(R, &ut, &nut);
   for (long i = 0; !R->bad && i < nut; i++) {
     rask *q = lg_box_add(&bq, tag_rank((long long)(ut[i] >> 1), P), &R->bad);
     if (q) { q->tag = (long long)(ut[i] >> 1); q->used = (int)(ut[i] & 1); }
@@ -338,59 +402,11 @@ static void number_nodes(reader *R) {
   long *at = malloc(sizeof(long) * ((size_t)bq.n + 1));
   if (!at) R->bad = 1;
   for (long k = 0; !R->bad && k < bq.n; k++) at[qord[k]] = back[k];
-  /* dense tags (Gmsh numbers nodes 1..n): a table from the smallest; else a binary search */
-  long long tlo = nut ? (long long)(ut[0] >> 1) : 0, span = nut ? (long long)(ut[nut - 1] >> 1) - tlo + 1 : 0;
-  int *direct = !R->bad && span <= 4LL * nut + 1024 ? malloc(sizeof(int) * ((size_t)span + 1)) : NULL;
-  if (direct) {
-    for (long long t = 0; t < span; t++) direct[t] = -1;
-    for (long u = 0; u < nut; u++) direct[(long long)(ut[u] >> 1) - tlo] = (int)at[u];
-  }
-#define TAG_ANSWER(t) (direct ? direct[(t) - tlo] : answer_of(ut, nut, at, (t)))
-  long ncells = 0, nfacets = 0;
-  for (long long i = 0; i < G->ne; i++) {
-    int d = mesh_gmsh_type_dim(G->e[i].type);
-    ncells += d == R->cdim;
-    nfacets += d == R->cdim - 1 && G->e[i].nphys > 0;
-  }
-  int nvc = R->nvc;
-  R->cv = malloc(sizeof(int) * (size_t)nvc * ((size_t)ncells + 1));
-  R->ctag = malloc(sizeof(int) * ((size_t)ncells + 1));
-  R->cidx = malloc(sizeof(int) * ((size_t)ncells + 1));
-  R->fv = malloc(sizeof(int) * 4 * ((size_t)nfacets + 1));
-  R->fidx = malloc(sizeof(int) * ((size_t)nfacets + 1));
-  R->fph = malloc(sizeof(int) * ((size_t)nfacets + 1));
-  R->fnp = malloc(sizeof(int) * ((size_t)nfacets + 1));
-  if (!R->cv || !R->ctag || !R->cidx || !R->fv || !R->fidx || !R->fph || !R->fnp) R->bad = 1;
-  int ftype = R->cdim == 1 ? 15 : R->cdim == 2 ? 1 : R->ct == CELL_TETRAHEDRON ? 2 : 3;
-  for (long long i = 0; !R->bad && i < G->ne; i++) {
-    const gmsh_elem *e = &G->e[i];
-    int d = mesh_gmsh_type_dim(e->type), nn1 = mesh_gmsh_type_nodes(e->type);
-    if (d == R->cdim) {
-      int *v = R->cv + (size_t)nvc * (size_t)R->ncl;
-      for (int j = 0; j < nn1; j++) {
-        v[j] = (int)TAG_ANSWER(G->enodes[e->node + j]);
-        for (int k = 0; k < j; k++)
-          if (v[k] == v[j]) why(R, "a collapsed cell");
-      }
-      for (int j = 1; j < e->nphys; j++)
-        if (G->phys[e->phys + j] != G->phys[e->phys]) why(R, "a cell in two physical groups");
-      R->ctag[R->ncl] = e->nphys ? G->phys[e->phys] : 0;
-      R->cidx[R->ncl++] = (int)i;
-    } else if (d == R->cdim - 1 && e->nphys > 0) {
-      int *v = R->fv + 4 * (size_t)R->nfl;
-      if (e->type != ftype) why(R, "a tagged facet of another type than the cells'");
-      for (int j = 0; j < nn1; j++) v[j] = (int)TAG_ANSWER(G->enodes[e->node + j]);
-      R->fph[R->nfl] = e->phys;
-      R->fnp[R->nfl] = e->nphys;
-      R->fidx[R->nfl++] = (int)i;
-    }
-  }
+  local_elements(R, ut, nut, at);
   R->nvg = total;
   R->vbase = base;
   R->nused = nused;
   free(nodes); free(asks); free(qord); free(which); free(used); free(fs); free(mine); free(num); free(ans);
-#undef TAG_ANSWER
-  free(direct);
   /* the elements and nodes as read are done with (their physical tags stay) */
   free(G->e); free(G->enodes); free(G->ntag); free(G->nx);
   G->e = NULL;
@@ -739,7 +755,7 @@ static void partition(reader *R, vhomes *H) {
     strcpy(method, MATPARTITIONINGCURRENT);
 #endif
   }
-  double t0 = now_ms();
+  double t0 = lg_now_ms();
   /* the rows, counted in a first pass and written in a second */
   int *nb = NULL, cap = 0;
   PetscInt *ia = NULL, *ja = NULL;
@@ -804,7 +820,7 @@ static void partition(reader *R, vhomes *H) {
   free(gp);
   if (env->verbose && R->rank == 0 && !R->bad)
     fprintf(stderr, "[lugal] partition: %d cells into %d parts by %s on the distributed vertex graph in %.1f ms\n", R->ncg, P,
-            method, now_ms() - t0);
+            method, lg_now_ms() - t0);
 }
 
 /* the owners of the homes' vertices (mesh_vertex_owners' vote, in cell order), and each
@@ -1176,20 +1192,20 @@ static mesh_part *finish(reader *R, window *W, lg_box *bf, int layers, double *t
   if (!any(R)) runs_parts(R);
   if (!any(R)) home_cells(R, &H);
   if (!any(R)) partition(R, &H);
-  ts[0] = now_ms();
+  ts[0] = lg_now_ms();
   if (!any(R)) owners(R, &H, W);
   if (!any(R)) window_layers(R, &H, W, layers);
-  ts[1] = now_ms();
+  ts[1] = lg_now_ms();
   if (!any(R)) fh = facet_homes(R, &H, bf, &nfh);
   lg_box_free(bf);
   if (!any(R)) window_vertices(R, &H, W);
   vhomes_free(&H);
   if (!any(R)) window_facets(R, fh, nfh, W);
   free(fh);
-  ts[2] = now_ms();
+  ts[2] = lg_now_ms();
   mesh_part *P = NULL;
   if (!any(R)) P = make_part(R, W, layers);
-  ts[3] = now_ms();
+  ts[3] = lg_now_ms();
   return P;
 }
 
@@ -1204,13 +1220,10 @@ static void reader_init(reader *R, window *W, lg_env *env) {
   if (!(R->cnt = malloc(sizeof(int) * 6 * (size_t)R->P))) R->bad = 1;
 }
 
-/* the part as the lg_mesh of every rank, or NULL on every rank where any failed */
-static lg_mesh *wrap(reader *R, mesh_part *P) {
-  lg_mesh *lm = NULL;
-  if (!any(R) && !(lm = lg_mesh_wrap_part(P))) why(R, "out of memory");
-  if (!any(R)) return lm;
-  if (lm) lg_mesh_free(lm);
-  else mesh_part_free(P);
+/* the part on every rank, or NULL on every rank where any failed */
+static mesh_part *agree(reader *R, mesh_part *P) {
+  if (!any(R)) return P;
+  mesh_part_free(P);
   return NULL;
 }
 
@@ -1228,8 +1241,8 @@ int lg_read_parts_wanted(void) {
   return on;
 }
 
-lg_mesh *lg_mesh_read_parts(lg_env *env, const char *path) {
-  double t0 = now_ms();
+mesh_part *lg_part_read(lg_env *env, const char *path) {
+  double t0 = lg_now_ms();
   int layers = lg_ghost_layers();
   if (layers < 0) return NULL; /* the whole path gives the message */
   reader R;
@@ -1253,7 +1266,7 @@ lg_mesh *lg_mesh_read_parts(lg_env *env, const char *path) {
   char err[MESH_ERRLEN] = "";
   if (!R.bad && mesh_gmsh_read_part(path, &R.L, R.rank, &R.G, err)) why(&R, err);
   R.efirst = R.L.nelems * R.rank / R.P;
-  double t1 = now_ms();
+  double t1 = lg_now_ms();
   if (!any(&R)) {
     /* the cells: the elements of the highest dimension, of one type */
     int cdim = 0, tmin = INT32_MAX, tmax = 0, d = 0, t[2];
@@ -1278,33 +1291,32 @@ lg_mesh *lg_mesh_read_parts(lg_env *env, const char *path) {
     }
   }
   double ts[7];
-  ts[0] = now_ms();
+  ts[0] = lg_now_ms();
   if (!any(&R)) number_nodes(&R);
-  ts[1] = now_ms();
+  ts[1] = lg_now_ms();
   if (!any(&R)) number_cells(&R);
-  ts[2] = now_ms();
+  ts[2] = lg_now_ms();
   /* fewer than 8 cells a rank (-lugal_read_parts_min): rank 0 cuts such a mesh, as it does a
    * generated one (runs, some parts maybe empty); 0 lets the ranks take tiny files too (the
    * tests' hostile corpus) */
   if (!any(&R) && R.ncg < read_parts_min() * R.P) why(&R, "few cells for the ranks");
   lg_box bf = {sizeof(rfacet), 0, 0, NULL, NULL};
   if (!any(&R)) file_facets(&R, &bf);
-  mesh_part *P = finish(&R, &W, &bf, layers, ts + 3);
-  lg_mesh *lm = wrap(&R, P);
-  if (!lm) {
+  mesh_part *P = agree(&R, finish(&R, &W, &bf, layers, ts + 3));
+  if (!P) {
     if (env->verbose && R.rank == 0) fprintf(stderr, "[lugal] read: %s read whole by rank 0 (%s)\n", path, R.why);
   } else if (env->verbose)
     fprintf(stderr, "[lugal] distribute: rank %d holds %d cells (%d owned, %d ghosts) and %d vertices of %d, read here (nodes %lld.., "
                     "elements %lld..) in %.1f ms: parsing %.1f, nodes %.1f, cells %.1f, partition %.1f, ghost layers %.1f, facets %.1f, "
                     "part %.1f\n",
             R.rank, P->m->ncell, P->nown_cell, P->m->ncell - P->nown_cell, P->m->nvert, P->nvert_global, R.G.node_first, R.efirst,
-            now_ms() - t0, t1 - t0, ts[1] - ts[0], ts[2] - ts[1], ts[3] - ts[2], ts[4] - ts[3], ts[5] - ts[4], ts[6] - ts[5]);
+            lg_now_ms() - t0, t1 - t0, ts[1] - ts[0], ts[2] - ts[1], ts[3] - ts[2], ts[4] - ts[3], ts[5] - ts[4], ts[6] - ts[5]);
   reader_free(&R, &W);
-  return lm;
+  return P;
 }
 
-lg_mesh *lg_mesh_parts_from_window(lg_env *env, mesh *m, const int *vglob, const int *cglob, int nvg, int ncg, int layers) {
-  double t0 = now_ms();
+mesh_part *lg_part_from_window(lg_env *env, mesh *m, const int *vglob, const int *cglob, int nvg, int ncg, int layers) {
+  double t0 = lg_now_ms();
   reader R;
   window W;
   reader_init(&R, &W, env);
@@ -1360,15 +1372,14 @@ lg_mesh *lg_mesh_parts_from_window(lg_env *env, mesh *m, const int *vglob, const
   free(part);
   free(have);
   double ts[4];
-  mesh_part *Pt = finish(&R, &W, &bf, layers, ts);
-  lg_mesh *lm = wrap(&R, Pt);
-  if (!lm) {
+  mesh_part *Pt = agree(&R, finish(&R, &W, &bf, layers, ts));
+  if (!Pt) {
     if (env->verbose && R.rank == 0) fprintf(stderr, "[lugal] distribute: the mesh generated whole on rank 0 (%s)\n", R.why);
   } else if (env->verbose)
     fprintf(stderr, "[lugal] distribute: rank %d holds %d cells (%d owned, %d ghosts) and %d vertices of %d, generated here and partitioned "
                     "on every rank in %.1f ms: partition %.1f, ghost layers %.1f, facets %.1f, part %.1f\n",
-            R.rank, Pt->m->ncell, Pt->nown_cell, Pt->m->ncell - Pt->nown_cell, Pt->m->nvert, Pt->nvert_global, now_ms() - t0, ts[0] - t0,
+            R.rank, Pt->m->ncell, Pt->nown_cell, Pt->m->ncell - Pt->nown_cell, Pt->m->nvert, Pt->nvert_global, lg_now_ms() - t0, ts[0] - t0,
             ts[1] - ts[0], ts[2] - ts[1], ts[3] - ts[2]);
   reader_free(&R, &W);
-  return lm;
+  return Pt;
 }

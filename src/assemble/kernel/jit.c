@@ -8,7 +8,7 @@
 #include "kernel.h"
 #include "vmath.h"
 
-#include "../config.h"
+#include "../../config.h"
 
 #include <dlfcn.h>
 #include <errno.h>
@@ -34,7 +34,7 @@ static void tcc_delete(TCCState *s) { (void)s; }
 #include <time.h>
 #include <unistd.h>
 
-#include "../mesh/io/outfile.h"
+#include "../../mesh/io/outfile.h"
 
 /* a system-compiler build: where its files are */
 typedef struct {

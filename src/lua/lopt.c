@@ -550,6 +550,75 @@ static void check_bounds(lua_State *L, lg_reduced *rf, int i, const double *lo, 
 
 /* lg.minimize(rf, {method=, bounds={lower, upper}, gatol=, grtol=, gttol=, maxit=, monitor=, series=,
  * inner_product=}) */
+/* lg.minimize's option constraints = {{g, "<=" | ">=" | "==", c}, ...} (on the top of the
+ * stack, not nil) into o->cons; u is the objective */
+static void opt_constraints(lua_State *L, const ud_reduced *u, lg_minimize_opts *o, const char *fn) {
+  int ct = lua_gettop(L);
+  if (!lua_istable(L, ct)) (void)luaL_error(L, "%s: option 'constraints' must be a table {{g, \"<=\", c}, ...}, got %s", fn,
+                                            luaL_typename(L, ct));
+  lua_Integer ncon = luaL_len(L, ct);
+  if (ncon < 1 || ncon > LG_MAXCONS) (void)luaL_error(L, "%s: option 'constraints' must list 1 to %d constraints", fn, LG_MAXCONS);
+  for (lua_Integer j = 1; j <= ncon; j++) {
+    lua_geti(L, ct, j);
+    int e = lua_gettop(L);
+    if (!lua_istable(L, e) || luaL_len(L, e) != 3)
+      (void)luaL_error(L, "%s: constraint %d must be {g, \"<=\" | \">=\" | \"==\", c} with g a reduced functional", fn, (int)j);
+    lua_geti(L, e, 1);
+    ud_reduced *ug = luaL_testudata(L, -1, MT_REDUCED);
+    if (!ug) (void)luaL_error(L, "%s: constraint %d: g must be a reduced functional (lg.reduced_functional), got %s", fn, (int)j,
+                               luaL_typename(L, -1));
+    if (ug == u) (void)luaL_error(L, "%s: constraint %d is the objective itself", fn, (int)j);
+    lua_geti(L, e, 2);
+    const char *op = lua_tostring(L, -1);
+    int kind = !op ? -1 : !strcmp(op, "<=") ? LG_CON_LE : !strcmp(op, ">=") ? LG_CON_GE : !strcmp(op, "==") ? LG_CON_EQ : -1;
+    if (kind < 0) (void)luaL_error(L, "%s: constraint %d: the relation must be \"<=\", \">=\" or \"==\"", fn, (int)j);
+    lua_geti(L, e, 3);
+    int isnum = 0;
+    double c = lua_tonumberx(L, -1, &isnum);
+    if (!isnum || !isfinite(c)) (void)luaL_error(L, "%s: constraint %d: the bound must be a finite number", fn, (int)j);
+    o->cons[o->ncons].rf = ug->rf;
+    o->cons[o->ncons].kind = kind;
+    o->cons[o->ncons].c = c;
+    o->ncons++;
+    lua_pop(L, 4);
+  }
+}
+
+/* lg.minimize's option bounds = {lower, upper} (the options table at index 2) into
+ * o->lower, o->upper, the bounded variant of the method chosen; the bound buffers are
+ * anchored in a table left on the stack */
+static void opt_bounds(lua_State *L, const ud_reduced *u, lg_minimize_opts *o, int nc, const char *fn) {
+  lua_newtable(L); /* anchors the bound buffers */
+  int anchor = lua_gettop(L), nanch = 0;
+  if (lua_getfield(L, 2, "bounds") != LUA_TNIL) {
+    if (!lua_istable(L, -1)) (void)luaL_error(L, "%s: option 'bounds' must be a table {lower, upper}", fn);
+    int bt = lua_gettop(L);
+    /* bounds need the bounded variant */
+    if (!strcmp(o->method, "lmvm")) o->method = "blmvm";
+    else if (!strcmp(o->method, "nls")) o->method = "bnls";
+    else if (!strcmp(o->method, "ntr")) o->method = "bntr";
+    for (int side = 0; side < 2; side++) {
+      lua_geti(L, bt, side + 1);
+      int vidx = lua_gettop(L);
+      for (int i = 0; i < nc; i++) {
+        int k = vidx;
+        if (nc > 1 && !lua_isnil(L, vidx)) {
+          if (!lua_istable(L, vidx) || luaL_testudata(L, vidx, MT_FUNC))
+            (void)luaL_error(L, "%s: with %d controls, each bound is a table of one per control", fn, nc);
+          lua_geti(L, vidx, i + 1);
+          k = lua_gettop(L);
+        }
+        const double *b = bound_values(L, u->rf, i, k, fn, side ? "upper" : "lower");
+        if (side) o->upper[i] = b; else o->lower[i] = b;
+        if (b) lua_rawseti(L, anchor, ++nanch); /* the buffer lives in the anchor table */
+        if (k != vidx) lua_pop(L, 1);
+      }
+      lua_pop(L, 1);
+    }
+    for (int i = 0; i < nc; i++) check_bounds(L, u->rf, i, o->lower[i], o->upper[i], fn);
+  }
+}
+
 static int l_minimize(lua_State *L) {
   gc_point(L, 1);
   const char *fn = "lg.minimize";
@@ -594,67 +663,9 @@ static int l_minimize(lua_State *L) {
     if (!strcmp(ip, "l2")) o.riesz = LG_RIESZ_L2;
     else if (!strcmp(ip, "dofs")) o.riesz = LG_RIESZ_NONE;
     else return luaL_error(L, "%s: option 'inner_product' must be \"l2\" or \"dofs\", got \"%s\"", fn, ip);
-    if (lua_getfield(L, 2, "constraints") != LUA_TNIL) {
-      int ct = lua_gettop(L);
-      if (!lua_istable(L, ct)) return luaL_error(L, "%s: option 'constraints' must be a table {{g, \"<=\", c}, ...}, got %s", fn,
-                                                luaL_typename(L, ct));
-      lua_Integer ncon = luaL_len(L, ct);
-      if (ncon < 1 || ncon > LG_MAXCONS) return luaL_error(L, "%s: option 'constraints' must list 1 to %d constraints", fn, LG_MAXCONS);
-      for (lua_Integer j = 1; j <= ncon; j++) {
-        lua_geti(L, ct, j);
-        int e = lua_gettop(L);
-        if (!lua_istable(L, e) || luaL_len(L, e) != 3)
-          return luaL_error(L, "%s: constraint %d must be {g, \"<=\" | \">=\" | \"==\", c} with g a reduced functional", fn, (int)j);
-        lua_geti(L, e, 1);
-        ud_reduced *ug = luaL_testudata(L, -1, MT_REDUCED);
-        if (!ug) return luaL_error(L, "%s: constraint %d: g must be a reduced functional (lg.reduced_functional), got %s", fn, (int)j,
-                                   luaL_typename(L, -1));
-        if (ug == u) return luaL_error(L, "%s: constraint %d is the objective itself", fn, (int)j);
-        lua_geti(L, e, 2);
-        const char *op = lua_tostring(L, -1);
-        int kind = !op ? -1 : !strcmp(op, "<=") ? LG_CON_LE : !strcmp(op, ">=") ? LG_CON_GE : !strcmp(op, "==") ? LG_CON_EQ : -1;
-        if (kind < 0) return luaL_error(L, "%s: constraint %d: the relation must be \"<=\", \">=\" or \"==\"", fn, (int)j);
-        lua_geti(L, e, 3);
-        int isnum = 0;
-        double c = lua_tonumberx(L, -1, &isnum);
-        if (!isnum || !isfinite(c)) return luaL_error(L, "%s: constraint %d: the bound must be a finite number", fn, (int)j);
-        o.cons[o.ncons].rf = ug->rf;
-        o.cons[o.ncons].kind = kind;
-        o.cons[o.ncons].c = c;
-        o.ncons++;
-        lua_pop(L, 4);
-      }
-    }
+    if (lua_getfield(L, 2, "constraints") != LUA_TNIL) opt_constraints(L, u, &o, fn);
     lua_pop(L, 1);
-    lua_newtable(L); /* anchors the bound buffers */
-    int anchor = lua_gettop(L), nanch = 0;
-    if (lua_getfield(L, 2, "bounds") != LUA_TNIL) {
-      if (!lua_istable(L, -1)) return luaL_error(L, "%s: option 'bounds' must be a table {lower, upper}", fn);
-      int bt = lua_gettop(L);
-      /* bounds need the bounded variant */
-      if (!strcmp(o.method, "lmvm")) o.method = "blmvm";
-      else if (!strcmp(o.method, "nls")) o.method = "bnls";
-      else if (!strcmp(o.method, "ntr")) o.method = "bntr";
-      for (int side = 0; side < 2; side++) {
-        lua_geti(L, bt, side + 1);
-        int vidx = lua_gettop(L);
-        for (int i = 0; i < nc; i++) {
-          int k = vidx;
-          if (nc > 1 && !lua_isnil(L, vidx)) {
-            if (!lua_istable(L, vidx) || luaL_testudata(L, vidx, MT_FUNC))
-              return luaL_error(L, "%s: with %d controls, each bound is a table of one per control", fn, nc);
-            lua_geti(L, vidx, i + 1);
-            k = lua_gettop(L);
-          }
-          const double *b = bound_values(L, u->rf, i, k, fn, side ? "upper" : "lower");
-          if (side) o.upper[i] = b; else o.lower[i] = b;
-          if (b) lua_rawseti(L, anchor, ++nanch); /* the buffer lives in the anchor table */
-          if (k != vidx) lua_pop(L, 1);
-        }
-        lua_pop(L, 1);
-      }
-      for (int i = 0; i < nc; i++) check_bounds(L, u->rf, i, o.lower[i], o.upper[i], fn);
-    }
+    opt_bounds(L, u, &o, nc, fn);
   }
   lg_env *env = get_env(L);
   lg_minimize_info info;

@@ -644,19 +644,21 @@ static int first_duplicates(const int *rows, long n, int k, int ks, long *first)
   return 0;
 }
 
-static mesh *build_mesh(gfile *g, const char *path, char *err) {
-  if (!g->version) { snprintf(err, MESH_ERRLEN, "%.200s: not a Gmsh MSH file (no $MeshFormat)", path); return NULL; }
+/* the file's sections present, its entities defined once, and its cells: the elements of
+ * the highest dimension (*cdim), of one type (*ctype), nc of them; 1 with the message */
+static int cell_kind(gfile *g, const char *path, int *cdim_out, int *ctype_out, long *nc_out, char *err) {
+  if (!g->version) { snprintf(err, MESH_ERRLEN, "%.200s: not a Gmsh MSH file (no $MeshFormat)", path); return 1; }
   if (!g->have_nodes || !g->have_elems) {
     snprintf(err, MESH_ERRLEN, "%.200s: the file is truncated or incomplete: no %s section", path,
              g->have_nodes ? "$Elements" : "$Nodes");
-    return NULL;
+    return 1;
   }
   if (g->nent) qsort(g->ent, g->nent, sizeof(gentity), ent_cmp);
   for (size_t i = 1; i < g->nent; i++)
     if (!ent_cmp(&g->ent[i], &g->ent[i - 1])) {
       snprintf(err, MESH_ERRLEN, "%.200s:%ld: entity %lld of dimension %d is defined twice", path, g->ent[i].line,
                (long long)g->ent[i].tag, g->ent[i].dim);
-      return NULL;
+      return 1;
     }
   /* the cells are the elements of the highest dimension, of one type */
   int cdim = 0, ctype = -1;
@@ -665,7 +667,7 @@ static mesh *build_mesh(gfile *g, const char *path, char *err) {
   if (cdim < 1) {
     snprintf(err, MESH_ERRLEN, "%.200s: no 1D, 2D or 3D elements (lugal reads lines, triangles, quadrilaterals, "
                                "tetrahedra and hexahedra)", path);
-    return NULL;
+    return 1;
   }
   long nc = 0;
   for (size_t i = 0; i < g->ne; i++) {
@@ -674,17 +676,123 @@ static mesh *build_mesh(gfile *g, const char *path, char *err) {
     else if (ctype != g->e[i].type) {
       snprintf(err, MESH_ERRLEN, "%.200s:%ld: mixes %s and %s cells; lugal meshes have one cell type", path,
                g->e[i].line, cell_name(gmsh_cell(ctype)), cell_name(gmsh_cell(g->e[i].type)));
-      return NULL;
+      return 1;
     }
     nc++;
   }
-  if (nc > INT_MAX / 8) { snprintf(err, MESH_ERRLEN, "%.200s: too many cells (%ld)", path, nc); return NULL; }
+  if (nc > INT_MAX / 8) { snprintf(err, MESH_ERRLEN, "%.200s: too many cells (%ld)", path, nc); return 1; }
+  *cdim_out = cdim;
+  *ctype_out = ctype;
+  *nc_out = nc;
+  return 0;
+}
+
+/* facets with physical tags become tagged boundary facets of m, one per (facet, tag), the
+ * same facet under the same tag once (it would be integrated twice); newid maps the file's
+ * node indices to m's vertices (-1: no cell uses it). 1 with the message */
+static int tagged_facets(gfile *g, mesh *m, const nodemap *nm, const int *newid, int cdim, const char *path, char *err) {
+  cell_type ct = m->type;
+  int *fv = NULL, *ftag = NULL;
+  long *first = NULL;
+  int nvf = m->nvf, ftype = cdim == 1 ? 15 : cdim == 2 ? 1 : ct == CELL_TETRAHEDRON ? 2 : 3;
+  size_t nf = 0, capf = 0, capt = 0;
+  for (size_t i = 0; i < g->ne; i++) {
+    const gelem *e = &g->e[i];
+    if (gmsh_dim(e->type) != cdim - 1) continue;
+    int np, one;
+    const int *ph = elem_phys(g, e, &np, &one);
+    if (!np) continue;
+    if (e->type != ftype) {
+      snprintf(err, MESH_ERRLEN, "%.200s:%ld: element %lld is a facet of type %d, which does not match %s cells", path,
+               e->line, (long long)e->id, e->type, cell_name(ct));
+      goto fail;
+    }
+    int v[4], ok = 1;
+    for (int j = 0; j < nvf; j++) {
+      long k = nodemap_get(nm, e->nodes[j]);
+      if (k < 0) {
+        snprintf(err, MESH_ERRLEN, "%.200s:%ld: element %lld refers to node %lld, which is not in $Nodes", path,
+                 e->line, (long long)e->id, (long long)e->nodes[j]);
+        goto fail;
+      }
+      v[j] = newid[k];
+      if (v[j] < 0) ok = 0;
+    }
+    if (!ok) continue; /* a tagged facet away from the cells carries nothing */
+    for (int j = 0; j < np; j++) {
+      if (grow((void **)&fv, &capf, (nf + 1) * (size_t)(nvf + 1), sizeof(int)) ||
+          grow((void **)&ftag, &capt, nf + 1, sizeof(int)))
+        goto oom;
+      memcpy(fv + nf * (size_t)(nvf + 1), v, sizeof(int) * (size_t)nvf);
+      fv[nf * (size_t)(nvf + 1) + nvf] = ph[j];
+      ftag[nf] = ph[j];
+      nf++;
+    }
+  }
+  /* the same facet under the same tag twice would be integrated twice: keep one */
+  first = malloc(sizeof(long) * nf + 1);
+  if (!first || first_duplicates(fv, (long)nf, nvf + 1, nvf, first)) goto oom;
+  size_t k = 0;
+  for (size_t i = 0; i < nf; i++)
+    if (first[i] == (long)i) k++;
+  if (k > (size_t)INT_MAX / 4) { snprintf(err, MESH_ERRLEN, "%.200s: too many boundary facets", path); goto fail; }
+  m->bf_verts = malloc(sizeof(int) * k * (size_t)nvf + 1);
+  m->bf_tag = malloc(sizeof(int) * k + 1);
+  if (!m->bf_verts || !m->bf_tag) goto oom;
+  k = 0;
+  for (size_t i = 0; i < nf; i++) {
+    if (first[i] != (long)i) continue;
+    memcpy(m->bf_verts + k * (size_t)nvf, fv + i * (size_t)(nvf + 1), sizeof(int) * (size_t)nvf);
+    m->bf_tag[k] = ftag[i];
+    k++;
+  }
+  m->nbf = (int)k;
+  free(fv); free(ftag); free(first);
+  return 0;
+oom:
+  snprintf(err, MESH_ERRLEN, "%.200s: out of memory", path);
+fail:
+  free(fv); free(ftag); free(first);
+  return 1;
+}
+
+/* the physical names of the cells' and facets' dimensions, and every unnamed boundary tag
+ * named by its number; 1 when out of memory */
+static int set_names(const gfile *g, mesh *m, int cdim) {
+  for (size_t i = 0; i < g->nname; i++) {
+    int rc = 0;
+    if (g->names[i].dim == cdim) rc = mesh_set_region_name(m, g->names[i].tag, g->names[i].name);
+    else if (g->names[i].dim == cdim - 1) rc = mesh_set_boundary_name(m, g->names[i].tag, g->names[i].name);
+    if (rc) return 1;
+  }
+  /* unnamed boundary tags are reachable by their number as a name */
+  {
+    int ntags = mesh_used_boundary_tags(m, NULL, 0);
+    int *tags = malloc(sizeof(int) * (size_t)(ntags > 0 ? ntags : 1));
+    if (ntags < 0 || !tags) { free(tags); return 1; }
+    mesh_used_boundary_tags(m, tags, ntags);
+    for (int t = 0; t < ntags; t++) {
+      int named = 0;
+      for (int i = 0; i < m->nbname && !named; i++) named = m->bnames[i].tag == tags[t];
+      char nmb[16];
+      snprintf(nmb, sizeof nmb, "%d", tags[t]);
+      if (!named && mesh_set_boundary_name(m, tags[t], nmb)) { free(tags); return 1; }
+    }
+    free(tags);
+  }
+  return 0;
+}
+
+static mesh *build_mesh(gfile *g, const char *path, char *err) {
+  int cdim, ctype;
+  long nc;
+  if (cell_kind(g, path, &cdim, &ctype, &nc, err)) return NULL;
   cell_type ct = gmsh_cell(ctype);
   int nvc = cell_nverts(ct);
   nodemap nm;
   if (nodemap_build(&nm, g, err, path)) { nodemap_free(&nm); return NULL; }
   mesh *m = NULL;
-  int *cells = NULL, *ctag = NULL, *newid = NULL, *fv = NULL, *ftag = NULL;
+  int *cells = NULL, *ctag = NULL, *newid = NULL;
   long *first = NULL, *elem_of = NULL;
   double *x = NULL;
   if (g->nn > (size_t)INT_MAX) { snprintf(err, MESH_ERRLEN, "%.200s: too many nodes", path); goto fail; }
@@ -783,96 +891,20 @@ static mesh *build_mesh(gfile *g, const char *path, char *err) {
   if (!m) goto fail;
   memcpy(m->cell_tag, ctag, sizeof(int) * (size_t)ncu);
   mesh_orient_consistently(m);
-  /* facets with physical tags become tagged boundary facets, one per (facet, tag) */
-  {
-    int nvf = m->nvf, ftype = cdim == 1 ? 15 : cdim == 2 ? 1 : ct == CELL_TETRAHEDRON ? 2 : 3;
-    size_t nf = 0, capf = 0, capt = 0;
-    for (size_t i = 0; i < g->ne; i++) {
-      const gelem *e = &g->e[i];
-      if (gmsh_dim(e->type) != cdim - 1) continue;
-      int np, one;
-      const int *ph = elem_phys(g, e, &np, &one);
-      if (!np) continue;
-      if (e->type != ftype) {
-        snprintf(err, MESH_ERRLEN, "%.200s:%ld: element %lld is a facet of type %d, which does not match %s cells", path,
-                 e->line, (long long)e->id, e->type, cell_name(ct));
-        goto fail;
-      }
-      int v[4], ok = 1;
-      for (int j = 0; j < nvf; j++) {
-        long k = nodemap_get(&nm, e->nodes[j]);
-        if (k < 0) {
-          snprintf(err, MESH_ERRLEN, "%.200s:%ld: element %lld refers to node %lld, which is not in $Nodes", path,
-                   e->line, (long long)e->id, (long long)e->nodes[j]);
-          goto fail;
-        }
-        v[j] = newid[k];
-        if (v[j] < 0) ok = 0;
-      }
-      if (!ok) continue; /* a tagged facet away from the cells carries nothing */
-      for (int j = 0; j < np; j++) {
-        if (grow((void **)&fv, &capf, (nf + 1) * (size_t)(nvf + 1), sizeof(int)) ||
-            grow((void **)&ftag, &capt, nf + 1, sizeof(int)))
-          goto oom;
-        memcpy(fv + nf * (size_t)(nvf + 1), v, sizeof(int) * (size_t)nvf);
-        fv[nf * (size_t)(nvf + 1) + nvf] = ph[j];
-        ftag[nf] = ph[j];
-        nf++;
-      }
-    }
-    /* the same facet under the same tag twice would be integrated twice: keep one */
-    free(first);
-    first = malloc(sizeof(long) * nf + 1);
-    if (!first || first_duplicates(fv, (long)nf, nvf + 1, nvf, first)) goto oom;
-    size_t k = 0;
-    for (size_t i = 0; i < nf; i++)
-      if (first[i] == (long)i) k++;
-    if (k > (size_t)INT_MAX / 4) { snprintf(err, MESH_ERRLEN, "%.200s: too many boundary facets", path); goto fail; }
-    m->bf_verts = malloc(sizeof(int) * k * (size_t)nvf + 1);
-    m->bf_tag = malloc(sizeof(int) * k + 1);
-    if (!m->bf_verts || !m->bf_tag) goto oom;
-    k = 0;
-    for (size_t i = 0; i < nf; i++) {
-      if (first[i] != (long)i) continue;
-      memcpy(m->bf_verts + k * (size_t)nvf, fv + i * (size_t)(nvf + 1), sizeof(int) * (size_t)nvf);
-      m->bf_tag[k] = ftag[i];
-      k++;
-    }
-    m->nbf = (int)k;
-  }
-  for (size_t i = 0; i < g->nname; i++) {
-    int rc = 0;
-    if (g->names[i].dim == cdim) rc = mesh_set_region_name(m, g->names[i].tag, g->names[i].name);
-    else if (g->names[i].dim == cdim - 1) rc = mesh_set_boundary_name(m, g->names[i].tag, g->names[i].name);
-    if (rc) goto oom;
-  }
-  /* unnamed boundary tags are reachable by their number as a name */
-  {
-    int ntags = mesh_used_boundary_tags(m, NULL, 0);
-    int *tags = malloc(sizeof(int) * (size_t)(ntags > 0 ? ntags : 1));
-    if (ntags < 0 || !tags) { free(tags); goto oom; }
-    mesh_used_boundary_tags(m, tags, ntags);
-    for (int t = 0; t < ntags; t++) {
-      int named = 0;
-      for (int i = 0; i < m->nbname && !named; i++) named = m->bnames[i].tag == tags[t];
-      char nmb[16];
-      snprintf(nmb, sizeof nmb, "%d", tags[t]);
-      if (!named && mesh_set_boundary_name(m, tags[t], nmb)) { free(tags); goto oom; }
-    }
-    free(tags);
-  }
+  if (tagged_facets(g, m, &nm, newid, cdim, path, err)) goto fail;
+  if (set_names(g, m, cdim)) goto oom;
   if (mesh_build_boundary_cells(m)) {
     snprintf(err, MESH_ERRLEN, "%.200s: %.300s", path, m->err);
     goto fail;
   }
   nodemap_free(&nm);
-  free(cells); free(ctag); free(newid); free(fv); free(ftag); free(first); free(elem_of); free(x);
+  free(cells); free(ctag); free(newid); free(first); free(elem_of); free(x);
   return m;
 oom:
   snprintf(err, MESH_ERRLEN, "%.200s: out of memory", path);
 fail:
   nodemap_free(&nm);
-  free(cells); free(ctag); free(newid); free(fv); free(ftag); free(first); free(elem_of); free(x);
+  free(cells); free(ctag); free(newid); free(first); free(elem_of); free(x);
   mesh_free(m);
   return NULL;
 }
@@ -1096,6 +1128,115 @@ void mesh_gmsh_part_free(gmsh_part *g) {
   memset(g, 0, sizeof *g);
 }
 
+/* the nodes lo .. hi - 1 of the file (this part's run) into g, from the layout's node
+ * blocks (MSH 4: tags and coordinates in two spans); 1 with the message */
+static int read_run_nodes(int fd, const gmsh_layout *L, int p, long long lo, long long hi, gfile *g, lex *lp, const char *path, char *err) {
+  lex l = *lp;
+  if (node_reserve(&l, g, (size_t)(hi - lo) + 1)) goto fail;
+  for (int b = 0; b < L->nnb; b++) {
+    const gmsh_block *B = &L->nb[b];
+    gmsh_span s;
+    long long first, count;
+    if (!run_span(B, L->np, lo, hi, p, 0, &s, &first, &count)) continue;
+    size_t at = (size_t)(first - lo);
+    for (int second = 0; second <= (L->version == 4); second++) {
+      if (second) run_span(B, L->np, lo, hi, p, 1, &s, &first, &count);
+      spanrd sr = {fd, s.off, s.end, s.line, NULL, path, err};
+      long long k, i = 0;
+      while ((k = span_next(&sr, &l)) > 0) {
+        for (long long j = 0; j < k && i < count && !l.failed; j++, i++) {
+          size_t q = at + (size_t)i;
+          if (!second) {
+            g->ntag[q] = tok_int(&l, "node tag", 1, INT64_MAX);
+            if (L->version == 2) read_coords(&l, g->ntag[q], g->nx + 3 * q);
+          } else {
+            read_coords(&l, g->ntag[q], g->nx + 3 * q);
+            for (int d = 0; B->par && d < B->edim && !l.failed; d++) tok_real(&l, "parametric coordinate");
+          }
+        }
+        if (span_done(&l)) break;
+      }
+      free(sr.buf);
+      if (k < 0 || l.failed || i != count) {
+        if (!err[0]) snprintf(err, MESH_ERRLEN, "%.200s: a node run does not hold its nodes", path);
+        goto fail;
+      }
+    }
+  }
+  *lp = l;
+  return 0;
+fail:
+  *lp = l;
+  return 1;
+}
+
+/* the elements lo .. hi - 1 of the file (this part's run) into out (out->e, out->enodes,
+ * out->phys allocated), their physical tags the entities' of g (MSH 4) or their own (MSH
+ * 2); 1 with the message */
+static int read_run_elements(int fd, const gmsh_layout *L, int p, long long lo, long long hi, gfile *g, gmsh_part *out, size_t capn,
+                             lex *lp, const char *path, char *err) {
+  lex l = *lp;
+  size_t nnodes = 0;
+  int nph = 0;
+  for (int b = 0; b < L->neb; b++) {
+    const gmsh_block *B = &L->eb[b];
+    gmsh_span s;
+    long long first, count;
+    if (!run_span(B, L->ep, lo, hi, p, 0, &s, &first, &count)) continue;
+    gelem e;
+    memset(&e, 0, sizeof e);
+    int enp = 0, eoff = 0;
+    if (L->version == 4) {
+      e.edim = B->edim;
+      e.etag = B->etag;
+      e.nn = gmsh_nnodes(B->type);
+      if (!e.nn || gmsh_dim(B->type) != e.edim) {
+        snprintf(err, MESH_ERRLEN, "%.200s: an element block of type %d on an entity of dimension %d", path, B->type, B->edim);
+        goto fail;
+      }
+      e.type = B->type;
+      int one;
+      const int *ph = elem_phys(g, &e, &enp, &one);
+      eoff = enp ? (int)(ph - g->phys) : 0;
+    }
+    spanrd sr = {fd, s.off, s.end, s.line, NULL, path, err};
+    long long k, i = 0;
+    while ((k = span_next(&sr, &l)) > 0) {
+      for (long long j = 0; j < k && i < count && !l.failed; j++, i++) {
+        gmsh_elem *o = &out->e[out->ne];
+        memset(o, 0, sizeof *o);
+        if (L->version == 2) {
+          if (read_elem2_head(&l, &e)) break;
+          o->type = e.type;
+          o->nphys = e.phys != 0;
+          o->phys = nph;
+          if (e.phys) out->phys[nph++] = e.phys;
+        } else {
+          tok_int(&l, "element tag", 1, INT64_MAX);
+          o->type = e.type;
+          o->nphys = enp;
+          o->phys = eoff;
+        }
+        if (nnodes + 8 > capn && GROW(&l, out->enodes, capn, nnodes + 8)) break;
+        o->node = (long long)nnodes;
+        for (int q = 0; q < e.nn && !l.failed; q++) out->enodes[nnodes++] = tok_int(&l, "element node", 1, INT64_MAX);
+        if (!l.failed) out->ne++;
+      }
+      if (span_done(&l)) break;
+    }
+    free(sr.buf);
+    if (k < 0 || l.failed || i != count) {
+      if (!err[0]) snprintf(err, MESH_ERRLEN, "%.200s: an element run does not hold its elements", path);
+      goto fail;
+    }
+  }
+  *lp = l;
+  return 0;
+fail:
+  *lp = l;
+  return 1;
+}
+
 int mesh_gmsh_read_part(const char *path, const gmsh_layout *L, int p, gmsh_part *out, char *err) {
   memset(out, 0, sizeof *out);
   err[0] = 0;
@@ -1141,37 +1282,7 @@ int mesh_gmsh_read_part(const char *path, const gmsh_layout *L, int p, gmsh_part
       goto done;
     }
   }
-  if (node_reserve(&l, &g, (size_t)(hi - lo) + 1)) goto done;
-  for (int b = 0; b < L->nnb; b++) {
-    const gmsh_block *B = &L->nb[b];
-    gmsh_span s;
-    long long first, count;
-    if (!run_span(B, L->np, lo, hi, p, 0, &s, &first, &count)) continue;
-    size_t at = (size_t)(first - lo);
-    for (int second = 0; second <= (L->version == 4); second++) {
-      if (second) run_span(B, L->np, lo, hi, p, 1, &s, &first, &count);
-      spanrd sr = {fd, s.off, s.end, s.line, NULL, path, err};
-      long long k, i = 0;
-      while ((k = span_next(&sr, &l)) > 0) {
-        for (long long j = 0; j < k && i < count && !l.failed; j++, i++) {
-          size_t q = at + (size_t)i;
-          if (!second) {
-            g.ntag[q] = tok_int(&l, "node tag", 1, INT64_MAX);
-            if (L->version == 2) read_coords(&l, g.ntag[q], g.nx + 3 * q);
-          } else {
-            read_coords(&l, g.ntag[q], g.nx + 3 * q);
-            for (int d = 0; B->par && d < B->edim && !l.failed; d++) tok_real(&l, "parametric coordinate");
-          }
-        }
-        if (span_done(&l)) break;
-      }
-      free(sr.buf);
-      if (k < 0 || l.failed || i != count) {
-        if (!err[0]) snprintf(err, MESH_ERRLEN, "%.200s: a node run does not hold its nodes", path);
-        goto done;
-      }
-    }
-  }
+  if (read_run_nodes(fd, L, p, lo, hi, &g, &l, path, err)) goto done;
   g.nn = (size_t)(hi - lo);
   /* the elements of this part's run, straight into out: their physical tags are the
    * entities' (MSH 4: out->phys is the entities' list) or their own (MSH 2: one each) */
@@ -1181,63 +1292,11 @@ int mesh_gmsh_read_part(const char *path, const gmsh_layout *L, int p, gmsh_part
   out->elem_first = lo;
   out->e = malloc(sizeof(gmsh_elem) * ((size_t)(hi - lo) + 1));
   out->phys = malloc(sizeof(int) * ((L->version == 2 ? (size_t)(hi - lo) : g.nphys) + 1));
-  size_t capn = 4 * (size_t)(hi - lo) + 16, nnodes = 0; /* grown for hexahedra */
+  size_t capn = 4 * (size_t)(hi - lo) + 16; /* grown for hexahedra */
   out->enodes = malloc(sizeof(long long) * capn);
   if (!out->e || !out->phys || !out->enodes) { snprintf(err, MESH_ERRLEN, "%.200s: out of memory", path); goto done; }
   if (L->version == 4) memcpy(out->phys, g.phys, sizeof(int) * g.nphys);
-  int nph = 0;
-  for (int b = 0; b < L->neb; b++) {
-    const gmsh_block *B = &L->eb[b];
-    gmsh_span s;
-    long long first, count;
-    if (!run_span(B, L->ep, lo, hi, p, 0, &s, &first, &count)) continue;
-    gelem e;
-    memset(&e, 0, sizeof e);
-    int enp = 0, eoff = 0;
-    if (L->version == 4) {
-      e.edim = B->edim;
-      e.etag = B->etag;
-      e.nn = gmsh_nnodes(B->type);
-      if (!e.nn || gmsh_dim(B->type) != e.edim) {
-        snprintf(err, MESH_ERRLEN, "%.200s: an element block of type %d on an entity of dimension %d", path, B->type, B->edim);
-        goto done;
-      }
-      e.type = B->type;
-      int one;
-      const int *ph = elem_phys(&g, &e, &enp, &one);
-      eoff = enp ? (int)(ph - g.phys) : 0;
-    }
-    spanrd sr = {fd, s.off, s.end, s.line, NULL, path, err};
-    long long k, i = 0;
-    while ((k = span_next(&sr, &l)) > 0) {
-      for (long long j = 0; j < k && i < count && !l.failed; j++, i++) {
-        gmsh_elem *o = &out->e[out->ne];
-        memset(o, 0, sizeof *o);
-        if (L->version == 2) {
-          if (read_elem2_head(&l, &e)) break;
-          o->type = e.type;
-          o->nphys = e.phys != 0;
-          o->phys = nph;
-          if (e.phys) out->phys[nph++] = e.phys;
-        } else {
-          tok_int(&l, "element tag", 1, INT64_MAX);
-          o->type = e.type;
-          o->nphys = enp;
-          o->phys = eoff;
-        }
-        if (nnodes + 8 > capn && GROW(&l, out->enodes, capn, nnodes + 8)) break;
-        o->node = (long long)nnodes;
-        for (int q = 0; q < e.nn && !l.failed; q++) out->enodes[nnodes++] = tok_int(&l, "element node", 1, INT64_MAX);
-        if (!l.failed) out->ne++;
-      }
-      if (span_done(&l)) break;
-    }
-    free(sr.buf);
-    if (k < 0 || l.failed || i != count) {
-      if (!err[0]) snprintf(err, MESH_ERRLEN, "%.200s: an element run does not hold its elements", path);
-      goto done;
-    }
-  }
+  if (read_run_elements(fd, L, p, lo, hi, &g, out, capn, &l, path, err)) goto done;
   /* out: the nodes as read, the names */
   out->nn = (long long)g.nn;
   out->ntag = (long long *)g.ntag; /* int64_t and long long: both 64 bits here */

@@ -457,95 +457,188 @@ static int try_global(ctx *C, work *W, double *x, double *save, unsigned char *t
   return kept;
 }
 
-static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, char *err) {
-  double t0 = ut_now();
-  memset(r, 0, sizeof *r);
-  if (m->ncell == 0) { snprintf(err, MESH_ERRLEN, "the mesh has no cells"); return 1; }
+/* one run of the three stages (untangle_run) and what its stages share: the context, the
+ * input coordinates, the reference shapes' inverse Jacobians, the vertices moved and
+ * touched, stage 2's work arrays (stage 3's lift reuses them) and the best state seen */
+typedef struct {
+  mesh *m;
+  const untangle_opts *o;
+  untangle_report *r;
   ctx C;
-  if (ut_ctx_init(&C, m, o->slide, err)) { ut_ctx_free(&C); return 1; }
-  ut_progress pg = {o->progress, "untangle", NULL, t0, t0};
-  C.progress = &pg;
-  double beta = o->beta < 0 ? untangle_default_beta(m) : o->beta;
-  r->beta = beta;
-  size_t nx = (size_t)m->nvert * m->dim;
-  double *x0 = malloc(sizeof(double) * nx);
-  unsigned char *moved = calloc((size_t)m->nvert + 1, 1), *region = calloc((size_t)m->nvert + 1, 1),
-                *touched = calloc((size_t)m->nvert + 1, 1);
-  if (!x0 || !moved || !region || !touched) {
-    free(x0); free(moved); free(region); free(touched); ut_ctx_free(&C);
-    snprintf(err, MESH_ERRLEN, "out of memory");
-    return 1;
-  }
-  memcpy(x0, m->x, sizeof(double) * nx);
+  work W;
+  double beta;
+  int maxit;
+  size_t nx;
+  double *x0, *cwinv, *save;
+  unsigned char *moved, *region, *touched, *trial, *held;
+  int *list, *off;
+  best_state best;
+} run;
+
+static void run_free(run *R) {
+  free(R->W.fidx); free(R->W.cmark); free(R->W.cells); free(R->list); free(R->off); free(R->save); free(R->trial); free(R->held);
+  free(R->x0); free(R->moved); free(R->region); free(R->touched); free(R->cwinv); free(R->best.x);
+  ut_ctx_free(&R->C);
+}
+
+/* the context, the input's copy, the reference shapes, the best state (the input's) */
+static int run_init(run *R, mesh *m, const untangle_opts *o, untangle_report *r, double t0, ut_progress *pg, char *err) {
+  memset(R, 0, sizeof *R);
+  R->m = m;
+  R->o = o;
+  R->r = r;
+  if (ut_ctx_init(&R->C, m, o->slide, err)) return 1;
+  *pg = (ut_progress){o->progress, "untangle", NULL, t0, t0};
+  R->C.progress = pg;
+  R->beta = r->beta = o->beta < 0 ? untangle_default_beta(m) : o->beta;
+  R->nx = (size_t)m->nvert * m->dim;
+  R->x0 = malloc(sizeof(double) * R->nx);
+  R->moved = calloc((size_t)m->nvert + 1, 1);
+  R->region = calloc((size_t)m->nvert + 1, 1);
+  R->touched = calloc((size_t)m->nvert + 1, 1);
+  if (!R->x0 || !R->moved || !R->region || !R->touched) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  memcpy(R->x0, m->x, sizeof(double) * R->nx);
   /* motion_weight: the stage 2 and global objectives weigh the distance to x0 (its scale a
    * typical edge, from the typical corner Jacobian) */
   if (o->motion_weight > 0) {
-    C.x0 = x0;
-    C.anchor = o->motion_weight / pow(C.jscale, 2.0 / m->dim);
+    R->C.x0 = R->x0;
+    R->C.anchor = o->motion_weight / pow(R->C.jscale, 2.0 / m->dim);
   }
-  C.escape = o->xref && o->reference_escape;
+  R->C.escape = o->xref && o->reference_escape;
   /* reference shapes for the global stage */
-  double *cwinv = NULL;
   if (o->xref) {
-    if (m->type == CELL_INTERVAL) {
-      snprintf(err, MESH_ERRLEN, "reference shapes are for 2D and 3D cells");
-      free(x0); free(moved); free(region); free(touched); ut_ctx_free(&C);
-      return 1;
-    }
-    if (!(cwinv = ut_reference_winv(&C, o->xref, err))) { free(x0); free(moved); free(region); free(touched); ut_ctx_free(&C); return 1; }
+    if (m->type == CELL_INTERVAL) { snprintf(err, MESH_ERRLEN, "reference shapes are for 2D and 3D cells"); return 1; }
+    if (!(R->cwinv = ut_reference_winv(&R->C, o->xref, err))) return 1;
   }
-  int maxit = o->max_iterations > 0 ? o->max_iterations : 100;
-  ut_count_cells(&C, m->x, beta, &r->invalid_before, NULL);
+  R->maxit = o->max_iterations > 0 ? o->max_iterations : 100;
+  ut_count_cells(&R->C, m->x, R->beta, &r->invalid_before, NULL);
   /* the best state seen (fewest invalid cells, then the largest smallest corner Jacobian):
    * a mesh with no valid embedding may defeat the stages, but is never left worse */
-  best_state best = {malloc(sizeof(double) * (nx + 1)), INT_MAX, -INFINITY, -1};
-  best_offer(&C, m->x, &best, nx, 0);
+  R->best = (best_state){malloc(sizeof(double) * (R->nx + 1)), INT_MAX, -INFINITY, -1};
+  best_offer(&R->C, m->x, &R->best, R->nx, 0);
   if (o->verbose)
     printf("untangle: %d %s, %d invalid, beta %.3g, boundary %s\n", m->ncell, cell_plural(m->type), r->invalid_before,
-           beta, o->slide ? "slides" : "fixed");
-  /* the cells that may change: everything around the invalid cells (and, after stage 2,
-   * around what moved) — the rest of the mesh keeps its coordinates bit for bit */
-  untangle_stage *s = &r->stage[0];
+           R->beta, o->slide ? "slides" : "fixed");
+  return 0;
+}
 
-  /* stage 1: feasible set, J > 0 */
+/* stage 1: feasible set, J > 0 */
+static void stage_feasible(run *R) {
+  mesh *m = R->m;
+  untangle_report *r = R->r;
+  untangle_stage *s = &r->stage[0];
   /* more than a quarter of the cells inverted is a scrambled knot (stage 2's rule for a
    * piece): vertex-by-vertex placement finds almost every feasible set empty there (100k
    * tetrahedra, all thrown: 1.5 s to move 4 vertices), so it is left to stage 2's harmonic
    * restart. Small tangles (up to 1000 invalid cells) keep the paper's stage 1: it is cheap
    * there and puts a single pulled vertex back exactly. */
   int knot = r->invalid_before > m->ncell / 4 && r->invalid_before > 1000;
-  double ts = stage_begin(&C, s, knot ? "1 feasible set (knot: skip)" : "1 feasible set", r->invalid_before);
+  double ts = stage_begin(&R->C, s, knot ? "1 feasible set (knot: skip)" : "1 feasible set", r->invalid_before);
   s->moved = r->invalid_before && !knot
-                 ? ut_feasible_passes(&C, m->x, 0, 0, NULL, o->placement, maxit, moved, &s->iterations) : 0;
-  stage_end(&C, m->x, beta, s, ts, o->verbose);
-  best_offer(&C, m->x, &best, nx, 1);
+                 ? ut_feasible_passes(&R->C, m->x, 0, 0, NULL, R->o->placement, R->maxit, R->moved, &s->iterations) : 0;
+  stage_end(&R->C, m->x, R->beta, s, ts, R->o->verbose);
+  best_offer(&R->C, m->x, &R->best, R->nx, 1);
+}
 
-  /* stage 2: optimization of (3.3); boundary vertices one by one along the boundary, then
-   * the interior vertices of a growing region around the invalid cells together */
-  s = &r->stage[1];
-  ts = stage_begin(&C, s, "2 optimization", r->stage[0].invalid_after);
+/* the optimizer is stuck in a local minimum of (3.3) or a knot on the piece's n vertices
+ * pv (left invalid cells): restart the piece from the harmonic (Tutte) position of its
+ * interior vertices — valid for triangles inside a convex boundary, and the way out of
+ * knots in practice — and keep it when it leaves no more invalid cells than the optimizer
+ * did; a knot's restart that gains nothing holds its vertices (*knot_stuck = 1) */
+static void restart_piece(run *R, untangle_stage *s, int *pv, int n, int knot, int *knot_stuck) {
+  ctx *C = &R->C;
+  double *x = R->m->x, *save = R->save;
+  int nf = 0, it;
+  double res;
+  for (int i = 0; i < n; i++)
+    if (!C->bnd[pv[i]]) pv[nf++] = pv[i];
+  for (int i = 0; i < nf; i++)
+    for (int j = 0; j < C->d; j++) save[(size_t)i * C->d + j] = x[(size_t)pv[i] * C->d + j];
+  int left = piece_invalid(C, &R->W, x, pv, nf);
+  laplace_solve(C, &R->W, x, pv, nf, NULL, 10000, 1e-8, &it, &res);
+  int its = 0;
+  optimize_vertices(C, &R->W, x, R->beta, 0, pv, nf, 10 * R->maxit, R->trial, &its);
+  int after_restart = piece_invalid(C, &R->W, x, pv, nf);
+  if (knot && after_restart >= left) {
+    *knot_stuck = 1;
+    for (int i = 0; i < nf; i++) R->held[pv[i]] = 1;
+  }
+  if (after_restart <= left) {
+    s->iterations += its;
+    for (int i = 0; i < nf; i++) {
+      int ch = 0;
+      for (int j = 0; j < C->d; j++) ch |= x[(size_t)pv[i] * C->d + j] != save[(size_t)i * C->d + j];
+      if (ch && !R->moved[pv[i]]) { R->moved[pv[i]] = 1; s->moved++; }
+    }
+  } else
+    for (int i = 0; i < nf; i++)
+      for (int j = 0; j < C->d; j++) x[(size_t)pv[i] * C->d + j] = save[(size_t)i * C->d + j];
+  for (int i = 0; i < nf; i++) R->trial[pv[i]] = 0;
+}
+
+/* one connected piece of stage 2's region (its n vertices pv) on its own: small problems
+ * converge fast. 0 when it had no invalid cell, -1 when the optimizer failed, else 1 */
+static int repair_piece(run *R, untangle_stage *s, int *pv, int n, int *knot_stuck) {
+  ctx *C = &R->C;
+  double *x = R->m->x;
+  int bad = piece_invalid(C, &R->W, x, pv, n);
+  if (!bad) return 0;
+  /* a piece where more than a quarter of the cells are inverted is a scrambled knot:
+   * go straight to the harmonic restart below */
+  int knot = bad > ut_cells_around(C, &R->W, pv, n) / 4;
+  if (!knot) {
+    int got = optimize_vertices(C, &R->W, x, R->beta, 0, pv, n, 10 * R->maxit, R->moved, &s->iterations);
+    if (got < 0) return -1;
+    s->moved += got;
+  }
+  int left = piece_invalid(C, &R->W, x, pv, n);
+  /* a piece around a knot whose harmonic restart has failed (its vertices held) is not
+   * restarted again: a knot waits until the rings have grown around it enough that it is
+   * no longer one (a quarter of its piece's cells), and then the optimizer above takes it.
+   * The million-triangle spiral's restarts at rings 4–64 each gave back more invalid cells
+   * than they started from (0.5–0.7 s of its untangle, the same mesh to the bit without
+   * them); on the 36 hard tangles of bench/untangle_sweep.lua the minima after smoothing
+   * moved by -0.5% to +0.02% (a ring-4 restart that had repaired the Tutte spiral 200 x 25
+   * is not tried: the optimizer repairs it at ring 8) */
+  int around = 0;
+  for (int i = 0; i < n && left && !around; i++) around = R->held[pv[i]];
+  if (!around && left) restart_piece(R, s, pv, n, knot, knot_stuck);
+  return 1;
+}
+
+/* stage 2: optimization of (3.3); boundary vertices one by one along the boundary, then
+ * the interior vertices of a growing region around the invalid cells together. The cells
+ * that may change: everything around the invalid cells (and, after stage 2, around what
+ * moved) — the rest of the mesh keeps its coordinates bit for bit */
+static void stage_optimize(run *R, char *err) {
+  mesh *m = R->m;
+  const untangle_opts *o = R->o;
+  ctx *C = &R->C;
+  double beta = R->beta;
+  untangle_stage *s = &R->r->stage[1];
+  double ts = stage_begin(C, s, "2 optimization", R->r->stage[0].invalid_after);
   int ninv = s->invalid_before;
-  work W;
-  W.fidx = malloc(sizeof(int) * ((size_t)m->nvert + 1));
-  W.cmark = calloc((size_t)m->ncell + 1, 1);
-  W.cells = malloc(sizeof(int) * ((size_t)m->ncell + 1));
-  int *list = malloc(sizeof(int) * ((size_t)m->nvert + 1)), *off = malloc(sizeof(int) * ((size_t)m->nvert + 2));
-  double *save = malloc(sizeof(double) * (nx + 1));
-  unsigned char *trial = calloc((size_t)m->nvert + 1, 1);
-  /* the interior vertices of knots whose harmonic restart failed (below) */
-  unsigned char *held = calloc((size_t)m->nvert + 1, 1);
-  if (!W.fidx || !W.cmark || !W.cells || !list || !off || !save || !trial || !held) {
+  R->W.fidx = malloc(sizeof(int) * ((size_t)m->nvert + 1));
+  R->W.cmark = calloc((size_t)m->ncell + 1, 1);
+  R->W.cells = malloc(sizeof(int) * ((size_t)m->ncell + 1));
+  R->list = malloc(sizeof(int) * ((size_t)m->nvert + 1));
+  R->off = malloc(sizeof(int) * ((size_t)m->nvert + 2));
+  R->save = malloc(sizeof(double) * (R->nx + 1));
+  R->trial = calloc((size_t)m->nvert + 1, 1);
+  /* the interior vertices of knots whose harmonic restart failed (restart_piece) */
+  R->held = calloc((size_t)m->nvert + 1, 1);
+  if (!R->W.fidx || !R->W.cmark || !R->W.cells || !R->list || !R->off || !R->save || !R->trial || !R->held) {
     snprintf(err, MESH_ERRLEN, "out of memory");
     ninv = 0;
   } else
-    for (int v = 0; v < m->nvert; v++) W.fidx[v] = -1;
+    for (int v = 0; v < m->nvert; v++) R->W.fidx[v] = -1;
   int prev_inv = ninv, global_tried = 0, knot_stuck = 0;
   for (int rings = 2; ninv > 0 && rings <= 1 << 20; rings *= 2) {
-    grow_region(&C, m->x, rings, region);
+    grow_region(C, m->x, rings, R->region);
     int whole = 1;
     for (int v = 0; v < m->nvert; v++) {
-      touched[v] |= region[v];
-      whole &= region[v];
+      R->touched[v] |= R->region[v];
+      whole &= R->region[v];
     }
     /* the tangle's neighbourhood already holds half the interior vertices, or 40% in one
      * connected piece, and it is not a scrambled knot (over a quarter of the cells inverted:
@@ -562,13 +655,13 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
      * perturbation of 546 750 tetrahedra: 40-50% of the vertices in many pieces) stay local:
      * there the global energy moved every vertex */
     int nin = 0, nreg = 0; /* interior vertices, those in the region */
-    for (int v = 0; v < m->nvert; v++) { nin += !C.bnd[v]; nreg += region[v] && !C.bnd[v]; }
-    int np = region_pieces(&C, region, list, off), all = 1; /* the region's pieces, below too */
+    for (int v = 0; v < m->nvert; v++) { nin += !C->bnd[v]; nreg += R->region[v] && !C->bnd[v]; }
+    int np = region_pieces(C, R->region, R->list, R->off), all = 1; /* the region's pieces, below too */
     if (rings == 2 && (2 * nreg >= nin || (5 * nreg >= 2 * nin && np == 1)) && 4 * ninv <= m->ncell && !global_tried &&
         !o->no_global) {
       global_tried = 1;
-      if (try_global(&C, &W, m->x, save, trial, moved, touched, 10 * maxit, cwinv, beta, &ninv, s)) {
-        ut_count_cells(&C, m->x, beta, &ninv, NULL);
+      if (try_global(C, &R->W, m->x, R->save, R->trial, R->moved, R->touched, 10 * R->maxit, R->cwinv, beta, &ninv, s)) {
+        ut_count_cells(C, m->x, beta, &ninv, NULL);
         prev_inv = ninv;
         if (!ninv) break;
       }
@@ -576,65 +669,11 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
     /* boundary vertices slide only once the interior alone has failed a round (the paper
      * slides them first; on 3D tangles that moved boundary vertices the interior did not
      * need moved and could leave a tangle that the fixed-boundary run undoes) */
-    if (o->slide && rings > 2) s->moved += slide_boundary(&C, m->x, beta, region, moved);
-    /* each connected piece of the region on its own: small problems converge fast */
+    if (o->slide && rings > 2) s->moved += slide_boundary(C, m->x, beta, R->region, R->moved);
     for (int k = 0; k < np; k++) {
-      int *pv = list + off[k], n = off[k + 1] - off[k];
-      int bad = piece_invalid(&C, &W, m->x, pv, n);
-      if (!bad) continue;
-      /* a piece where more than a quarter of the cells are inverted is a scrambled knot:
-       * go straight to the harmonic restart below */
-      int knot = bad > ut_cells_around(&C, &W, pv, n) / 4;
-      if (!knot) {
-        int got = optimize_vertices(&C, &W, m->x, beta, 0, pv, n, 10 * maxit, moved, &s->iterations);
-        if (got < 0) break;
-        s->moved += got;
-      }
-      int left = piece_invalid(&C, &W, m->x, pv, n);
-      /* a piece around a knot whose harmonic restart has failed (its vertices held) is not
-       * restarted again: a knot waits until the rings have grown around it enough that it is
-       * no longer one (a quarter of its piece's cells), and then the optimizer above takes it.
-       * The million-triangle spiral's restarts at rings 4–64 each gave back more invalid cells
-       * than they started from (0.5–0.7 s of its untangle, the same mesh to the bit without
-       * them); on the 36 hard tangles of bench/untangle_sweep.lua the minima after smoothing
-       * moved by -0.5% to +0.02% (a ring-4 restart that had repaired the Tutte spiral 200 x 25
-       * is not tried: the optimizer repairs it at ring 8) */
-      int around = 0;
-      for (int i = 0; i < n && left && !around; i++) around = held[pv[i]];
-      if (around) { all = 0; continue; }
-      if (left) {
-        /* the optimizer is stuck in a local minimum of (3.3) or a knot: restart the piece
-         * from the harmonic (Tutte) position of its interior vertices — valid for triangles
-         * inside a convex boundary, and the way out of knots in practice — and keep it when
-         * it leaves fewer invalid cells than the optimizer did */
-        int nf = 0, it;
-        double res;
-        for (int i = 0; i < n; i++)
-          if (!C.bnd[pv[i]]) pv[nf++] = pv[i];
-        for (int i = 0; i < nf; i++)
-          for (int j = 0; j < C.d; j++) save[(size_t)i * C.d + j] = m->x[(size_t)pv[i] * C.d + j];
-        left = piece_invalid(&C, &W, m->x, pv, nf);
-        laplace_solve(&C, &W, m->x, pv, nf, NULL, 10000, 1e-8, &it, &res);
-        int its = 0;
-        optimize_vertices(&C, &W, m->x, beta, 0, pv, nf, 10 * maxit, trial, &its);
-        int after_restart = piece_invalid(&C, &W, m->x, pv, nf);
-        if (knot && after_restart >= left) {
-          knot_stuck = 1;
-          for (int i = 0; i < nf; i++) held[pv[i]] = 1;
-        }
-        if (after_restart <= left) {
-          s->iterations += its;
-          for (int i = 0; i < nf; i++) {
-            int ch = 0;
-            for (int j = 0; j < C.d; j++) ch |= m->x[(size_t)pv[i] * C.d + j] != save[(size_t)i * C.d + j];
-            if (ch && !moved[pv[i]]) { moved[pv[i]] = 1; s->moved++; }
-          }
-        } else
-          for (int i = 0; i < nf; i++)
-            for (int j = 0; j < C.d; j++) m->x[(size_t)pv[i] * C.d + j] = save[(size_t)i * C.d + j];
-        for (int i = 0; i < nf; i++) trial[pv[i]] = 0;
-      }
-      all = 0;
+      int got = repair_piece(R, s, R->list + R->off[k], R->off[k + 1] - R->off[k], &knot_stuck);
+      if (got < 0) break;
+      if (got) all = 0;
     }
     /* a knot's harmonic restart gained nothing and over a quarter of the cells are inverted:
      * the rings would only grow to the whole mesh, repeating the restart (it gives a Tutte
@@ -649,10 +688,10 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
      * optimizer did: skipped after any increase, the random star's ring 16 (831 -> 885)
      * left a mesh whose smoothing took 29 Newton steps instead of 23 (bench/RESULTS.md) */
     int pass;
-    ut_count_cells(&C, m->x, beta, &ninv, NULL);
+    ut_count_cells(C, m->x, beta, &ninv, NULL);
     if (4 * (long)ninv <= 5 * (long)prev_inv) {
-      s->moved += ut_feasible_passes(&C, m->x, 0, 0, region, o->placement, maxit, moved, &pass);
-      ut_count_cells(&C, m->x, beta, &ninv, NULL);
+      s->moved += ut_feasible_passes(C, m->x, 0, 0, R->region, o->placement, R->maxit, R->moved, &pass);
+      ut_count_cells(C, m->x, beta, &ninv, NULL);
     }
     /* stop when there is nothing left to grow into and the last round did not help */
     if ((all && rings > 64) || (whole && ninv >= prev_inv)) break;
@@ -660,108 +699,132 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
   }
   /* the local optimization left knots: every interior vertex together on the global
    * barrier energy (untangle_global.c), kept only if it leaves fewer invalid cells */
-  if (ninv > 0 && !global_tried && !o->no_global) try_global(&C, &W, m->x, save, trial, moved, touched, 10 * maxit, cwinv, beta, &ninv, s);
-  stage_end(&C, m->x, beta, s, ts, o->verbose);
-  best_offer(&C, m->x, &best, nx, 2);
+  if (ninv > 0 && !global_tried && !o->no_global)
+    try_global(C, &R->W, m->x, R->save, R->trial, R->moved, R->touched, 10 * R->maxit, R->cwinv, beta, &ninv, s);
+  stage_end(C, m->x, beta, s, ts, o->verbose);
+  best_offer(C, m->x, &R->best, R->nx, 2);
+}
 
-  /* stage 3: feasible set with J >= β, around what stages 1–2 touched */
-  s = &r->stage[2];
-  ts = stage_begin(&C, s, "3 feasible set (J >= beta)", r->stage[1].invalid_after);
-  for (int v = 0; v < m->nvert; v++) touched[v] |= moved[v];
+/* stage 3's last step: what one vertex at a time cannot lift (neighbours below β together):
+ * (3.3) once more over the vertices of the cells below β near the marked vertices t2,
+ * stopping when every cell is at least β; kept only if no cell became invalid and the
+ * smallest corner Jacobian grew */
+static void lift_together(run *R, untangle_stage *s, const unsigned char *t2) {
+  mesh *m = R->m;
+  ctx *C = &R->C;
+  double beta = R->beta, *save = R->save;
+  unsigned char *trial = R->trial;
+  int *list = R->list;
+  int nlift = 0, ok = R->W.fidx && R->W.cmark && R->W.cells && list && save && trial && beta > 0;
+  for (int c = 0; ok && c < m->ncell; c++) {
+    const int *cell = cell_of(C, c);
+    int near = 0;
+    for (int i = 0; i < C->nvc; i++) near |= t2[cell[i]];
+    if (!near || ut_cell_min_jac(C, m->x, c) >= beta) continue;
+    for (int i = 0; i < C->nvc; i++)
+      if (!C->bnd[cell[i]] && !trial[cell[i]]) { trial[cell[i]] = 1; list[nlift++] = cell[i]; }
+  }
+  if (nlift && !piece_invalid(C, &R->W, m->x, list, nlift)) {
+    double jmin = piece_min_jac(C, &R->W, m->x, list, nlift);
+    for (int i = 0; i < nlift; i++)
+      for (int j = 0; j < C->d; j++) save[(size_t)i * C->d + j] = m->x[(size_t)list[i] * C->d + j];
+    unsigned char *mv = trial; /* reused: cleared below */
+    for (int i = 0; i < nlift; i++) mv[list[i]] = 0;
+    int its = 0;
+    optimize_vertices(C, &R->W, m->x, beta, 1, list, nlift, 10 * R->maxit, mv, &its);
+    if (piece_invalid(C, &R->W, m->x, list, nlift) || piece_min_jac(C, &R->W, m->x, list, nlift) <= jmin)
+      for (int i = 0; i < nlift; i++)
+        for (int j = 0; j < C->d; j++) m->x[(size_t)list[i] * C->d + j] = save[(size_t)i * C->d + j];
+    else {
+      s->iterations += its;
+      for (int i = 0; i < nlift; i++)
+        if (mv[list[i]] && !R->moved[list[i]]) { R->moved[list[i]] = 1; s->moved++; }
+    }
+  }
+  for (int i = 0; i < nlift; i++) trial[list[i]] = 0;
+}
+
+/* stage 3: feasible set with J >= β, around what stages 1–2 touched */
+static void stage_lift(run *R) {
+  mesh *m = R->m;
+  ctx *C = &R->C;
+  untangle_stage *s = &R->r->stage[2];
+  double ts = stage_begin(C, s, "3 feasible set (J >= beta)", R->r->stage[1].invalid_after);
+  for (int v = 0; v < m->nvert; v++) R->touched[v] |= R->moved[v];
   /* the neighbours of moved vertices too: their cells changed */
   size_t nvb = m->nvert > 0 ? (size_t)m->nvert : 0;
   unsigned char *t2 = malloc(nvb + 1);
   if (t2) {
-    memcpy(t2, touched, nvb);
+    memcpy(t2, R->touched, nvb);
     for (int v = 0; v < m->nvert; v++)
-      if (moved[v])
-        for (int p = C.vc_off[v]; p < C.vc_off[v + 1]; p++)
-          for (int i = 0; i < C.nvc; i++) t2[cell_of(&C, C.vc[p])[i]] = 1;
-    s->moved = beta > 0 ? ut_feasible_passes(&C, m->x, beta, 1, t2, o->placement, maxit, moved, &s->iterations) : 0;
-    /* what one vertex at a time cannot lift (neighbours below β together): (3.3) once more
-     * over the vertices of those cells, stopping when every cell is at least β; kept only
-     * if no cell became invalid and the smallest corner Jacobian grew */
-    int nlift = 0, ok = W.fidx && W.cmark && W.cells && list && save && trial && beta > 0;
-    for (int c = 0; ok && c < m->ncell; c++) {
-      const int *cell = cell_of(&C, c);
-      int near = 0;
-      for (int i = 0; i < C.nvc; i++) near |= t2[cell[i]];
-      if (!near || ut_cell_min_jac(&C, m->x, c) >= beta) continue;
-      for (int i = 0; i < C.nvc; i++)
-        if (!C.bnd[cell[i]] && !trial[cell[i]]) { trial[cell[i]] = 1; list[nlift++] = cell[i]; }
-    }
-    if (nlift && !piece_invalid(&C, &W, m->x, list, nlift)) {
-      double jmin = piece_min_jac(&C, &W, m->x, list, nlift);
-      for (int i = 0; i < nlift; i++)
-        for (int j = 0; j < C.d; j++) save[(size_t)i * C.d + j] = m->x[(size_t)list[i] * C.d + j];
-      unsigned char *mv = trial; /* reused: cleared below */
-      for (int i = 0; i < nlift; i++) mv[list[i]] = 0;
-      int its = 0;
-      optimize_vertices(&C, &W, m->x, beta, 1, list, nlift, 10 * maxit, mv, &its);
-      if (piece_invalid(&C, &W, m->x, list, nlift) || piece_min_jac(&C, &W, m->x, list, nlift) <= jmin)
-        for (int i = 0; i < nlift; i++)
-          for (int j = 0; j < C.d; j++) m->x[(size_t)list[i] * C.d + j] = save[(size_t)i * C.d + j];
-      else {
-        s->iterations += its;
-        for (int i = 0; i < nlift; i++)
-          if (mv[list[i]] && !moved[list[i]]) { moved[list[i]] = 1; s->moved++; }
-      }
-    }
-    for (int i = 0; i < nlift; i++) trial[list[i]] = 0;
+      if (R->moved[v])
+        for (int p = C->vc_off[v]; p < C->vc_off[v + 1]; p++)
+          for (int i = 0; i < C->nvc; i++) t2[cell_of(C, C->vc[p])[i]] = 1;
+    s->moved = R->beta > 0 ? ut_feasible_passes(C, m->x, R->beta, 1, t2, R->o->placement, R->maxit, R->moved, &s->iterations) : 0;
+    lift_together(R, s, t2);
     free(t2);
   }
-  stage_end(&C, m->x, beta, s, ts, o->verbose);
-  best_offer(&C, m->x, &best, nx, 3);
-  /* reference shapes: the vertices the stages touched, now valid, minimize the energy
-   * towards them (the local stages only aim at validity, and may have repaired the mesh
-   * without the global stage); kept if every cell stays valid and the mean of the cells'
-   * mean ratios relative to their shapes grows */
-  if (cwinv && !s->invalid_after && W.fidx && W.cells && save && trial && !o->no_global && !C.escape) {
-    double *q = malloc(sizeof(double) * ((size_t)m->ncell + 1));
-    if (q) {
-      double q0 = 0, q1 = 0;
-      ut_relative_mean_ratio(&C, cwinv, q);
-      for (int c = 0; c < m->ncell; c++) q0 += q[c];
-      memcpy(save, m->x, sizeof(double) * nx);
-      int its = 0, mv = 0, after = 1;
-      memset(trial, 0, (size_t)m->nvert);
-      for (int v = 0; v < m->nvert; v++) touched[v] |= moved[v];
-      if (ut_untangle_global(&C, &W, m->x, 10 * maxit, cwinv, touched, &its, &mv, trial) == 0)
-        ut_count_cells(&C, m->x, beta, &after, NULL);
-      ut_relative_mean_ratio(&C, cwinv, q);
-      for (int c = 0; c < m->ncell; c++) q1 += q[c];
-      if (!after && q1 > q0) {
-        s->iterations += its;
-        for (int v = 0; v < m->nvert; v++)
-          if (trial[v] && !moved[v]) { moved[v] = 1; s->moved++; }
-        if (o->verbose)
-          printf("untangle: towards the reference shapes: mean relative mean ratio %.4f -> %.4f, %d iterations\n",
-                 q0 / m->ncell, q1 / m->ncell, its);
-      } else memcpy(m->x, save, sizeof(double) * nx);
-      memset(trial, 0, (size_t)m->nvert);
-      free(q);
-    }
-  }
-  free(W.fidx); free(W.cmark); free(W.cells); free(list); free(off); free(save); free(trial); free(held);
+  stage_end(C, m->x, R->beta, s, ts, R->o->verbose);
+  best_offer(C, m->x, &R->best, R->nx, 3);
+}
+
+/* reference shapes: the vertices the stages touched, now valid, minimize the energy
+ * towards them (the local stages only aim at validity, and may have repaired the mesh
+ * without the global stage); kept if every cell stays valid and the mean of the cells'
+ * mean ratios relative to their shapes grows */
+static void towards_reference(run *R) {
+  mesh *m = R->m;
+  ctx *C = &R->C;
+  untangle_stage *s = &R->r->stage[2];
+  if (!R->cwinv || s->invalid_after || !R->W.fidx || !R->W.cells || !R->save || !R->trial || R->o->no_global || C->escape) return;
+  double *q = malloc(sizeof(double) * ((size_t)m->ncell + 1));
+  if (!q) return;
+  double q0 = 0, q1 = 0;
+  ut_relative_mean_ratio(C, R->cwinv, q);
+  for (int c = 0; c < m->ncell; c++) q0 += q[c];
+  memcpy(R->save, m->x, sizeof(double) * R->nx);
+  int its = 0, mv = 0, after = 1;
+  memset(R->trial, 0, (size_t)m->nvert);
+  for (int v = 0; v < m->nvert; v++) R->touched[v] |= R->moved[v];
+  if (ut_untangle_global(C, &R->W, m->x, 10 * R->maxit, R->cwinv, R->touched, &its, &mv, R->trial) == 0)
+    ut_count_cells(C, m->x, R->beta, &after, NULL);
+  ut_relative_mean_ratio(C, R->cwinv, q);
+  for (int c = 0; c < m->ncell; c++) q1 += q[c];
+  if (!after && q1 > q0) {
+    s->iterations += its;
+    for (int v = 0; v < m->nvert; v++)
+      if (R->trial[v] && !R->moved[v]) { R->moved[v] = 1; s->moved++; }
+    if (R->o->verbose)
+      printf("untangle: towards the reference shapes: mean relative mean ratio %.4f -> %.4f, %d iterations\n",
+             q0 / m->ncell, q1 / m->ncell, its);
+  } else memcpy(m->x, R->save, sizeof(double) * R->nx);
+  memset(R->trial, 0, (size_t)m->nvert);
+  free(q);
+}
+
+/* the report: the best state seen kept when the stages did not end in it, the vertices
+ * moved and their displacements */
+static void run_report(run *R, double t0) {
+  mesh *m = R->m;
+  untangle_report *r = R->r;
+  const untangle_stage *s = &r->stage[2];
   r->nstage = 3;
   r->invalid_after = s->invalid_after;
-  if (best.x && best.stage >= 0 && best.stage < 3) {
-    memcpy(m->x, best.x, sizeof(double) * nx);
-    r->invalid_after = best.ninv;
-    r->kept_stage = best.stage;
-    if (o->verbose)
+  if (R->best.x && R->best.stage >= 0 && R->best.stage < 3) {
+    memcpy(m->x, R->best.x, sizeof(double) * R->nx);
+    r->invalid_after = R->best.ninv;
+    r->kept_stage = R->best.stage;
+    if (R->o->verbose)
       printf("untangle: the stages did not end in the best state seen; kept the one after %s (%d invalid)\n",
-             best.stage ? r->stage[best.stage - 1].name : "nothing (the input)", best.ninv);
+             R->best.stage ? r->stage[R->best.stage - 1].name : "nothing (the input)", R->best.ninv);
   } else r->kept_stage = 3;
-  free(best.x);
-
   double sum = 0;
   for (int v = 0; v < m->nvert; v++) {
     double dd = 0;
     int ch = 0;
     for (int j = 0; j < m->dim; j++) {
-      double e = m->x[(size_t)v * m->dim + j] - x0[(size_t)v * m->dim + j];
-      ch |= m->x[(size_t)v * m->dim + j] != x0[(size_t)v * m->dim + j];
+      double e = m->x[(size_t)v * m->dim + j] - R->x0[(size_t)v * m->dim + j];
+      ch |= m->x[(size_t)v * m->dim + j] != R->x0[(size_t)v * m->dim + j];
       dd += e * e;
     }
     if (!ch) continue;
@@ -771,12 +834,28 @@ static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, cha
   }
   r->mean_displacement = r->moved ? sum / r->moved : 0;
   r->seconds = ut_now() - t0;
-  if (o->verbose)
+  if (R->o->verbose)
     printf("untangle: %s — %d invalid left, %d vertices moved (mean %.3g, max %.3g), %.3f s\n",
            r->invalid_after ? "FAILED" : "done", r->invalid_after, r->moved, r->mean_displacement,
            r->max_displacement, r->seconds);
-  free(x0); free(moved); free(region); free(touched); free(cwinv);
-  ut_ctx_free(&C);
+}
+
+/* the three stages of the seed's untangler, once */
+static int untangle_run(mesh *m, const untangle_opts *o, untangle_report *r, char *err) {
+  double t0 = ut_now();
+  memset(r, 0, sizeof *r);
+  if (m->ncell == 0) { snprintf(err, MESH_ERRLEN, "the mesh has no cells"); return 1; }
+  run *R = malloc(sizeof *R);
+  if (!R) { snprintf(err, MESH_ERRLEN, "out of memory"); return 1; }
+  ut_progress pg;
+  if (run_init(R, m, o, r, t0, &pg, err)) { run_free(R); free(R); return 1; }
+  stage_feasible(R);
+  stage_optimize(R, err);
+  stage_lift(R);
+  towards_reference(R);
+  run_report(R, t0);
+  run_free(R);
+  free(R);
   return 0;
 }
 

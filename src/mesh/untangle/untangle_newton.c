@@ -91,34 +91,207 @@ static int build_pattern(const ctx *C, const int *fidx, const int *freev, int nf
 /* the forcing term's cap on the barrier (ε = 0) with the multigrid (below) */
 #define ETA_AMG 0.2
 
+/* a Newton run's work arrays: the Hessian's pattern and values, its block inverses, the
+ * gradient (g; gn the trial point's, q a second trial's, swapped as points are accepted),
+ * the step s, the conjugate gradients' vectors (r, z, pd, q), the free vertices' start x0,
+ * the dot products' partial sums, and the preconditioner's state (block Jacobi's single
+ * precision copy, the multigrid once built) */
+typedef struct {
+  ut_bsr P;
+  double *val, *dinv, *g, *gn, *s, *r, *z, *pd, *q, *x0, *part;
+  int *dpos;
+  float *bjf;
+  ut_amg amg;
+  int use_amg, amg_failed;
+} newton_ws;
+
+/* the Newton direction w->s at x (the gradient in w->g, gg = |g|², g0 = |g| at the first
+ * step): the projected Hessian and its preconditioner (block Jacobi, the multigrid when
+ * want_amg or when block Jacobi needs many iterations), then inexact preconditioned
+ * conjugate gradients; *gp_out = g·s < 0. 1 when there is no direction (the Hessian
+ * failed, or neither the Newton step nor the preconditioned gradient descends). near: the
+ * forcing term's cap applies (below) */
+static int newton_direction(const objective *o, newton_ws *w, const double *x, int nfree, int want_amg, double gg, double g0,
+                            int near, double *gp_out) {
+  const ctx *C = o->C;
+  int d = C->d, dd = d * d;
+  long n = (long)nfree * d;
+  if (ut_energy_hessian(o, x, &w->P, w->val, nfree)) return 1;
+  if (C->anchor > 0 && C->x0) /* the motion weight's w |x − x0|² */
+    for (int fi = 0; fi < nfree; fi++)
+      for (int a = 0; a < d; a++) w->val[(size_t)w->dpos[fi] * dd + a * d + a] += 2 * C->anchor;
+  ut_block_jacobi(w->val, w->dpos, nfree, d, w->dinv);
+  if (want_amg && !w->use_amg && !w->amg_failed) {
+    if (ut_amg_build(&w->amg, &w->P, w->val, nfree, d)) { ut_amg_free(&w->amg); w->amg_failed = 1; }
+    else {
+      w->use_amg = 1;
+      if (o->amg_used) *o->amg_used = 1;
+    }
+  }
+  if (w->use_amg) ut_amg_values(&w->amg, w->val, w->dinv);
+  /* preconditioned conjugate gradients for H s' = g from s' = 0, then s = −s' (the same
+   * bits as solving for −g: every operation is odd in the right side) */
+  /* the forcing term: at least 0.1 (0.01 cost the star 40x200 twice the CG iterations for
+   * the same Newton steps) */
+  /* on the barrier with the multigrid while the minimum quality is below SOFT_Q, at most
+   * ETA_AMG: the multigrid's count grows slowly with the tolerance (the random star's
+   * steps: 4–12 iterations at 0.2, 3–8 at 0.5), and the closer steps end the halved steps
+   * whose full steps crossed the barrier. Not above SOFT_Q, far from the barrier, where the
+   * steps were the same at more iterations (the 100 000-vertex quadrilateral spiral,
+   * minimum 0.27: 5 a step instead of 3). A softened step, whose minimum is checked, is
+   * solved at 0.5 first and, when not kept, once more from its start at ETA_AMG, as are the
+   * softened steps after it: the random star's first is kept only at 0.2 (17 -> 13 steps
+   * with the cap), and the million-triangle spiral's are kept at 0.5 (7 + 5 iterations,
+   * 10 + 7 at 0.2; bench/RESULTS.md) */
+  double eta = fmin(w->use_amg && o->eps == 0 && near ? ETA_AMG : 0.5, fmax(0.1, sqrt(sqrt(gg) / g0))), *cw[4] = {w->r, w->z, w->pd, w->q};
+  /* the products in single precision: the multigrid's finest copy, or on a mesh where block
+   * Jacobi's conjugate gradients may take dozens of iterations (the multigrid's size) a copy
+   * of its own (the 100 000-vertex spiral's smoothing took 137 of them before the switch) */
+  const float *valf = NULL;
+  if (w->use_amg) valf = w->amg.L[0].valf;
+  else if (nfree >= UT_AMG_MIN_ROWS && (w->bjf || (w->bjf = malloc(sizeof(float) * ((size_t)w->P.off[nfree] * dd + 1))))) {
+    ut_to_single(w->val, w->bjf, (long)w->P.off[nfree] * dd);
+    valf = w->bjf;
+  }
+  int conv, k = ut_fcg(&w->P, w->val, valf, nfree, d, w->use_amg ? &w->amg : NULL, w->dinv, w->g, w->s, 1, 1000, eta * eta * gg, w->part, cw, &conv);
+  UT_PAR_FOR
+  for (long i = 0; i < n; i++) w->s[i] = -w->s[i];
+  /* block Jacobi needed many iterations on a large mesh: the multigrid from the next step
+   * on (its hierarchy is built from this step's Hessian: its pattern and strong couplings;
+   * out of memory or a stalled coarsening: block Jacobi stays).
+   * Block Jacobi's count grows with the mesh where the error is smooth (a million-triangle
+   * spiral: 50–240 per step), while perturbed grids, whose error is local, need few and
+   * were faster without the multigrid's five products per cycle (k − conv: the count
+   * before the converging iteration, as the rule was measured) */
+  if (!w->use_amg && !w->amg_failed && k - conv > AMG_SWITCH_ITS && nfree >= UT_AMG_MIN_ROWS && !o->no_multigrid) {
+    if (ut_amg_build(&w->amg, &w->P, w->val, nfree, d)) { ut_amg_free(&w->amg); w->amg_failed = 1; }
+    else {
+      w->use_amg = 1;
+      if (o->amg_used) *o->amg_used = 1;
+      free(w->bjf); /* the multigrid's finest level has its own copy */
+      w->bjf = NULL;
+    }
+  }
+  /* sliding vertices: the multigrid's coarse corrections leave the normal components of an
+   * inexact solve nonzero (the exact solution has none); g·s is unchanged, g being tangent */
+  ut_slide_project(o, w->s, nfree);
+  double gp = ut_dot(w->g, w->s, n, w->part);
+  if (!(gp < 0)) { /* no descent (a breakdown at the first step): the preconditioned gradient */
+    ut_block_apply(w->dinv, nfree, d, w->g, w->s);
+    for (long i = 0; i < n; i++) w->s[i] = -w->s[i];
+    ut_slide_project(o, w->s, nfree);
+    gp = ut_dot(w->g, w->s, n, w->part);
+    if (!(gp < 0)) return 1;
+  }
+  *gp_out = gp;
+  return 0;
+}
+
+/* the step along w->s from x (f, g·s = gp there): backtracking, then a longer step where
+ * the energy along s is flatter than its model. x at the accepted point, *fn_out its energy,
+ * w->gn its gradient; returns the backtracking count, 50 when nothing decreased f (x then
+ * restored) */
+static int newton_step(const objective *o, const objective *real, newton_ws *w, double *x, const int *freev, int nfree, double f,
+                       double gp, double *fn_out) {
+  int d = o->C->d;
+  ut_gather(w->x0, x, freev, nfree, d);
+  double t = 1, fn = f;
+  int ls;
+  for (ls = 0; ls < 50; ls++) {
+    ut_place(x, w->x0, w->s, t, freev, nfree, d);
+    fn = ut_eval(o, x, w->gn, nfree);
+    if (fn <= f + 1e-4 * t * gp) break;
+    t *= 0.5;
+  }
+  /* the full step lowered f by more than 3/4 of g·s, where the model ½ sᵀHs + g·s predicts
+   * ½ g·s at its minimum: along s the energy is nearly linear, and the projected Hessian
+   * (every corner's negative curvature set to 0) is far stiffer than the energy itself.
+   * Double the step while it gains that much (at ε = 0 an inverted trial is infinite and
+   * stops it). The Tutte-started 80 × 250 strip's smoothing took 581 steps of t = 1 whose
+   * gains were as g·s predicted, each 1e-5 of f: steps of 2–32 took 267–290, 11.6 → 3.9–5.2 s, the
+   * same minimum (bench/RESULTS.md) */
+  if (ls == 0 && f - fn > 0.75 * -gp) {
+    for (int e = 0; e < 10; e++) {
+      double t2 = 2 * t, f2;
+      ut_place(x, w->x0, w->s, t2, freev, nfree, d);
+      f2 = ut_eval(o, x, w->q, nfree);
+      if (!(f2 < fn)) break;
+      t = t2;
+      fn = f2;
+      double *tq = w->gn; /* q holds the trial's gradient: it becomes the accepted point's */
+      w->gn = w->q;
+      w->q = tq;
+      if (!(f - fn > 0.75 * t * -gp)) break;
+    }
+    ut_place(x, w->x0, w->s, t, freev, nfree, d);
+  }
+  /* one more trial at tt, kept when lower, in two cases (else tt = 0):
+   * a full step that lowered f by 0.55–0.75 of g·s: the energy along s is flatter than the
+   * model (at its minimum ½ g·s) and its minimum lies past t = 1. With the barrier alone
+   * (ε = 0: smoothing) the trial at the minimum of the parabola through f, g·s and
+   * the full step's value (t* = −g·s / (2 (f(1) − f − g·s)), up to 2).
+   * The million-triangle spiral's smoothing: 15 → 12 steps, 9.5–11.6 → 7.8 s, the same
+   * minimum (its steps gained two thirds of g·s at t = 1, t* 1.4–1.5). Not with ε > 0: the
+   * untangler's global energy then zigzagged (the 100 000-vertex Tutte spiral 9 → 14 steps);
+   * a backtracked step on the barrier (the longer trial crossed it or gained too little):
+   * the trial half-way to that longer one. The random star's smoothing: its steps at
+   * t = 1/2 after an inverted full step, each halving g·s, became steps at 3/4 (13 -> 12
+   * steps, bench/RESULTS.md). Not in the softened steps, which are judged by the minimum
+   * they leave: the first of a 300 × 45 spiral's (Gauss-Seidel start), backtracked to 1/2,
+   * left it at 0.0056, and at 3/4 at 0.0005 */
+  else {
+    double tt = 0;
+    if (o->eps == 0 && ls == 0 && f - fn > 0.55 * -gp) {
+      double c = 2 * (fn - f - gp), ts = c > 0 ? fmin(2, -gp / c) : 2;
+      if (ts > 1.15) tt = ts;
+    } else if (o == real && o->eps == 0 && ls > 0 && ls < 50)
+      tt = 1.5 * t;
+    if (tt > 0) {
+      ut_place(x, w->x0, w->s, tt, freev, nfree, d);
+      double f2 = ut_eval(o, x, w->q, nfree);
+      if (f2 < fn) {
+        t = tt;
+        fn = f2;
+        double *tq = w->gn; /* q holds the trial's gradient: it becomes the accepted point's */
+        w->gn = w->q;
+        w->q = tq;
+      } else
+        ut_place(x, w->x0, w->s, t, freev, nfree, d);
+    }
+  }
+  if (ls == 50) ut_place(x, w->x0, NULL, 0, freev, nfree, d); /* no decrease: restore */
+  *fn_out = fn;
+  return ls;
+}
+
+/* (untangle_int.h) The loop keeps the softened first steps' bookkeeping and the end test
+ * with the steps (direction and step length are newton_direction and newton_step): about
+ * 180 lines, half of them the measurements behind each rule, which belong beside it */
 int ut_newton(const objective *o, double *x, const int *freev, int nfree, int maxit, double *fout) {
   const ctx *C = o->C;
   int d = C->d, dd = d * d, it;
   long n = (long)nfree * d;
-  ut_bsr P = {NULL, NULL};
-  if (build_pattern(C, o->fidx, freev, nfree, &P)) { free(P.off); return -1; }
-  size_t nb = (size_t)P.off[nfree];
-  double *val = malloc(sizeof(double) * (nb * dd + 1)), *dinv = malloc(sizeof(double) * ((size_t)nfree * dd + 1));
-  double *g = malloc(sizeof(double) * (n + 1)), *gn = malloc(sizeof(double) * (n + 1)), *s = malloc(sizeof(double) * (n + 1)),
-         *r = malloc(sizeof(double) * (n + 1)), *z = malloc(sizeof(double) * (n + 1)), *pd = malloc(sizeof(double) * (n + 1)),
-         *q = malloc(sizeof(double) * (n + 1)), *x0 = malloc(sizeof(double) * (n + 1)),
-         *part = malloc(sizeof(double) * (2 * ((size_t)n / UT_DOT_CHUNK) + 4)); /* ut_fcg's two */
-  int *dpos = malloc(sizeof(int) * ((size_t)nfree + 1));
+  newton_ws w;
+  memset(&w, 0, sizeof w);
+  if (build_pattern(C, o->fidx, freev, nfree, &w.P)) { free(w.P.off); return -1; }
+  size_t nb = (size_t)w.P.off[nfree];
+  w.val = malloc(sizeof(double) * (nb * dd + 1));
+  w.dinv = malloc(sizeof(double) * ((size_t)nfree * dd + 1));
+  double **vec[] = {&w.g, &w.gn, &w.s, &w.r, &w.z, &w.pd, &w.q, &w.x0};
+  for (size_t i = 0; i < sizeof vec / sizeof vec[0]; i++) *vec[i] = malloc(sizeof(double) * (n + 1));
+  w.part = malloc(sizeof(double) * (2 * ((size_t)n / UT_DOT_CHUNK) + 4)); /* ut_fcg's two */
+  w.dpos = malloc(sizeof(int) * ((size_t)nfree + 1));
   double *xkeep = o->keepq > 0 ? malloc(sizeof(double) * (n + 1)) : NULL;
-  float *bjf = NULL; /* block Jacobi's single-precision copy of the Hessian (below) */
   double *soft_eps = NULL, *xsoft = NULL; /* the softened barrier's first steps (below) */
-  ut_amg amg;
-  memset(&amg, 0, sizeof amg);
-  int use_amg = 0, amg_failed = 0;
-  int ok = val && dinv && g && gn && s && r && z && pd && q && x0 && part && dpos && (xkeep || !(o->keepq > 0)), below = 0;
+  int ok = w.val && w.dinv && w.g && w.gn && w.s && w.r && w.z && w.pd && w.q && w.x0 && w.part && w.dpos && (xkeep || !(o->keepq > 0)), below = 0;
   double f = INFINITY, g0 = 0, qmin = 0;
   if (!ok) { it = -1; goto done; }
   for (int fi = 0; fi < nfree; fi++) {
-    int lo = P.off[fi];
-    while (P.col[lo] != fi) lo++; /* every row holds its own vertex */
-    dpos[fi] = lo;
+    int lo = w.P.off[fi];
+    while (w.P.col[lo] != fi) lo++; /* every row holds its own vertex */
+    w.dpos[fi] = lo;
   }
-  f = ut_eval(o, x, g, nfree);
+  f = ut_eval(o, x, w.g, nfree);
   if (xkeep)
     ut_gather(xkeep, x, freev, nfree, d);
   /* smoothing's barrier (ε = 0) and corners far below the good shapes: Newton on 1/D moves a
@@ -156,7 +329,7 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
     soft.soft_eps = soft_eps;
     o = &soft;
     soft_left = SOFT_STEPS;
-    f = ut_eval(o, x, g, nfree);
+    f = ut_eval(o, x, w.g, nfree);
   }
   double tol = o->ftol > 0 ? o->ftol : 1e-9;
   /* with the multigrid, a tenth of that: its steps resolve every scale alike where block
@@ -183,150 +356,18 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
   int want_amg = ((o->amg_used && *o->amg_used) || soft_left) && nfree >= UT_AMG_MIN_ROWS && !o->no_multigrid;
   for (it = 0; it < maxit && isfinite(f) && f > 0; it++) {
     ut_progress_tick(C->progress, "Newton step", it, f, qmin);
-    double gg = ut_dot(g, g, n, part);
+    double gg = ut_dot(w.g, w.g, n, w.part);
     if (!it) g0 = sqrt(gg);
-    if (!(gg > 0) || ut_energy_hessian(o, x, &P, val, nfree)) break;
-    if (C->anchor > 0 && C->x0) /* the motion weight's w |x − x0|² */
-      for (int fi = 0; fi < nfree; fi++)
-        for (int a = 0; a < d; a++) val[(size_t)dpos[fi] * dd + a * d + a] += 2 * C->anchor;
-    ut_block_jacobi(val, dpos, nfree, d, dinv);
-    if (want_amg && !use_amg && !amg_failed) {
-      if (ut_amg_build(&amg, &P, val, nfree, d)) { ut_amg_free(&amg); amg_failed = 1; }
-      else {
-        use_amg = 1;
-        if (o->amg_used) *o->amg_used = 1;
-      }
-    }
-    if (use_amg) ut_amg_values(&amg, val, dinv);
-    /* preconditioned conjugate gradients for H s' = g from s' = 0, then s = −s' (the same
-     * bits as solving for −g: every operation is odd in the right side) */
-    /* the forcing term: at least 0.1 (0.01 cost the star 40x200 twice the CG iterations for
-     * the same Newton steps) */
-    /* on the barrier with the multigrid while the minimum quality is below SOFT_Q, at most
-     * ETA_AMG: the multigrid's count grows slowly with the tolerance (the random star's
-     * steps: 4–12 iterations at 0.2, 3–8 at 0.5), and the closer steps end the halved steps
-     * whose full steps crossed the barrier. Not above SOFT_Q, far from the barrier, where the
-     * steps were the same at more iterations (the 100 000-vertex quadrilateral spiral,
-     * minimum 0.27: 5 a step instead of 3). A softened step, whose minimum is checked, is
-     * solved at 0.5 first and, when not kept, once more from its start at ETA_AMG, as are the
-     * softened steps after it: the random star's first is kept only at 0.2 (17 -> 13 steps
-     * with the cap), and the million-triangle spiral's are kept at 0.5 (7 + 5 iterations,
-     * 10 + 7 at 0.2; bench/RESULTS.md) */
     int near = o != real ? soft_close : xkeep && qmin > 0 && qmin < SOFT_Q;
-    double eta = fmin(use_amg && o->eps == 0 && near ? ETA_AMG : 0.5, fmax(0.1, sqrt(sqrt(gg) / g0))), *cw[4] = {r, z, pd, q};
-    /* the products in single precision: the multigrid's finest copy, or on a mesh where block
-     * Jacobi's conjugate gradients may take dozens of iterations (the multigrid's size) a copy
-     * of its own (the 100 000-vertex spiral's smoothing took 137 of them before the switch) */
-    const float *valf = NULL;
-    if (use_amg) valf = amg.L[0].valf;
-    else if (nfree >= UT_AMG_MIN_ROWS && (bjf || (bjf = malloc(sizeof(float) * ((size_t)P.off[nfree] * dd + 1))))) {
-      ut_to_single(val, bjf, (long)P.off[nfree] * dd);
-      valf = bjf;
-    }
-    int conv, k = ut_fcg(&P, val, valf, nfree, d, use_amg ? &amg : NULL, dinv, g, s, 1, 1000, eta * eta * gg, part, cw, &conv);
-    UT_PAR_FOR
-    for (long i = 0; i < n; i++) s[i] = -s[i];
-    /* block Jacobi needed many iterations on a large mesh: the multigrid from the next step
-     * on (its hierarchy is built from this step's Hessian: its pattern and strong couplings;
-     * out of memory or a stalled coarsening: block Jacobi stays).
-     * Block Jacobi's count grows with the mesh where the error is smooth (a million-triangle
-     * spiral: 50–240 per step), while perturbed grids, whose error is local, need few and
-     * were faster without the multigrid's five products per cycle (k − conv: the count
-     * before the converging iteration, as the rule was measured) */
-    if (!use_amg && !amg_failed && k - conv > AMG_SWITCH_ITS && nfree >= UT_AMG_MIN_ROWS && !o->no_multigrid) {
-      if (ut_amg_build(&amg, &P, val, nfree, d)) { ut_amg_free(&amg); amg_failed = 1; }
-      else {
-        use_amg = 1;
-        if (o->amg_used) *o->amg_used = 1;
-        free(bjf); /* the multigrid's finest level has its own copy */
-        bjf = NULL;
-      }
-    }
-    /* sliding vertices: the multigrid's coarse corrections leave the normal components of an
-     * inexact solve nonzero (the exact solution has none); g·s is unchanged, g being tangent */
-    ut_slide_project(o, s, nfree);
-    double gp = ut_dot(g, s, n, part);
-    if (!(gp < 0)) { /* no descent (a breakdown at the first step): the preconditioned gradient */
-      ut_block_apply(dinv, nfree, d, g, s);
-      for (long i = 0; i < n; i++) s[i] = -s[i];
-      ut_slide_project(o, s, nfree);
-      gp = ut_dot(g, s, n, part);
-      if (!(gp < 0)) break;
-    }
-    ut_gather(x0, x, freev, nfree, d);
-    double t = 1, fn = f;
-    int ls;
-    for (ls = 0; ls < 50; ls++) {
-      ut_place(x, x0, s, t, freev, nfree, d);
-      fn = ut_eval(o, x, gn, nfree);
-      if (fn <= f + 1e-4 * t * gp) break;
-      t *= 0.5;
-    }
-    /* the full step lowered f by more than 3/4 of g·s, where the model ½ sᵀHs + g·s predicts
-     * ½ g·s at its minimum: along s the energy is nearly linear, and the projected Hessian
-     * (every corner's negative curvature set to 0) is far stiffer than the energy itself.
-     * Double the step while it gains that much (at ε = 0 an inverted trial is infinite and
-     * stops it). The Tutte-started 80 × 250 strip's smoothing took 581 steps of t = 1 whose
-     * gains were as g·s predicted, each 1e-5 of f: steps of 2–32 took 267–290, 11.6 → 3.9–5.2 s, the
-     * same minimum (bench/RESULTS.md) */
-    if (ls == 0 && f - fn > 0.75 * -gp) {
-      for (int e = 0; e < 10; e++) {
-        double t2 = 2 * t, f2;
-        ut_place(x, x0, s, t2, freev, nfree, d);
-        f2 = ut_eval(o, x, q, nfree);
-        if (!(f2 < fn)) break;
-        t = t2;
-        fn = f2;
-        double *tq = gn; /* q holds the trial's gradient: it becomes the accepted point's */
-        gn = q;
-        q = tq;
-        if (!(f - fn > 0.75 * t * -gp)) break;
-      }
-      ut_place(x, x0, s, t, freev, nfree, d);
-    }
-    /* one more trial at tt, kept when lower, in two cases (else tt = 0):
-     * a full step that lowered f by 0.55–0.75 of g·s: the energy along s is flatter than the
-     * model (at its minimum ½ g·s) and its minimum lies past t = 1. With the barrier alone
-     * (ε = 0: smoothing) the trial at the minimum of the parabola through f, g·s and
-     * the full step's value (t* = −g·s / (2 (f(1) − f − g·s)), up to 2).
-     * The million-triangle spiral's smoothing: 15 → 12 steps, 9.5–11.6 → 7.8 s, the same
-     * minimum (its steps gained two thirds of g·s at t = 1, t* 1.4–1.5). Not with ε > 0: the
-     * untangler's global energy then zigzagged (the 100 000-vertex Tutte spiral 9 → 14 steps);
-     * a backtracked step on the barrier (the longer trial crossed it or gained too little):
-     * the trial half-way to that longer one. The random star's smoothing: its steps at
-     * t = 1/2 after an inverted full step, each halving g·s, became steps at 3/4 (13 -> 12
-     * steps, bench/RESULTS.md). Not in the softened steps, which are judged by the minimum
-     * they leave: the first of a 300 × 45 spiral's (Gauss-Seidel start), backtracked to 1/2,
-     * left it at 0.0056, and at 3/4 at 0.0005 */
-    else {
-      double tt = 0;
-      if (o->eps == 0 && ls == 0 && f - fn > 0.55 * -gp) {
-        double c = 2 * (fn - f - gp), ts = c > 0 ? fmin(2, -gp / c) : 2;
-        if (ts > 1.15) tt = ts;
-      } else if (o == real && o->eps == 0 && ls > 0 && ls < 50)
-        tt = 1.5 * t;
-      if (tt > 0) {
-        ut_place(x, x0, s, tt, freev, nfree, d);
-        double f2 = ut_eval(o, x, q, nfree);
-        if (f2 < fn) {
-          t = tt;
-          fn = f2;
-          double *tq = gn; /* q holds the trial's gradient: it becomes the accepted point's */
-          gn = q;
-          q = tq;
-        } else
-          ut_place(x, x0, s, t, freev, nfree, d);
-      }
-    }
-    if (ls == 50) { /* no decrease: restore and stop */
-      ut_place(x, x0, NULL, 0, freev, nfree, d);
-      break;
-    }
+    double gp;
+    if (!(gg > 0) || newton_direction(o, &w, x, nfree, want_amg, gg, g0, near, &gp)) break;
+    double fn;
+    if (newton_step(o, real, &w, x, freev, nfree, f, gp, &fn) == 50) break; /* no decrease: x restored */
     double fprev = f;
     f = fn;
-    double *gt = g; /* the accepted point's gradient becomes the current one */
-    g = gn;
-    gn = gt;
+    double *gt = w.g; /* the accepted point's gradient becomes the current one */
+    w.g = w.gn;
+    w.gn = gt;
     double qlast = qmin;
     if (xkeep) { /* the last iterate that keeps the smallest quality (to rounding: a minimum
                   * no vertex can move, measured by the caller in other arithmetic, is kept) */
@@ -344,23 +385,23 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
      * rises by more than QMIN_RISE a step: a random star's smoothing, its minimum held by the
      * fixed boundary's cells, spent its last seven steps (a quarter of its time) on gains of
      * 1e-5 to 1e-6 that moved the minimum by 1e-4 of itself (bench/RESULTS.md) */
-    double tl = use_amg && o->eps == 0 && !(xkeep && qlast > 0 && qmin <= (1 + QMIN_RISE) * qlast) ? tol_amg : tol;
+    double tl = w.use_amg && o->eps == 0 && !(xkeep && qlast > 0 && qmin <= (1 + QMIN_RISE) * qlast) ? tol_amg : tol;
     gain[it % 3] = (fprev - f) / fprev;
     if (o != real) { /* a softened step: kept (in xsoft) when it lowered the barrier's energy and
                       * left the minimum quality at least the start's times the energy's ratio
                       * to the start's (above) */
       /* (the quality does not depend on ε: xkeep's pass above measured it; gn, the last
        * point's gradient, is free) */
-      double qs = xkeep ? qmin : ut_energy_qmin(real, x), fr = qs > 0 ? ut_eval(real, x, gn, nfree) : INFINITY;
+      double qs = xkeep ? qmin : ut_energy_qmin(real, x), fr = qs > 0 ? ut_eval(real, x, w.gn, nfree) : INFINITY;
       int kept = qs >= qstart * fmin(1, fr / fstart) && fr < fgood;
       if (kept) {
         ut_gather(xsoft, x, freev, nfree, d);
         qgood = qs;
         fgood = fr;
-      } else if (use_amg && !soft_close) { /* solved again from its start, closer (above) */
+      } else if (w.use_amg && !soft_close) { /* solved again from its start, closer (above) */
         soft_close = 1;
         ut_place(x, xsoft, NULL, 0, freev, nfree, d);
-        f = ut_eval(o, x, g, nfree);
+        f = ut_eval(o, x, w.g, nfree);
         qmin = qgood;
         below = xkeep && qmin < o->keepq * (1 - 1e-12);
         continue;
@@ -368,22 +409,22 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
       if (--soft_left > 0 && kept) continue;
       o = real; /* back to the barrier, from the last kept state */
       if (kept) { /* here: the barrier's energy and gradient just evaluated */
-        double *gt = g;
-        g = gn;
-        gn = gt;
+        double *gt = w.g;
+        w.g = w.gn;
+        w.gn = gt;
         f = fr;
       } else {
         ut_place(x, xsoft, NULL, 0, freev, nfree, d);
-        f = ut_eval(o, x, g, nfree);
+        f = ut_eval(o, x, w.g, nfree);
       }
       qmin = qgood;
       below = xkeep && qmin < o->keepq * (1 - 1e-12);
       if (xkeep && !below) ut_gather(xkeep, x, freev, nfree, d);
-      g0 = sqrt(ut_dot(g, g, n, part)); /* the end test's and the forcing term's reference */
+      g0 = sqrt(ut_dot(w.g, w.g, n, w.part)); /* the end test's and the forcing term's reference */
       gain[0] = gain[1] = gain[2] = 1;
       continue;
     }
-    if (gain[it % 3] <= tl && (ut_dot(g, g, n, part) <= 0.01 * g0 * g0 || gain[0] + gain[1] + gain[2] <= 3 * tl)) {
+    if (gain[it % 3] <= tl && (ut_dot(w.g, w.g, n, w.part) <= 0.01 * g0 * g0 || gain[0] + gain[1] + gain[2] <= 3 * tl)) {
       it++;
       break;
     }
@@ -400,10 +441,10 @@ int ut_newton(const objective *o, double *x, const int *freev, int nfree, int ma
   }
 done:
   free(soft_eps); free(xsoft);
-  ut_amg_free(&amg);
+  ut_amg_free(&w.amg);
   ut_energy_release_blocks(o->eb); /* its positions are on P */
   *fout = f;
-  free(P.off); free(P.col); free(val); free(dinv); free(g); free(gn); free(s); free(r); free(z); free(pd); free(q);
-  free(x0); free(part); free(dpos); free(xkeep); free(bjf);
+  free(w.P.off); free(w.P.col); free(w.val); free(w.dinv); free(w.g); free(w.gn); free(w.s); free(w.r); free(w.z); free(w.pd); free(w.q);
+  free(w.x0); free(w.part); free(w.dpos); free(xkeep); free(w.bjf);
   return it;
 }

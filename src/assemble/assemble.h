@@ -177,5 +177,17 @@ int lg_table_degree(lg_env *env, const coef_table *t, int arity, cell_type ct);
  * and rank 0 the collection. Every rank gets the outcome, and the message (MESH_ERRLEN) in
  * err */
 int lg_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_field *fl, int format, int npiece, char *err);
+/* a ParaView series (.pvd) written step by step: each step a .vtu beside it (<stem>_NNNN.vtu),
+ * or under mpiexec a .pvtu of a piece per rank (lg_write_vtu), and the .pvd rewritten with
+ * every step so far (rank 0) */
+typedef struct {
+  char *path;
+  int n, cap;
+  double *t;
+  char **files;
+} lg_series;
+lg_series *lg_series_new(lg_env *env, const char *path);
+int lg_series_write(lg_env *env, lg_series *s, lg_mesh *lm, int nf, const mesh_field *fl, double t);
+void lg_series_free(lg_series *s);
 
 #endif

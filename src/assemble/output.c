@@ -124,3 +124,44 @@ int lg_write_vtu(lg_env *env, lg_mesh *lm, const char *path, int nf, const mesh_
   return rc;
 }
 
+
+lg_series *lg_series_new(lg_env *env, const char *path) {
+  size_t l = strlen(path);
+  if (l < 5 || strcmp(path + l - 4, ".pvd")) { lg_seterr(env, "a series is a path ending in .pvd, got \"%s\"", path); return NULL; }
+  lg_series *s = calloc(1, sizeof *s);
+  if (!s || !(s->path = strdup(path))) { free(s); lg_seterr(env, "out of memory"); return NULL; }
+  return s;
+}
+
+int lg_series_write(lg_env *env, lg_series *s, lg_mesh *lm, int nf, const mesh_field *fl, double t) {
+  if (s->n == s->cap) {
+    int cap = s->cap ? 2 * s->cap : 16;
+    double *nt = realloc(s->t, sizeof(double) * (size_t)cap);
+    if (nt) s->t = nt;
+    char **nfl = realloc(s->files, sizeof(char *) * (size_t)cap);
+    if (nfl) s->files = nfl;
+    if (!nt || !nfl) { lg_seterr(env, "out of memory"); return 1; }
+    s->cap = cap;
+  }
+  int size = lg_mpi_size();
+  size_t l = strlen(s->path);
+  char *file = malloc(l + 32);
+  if (!file) { lg_seterr(env, "out of memory"); return 1; }
+  snprintf(file, l + 32, "%.*s_%04d.%s", (int)(l - 4), s->path, s->n, size > 1 ? "pvtu" : "vtu");
+  char err[MESH_ERRLEN] = "";
+  if (lg_write_vtu(env, lm, file, nf, fl, VTU_BINARY, size > 1 ? size : 0, err)) { lg_seterr(env, "%s", err); free(file); return 1; }
+  s->files[s->n] = file;
+  s->t[s->n++] = t;
+  int rc = lg_mpi_rank() == 0 ? mesh_write_pvd(s->path, s->n, s->t, s->files, err) : 0;
+  if (lg_root_result(rc, err, sizeof err)) { lg_seterr(env, "%s", err); return 1; }
+  return 0;
+}
+
+void lg_series_free(lg_series *s) {
+  if (!s) return;
+  for (int i = 0; i < s->n; i++) free(s->files[i]);
+  free(s->files);
+  free(s->t);
+  free(s->path);
+  free(s);
+}

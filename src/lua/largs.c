@@ -403,6 +403,8 @@ static const arity arities[] = {
     {MT_PROB, "size", 0, "problem:size"}, {MT_PROB, "sensitivity", 1, "problem:sensitivity"},
     {MT_REDUCED, "value", 1, "rf:value"}, {MT_REDUCED, "derivative", 2, "rf:derivative"},
     {MT_REDUCED, "gradient", 2, "rf:gradient"}, {MT_REDUCED, "hessian", 3, "rf:hessian"}, {MT_REDUCED, "state", 0, "rf:state"},
+    {MT_REDUCED, "stats", 0, "rf:stats"}, {"lg", "time_problem", 1, "lg.time_problem"}, {MT_TIME, "solve", 0, "step:solve"},
+    {MT_TIME, "times", 0, "step:times"},
     {NULL, NULL, 0, NULL}};
 
 static int checked_call(lua_State *L) {

@@ -24,6 +24,7 @@
 #define MT_QARRAY "lugal.QualityArray"
 #define MT_FUNCTIONAL "lugal.Functional"
 #define MT_REDUCED "lugal.ReducedFunctional"
+#define MT_TIME "lugal.TimeProblem"
 
 typedef struct { lg_mesh *lm; } ud_mesh;
 typedef struct { region r; } ud_region;
@@ -32,6 +33,9 @@ typedef struct { expr *e; } ud_expr;
 typedef struct { lg_function *f; } ud_func;
 typedef struct { form *f; } ud_form;
 typedef struct { lg_problem *p; int nfield; int nonlinear; } ud_prob;
+/* a time-dependent problem (ltime.c): its step problem, owned; output every `every` steps
+ * into the series, a progress line as often with monitor */
+typedef struct { lg_time *T; lg_problem *p; int nfield, every, monitor; char *output; } ud_time;
 /* format: VTU_*; pieces: 0 for .vtu steps, else .pvtu steps of so many pieces */
 typedef struct { char *path; int n, cap; double *t; char **files; int format, pieces; } ud_series;
 typedef struct { lg_env *env; int owns_petsc; } ud_env;
@@ -112,6 +116,11 @@ void push_functions_of(lua_State *L, int owner, lg_function **f, int n);
 int check_symbols(lua_State *L, int t, const char *key, func_kind kind, int *ids, const char *fn);
 const form *check_bcs(lua_State *L, int idx, const char *fn, form **owned);
 void push_problem(lua_State *L, lg_problem *p, int nfield, int nonlinear, int ndeps, const int *deps);
+/* a problem from the options table at 1 (mesh, eqn, bc, test, unknown, symmetric, prefix,
+ * nullspace; keys: every key allowed): the values it reads at deps (*ndeps of them) and its
+ * number of unknowns; raises a Lua error naming fn on bad options */
+lg_problem *problem_from_table(lua_State *L, const char *fn, int nonlinear, const char *const *keys, int *nfield, int *deps,
+                               int *ndeps);
 /* the assembled matrix of p as a Lua table of rows (small problems: n <= 2000) */
 int push_dense_matrix(lua_State *L, lg_problem *p, const char *fn);
 void new_mt(lua_State *L, const char *name, const luaL_Reg *mm, const luaL_Reg *methods);
@@ -130,6 +139,10 @@ void lg_lua_problem_register(lua_State *L);
 extern const luaL_Reg lg_problem_lib[];
 void lg_lua_opt_register(lua_State *L);
 extern const luaL_Reg lg_opt_lib[];
+/* ltime.c: time-dependent problems; time_of: the problem at idx, or NULL */
+void lg_lua_time_register(lua_State *L);
+extern const luaL_Reg lg_time_lib[];
+lg_time *time_of(lua_State *L, int idx);
 void lg_lua_operator_register(lua_State *L);
 extern const luaL_Reg lg_parallel_lib[]; /* lg.rank, lg.size, lg.allreduce */
 /* lparallel.c: the function on the top of the stack replaced by one that first checks, in a

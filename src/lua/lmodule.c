@@ -89,12 +89,14 @@ int luaopen_lugal(lua_State *L) {
   lg_lua_mesh_register(L);
   lg_lua_problem_register(L);
   lg_lua_opt_register(L);
+  lg_lua_time_register(L);
   lg_lua_operator_register(L);
   lua_newtable(L);
   set_funcs_checked(L, lg_expr_lib, "lg");
   set_funcs_checked(L, lg_problem_lib, "lg");
   set_funcs_checked(L, lg_output_lib, "lg");
   set_funcs_checked(L, lg_opt_lib, "lg");
+  set_funcs_checked(L, lg_time_lib, "lg");
   set_funcs_checked(L, lg_operator_lib, "lg");
   set_funcs_checked(L, lg_parallel_lib, "lg");
   lg_lua_parallel_register(L);

@@ -9,7 +9,15 @@
 #include <stdlib.h>
 #include <string.h>
 
-typedef struct { form *f; } ud_functional;
+/* a functional: one form (f), or the terms of a time-dependent problem's (lg.functional{final=,
+ * running=, at=}: f NULL) */
+typedef struct {
+  form *f;
+  int nterm;
+  form *tf[LG_TIME_MAXTERMS];
+  int kind[LG_TIME_MAXTERMS];
+  double at[LG_TIME_MAXTERMS];
+} ud_functional;
 typedef struct { lg_reduced *rf; } ud_reduced;
 
 /* ---------------------------------------------------------------- controls, functionals */
@@ -39,11 +47,11 @@ static int l_control(lua_State *L) {
   return 1;
 }
 
-static int l_functional(lua_State *L) {
-  const char *fn = "lg.functional";
-  ud_form *u = luaL_testudata(L, 1, MT_FORM);
-  if (!u) return typeerror(L, fn, 1, luaL_testudata(L, 1, MT_BC) ? "a form (lg.integral), not a boundary condition"
-                                                                  : "a form (lg.integral(...) + ...)");
+/* the form at idx checked as a functional's (no test functions) */
+static form *functional_form(lua_State *L, int idx, const char *fn, const char *what) {
+  ud_form *u = luaL_testudata(L, idx, MT_FORM);
+  if (!u) luaL_error(L, "%s: %s must be a form (lg.integral(...) + ...), got %s", fn, what,
+                     luaL_testudata(L, idx, MT_BC) ? "a boundary condition" : luaL_typename(L, idx));
   lg_env *env = get_env(L);
   for (int i = 0; i < u->f->n; i++) {
     expr *e = u->f->t[i].integrand, *leaf[64];
@@ -51,14 +59,57 @@ static int l_functional(lua_State *L) {
     for (int k = 0; k < n && k < 64; k++) {
       expr_func_info *fi = expr_func_get(env->c, leaf[k]->i0);
       if (fi && fi->kind == FK_TEST)
-        return luaL_error(L, "%s: the form contains the test function %s: a functional is a number (integrals of the "
-                             "state and the controls, without test functions)", fn, fi->name);
+        luaL_error(L, "%s: the form contains the test function %s: a functional is a number (integrals of the "
+                      "state and the controls, without test functions)", fn, fi->name);
     }
   }
+  form *f = form_copy(u->f);
+  if (!f) luaL_error(L, "%s: out of memory", fn);
+  return f;
+}
+
+/* one term of a time-dependent functional into f (its form anchored in f's userdata) */
+static void add_term(lua_State *L, ud_functional *f, int idx, int kind, double at, const char *fn, const char *what) {
+  if (f->nterm == LG_TIME_MAXTERMS) luaL_error(L, "%s: at most %d terms", fn, LG_TIME_MAXTERMS);
+  f->tf[f->nterm] = functional_form(L, idx, fn, what);
+  f->kind[f->nterm] = kind;
+  f->at[f->nterm++] = at;
+}
+
+/* lg.functional(form), or for a time-dependent problem lg.functional{final = form, running =
+ * form, at = {[t] = form, ...}} */
+static int l_functional(lua_State *L) {
+  const char *fn = "lg.functional";
+  if (!luaL_testudata(L, 1, MT_FORM) && !lua_istable(L, 1))
+    return typeerror(L, fn, 1, luaL_testudata(L, 1, MT_BC) ? "a form (lg.integral), not a boundary condition"
+                                                          : "a form (lg.integral(...) + ...) or a table {final=, running=, at=}");
   int deps[1] = {1};
   ud_functional *f = new_ud(L, sizeof *f, MT_FUNCTIONAL, 1, deps);
-  f->f = form_copy(u->f);
-  if (!f->f) return luaL_error(L, "%s: out of memory", fn);
+  int fi = lua_gettop(L);
+  if (luaL_testudata(L, 1, MT_FORM)) {
+    f->f = functional_form(L, 1, fn, "argument 1");
+    return 1;
+  }
+  static const char *const keys[] = {"final", "running", "at", "initial", NULL};
+  check_keys(L, 1, fn, keys);
+  if (lua_getfield(L, 1, "initial") != LUA_TNIL) add_term(L, f, lua_gettop(L), LG_TJ_INITIAL, 0, fn, "option 'initial'");
+  if (lua_getfield(L, 1, "final") != LUA_TNIL) add_term(L, f, lua_gettop(L), LG_TJ_FINAL, 0, fn, "option 'final'");
+  if (lua_getfield(L, 1, "running") != LUA_TNIL) add_term(L, f, lua_gettop(L), LG_TJ_RUNNING, 0, fn, "option 'running'");
+  lua_settop(L, fi);
+  if (lua_getfield(L, 1, "at") != LUA_TNIL) {
+    int t = lua_gettop(L);
+    if (!lua_istable(L, t)) return luaL_error(L, "%s: option 'at' must be a table {[t] = form, ...}", fn);
+    lua_pushnil(L);
+    while (lua_next(L, t)) {
+      int isnum;
+      double at = lua_tonumberx(L, -2, &isnum);
+      if (!isnum || !isfinite(at)) return luaL_error(L, "%s: option 'at' must be indexed by times (numbers)", fn);
+      add_term(L, f, lua_gettop(L), LG_TJ_AT, at, fn, "each entry of option 'at'");
+      lua_pop(L, 1);
+    }
+  }
+  lua_settop(L, fi);
+  if (!f->nterm) return luaL_error(L, "%s: give at least one of 'final', 'running', 'at', 'initial'", fn);
   return 1;
 }
 
@@ -66,6 +117,8 @@ static int functional_gc(lua_State *L) {
   ud_functional *f = lua_touserdata(L, 1);
   form_free(f->f);
   f->f = NULL;
+  for (int i = 0; i < f->nterm; i++) form_free(f->tf[i]);
+  f->nterm = 0;
   return 0;
 }
 
@@ -87,16 +140,48 @@ static int to_control(lua_State *L, int idx, lg_control *c, const char *fn, int 
                     ue ? "an expression" : luaL_typename(L, idx));
 }
 
+/* the reduced functional of a time-dependent problem: checkpoints = "all" (every state),
+ * a number of snapshots, or by default every state while they take at most 1 GiB, else
+ * as many snapshots as fit in it */
+static lg_reduced *time_reduced(lua_State *L, lg_time *T, const ud_functional *uf, int nc, const lg_control *c, const char *fn) {
+  lg_env *env = get_env(L);
+  lg_time_term terms[LG_TIME_MAXTERMS];
+  int nterm = 0;
+  if (uf->f) terms[nterm++] = (lg_time_term){uf->f, LG_TJ_FINAL, 0};
+  for (int i = 0; i < uf->nterm; i++) terms[nterm++] = (lg_time_term){uf->tf[i], uf->kind[i], uf->at[i]};
+  double state_bytes = 8.0 * lg_time_state_size(T), budget = 1024.0 * 1024 * 1024;
+  int N = lg_time_nsteps(T), snaps = 0;
+  int ty = lua_getfield(L, 1, "checkpoints");
+  if (ty == LUA_TSTRING) {
+    if (strcmp(lua_tostring(L, -1), "all")) luaL_error(L, "%s: option 'checkpoints' must be \"all\" or a number of snapshots, got \"%s\"", fn, lua_tostring(L, -1));
+  } else if (ty != LUA_TNIL) {
+    int isnum;
+    lua_Integer k = lua_tointegerx(L, -1, &isnum);
+    if (!isnum || k < 1) luaL_error(L, "%s: option 'checkpoints' must be \"all\" or a number of snapshots >= 1", fn);
+    snaps = k > N ? 0 : (int)k;
+  } else if ((N + 1) * state_bytes > budget) {
+    snaps = (int)(budget / state_bytes) - 2;
+    if (snaps < 2) snaps = 2;
+  }
+  lua_pop(L, 1);
+  lua_getfield(L, 1, "monitor");
+  int monitor = lua_toboolean(L, -1);
+  lua_pop(L, 1);
+  return lg_reduced_new_time(env, T, nterm, terms, nc, c, snaps, monitor);
+}
+
 static int l_reduced_functional(lua_State *L) {
   gc_point(L, 1);
   const char *fn = "lg.reduced_functional";
   if (!lua_istable(L, 1)) return typeerror(L, fn, 1, "a table {problem=, functional=, control=}");
-  static const char *const keys[] = {"problem", "functional", "control", NULL};
+  static const char *const keys[] = {"problem", "functional", "control", "checkpoints", "monitor", NULL};
   check_keys(L, 1, fn, keys);
   lua_getfield(L, 1, "problem");
   ud_prob *up = luaL_testudata(L, -1, MT_PROB);
-  if (!up) return luaL_error(L, "%s: option 'problem' must be a problem (lg.linear_problem or lg.nonlinear_problem), got %s", fn,
-                             luaL_typename(L, -1));
+  lg_time *T = time_of(L, -1);
+  if (!up && !T)
+    return luaL_error(L, "%s: option 'problem' must be a problem (lg.linear_problem, lg.nonlinear_problem or lg.time_problem), "
+                         "got %s", fn, luaL_typename(L, -1));
   int pidx = lua_gettop(L);
   lua_getfield(L, 1, "functional");
   ud_functional *uf = luaL_testudata(L, -1, MT_FUNCTIONAL);
@@ -122,7 +207,14 @@ static int l_reduced_functional(lua_State *L) {
   } else if (lua_isnil(L, cidx)) return luaL_error(L, "%s: option 'control' is required (a discrete function, a parameter or a table of them)", fn);
   else to_control(L, cidx, &c[nc++], fn, 1);
   lg_env *env = get_env(L);
-  lg_reduced *rf = lg_reduced_new(env, up->p, uf->f, nc, c);
+  lg_reduced *rf;
+  if (T) rf = time_reduced(L, T, uf, nc, c, fn);
+  else {
+    if (!uf->f) return luaL_error(L, "%s: a functional with final, running or observed terms is for a time-dependent problem", fn);
+    if (lua_getfield(L, 1, "checkpoints") != LUA_TNIL) return luaL_error(L, "%s: option 'checkpoints' is for a time-dependent problem", fn);
+    lua_pop(L, 1);
+    rf = lg_reduced_new(env, up->p, uf->f, nc, c);
+  }
   if (!rf) return lgerror(L, fn, env);
   int deps[3] = {pidx, fidx, cidx};
   ud_reduced *u = new_ud(L, sizeof *u, MT_REDUCED, 3, deps);
@@ -352,6 +444,19 @@ static int reduced_hessian(lua_State *L) {
   read_direction(L, u->rf, 2, dm, fn);
   raw_hessian(L, u->rf, dm, h, fn);
   return push_riesz(L, u->rf, h, riesz, "hess", fn);
+}
+
+/* rf:stats(): {recomputed = forward steps the last gradient solved beyond the value's march,
+ * states = the states it holds at most} (a time-dependent problem's; 0 and 1 otherwise) */
+static int reduced_stats(lua_State *L) {
+  ud_reduced *u = check_reduced(L, 1, "rf:stats");
+  long rec = 0;
+  int states = 1;
+  lg_time_rf_stats(u->rf, &rec, &states);
+  push_info_table(L, 2);
+  lua_pushinteger(L, rec); lua_setfield(L, -2, "recomputed");
+  lua_pushinteger(L, states ? states : 1); lua_setfield(L, -2, "states");
+  return 1;
 }
 
 static int reduced_state(lua_State *L) {
@@ -859,7 +964,7 @@ void lg_lua_opt_register(lua_State *L) {
   static const luaL_Reg reduced_mm[] = {{"__gc", reduced_gc}, {NULL, NULL}};
   static const luaL_Reg reduced_methods[] = {{"value", reduced_value}, {"derivative", reduced_derivative},
                                              {"gradient", reduced_gradient}, {"hessian", reduced_hessian},
-                                             {"state", reduced_state}, {NULL, NULL}};
+                                             {"state", reduced_state}, {"stats", reduced_stats}, {NULL, NULL}};
   new_mt(L, MT_REDUCED, reduced_mm, reduced_methods);
 }
 

@@ -54,6 +54,8 @@ static const collective collectives[] = {
     {MT_REDUCED, "gradient", "rf:gradient", ALWAYS},
     {MT_REDUCED, "hessian", "rf:hessian", ALWAYS},
     {MT_REDUCED, "state", "rf:state", ALWAYS},
+    {"lg", "time_problem", "lg.time_problem", ALWAYS},
+    {MT_TIME, "solve", "step:solve", ALWAYS},
     {MT_SERIES, "write", "series:write", ALWAYS},
     {MT_MESH, "write", "mesh:write", DIST},
     {MT_MESH, "hmax", "mesh:hmax", DIST},

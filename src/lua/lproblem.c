@@ -356,25 +356,23 @@ void push_problem(lua_State *L, lg_problem *p, int nfield, int nonlinear, int nd
   lua_pop(L, 1);
 }
 
-static int make_problem(lua_State *L, int nonlinear) {
-  gc_point(L, 1);
-  const char *fn = nonlinear ? "lg.nonlinear_problem" : "lg.linear_problem";
-  if (!lua_istable(L, 1)) return typeerror(L, fn, 1, "a table {mesh=, eqn=, bc=, test=, unknown=}");
-  static const char *const keys[] = {"mesh", "eqn", "bc", "test", "unknown", "initial", "symmetric", "prefix", "nullspace", NULL};
+lg_problem *problem_from_table(lua_State *L, const char *fn, int nonlinear, const char *const *keys, int *nfield, int *deps,
+                               int *ndeps) {
+  if (!lua_istable(L, 1)) typeerror(L, fn, 1, "a table {mesh=, eqn=, bc=, test=, unknown=}");
   check_keys(L, 1, fn, keys);
   lua_getfield(L, 1, "mesh");
   ud_mesh *um = luaL_testudata(L, -1, MT_MESH);
-  if (!um) return luaL_error(L, "%s: option 'mesh' must be a mesh, got %s", fn, luaL_typename(L, -1));
+  if (!um) luaL_error(L, "%s: option 'mesh' must be a mesh, got %s", fn, luaL_typename(L, -1));
   int mesh_idx = lua_gettop(L);
   lua_getfield(L, 1, "eqn");
   ud_form *ue = luaL_testudata(L, -1, MT_FORM);
-  if (!ue) return luaL_error(L, "%s: option 'eqn' must be a form (lg.integral(...) + ...), got %s", fn,
+  if (!ue) luaL_error(L, "%s: option 'eqn' must be a form (lg.integral(...) + ...), got %s", fn,
                              luaL_testudata(L, -1, MT_BC) ? "a boundary condition" : luaL_typename(L, -1));
   int eqn_idx = lua_gettop(L);
   int test[KER_MAXFIELD], unk[KER_MAXFIELD];
   int nt = check_symbols(L, 1, "test", FK_TEST, test, fn);
   int nu = check_symbols(L, 1, "unknown", FK_UNKNOWN, unk, fn);
-  if (nt != nu) return luaL_error(L, "%s: %d test functions for %d unknowns", fn, nt, nu);
+  if (nt != nu) luaL_error(L, "%s: %d test functions for %d unknowns", fn, nt, nu);
   lua_getfield(L, 1, "symmetric");
   int sym = lua_toboolean(L, -1);
   lua_pop(L, 1);
@@ -386,7 +384,7 @@ static int make_problem(lua_State *L, int nonlinear) {
   if (nty == LUA_TSTRING) {
     lua_getfield(L, 1, "nullspace");
     const char *k = lua_tostring(L, -1);
-    if (strcmp(k, "rigid")) return luaL_error(L, "%s: option 'nullspace' must be an unknown, a table of unknowns or \"rigid\", got \"%s\"", fn, k);
+    if (strcmp(k, "rigid")) luaL_error(L, "%s: option 'nullspace' must be an unknown, a table of unknowns or \"rigid\", got \"%s\"", fn, k);
     lua_pop(L, 1);
     rigid = 1;
   } else if (nty != LUA_TNIL) {
@@ -394,7 +392,7 @@ static int make_problem(lua_State *L, int nonlinear) {
     for (int i = 0; i < nnull; i++) {
       int found = 0;
       for (int j = 0; j < nu; j++) found |= unk[j] == null_fields[i];
-      if (!found) return luaL_error(L, "%s: option 'nullspace' lists %s, which is not one of the unknowns", fn, expr_func_get(get_env(L)->c, null_fields[i])->name);
+      if (!found) luaL_error(L, "%s: option 'nullspace' lists %s, which is not one of the unknowns", fn, expr_func_get(get_env(L)->c, null_fields[i])->name);
     }
   }
   /* last: what raises an error after this frees bc_owned first */
@@ -403,16 +401,29 @@ static int make_problem(lua_State *L, int nonlinear) {
   form *bc_owned = NULL;
   const form *bcf = check_bcs(L, bc_idx, fn, &bc_owned);
   for (int i = 0; ue && i < ue->f->n; i++)
-    if (ue->f->t[i].reg.mesh != um->lm) { form_free(bc_owned); return luaL_error(L, "%s: the equation integrates over a different mesh than 'mesh'", fn); }
+    if (ue->f->t[i].reg.mesh != um->lm) { form_free(bc_owned); luaL_error(L, "%s: the equation integrates over a different mesh than 'mesh'", fn); }
   for (int i = 0; bcf && i < bcf->n; i++)
-    if (bcf->t[i].reg.mesh != um->lm) { form_free(bc_owned); return luaL_error(L, "%s: a boundary condition is on a different mesh than 'mesh'", fn); }
+    if (bcf->t[i].reg.mesh != um->lm) { form_free(bc_owned); luaL_error(L, "%s: a boundary condition is on a different mesh than 'mesh'", fn); }
   lg_env *env = get_env(L);
   lg_problem_spec s = {um->lm, ue->f, bcf, nt, test, unk, nonlinear, sym, prefix, nnull, null_fields, rigid};
   lg_problem *p = lg_problem_new(env, &s);
   form_free(bc_owned);
-  if (!p) return lgerror(L, fn, env);
-  int deps[3] = {mesh_idx, eqn_idx, bc_idx};
-  push_problem(L, p, nt, nonlinear, lua_isnil(L, bc_idx) ? 2 : 3, deps);
+  if (!p) lgerror(L, fn, env);
+  deps[0] = mesh_idx;
+  deps[1] = eqn_idx;
+  deps[2] = bc_idx;
+  *ndeps = lua_isnil(L, bc_idx) ? 2 : 3;
+  *nfield = nt;
+  return p;
+}
+
+static int make_problem(lua_State *L, int nonlinear) {
+  gc_point(L, 1);
+  const char *fn = nonlinear ? "lg.nonlinear_problem" : "lg.linear_problem";
+  static const char *const keys[] = {"mesh", "eqn", "bc", "test", "unknown", "initial", "symmetric", "prefix", "nullspace", NULL};
+  int nt, deps[3], ndeps;
+  lg_problem *p = problem_from_table(L, fn, nonlinear, keys, &nt, deps, &ndeps);
+  push_problem(L, p, nt, nonlinear, ndeps, deps);
   return 1;
 }
 

@@ -6,7 +6,7 @@
 package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
 local T = require "testlib"
 local root = arg[0]:match("(.*/)tests/lua/") or "./"
-local files = {"largs.c", "lexpr.c", "lmesh.c", "lmodule.c", "loperator.c", "lopt.c", "lparallel.c", "lproblem.c", "lrepair.c",
+local files = {"largs.c", "lexpr.c", "lmesh.c", "lmodule.c", "loperator.c", "lopt.c", "lparallel.c", "lproblem.c", "lrepair.c", "ltime.c",
                "launch.c", "main.c"}
 local bad, calls = {}, 0
 -- every call of fn in the file s: its string literals (concatenated, as C does) checked

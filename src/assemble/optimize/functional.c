@@ -10,7 +10,7 @@
  * where every vector is a generated kernel: dJ/du and dJ/dm are the gradient tables of J's
  * integrands (form_gradient_table), and lam^T dR/dm is the gradient with respect to m of the
  * equation with its test functions replaced by the adjoint (form_replace_function). */
-#include "optimize.h"
+#include "optimize_int.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -217,33 +217,9 @@ int lg_form_kernels_eval(lg_env *env, lg_mesh *lm, lg_form_kernels *K, int nextr
 
 /* ---------------------------------------------------------------- reduced functionals */
 
-struct lg_reduced {
-  lg_env *env;
-  lg_problem *p;
-  lg_mesh *lm;
-  form *J;
-  int nc;
-  lg_control c[LG_MAXCONTROL];
-  int nf;
-  lg_field_info fld[KER_MAXFIELD];
-  lg_function *lam[KER_MAXFIELD];   /* the adjoint, one discrete function per state field */
-  form *L;                          /* the equation with its tests replaced by the adjoint */
-  lg_form_kernels *Jval, *dJdu[KER_MAXFIELD], *dJdm[LG_MAXCONTROL], *dLdm[LG_MAXCONTROL];
-  lg_problem *riesz[LG_MAXCONTROL][2]; /* L2 and H1 Gram matrices of field controls */
-  double *rhs, *lamv;
-  int solved;                       /* the state is the one of the current controls */
-  int bcdep[LG_MAXCONTROL];         /* Dirichlet controls: in the essential values (1 affine, 2 not) */
-  int grad_fresh;                   /* the adjoint is the one of the current state */
-  /* Hessian actions (built on first use): directions, tangent, second-order adjoint */
-  int hess_ready;
-  lg_function *dmf[LG_MAXCONTROL];  /* the direction of a field control */
-  int dpar[LG_MAXCONTROL];          /* the direction of a parameter control: a scratch parameter */
-  lg_function *du[KER_MAXFIELD], *dlam[KER_MAXFIELD];
-  lg_form_kernels *tan_rhs[KER_MAXFIELD], *soa_rhs[KER_MAXFIELD], *hD[LG_MAXCONTROL], *hG[LG_MAXCONTROL];
-};
 
 /* F uses func, or its '-' side restriction (interior facets) */
-static int form_uses(lg_env *env, const form *F, int func) {
+int lg_form_uses(lg_env *env, const form *F, int func) {
   expr_func_info *fi = expr_func_get(env->c, func);
   int tw = fi ? fi->twin : -1;
   for (int i = 0; i < F->n; i++) {
@@ -254,7 +230,7 @@ static int form_uses(lg_env *env, const form *F, int func) {
   return 0;
 }
 
-static int form_uses_param(lg_env *env, const form *F, int param) {
+int lg_form_uses_param(lg_env *env, const form *F, int param) {
   for (int i = 0; i < F->n; i++) {
     expr *e = expr_canon(env->c, F->t[i].integrand);
     expr *d = expr_diff(env->c, e, expr_param(env->c, param));
@@ -265,7 +241,7 @@ static int form_uses_param(lg_env *env, const form *F, int param) {
 }
 
 /* a form with each integrand replaced by its derivative with respect to a parameter */
-static form *form_param_derivative(lg_env *env, const form *F, int param) {
+form *lg_form_param_derivative(lg_env *env, const form *F, int param) {
   form *D = form_new();
   if (!D) return NULL;
   expr *pe = expr_param(env->c, param);
@@ -304,6 +280,7 @@ static void hessian_free(lg_reduced *rf) {
 
 void lg_reduced_free(lg_reduced *rf) {
   if (!rf) return;
+  lg_time_rf_free(rf);
   hessian_free(rf);
   lg_form_kernels_free(rf->Jval);
   for (int a = 0; a < rf->nf; a++) {
@@ -326,23 +303,65 @@ void lg_reduced_free(lg_reduced *rf) {
   free(rf);
 }
 
-lg_reduced *lg_reduced_new(lg_env *env, lg_problem *p, const form *J, int nc, const lg_control *c) {
-  if (nc < 1 || nc > LG_MAXCONTROL) { lg_seterr(env, "a reduced functional has 1 to %d controls (got %d)", LG_MAXCONTROL, nc); return NULL; }
-  lg_reduced *rf = calloc(1, sizeof *rf);
-  if (!rf) { lg_seterr(env, "out of memory"); return NULL; }
+int lg_reduced_setup(lg_env *env, lg_reduced *rf, lg_problem *p, int nc, const lg_control *c, const int *skip) {
+  if (nc < 1 || nc > LG_MAXCONTROL) { lg_seterr(env, "a reduced functional has 1 to %d controls (got %d)", LG_MAXCONTROL, nc); return 1; }
   rf->env = env;
   rf->p = p;
   rf->lm = lg_problem_mesh(p);
   rf->nf = lg_problem_fields(p, rf->fld);
   rf->nc = nc;
   memcpy(rf->c, c, sizeof(lg_control) * (size_t)nc);
-  rf->J = form_copy(J);
   int N = lg_problem_size(p);
   rf->rhs = calloc((size_t)N + 1, sizeof(double));
   rf->lamv = calloc((size_t)N + 1, sizeof(double));
-  if (!rf->J || !rf->rhs || !rf->lamv) { lg_seterr(env, "out of memory"); goto fail; }
+  if (!rf->rhs || !rf->lamv) { lg_seterr(env, "out of memory"); return 1; }
   const form *F = lg_problem_equation(p);
-  /* the functional: a number of the state and the controls, no test functions */
+  /* the controls: on the problem's mesh; in the essential values (Dirichlet) only where
+   * their columns are kept */
+  for (int i = 0; i < nc; i++) {
+    int fid = c[i].kind == LG_CONTROL_FIELD ? c[i].f->fid : -1;
+    if (fid >= 0 && c[i].f->mesh != rf->lm) { lg_seterr(env, "control %d lives on a different mesh than the problem", i + 1); return 1; }
+    int dep = lg_problem_bc_dependence(env, p, fid, c[i].param);
+    if (dep < 0) return 1;
+    rf->bcdep[i] = dep;
+    if (dep && lg_problem_bc_symmetric(p)) {
+      lg_seterr(env, "control %d is a Dirichlet control of a problem with symmetric = true: its derivatives need the "
+                     "eliminated columns (use symmetric = false)", i + 1);
+      return 1;
+    }
+  }
+  /* the adjoint functions, and the equation with its tests replaced by them */
+  rf->L = form_new();
+  if (!rf->L) { lg_seterr(env, "out of memory"); return 1; }
+  for (int a = 0; a < rf->nf; a++) {
+    expr_func_info *fu = expr_func_get(env->c, rf->fld[a].unknown);
+    char nm[80];
+    snprintf(nm, sizeof nm, "lambda_%s", fu ? fu->name : "u");
+    rf->lam[a] = lg_function_new(env, rf->lm, (dofmap *)rf->fld[a].dm, nm);
+    if (!rf->lam[a]) return 1;
+  }
+  for (int i = 0; i < F->n; i++) {
+    expr *e = F->t[i].integrand;
+    for (int a = 0; a < rf->nf && e; a++) e = form_replace_function(env->c, e, rf->fld[a].test, rf->lam[a]->fid);
+    if (!e || form_add_term(rf->L, &F->t[i].reg, e, F->t[i].order)) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
+  }
+  for (int i = 0; i < nc; i++) {
+    if (skip && skip[i]) continue;
+    if (c[i].kind == LG_CONTROL_FIELD) {
+      if (!(rf->dLdm[i] = lg_form_kernels_new(env, rf->lm, rf->L, c[i].f->fid, c[i].f->dm))) return 1;
+    } else {
+      form *dL = lg_form_param_derivative(env, rf->L, c[i].param);
+      if (!dL) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
+      rf->dLdm[i] = lg_form_kernels_new(env, rf->lm, dL, -1, NULL);
+      form_free(dL);
+      if (!rf->dLdm[i]) return 1;
+    }
+  }
+  return 0;
+}
+
+int lg_functional_check(lg_env *env, lg_reduced *rf, const form *J) {
+  /* a number of the state and the controls, no test functions */
   for (int i = 0; i < J->n; i++) {
     expr *e = expr_canon(env->c, J->t[i].integrand), *leaf[64];
     int n = expr_collect_fields(env->c, 1, &e, -1, 64, leaf);
@@ -351,83 +370,71 @@ lg_reduced *lg_reduced_new(lg_env *env, lg_problem *p, const form *J, int nc, co
       if (fi && fi->kind == FK_TEST) {
         lg_seterr(env, "the functional contains the test function %s: a functional is a number (lg.integral of "
                        "the state and the controls, without test functions)", fi->name);
-        goto fail;
+        return 1;
       }
       if (fi && fi->kind == FK_UNKNOWN) {
         int ours = 0, base = fi->side ? fi->twin : leaf[k]->i0; /* a '-' side restriction is its function's */
         for (int a = 0; a < rf->nf; a++) ours |= rf->fld[a].unknown == base;
         if (!ours) {
           lg_seterr(env, "the functional contains the unknown %s, which is not an unknown of the problem", fi->name);
-          goto fail;
+          return 1;
         }
       }
     }
     if (J->t[i].reg.mesh && J->t[i].reg.mesh != (void *)rf->lm) {
       lg_seterr(env, "the functional integrates over a region of a different mesh than the problem's");
-      goto fail;
+      return 1;
     }
   }
-  /* the controls: in the equation, the functional or the essential values (Dirichlet) */
-  for (int i = 0; i < nc; i++) {
-    int fid = c[i].kind == LG_CONTROL_FIELD ? c[i].f->fid : -1;
-    if (fid >= 0 && c[i].f->mesh != rf->lm) { lg_seterr(env, "control %d lives on a different mesh than the problem", i + 1); goto fail; }
-    int dep = lg_problem_bc_dependence(env, p, fid, c[i].param);
-    if (dep < 0) goto fail;
-    rf->bcdep[i] = dep;
-    int inF, inJ;
-    if (fid >= 0) {
-      inF = form_uses(env, F, fid);
-      inJ = form_uses(env, J, fid);
+  return 0;
+}
+
+int lg_functional_kernels(lg_env *env, lg_reduced *rf, const form *J, const int *skip, lg_form_kernels **val,
+                          lg_form_kernels **dJdu, lg_form_kernels **dJdm) {
+  if (!(*val = lg_form_kernels_new(env, rf->lm, J, -1, NULL))) return 1;
+  for (int a = 0; a < rf->nf; a++)
+    if (!(dJdu[a] = lg_form_kernels_new(env, rf->lm, J, rf->fld[a].unknown, rf->fld[a].dm))) return 1;
+  for (int i = 0; i < rf->nc; i++) {
+    if (skip && skip[i]) continue;
+    if (rf->c[i].kind == LG_CONTROL_FIELD) {
+      if (!(dJdm[i] = lg_form_kernels_new(env, rf->lm, J, rf->c[i].f->fid, rf->c[i].f->dm))) return 1;
     } else {
-      inF = form_uses_param(env, F, c[i].param);
-      inJ = form_uses_param(env, J, c[i].param);
+      form *dJ = lg_form_param_derivative(env, J, rf->c[i].param);
+      if (!dJ) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
+      dJdm[i] = lg_form_kernels_new(env, rf->lm, dJ, -1, NULL);
+      form_free(dJ);
+      if (!dJdm[i]) return 1;
+    }
+  }
+  return 0;
+}
+
+lg_reduced *lg_reduced_new(lg_env *env, lg_problem *p, const form *J, int nc, const lg_control *c) {
+  lg_reduced *rf = calloc(1, sizeof *rf);
+  if (!rf) { lg_seterr(env, "out of memory"); return NULL; }
+  if (lg_reduced_setup(env, rf, p, nc, c, NULL)) goto fail;
+  if (!(rf->J = form_copy(J))) { lg_seterr(env, "out of memory"); goto fail; }
+  if (lg_functional_check(env, rf, J)) goto fail;
+  /* every control in the equation, the functional or the essential values */
+  const form *F = lg_problem_equation(p);
+  for (int i = 0; i < nc; i++) {
+    int inF, inJ, fid = c[i].kind == LG_CONTROL_FIELD ? c[i].f->fid : -1;
+    if (fid >= 0) {
+      inF = lg_form_uses(env, F, fid);
+      inJ = lg_form_uses(env, J, fid);
+    } else {
+      inF = lg_form_uses_param(env, F, c[i].param);
+      inJ = lg_form_uses_param(env, J, c[i].param);
       if (inF < 0 || inJ < 0) { lg_seterr(env, "%s", expr_error(env->c)); goto fail; }
     }
-    if (!inF && !inJ && !dep) {
+    if (!inF && !inJ && !rf->bcdep[i]) {
       if (fid >= 0) lg_seterr(env, "control %d appears in neither the problem nor the functional", i + 1);
       else lg_seterr(env, "control %d (parameter %s) appears in neither the problem nor the functional", i + 1,
                      expr_param_name(env->c, c[i].param));
       goto fail;
     }
-    if (dep && lg_problem_bc_symmetric(p)) {
-      lg_seterr(env, "control %d is a Dirichlet control of a problem with symmetric = true: its derivatives need the "
-                     "eliminated columns (use symmetric = false)", i + 1);
-      goto fail;
-    }
   }
-  /* the adjoint functions, and the equation with its tests replaced by them */
-  rf->L = form_new();
-  if (!rf->L) { lg_seterr(env, "out of memory"); goto fail; }
-  for (int a = 0; a < rf->nf; a++) {
-    expr_func_info *fu = expr_func_get(env->c, rf->fld[a].unknown);
-    char nm[80];
-    snprintf(nm, sizeof nm, "lambda_%s", fu ? fu->name : "u");
-    rf->lam[a] = lg_function_new(env, rf->lm, (dofmap *)rf->fld[a].dm, nm);
-    if (!rf->lam[a]) goto fail;
-  }
-  for (int i = 0; i < F->n; i++) {
-    expr *e = F->t[i].integrand;
-    for (int a = 0; a < rf->nf && e; a++) e = form_replace_function(env->c, e, rf->fld[a].test, rf->lam[a]->fid);
-    if (!e || form_add_term(rf->L, &F->t[i].reg, e, F->t[i].order)) { lg_seterr(env, "%s", expr_error(env->c)); goto fail; }
-  }
-  /* the kernels, compiled once */
-  if (!(rf->Jval = lg_form_kernels_new(env, rf->lm, J, -1, NULL))) goto fail;
-  for (int a = 0; a < rf->nf; a++)
-    if (!(rf->dJdu[a] = lg_form_kernels_new(env, rf->lm, J, rf->fld[a].unknown, rf->fld[a].dm))) goto fail;
-  for (int i = 0; i < nc; i++) {
-    if (c[i].kind == LG_CONTROL_FIELD) {
-      if (!(rf->dJdm[i] = lg_form_kernels_new(env, rf->lm, J, c[i].f->fid, c[i].f->dm))) goto fail;
-      if (!(rf->dLdm[i] = lg_form_kernels_new(env, rf->lm, rf->L, c[i].f->fid, c[i].f->dm))) goto fail;
-    } else {
-      form *dJ = form_param_derivative(env, J, c[i].param), *dL = form_param_derivative(env, rf->L, c[i].param);
-      if (!dJ || !dL) { form_free(dJ); form_free(dL); lg_seterr(env, "%s", expr_error(env->c)); goto fail; }
-      rf->dJdm[i] = lg_form_kernels_new(env, rf->lm, dJ, -1, NULL);
-      rf->dLdm[i] = lg_form_kernels_new(env, rf->lm, dL, -1, NULL);
-      form_free(dJ);
-      form_free(dL);
-      if (!rf->dJdm[i] || !rf->dLdm[i]) goto fail;
-    }
-  }
+  if (lg_functional_kernels(env, rf, J, NULL, &rf->Jval, rf->dJdu, rf->dJdm)) goto fail;
   return rf;
 fail:
   lg_reduced_free(rf);
@@ -439,6 +446,7 @@ const lg_control *lg_reduced_control(const lg_reduced *rf, int i) { return &rf->
 lg_problem *lg_reduced_problem(const lg_reduced *rf) { return rf->p; }
 void lg_reduced_changed(lg_reduced *rf) { rf->solved = 0; rf->grad_fresh = 0; }
 int lg_reduced_share_state(lg_reduced *rf, const lg_reduced *from) {
+  if (rf->tm || from->tm) return 0; /* a march is not shared (yet) */
   if (rf->solved || !from->solved || rf->p != from->p) return 0;
   rf->solved = 1;
   return 1;
@@ -463,6 +471,7 @@ static int ensure_state(lg_env *env, lg_reduced *rf) {
 }
 
 int lg_reduced_value(lg_env *env, lg_reduced *rf, double *J) {
+  if (rf->tm) return lg_time_value(env, rf, J);
   if (ensure_state(env, rf)) return 1;
   coef_binding st[2 * KER_MAXFIELD];
   int ns = lg_problem_bind_state(rf->p, st);
@@ -470,7 +479,7 @@ int lg_reduced_value(lg_env *env, lg_reduced *rf, double *J) {
 }
 
 /* the derivatives of the essential values for control i: out += s (dg/dm)^T w */
-static int add_bc_transpose(lg_env *env, lg_reduced *rf, int i, const double *w, double s, double *out) {
+int lg_reduced_bc_transpose(lg_env *env, lg_reduced *rf, int i, const double *w, double s, double *out) {
   int *r, *c;
   double *v;
   int n = lg_problem_bc_derivative(env, rf->p, rf->c[i].kind == LG_CONTROL_FIELD ? rf->c[i].f->fid : -1, rf->c[i].param, &r, &c, &v);
@@ -503,7 +512,7 @@ static int add_bc_action(lg_env *env, lg_reduced *rf, int i, const double *dm, d
 
 /* a Dirichlet control's derivative on a distributed mesh: the essential rows added to its
  * owned dofs, which the ghost dofs now take */
-static int dirichlet_ghosts(lg_env *env, lg_reduced *rf, int i, double *v) {
+int lg_reduced_dirichlet_ghosts(lg_env *env, lg_reduced *rf, int i, double *v) {
   if (!rf->lm->dist || !rf->bcdep[i] || rf->c[i].kind != LG_CONTROL_FIELD) return 0;
   return lg_dist_ghosts(env, rf->lm, rf->c[i].f->dm, v);
 }
@@ -526,7 +535,25 @@ int lg_reduced_dot(lg_env *env, lg_reduced *rf, double **a, double **b, double *
   return 0;
 }
 
+int lg_reduced_set_adjoint(lg_env *env, lg_reduced *rf, const double *lam) {
+  /* lam^T dR/dm: the essential rows (u_i - g_i) do not depend on a control in the equation,
+   * so the adjoint enters the equation with those values zero (the test space) */
+  int N = lg_problem_size(rf->p), nbc = lg_problem_essential_rows(rf->p, NULL, 0);
+  int *rows = malloc(sizeof(int) * (size_t)(nbc + 1));
+  double *lam0 = malloc(sizeof(double) * (size_t)N + 1);
+  if (!rows || !lam0) { free(rows); free(lam0); lg_seterr(env, "out of memory"); return 1; }
+  lg_problem_essential_rows(rf->p, rows, nbc);
+  memcpy(lam0, lam, sizeof(double) * (size_t)N);
+  for (int i = 0; i < nbc; i++) lam0[rows[i]] = 0;
+  for (int a = 0; a < rf->nf; a++)
+    memcpy(rf->lam[a]->x, lam0 + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
+  free(rows);
+  free(lam0);
+  return 0;
+}
+
 int lg_reduced_gradient(lg_env *env, lg_reduced *rf, double **g) {
+  if (rf->tm) return lg_time_gradient(env, rf, g);
   if (ensure_state(env, rf)) return 1;
   coef_binding b[3 * KER_MAXFIELD];
   int ns = lg_problem_bind_state(rf->p, b);
@@ -539,19 +566,7 @@ int lg_reduced_gradient(lg_env *env, lg_reduced *rf, double **g) {
   }
   for (int i = 0; i < N; i++) rf->rhs[i] = -rf->rhs[i];
   if (lg_problem_adjoint(env, rf->p, rf->rhs, rf->lamv)) return 1;
-  /* lam^T dR/dm: the essential rows (u_i - g_i) do not depend on a control in the equation,
-   * so the adjoint enters the equation with those values zero (the test space) */
-  int nbc = lg_problem_essential_rows(rf->p, NULL, 0);
-  int *rows = malloc(sizeof(int) * (size_t)(nbc + 1));
-  double *lam0 = malloc(sizeof(double) * (size_t)N + 1);
-  if (!rows || !lam0) { free(rows); free(lam0); lg_seterr(env, "out of memory"); return 1; }
-  lg_problem_essential_rows(rf->p, rows, nbc);
-  memcpy(lam0, rf->lamv, sizeof(double) * (size_t)N);
-  for (int i = 0; i < nbc; i++) lam0[rows[i]] = 0;
-  for (int a = 0; a < rf->nf; a++)
-    memcpy(rf->lam[a]->x, lam0 + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
-  free(rows);
-  free(lam0);
+  if (lg_reduced_set_adjoint(env, rf, rf->lamv)) return 1;
   rf->grad_fresh = 1;
   /* dj/dm = dJ/dm + lam^T dR/dm */
   for (int i = 0; i < rf->nc; i++) {
@@ -565,9 +580,9 @@ int lg_reduced_gradient(lg_env *env, lg_reduced *rf, double **g) {
     }
     for (int k = 0; k < n; k++) g[i][k] += tmp[k];
     /* a Dirichlet control: the essential rows u_r - g_r(m) add -lam_r dg_r/dm */
-    if (rf->bcdep[i] && add_bc_transpose(env, rf, i, rf->lamv, -1, g[i])) { free(tmp); return 1; }
+    if (rf->bcdep[i] && lg_reduced_bc_transpose(env, rf, i, rf->lamv, -1, g[i])) { free(tmp); return 1; }
     free(tmp);
-    if (dirichlet_ghosts(env, rf, i, g[i])) return 1;
+    if (lg_reduced_dirichlet_ghosts(env, rf, i, g[i])) return 1;
   }
   return 0;
 }
@@ -623,7 +638,7 @@ int lg_sensitivity(lg_env *env, lg_problem *p, int param, double *du) {
   lg_mesh *lm = lg_problem_mesh(p);
   lg_field_info fld[KER_MAXFIELD];
   int nf = lg_problem_fields(p, fld), N = lg_problem_size(p);
-  form *dF = form_param_derivative(env, F, param);
+  form *dF = lg_form_param_derivative(env, F, param);
   double *rhs = calloc((size_t)N + 1, sizeof(double));
   if (!dF || !rhs) { form_free(dF); free(rhs); lg_seterr(env, "%s", dF ? "out of memory" : expr_error(env->c)); return 1; }
   coef_binding st[2 * KER_MAXFIELD];
@@ -765,7 +780,7 @@ static int hessian_setup(lg_env *env, lg_reduced *rf) {
       rf->hD[i] = lg_form_kernels_new(env, rf->lm, D, rf->c[i].f->fid, rf->c[i].f->dm);
       rf->hG[i] = rf->hD[i] ? lg_form_kernels_new(env, rf->lm, G, rf->c[i].f->fid, rf->c[i].f->dm) : NULL;
     } else {
-      form *dD = form_param_derivative(env, D, rf->c[i].param), *dG = form_param_derivative(env, G, rf->c[i].param);
+      form *dD = lg_form_param_derivative(env, D, rf->c[i].param), *dG = lg_form_param_derivative(env, G, rf->c[i].param);
       rf->hD[i] = dD ? lg_form_kernels_new(env, rf->lm, dD, -1, NULL) : NULL;
       rf->hG[i] = dG && rf->hD[i] ? lg_form_kernels_new(env, rf->lm, dG, -1, NULL) : NULL;
       if (!dD || !dG) lg_seterr(env, "%s", expr_error(env->c));
@@ -783,6 +798,11 @@ static int hessian_setup(lg_env *env, lg_reduced *rf) {
 }
 
 int lg_reduced_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
+  if (rf->tm) {
+    lg_seterr(env, "Hessian actions of a time-dependent reduced functional are not available yet (gradients are): use a "
+                   "quasi-Newton method (lmvm, blmvm)");
+    return 1;
+  }
   if (hessian_setup(env, rf)) return 1;
   if (!rf->grad_fresh || !rf->solved) { /* the first-order adjoint at the current controls */
     double *g[LG_MAXCONTROL];
@@ -836,8 +856,8 @@ int lg_reduced_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
     rc = !tmp || lg_form_kernels_eval(env, rf->lm, rf->hD[i], ns, st, out[i]) || lg_form_kernels_eval(env, rf->lm, rf->hG[i], ns, st, tmp);
     if (!rc)
       for (int k = 0; k < n; k++) out[i][k] += tmp[k];
-    if (!rc && rf->bcdep[i]) rc = add_bc_transpose(env, rf, i, dlr, -1, out[i]);
-    if (!rc) rc = dirichlet_ghosts(env, rf, i, out[i]);
+    if (!rc && rf->bcdep[i]) rc = lg_reduced_bc_transpose(env, rf, i, dlr, -1, out[i]);
+    if (!rc) rc = lg_reduced_dirichlet_ghosts(env, rf, i, out[i]);
     free(tmp);
   }
   free(dlr);

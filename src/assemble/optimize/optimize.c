@@ -39,9 +39,7 @@ typedef struct {
   int failed, evals, hess_failed, hmults;
   double *xh;       /* the point of the Hessian (TAO's variables) */
   double *dm[LG_MAXCONTROL], *hd[LG_MAXCONTROL];
-  int nstep;
-  double *times;
-  char **files;
+  lg_series *series;           /* the controls per iteration (o->series) */
   double *cg[LG_MAXCONTROL]; /* a constraint's gradient */
   Tao outer;                 /* almm hands its monitors to its subsolver: report the outer one */
   double *xlast;             /* almm: the point last set (the objective and the constraints
@@ -262,25 +260,8 @@ static int write_step(opt_ctx *C, int it) {
     expr_func_info *fi = expr_func_get(C->env->c, ci->f->fid);
     fl[nf++] = (mesh_field){fi ? fi->name : "m", 1, ci->f->dm->degree == 0, ci->f->x};
   }
-  size_t l = strlen(C->o->series);
-  char *file = malloc(l + 32);
-  double *nt = realloc(C->times, sizeof(double) * (size_t)(C->nstep + 1));
-  if (nt) C->times = nt;
-  char **nf2 = realloc(C->files, sizeof(char *) * (size_t)(C->nstep + 1));
-  if (nf2) C->files = nf2;
-  if (!file || !nt || !nf2) { free(file); lg_seterr(C->env, "out of memory"); return 1; }
-  /* every rank holds the same controls: a .vtu by rank 0, or under mpiexec a .pvtu of a
-   * piece per rank */
-  int size = lg_mpi_size();
-  snprintf(file, l + 32, "%.*s_%04d.%s", (int)(l > 4 ? l - 4 : l), C->o->series, it, size > 1 ? "pvtu" : "vtu");
-  char err[MESH_ERRLEN] = "";
-  if (lg_write_vtu(C->env, c->f->mesh, file, nf, fl, VTU_BINARY, size > 1 ? size : 0, err)) { lg_seterr(C->env, "%s", err); free(file); return 1; }
-  C->files[C->nstep] = file;
-  C->times[C->nstep] = it;
-  C->nstep++;
-  int rc = lg_mpi_rank() == 0 ? mesh_write_pvd(C->o->series, C->nstep, C->times, C->files, err) : 0;
-  if (lg_root_result(rc, err, sizeof err)) { lg_seterr(C->env, "%s", err); return 1; }
-  return 0;
+  if (!C->series && !(C->series = lg_series_new(C->env, C->o->series))) return 1;
+  return lg_series_write(C->env, C->series, c->f->mesh, nf, fl, it);
 }
 
 /* the monitor's context is a PetscContainer holding the opt_ctx: TAOALMM hands its monitors
@@ -663,9 +644,7 @@ done:
   if (AI) MatDestroy(&AI);
   if (AE) MatDestroy(&AE);
   free(C.sq);
-  for (int i = 0; i < C.nstep; i++) free(C.files[i]);
-  free(C.files);
-  free(C.times);
+  lg_series_free(C.series);
 done_early:
   for (int i = 0; i < C.nc; i++) { free(C.g[i]); free(C.dm[i]); free(C.hd[i]); free(C.cg[i]); free(C.idx[i]); }
   free(C.xh);

@@ -91,4 +91,31 @@ typedef struct {
  * functional, or TAO not converging. */
 int lg_minimize(lg_env *env, lg_reduced *rf, const lg_minimize_opts *o, lg_minimize_info *info);
 
+/* ---- time-dependent reduced functionals (time_adjoint.c) */
+/* the functional's terms: at the final time, running (the trapezoidal rule over the steps'
+ * times: dt/2 at t0 and t1, dt between), at a step's time (an observation), or at the
+ * initial state (the only terms that may read the previous functions: a regularization of
+ * an initial-state control) */
+enum { LG_TJ_FINAL, LG_TJ_RUNNING, LG_TJ_AT, LG_TJ_INITIAL };
+#define LG_TIME_MAXTERMS 16
+typedef struct {
+  const form *J;
+  int kind;
+  double at;
+} lg_time_term;
+/* j(m) = J(u^0 .. u^N, m) of the march of T (problem.h, lg_time): the controls are fields
+ * or parameters the step or the terms read, and initial states (a previous function of T);
+ * checkpoints 0 keeps every state, s >= 1 takes s snapshots (binomial checkpointing, the
+ * initial state's included; s >= N + 1 keeps every state). monitor: a line per 100 steps of
+ * each sweep. lg_reduced_value, lg_reduced_gradient and what uses them (lg_minimize) work on
+ * it as on a steady reduced functional; Hessian actions are not available yet */
+lg_reduced *lg_reduced_new_time(lg_env *env, lg_time *T, int nterm, const lg_time_term *terms, int nc, const lg_control *c,
+                                int checkpoints, int monitor);
+/* the last gradient's forward steps beyond the value's march, and the states it holds at
+ * most (snapshots + 2, or N + 1) */
+void lg_time_rf_stats(const lg_reduced *rf, long *recomputed, int *states);
+/* Griewank and Walther's minimal number of forward steps of a reversal of l steps with s
+ * snapshots, t(l, s) = r l - C(s + r, s + 1), r the least with C(s + r, s) >= l */
+long lg_revolve_steps(long l, int s);
+
 #endif

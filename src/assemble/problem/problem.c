@@ -1161,3 +1161,7 @@ int lg_problem_bind_state(const lg_problem *p, coef_binding *b) {
   return lg_problem_bind_unknowns((lg_problem *)p, p->solution, b);
 }
 
+int lg_problem_bind_values(const lg_problem *p, const double *u, coef_binding *b) {
+  return lg_problem_bind_unknowns((lg_problem *)p, u, b);
+}
+

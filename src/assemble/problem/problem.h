@@ -84,6 +84,18 @@ int lg_problem_row_owned(const lg_problem *p, int r);
 /* bindings of the unknowns (and of their '-' side copies, interior facets) to the last solution:
  * up to 2 per unknown; returns how many */
 int lg_problem_bind_state(const lg_problem *p, coef_binding *b);
+/* the problem's last solution set to u (N values), as if solved at the current values of
+ * the functions and parameters it reads (a step of a time-dependent problem restored from
+ * a checkpoint, for its adjoint): the next adjoint or tangent solve uses the Jacobian at u.
+ * A linear problem's matrix is assembled and factored again only when its fingerprint
+ * changed; a nonlinear problem's Jacobian is assembled at u by the next such solve */
+int lg_problem_restore(lg_env *env, lg_problem *p, const double *u);
+/* bindings of the unknowns (and their '-' side copies) to the values u (N values in the
+ * problem's numbering); returns how many (up to 2 per unknown) */
+int lg_problem_bind_values(const lg_problem *p, const double *u, coef_binding *b);
+/* never solve with a kept factor of an earlier matrix (solver.h, lg_keep): every solve of
+ * the same data gives the same bits, as replayed time steps must */
+void lg_problem_replayable(lg_problem *p);
 /* the adjoint: (dR/du)^T lam = rhs at the last solution (N values each), R the discrete
  * residual whose essential rows are u_i - g_i */
 int lg_problem_adjoint(lg_env *env, lg_problem *p, const double *rhs, double *lam);
@@ -105,5 +117,52 @@ int lg_problem_dense_matrix(lg_env *env, lg_problem *p, double *dense, int n);
 /* reassemble the matrix only (benchmarks); returns milliseconds */
 int lg_problem_assemble_matrix(lg_env *env, lg_problem *p, double *ms);
 long lg_problem_nnz(const lg_problem *p);
+
+/* ---- time-dependent problems (time.c) */
+/* a step problem R(u_{n+1}; u_n[, u_{n-1}], t) = 0 (its unknowns the new state, the
+ * previous states discrete functions it reads: prev[level][field], level 0 u_n) marched
+ * from t0 by nsteps steps of dt; the time parameter (or -1) is set to each step's new
+ * time t0 + k dt before it is solved. The step problem's kept factorizations are turned
+ * off (lg_problem_replayable): a step solved again gives the same bits */
+#define LG_TIME_MAXLEV 2
+typedef struct lg_time lg_time;
+typedef struct {
+  lg_problem *step;
+  int nlev;
+  lg_function *prev[LG_TIME_MAXLEV][KER_MAXFIELD];
+  int time_param;
+  double t0, dt;
+  int nsteps;
+} lg_time_spec;
+lg_time *lg_time_new(lg_env *env, const lg_time_spec *s);
+void lg_time_free(lg_time *T);
+/* called before step k is solved, after the time parameter is set to t (k = 1 .. nsteps):
+ * what changes from step to step (per-step controls, a script's before_step); nonzero with
+ * the message in env stops the march */
+typedef int (*lg_time_hook)(lg_env *env, void *ud, int k, double t);
+void lg_time_set_hook(lg_time *T, lg_time_hook hook, void *ud);
+lg_problem *lg_time_step_problem(const lg_time *T);
+int lg_time_levels(const lg_time *T);
+int lg_time_nsteps(const lg_time *T);
+double lg_time_dt(const lg_time *T);
+double lg_time_at(const lg_time *T, int k);      /* t0 + k dt */
+long lg_time_steps_solved(const lg_time *T);     /* steps solved since it was made */
+lg_function *lg_time_previous(const lg_time *T, int lev, int field);
+/* the march's state X_n: the previous functions' values after step n, level after level,
+ * field after field (lg_time_state_size values); lg_time_unknowns puts level 0 of X into
+ * the step problem's numbering (u, lg_problem_size values) */
+int lg_time_state_size(const lg_time *T);
+void lg_time_get_state(const lg_time *T, double *X);
+void lg_time_set_state(lg_time *T, const double *X);
+void lg_time_unknowns(const lg_time *T, const double *X, double *u);
+/* a march: lg_time_begin keeps the previous functions' values and the time parameter,
+ * lg_time_end puts them back (the march's initial state: what the script gave) */
+int lg_time_begin(lg_env *env, lg_time *T);
+void lg_time_end(lg_env *env, lg_time *T);
+/* step k from the current state: the time parameter and the hook (lg_time_prepare; k = 0:
+ * the time parameter at t0 only, for what is evaluated at the initial state), the
+ * step problem solved from level 0 as its initial guess, the levels shifted */
+int lg_time_prepare(lg_env *env, lg_time *T, int k);
+int lg_time_step(lg_env *env, lg_time *T, int k, lg_solve_info *info);
 
 #endif

@@ -127,6 +127,7 @@ struct lg_problem {
   double *solution;   /* the last solution (N), for adjoints */
   int have_solution;
   unsigned long solved_geometry; /* the mesh's geometry count at the last solve */
+  int no_keep;        /* never solve with a kept factor of an earlier matrix (lg_problem_replayable) */
   form *eqn, *bcf;    /* copies of the forms, for derived operators */
   int test[KER_MAXFIELD], unk[KER_MAXFIELD];
   int matrix_ready;   /* lg_problem_solve_vector: the matrix is assembled and factored */

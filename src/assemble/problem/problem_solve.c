@@ -377,7 +377,7 @@ static int keep_bc_columns(lg_env *env, lg_problem *p) {
 /* whether a solve with a matrix other than the factored one may iterate with the old factor
  * (solver.h, lg_keep): linear problems, unless -lugal_keep_factor 0 */
 static int keep_usable(lg_env *env, lg_problem *p) {
-  return !p->nonlinear && !env->no_keep_factor && lg_keep_usable(&p->keep, p->ksp, p->prefix);
+  return !p->nonlinear && !env->no_keep_factor && !p->no_keep && lg_keep_usable(&p->keep, p->ksp, p->prefix);
 }
 
 /* b = -R(0): the right-hand side's owned part (a parallel run assembles the whole-length
@@ -828,7 +828,7 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   }
   if (!ierr && !kept && stale) lg_keep_factored(&p->keep, ksp);
   /* the next solve's initial guess, where a factor may be kept */
-  if (!ierr && !p->nonlinear && !env->no_keep_factor && lg_keep_applies(ksp, p->prefix))
+  if (!ierr && !p->nonlinear && !env->no_keep_factor && !p->no_keep && lg_keep_applies(ksp, p->prefix))
     ierr = lg_keep_remember(&p->keep, transpose, l);
   if (!ierr && reason >= 0 && transpose && scale_essential(env, p, l, D)) ierr = PETSC_ERR_LIB;
   if (!ierr && reason >= 0 && lg_problem_vec_get(env, p, l, lam)) ierr = PETSC_ERR_LIB;
@@ -844,6 +844,41 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   }
   for (int i = 0; i < p->N; i++)
     if (!isfinite(lam[i])) { lg_seterr(env, "%s produced non-finite values", what); return 1; }
+  return 0;
+}
+
+void lg_problem_replayable(lg_problem *p) { p->no_keep = 1; }
+
+int lg_problem_restore(lg_env *env, lg_problem *p, const double *u) {
+  if (lg_mesh_check(env, p->lm) || lg_problem_follow_geometry(env, p)) return 1;
+  if (p->nonlinear) {
+    if (!p->snes) { lg_seterr(env, "a nonlinear problem is restored after its first solve"); return 1; }
+    p->adj_stale = 1; /* the Jacobian at u, made by the next adjoint or tangent solve */
+  } else {
+    /* the matrix at the current coefficients, as a solve would make it (solve_linear): kept
+     * while its fingerprint holds (a step whose matrix does not change in time: no
+     * assembly and no factorization per step) */
+    memset(p->state, 0, sizeof(double) * (size_t)p->N);
+    uint64_t fp = matrix_fingerprint(env, p);
+    if (!(fp && fp == p->matrix_fp && p->ksp)) {
+      p->matrix_fp = 0;
+      p->matrix_ready = 0;
+      if (lg_problem_assemble_into(env, p, p->state, p->A) || essential_diagonal(env, p, &p->bc_diag)) return 1;
+      if (lg_problem_compute_bcs(env, p)) return 1;
+      if (p->bc_symmetric) {
+        if (keep_bc_columns(env, p)) return 1;
+        PCHK(MatZeroRowsColumns(p->A, p->nown, p->own_rows, p->bc_diag, NULL, NULL), "MatZeroRowsColumns");
+      } else PCHK(MatZeroRows(p->A, p->nown, p->own_rows, p->bc_diag, NULL, NULL), "MatZeroRows");
+      if (ensure_ksp(env, p)) return 1;
+      PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
+      PCHK(lg_lu_prepare(p->ksp, p->A, p->own_rows, p->nown, p->prefix, 1), "the factorization's choice");
+      p->keep.stale = 1; /* the PC's factor is an earlier matrix's: the next solve refactors */
+      p->matrix_fp = fp;
+    } else if (lg_problem_compute_bcs(env, p)) return 1;
+  }
+  memcpy(p->solution, u, sizeof(double) * (size_t)p->N);
+  p->have_solution = 1;
+  p->solved_geometry = p->lm->geometry;
   return 0;
 }
 

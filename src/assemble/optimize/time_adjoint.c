@@ -1,0 +1,543 @@
+/* time_adjoint.c — reduced functionals of time-dependent problems (problem/time.c), without a
+ * tape: the adjoint of every step is derived from the step's form as for a steady problem.
+ *
+ * The march: X_0 (the previous functions as given), and for n = 1 .. N the step residual
+ * R_n(u^n; X_{n-1}, t_n, m) = 0 whose solution u^n shifts into X_n. The functional is
+ *   J = sum_k sum_terms w(term, k) J_term(u^k, m),
+ * a final term (w = 1 at k = N), running terms (the trapezoidal rule: dt/2 at k = 0 and N, dt
+ * between) and observations at given step times (w = 1 at that step). The backward sweep,
+ * n = N .. 1, with the step's inputs restored (its previous states, time, hook):
+ *   (dR_n/du^n)^T lam^n = -sum_terms w(term, n) dJ_term/du(u^n) - pending_n,
+ * where pending_n collects (dR_{n+1+j}/d prev_j)^T lam^{n+1+j} from the later steps that read
+ * u^n as their level-j previous state (each computed when its step is swept, as the
+ * gradient of the step's form with its tests replaced by the adjoint, with respect to that
+ * previous function). The gradient: dj/dm = sum_n lam^n^T dR_n/dm + sum_k w dJ/dm, and for an
+ * initial state (a previous function as a control) the pending vectors that reach step 0.
+ *
+ * Checkpoints: every state (checkpoints = 0), or binomial checkpointing (Griewank and
+ * Walther's revolve) with s snapshots: the reversal of n steps from a snapshot of X_a splits
+ * at the m that minimizes m + t(n - m, s - 1) + t(m, s), t the minimal number of forward
+ * steps t(l, s) = r l - C(s + r, s + 1), r the least with C(s + r, s) >= l. The adjoint of
+ * step n needs X_{n-1} and X_n: the second is held from the step swept before (its input),
+ * and the value's march leaves the snapshots of the first descent, X_{N-1} and X_N, so that
+ * a gradient after its value recomputes t(N, s) - N + 1 forward steps, the least any schedule
+ * with s snapshots can. */
+#include "optimize_int.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct {
+  form *J;
+  int kind;
+  int atk;                 /* LG_TJ_AT: the step */
+  lg_form_kernels *val, *dJdu[KER_MAXFIELD], *dJdm[LG_MAXCONTROL];
+} tj_term;
+
+struct lg_time_rf {
+  lg_time *T;
+  int nterm;
+  tj_term t[LG_TIME_MAXTERMS];
+  int nlev, S, N;          /* levels, state size, steps */
+  lg_form_kernels *dLdprev[LG_TIME_MAXLEV][KER_MAXFIELD]; /* lam^T dR/d prev_j[b] */
+  int ic[LG_MAXCONTROL];   /* a control that is an initial state: level * KER_MAXFIELD + field, else -1 */
+  const int *skip_ic;      /* ic[i] >= 0 (construction only) */
+  int snaps;               /* 0: every state kept; else the snapshots of the binomial schedule */
+  /* the states: every one (all[0 .. N]), or the snapshots (slot[k] holds X_{slot_at[k]}, -1
+   * free), the held X_{k} and the working X_{k-1} the value's march leaves */
+  double **all;
+  double **slot;
+  int *slot_at;
+  double *held, *work;
+  int held_at, work_at;
+  double *u, *rhs, *tmp, *pend[LG_TIME_MAXLEV + 1], *dX0;
+  double **g;              /* the gradient being summed (the caller's) */
+  double J;
+  int fresh;               /* J and the stored states are those of the current controls */
+  long recomputed;         /* forward steps the last gradient solved */
+  int monitor;
+};
+
+/* ---------------------------------------------------------------- the binomial schedule */
+
+long lg_revolve_steps(long l, int s) {
+  if (l <= 1) return 0;
+  if (s < 1) return -1;
+  if (s == 1) return l * (l - 1) / 2;
+  /* r: the least with C(s + r, s) >= l; beta = C(s + r, s) */
+  long r = 0;
+  double beta = 1;
+  while (beta < (double)l) {
+    r++;
+    beta = beta * (double)(s + r) / (double)r;
+  }
+  /* C(s + r, s + 1) = C(s + r, s) r / (s + 1) */
+  double c = beta * (double)r / (double)(s + 1);
+  return (long)llround((double)r * (double)l - c);
+}
+
+/* the split of a reversal of n steps with s snapshots (n >= 2, s >= 2): the m of least
+ * m + t(n - m, s - 1) + t(m, s), the largest of those (the fewest steps left below) */
+static int best_split(int n, int s) {
+  long best = -1;
+  int at = 1;
+  for (int m = 1; m < n; m++) {
+    long c = m + lg_revolve_steps(n - m, s - 1) + lg_revolve_steps(m, s);
+    if (best < 0 || c <= best) { best = c; at = m; }
+  }
+  return at;
+}
+
+/* ---------------------------------------------------------------- weights and evaluation */
+
+static double weight(const lg_time_rf *R, const tj_term *t, int k) {
+  if (t->kind == LG_TJ_FINAL) return k == R->N ? 1 : 0;
+  if (t->kind == LG_TJ_AT) return k == t->atk ? 1 : 0;
+  if (t->kind == LG_TJ_INITIAL) return k == 0 ? 1 : 0;
+  double dt = lg_time_dt(R->T);
+  return k == 0 || k == R->N ? 0.5 * dt : dt;
+}
+
+/* the terms' value at step k, from the state X_k (its level 0: the unknowns u^k) */
+static int value_at(lg_env *env, lg_reduced *rf, int k, const double *X, double *J) {
+  lg_time_rf *R = rf->tm;
+  lg_time_unknowns(R->T, X, R->u);
+  coef_binding b[2 * KER_MAXFIELD];
+  int nb = lg_problem_bind_values(rf->p, R->u, b);
+  for (int i = 0; i < R->nterm; i++) {
+    double w = weight(R, &R->t[i], k), v;
+    if (w == 0) continue;
+    if (lg_form_kernels_eval(env, rf->lm, R->t[i].val, nb, b, &v)) return 1;
+    *J += w * v;
+  }
+  return 0;
+}
+
+/* ---------------------------------------------------------------- the forward march */
+
+static int monitor_line(lg_env *env, const lg_time_rf *R, int k, const char *what) {
+  (void)env;
+  if (R->monitor && lg_mpi_rank() == 0 && (k == R->N || k % 100 == 0)) {
+    printf("%s: step %d of %d (t = %.6g)\n", what, k, R->N, lg_time_at(R->T, k));
+    fflush(stdout);
+  }
+  return 0;
+}
+
+/* a snapshot slot for X_k: the first free one */
+static double *take_slot(lg_time_rf *R, int k) {
+  for (int i = 0; i < R->snaps; i++)
+    if (R->slot_at[i] < 0) { R->slot_at[i] = k; return R->slot[i]; }
+  return NULL;
+}
+
+static void free_slot(lg_time_rf *R, int k) {
+  for (int i = 0; i < R->snaps; i++)
+    if (R->slot_at[i] == k) R->slot_at[i] = -1;
+}
+
+static double *find_slot(lg_time_rf *R, int k) {
+  for (int i = 0; i < R->snaps; i++)
+    if (R->slot_at[i] == k) return R->slot[i];
+  return NULL;
+}
+
+/* the positions the schedule's first descent snapshots (spine[k] = 1), and where its
+ * innermost reversal starts (one snapshot left, or one step) */
+static void first_descent(const lg_time_rf *R, unsigned char *spine) {
+  int a = 0, n = R->N, s = R->snaps;
+  spine[0] = 1;
+  while (n >= 2 && s >= 2) {
+    int m = best_split(n, s);
+    a += m;
+    n -= m;
+    s--;
+    spine[a] = 1;
+  }
+}
+
+/* the value's march: J, and the states the gradient starts from (every one, or the first
+ * descent's snapshots, X_{N-1} and X_N) */
+static int march(lg_env *env, lg_reduced *rf) {
+  lg_time_rf *R = rf->tm;
+  lg_time *T = R->T;
+  unsigned char *spine = NULL;
+  if (R->snaps) {
+    if (!(spine = calloc((size_t)R->N + 1, 1))) { lg_seterr(env, "out of memory"); return 1; }
+    first_descent(R, spine);
+    for (int i = 0; i < R->snaps; i++) R->slot_at[i] = -1;
+  }
+  R->fresh = 0;
+  if (lg_time_begin(env, T)) { free(spine); return 1; }
+  double J = 0, *X = R->snaps ? R->held : R->all[0];
+  lg_time_get_state(T, X);
+  lg_time_prepare(env, T, 0);
+  if (R->snaps) memcpy(take_slot(R, 0), X, sizeof(double) * (size_t)R->S);
+  int rc = value_at(env, rf, 0, X, &J);
+  lg_solve_info info;
+  for (int k = 1; !rc && k <= R->N; k++) {
+    if (R->snaps && k == R->N) memcpy(R->work, R->held, sizeof(double) * (size_t)R->S); /* X_{N-1} */
+    if ((rc = lg_time_step(env, T, k, &info))) break;
+    X = R->snaps ? R->held : R->all[k];
+    lg_time_get_state(T, X);
+    if (R->snaps && spine[k] && k < R->N) {
+      double *sl = take_slot(R, k);
+      if (sl) memcpy(sl, X, sizeof(double) * (size_t)R->S);
+    }
+    rc = value_at(env, rf, k, X, &J);
+    monitor_line(env, R, k, "forward");
+  }
+  lg_time_end(env, T);
+  free(spine);
+  if (rc) return 1;
+  R->J = J;
+  R->held_at = R->N;
+  R->work_at = R->N - 1;
+  R->fresh = 1;
+  return 0;
+}
+
+/* X_b from X_a (a < b) into out, counting the steps */
+static int advance(lg_env *env, lg_reduced *rf, const double *Xa, int a, int b, double *out) {
+  lg_time_rf *R = rf->tm;
+  lg_time_set_state(R->T, Xa);
+  lg_solve_info info;
+  for (int k = a + 1; k <= b; k++) {
+    if (lg_time_step(env, R->T, k, &info)) return 1;
+    R->recomputed++;
+  }
+  lg_time_get_state(R->T, out);
+  return 0;
+}
+
+/* ---------------------------------------------------------------- one step's adjoint */
+
+/* the adjoint of step n from its inputs X_{n-1} (Xp) and its output X_n (Xn): lam^n, its
+ * terms of the gradient, and what it sends to the earlier steps (pending, dX0) */
+static int adjoint_step(lg_env *env, lg_reduced *rf, int n, const double *Xp, const double *Xn) {
+  lg_time_rf *R = rf->tm;
+  lg_time *T = R->T;
+  lg_problem *p = rf->p;
+  int N = lg_problem_size(p), L = R->nlev;
+  lg_time_set_state(T, Xp);
+  if (lg_time_prepare(env, T, n)) return 1;
+  lg_time_unknowns(T, Xn, R->u);
+  if (lg_problem_restore(env, p, R->u)) return 1;
+  coef_binding b[3 * KER_MAXFIELD];
+  int nb = lg_problem_bind_values(p, R->u, b);
+  /* the right side: -sum w dJ/du(u^n) - pending_n */
+  double *pend = R->pend[n % (L + 1)];
+  for (int i = 0; i < N; i++) R->rhs[i] = -pend[i];
+  memset(pend, 0, sizeof(double) * (size_t)N);
+  for (int i = 0; i < R->nterm; i++) {
+    double w = weight(R, &R->t[i], n);
+    if (w == 0) continue;
+    for (int a = 0; a < rf->nf; a++) {
+      if (lg_form_kernels_eval(env, rf->lm, R->t[i].dJdu[a], nb, b, R->tmp)) return 1;
+      for (int d = 0; d < rf->fld[a].dm->ndof; d++) R->rhs[rf->fld[a].offset + d] -= w * R->tmp[d];
+    }
+  }
+  if (lg_problem_adjoint(env, p, R->rhs, rf->lamv)) {
+    char why[LG_ERRLEN];
+    snprintf(why, sizeof why, "%s", env->err);
+    lg_seterr(env, "the adjoint of step %d (t = %.6g): %s", n, lg_time_at(T, n), why);
+    return 1;
+  }
+  if (lg_reduced_set_adjoint(env, rf, rf->lamv)) return 1;
+  /* the controls' terms: lam^n^T dR_n/dm and the terms' dJ/dm at step n */
+  for (int i = 0; i < rf->nc; i++) {
+    if (R->ic[i] >= 0) continue;
+    int m = lg_reduced_control_size(rf, i);
+    if (lg_form_kernels_eval(env, rf->lm, rf->dLdm[i], nb, b, R->tmp)) return 1;
+    for (int k = 0; k < m; k++) R->g[i][k] += R->tmp[k];
+    for (int t = 0; t < R->nterm; t++) {
+      double w = weight(R, &R->t[t], n);
+      if (w == 0) continue;
+      if (lg_form_kernels_eval(env, rf->lm, R->t[t].dJdm[i], nb, b, R->tmp)) return 1;
+      for (int k = 0; k < m; k++) R->g[i][k] += w * R->tmp[k];
+    }
+    if (rf->bcdep[i] && lg_reduced_bc_transpose(env, rf, i, rf->lamv, -1, R->g[i])) return 1;
+  }
+  /* to the steps that made this one's previous states: level j of X_{n-1} is u^{n-1-j} */
+  for (int j = 0; j < L; j++) {
+    int m = n - 1 - j;
+    for (int a = 0; a < rf->nf; a++) {
+      if (!R->dLdprev[j][a]) continue;
+      if (lg_form_kernels_eval(env, rf->lm, R->dLdprev[j][a], nb, b, R->tmp)) return 1;
+      int nd = rf->fld[a].dm->ndof;
+      if (m >= 1) {
+        double *to = R->pend[m % (L + 1)] + rf->fld[a].offset;
+        for (int d = 0; d < nd; d++) to[d] += R->tmp[d];
+      } else { /* an initial state: X_0's level -m */
+        int off = 0;
+        for (int jj = 0; jj < -m; jj++)
+          for (int aa = 0; aa < rf->nf; aa++) off += rf->fld[aa].dm->ndof;
+        for (int aa = 0; aa < a; aa++) off += rf->fld[aa].dm->ndof;
+        for (int d = 0; d < nd; d++) R->dX0[off + d] += R->tmp[d];
+      }
+    }
+  }
+  monitor_line(env, R, n, "adjoint");
+  return 0;
+}
+
+/* ---------------------------------------------------------------- the reversals */
+
+/* steps a + 1 .. a + n reversed, X_a in a snapshot, R->held = X_{a+n}; ends with R->held =
+ * X_a. s: the snapshots this reversal may use, X_a's included */
+static int reverse(lg_env *env, lg_reduced *rf, int a, int n, int s) {
+  lg_time_rf *R = rf->tm;
+  size_t bytes = sizeof(double) * (size_t)R->S;
+  const double *Xa = find_slot(R, a);
+  if (!Xa) { lg_seterr(env, "internal error: no snapshot of step %d", a); return 1; }
+  if (n == 1) {
+    if (adjoint_step(env, rf, a + 1, Xa, R->held)) return 1;
+    memcpy(R->held, Xa, bytes);
+    R->held_at = a;
+    return 0;
+  }
+  if (s == 1) { /* each step's input from X_a (the value's march left the last one) */
+    for (int k = n; k >= 1; k--) {
+      const double *in = Xa;
+      if (k > 1) {
+        if (R->work_at != a + k - 1 && advance(env, rf, Xa, a, a + k - 1, R->work)) return 1;
+        R->work_at = a + k - 1;
+        in = R->work;
+      }
+      if (adjoint_step(env, rf, a + k, in, R->held)) return 1;
+      memcpy(R->held, in, bytes);
+      R->held_at = a + k - 1;
+    }
+    return 0;
+  }
+  int m = best_split(n, s);
+  if (!find_slot(R, a + m)) {
+    double *sl = take_slot(R, a + m);
+    if (!sl) { lg_seterr(env, "internal error: no free snapshot"); return 1; }
+    if (advance(env, rf, Xa, a, a + m, sl)) return 1;
+  }
+  if (reverse(env, rf, a + m, n - m, s - 1)) return 1;
+  free_slot(R, a + m);
+  return reverse(env, rf, a, m, s);
+}
+
+/* ---------------------------------------------------------------- value and gradient */
+
+int lg_time_value(lg_env *env, lg_reduced *rf, double *J) {
+  lg_time_rf *R = rf->tm;
+  if (!R->fresh || !rf->solved) {
+    if (march(env, rf)) return 1;
+    rf->solved = 1;
+  }
+  *J = R->J;
+  return 0;
+}
+
+int lg_time_gradient(lg_env *env, lg_reduced *rf, double **g) {
+  lg_time_rf *R = rf->tm;
+  double J;
+  if (lg_time_value(env, rf, &J)) return 1;
+  int N = lg_problem_size(rf->p);
+  R->g = g;
+  for (int i = 0; i < rf->nc; i++) memset(g[i], 0, sizeof(double) * (size_t)lg_reduced_control_size(rf, i));
+  for (int l = 0; l <= R->nlev; l++) memset(R->pend[l], 0, sizeof(double) * (size_t)N);
+  memset(R->dX0, 0, sizeof(double) * (size_t)R->S);
+  R->recomputed = 0;
+  lg_time *T = R->T;
+  if (lg_time_begin(env, T)) return 1;
+  int rc = 0;
+  if (R->snaps) rc = reverse(env, rf, 0, R->N, R->snaps);
+  else
+    for (int n = R->N; n >= 1 && !rc; n--) rc = adjoint_step(env, rf, n, R->all[n - 1], R->all[n]);
+  /* step 0: the terms at the initial state (their dJ/du into dX0's level 0, dJ/dm) */
+  const double *X0 = R->snaps ? find_slot(R, 0) : R->all[0];
+  if (!rc && X0) {
+    lg_time_set_state(T, X0);
+    lg_time_prepare(env, T, 0);
+    lg_time_unknowns(T, X0, R->u);
+    coef_binding b[3 * KER_MAXFIELD];
+    int nb = lg_problem_bind_values(rf->p, R->u, b);
+    for (int t = 0; t < R->nterm && !rc; t++) {
+      double w = weight(R, &R->t[t], 0);
+      if (w == 0) continue;
+      for (int a = 0, off = 0; a < rf->nf && !rc; off += rf->fld[a].dm->ndof, a++) {
+        if ((rc = lg_form_kernels_eval(env, rf->lm, R->t[t].dJdu[a], nb, b, R->tmp))) break;
+        for (int d = 0; d < rf->fld[a].dm->ndof; d++) R->dX0[off + d] += w * R->tmp[d];
+      }
+      for (int i = 0; i < rf->nc && !rc; i++) {
+        if (!R->t[t].dJdm[i]) continue; /* an initial state, read only by initial terms */
+        if ((rc = lg_form_kernels_eval(env, rf->lm, R->t[t].dJdm[i], nb, b, R->tmp))) break;
+        for (int k = 0; k < lg_reduced_control_size(rf, i); k++) g[i][k] += w * R->tmp[k];
+      }
+    }
+  }
+  lg_time_end(env, T);
+  /* the initial states' gradients */
+  for (int i = 0; i < rf->nc && !rc; i++) {
+    if (R->ic[i] < 0) continue;
+    int lev = R->ic[i] / KER_MAXFIELD, a = R->ic[i] % KER_MAXFIELD, off = 0;
+    for (int j = 0; j < lev; j++)
+      for (int aa = 0; aa < rf->nf; aa++) off += rf->fld[aa].dm->ndof;
+    for (int aa = 0; aa < a; aa++) off += rf->fld[aa].dm->ndof;
+    for (int d = 0; d < rf->fld[a].dm->ndof; d++) g[i][d] += R->dX0[off + d];
+  }
+  for (int i = 0; i < rf->nc && !rc; i++) rc = lg_reduced_dirichlet_ghosts(env, rf, i, g[i]);
+  /* the stored states are spent (the snapshots were reused): the next gradient marches */
+  if (R->snaps) R->fresh = 0;
+  rf->grad_fresh = !rc;
+  return rc;
+}
+
+void lg_time_rf_stats(const lg_reduced *rf, long *recomputed, int *states) {
+  const lg_time_rf *R = rf->tm;
+  if (recomputed) *recomputed = R ? R->recomputed : 0;
+  if (states) *states = !R ? 0 : R->snaps ? R->snaps + 2 : R->N + 1;
+}
+
+/* ---------------------------------------------------------------- construction */
+
+void lg_time_rf_free(lg_reduced *rf) {
+  lg_time_rf *R = rf->tm;
+  if (!R) return;
+  for (int i = 0; i < R->nterm; i++) {
+    form_free(R->t[i].J);
+    lg_form_kernels_free(R->t[i].val);
+    for (int a = 0; a < KER_MAXFIELD; a++) lg_form_kernels_free(R->t[i].dJdu[a]);
+    for (int c = 0; c < LG_MAXCONTROL; c++) lg_form_kernels_free(R->t[i].dJdm[c]);
+  }
+  for (int j = 0; j < LG_TIME_MAXLEV; j++)
+    for (int a = 0; a < KER_MAXFIELD; a++) lg_form_kernels_free(R->dLdprev[j][a]);
+  if (R->all)
+    for (int k = 0; k <= R->N; k++) free(R->all[k]);
+  if (R->slot)
+    for (int k = 0; k < R->snaps; k++) free(R->slot[k]);
+  free(R->all); free(R->slot); free(R->slot_at); free(R->held); free(R->work);
+  free(R->u); free(R->rhs); free(R->tmp); free(R->dX0);
+  for (int l = 0; l <= LG_TIME_MAXLEV; l++) free(R->pend[l]);
+  free(R);
+  rf->tm = NULL;
+}
+
+/* the functional's terms: checked, copied, their kernels; every control used somewhere */
+static int setup_terms(lg_env *env, lg_reduced *rf, int nterm, const lg_time_term *terms) {
+  lg_time_rf *R = rf->tm;
+  if (nterm < 1 || nterm > LG_TIME_MAXTERMS) {
+    lg_seterr(env, "a time-dependent functional has 1 to %d terms (got %d)", LG_TIME_MAXTERMS, nterm);
+    return 1;
+  }
+  for (int i = 0; i < nterm; i++) {
+    tj_term *t = &R->t[R->nterm];
+    t->kind = terms[i].kind;
+    if (t->kind == LG_TJ_AT) {
+      double x = (terms[i].at - lg_time_at(R->T, 0)) / lg_time_dt(R->T);
+      long k = lround(x);
+      if (!(fabs(x - (double)k) <= 1e-9 * (1 + fabs(x))) || k < 0 || k > R->N) {
+        lg_seterr(env, "an observation at t = %.9g is not at a step's time (t0 + k dt, k = 0 .. %d)", terms[i].at, R->N);
+        return 1;
+      }
+      t->atk = (int)k;
+    }
+    if (!(t->J = form_copy(terms[i].J))) { lg_seterr(env, "out of memory"); return 1; }
+    R->nterm++;
+    if (lg_functional_check(env, rf, t->J)) return 1;
+    /* the previous states are the march's: a functional reads the unknowns (u^k); only an
+     * initial term reads them (their initial values, as the unknowns' there) */
+    for (int j = 0; j < R->nlev && t->kind != LG_TJ_INITIAL; j++)
+      for (int a = 0; a < rf->nf; a++)
+        if (lg_form_uses(env, t->J, lg_time_previous(R->T, j, a)->fid)) {
+          lg_seterr(env, "the functional reads a previous state of the problem (%s): write it in the unknowns, whose value "
+                         "at each step the functional's terms take", expr_func_get(env->c, lg_time_previous(R->T, j, a)->fid)->name);
+          return 1;
+        }
+    if (lg_functional_kernels(env, rf, t->J, t->kind == LG_TJ_INITIAL ? NULL : R->skip_ic, &t->val, t->dJdu, t->dJdm)) return 1;
+  }
+  return 0;
+}
+
+lg_reduced *lg_reduced_new_time(lg_env *env, lg_time *T, int nterm, const lg_time_term *terms, int nc, const lg_control *c,
+                                int checkpoints, int monitor) {
+  lg_reduced *rf = calloc(1, sizeof *rf);
+  lg_time_rf *R = calloc(1, sizeof *R);
+  if (!rf || !R) { free(rf); free(R); lg_seterr(env, "out of memory"); return NULL; }
+  rf->tm = R;
+  R->T = T;
+  R->nlev = lg_time_levels(T);
+  R->N = lg_time_nsteps(T);
+  R->S = lg_time_state_size(T);
+  R->monitor = monitor;
+  lg_problem *p = lg_time_step_problem(T);
+  int nf0 = lg_problem_fields(p, rf->fld);
+  /* the initial states among the controls: not differentiated as fields of the step */
+  for (int i = 0; i < nc && i < LG_MAXCONTROL; i++) {
+    R->ic[i] = -1;
+    for (int j = 0; j < R->nlev; j++)
+      for (int a = 0; a < nf0; a++)
+        if (c[i].kind == LG_CONTROL_FIELD && c[i].f == lg_time_previous(T, j, a)) R->ic[i] = j * KER_MAXFIELD + a;
+  }
+  int skip[LG_MAXCONTROL] = {0};
+  for (int i = 0; i < nc && i < LG_MAXCONTROL; i++) skip[i] = R->ic[i] >= 0;
+  R->skip_ic = skip; /* for the terms' kernels (setup_terms), during construction */
+  if (lg_reduced_setup(env, rf, p, nc, c, skip)) goto fail;
+  for (int i = 0; i < nc; i++)
+    if (R->ic[i] >= 0 && rf->bcdep[i]) {
+      lg_seterr(env, "control %d, an initial state, appears in an essential condition of the step", i + 1);
+      goto fail;
+    }
+  if (setup_terms(env, rf, nterm, terms)) goto fail;
+  /* every control used: in the step, a term, or an essential condition; an initial state
+   * in the step */
+  const form *F = lg_problem_equation(p);
+  for (int i = 0; i < nc; i++) {
+    int used = rf->bcdep[i] != 0, fid = c[i].kind == LG_CONTROL_FIELD ? c[i].f->fid : -1;
+    for (int t = -1; t < R->nterm && !used; t++) {
+      const form *G = t < 0 ? F : R->t[t].J;
+      int u = fid >= 0 ? lg_form_uses(env, G, fid) : lg_form_uses_param(env, G, c[i].param);
+      if (u < 0) { lg_seterr(env, "%s", expr_error(env->c)); goto fail; }
+      used = u;
+    }
+    if (!used) {
+      lg_seterr(env, "control %d appears in neither the step nor the functional", i + 1);
+      goto fail;
+    }
+  }
+  /* lam^T dR/d prev: the step's form with its tests replaced by the adjoint, differentiated
+   * with respect to each previous function it reads */
+  for (int j = 0; j < R->nlev; j++)
+    for (int a = 0; a < rf->nf; a++) {
+      lg_function *f = lg_time_previous(T, j, a);
+      if (!lg_form_uses(env, F, f->fid)) continue;
+      if (!(R->dLdprev[j][a] = lg_form_kernels_new(env, rf->lm, rf->L, f->fid, f->dm))) goto fail;
+    }
+  /* the states */
+  int N = lg_problem_size(p), mx = 0;
+  for (int a = 0; a < rf->nf; a++) mx = rf->fld[a].dm->ndof > mx ? rf->fld[a].dm->ndof : mx;
+  R->u = malloc(sizeof(double) * ((size_t)N + 1));
+  R->rhs = malloc(sizeof(double) * ((size_t)N + 1));
+  R->tmp = malloc(sizeof(double) * ((size_t)(mx > N ? mx : N) + 8));
+  R->dX0 = malloc(sizeof(double) * ((size_t)R->S + 1));
+  int bad = !R->u || !R->rhs || !R->tmp || !R->dX0;
+  for (int l = 0; l <= R->nlev; l++) bad |= !(R->pend[l] = malloc(sizeof(double) * ((size_t)N + 1)));
+  if (checkpoints > 0 && checkpoints < R->N + 1) {
+    R->snaps = checkpoints;
+    R->slot = calloc((size_t)R->snaps, sizeof(double *));
+    R->slot_at = malloc(sizeof(int) * (size_t)R->snaps);
+    R->held = malloc(sizeof(double) * ((size_t)R->S + 1));
+    R->work = malloc(sizeof(double) * ((size_t)R->S + 1));
+    bad |= !R->slot || !R->slot_at || !R->held || !R->work;
+    for (int k = 0; !bad && k < R->snaps; k++) bad |= !(R->slot[k] = malloc(sizeof(double) * ((size_t)R->S + 1)));
+  } else {
+    R->all = calloc((size_t)R->N + 1, sizeof(double *));
+    bad |= !R->all;
+    for (int k = 0; !bad && k <= R->N; k++) bad |= !(R->all[k] = malloc(sizeof(double) * ((size_t)R->S + 1)));
+  }
+  if (bad) {
+    lg_seterr(env, "out of memory for the states of %d steps (%d values each): use fewer checkpoints", R->N, R->S);
+    goto fail;
+  }
+  return rf;
+fail:
+  lg_reduced_free(rf);
+  return NULL;
+}

@@ -1,0 +1,184 @@
+-- Time-dependent problems and their adjoints (src/assemble/problem/time.c,
+-- src/assemble/optimize/time_adjoint.c): step:solve() must march as a hand-written loop of
+-- steady solves does, to the bit, and leave the initial state as it was; gradients of
+-- reduced functionals over the march must pass Taylor tests (rate 2.00 +- 0.05) for linear
+-- and nonlinear steps, backward Euler, Crank-Nicolson and BDF2, a matrix that changes with
+-- time, field, parameter, initial-state and Dirichlet controls, final, running and observed
+-- terms; every checkpoint schedule must give the same gradient (1e-12), and the binomial
+-- schedule must recompute exactly Griewank and Walther's minimal number of forward steps.
+package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
+local T = require "testlib"
+local lg = require "lugal"
+local pi = math.pi
+local x, y = lg.x, lg.y
+
+local mesh = lg.mesh.rectangle{nx = 6, ny = 6}
+local P1 = lg.lagrange(1)
+local v, u = lg.test(P1, "v"), lg.unknown(P1, "u")
+
+local function rate_ok(t, what)
+  local r = t.rates1[#t.rates1]
+  T.check(math.abs(r - 2) < 0.05, "%s: Taylor rate %.3f (want 2.00 +- 0.05)\n%s", what, r, tostring(t))
+  return r
+end
+
+-- Griewank and Walther: t(l, s) = r l - C(s + r, s + 1), r the least with C(s + r, s) >= l
+local function binom(n, k)
+  local c = 1
+  for i = 1, k do c = c * (n - k + i) / i end
+  return c
+end
+local function revolve(l, s)
+  if l <= 1 then return 0 end
+  local r = 0
+  while binom(s + r, s) < l do r = r + 1 end
+  return math.floor(r * l - binom(s + r, s + 1) + 0.5)
+end
+
+-- 1. step:solve() against a hand-written loop of linear solves (the same bits), the initial
+-- state left as it was, the time parameter too
+do
+  local t = lg.parameter("t", -1)
+  local u0 = lg.interpolate(P1, mesh, lg.sin(pi*x)*lg.sin(pi*y), "u0")
+  local dt = 0.1
+  local F = lg.integral(mesh:cells(), (u - u0)/dt*v + 0.3*lg.dot(lg.grad(u), lg.grad(v)) - (1 + t)*x*v)
+  local bc = lg.essential_bc(mesh:boundary(), v*u)
+  local step = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, bc = bc, dt = dt, t1 = 0.5,
+                               time = t, monitor = false}
+  local before = u0:values()
+  local uT, info = step:solve()
+  T.check(info.steps == 5, "steps %d", info.steps)
+  local after = u0:values()
+  for i = 1, #before do T.check(before[i] == after[i], "step:solve() changed the initial state at dof %d", i) end
+  T.check(t:value() == -1, "the time parameter was not restored (%g)", t:value())
+  local w = lg.interpolate(P1, mesh, lg.sin(pi*x)*lg.sin(pi*y), "w")
+  local Fw = lg.integral(mesh:cells(), (u - w)/dt*v + 0.3*lg.dot(lg.grad(u), lg.grad(v)) - (1 + t)*x*v)
+  local prob = lg.linear_problem{mesh = mesh, eqn = Fw, bc = lg.essential_bc(mesh:boundary(), v*u), test = v, unknown = u}
+  for k = 1, 5 do
+    t:set(k*dt)
+    w:assign((prob:solve()))
+  end
+  local a, b = uT:values(), w:values()
+  for i = 1, #a do T.check(a[i] == b[i], "step:solve() differs from the loop at dof %d: %.17g %.17g", i, a[i], b[i]) end
+  local times = step:times()
+  T.close(times[#times], 0.5, 1e-15, "the last step's time")
+  print(string.format("time_problem: 5 steps equal to a loop of solves to the bit, u0 and t kept"))
+end
+
+-- 2. the heat equation by backward Euler and by Crank-Nicolson (the step reads grad u0),
+-- diffusivity rising in time (a new matrix every step), a source f, a parameter kappa and
+-- the initial state as controls, final + running + observed terms; every schedule
+do
+  local t = lg.parameter("t", 0)
+  local kappa = lg.parameter("kappa", 0.4)
+  local u0 = lg.interpolate(P1, mesh, lg.sin(pi*x)*lg.sin(pi*y), "u0")
+  local f = lg.control(P1, mesh, "f", 1 + x)
+  local d = lg.interpolate(P1, mesh, x*y, "d")
+  local dt = 0.05
+  for _, scheme in ipairs{"backward Euler", "Crank-Nicolson"} do
+    local th = scheme == "backward Euler" and 1 or 0.5
+    local A = function(w) return kappa*(1 + t)*lg.dot(lg.grad(w), lg.grad(v)) end
+    local F = lg.integral(mesh:cells(), (u - u0)/dt*v + th*A(u) + (1 - th)*A(u0) - f*(1 + t)*v)
+    local step = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = dt, t1 = 0.5, time = t,
+                                 bc = lg.essential_bc(mesh:boundary(), v*u), monitor = false}
+    local J = lg.functional{final = lg.integral(mesh:cells(), 0.5*(u - d)^2), running = lg.integral(mesh:cells(), 0.5*u^2),
+                            at = {[0.25] = lg.integral(mesh:cells(), u*x)}}
+    local grads = {}
+    for _, ck in ipairs{"all", 4, 2, 1} do
+      local rf = lg.reduced_functional{problem = step, functional = J, control = {f, kappa, u0}, checkpoints = ck}
+      local tt = lg.taylor_test(rf, {1 + x, 0.4, lg.sin(pi*x)*lg.sin(pi*y)}, {x*y, 0.3, x*(1 - x)*y*(1 - y)}, {h = 0.05, steps = 4})
+      local r = rate_ok(tt, scheme .. ", checkpoints " .. tostring(ck))
+      local gf, gk, gu = rf:gradient({1 + x, 0.4, lg.sin(pi*x)*lg.sin(pi*y)}, {riesz = "none"})
+      grads[#grads + 1] = {gf:values(), gk, gu:values(), tostring(ck)}
+      if ck ~= "all" then
+        local want = revolve(10, ck) - 10 + 1
+        T.check(rf:stats().recomputed == want, "%s, %d snapshots: %d forward steps recomputed, the minimum is %d", scheme, ck,
+                rf:stats().recomputed, want)
+      else T.check(rf:stats().recomputed == 0, "every state kept: nothing to recompute") end
+      print(string.format("time adjoint: %s, checkpoints %-3s Taylor rate %.3f, %d steps recomputed, %d states", scheme,
+                          tostring(ck), r, rf:stats().recomputed, rf:stats().states))
+    end
+    for k = 2, #grads do
+      local a, b = grads[1], grads[k]
+      for i = 1, #a[1] do T.close(b[1][i], a[1][i], 1e-12, scheme .. " gradient (f) with checkpoints " .. b[4]) end
+      T.close(b[2], a[2], 1e-12, scheme .. " gradient (kappa) with checkpoints " .. b[4])
+      for i = 1, #a[3] do T.close(b[3][i], a[3][i], 1e-12, scheme .. " gradient (u0) with checkpoints " .. b[4]) end
+    end
+  end
+end
+
+-- 3. a nonlinear step (u_t - div((1 + u^2) grad u) + u^3 = f), BDF2 (two previous states,
+-- both controls), a Dirichlet control (the boundary value a)
+do
+  local a = lg.parameter("a", 0.2)
+  local u0 = lg.interpolate(P1, mesh, 0.2 + x*y, "u0")
+  local u00 = lg.interpolate(P1, mesh, 0.2 + 0.9*x*y, "u00")
+  local f = lg.control(P1, mesh, "g", 1 - y)
+  local dt = 0.1
+  local F = lg.integral(mesh:cells(), (1.5*u - 2*u0 + 0.5*u00)/dt*v + (1 + u^2)*lg.dot(lg.grad(u), lg.grad(v)) + u^3*v - f*v)
+  local step = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = {u0, u00}, eqn = F, dt = dt, steps = 6,
+                               bc = lg.essential_bc(mesh:boundary(), v*(u - a)), nonlinear = true, monitor = false}
+  local _, info = step:solve()
+  T.check(info.iterations >= 12, "Newton iterations %d over 6 steps", info.iterations)
+  local J = lg.functional{final = lg.integral(mesh:cells(), u^2*x), running = lg.integral(mesh:cells(), 0.1*u^2)}
+  local g1
+  for _, ck in ipairs{"all", 3} do
+    local rf = lg.reduced_functional{problem = step, functional = J, control = {f, a, u0, u00}, checkpoints = ck}
+    local tt = lg.taylor_test(rf, {1 - y, 0.2, 0.2 + x*y, 0.2 + 0.9*x*y}, {x, 0.1, x*y*(1 - x), y*(1 - y)}, {h = 0.05, steps = 4})
+    local r = rate_ok(tt, "nonlinear BDF2, checkpoints " .. tostring(ck))
+    local gf, ga, g0, g00 = rf:gradient({1 - y, 0.2, 0.2 + x*y, 0.2 + 0.9*x*y}, {riesz = "none"})
+    if not g1 then g1 = {ga, g0:values()} else
+      T.close(ga, g1[1], 1e-12, "the Dirichlet gradient with 3 snapshots")
+      local b = g0:values()
+      for i = 1, #b do T.close(b[i], g1[2][i], 1e-12, "the initial state's gradient with 3 snapshots") end
+      T.check(rf:stats().recomputed == revolve(6, 3) - 6 + 1, "recomputed %d", rf:stats().recomputed)
+    end
+    print(string.format("time adjoint: nonlinear BDF2 with a Dirichlet control, checkpoints %-3s Taylor rate %.3f", tostring(ck), r))
+  end
+end
+
+-- 4. the binomial schedule recomputes the minimum for several lengths and snapshot counts
+do
+  local u0 = lg.interpolate(P1, mesh, x, "u0")
+  local m = lg.parameter("m", 1)
+  local F = lg.integral(mesh:cells(), (u - u0)*v + 0.01*lg.dot(lg.grad(u), lg.grad(v)) - m*v)
+  for _, c in ipairs{{7, 1}, {12, 2}, {16, 3}, {20, 4}, {33, 5}, {40, 40}} do
+    local l, s = c[1], c[2]
+    local step = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = 1, steps = l, monitor = false}
+    local rf = lg.reduced_functional{problem = step, functional = lg.functional{final = lg.integral(mesh:cells(), u^2)},
+                                     control = m, checkpoints = s}
+    local ga = rf:gradient(1)
+    local rf2 = lg.reduced_functional{problem = step, functional = lg.functional{final = lg.integral(mesh:cells(), u^2)},
+                                      control = m, checkpoints = "all"}
+    T.close(ga, rf2:gradient(1), 1e-12, string.format("%d steps, %d snapshots: gradient", l, s))
+    local want = math.max(0, revolve(l, s) - l + 1)
+    T.check(rf:stats().recomputed == want, "%d steps, %d snapshots: %d recomputed, the minimum is %d", l, s, rf:stats().recomputed, want)
+    print(string.format("revolve: %2d steps, %2d snapshots: %3d forward steps recomputed (t(l, s) - l + 1 = %d)", l, s,
+                        rf:stats().recomputed, want))
+  end
+end
+
+-- 5. refused with a message naming the call
+do
+  local u0 = lg.interpolate(P1, mesh, x, "u0")
+  local F = lg.integral(mesh:cells(), (u - u0)*v + lg.dot(lg.grad(u), lg.grad(v)))
+  T.fails(function() lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = 0.3, t1 = 1} end,
+          "lg.time_problem", "whole number of steps")
+  T.fails(function() lg.time_problem{mesh = mesh, test = v, unknown = u, eqn = F, dt = 0.1, t1 = 1} end, "option 'previous'")
+  T.fails(function() lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = 0.1} end, "'t1'", "'steps'")
+  T.fails(function() lg.time_problem{mesh = mesh, test = v, unknown = u, previous = {u0, u0}, eqn = F, dt = 0.1, steps = 2} end,
+          "the same discrete function")
+  local step = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = 0.1, steps = 3, monitor = false}
+  local f = lg.control(P1, mesh, "f", 1)
+  T.fails(function() lg.reduced_functional{problem = step, functional = lg.functional{final = lg.integral(mesh:cells(), u0*u)},
+                                           control = u0} end, "reads a previous state")
+  T.fails(function() lg.reduced_functional{problem = step, functional = lg.functional{final = lg.integral(mesh:cells(), u)},
+                                           control = f} end, "appears in neither")
+  T.fails(function() lg.reduced_functional{problem = step, functional = lg.functional{final = lg.integral(mesh:cells(), u)},
+                                           control = u0, checkpoints = 0} end, "checkpoints")
+  T.fails(function() lg.reduced_functional{problem = step, functional = lg.functional{at = {[0.15] = lg.integral(mesh:cells(), u)}},
+                                           control = u0} end, "not at a step's time")
+  local rf = lg.reduced_functional{problem = step, functional = lg.functional{final = lg.integral(mesh:cells(), u^2)}, control = u0}
+  T.fails(function() rf:hessian(x) end, "rf:hessian", "time-dependent")
+  print("time_problem: bad input refused with messages")
+end

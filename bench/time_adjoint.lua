@@ -26,7 +26,8 @@ local function hwm()
   local s = io.open("/proc/self/status"):read("a")
   return tonumber(s:match("VmHWM:%s*(%d+)")) / 1024
 end
-rf:gradient(1 + x) -- kernels compiled, solvers set up
+local J1 = rf:value(1 + x)
+rf:gradient() -- kernels compiled, solvers set up
 local tf, tg = {}, {}
 for r = 1, 3 do
   local t0 = lg.wtime()
@@ -39,5 +40,5 @@ end
 table.sort(tf)
 table.sort(tg)
 print(string.format("time_adjoint N=%d steps=%d checkpoints=%s: forward %.3f s, gradient sweep %.3f s (%.2f x the forward), "
-                    .. "%d steps recomputed, %d states held, peak RSS %.0f MB", N, steps, snaps and tostring(snaps) or "all",
-                    tf[2], tg[2], tg[2] / tf[2], rf:stats().recomputed, rf:stats().states, hwm()))
+                    .. "%d steps recomputed, %d states held, peak RSS %.0f MB, J %.12e", N, steps, snaps and tostring(snaps) or "all",
+                    tf[2], tg[2], tg[2] / tf[2], rf:stats().recomputed, rf:stats().states, hwm(), J1))

@@ -39,6 +39,8 @@ typedef struct {
   int degree;
   double *x;            /* ndof values */
   int fid;              /* expr function id (FK_DISCRETE) */
+  int per_step;         /* a control with a value per step of a time-dependent problem (lg.control's option) */
+  void *step_prev;      /* its companion holding the value of the step before (an lg_function), or NULL */
 } lg_function;
 
 lg_mesh *lg_mesh_wrap(mesh *m);

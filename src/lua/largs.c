@@ -385,7 +385,7 @@ static const arity arities[] = {
     {"lg", "nonlinear_problem", 1, "lg.nonlinear_problem"}, {"lg", "options", 1, "lg.options"}, {"lg", "jit", 2, "lg.jit"},
     {"lg", "jit_status", 1, "lg.jit_status"}, {"lg", "stats", 0, "lg.stats"}, {"lg", "wtime", 0, "lg.wtime"},
     {"lg", "rank", 0, "lg.rank"}, {"lg", "size", 0, "lg.size"}, {"lg", "allreduce", 2, "lg.allreduce"},
-    {"lg", "control", 4, "lg.control"}, {"lg", "functional", 1, "lg.functional"},
+    {"lg", "control", 5, "lg.control"}, {"lg", "functional", 1, "lg.functional"},
     {"lg", "reduced_functional", 1, "lg.reduced_functional"}, {"lg", "taylor_test", 4, "lg.taylor_test"},
     {"lg", "minimize", 2, "lg.minimize"}, {"lg", "kkt_problem", 1, "lg.kkt_problem"}, {"lg", "series", 2, "lg.series"},
     {"lg.mesh", "interval", 1, "lg.mesh.interval"}, {"lg.mesh", "rectangle", 1, "lg.mesh.rectangle"},

@@ -30,7 +30,7 @@ static int distributed(const op_space *sp) { return sp->lm && sp->lm->dist; }
 
 /* the space's values as a discrete function (for the gathering and counting of distributed.c) */
 static lg_function as_function(const op_space *sp, double *v) {
-  lg_function f = {sp->lm, (dofmap *)sp->dm, sp->dm ? sp->dm->degree : 0, v, -1};
+  lg_function f = {sp->lm, (dofmap *)sp->dm, sp->dm ? sp->dm->degree : 0, v, -1, 0, NULL};
   return f;
 }
 

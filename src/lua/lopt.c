@@ -25,6 +25,17 @@ typedef struct { lg_reduced *rf; } ud_reduced;
 /* lg.control(basis, mesh, name[, initial]): a discrete function to optimize over */
 static int l_control(lua_State *L) {
   const char *fn = "lg.control";
+  /* the options last: {per_step = true} (a table with that key, not a vector expression) */
+  int per_step = 0, top = lua_gettop(L);
+  if (top >= 4 && lua_istable(L, top) && !luaL_testudata(L, top, MT_EXPR) && lua_getfield(L, top, "per_step") != LUA_TNIL) {
+    lua_pop(L, 1);
+    static const char *const keys[] = {"per_step", NULL};
+    check_keys(L, top, fn, keys);
+    lua_getfield(L, top, "per_step");
+    if (!lua_isboolean(L, -1)) return luaL_error(L, "%s: option 'per_step' must be a boolean", fn);
+    per_step = lua_toboolean(L, -1);
+    lua_settop(L, top - 1);
+  } else if (top >= 4) lua_settop(L, top);
   ud_basis *b = luaL_testudata(L, 1, MT_BASIS);
   if (!b) return typeerror(L, fn, 1, "a basis (lg.lagrange(p))");
   ud_mesh *um = check_mesh(L, 2, fn);
@@ -32,6 +43,7 @@ static int l_control(lua_State *L) {
   lg_env *env = get_env(L);
   lg_function *f = lg_function_new(env, um->lm, lg_mesh_dofmap(env, um->lm, b->degree, b->ncomp, b->disc), name);
   if (!f) return lgerror(L, fn, env);
+  f->per_step = per_step;
   push_function(L, f, 2);
   if (!lua_isnoneornil(L, 4)) {
     ud_func *g = luaL_testudata(L, 4, MT_FUNC);
@@ -44,7 +56,23 @@ static int l_control(lua_State *L) {
       if (lg_interpolate(env, f, e)) return lgerror(L, fn, env);
     }
   }
-  return 1;
+  if (!per_step) return 1;
+  /* the companion: the control's value at the step before (a regularization of its rate,
+   * a Crank-Nicolson source); kept alive by the control */
+  int fidx = lua_gettop(L);
+  char nm[96];
+  snprintf(nm, sizeof nm, "%s_prev", name);
+  lg_function *fp = lg_function_new(env, um->lm, f->dm, nm);
+  if (!fp) return lgerror(L, fn, env);
+  memcpy(fp->x, f->x, sizeof(double) * (size_t)f->dm->ndof);
+  push_function(L, fp, 2);
+  f->step_prev = fp;
+  lua_getiuservalue(L, fidx, 1);
+  lua_pushvalue(L, -2);
+  lua_pushboolean(L, 1);
+  lua_rawset(L, -3);
+  lua_pop(L, 1);
+  return 2;
 }
 
 /* the form at idx checked as a functional's (no test functions) */
@@ -133,9 +161,16 @@ static ud_reduced *check_reduced(lua_State *L, int idx, const char *fn) {
 /* one control from the value at idx: a discrete function or a parameter */
 static int to_control(lua_State *L, int idx, lg_control *c, const char *fn, int k) {
   ud_func *uf = luaL_testudata(L, idx, MT_FUNC);
-  if (uf) { c->kind = LG_CONTROL_FIELD; c->f = uf->f; c->param = -1; return 1; }
+  if (uf) {
+    c->kind = LG_CONTROL_FIELD;
+    c->f = uf->f;
+    c->param = -1;
+    c->per_step = uf->f->per_step;
+    c->fprev = uf->f->step_prev;
+    return 1;
+  }
   ud_expr *ue = luaL_testudata(L, idx, MT_EXPR);
-  if (ue && expr_of(L, ue)->kind == E_PARAM) { c->kind = LG_CONTROL_PARAM; c->f = NULL; c->param = ue->e->i0; return 1; }
+  if (ue && expr_of(L, ue)->kind == E_PARAM) { c->kind = LG_CONTROL_PARAM; c->f = NULL; c->param = ue->e->i0; c->per_step = 0; c->fprev = NULL; return 1; }
   return luaL_error(L, "%s: control %d must be a discrete function (lg.control) or a parameter (lg.parameter), got %s", fn, k,
                     ue ? "an expression" : luaL_typename(L, idx));
 }
@@ -238,37 +273,94 @@ static int reduced_gc(lua_State *L) {
   return 0;
 }
 
-/* set control i from the value at idx (a discrete function of its space, an expression to
- * interpolate, or a number) */
-static void set_control(lua_State *L, lg_reduced *rf, int i, int idx, const char *fn) {
+/* one block (nd dofs) of field control i from the value at idx: a discrete function of its
+ * space, or an expression interpolated (at step k's time for a per-step control: the time
+ * parameter set as the march sets it); what names it in messages */
+static void fill_block(lua_State *L, lg_reduced *rf, int i, int idx, int k, double *out, const char *fn, const char *what) {
+  lg_env *env = get_env(L);
+  const lg_control *c = lg_reduced_control(rf, i);
+  int nd = c->f->dm->ndof;
+  ud_func *g = luaL_testudata(L, idx, MT_FUNC);
+  if (g) {
+    if (g->f->dm != c->f->dm) luaL_error(L, "%s: %s must be a discrete function of the control's basis and mesh (P%d)", fn, what, c->f->degree);
+    if (lg_check_finite(env, g->f->dm, g->f->x, what)) lgerror(L, fn, env);
+    if (out != g->f->x) memcpy(out, g->f->x, sizeof(double) * (size_t)nd);
+    return;
+  }
+  int ok;
+  expr *e = to_expr_opt(L, idx, &ok);
+  if (!ok) typeerror(L, fn, idx, "a discrete function, an expression or a number");
+  e = expr_canon(env->c, e);
+  if (!e) exprerror(L, fn);
+  lg_time *T = lg_reduced_time(rf);
+  lg_function *t = lg_function_new(env, c->f->mesh, c->f->dm, "m");
+  if (!t) lgerror(L, fn, env);
+  int rc = c->per_step && lg_time_begin(env, T);
+  if (!rc && c->per_step) lg_time_prepare(env, T, k);
+  if (!rc) rc = lg_interpolate(env, t, e);
+  if (c->per_step) lg_time_end(env, T);
+  if (!rc) memcpy(out, t->x, sizeof(double) * (size_t)nd);
+  expr_func_forget_user(env->c, t->fid);
+  lg_function_free(t);
+  if (rc) lgerror(L, fn, env);
+}
+
+/* control i's values (lg_reduced_control_size of them) into out from the value at idx: a
+ * parameter's number; a field's function or expression; a per-step control's one value for
+ * every step, or a table of one per step time (N + 1) */
+static void fill_control(lua_State *L, lg_reduced *rf, int i, int idx, double *out, const char *fn, const char *what) {
   lg_env *env = get_env(L);
   const lg_control *c = lg_reduced_control(rf, i);
   if (c->kind == LG_CONTROL_PARAM) {
     int isnum;
     double v = lua_tonumberx(L, idx, &isnum);
-    if (!isnum) luaL_error(L, "%s: the value of control %d (parameter %s) must be a number, got %s", fn, i + 1,
-                           expr_param_name(env->c, c->param), luaL_typename(L, idx));
-    if (!isfinite(v)) luaL_error(L, "%s: the value of control %d is not finite (%f)", fn, i + 1, v);
-    expr_param_values(env->c)[c->param] = v;
-    lg_reduced_changed(rf);
+    if (!isnum) luaL_error(L, "%s: %s (a parameter, %s) must be a number, got %s", fn, what, expr_param_name(env->c, c->param),
+                           luaL_typename(L, idx));
+    if (!isfinite(v)) luaL_error(L, "%s: %s is not finite (%f)", fn, what, v);
+    out[0] = v;
     return;
   }
-  ud_func *g = luaL_testudata(L, idx, MT_FUNC);
-  if (g) {
-    if (g->f == c->f) { lg_reduced_changed(rf); return; }
-    if (g->f->dm != c->f->dm)
-      luaL_error(L, "%s: control %d must be given as a discrete function of its own basis and mesh (P%d)", fn, i + 1, c->f->degree);
-    if (lg_check_finite(env, g->f->dm, g->f->x, "the control")) lgerror(L, fn, env);
-    memcpy(c->f->x, g->f->x, sizeof(double) * (size_t)c->f->dm->ndof);
-  } else {
-    int ok;
-    expr *e = to_expr_opt(L, idx, &ok);
-    if (!ok) typeerror(L, fn, idx, "a control value: a discrete function, an expression or a number");
-    e = expr_canon(env->c, e);
-    if (!e) exprerror(L, fn);
-    if (lg_interpolate(env, c->f, e)) lgerror(L, fn, env);
+  int nb = lg_reduced_control_blocks(rf, i), nd = c->f->dm->ndof;
+  if (nb > 1 && lua_istable(L, idx) && !luaL_testudata(L, idx, MT_EXPR) && !luaL_testudata(L, idx, MT_FUNC)) {
+    if ((int)luaL_len(L, idx) != nb)
+      luaL_error(L, "%s: %s has a value per step time: give one value or %d (t0 .. t1), got %d", fn, what, nb, (int)luaL_len(L, idx));
+    for (int k = 0; k < nb; k++) {
+      lua_geti(L, idx, k + 1);
+      fill_block(L, rf, i, lua_gettop(L), k, out + (size_t)k * (size_t)nd, fn, what);
+      lua_pop(L, 1);
+    }
+    return;
   }
+  for (int k = 0; k < nb; k++) fill_block(L, rf, i, idx, k, out + (size_t)k * (size_t)nd, fn, what);
+}
+
+/* set control i from the value at idx (fill_control) */
+static void set_control(lua_State *L, lg_reduced *rf, int i, int idx, const char *fn) {
+  char what[48];
+  snprintf(what, sizeof what, "the value of control %d", i + 1);
+  fill_control(L, rf, i, idx, lg_reduced_control_values(rf, i), fn, what);
   lg_reduced_changed(rf);
+}
+
+/* a per-step control's blocks as a table of discrete functions (one per step time) on the
+ * stack; other controls push nothing and return 0 */
+static int push_blocks(lua_State *L, lg_reduced *rf, int i, const double *v, const char *prefix, const char *fn) {
+  const lg_control *c = lg_reduced_control(rf, i);
+  if (c->kind != LG_CONTROL_FIELD || !c->per_step) return 0;
+  lg_env *env = get_env(L);
+  int nb = lg_reduced_control_blocks(rf, i), nd = c->f->dm->ndof;
+  expr_func_info *fi = expr_func_get(env->c, c->f->fid);
+  lua_createtable(L, nb, 0);
+  for (int k = 0; k < nb; k++) {
+    char nm[96];
+    snprintf(nm, sizeof nm, "%s%s_%d", prefix, fi ? fi->name : "m", k);
+    lg_function *gf = lg_function_new(env, c->f->mesh, c->f->dm, nm);
+    if (!gf) lgerror(L, fn, env);
+    push_functions_of(L, 1, &gf, 1);
+    memcpy(gf->x, v + (size_t)k * (size_t)nd, sizeof(double) * (size_t)nd);
+    lua_rawseti(L, -2, k + 1);
+  }
+  return 1;
 }
 
 /* the controls from the argument at idx (one value, or a table of one per control when there
@@ -313,38 +405,13 @@ static void read_direction(lua_State *L, lg_reduced *rf, int idx, double **dm, c
   if (nc > 1 && (!lua_istable(L, idx) || luaL_testudata(L, idx, MT_EXPR)))
     typeerror(L, fn, idx, "a direction: a table with one value per control");
   if (nc > 1 && luaL_len(L, idx) != nc) luaL_error(L, "%s: the direction needs %d values (one per control), got %d", fn, nc, (int)luaL_len(L, idx));
-  lg_env *env = get_env(L);
   for (int i = 0; i < nc; i++) {
     int n = lg_reduced_control_size(rf, i);
-    const lg_control *c = lg_reduced_control(rf, i);
     dm[i] = lua_newuserdatauv(L, sizeof(double) * ((size_t)n + 1), 0);
     int k = nc == 1 ? idx : (lua_geti(L, idx, i + 1), lua_gettop(L));
-    if (c->kind == LG_CONTROL_PARAM) {
-      int isnum;
-      dm[i][0] = lua_tonumberx(L, k, &isnum);
-      if (!isnum) luaL_error(L, "%s: the direction of control %d (a parameter) must be a number, got %s", fn, i + 1, luaL_typename(L, k));
-      if (!isfinite(dm[i][0])) luaL_error(L, "%s: the direction of control %d is not finite", fn, i + 1);
-    } else {
-      ud_func *df = luaL_testudata(L, k, MT_FUNC);
-      if (df) {
-        if (df->f->dm != c->f->dm)
-          luaL_error(L, "%s: the direction of control %d must be a discrete function of its basis and mesh (P%d)", fn, i + 1,
-                     c->f->degree);
-        memcpy(dm[i], df->f->x, sizeof(double) * (size_t)n);
-      } else { /* an expression: interpolate into a scratch function of the control's space */
-        int ok;
-        expr *e = to_expr_opt(L, k, &ok);
-        if (!ok) typeerror(L, fn, k, "a direction: a discrete function, an expression or a number");
-        lg_function *t = lg_function_new(env, c->f->mesh, c->f->dm, "dm");
-        if (!t) lgerror(L, fn, env);
-        int rc = lg_interpolate(env, t, e);
-        if (!rc) memcpy(dm[i], t->x, sizeof(double) * (size_t)n);
-        expr_func_forget_user(env->c, t->fid);
-        lg_function_free(t);
-        if (rc) lgerror(L, fn, env);
-      }
-    }
-    if (nc > 1) lua_remove(L, k);
+    char what[48];
+    snprintf(what, sizeof what, "the direction of control %d", i + 1);
+    fill_control(L, rf, i, k, dm[i], fn, what);
   }
 }
 
@@ -384,6 +451,14 @@ static int push_riesz(lua_State *L, lg_reduced *rf, double **g, int riesz, const
   for (int i = 0; i < nc; i++) {
     const lg_control *c = lg_reduced_control(rf, i);
     if (c->kind == LG_CONTROL_PARAM) { lua_pushnumber(L, g[i][0]); continue; }
+    if (c->per_step) { /* a function per step time, each mapped by the space's Riesz map */
+      int n = lg_reduced_control_size(rf, i);
+      double *r = lua_newuserdatauv(L, sizeof(double) * ((size_t)n + 1), 0);
+      if (lg_reduced_riesz(env, rf, i, riesz, g[i], r)) return lgerror(L, fn, env);
+      push_blocks(L, rf, i, r, prefix, fn);
+      lua_remove(L, -2);
+      continue;
+    }
     expr_func_info *fi = expr_func_get(env->c, c->f->fid);
     char nm[80];
     snprintf(nm, sizeof nm, "%s_%s", prefix, fi ? fi->name : "m");
@@ -490,11 +565,10 @@ static int taylor_tostring(lua_State *L) {
 }
 
 /* set the controls to m0 + h dm (h = 0: back to m0) */
-static void move_controls(lg_env *env, lg_reduced *rf, double **m0, double **dm, double h) {
+static void move_controls(lg_reduced *rf, double **m0, double **dm, double h) {
   for (int i = 0; i < lg_reduced_ncontrols(rf); i++) {
-    const lg_control *c = lg_reduced_control(rf, i);
     int n = lg_reduced_control_size(rf, i);
-    double *x = c->kind == LG_CONTROL_PARAM ? &expr_param_values(env->c)[c->param] : c->f->x;
+    double *x = lg_reduced_control_values(rf, i);
     for (int j = 0; j < n; j++) x[j] = m0[i][j] + h * dm[i][j];
   }
   lg_reduced_changed(rf);
@@ -534,9 +608,8 @@ static int l_taylor_test(lua_State *L) {
   set_controls(L, rf, 2, fn);
   for (int i = 0; i < nc; i++) {
     int n = lg_reduced_control_size(rf, i);
-    const lg_control *c = lg_reduced_control(rf, i);
     m0[i] = lua_newuserdatauv(L, sizeof(double) * ((size_t)n + 1), 0);
-    memcpy(m0[i], c->kind == LG_CONTROL_PARAM ? &expr_param_values(env->c)[c->param] : c->f->x, sizeof(double) * (size_t)n);
+    memcpy(m0[i], lg_reduced_control_values(rf, i), sizeof(double) * (size_t)n);
   }
   double J0;
   if (lg_reduced_value(env, rf, &J0)) return lgerror(L, fn, env);
@@ -552,10 +625,10 @@ static int l_taylor_test(lua_State *L) {
   int nr = hess ? 3 : 2;
   for (int s = 0; s < steps; s++) {
     double h = h0 / pow(2, s);
-    move_controls(env, rf, m0, dm, h);
+    move_controls(rf, m0, dm, h);
     double Jh;
     if (lg_reduced_value(env, rf, &Jh)) {
-      move_controls(env, rf, m0, dm, 0); /* restore m before reporting */
+      move_controls(rf, m0, dm, 0); /* restore m before reporting */
       return lgerror(L, fn, env);
     }
     hs[s] = h;
@@ -563,7 +636,7 @@ static int l_taylor_test(lua_State *L) {
     r[1][s] = fabs(Jh - J0 - h * dJ);
     r[2][s] = fabs(Jh - J0 - h * dJ - 0.5 * h * h * d2J);
   }
-  move_controls(env, rf, m0, dm, 0);
+  move_controls(rf, m0, dm, 0);
   static const char *const rname[3] = {"remainders0", "remainders1", "remainders2"};
   static const char *const qname[3] = {"rates0", "rates1", "rates2"};
   lua_createtable(L, steps, 0);
@@ -623,19 +696,19 @@ static const double *bound_values(lua_State *L, lg_reduced *rf, int i, int idx, 
   const lg_control *c = lg_reduced_control(rf, i);
   int n = lg_reduced_control_size(rf, i);
   double *v = lua_newuserdatauv(L, sizeof(double) * ((size_t)n + 1), 0);
-  ud_func *uf = luaL_testudata(L, idx, MT_FUNC);
-  if (uf) {
-    if (c->kind != LG_CONTROL_FIELD || uf->f->dm != c->f->dm)
-      luaL_error(L, "%s: the %s bound of control %d must be a number or a discrete function of the control's basis and mesh", fn,
-                 which, i + 1);
-    memcpy(v, uf->f->x, sizeof(double) * (size_t)n);
-    return v;
-  }
   int isnum;
   double b = lua_tonumberx(L, idx, &isnum);
-  if (!isnum) luaL_error(L, "%s: the %s bound of control %d must be a number or a discrete function, got %s", fn, which, i + 1,
-                         luaL_typename(L, idx));
-  for (int k = 0; k < n; k++) v[k] = b;
+  if (isnum) { /* a number (±math.huge: none) */
+    for (int k = 0; k < n; k++) v[k] = b;
+    return v;
+  }
+  ud_func *bf = luaL_testudata(L, idx, MT_FUNC);
+  if (c->kind != LG_CONTROL_FIELD || (bf && bf->f->dm != c->f->dm) || (!bf && !(c->per_step && lua_istable(L, idx))))
+    luaL_error(L, "%s: the %s bound of control %d must be a number or a discrete function of the control's basis and mesh, got %s",
+               fn, which, i + 1, luaL_typename(L, idx));
+  char what[48];
+  snprintf(what, sizeof what, "the %s bound of control %d", which, i + 1);
+  fill_control(L, rf, i, idx, v, fn, what);
   return v;
 }
 
@@ -782,6 +855,7 @@ static int l_minimize(lua_State *L) {
   for (int i = 0; i < nc; i++) {
     const lg_control *c = lg_reduced_control(u->rf, i);
     if (c->kind == LG_CONTROL_PARAM) { lua_pushnumber(L, expr_param_values(env->c)[c->param]); continue; }
+    if (push_blocks(L, u->rf, i, lg_reduced_control_values(u->rf, i), "", fn)) continue; /* a function per step time */
     /* the control userdata: among the dependencies */
     int found = 0;
     lua_pushnil(L);

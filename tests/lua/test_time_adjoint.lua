@@ -158,6 +158,50 @@ do
   end
 end
 
+-- 4b. a control per step (lg.control's per_step): a Crank-Nicolson step whose source is the
+-- mean of the values at the step's two times (the companion holds the one before), a rate
+-- regularization; Taylor rates, every schedule alike, a table of one value per step time
+do
+  local t = lg.parameter("t", 0)
+  local u0 = lg.interpolate(P1, mesh, 0*x, "u0")
+  local f, fp = lg.control(P1, mesh, "f", 0*x, {per_step = true})
+  T.check(fp ~= nil and fp:ndof() == f:ndof(), "lg.control with per_step returns the companion")
+  local dt = 0.1
+  local A = function(w) return 0.2*lg.dot(lg.grad(w), lg.grad(v)) end
+  local F = lg.integral(mesh:cells(), (u - u0)/dt*v + 0.5*(A(u) + A(u0)) - 0.5*(f + fp)*v)
+  local step = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = dt, t1 = 0.8, time = t,
+                               bc = lg.essential_bc(mesh:boundary(), v*u), monitor = false}
+  local d = 16*x*(1 - x)*y*(1 - y)*lg.sin(pi*t)
+  local J = lg.functional{running = lg.integral(mesh:cells(), 0.5*(u - d)^2 + 0.01/2*((f - fp)/dt)^2),
+                          final = lg.integral(mesh:cells(), f^2)}
+  local ref
+  for _, ck in ipairs{"all", 3} do
+    local rf = lg.reduced_functional{problem = step, functional = J, control = f, checkpoints = ck}
+    local tt = lg.taylor_test(rf, lg.sin(pi*t)*x, lg.cos(3*t)*y, {h = 0.1, steps = 4})
+    local r = rate_ok(tt, "a control per step, checkpoints " .. tostring(ck))
+    local g = rf:gradient(lg.sin(pi*t)*x, {riesz = "none"})
+    T.check(#g == 9, "the gradient of a per-step control: %d functions for 9 step times", #g)
+    if not ref then ref = g else
+      for k = 1, 9 do
+        local a, b = ref[k]:values(), g[k]:values()
+        for i = 1, #a do T.close(b[i], a[i], 1e-12, string.format("per-step gradient, time %d, 3 snapshots", k)) end
+      end
+    end
+    print(string.format("time adjoint: a control per step (Crank-Nicolson, its value before), checkpoints %-3s Taylor rate %.3f", tostring(ck), r))
+  end
+  -- one value per step time as a table: the same as the expression of t
+  local rf = lg.reduced_functional{problem = step, functional = J, control = f}
+  local vals = {}
+  for k = 0, 8 do vals[k + 1] = math.sin(pi*k*dt)*x end
+  T.close(rf:value(vals), rf:value(lg.sin(pi*t)*x), 1e-14, "per-step values from a table and from an expression of t")
+  T.fails(function() rf:value({x, y}) end, "one value or 9")
+  T.fails(function() lg.reduced_functional{problem = lg.linear_problem{mesh = mesh, test = v, unknown = u,
+            eqn = lg.integral(mesh:cells(), u*v - f*v)}, functional = lg.functional(lg.integral(mesh:cells(), u^2)), control = f} end,
+          "value per step", "time-dependent problem")
+  local fopt, info = lg.minimize(rf, {method = "lmvm", gttol = 1e-6, gatol = 0, grtol = 0, maxit = 400, monitor = false})
+  T.check(#fopt == 9 and info.J < 0.5 * rf:value(0*x), "the minimizer of a per-step control: %d values, J %g", #fopt, info.J)
+end
+
 -- 5. refused with a message naming the call
 do
   local u0 = lg.interpolate(P1, mesh, x, "u0")

@@ -410,6 +410,11 @@ int lg_functional_kernels(lg_env *env, lg_reduced *rf, const form *J, const int 
 }
 
 lg_reduced *lg_reduced_new(lg_env *env, lg_problem *p, const form *J, int nc, const lg_control *c) {
+  for (int i = 0; i < nc && i < LG_MAXCONTROL; i++)
+    if (c[i].per_step) {
+      lg_seterr(env, "control %d has a value per step: that is for a time-dependent problem (lg.time_problem)", i + 1);
+      return NULL;
+    }
   lg_reduced *rf = calloc(1, sizeof *rf);
   if (!rf) { lg_seterr(env, "out of memory"); return NULL; }
   if (lg_reduced_setup(env, rf, p, nc, c, NULL)) goto fail;
@@ -453,7 +458,16 @@ int lg_reduced_share_state(lg_reduced *rf, const lg_reduced *from) {
 }
 
 int lg_reduced_control_size(const lg_reduced *rf, int i) {
-  return rf->c[i].kind == LG_CONTROL_FIELD ? rf->c[i].f->dm->ndof : 1;
+  return rf->c[i].kind == LG_CONTROL_FIELD ? rf->c[i].f->dm->ndof * lg_reduced_control_blocks(rf, i) : 1;
+}
+
+lg_time *lg_reduced_time(const lg_reduced *rf) { return lg_time_rf_time(rf); }
+
+int lg_reduced_control_blocks(const lg_reduced *rf, int i) { return rf->c[i].per_step ? lg_time_rf_blocks(rf) : 1; }
+
+double *lg_reduced_control_values(lg_reduced *rf, int i) {
+  if (rf->c[i].kind == LG_CONTROL_PARAM) return &expr_param_values(rf->env->c)[rf->c[i].param];
+  return rf->c[i].per_step ? lg_time_rf_steps(rf, i) : rf->c[i].f->x;
 }
 
 /* solve the state at the current controls (if they changed) */
@@ -620,7 +634,10 @@ int lg_reduced_riesz(lg_env *env, lg_reduced *rf, int i, int kind, const double 
     return 0;
   }
   lg_problem *G = lg_reduced_gram(env, rf, i, kind == LG_RIESZ_H1);
-  return G ? lg_problem_solve_vector(env, G, dual, out) : 1;
+  int nb = lg_reduced_control_blocks(rf, i), nd = rf->c[i].f->dm->ndof; /* a per-step control: block by block */
+  for (int b = 0; G && b < nb; b++)
+    if (lg_problem_solve_vector(env, G, dual + (size_t)b * (size_t)nd, out + (size_t)b * (size_t)nd)) return 1;
+  return G ? 0 : 1;
 }
 
 /* ---------------------------------------------------------------- sensitivities */

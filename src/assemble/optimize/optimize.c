@@ -88,10 +88,7 @@ static void to_controls(opt_ctx *C, const PetscScalar *x) {
     memcpy(C->xlast, x, sizeof(double) * (size_t)n);
     C->xlast[n] = 1;
   }
-  for (int i = 0; i < C->nc; i++) {
-    const lg_control *c = lg_reduced_control(C->rf, i);
-    spread(C, i, x, c->kind == LG_CONTROL_PARAM ? &expr_param_values(C->env->c)[c->param] : c->f->x);
-  }
+  for (int i = 0; i < C->nc; i++) spread(C, i, x, lg_reduced_control_values(C->rf, i));
   lg_reduced_changed(C->rf);
   for (int j = 0; j < C->o->ncons; j++) lg_reduced_changed(C->o->cons[j].rf);
 }
@@ -108,10 +105,7 @@ static void gather_entries(opt_ctx *C, double **v, int s, double f, PetscScalar 
 }
 static void from_controls(opt_ctx *C, PetscScalar *x) {
   double *v[LG_MAXCONTROL];
-  for (int i = 0; i < C->nc; i++) {
-    const lg_control *c = lg_reduced_control(C->rf, i);
-    v[i] = c->kind == LG_CONTROL_PARAM ? &expr_param_values(C->env->c)[c->param] : c->f->x;
-  }
+  for (int i = 0; i < C->nc; i++) v[i] = lg_reduced_control_values(C->rf, i);
   gather_entries(C, v, 1, 1, x);
 }
 
@@ -250,13 +244,13 @@ static PetscErrorCode hessian_mult(Mat H, Vec V, Vec Y) {
 static int write_step(opt_ctx *C, int it) {
   const lg_control *c = NULL;
   for (int i = 0; i < C->nc && !c; i++)
-    if (lg_reduced_control(C->rf, i)->kind == LG_CONTROL_FIELD) c = lg_reduced_control(C->rf, i);
+    if (lg_reduced_control(C->rf, i)->kind == LG_CONTROL_FIELD && !lg_reduced_control(C->rf, i)->per_step) c = lg_reduced_control(C->rf, i);
   if (!c) return 0;
   mesh_field fl[LG_MAXCONTROL];
   int nf = 0;
   for (int i = 0; i < C->nc; i++) {
     const lg_control *ci = lg_reduced_control(C->rf, i);
-    if (ci->kind != LG_CONTROL_FIELD || ci->f->mesh != c->f->mesh) continue;
+    if (ci->kind != LG_CONTROL_FIELD || ci->per_step || ci->f->mesh != c->f->mesh) continue;
     expr_func_info *fi = expr_func_get(C->env->c, ci->f->fid);
     fl[nf++] = (mesh_field){fi ? fi->name : "m", 1, ci->f->dm->degree == 0, ci->f->x};
   }
@@ -338,6 +332,7 @@ static int mass_scaling(lg_env *env, opt_ctx *C, int n) {
       continue;
     }
     lg_problem *G = lg_reduced_gram(env, C->rf, i, 0);
+    ni /= lg_reduced_control_blocks(C->rf, i); /* a per-step control: each block as one field (whole meshes) */
     double *dg = malloc(sizeof(double) * ((size_t)ni + 1)), *rs = malloc(sizeof(double) * ((size_t)ni + 1));
     if (!G || !dg || !rs || lg_problem_matrix_diagonal(env, G, dg, rs)) {
       if (!rs || !dg) lg_seterr(env, "out of memory");
@@ -347,12 +342,12 @@ static int mass_scaling(lg_env *env, opt_ctx *C, int n) {
     }
     double sum[2] = {0, 0}; /* the row sums' and the diagonal's totals (over the ranks) */
     for (int j = 0; j < nl; j++) {
-      sum[0] += rs[dof_at(C, i, j)];
-      sum[1] += dg[dof_at(C, i, j)];
+      sum[0] += rs[dof_at(C, i, j) % ni];
+      sum[1] += dg[dof_at(C, i, j) % ni];
     }
     if (C->dist && lg_allreduce(sum, 2, LG_SUM)) { lg_seterr(env, "the sum over the ranks failed"); rc = 1; }
     for (int j = 0; j < nl && !rc; j++) {
-      q[j] = sqrt(dg[dof_at(C, i, j)] * sum[0] / sum[1]);
+      q[j] = sqrt(dg[dof_at(C, i, j) % ni] * sum[0] / sum[1]);
       if (!(q[j] > 0)) { lg_seterr(env, "the mass matrix of control %d is not positive", i + 1); rc = 1; }
     }
     free(rs);

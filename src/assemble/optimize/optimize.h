@@ -25,6 +25,9 @@ typedef struct {
   int kind;
   lg_function *f;   /* a field control: a discrete function the problem's forms use */
   int param;        /* a parameter control: its index */
+  int per_step;     /* a field control of a time-dependent problem with a value per step time
+                     * (t0 + k dt, k = 0 .. N; step k and the terms at t_k read value k) */
+  lg_function *fprev; /* a per-step control's companion: value k - 1 at step k (value 0 at t0), or NULL */
 } lg_control;
 
 /* j(m) = J(u(m), m) for a state problem and a functional (a form without test functions);
@@ -35,7 +38,14 @@ lg_reduced *lg_reduced_new(lg_env *env, lg_problem *p, const form *J, int nc, co
 void lg_reduced_free(lg_reduced *rf);
 int lg_reduced_ncontrols(const lg_reduced *rf);
 const lg_control *lg_reduced_control(const lg_reduced *rf, int i);
-int lg_reduced_control_size(const lg_reduced *rf, int i); /* dofs of a field, 1 for a parameter */
+int lg_reduced_control_size(const lg_reduced *rf, int i); /* dofs of a field, 1 for a parameter, (N + 1) x dofs per step */
+/* where control i's value lives: the parameter's value, the field's dofs, or a per-step
+ * control's N + 1 blocks of dofs (lg_reduced_control_size values) */
+double *lg_reduced_control_values(lg_reduced *rf, int i);
+/* the time-dependent problem of a reduced functional, or NULL */
+lg_time *lg_reduced_time(const lg_reduced *rf);
+/* a per-step control's blocks: N + 1, or 1 for any other control */
+int lg_reduced_control_blocks(const lg_reduced *rf, int i);
 lg_problem *lg_reduced_problem(const lg_reduced *rf);
 /* a control's values changed: the next value or gradient solves the state again */
 void lg_reduced_changed(lg_reduced *rf);

@@ -64,5 +64,10 @@ int lg_reduced_set_adjoint(lg_env *env, lg_reduced *rf, const double *lam);
 int lg_time_value(lg_env *env, lg_reduced *rf, double *J);
 int lg_time_gradient(lg_env *env, lg_reduced *rf, double **g);
 void lg_time_rf_free(lg_reduced *rf);
+/* a per-step control's values (N + 1 blocks), and the number of blocks (N + 1; 1 for a
+ * steady reduced functional) */
+double *lg_time_rf_steps(lg_reduced *rf, int i);
+int lg_time_rf_blocks(const lg_reduced *rf);
+lg_time *lg_time_rf_time(const lg_reduced *rf);
 
 #endif

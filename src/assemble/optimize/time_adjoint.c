@@ -34,6 +34,7 @@ typedef struct {
   int kind;
   int atk;                 /* LG_TJ_AT: the step */
   lg_form_kernels *val, *dJdu[KER_MAXFIELD], *dJdm[LG_MAXCONTROL];
+  lg_form_kernels *dJdp[LG_MAXCONTROL]; /* per-step controls: with respect to the value before */
 } tj_term;
 
 struct lg_time_rf {
@@ -54,6 +55,9 @@ struct lg_time_rf {
   int held_at, work_at;
   double *u, *rhs, *tmp, *pend[LG_TIME_MAXLEV + 1], *dX0;
   double **g;              /* the gradient being summed (the caller's) */
+  double *ps[LG_MAXCONTROL]; /* per-step controls: N + 1 blocks of their dofs */
+  double *ps_keep[LG_MAXCONTROL][2]; /* their functions' own values (and the companions'), put back after a sweep */
+  lg_form_kernels *dLdp[LG_MAXCONTROL]; /* lam^T dR/d(the value before) */
   double J;
   int fresh;               /* J and the stored states are those of the current controls */
   long recomputed;         /* forward steps the last gradient solved */
@@ -88,6 +92,52 @@ static int best_split(int n, int s) {
     if (best < 0 || c <= best) { best = c; at = m; }
   }
   return at;
+}
+
+/* ---------------------------------------------------------------- per-step controls */
+
+double *lg_time_rf_steps(lg_reduced *rf, int i) { return rf->tm ? rf->tm->ps[i] : NULL; }
+int lg_time_rf_blocks(const lg_reduced *rf) { return rf->tm ? rf->tm->N + 1 : 1; }
+lg_time *lg_time_rf_time(const lg_reduced *rf) { return rf->tm ? rf->tm->T : NULL; }
+
+/* value k of every per-step control into its function */
+static void set_step_controls(lg_reduced *rf, int k) {
+  lg_time_rf *R = rf->tm;
+  for (int i = 0; i < rf->nc; i++)
+    if (R->ps[i]) {
+      int nd = rf->c[i].f->dm->ndof;
+      memcpy(rf->c[i].f->x, R->ps[i] + (size_t)k * (size_t)nd, sizeof(double) * (size_t)nd);
+      if (rf->c[i].fprev) memcpy(rf->c[i].fprev->x, R->ps[i] + (size_t)(k > 0 ? k - 1 : 0) * (size_t)nd, sizeof(double) * (size_t)nd);
+    }
+}
+
+static int step_hook(lg_env *env, void *ud, int k, double t) {
+  (void)env;
+  (void)t;
+  set_step_controls(ud, k);
+  return 0;
+}
+
+/* a sweep's start and end: the per-step controls' functions kept and put back, the hook set
+ * and cleared */
+static void sweep_begin(lg_reduced *rf) {
+  lg_time_rf *R = rf->tm;
+  for (int i = 0; i < rf->nc; i++)
+    if (R->ps[i]) {
+      memcpy(R->ps_keep[i][0], rf->c[i].f->x, sizeof(double) * (size_t)rf->c[i].f->dm->ndof);
+      if (rf->c[i].fprev) memcpy(R->ps_keep[i][1], rf->c[i].fprev->x, sizeof(double) * (size_t)rf->c[i].f->dm->ndof);
+    }
+  lg_time_set_hook(R->T, step_hook, rf);
+}
+
+static void sweep_end(lg_reduced *rf) {
+  lg_time_rf *R = rf->tm;
+  lg_time_set_hook(R->T, NULL, NULL);
+  for (int i = 0; i < rf->nc; i++)
+    if (R->ps[i]) {
+      memcpy(rf->c[i].f->x, R->ps_keep[i][0], sizeof(double) * (size_t)rf->c[i].f->dm->ndof);
+      if (rf->c[i].fprev) memcpy(rf->c[i].fprev->x, R->ps_keep[i][1], sizeof(double) * (size_t)rf->c[i].f->dm->ndof);
+    }
 }
 
 /* ---------------------------------------------------------------- weights and evaluation */
@@ -171,9 +221,11 @@ static int march(lg_env *env, lg_reduced *rf) {
   }
   R->fresh = 0;
   if (lg_time_begin(env, T)) { free(spine); return 1; }
+  sweep_begin(rf);
   double J = 0, *X = R->snaps ? R->held : R->all[0];
   lg_time_get_state(T, X);
   lg_time_prepare(env, T, 0);
+  set_step_controls(rf, 0);
   if (R->snaps) memcpy(take_slot(R, 0), X, sizeof(double) * (size_t)R->S);
   int rc = value_at(env, rf, 0, X, &J);
   lg_solve_info info;
@@ -189,6 +241,7 @@ static int march(lg_env *env, lg_reduced *rf) {
     rc = value_at(env, rf, k, X, &J);
     monitor_line(env, R, k, "forward");
   }
+  sweep_end(rf);
   lg_time_end(env, T);
   free(spine);
   if (rc) return 1;
@@ -250,15 +303,33 @@ static int adjoint_step(lg_env *env, lg_reduced *rf, int n, const double *Xp, co
   for (int i = 0; i < rf->nc; i++) {
     if (R->ic[i] >= 0) continue;
     int m = lg_reduced_control_size(rf, i);
+    double *gi = R->g[i];
+    if (R->ps[i]) { /* a per-step control: its block n */
+      m /= R->N + 1;
+      gi += (size_t)n * (size_t)m;
+    }
     if (lg_form_kernels_eval(env, rf->lm, rf->dLdm[i], nb, b, R->tmp)) return 1;
-    for (int k = 0; k < m; k++) R->g[i][k] += R->tmp[k];
+    for (int k = 0; k < m; k++) gi[k] += R->tmp[k];
     for (int t = 0; t < R->nterm; t++) {
       double w = weight(R, &R->t[t], n);
       if (w == 0) continue;
       if (lg_form_kernels_eval(env, rf->lm, R->t[t].dJdm[i], nb, b, R->tmp)) return 1;
-      for (int k = 0; k < m; k++) R->g[i][k] += w * R->tmp[k];
+      for (int k = 0; k < m; k++) gi[k] += w * R->tmp[k];
     }
-    if (rf->bcdep[i] && lg_reduced_bc_transpose(env, rf, i, rf->lamv, -1, R->g[i])) return 1;
+    if (rf->bcdep[i] && lg_reduced_bc_transpose(env, rf, i, rf->lamv, -1, gi)) return 1;
+    if (R->ps[i] && rf->c[i].fprev) { /* the value before: block n - 1 */
+      double *gp = gi - m;
+      if (R->dLdp[i]) {
+        if (lg_form_kernels_eval(env, rf->lm, R->dLdp[i], nb, b, R->tmp)) return 1;
+        for (int k = 0; k < m; k++) gp[k] += R->tmp[k];
+      }
+      for (int t = 0; t < R->nterm; t++) {
+        double w = weight(R, &R->t[t], n);
+        if (w == 0 || !R->t[t].dJdp[i]) continue;
+        if (lg_form_kernels_eval(env, rf->lm, R->t[t].dJdp[i], nb, b, R->tmp)) return 1;
+        for (int k = 0; k < m; k++) gp[k] += w * R->tmp[k];
+      }
+    }
   }
   /* to the steps that made this one's previous states: level j of X_{n-1} is u^{n-1-j} */
   for (int j = 0; j < L; j++) {
@@ -347,6 +418,7 @@ int lg_time_gradient(lg_env *env, lg_reduced *rf, double **g) {
   R->recomputed = 0;
   lg_time *T = R->T;
   if (lg_time_begin(env, T)) return 1;
+  sweep_begin(rf);
   int rc = 0;
   if (R->snaps) rc = reverse(env, rf, 0, R->N, R->snaps);
   else
@@ -356,6 +428,7 @@ int lg_time_gradient(lg_env *env, lg_reduced *rf, double **g) {
   if (!rc && X0) {
     lg_time_set_state(T, X0);
     lg_time_prepare(env, T, 0);
+    set_step_controls(rf, 0);
     lg_time_unknowns(T, X0, R->u);
     coef_binding b[3 * KER_MAXFIELD];
     int nb = lg_problem_bind_values(rf->p, R->u, b);
@@ -369,10 +442,16 @@ int lg_time_gradient(lg_env *env, lg_reduced *rf, double **g) {
       for (int i = 0; i < rf->nc && !rc; i++) {
         if (!R->t[t].dJdm[i]) continue; /* an initial state, read only by initial terms */
         if ((rc = lg_form_kernels_eval(env, rf->lm, R->t[t].dJdm[i], nb, b, R->tmp))) break;
-        for (int k = 0; k < lg_reduced_control_size(rf, i); k++) g[i][k] += w * R->tmp[k];
+        int m = lg_reduced_control_size(rf, i) / lg_reduced_control_blocks(rf, i); /* block 0 of a per-step control */
+        for (int k = 0; k < m; k++) g[i][k] += w * R->tmp[k];
+        if (R->t[t].dJdp[i]) { /* the value before t0 is value 0 */
+          if ((rc = lg_form_kernels_eval(env, rf->lm, R->t[t].dJdp[i], nb, b, R->tmp))) break;
+          for (int k = 0; k < m; k++) g[i][k] += w * R->tmp[k];
+        }
       }
     }
   }
+  sweep_end(rf);
   lg_time_end(env, T);
   /* the initial states' gradients */
   for (int i = 0; i < rf->nc && !rc; i++) {
@@ -416,6 +495,13 @@ void lg_time_rf_free(lg_reduced *rf) {
   free(R->all); free(R->slot); free(R->slot_at); free(R->held); free(R->work);
   free(R->u); free(R->rhs); free(R->tmp); free(R->dX0);
   for (int l = 0; l <= LG_TIME_MAXLEV; l++) free(R->pend[l]);
+  for (int i = 0; i < LG_MAXCONTROL; i++) {
+    free(R->ps[i]);
+    free(R->ps_keep[i][0]);
+    free(R->ps_keep[i][1]);
+    lg_form_kernels_free(R->dLdp[i]);
+    for (int t = 0; t < R->nterm; t++) lg_form_kernels_free(R->t[t].dJdp[i]);
+  }
   free(R);
   rf->tm = NULL;
 }
@@ -480,12 +566,42 @@ lg_reduced *lg_reduced_new_time(lg_env *env, lg_time *T, int nterm, const lg_tim
   for (int i = 0; i < nc && i < LG_MAXCONTROL; i++) skip[i] = R->ic[i] >= 0;
   R->skip_ic = skip; /* for the terms' kernels (setup_terms), during construction */
   if (lg_reduced_setup(env, rf, p, nc, c, skip)) goto fail;
+  /* per-step controls: every step's value the function's, to start */
+  for (int i = 0; i < nc; i++) {
+    if (!c[i].per_step) continue;
+    if (c[i].kind != LG_CONTROL_FIELD || R->ic[i] >= 0) {
+      lg_seterr(env, "control %d: a value per step is for a field the step reads (not a parameter or an initial state)", i + 1);
+      goto fail;
+    }
+    if (rf->lm->dist) {
+      lg_seterr(env, "control %d: per-step controls on a distributed mesh are not available yet (-lugal_distribute 0 keeps "
+                     "the mesh whole on every rank)", i + 1);
+      goto fail;
+    }
+    int nd = c[i].f->dm->ndof;
+    R->ps[i] = malloc(sizeof(double) * (size_t)nd * ((size_t)R->N + 1) + 8);
+    R->ps_keep[i][0] = malloc(sizeof(double) * (size_t)nd + 8);
+    R->ps_keep[i][1] = malloc(sizeof(double) * (size_t)nd + 8);
+    if (!R->ps[i] || !R->ps_keep[i][0] || !R->ps_keep[i][1]) { lg_seterr(env, "out of memory for control %d's values per step", i + 1); goto fail; }
+    for (int k = 0; k <= R->N; k++) memcpy(R->ps[i] + (size_t)k * (size_t)nd, c[i].f->x, sizeof(double) * (size_t)nd);
+  }
   for (int i = 0; i < nc; i++)
     if (R->ic[i] >= 0 && rf->bcdep[i]) {
       lg_seterr(env, "control %d, an initial state, appears in an essential condition of the step", i + 1);
       goto fail;
     }
   if (setup_terms(env, rf, nterm, terms)) goto fail;
+  /* a per-step control's companion (its value at the step before): the step's and the
+   * terms' derivatives with respect to it */
+  for (int i = 0; i < nc; i++) {
+    lg_function *fp = R->ps[i] ? c[i].fprev : NULL;
+    if (!fp) continue;
+    if (lg_form_uses(env, lg_problem_equation(p), fp->fid) && !(R->dLdp[i] = lg_form_kernels_new(env, rf->lm, rf->L, fp->fid, fp->dm)))
+      goto fail;
+    for (int t = 0; t < R->nterm; t++)
+      if (lg_form_uses(env, R->t[t].J, fp->fid) && !(R->t[t].dJdp[i] = lg_form_kernels_new(env, rf->lm, R->t[t].J, fp->fid, fp->dm)))
+        goto fail;
+  }
   /* every control used: in the step, a term, or an essential condition; an initial state
    * in the step */
   const form *F = lg_problem_equation(p);

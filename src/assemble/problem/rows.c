@@ -135,7 +135,7 @@ int lg_dist_problem_order(lg_env *env, const lg_problem *p, int *order) {
   if (!zero) bad = 1;
   for (int a = 0; a < p->cols.n; a++) {
     const dofmap *dm = p->cdm[a];
-    lg_function f = {p->lm, (dofmap *)dm, dm->degree, zero, -1};
+    lg_function f = {p->lm, (dofmap *)dm, dm->degree, zero, -1, 0, NULL};
     lg_dof_rec *all = NULL;
     long total = 0;
     /* collective whatever this rank's state: every rank gathers every field */

@@ -35,7 +35,14 @@ typedef struct { form *f; } ud_form;
 typedef struct { lg_problem *p; int nfield; int nonlinear; } ud_prob;
 /* a time-dependent problem (ltime.c): its step problem, owned; output every `every` steps
  * into the series, a progress line as often with monitor */
-typedef struct { lg_time *T; lg_problem *p; int nfield, every, monitor; char *output; } ud_time;
+typedef struct {
+  lg_time *T;
+  lg_problem *p;
+  int nfield, every, monitor;
+  char *output;
+  lua_State *hook_L;   /* before_step's own thread (kept in the userdata's uservalue), or NULL */
+  int hook_ref;        /* before_step in the registry */
+} ud_time;
 /* format: VTU_*; pieces: 0 for .vtu steps, else .pvtu steps of so many pieces */
 typedef struct { char *path; int n, cap; double *t; char **files; int format, pieces; } ud_series;
 typedef struct { lg_env *env; int owns_petsc; } ud_env;

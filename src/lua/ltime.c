@@ -76,6 +76,23 @@ static int read_previous(lua_State *L, int t, int nfield, lg_function *prev[LG_T
   return nlev;
 }
 
+/* before_step(k, t): the script's function, called on a thread of its own (the hook runs
+ * inside C calls made from any thread); an error in it stops the march with its message */
+static int before_step(lg_env *env, void *ud, int k, double t) {
+  ud_time *u = ud;
+  lua_State *L = u->hook_L;
+  lua_rawgeti(L, LUA_REGISTRYINDEX, u->hook_ref);
+  lua_pushinteger(L, k);
+  lua_pushnumber(L, t);
+  if (lua_pcall(L, 2, 0, 0) != LUA_OK) {
+    lg_seterr(env, "before_step(%d, %g): %s", k, t, lua_tostring(L, -1) ? lua_tostring(L, -1) : "an error");
+    lua_settop(L, 0);
+    return 1;
+  }
+  lua_settop(L, 0);
+  return 0;
+}
+
 /* lg.time_problem{mesh=, test=, unknown=, previous=, eqn=, bc=, dt=, t0=, t1= | steps=,
  * time=, nonlinear=, symmetric=, prefix=, output=, every=, monitor=} */
 static int l_time_problem(lua_State *L) {
@@ -83,7 +100,7 @@ static int l_time_problem(lua_State *L) {
   const char *fn = "lg.time_problem";
   if (!lua_istable(L, 1)) return typeerror(L, fn, 1, "a table {mesh=, eqn=, test=, unknown=, previous=, dt=, t1=}");
   static const char *const keys[] = {"mesh", "eqn", "bc", "test", "unknown", "symmetric", "prefix", "nullspace", "previous", "dt",
-                                     "t0", "t1", "steps", "time", "nonlinear", "output", "every", "monitor", NULL};
+                                     "t0", "t1", "steps", "time", "nonlinear", "output", "every", "monitor", "before_step", NULL};
   check_keys(L, 1, fn, keys);
   lua_getfield(L, 1, "dt");
   int have_dt = !lua_isnil(L, -1);
@@ -118,6 +135,10 @@ static int l_time_problem(lua_State *L) {
   lua_getfield(L, 1, "nonlinear");
   int nonlinear = lua_toboolean(L, -1);
   lua_pop(L, 1);
+  int bty = lua_getfield(L, 1, "before_step");
+  lua_pop(L, 1);
+  if (bty != LUA_TNIL && bty != LUA_TFUNCTION)
+    return luaL_error(L, "%s: option 'before_step' must be a function(k, t), got %s", fn, lua_typename(L, bty));
   lua_getfield(L, 1, "monitor");
   int monitor = lua_isnil(L, -1) ? 1 : lua_toboolean(L, -1);
   lua_pop(L, 1);
@@ -155,6 +176,13 @@ static int l_time_problem(lua_State *L) {
   }
   lua_getfield(L, 1, "previous");
   lua_setfield(L, -2, "__previous");
+  if (bty == LUA_TFUNCTION) {
+    u->hook_L = lua_newthread(L);
+    lua_setfield(L, -2, "__before_step_thread");
+    lua_getfield(L, 1, "before_step");
+    u->hook_ref = luaL_ref(L, LUA_REGISTRYINDEX);
+    lg_time_set_hook(u->T, before_step, u);
+  }
   lua_setiuservalue(L, uidx, 1);
   lua_pushvalue(L, uidx);
   return 1;
@@ -162,6 +190,8 @@ static int l_time_problem(lua_State *L) {
 
 static int time_gc(lua_State *L) {
   ud_time *u = lua_touserdata(L, 1);
+  if (u->hook_L) luaL_unref(L, LUA_REGISTRYINDEX, u->hook_ref);
+  u->hook_L = NULL;
   lg_time_free(u->T);
   lg_problem_free(u->p);
   free(u->output);

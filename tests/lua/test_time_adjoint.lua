@@ -137,6 +137,77 @@ do
   end
 end
 
+-- 3b. Hessian actions: a tangent march and a second-order backward sweep (rate 3.0 +- 0.1),
+-- a nonlinear Crank-Nicolson step with a parameter in time-dependent diffusion, a field and
+-- the initial state; BDF2 with a control per step and its companion in the step and a rate
+-- term, both initial levels, an initial term; every state kept and 2 or 3 snapshots alike
+local function hess_ok(t, what)
+  local r = t.rates2[#t.rates2]
+  T.check(math.abs(r - 3) < 0.1, "%s: second-order Taylor rate %.3f (want 3.0 +- 0.1)\n%s", what, r, tostring(t))
+  T.check(math.abs(t.rates1[#t.rates1] - 2) < 0.05, "%s: first-order rate\n%s", what, tostring(t))
+  return r
+end
+do
+  local t = lg.parameter("t", 0)
+  local kappa = lg.parameter("kappa", 0.4)
+  local u0 = lg.interpolate(P1, mesh, lg.sin(pi*x)*lg.sin(pi*y), "u0")
+  local f = lg.control(P1, mesh, "f", 1 + x)
+  local d = lg.interpolate(P1, mesh, x*y, "d")
+  local dt = 0.05
+  local A = function(w) return kappa*(1 + t)*lg.dot(lg.grad(w), lg.grad(v)) end
+  local F = lg.integral(mesh:cells(), (u - u0)/dt*v + 0.5*A(u) + 0.5*A(u0) + u^3*v - f*(1 + t)*v)
+  local step = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = dt, t1 = 0.3, time = t,
+                               nonlinear = true, bc = lg.essential_bc(mesh:boundary(), v*u), monitor = false}
+  local J = lg.functional{final = lg.integral(mesh:cells(), 0.5*(u - d)^2*(1 + f^2)), running = lg.integral(mesh:cells(), 0.5*u^2*kappa)}
+  local q
+  for _, ck in ipairs{"all", 3} do
+    local rf = lg.reduced_functional{problem = step, functional = J, control = {f, kappa, u0}, checkpoints = ck}
+    local tt = lg.taylor_test(rf, {1 + x, 0.4, lg.sin(pi*x)*lg.sin(pi*y)}, {x*y, 0.3, x*(1 - x)*y*(1 - y)},
+                              {h = 0.1, steps = 4, hessian = true})
+    local r = hess_ok(tt, "nonlinear Crank-Nicolson Hessian, checkpoints " .. tostring(ck))
+    local hf, hk, hu = rf:hessian({x*y, 0.3, x*(1 - x)*y*(1 - y)}, nil, {riesz = "none"})
+    local s = hk
+    for _, val in ipairs(hf:values()) do s = s + val end
+    for _, val in ipairs(hu:values()) do s = s + 2*val end
+    if not q then q = s else T.close(s, q, 1e-12, "the Hessian action with 3 snapshots") end
+    print(string.format("time Hessian: nonlinear Crank-Nicolson, checkpoints %-3s second-order rate %.3f", tostring(ck), r))
+  end
+  -- and a symmetric one: a.H b = b.H a
+  local rf = lg.reduced_functional{problem = step, functional = J, control = {f, kappa, u0}}
+  local da, db = {x*y, 0.3, x*(1 - x)*y}, {lg.cos(x), -0.2, y*(1 - y)*x}
+  local ha = {rf:hessian(da, {1 + x, 0.4, lg.sin(pi*x)*lg.sin(pi*y)}, {riesz = "none"})}
+  local hb = {rf:hessian(db, nil, {riesz = "none"})}
+  local function pair(h, dir)
+    local s = h[2]*dir[2]
+    for i, w in ipairs({1, 3}) do
+      local vals = h[w]:values()
+      local dv = lg.interpolate(P1, mesh, dir[w], "dv"):values()
+      for k = 1, #vals do s = s + vals[k]*dv[k] end
+    end
+    return s
+  end
+  T.close(pair(ha, db), pair(hb, da), 1e-10, "the Hessian's symmetry")
+end
+do
+  local t = lg.parameter("t", 0)
+  local u0 = lg.interpolate(P1, mesh, 0.2 + x*y, "u0")
+  local u00 = lg.interpolate(P1, mesh, 0.2 + 0.9*x*y, "u00")
+  local f, fp = lg.control(P1, mesh, "g", 0*x, {per_step = true})
+  local dt = 0.1
+  local F = lg.integral(mesh:cells(), (1.5*u - 2*u0 + 0.5*u00)/dt*v + (1 + u^2)*lg.dot(lg.grad(u), lg.grad(v)) - 0.5*(f + fp)*u*v)
+  local step = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = {u0, u00}, eqn = F, dt = dt, steps = 5, time = t,
+                               nonlinear = true, bc = lg.essential_bc(mesh:boundary(), v*u), monitor = false}
+  local J = lg.functional{final = lg.integral(mesh:cells(), u^2*x), running = lg.integral(mesh:cells(), 0.1*u^2 + ((f - fp)/dt)^2*0.01),
+                          initial = lg.integral(mesh:cells(), u0^2*u00)}
+  for _, ck in ipairs{"all", 2} do
+    local rf = lg.reduced_functional{problem = step, functional = J, control = {f, u0, u00}, checkpoints = ck}
+    local tt = lg.taylor_test(rf, {lg.sin(pi*t)*x, 0.2 + x*y, 0.2 + 0.9*x*y}, {lg.cos(2*t)*y, x*y*(1 - x), y*(1 - y)},
+                              {h = 0.1, steps = 4, hessian = true})
+    local r = hess_ok(tt, "BDF2 with a per-step control, checkpoints " .. tostring(ck))
+    print(string.format("time Hessian: BDF2, a control per step, both initial levels, checkpoints %-3s second-order rate %.3f", tostring(ck), r))
+  end
+end
+
 -- 4. the binomial schedule recomputes the minimum for several lengths and snapshot counts
 do
   local u0 = lg.interpolate(P1, mesh, x, "u0")
@@ -202,6 +273,36 @@ do
   T.check(#fopt == 9 and info.J < 0.5 * rf:value(0*x), "the minimizer of a per-step control: %d values, J %g", #fopt, info.J)
 end
 
+-- 4c. before_step(k, t): the script's function before each step (here it sets a source
+-- function); replayed steps call it again; the same J and gradient as the time parameter's
+-- expression; an error in it stops the march with its message
+do
+  local t = lg.parameter("t", 0)
+  local u0 = lg.interpolate(P1, mesh, x*y, "u0")
+  local s = lg.interpolate(P1, mesh, 0*x, "s")
+  local f = lg.control(P1, mesh, "f", 1 + x)
+  local dt, calls = 0.1, 0
+  local function mk(src, hook)
+    return lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, dt = dt, steps = 6, time = t, monitor = false,
+      eqn = lg.integral(mesh:cells(), (u - u0)/dt*v + lg.dot(lg.grad(u), lg.grad(v)) - (f + src)*v),
+      bc = lg.essential_bc(mesh:boundary(), v*u), before_step = hook}
+  end
+  local a = mk(s, function(k, tk) calls = calls + 1; s:assign(tk*(x + 2*y)) end)
+  local b = mk(t*(x + 2*y))
+  local J = lg.functional{final = lg.integral(mesh:cells(), u^2), running = lg.integral(mesh:cells(), u*x)}
+  local ra = lg.reduced_functional{problem = a, functional = J, control = f, checkpoints = 2}
+  local rb = lg.reduced_functional{problem = b, functional = J, control = f}
+  T.close(ra:value(), rb:value(), 1e-13, "J with before_step")
+  T.check(calls == 6, "before_step called %d times by the march", calls)
+  local ga, gb = ra:gradient(nil, {riesz = "none"}):values(), rb:gradient(nil, {riesz = "none"}):values()
+  for i = 1, #ga do T.close(ga[i], gb[i], 1e-12, "the gradient with before_step") end
+  T.check(calls > 6, "the replayed steps call before_step again")
+  local bad = mk(s, function(k) if k == 3 then error("no data for this step") end end)
+  T.fails(function() bad:solve() end, "step:solve", "before_step(3,", "no data for this step")
+  T.fails(function() mk(s, 1) end, "option 'before_step' must be a function")
+  print(string.format("time_problem: before_step, %d calls (the march's 6, then the replays'), the same gradient", calls))
+end
+
 -- 5. refused with a message naming the call
 do
   local u0 = lg.interpolate(P1, mesh, x, "u0")
@@ -222,7 +323,10 @@ do
                                            control = u0, checkpoints = 0} end, "checkpoints")
   T.fails(function() lg.reduced_functional{problem = step, functional = lg.functional{at = {[0.15] = lg.integral(mesh:cells(), u)}},
                                            control = u0} end, "not at a step's time")
-  local rf = lg.reduced_functional{problem = step, functional = lg.functional{final = lg.integral(mesh:cells(), u^2)}, control = u0}
-  T.fails(function() rf:hessian(x) end, "rf:hessian", "time-dependent")
+  local a = lg.parameter("a", 0)
+  local sd = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = 0.1, steps = 3, monitor = false,
+                             bc = lg.essential_bc(mesh:boundary(), v*(u - a))}
+  local rfd = lg.reduced_functional{problem = sd, functional = lg.functional{final = lg.integral(mesh:cells(), u^2)}, control = a}
+  T.fails(function() rfd:hessian(1) end, "rf:hessian", "Dirichlet control")
   print("time_problem: bad input refused with messages")
 end

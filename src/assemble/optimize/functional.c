@@ -815,11 +815,7 @@ static int hessian_setup(lg_env *env, lg_reduced *rf) {
 }
 
 int lg_reduced_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
-  if (rf->tm) {
-    lg_seterr(env, "Hessian actions of a time-dependent reduced functional are not available yet (gradients are): use a "
-                   "quasi-Newton method (lmvm, blmvm)");
-    return 1;
-  }
+  if (rf->tm) return lg_time_hessian(env, rf, dm, out);
   if (hessian_setup(env, rf)) return 1;
   if (!rf->grad_fresh || !rf->solved) { /* the first-order adjoint at the current controls */
     double *g[LG_MAXCONTROL];

@@ -117,8 +117,8 @@ typedef struct {
  * or parameters the step or the terms read, and initial states (a previous function of T);
  * checkpoints 0 keeps every state, s >= 1 takes s snapshots (binomial checkpointing, the
  * initial state's included; s >= N + 1 keeps every state). monitor: a line per 100 steps of
- * each sweep. lg_reduced_value, lg_reduced_gradient and what uses them (lg_minimize) work on
- * it as on a steady reduced functional; Hessian actions are not available yet */
+ * each sweep. lg_reduced_value, lg_reduced_gradient, lg_reduced_hessian (not with a Dirichlet
+ * control yet) and what uses them (lg_minimize) work on it as on a steady reduced functional */
 lg_reduced *lg_reduced_new_time(lg_env *env, lg_time *T, int nterm, const lg_time_term *terms, int nc, const lg_control *c,
                                 int checkpoints, int monitor);
 /* the last gradient's forward steps beyond the value's march, and the states it holds at

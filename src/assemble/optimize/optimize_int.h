@@ -63,6 +63,7 @@ int lg_reduced_set_adjoint(lg_env *env, lg_reduced *rf, const double *lam);
  * it frees */
 int lg_time_value(lg_env *env, lg_reduced *rf, double *J);
 int lg_time_gradient(lg_env *env, lg_reduced *rf, double **g);
+int lg_time_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out);
 void lg_time_rf_free(lg_reduced *rf);
 /* a per-step control's values (N + 1 blocks), and the number of blocks (N + 1; 1 for a
  * steady reduced functional) */

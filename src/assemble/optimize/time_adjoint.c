@@ -55,6 +55,8 @@ struct lg_time_rf {
   int held_at, work_at;
   double *u, *rhs, *tmp, *pend[LG_TIME_MAXLEV + 1], *dX0;
   double **g;              /* the gradient being summed (the caller's) */
+  int SY;                  /* the stored states' size: S, or 2 S in a Hessian sweep (the tangent after the state) */
+  struct tm_hess *hs;      /* Hessian actions' state (built on first use), or NULL */
   double *ps[LG_MAXCONTROL]; /* per-step controls: N + 1 blocks of their dofs */
   double *ps_keep[LG_MAXCONTROL][2]; /* their functions' own values (and the companions'), put back after a sweep */
   lg_form_kernels *dLdp[LG_MAXCONTROL]; /* lam^T dR/d(the value before) */
@@ -63,6 +65,17 @@ struct lg_time_rf {
   long recomputed;         /* forward steps the last gradient solved */
   int monitor;
 };
+
+/* Hessian mode (below): states carry their tangents; the step solves the tangent too; the
+ * adjoint step solves the second-order adjoint too */
+static void ystate_get(lg_reduced *rf, double *Y);
+static void ystate_set(lg_reduced *rf, const double *Y);
+static int full_step(lg_env *env, lg_reduced *rf, int k);
+static int hess_on(const lg_reduced *rf);
+static void set_step_directions(lg_reduced *rf, int k);
+static int second_order_step(lg_env *env, lg_reduced *rf, int n, const double *Yp, const double *Yn, const coef_binding *b, int nb);
+static void send_back(lg_reduced *rf, double **pend, double *dX0, int n, int j, int a, const double *v);
+static void add_initial(lg_reduced *rf, const double *dX0, double **out);
 
 /* ---------------------------------------------------------------- the binomial schedule */
 
@@ -115,6 +128,7 @@ static int step_hook(lg_env *env, void *ud, int k, double t) {
   (void)env;
   (void)t;
   set_step_controls(ud, k);
+  if (hess_on(ud)) set_step_directions(ud, k);
   return 0;
 }
 
@@ -127,12 +141,12 @@ static void sweep_begin(lg_reduced *rf) {
       memcpy(R->ps_keep[i][0], rf->c[i].f->x, sizeof(double) * (size_t)rf->c[i].f->dm->ndof);
       if (rf->c[i].fprev) memcpy(R->ps_keep[i][1], rf->c[i].fprev->x, sizeof(double) * (size_t)rf->c[i].f->dm->ndof);
     }
-  lg_time_set_hook(R->T, step_hook, rf);
+  lg_time_set_control_hook(R->T, step_hook, rf);
 }
 
 static void sweep_end(lg_reduced *rf) {
   lg_time_rf *R = rf->tm;
-  lg_time_set_hook(R->T, NULL, NULL);
+  lg_time_set_control_hook(R->T, NULL, NULL);
   for (int i = 0; i < rf->nc; i++)
     if (R->ps[i]) {
       memcpy(rf->c[i].f->x, R->ps_keep[i][0], sizeof(double) * (size_t)rf->c[i].f->dm->ndof);
@@ -223,20 +237,19 @@ static int march(lg_env *env, lg_reduced *rf) {
   if (lg_time_begin(env, T)) { free(spine); return 1; }
   sweep_begin(rf);
   double J = 0, *X = R->snaps ? R->held : R->all[0];
-  lg_time_get_state(T, X);
+  ystate_get(rf, X);
   lg_time_prepare(env, T, 0);
   set_step_controls(rf, 0);
-  if (R->snaps) memcpy(take_slot(R, 0), X, sizeof(double) * (size_t)R->S);
+  if (R->snaps) memcpy(take_slot(R, 0), X, sizeof(double) * (size_t)R->SY);
   int rc = value_at(env, rf, 0, X, &J);
-  lg_solve_info info;
   for (int k = 1; !rc && k <= R->N; k++) {
-    if (R->snaps && k == R->N) memcpy(R->work, R->held, sizeof(double) * (size_t)R->S); /* X_{N-1} */
-    if ((rc = lg_time_step(env, T, k, &info))) break;
+    if (R->snaps && k == R->N) memcpy(R->work, R->held, sizeof(double) * (size_t)R->SY); /* X_{N-1} */
+    if ((rc = full_step(env, rf, k))) break;
     X = R->snaps ? R->held : R->all[k];
-    lg_time_get_state(T, X);
+    ystate_get(rf, X);
     if (R->snaps && spine[k] && k < R->N) {
       double *sl = take_slot(R, k);
-      if (sl) memcpy(sl, X, sizeof(double) * (size_t)R->S);
+      if (sl) memcpy(sl, X, sizeof(double) * (size_t)R->SY);
     }
     rc = value_at(env, rf, k, X, &J);
     monitor_line(env, R, k, "forward");
@@ -255,13 +268,12 @@ static int march(lg_env *env, lg_reduced *rf) {
 /* X_b from X_a (a < b) into out, counting the steps */
 static int advance(lg_env *env, lg_reduced *rf, const double *Xa, int a, int b, double *out) {
   lg_time_rf *R = rf->tm;
-  lg_time_set_state(R->T, Xa);
-  lg_solve_info info;
+  ystate_set(rf, Xa);
   for (int k = a + 1; k <= b; k++) {
-    if (lg_time_step(env, R->T, k, &info)) return 1;
+    if (full_step(env, rf, k)) return 1;
     R->recomputed++;
   }
-  lg_time_get_state(R->T, out);
+  ystate_get(rf, out);
   return 0;
 }
 
@@ -274,7 +286,7 @@ static int adjoint_step(lg_env *env, lg_reduced *rf, int n, const double *Xp, co
   lg_time *T = R->T;
   lg_problem *p = rf->p;
   int N = lg_problem_size(p), L = R->nlev;
-  lg_time_set_state(T, Xp);
+  ystate_set(rf, Xp);
   if (lg_time_prepare(env, T, n)) return 1;
   lg_time_unknowns(T, Xn, R->u);
   if (lg_problem_restore(env, p, R->u)) return 1;
@@ -299,8 +311,9 @@ static int adjoint_step(lg_env *env, lg_reduced *rf, int n, const double *Xp, co
     return 1;
   }
   if (lg_reduced_set_adjoint(env, rf, rf->lamv)) return 1;
-  /* the controls' terms: lam^n^T dR_n/dm and the terms' dJ/dm at step n */
-  for (int i = 0; i < rf->nc; i++) {
+  /* the controls' terms: lam^n^T dR_n/dm and the terms' dJ/dm at step n (a Hessian sweep
+   * needs the adjoint only) */
+  for (int i = 0; i < rf->nc && !hess_on(rf); i++) {
     if (R->ic[i] >= 0) continue;
     int m = lg_reduced_control_size(rf, i);
     double *gi = R->g[i];
@@ -332,24 +345,13 @@ static int adjoint_step(lg_env *env, lg_reduced *rf, int n, const double *Xp, co
     }
   }
   /* to the steps that made this one's previous states: level j of X_{n-1} is u^{n-1-j} */
-  for (int j = 0; j < L; j++) {
-    int m = n - 1 - j;
+  for (int j = 0; j < L; j++)
     for (int a = 0; a < rf->nf; a++) {
       if (!R->dLdprev[j][a]) continue;
       if (lg_form_kernels_eval(env, rf->lm, R->dLdprev[j][a], nb, b, R->tmp)) return 1;
-      int nd = rf->fld[a].dm->ndof;
-      if (m >= 1) {
-        double *to = R->pend[m % (L + 1)] + rf->fld[a].offset;
-        for (int d = 0; d < nd; d++) to[d] += R->tmp[d];
-      } else { /* an initial state: X_0's level -m */
-        int off = 0;
-        for (int jj = 0; jj < -m; jj++)
-          for (int aa = 0; aa < rf->nf; aa++) off += rf->fld[aa].dm->ndof;
-        for (int aa = 0; aa < a; aa++) off += rf->fld[aa].dm->ndof;
-        for (int d = 0; d < nd; d++) R->dX0[off + d] += R->tmp[d];
-      }
+      send_back(rf, R->pend, R->dX0, n, j, a, R->tmp);
     }
-  }
+  if (hess_on(rf) && second_order_step(env, rf, n, Xp, Xn, b, nb)) return 1;
   monitor_line(env, R, n, "adjoint");
   return 0;
 }
@@ -360,7 +362,7 @@ static int adjoint_step(lg_env *env, lg_reduced *rf, int n, const double *Xp, co
  * X_a. s: the snapshots this reversal may use, X_a's included */
 static int reverse(lg_env *env, lg_reduced *rf, int a, int n, int s) {
   lg_time_rf *R = rf->tm;
-  size_t bytes = sizeof(double) * (size_t)R->S;
+  size_t bytes = sizeof(double) * (size_t)R->SY;
   const double *Xa = find_slot(R, a);
   if (!Xa) { lg_seterr(env, "internal error: no snapshot of step %d", a); return 1; }
   if (n == 1) {
@@ -406,10 +408,12 @@ int lg_time_value(lg_env *env, lg_reduced *rf, double *J) {
   return 0;
 }
 
-int lg_time_gradient(lg_env *env, lg_reduced *rf, double **g) {
+static int hessian_step0(lg_env *env, lg_reduced *rf, const double *Y0);
+
+/* the backward sweep after a march: the gradient into g (and, in a Hessian sweep, the
+ * Hessian action into the Hessian's buffers) */
+static int backward(lg_env *env, lg_reduced *rf, double **g) {
   lg_time_rf *R = rf->tm;
-  double J;
-  if (lg_time_value(env, rf, &J)) return 1;
   int N = lg_problem_size(rf->p);
   R->g = g;
   for (int i = 0; i < rf->nc; i++) memset(g[i], 0, sizeof(double) * (size_t)lg_reduced_control_size(rf, i));
@@ -426,7 +430,7 @@ int lg_time_gradient(lg_env *env, lg_reduced *rf, double **g) {
   /* step 0: the terms at the initial state (their dJ/du into dX0's level 0, dJ/dm) */
   const double *X0 = R->snaps ? find_slot(R, 0) : R->all[0];
   if (!rc && X0) {
-    lg_time_set_state(T, X0);
+    ystate_set(rf, X0);
     lg_time_prepare(env, T, 0);
     set_step_controls(rf, 0);
     lg_time_unknowns(T, X0, R->u);
@@ -451,20 +455,20 @@ int lg_time_gradient(lg_env *env, lg_reduced *rf, double **g) {
       }
     }
   }
+  if (!rc && X0 && hess_on(rf)) rc = hessian_step0(env, rf, X0);
   sweep_end(rf);
   lg_time_end(env, T);
-  /* the initial states' gradients */
-  for (int i = 0; i < rf->nc && !rc; i++) {
-    if (R->ic[i] < 0) continue;
-    int lev = R->ic[i] / KER_MAXFIELD, a = R->ic[i] % KER_MAXFIELD, off = 0;
-    for (int j = 0; j < lev; j++)
-      for (int aa = 0; aa < rf->nf; aa++) off += rf->fld[aa].dm->ndof;
-    for (int aa = 0; aa < a; aa++) off += rf->fld[aa].dm->ndof;
-    for (int d = 0; d < rf->fld[a].dm->ndof; d++) g[i][d] += R->dX0[off + d];
-  }
+  if (!rc) add_initial(rf, R->dX0, g); /* the initial states' gradients */
   for (int i = 0; i < rf->nc && !rc; i++) rc = lg_reduced_dirichlet_ghosts(env, rf, i, g[i]);
   /* the stored states are spent (the snapshots were reused): the next gradient marches */
   if (R->snaps) R->fresh = 0;
+  return rc;
+}
+
+int lg_time_gradient(lg_env *env, lg_reduced *rf, double **g) {
+  double J;
+  if (lg_time_value(env, rf, &J)) return 1;
+  int rc = backward(env, rf, g);
   rf->grad_fresh = !rc;
   return rc;
 }
@@ -475,11 +479,466 @@ void lg_time_rf_stats(const lg_reduced *rf, long *recomputed, int *states) {
   if (states) *states = !R ? 0 : R->snaps ? R->snaps + 2 : R->N + 1;
 }
 
+/* ---------------------------------------------------------------- Hessian actions */
+
+/* H dm by a tangent march and a second-order backward sweep under the same schedule. The
+ * stored state Y_n is [X_n, dX_n]: the previous functions' values and their tangents (the
+ * tangent functions dprev hold dX during the march, as the previous functions hold X). Step n
+ * solves u^n, then from its inputs the tangent (dR/du) du^n = -(R_P dP + R_m dm), zero on the
+ * essential rows. Backward, after lam^n, with D = the directional derivative of
+ * lam^n R_n + sum w J in the direction (du^n, dP, dm) and G = dlam^n R_n:
+ *   (dR/du)^T dlam^n = -dD/du^n - pending2_n,  H dm += dD/dm + dG/dm,
+ * and dD/dP_j + dG/dP_j go to the step that made P_j (pending2), or to the initial states. */
+struct tm_hess {
+  int on;
+  lg_function *dprev[LG_TIME_MAXLEV][KER_MAXFIELD], *du[KER_MAXFIELD], *dlam[KER_MAXFIELD];
+  lg_function *dmf[LG_MAXCONTROL], *dfp[LG_MAXCONTROL]; /* field directions; a per-step companion's */
+  int dpar[LG_MAXCONTROL];
+  double *dps[LG_MAXCONTROL];                          /* a per-step control's direction, N + 1 blocks */
+  lg_form_kernels *tan[KER_MAXFIELD];                  /* R_P dP + R_m dm, by test field */
+  lg_form_kernels *jd_u[LG_TIME_MAXTERMS][KER_MAXFIELD], *jd_m[LG_TIME_MAXTERMS][LG_MAXCONTROL];
+  lg_form_kernels *jd_p[LG_TIME_MAXTERMS][LG_MAXCONTROL];
+  lg_form_kernels *ld_u[KER_MAXFIELD], *ld_P[LG_TIME_MAXLEV][KER_MAXFIELD], *ld_m[LG_MAXCONTROL], *ld_p[LG_MAXCONTROL];
+  lg_form_kernels *g_P[LG_TIME_MAXLEV][KER_MAXFIELD], *g_m[LG_MAXCONTROL], *g_p[LG_MAXCONTROL];
+  double *pend2[LG_TIME_MAXLEV + 1], *dX0b, *ytmp, *xk, *v;
+  double **h;
+};
+
+static int hess_on(const lg_reduced *rf) { return rf->tm && rf->tm->hs && rf->tm->hs->on; }
+
+/* the state and, in a Hessian sweep, its tangent: functions <-> a stored state */
+static void ystate_get(lg_reduced *rf, double *Y) {
+  lg_time_rf *R = rf->tm;
+  lg_time_get_state(R->T, Y);
+  if (!hess_on(rf)) return;
+  double *d = Y + R->S;
+  for (int j = 0; j < R->nlev; j++)
+    for (int a = 0; a < rf->nf; a++) {
+      int nd = rf->fld[a].dm->ndof;
+      memcpy(d, R->hs->dprev[j][a]->x, sizeof(double) * (size_t)nd);
+      d += nd;
+    }
+}
+
+static void ystate_set(lg_reduced *rf, const double *Y) {
+  lg_time_rf *R = rf->tm;
+  lg_time_set_state(R->T, Y);
+  if (!hess_on(rf)) return;
+  const double *d = Y + R->S;
+  for (int j = 0; j < R->nlev; j++)
+    for (int a = 0; a < rf->nf; a++) {
+      int nd = rf->fld[a].dm->ndof;
+      memcpy(R->hs->dprev[j][a]->x, d, sizeof(double) * (size_t)nd);
+      d += nd;
+    }
+}
+
+/* a per-step control's direction at step k (and its companion's, block k - 1) */
+static void set_step_directions(lg_reduced *rf, int k) {
+  struct tm_hess *H = rf->tm->hs;
+  for (int i = 0; i < rf->nc; i++)
+    if (H->dps[i]) {
+      int nd = rf->c[i].f->dm->ndof;
+      memcpy(H->dmf[i]->x, H->dps[i] + (size_t)k * (size_t)nd, sizeof(double) * (size_t)nd);
+      if (H->dfp[i]) memcpy(H->dfp[i]->x, H->dps[i] + (size_t)(k > 0 ? k - 1 : 0) * (size_t)nd, sizeof(double) * (size_t)nd);
+    }
+}
+
+/* step k, and in a Hessian sweep its tangent from the step's inputs */
+static int full_step(lg_env *env, lg_reduced *rf, int k) {
+  lg_time_rf *R = rf->tm;
+  lg_solve_info info;
+  if (!hess_on(rf)) return lg_time_step(env, R->T, k, &info);
+  struct tm_hess *H = R->hs;
+  lg_problem *p = rf->p;
+  int N = lg_problem_size(p);
+  lg_time_get_state(R->T, H->ytmp); /* X_{k-1}; the tangents dX_{k-1} stay in dprev */
+  if (lg_time_step(env, R->T, k, &info)) return 1;
+  lg_time_get_state(R->T, H->xk);
+  memcpy(R->u, lg_problem_solution(p), sizeof(double) * (size_t)N);
+  lg_time_set_state(R->T, H->ytmp);
+  if (lg_time_prepare(env, R->T, k) || lg_problem_restore(env, p, R->u)) return 1;
+  coef_binding b[3 * KER_MAXFIELD];
+  int nb = lg_problem_bind_values(p, R->u, b);
+  for (int a = 0; a < rf->nf; a++)
+    if (lg_form_kernels_eval(env, rf->lm, H->tan[a], nb, b, R->rhs + rf->fld[a].offset)) return 1;
+  for (int i = 0; i < N; i++) R->rhs[i] = -R->rhs[i];
+  int nbc = lg_problem_essential_rows(p, NULL, 0);
+  int *rows = malloc(sizeof(int) * (size_t)(nbc + 1));
+  if (!rows) { lg_seterr(env, "out of memory"); return 1; }
+  lg_problem_essential_rows(p, rows, nbc);
+  for (int i = 0; i < nbc; i++) R->rhs[rows[i]] = 0;
+  free(rows);
+  if (lg_problem_tangent(env, p, R->rhs, H->v)) return 1;
+  /* the new state and its tangent: the levels shifted, level 0 du^k */
+  lg_time_set_state(R->T, H->xk);
+  for (int j = R->nlev - 1; j > 0; j--)
+    for (int a = 0; a < rf->nf; a++)
+      memcpy(H->dprev[j][a]->x, H->dprev[j - 1][a]->x, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
+  for (int a = 0; a < rf->nf; a++)
+    memcpy(H->dprev[0][a]->x, H->v + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
+  return 0;
+}
+
+/* the place of level lev of field a in a state X */
+static int state_offset(const lg_reduced *rf, int lev, int a) {
+  int off = 0;
+  for (int j = 0; j < lev; j++)
+    for (int aa = 0; aa < rf->nf; aa++) off += rf->fld[aa].dm->ndof;
+  for (int aa = 0; aa < a; aa++) off += rf->fld[aa].dm->ndof;
+  return off;
+}
+
+/* v (field a's values) added at the step that made level j of step n's inputs (pending, in
+ * the problem's numbering), or for level -m of the initial state X_0 into dX0 */
+static void send_back(lg_reduced *rf, double **pend, double *dX0, int n, int j, int a, const double *v) {
+  int m = n - 1 - j, nd = rf->fld[a].dm->ndof;
+  double *to = m >= 1 ? pend[m % (rf->tm->nlev + 1)] + rf->fld[a].offset : dX0 + state_offset(rf, -m, a);
+  for (int d = 0; d < nd; d++) to[d] += v[d];
+}
+
+/* the initial states' parts of dX0 added to their controls' vectors */
+static void add_initial(lg_reduced *rf, const double *dX0, double **out) {
+  lg_time_rf *R = rf->tm;
+  for (int i = 0; i < rf->nc; i++) {
+    if (R->ic[i] < 0) continue;
+    int a = R->ic[i] % KER_MAXFIELD, off = state_offset(rf, R->ic[i] / KER_MAXFIELD, a);
+    for (int d = 0; d < rf->fld[a].dm->ndof; d++) out[i][d] += dX0[off + d];
+  }
+}
+
+/* out += s K (evaluated); a per-step control's block `blk` */
+static int add_eval(lg_env *env, lg_reduced *rf, lg_form_kernels *K, const coef_binding *b, int nb, int i, int blk, double *out) {
+  if (!K) return 0;
+  lg_time_rf *R = rf->tm;
+  int m = lg_reduced_control_size(rf, i) / lg_reduced_control_blocks(rf, i);
+  if (lg_form_kernels_eval(env, rf->lm, K, nb, b, R->tmp)) return 1;
+  double *o = out + (R->ps[i] ? (size_t)blk * (size_t)m : 0);
+  for (int k = 0; k < m; k++) o[k] += R->tmp[k];
+  return 0;
+}
+
+/* the second-order adjoint of step n (lam^n set, step n's inputs restored) and its terms */
+static int second_order_step(lg_env *env, lg_reduced *rf, int n, const double *Yp, const double *Yn, const coef_binding *b, int nb) {
+  lg_time_rf *R = rf->tm;
+  struct tm_hess *H = R->hs;
+  lg_problem *p = rf->p;
+  int N = lg_problem_size(p), L = R->nlev;
+  (void)Yp; /* dprev holds dX_{n-1}: ystate_set at the step's start */
+  /* du^n: level 0 of dX_n */
+  for (int a = 0, off = R->S; a < rf->nf; off += rf->fld[a].dm->ndof, a++)
+    memcpy(H->du[a]->x, Yn + off, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
+  double *pend = H->pend2[n % (L + 1)];
+  for (int i = 0; i < N; i++) R->rhs[i] = -pend[i];
+  memset(pend, 0, sizeof(double) * (size_t)N);
+  for (int a = 0; a < rf->nf; a++) {
+    int nd = rf->fld[a].dm->ndof;
+    double *r = R->rhs + rf->fld[a].offset;
+    if (lg_form_kernels_eval(env, rf->lm, H->ld_u[a], nb, b, R->tmp)) return 1;
+    for (int d = 0; d < nd; d++) r[d] -= R->tmp[d];
+    for (int t = 0; t < R->nterm; t++) {
+      double w = weight(R, &R->t[t], n);
+      if (w == 0 || !H->jd_u[t][a]) continue;
+      if (lg_form_kernels_eval(env, rf->lm, H->jd_u[t][a], nb, b, R->tmp)) return 1;
+      for (int d = 0; d < nd; d++) r[d] -= w * R->tmp[d];
+    }
+  }
+  if (lg_problem_adjoint(env, p, R->rhs, H->v)) return 1;
+  int nbc = lg_problem_essential_rows(p, NULL, 0);
+  int *rows = malloc(sizeof(int) * (size_t)(nbc + 1));
+  if (!rows) { lg_seterr(env, "out of memory"); return 1; }
+  lg_problem_essential_rows(p, rows, nbc);
+  for (int i = 0; i < nbc; i++) H->v[rows[i]] = 0;
+  free(rows);
+  for (int a = 0; a < rf->nf; a++) memcpy(H->dlam[a]->x, H->v + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
+  /* H dm: dD/dm + dG/dm (a per-step control's block n, its companion's block n - 1) */
+  for (int i = 0; i < rf->nc; i++) {
+    if (R->ic[i] >= 0) continue;
+    if (add_eval(env, rf, H->ld_m[i], b, nb, i, n, H->h[i]) || add_eval(env, rf, H->g_m[i], b, nb, i, n, H->h[i]) ||
+        add_eval(env, rf, H->ld_p[i], b, nb, i, n - 1, H->h[i]) || add_eval(env, rf, H->g_p[i], b, nb, i, n - 1, H->h[i]))
+      return 1;
+    for (int t = 0; t < R->nterm; t++) {
+      double w = weight(R, &R->t[t], n);
+      if (w == 0) continue;
+      double *save = R->tmp; /* weighted: through a scaled copy */
+      int m = lg_reduced_control_size(rf, i) / lg_reduced_control_blocks(rf, i);
+      for (int pass = 0; pass < 2; pass++) {
+        lg_form_kernels *K = pass ? H->jd_p[t][i] : H->jd_m[t][i];
+        if (!K) continue;
+        if (lg_form_kernels_eval(env, rf->lm, K, nb, b, save)) return 1;
+        int blk = pass ? n - 1 : n;
+        double *o = H->h[i] + (R->ps[i] ? (size_t)blk * (size_t)m : 0);
+        for (int k = 0; k < m; k++) o[k] += w * save[k];
+      }
+    }
+  }
+  /* to the steps that made the inputs */
+  for (int j = 0; j < L; j++)
+    for (int a = 0; a < rf->nf; a++)
+      for (int pass = 0; pass < 2; pass++) {
+        lg_form_kernels *K = pass ? H->g_P[j][a] : H->ld_P[j][a];
+        if (!K) continue;
+        if (lg_form_kernels_eval(env, rf->lm, K, nb, b, R->tmp)) return 1;
+        send_back(rf, H->pend2, H->dX0b, n, j, a, R->tmp);
+      }
+  return 0;
+}
+
+/* the terms at the initial state: dD/du^0 into the initial states, dD/dm */
+static int hessian_step0(lg_env *env, lg_reduced *rf, const double *Y0) {
+  lg_time_rf *R = rf->tm;
+  struct tm_hess *H = R->hs;
+  set_step_directions(rf, 0);
+  for (int a = 0, off = R->S; a < rf->nf; off += rf->fld[a].dm->ndof, a++)
+    memcpy(H->du[a]->x, Y0 + off, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
+  coef_binding b[3 * KER_MAXFIELD];
+  int nb = lg_problem_bind_values(rf->p, R->u, b); /* R->u: u^0, set by the first-order step 0 */
+  for (int t = 0; t < R->nterm; t++) {
+    double w = weight(R, &R->t[t], 0);
+    if (w == 0) continue;
+    for (int a = 0, off = 0; a < rf->nf; off += rf->fld[a].dm->ndof, a++) {
+      if (!H->jd_u[t][a]) continue;
+      if (lg_form_kernels_eval(env, rf->lm, H->jd_u[t][a], nb, b, R->tmp)) return 1;
+      for (int d = 0; d < rf->fld[a].dm->ndof; d++) H->dX0b[off + d] += w * R->tmp[d];
+    }
+    for (int i = 0; i < rf->nc; i++) {
+      int m = lg_reduced_control_size(rf, i) / lg_reduced_control_blocks(rf, i);
+      for (int pass = 0; pass < 2; pass++) {
+        lg_form_kernels *K = pass ? H->jd_p[t][i] : H->jd_m[t][i];
+        if (!K) continue;
+        if (lg_form_kernels_eval(env, rf->lm, K, nb, b, R->tmp)) return 1;
+        for (int k = 0; k < m; k++) H->h[i][k] += w * R->tmp[k]; /* block 0 (the value before t0 is value 0) */
+      }
+    }
+  }
+  return 0;
+}
+
+
+/* the direction expression of e: its derivative along every control's direction (fields,
+ * per-step companions, parameters) and every previous function's (dprev); with du, along the
+ * unknowns' too */
+static expr *direction_of(lg_env *env, lg_reduced *rf, expr *e, int with_du) {
+  lg_time_rf *R = rf->tm;
+  struct tm_hess *H = R->hs;
+  expr_ctx *c = env->c;
+  expr *sum = expr_num(c, 0);
+  for (int i = 0; i < rf->nc && sum; i++) {
+    const lg_control *ci = &rf->c[i];
+    if (R->ic[i] >= 0) continue; /* an initial state: along dprev below */
+    if (ci->kind == LG_CONTROL_PARAM)
+      sum = expr_add(c, sum, expr_mul(c, expr_diff(c, e, expr_param(c, ci->param)), expr_param(c, H->dpar[i])));
+    else {
+      sum = expr_add(c, sum, form_directional(c, e, ci->f->fid, H->dmf[i]->fid));
+      if (H->dfp[i]) sum = expr_add(c, sum, form_directional(c, e, ci->fprev->fid, H->dfp[i]->fid));
+    }
+  }
+  for (int j = 0; j < R->nlev && sum; j++)
+    for (int a = 0; a < rf->nf && sum; a++)
+      sum = expr_add(c, sum, form_directional(c, e, lg_time_previous(R->T, j, a)->fid, H->dprev[j][a]->fid));
+  for (int a = 0; with_du && a < rf->nf && sum; a++) sum = expr_add(c, sum, form_directional(c, e, rf->fld[a].unknown, H->du[a]->fid));
+  return sum;
+}
+
+/* a form of each term's direction (or G: the equation with its tests replaced by dlam) */
+static form *hess_form(lg_env *env, lg_reduced *rf, const form *F, int kind) {
+  form *D = form_new();
+  for (int i = 0; D && i < F->n; i++) {
+    expr *e = F->t[i].integrand;
+    if (kind == 2)
+      for (int a = 0; a < rf->nf && e; a++) e = form_replace_function(env->c, e, rf->fld[a].test, rf->tm->hs->dlam[a]->fid);
+    else e = direction_of(env, rf, e, kind == 1);
+    if (!e || form_add_term(D, &F->t[i].reg, e, F->t[i].order)) { form_free(D); D = NULL; }
+  }
+  if (!D) lg_seterr(env, "%s", expr_error(env->c)[0] ? expr_error(env->c) : "out of memory");
+  return D;
+}
+
+/* the gradient kernels of F with respect to function fid (space dm), or NULL where F does
+ * not use it; param >= 0: the derivative with respect to that parameter (a number). 1 on
+ * failure */
+static int kern(lg_env *env, lg_reduced *rf, const form *F, int fid, const dofmap *dm, int param, lg_form_kernels **out) {
+  *out = NULL;
+  if (param >= 0) {
+    int u = lg_form_uses_param(env, F, param);
+    if (u < 0) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
+    if (!u) return 0;
+    form *dF = lg_form_param_derivative(env, F, param);
+    if (!dF) { lg_seterr(env, "%s", expr_error(env->c)); return 1; }
+    *out = lg_form_kernels_new(env, rf->lm, dF, -1, NULL);
+    form_free(dF);
+    return !*out;
+  }
+  if (!lg_form_uses(env, F, fid)) return 0;
+  return !(*out = lg_form_kernels_new(env, rf->lm, F, fid, dm));
+}
+
+/* a form's kernels with respect to the controls: ctl[i] (the control), cp[i] (a per-step
+ * companion); initial states only with ic_too */
+static int control_kernels(lg_env *env, lg_reduced *rf, const form *F, int ic_too, lg_form_kernels **ctl, lg_form_kernels **cp) {
+  lg_time_rf *R = rf->tm;
+  for (int i = 0; i < rf->nc; i++) {
+    const lg_control *c = &rf->c[i];
+    if (R->ic[i] >= 0 && !ic_too) continue;
+    if (kern(env, rf, F, c->kind == LG_CONTROL_FIELD ? c->f->fid : -1, c->kind == LG_CONTROL_FIELD ? c->f->dm : NULL,
+             c->kind == LG_CONTROL_PARAM ? c->param : -1, &ctl[i]))
+      return 1;
+    if (cp && c->kind == LG_CONTROL_FIELD && R->ps[i] && c->fprev && kern(env, rf, F, c->fprev->fid, c->fprev->dm, -1, &cp[i])) return 1;
+  }
+  return 0;
+}
+
+static void hess_free(lg_reduced *rf) {
+  struct tm_hess *H = rf->tm->hs;
+  if (!H) return;
+  lg_env *env = rf->env;
+#define KF(k) lg_form_kernels_free(k)
+  for (int a = 0; a < KER_MAXFIELD; a++) {
+    KF(H->tan[a]); KF(H->ld_u[a]);
+    for (int j = 0; j < LG_TIME_MAXLEV; j++) { KF(H->ld_P[j][a]); KF(H->g_P[j][a]); }
+    for (int t = 0; t < LG_TIME_MAXTERMS; t++) KF(H->jd_u[t][a]);
+  }
+  for (int i = 0; i < LG_MAXCONTROL; i++) {
+    KF(H->ld_m[i]); KF(H->ld_p[i]); KF(H->g_m[i]); KF(H->g_p[i]);
+    for (int t = 0; t < LG_TIME_MAXTERMS; t++) { KF(H->jd_m[t][i]); KF(H->jd_p[t][i]); }
+    free(H->dps[i]);
+  }
+#undef KF
+  lg_function *fs[3 * KER_MAXFIELD + LG_TIME_MAXLEV * KER_MAXFIELD + 2 * LG_MAXCONTROL];
+  int nfs = 0;
+  for (int a = 0; a < KER_MAXFIELD; a++) { fs[nfs++] = H->du[a]; fs[nfs++] = H->dlam[a]; }
+  for (int j = 0; j < LG_TIME_MAXLEV; j++)
+    for (int a = 0; a < KER_MAXFIELD; a++) fs[nfs++] = H->dprev[j][a];
+  for (int i = 0; i < LG_MAXCONTROL; i++) { fs[nfs++] = H->dmf[i]; fs[nfs++] = H->dfp[i]; }
+  for (int k = 0; k < nfs; k++)
+    if (fs[k]) {
+      expr_func_forget_user(env->c, fs[k]->fid);
+      lg_function_free(fs[k]);
+    }
+  for (int l = 0; l <= LG_TIME_MAXLEV; l++) free(H->pend2[l]);
+  free(H->dX0b); free(H->ytmp); free(H->xk); free(H->v);
+  free(H);
+  rf->tm->hs = NULL;
+}
+
+/* a scratch function of the space dm */
+static lg_function *scratch(lg_env *env, lg_reduced *rf, const dofmap *dm, const char *name) {
+  return lg_function_new(env, rf->lm, (dofmap *)dm, name);
+}
+
+/* the stored states made room for their tangents (2 S values each) */
+static int grow_states(lg_env *env, lg_time_rf *R) {
+  size_t bytes = sizeof(double) * (2 * (size_t)R->S + 1);
+  double **bufs[4] = {R->all, R->slot, &R->held, &R->work};
+  int counts[4] = {R->all ? R->N + 1 : 0, R->slot ? R->snaps : 0, R->held ? 1 : 0, R->work ? 1 : 0};
+  for (int b = 0; b < 4; b++)
+    for (int k = 0; k < counts[b]; k++) {
+      double *n = realloc(bufs[b][k], bytes);
+      if (!n) { lg_seterr(env, "out of memory for the states' tangents (Hessian actions)"); return 1; }
+      bufs[b][k] = n;
+    }
+  R->SY = 2 * R->S;
+  return 0;
+}
+
+static int hess_setup(lg_env *env, lg_reduced *rf) {
+  lg_time_rf *R = rf->tm;
+  if (R->hs) return 0;
+  for (int i = 0; i < rf->nc; i++)
+    if (rf->bcdep[i]) {
+      lg_seterr(env, "Hessian actions of a time-dependent reduced functional with a Dirichlet control (control %d) are not "
+                     "available yet: use a quasi-Newton method (lmvm, blmvm)", i + 1);
+      return 1;
+    }
+  struct tm_hess *H = R->hs = calloc(1, sizeof *H);
+  if (!H) { lg_seterr(env, "out of memory"); return 1; }
+  int N = lg_problem_size(rf->p), rc = 0;
+  for (int a = 0; a < rf->nf && !rc; a++) {
+    rc |= !(H->du[a] = scratch(env, rf, rf->fld[a].dm, "du")) || !(H->dlam[a] = scratch(env, rf, rf->fld[a].dm, "dlambda"));
+    for (int j = 0; j < R->nlev && !rc; j++) rc |= !(H->dprev[j][a] = scratch(env, rf, rf->fld[a].dm, "dprev"));
+  }
+  for (int i = 0; i < rf->nc && !rc; i++) {
+    const lg_control *c = &rf->c[i];
+    if (R->ic[i] >= 0) continue;
+    if (c->kind == LG_CONTROL_PARAM) rc |= (H->dpar[i] = expr_param_new(env->c, "dm", 0)) < 0;
+    else {
+      rc |= !(H->dmf[i] = scratch(env, rf, c->f->dm, "dm"));
+      if (!rc && R->ps[i]) rc |= !(H->dps[i] = malloc(sizeof(double) * (size_t)c->f->dm->ndof * ((size_t)R->N + 1) + 8));
+      if (!rc && R->ps[i] && c->fprev) rc |= !(H->dfp[i] = scratch(env, rf, c->f->dm, "dm_prev"));
+    }
+  }
+  for (int l = 0; l <= R->nlev && !rc; l++) rc |= !(H->pend2[l] = malloc(sizeof(double) * ((size_t)N + 1)));
+  if (!rc) rc = !(H->dX0b = malloc(sizeof(double) * ((size_t)R->S + 1))) || !(H->ytmp = malloc(sizeof(double) * ((size_t)R->S + 1))) ||
+                !(H->xk = malloc(sizeof(double) * ((size_t)R->S + 1))) || !(H->v = malloc(sizeof(double) * ((size_t)N + 1)));
+  if (rc) { if (!env->err[0]) lg_seterr(env, "out of memory"); hess_free(rf); return 1; }
+  const form *F = lg_problem_equation(rf->p);
+  form *T = hess_form(env, rf, F, 0), *DL = hess_form(env, rf, rf->L, 1), *G = hess_form(env, rf, F, 2);
+  rc = !T || !DL || !G;
+  for (int a = 0; a < rf->nf && !rc; a++) {
+    rc = kern(env, rf, T, rf->fld[a].test, rf->fld[a].dm, -1, &H->tan[a]) || kern(env, rf, DL, rf->fld[a].unknown, rf->fld[a].dm, -1, &H->ld_u[a]);
+    if (!rc && !H->tan[a]) rc = !(H->tan[a] = lg_form_kernels_new(env, rf->lm, T, rf->fld[a].test, rf->fld[a].dm)); /* zero, but evaluated */
+    if (!rc && !H->ld_u[a]) rc = !(H->ld_u[a] = lg_form_kernels_new(env, rf->lm, DL, rf->fld[a].unknown, rf->fld[a].dm));
+    for (int j = 0; j < R->nlev && !rc; j++) {
+      lg_function *pf = lg_time_previous(R->T, j, a);
+      rc = kern(env, rf, DL, pf->fid, pf->dm, -1, &H->ld_P[j][a]) || kern(env, rf, G, pf->fid, pf->dm, -1, &H->g_P[j][a]);
+    }
+  }
+  if (!rc) rc = control_kernels(env, rf, DL, 0, H->ld_m, H->ld_p) || control_kernels(env, rf, G, 0, H->g_m, H->g_p);
+  for (int t = 0; t < R->nterm && !rc; t++) {
+    form *DJ = hess_form(env, rf, R->t[t].J, 1);
+    rc = !DJ;
+    for (int a = 0; a < rf->nf && !rc; a++) rc = kern(env, rf, DJ, rf->fld[a].unknown, rf->fld[a].dm, -1, &H->jd_u[t][a]);
+    if (!rc) rc = control_kernels(env, rf, DJ, R->t[t].kind == LG_TJ_INITIAL, H->jd_m[t], H->jd_p[t]);
+    form_free(DJ);
+  }
+  form_free(T);
+  form_free(DL);
+  form_free(G);
+  if (!rc) rc = grow_states(env, R);
+  if (rc) { hess_free(rf); return 1; }
+  return 0;
+}
+
+int lg_time_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
+  lg_time_rf *R = rf->tm;
+  if (hess_setup(env, rf)) return 1;
+  struct tm_hess *H = R->hs;
+  int N = lg_problem_size(rf->p);
+  /* the directions: fields and parameters, per-step blocks, initial states as dX_0 */
+  for (int j = 0; j < R->nlev; j++)
+    for (int a = 0; a < rf->nf; a++) memset(H->dprev[j][a]->x, 0, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
+  for (int i = 0; i < rf->nc; i++) {
+    int n = lg_reduced_control_size(rf, i);
+    memset(out[i], 0, sizeof(double) * (size_t)n);
+    if (R->ic[i] >= 0) {
+      lg_function *f = H->dprev[R->ic[i] / KER_MAXFIELD][R->ic[i] % KER_MAXFIELD];
+      memcpy(f->x, dm[i], sizeof(double) * (size_t)f->dm->ndof);
+    } else if (rf->c[i].kind == LG_CONTROL_PARAM) expr_param_values(env->c)[H->dpar[i]] = dm[i][0];
+    else if (H->dps[i]) memcpy(H->dps[i], dm[i], sizeof(double) * (size_t)n);
+    else memcpy(H->dmf[i]->x, dm[i], sizeof(double) * (size_t)n);
+  }
+  for (int l = 0; l <= R->nlev; l++) memset(H->pend2[l], 0, sizeof(double) * (size_t)N);
+  memset(H->dX0b, 0, sizeof(double) * (size_t)R->S);
+  H->h = out;
+  double *g[LG_MAXCONTROL] = {NULL};
+  int rc = 0;
+  for (int i = 0; i < rf->nc && !rc; i++) rc = !(g[i] = malloc(sizeof(double) * ((size_t)lg_reduced_control_size(rf, i) + 1)));
+  if (rc) lg_seterr(env, "out of memory");
+  H->on = 1;
+  if (!rc) rc = march(env, rf) || backward(env, rf, g);
+  H->on = 0;
+  R->fresh = 0; /* the stored states held tangents: the next value marches again */
+  for (int i = 0; i < rf->nc; i++) free(g[i]);
+  if (!rc) add_initial(rf, H->dX0b, out); /* the initial states' part */
+  return rc;
+}
+
 /* ---------------------------------------------------------------- construction */
 
 void lg_time_rf_free(lg_reduced *rf) {
   lg_time_rf *R = rf->tm;
   if (!R) return;
+  hess_free(rf);
   for (int i = 0; i < R->nterm; i++) {
     form_free(R->t[i].J);
     lg_form_kernels_free(R->t[i].val);
@@ -551,7 +1010,7 @@ lg_reduced *lg_reduced_new_time(lg_env *env, lg_time *T, int nterm, const lg_tim
   R->T = T;
   R->nlev = lg_time_levels(T);
   R->N = lg_time_nsteps(T);
-  R->S = lg_time_state_size(T);
+  R->S = R->SY = lg_time_state_size(T);
   R->monitor = monitor;
   lg_problem *p = lg_time_step_problem(T);
   int nf0 = lg_problem_fields(p, rf->fld);

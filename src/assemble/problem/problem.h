@@ -141,6 +141,8 @@ void lg_time_free(lg_time *T);
  * the message in env stops the march */
 typedef int (*lg_time_hook)(lg_env *env, void *ud, int k, double t);
 void lg_time_set_hook(lg_time *T, lg_time_hook hook, void *ud);
+/* a second hook, after the first: a reduced functional's (the controls' values per step) */
+void lg_time_set_control_hook(lg_time *T, lg_time_hook hook, void *ud);
 lg_problem *lg_time_step_problem(const lg_time *T);
 int lg_time_levels(const lg_time *T);
 int lg_time_nsteps(const lg_time *T);

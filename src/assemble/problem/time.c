@@ -21,8 +21,8 @@ struct lg_time {
   int tparam;                                /* the time parameter, or -1 */
   double t0, dt;
   int nsteps;
-  lg_time_hook hook;
-  void *hook_ud;
+  lg_time_hook hook, chook;                  /* the script's (before_step), a reduced functional's (controls) */
+  void *hook_ud, *chook_ud;
   long steps;                                /* steps solved since it was made */
   int marching;                              /* between lg_time_begin and lg_time_end */
   double *x0, tsave;                         /* what a march found, restored at its end */
@@ -90,6 +90,11 @@ void lg_time_set_hook(lg_time *T, lg_time_hook hook, void *ud) {
   T->hook_ud = ud;
 }
 
+void lg_time_set_control_hook(lg_time *T, lg_time_hook hook, void *ud) {
+  T->chook = hook;
+  T->chook_ud = ud;
+}
+
 lg_problem *lg_time_step_problem(const lg_time *T) { return T->p; }
 int lg_time_levels(const lg_time *T) { return T->nlev; }
 int lg_time_nsteps(const lg_time *T) { return T->nsteps; }
@@ -144,7 +149,9 @@ void lg_time_end(lg_env *env, lg_time *T) {
 
 int lg_time_prepare(lg_env *env, lg_time *T, int k) {
   if (T->tparam >= 0) expr_param_values(env->c)[T->tparam] = lg_time_at(T, k);
-  return k >= 1 && T->hook && T->hook(env, T->hook_ud, k, lg_time_at(T, k));
+  if (k < 1) return 0;
+  if (T->hook && T->hook(env, T->hook_ud, k, lg_time_at(T, k))) return 1;
+  return T->chook && T->chook(env, T->chook_ud, k, lg_time_at(T, k));
 }
 
 int lg_time_step(lg_env *env, lg_time *T, int k, lg_solve_info *info) {

@@ -1,0 +1,30 @@
+#!/bin/sh
+# bench/time_adjoint.sh — time-dependent gradients, lugal (every state kept, and 16
+# snapshots) and pyadjoint 2023.0.0.post0 on legacy FEniCS side by side, alternating, three
+# rounds each (the lines give each run's median of three evaluations; RESULTS.md the medians
+# over rounds), OMP_NUM_THREADS=1, with one busy process beside them (issue 55). pyadjoint is
+# found in PYADJOINT (a checkout of its 2023.0.0.post0 tag) with Debian's python3-dolfin;
+# neither is a dependency of lugal: without them only lugal runs.
+ROOT=$(cd "$(dirname "$0")/.." && pwd)
+PYADJOINT=${PYADJOINT:-/opt/pyadjoint}
+export OMP_NUM_THREADS=1
+have_pa=0
+PYTHONPATH="$PYADJOINT" /usr/bin/python3 -c "import fenics_adjoint" 2> /dev/null && have_pa=1
+sh -c 'while :; do :; done' &
+busy=$!
+trap 'kill $busy 2> /dev/null' EXIT INT TERM
+cat /proc/loadavg
+for cfg in "32 100" "32 1000" "64 100" "64 1000"; do
+  for round in 1 2 3; do
+    # shellcheck disable=SC2086
+    "$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" $cfg
+    # shellcheck disable=SC2086
+    "$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" $cfg 16
+    # shellcheck disable=SC2086
+    [ $have_pa = 1 ] && PYTHONPATH="$PYADJOINT" /usr/bin/python3 "$ROOT/bench/time_adjoint_pyadjoint.py" $cfg 2> /dev/null | grep -v "^Calling FFC"
+  done
+done
+# memory over a long march: the plain forward run, every state kept, 16 snapshots
+"$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" 32 5000 16
+"$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" 32 5000
+cat /proc/loadavg

@@ -83,3 +83,27 @@ do
     out("time_recomputed_" .. ck, "count", rf:stats().recomputed)
   end
 end
+
+-- a control per step time (and its companion) on the ranks: the gradient's blocks as the serial run's
+do
+  local mesh = lg.mesh.rectangle{nx = 10}
+  local P1 = lg.lagrange(1)
+  local u, v = lg.unknown(P1, "u"), lg.test(P1, "v")
+  local t = lg.parameter("t", 0)
+  local u0 = lg.interpolate(P1, mesh, 0*x, "u0")
+  local f, fp = lg.control(P1, mesh, "f", 0*x, {per_step = true})
+  local dt = 0.1
+  local step = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, dt = dt, t1 = 0.6, time = t, monitor = false,
+                               eqn = lg.integral(mesh:cells(), (u - u0)/dt*v + 0.1*lg.dot(lg.grad(u), lg.grad(v)) - 0.5*(f + fp)*v),
+                               bc = lg.essential_bc(mesh:boundary(), v*u)}
+  local J = lg.functional{running = lg.integral(mesh:cells(), 0.5*(u - x*y*t)^2 + 0.01*((f - fp)/dt)^2)}
+  local rf = lg.reduced_functional{problem = step, functional = J, control = f, checkpoints = 3}
+  out("time_ps_J", "direct", rf:value(lg.sin(3*t)*x))
+  local g = rf:gradient(nil, {riesz = "l2"})
+  local s = 0
+  for k, gk in ipairs(g) do
+    local vals = gk:values()
+    for i = 1, #vals do s = s + vals[i]*(k + i % 3) end
+  end
+  out("time_ps_grad", "direct", s)
+end

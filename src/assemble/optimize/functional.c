@@ -538,8 +538,9 @@ int lg_reduced_dot(lg_env *env, lg_reduced *rf, double **a, double **b, double *
     if (rf->c[i].kind == LG_CONTROL_PARAM) par += a[i][0] * b[i][0];
     else if (rf->lm->dist) {
       const char *own = lg_dist_owned(env, rf->lm, rf->c[i].f->dm, NULL);
-      if (own) s[0] += lg_dist_dot(own, n, a[i], b[i]);
-      else s[1] = 1;
+      int nd = rf->c[i].f->dm->ndof; /* a per-step control: block by block */
+      for (int k = 0; own && k < n; k += nd) s[0] += lg_dist_dot(own, nd, a[i] + k, b[i] + k);
+      if (!own) s[1] = 1;
     } else
       for (int k = 0; k < n; k++) s[0] += a[i][k] * b[i][k];
   }

@@ -77,7 +77,11 @@ static void spread(opt_ctx *C, int i, const PetscScalar *v, double *out) {
   if (!C->dist) return;
   if (c->kind == LG_CONTROL_PARAM) {
     if (MPI_Bcast(out, 1, MPI_DOUBLE, 0, PETSC_COMM_WORLD) != MPI_SUCCESS) C->failed = 1;
-  } else if (lg_dist_ghosts(C->env, c->f->mesh, c->f->dm, out)) C->failed = 1;
+    return;
+  }
+  int nd = c->f->dm->ndof, n = lg_reduced_control_size(C->rf, i); /* a per-step control: block by block */
+  for (int k = 0; k < n; k += nd)
+    if (lg_dist_ghosts(C->env, c->f->mesh, c->f->dm, out + k)) C->failed = 1;
 }
 
 /* controls <-> the TAO vector x = sqrt(d) m */
@@ -297,13 +301,13 @@ static int number_controls(lg_env *env, opt_ctx *C, int *n) {
     if (!C->dist) *n += lg_reduced_control_size(C->rf, i);
     else if (c->kind == LG_CONTROL_PARAM) *n += lg_mpi_rank() == 0;
     else { /* the owned dofs */
-      int nown = 0, ni = lg_reduced_control_size(C->rf, i);
+      int nown = 0, ni = lg_reduced_control_size(C->rf, i), nd = c->f->dm->ndof, nb = ni / nd;
       const char *own = lg_dist_owned(env, lm, c->f->dm, &nown);
-      C->idx[i] = own ? malloc(sizeof(int) * ((size_t)nown + 1)) : NULL;
+      C->idx[i] = own ? malloc(sizeof(int) * ((size_t)nown * (size_t)nb + 1)) : NULL;
       if (!C->idx[i]) { if (own) lg_seterr(env, "out of memory"); rc = 1; continue; }
-      for (int k = 0, j = 0; k < ni; k++)
-        if (own[k]) C->idx[i][j++] = k;
-      *n += nown;
+      for (int k = 0, j = 0; k < ni; k++) /* a per-step control: each block's owned dofs */
+        if (own[k % nd]) C->idx[i][j++] = k;
+      *n += nown * nb;
     }
   }
   C->off[C->nc] = *n;

@@ -1032,11 +1032,6 @@ lg_reduced *lg_reduced_new_time(lg_env *env, lg_time *T, int nterm, const lg_tim
       lg_seterr(env, "control %d: a value per step is for a field the step reads (not a parameter or an initial state)", i + 1);
       goto fail;
     }
-    if (rf->lm->dist) {
-      lg_seterr(env, "control %d: per-step controls on a distributed mesh are not available yet (-lugal_distribute 0 keeps "
-                     "the mesh whole on every rank)", i + 1);
-      goto fail;
-    }
     int nd = c[i].f->dm->ndof;
     R->ps[i] = malloc(sizeof(double) * (size_t)nd * ((size_t)R->N + 1) + 8);
     R->ps_keep[i][0] = malloc(sizeof(double) * (size_t)nd + 8);

@@ -3,12 +3,13 @@
 -- (a control), J = 1/2 ∫ (u(T) - d)² + running 1/2 ∫∫ u². Prints the forward march (rf:value
 -- after the control changed), the backward sweep (rf:gradient right after), their ratio, the
 -- forward steps the sweep recomputed and the peak resident memory, for every state kept and
--- for s snapshots.
---   lugal bench/time_adjoint.lua N steps [snapshots]
+-- for s snapshots; with "plain" the march alone (step:solve()), for its time and memory.
+--   lugal bench/time_adjoint.lua N steps [snapshots | plain]
 local lg = require "lugal"
 local N = tonumber(arg[1]) or 32
 local steps = tonumber(arg[2]) or 100
 local snaps = tonumber(arg[3])
+local plain = arg[3] == "plain"
 local mesh = lg.mesh.rectangle{nx = N}
 local P1 = lg.lagrange(1)
 local u, v = lg.unknown(P1, "u"), lg.test(P1, "v")
@@ -20,6 +21,17 @@ local d = lg.interpolate(P1, mesh, x*y, "d")
 local step = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, dt = dt, t1 = 1, monitor = false,
                              eqn = lg.integral(mesh:cells(), (u - u0)/dt*v + 0.1*lg.dot(lg.grad(u), lg.grad(v)) - f*v),
                              bc = lg.essential_bc(mesh:boundary(), v*u)}
+local function hwm()
+  local s = io.open("/proc/self/status"):read("a")
+  return tonumber(s:match("VmHWM:%s*(%d+)")) / 1024
+end
+if plain then
+  local t0 = lg.wtime()
+  step:solve()
+  print(string.format("time_adjoint N=%d steps=%d plain march (step:solve): %.3f s, peak RSS %.0f MB", N, steps,
+                      lg.wtime() - t0, hwm()))
+  return
+end
 local J = lg.functional{final = lg.integral(mesh:cells(), 0.5*(u - d)^2), running = lg.integral(mesh:cells(), 0.5*u^2)}
 local rf = lg.reduced_functional{problem = step, functional = J, control = f, checkpoints = snaps or "all"}
 local function hwm()

@@ -4,7 +4,8 @@
 # rounds each (the lines give each run's median of three evaluations; RESULTS.md the medians
 # over rounds), OMP_NUM_THREADS=1, with one busy process beside them (issue 55). pyadjoint is
 # found in PYADJOINT (a checkout of its 2023.0.0.post0 tag) with Debian's python3-dolfin;
-# neither is a dependency of lugal: without them only lugal runs.
+# neither is a dependency of lugal: without them only lugal runs. `sh bench/time_adjoint.sh
+# memory` runs the memory lines alone.
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 PYADJOINT=${PYADJOINT:-/opt/pyadjoint}
 export OMP_NUM_THREADS=1
@@ -14,7 +15,7 @@ sh -c 'while :; do :; done' &
 busy=$!
 trap 'kill $busy 2> /dev/null' EXIT INT TERM
 cat /proc/loadavg
-for cfg in "32 100" "32 1000" "64 100" "64 1000"; do
+[ "$1" = memory ] || for cfg in "32 100" "32 1000" "64 100" "64 1000"; do
   for round in 1 2 3; do
     # shellcheck disable=SC2086
     "$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" $cfg
@@ -24,7 +25,13 @@ for cfg in "32 100" "32 1000" "64 100" "64 1000"; do
     [ $have_pa = 1 ] && PYTHONPATH="$PYADJOINT" /usr/bin/python3 "$ROOT/bench/time_adjoint_pyadjoint.py" $cfg 2> /dev/null | grep -v "^Calling FFC"
   done
 done
-# memory over a long march: the plain forward run, every state kept, 16 snapshots
-"$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" 32 5000 16
-"$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" 32 5000
+# memory over a long march: the plain forward run, 16 snapshots, every state kept
+for cfg in "32 5000" "128 1000"; do
+  # shellcheck disable=SC2086
+  "$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" $cfg plain
+  # shellcheck disable=SC2086
+  "$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" $cfg 16
+  # shellcheck disable=SC2086
+  "$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" $cfg
+done
 cat /proc/loadavg

@@ -300,6 +300,7 @@ void lg_reduced_free(lg_reduced *rf) {
   form_free(rf->L);
   free(rf->rhs);
   free(rf->lamv);
+  free(rf->lamz);
   free(rf);
 }
 
@@ -314,7 +315,8 @@ int lg_reduced_setup(lg_env *env, lg_reduced *rf, lg_problem *p, int nc, const l
   int N = lg_problem_size(p);
   rf->rhs = calloc((size_t)N + 1, sizeof(double));
   rf->lamv = calloc((size_t)N + 1, sizeof(double));
-  if (!rf->rhs || !rf->lamv) { lg_seterr(env, "out of memory"); return 1; }
+  rf->lamz = calloc((size_t)N + 1, sizeof(double));
+  if (!rf->rhs || !rf->lamv || !rf->lamz) { lg_seterr(env, "out of memory"); return 1; }
   const form *F = lg_problem_equation(p);
   /* the controls: on the problem's mesh; in the essential values (Dirichlet) only where
    * their columns are kept */
@@ -553,17 +555,11 @@ int lg_reduced_dot(lg_env *env, lg_reduced *rf, double **a, double **b, double *
 int lg_reduced_set_adjoint(lg_env *env, lg_reduced *rf, const double *lam) {
   /* lam^T dR/dm: the essential rows (u_i - g_i) do not depend on a control in the equation,
    * so the adjoint enters the equation with those values zero (the test space) */
-  int N = lg_problem_size(rf->p), nbc = lg_problem_essential_rows(rf->p, NULL, 0);
-  int *rows = malloc(sizeof(int) * (size_t)(nbc + 1));
-  double *lam0 = malloc(sizeof(double) * (size_t)N + 1);
-  if (!rows || !lam0) { free(rows); free(lam0); lg_seterr(env, "out of memory"); return 1; }
-  lg_problem_essential_rows(rf->p, rows, nbc);
-  memcpy(lam0, lam, sizeof(double) * (size_t)N);
-  for (int i = 0; i < nbc; i++) lam0[rows[i]] = 0;
+  (void)env;
+  memcpy(rf->lamz, lam, sizeof(double) * (size_t)lg_problem_size(rf->p));
+  lg_problem_zero_essential(rf->p, rf->lamz);
   for (int a = 0; a < rf->nf; a++)
-    memcpy(rf->lam[a]->x, lam0 + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
-  free(rows);
-  free(lam0);
+    memcpy(rf->lam[a]->x, rf->lamz + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
   return 0;
 }
 
@@ -670,14 +666,9 @@ int lg_sensitivity(lg_env *env, lg_problem *p, int param, double *du) {
   form_free(dF);
   if (!rc) {
     /* the essential rows u_r - g_r(a): du_r = dg_r/da */
-    int nbc = lg_problem_essential_rows(p, NULL, 0);
-    int *rows = malloc(sizeof(int) * (size_t)(nbc + 1));
-    if (!rows) { lg_seterr(env, "out of memory"); rc = 1; }
-    else {
-      lg_problem_essential_rows(p, rows, nbc);
+    {
       for (int i = 0; i < N; i++) rhs[i] = -rhs[i];
-      for (int i = 0; i < nbc; i++) rhs[rows[i]] = 0;
-      free(rows);
+      lg_problem_zero_essential(p, rhs);
       if (inB) {
         int *r, *c;
         double *v;
@@ -833,17 +824,14 @@ int lg_reduced_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
   }
   coef_binding st[2 * KER_MAXFIELD];
   int ns = lg_problem_bind_state(rf->p, st), N = lg_problem_size(rf->p);
-  int nbc = lg_problem_essential_rows(rf->p, NULL, 0);
-  int *rows = malloc(sizeof(int) * (size_t)(nbc + 1));
   double *v = malloc(sizeof(double) * ((size_t)N + 1));
-  int rc = !rows || !v;
+  int rc = !v;
   if (rc) lg_seterr(env, "out of memory");
-  else lg_problem_essential_rows(rf->p, rows, nbc);
   /* the tangent: (dR/du) du = -(dR/dm) dm, zero on the essential rows */
   for (int a = 0; a < rf->nf && !rc; a++) rc = lg_form_kernels_eval(env, rf->lm, rf->tan_rhs[a], ns, st, rf->rhs + rf->fld[a].offset);
   if (!rc) {
     for (int i = 0; i < N; i++) rf->rhs[i] = -rf->rhs[i];
-    for (int i = 0; i < nbc; i++) rf->rhs[rows[i]] = 0;
+    lg_problem_zero_essential(rf->p, rf->rhs);
     for (int i = 0; i < rf->nc && !rc; i++)
       if (rf->bcdep[i]) rc = add_bc_action(env, rf, i, dm[i], rf->rhs); /* du_r = dg_r/dm dm */
     if (!rc) rc = lg_problem_tangent(env, rf->p, rf->rhs, v);
@@ -861,7 +849,7 @@ int lg_reduced_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
   if (!rc && !dlr) { lg_seterr(env, "out of memory"); rc = 1; }
   if (!rc) {
     memcpy(dlr, v, sizeof(double) * (size_t)N);
-    for (int i = 0; i < nbc; i++) v[rows[i]] = 0; /* it enters the equation as a test function */
+    lg_problem_zero_essential(rf->p, v); /* it enters the equation as a test function */
     for (int a = 0; a < rf->nf; a++) memcpy(rf->dlam[a]->x, v + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
   }
   for (int i = 0; i < rf->nc && !rc; i++) {
@@ -875,7 +863,6 @@ int lg_reduced_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
     free(tmp);
   }
   free(dlr);
-  free(rows);
   free(v);
   return rc;
 }

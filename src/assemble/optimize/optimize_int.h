@@ -22,7 +22,7 @@ struct lg_reduced {
   form *L;                          /* the equation with its tests replaced by the adjoint */
   lg_form_kernels *Jval, *dJdu[KER_MAXFIELD], *dJdm[LG_MAXCONTROL], *dLdm[LG_MAXCONTROL];
   lg_problem *riesz[LG_MAXCONTROL][2]; /* L2 and H1 Gram matrices of field controls */
-  double *rhs, *lamv;
+  double *rhs, *lamv, *lamz;       /* lamz: lamv with the essential rows zero (lg_reduced_set_adjoint) */
   int solved;                       /* the state is the one of the current controls */
   int bcdep[LG_MAXCONTROL];         /* Dirichlet controls: in the essential values (1 affine, 2 not) */
   int grad_fresh;                   /* the adjoint is the one of the current state */

@@ -73,7 +73,7 @@ static void ystate_set(lg_reduced *rf, const double *Y);
 static int full_step(lg_env *env, lg_reduced *rf, int k);
 static int hess_on(const lg_reduced *rf);
 static void set_step_directions(lg_reduced *rf, int k);
-static int second_order_step(lg_env *env, lg_reduced *rf, int n, const double *Yp, const double *Yn, const coef_binding *b, int nb);
+static int second_order_step(lg_env *env, lg_reduced *rf, int n, const double *Yn, const coef_binding *b, int nb);
 static void send_back(lg_reduced *rf, double **pend, double *dX0, int n, int j, int a, const double *v);
 static void add_initial(lg_reduced *rf, const double *dX0, double **out);
 
@@ -181,13 +181,11 @@ static int value_at(lg_env *env, lg_reduced *rf, int k, const double *X, double 
 
 /* ---------------------------------------------------------------- the forward march */
 
-static int monitor_line(lg_env *env, const lg_time_rf *R, int k, const char *what) {
-  (void)env;
+static void monitor_line(const lg_time_rf *R, int k, const char *what) {
   if (R->monitor && lg_mpi_rank() == 0 && (k == R->N || k % 100 == 0)) {
     printf("%s: step %d of %d (t = %.6g)\n", what, k, R->N, lg_time_at(R->T, k));
     fflush(stdout);
   }
-  return 0;
 }
 
 /* a snapshot slot for X_k: the first free one */
@@ -252,7 +250,7 @@ static int march(lg_env *env, lg_reduced *rf) {
       if (sl) memcpy(sl, X, sizeof(double) * (size_t)R->SY);
     }
     rc = value_at(env, rf, k, X, &J);
-    monitor_line(env, R, k, "forward");
+    monitor_line(R, k, "forward");
   }
   sweep_end(rf);
   lg_time_end(env, T);
@@ -351,8 +349,8 @@ static int adjoint_step(lg_env *env, lg_reduced *rf, int n, const double *Xp, co
       if (lg_form_kernels_eval(env, rf->lm, R->dLdprev[j][a], nb, b, R->tmp)) return 1;
       send_back(rf, R->pend, R->dX0, n, j, a, R->tmp);
     }
-  if (hess_on(rf) && second_order_step(env, rf, n, Xp, Xn, b, nb)) return 1;
-  monitor_line(env, R, n, "adjoint");
+  if (hess_on(rf) && second_order_step(env, rf, n, Xn, b, nb)) return 1;
+  monitor_line(R, n, "adjoint");
   return 0;
 }
 
@@ -563,12 +561,7 @@ static int full_step(lg_env *env, lg_reduced *rf, int k) {
   for (int a = 0; a < rf->nf; a++)
     if (lg_form_kernels_eval(env, rf->lm, H->tan[a], nb, b, R->rhs + rf->fld[a].offset)) return 1;
   for (int i = 0; i < N; i++) R->rhs[i] = -R->rhs[i];
-  int nbc = lg_problem_essential_rows(p, NULL, 0);
-  int *rows = malloc(sizeof(int) * (size_t)(nbc + 1));
-  if (!rows) { lg_seterr(env, "out of memory"); return 1; }
-  lg_problem_essential_rows(p, rows, nbc);
-  for (int i = 0; i < nbc; i++) R->rhs[rows[i]] = 0;
-  free(rows);
+  lg_problem_zero_essential(p, R->rhs);
   if (lg_problem_tangent(env, p, R->rhs, H->v)) return 1;
   /* the new state and its tangent: the levels shifted, level 0 du^k */
   lg_time_set_state(R->T, H->xk);
@@ -618,13 +611,13 @@ static int add_eval(lg_env *env, lg_reduced *rf, lg_form_kernels *K, const coef_
   return 0;
 }
 
-/* the second-order adjoint of step n (lam^n set, step n's inputs restored) and its terms */
-static int second_order_step(lg_env *env, lg_reduced *rf, int n, const double *Yp, const double *Yn, const coef_binding *b, int nb) {
+/* the second-order adjoint of step n (lam^n set, step n's inputs and their tangents dX_{n-1}
+ * restored) from its output Yn, and its terms */
+static int second_order_step(lg_env *env, lg_reduced *rf, int n, const double *Yn, const coef_binding *b, int nb) {
   lg_time_rf *R = rf->tm;
   struct tm_hess *H = R->hs;
   lg_problem *p = rf->p;
   int N = lg_problem_size(p), L = R->nlev;
-  (void)Yp; /* dprev holds dX_{n-1}: ystate_set at the step's start */
   /* du^n: level 0 of dX_n */
   for (int a = 0, off = R->S; a < rf->nf; off += rf->fld[a].dm->ndof, a++)
     memcpy(H->du[a]->x, Yn + off, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
@@ -644,12 +637,7 @@ static int second_order_step(lg_env *env, lg_reduced *rf, int n, const double *Y
     }
   }
   if (lg_problem_adjoint(env, p, R->rhs, H->v)) return 1;
-  int nbc = lg_problem_essential_rows(p, NULL, 0);
-  int *rows = malloc(sizeof(int) * (size_t)(nbc + 1));
-  if (!rows) { lg_seterr(env, "out of memory"); return 1; }
-  lg_problem_essential_rows(p, rows, nbc);
-  for (int i = 0; i < nbc; i++) H->v[rows[i]] = 0;
-  free(rows);
+  lg_problem_zero_essential(p, H->v);
   for (int a = 0; a < rf->nf; a++) memcpy(H->dlam[a]->x, H->v + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
   /* H dm: dD/dm + dG/dm (a per-step control's block n, its companion's block n - 1) */
   for (int i = 0; i < rf->nc; i++) {

@@ -1026,6 +1026,10 @@ int lg_problem_essential_rows(const lg_problem *p, int *rows, int max) {
   return p->nbc;
 }
 
+void lg_problem_zero_essential(const lg_problem *p, double *v) {
+  for (int i = 0; i < p->nbc; i++) v[p->bc_rows[i]] = 0;
+}
+
 /* ---- essential values that depend on a control (Dirichlet controls) */
 
 static expr *control_leaf(lg_env *env, int fid, int param) {

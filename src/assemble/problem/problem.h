@@ -68,6 +68,9 @@ int lg_problem_is_nonlinear(const lg_problem *p);
 const double *lg_problem_solution(const lg_problem *p);
 /* the rows of the essential conditions at the last solve (in the problem's numbering) */
 int lg_problem_essential_rows(const lg_problem *p, int *rows, int max); /* returns how many; writes up to max */
+/* v (N values in the problem's numbering) zero on those rows (a tangent's right side, an
+ * adjoint as a test function) */
+void lg_problem_zero_essential(const lg_problem *p, double *v);
 /* essential values g_r that depend on a control (a discrete function fid, or the parameter
  * param when fid < 0): 0 not at all, 1 linearly, 2 nonlinearly, -1 error (a derivative of
  * the control in a condition) */

@@ -802,6 +802,27 @@ static void towards_reference(run *R) {
   free(q);
 }
 
+/* the vertices moved from x0 and their mean and largest displacement, into r */
+static void displacement(const mesh *m, const double *x0, untangle_report *r) {
+  double sum = 0;
+  r->moved = 0;
+  r->max_displacement = 0;
+  for (int v = 0; v < m->nvert; v++) {
+    double dd = 0;
+    int ch = 0;
+    for (int j = 0; j < m->dim; j++) {
+      double e = m->x[(size_t)v * m->dim + j] - x0[(size_t)v * m->dim + j];
+      ch |= m->x[(size_t)v * m->dim + j] != x0[(size_t)v * m->dim + j];
+      dd += e * e;
+    }
+    if (!ch) continue;
+    r->moved++;
+    sum += sqrt(dd);
+    r->max_displacement = fmax(r->max_displacement, sqrt(dd));
+  }
+  r->mean_displacement = r->moved ? sum / r->moved : 0;
+}
+
 /* the report: the best state seen kept when the stages did not end in it, the vertices
  * moved and their displacements */
 static void run_report(run *R, double t0) {
@@ -818,21 +839,7 @@ static void run_report(run *R, double t0) {
       printf("untangle: the stages did not end in the best state seen; kept the one after %s (%d invalid)\n",
              R->best.stage ? r->stage[R->best.stage - 1].name : "nothing (the input)", R->best.ninv);
   } else r->kept_stage = 3;
-  double sum = 0;
-  for (int v = 0; v < m->nvert; v++) {
-    double dd = 0;
-    int ch = 0;
-    for (int j = 0; j < m->dim; j++) {
-      double e = m->x[(size_t)v * m->dim + j] - R->x0[(size_t)v * m->dim + j];
-      ch |= m->x[(size_t)v * m->dim + j] != R->x0[(size_t)v * m->dim + j];
-      dd += e * e;
-    }
-    if (!ch) continue;
-    r->moved++;
-    sum += sqrt(dd);
-    r->max_displacement = fmax(r->max_displacement, sqrt(dd));
-  }
-  r->mean_displacement = r->moved ? sum / r->moved : 0;
+  displacement(m, R->x0, r);
   r->seconds = ut_now() - t0;
   if (R->o->verbose)
     printf("untangle: %s — %d invalid left, %d vertices moved (mean %.3g, max %.3g), %.3f s\n",
@@ -1253,24 +1260,7 @@ int mesh_untangle(mesh *m, const untangle_opts *o, untangle_report *r, char *err
   int back = 0;
   if (!rc && oo.slide) back = restore_boundary(m, keep);
   if (!rc && (r->passes > 1 || back > 0 || r->fallback_tried || r->tutte_tried)) {
-    /* the motion of all passes together, from the input */
-    double sum = 0;
-    r->moved = 0;
-    r->max_displacement = 0;
-    for (int v = 0; v < m->nvert; v++) {
-      double dd = 0;
-      int ch = 0;
-      for (int j = 0; j < m->dim; j++) {
-        double e = m->x[(size_t)v * m->dim + j] - keep[(size_t)v * m->dim + j];
-        ch |= e != 0;
-        dd += e * e;
-      }
-      if (!ch) continue;
-      r->moved++;
-      sum += sqrt(dd);
-      r->max_displacement = fmax(r->max_displacement, sqrt(dd));
-    }
-    r->mean_displacement = r->moved ? sum / r->moved : 0;
+    displacement(m, keep, r); /* the motion of all passes together, from the input */
   }
   if (!rc && !ut_finite_or_restore(m, keep)) {
     r->invalid_after = r->invalid_before;

@@ -150,6 +150,9 @@ extern const luaL_Reg lg_opt_lib[];
 void lg_lua_time_register(lua_State *L);
 extern const luaL_Reg lg_time_lib[];
 lg_time *time_of(lua_State *L, int idx);
+/* lopt.c: step:sensitivity (a method of time-dependent problems, made of a reduced
+ * functional's tangent march) */
+int lg_lua_time_sensitivity(lua_State *L);
 void lg_lua_operator_register(lua_State *L);
 extern const luaL_Reg lg_parallel_lib[]; /* lg.rank, lg.size, lg.allreduce */
 /* lparallel.c: the function on the top of the stack replaced by one that first checks, in a

@@ -175,41 +175,89 @@ static int to_control(lua_State *L, int idx, lg_control *c, const char *fn, int 
                     ue ? "an expression" : luaL_typename(L, idx));
 }
 
-/* the reduced functional of a time-dependent problem: checkpoints = "all" (every state),
- * a number of snapshots, or by default every state while they take at most 1 GiB, else
- * as many snapshots as fit in it */
+/* option 'checkpoints' of a time-dependent reduced functional: "all" (every state), a number
+ * of snapshots in memory, or {ram =, disk =, dir =}; by default every state while they take
+ * at most 1 GiB, else as many snapshots as fit in it. Option 'schedule': "revolve" (memory
+ * only) or "multistage" (memory and disk, the default with disk snapshots) */
+static void read_checkpoints(lua_State *L, lg_time *T, lg_checkpoints *ck, const char *fn) {
+  double state_bytes = 8.0 * lg_time_state_size(T), budget = 1024.0 * 1024 * 1024;
+  int N = lg_time_nsteps(T);
+  memset(ck, 0, sizeof *ck);
+  int ty = lua_getfield(L, 1, "checkpoints");
+  if (ty == LUA_TSTRING) {
+    if (strcmp(lua_tostring(L, -1), "all"))
+      luaL_error(L, "%s: option 'checkpoints' must be \"all\", a number of snapshots or {ram =, disk =, dir =}, got \"%s\"", fn, lua_tostring(L, -1));
+  } else if (ty == LUA_TTABLE) {
+    static const char *const keys[] = {"ram", "disk", "dir", NULL};
+    int t = lua_gettop(L);
+    check_keys(L, t, "lg.reduced_functional: option 'checkpoints'", keys);
+    ck->ram = opt_int(L, t, "ram", 0, fn);
+    ck->disk = opt_int(L, t, "disk", 0, fn);
+    ck->dir = opt_str(L, t, "dir", NULL, fn);
+    if (ck->ram < 0 || ck->disk < 0 || ck->ram + ck->disk < 1)
+      luaL_error(L, "%s: option 'checkpoints' = {ram = %d, disk = %d}: snapshots in memory and on disk, at least one in all", fn, ck->ram, ck->disk);
+    if (ck->disk && ck->ram < 1) luaL_error(L, "%s: option 'checkpoints' needs at least one snapshot in memory (ram = 1) beside disk ones", fn);
+  } else if (ty != LUA_TNIL) {
+    int isnum;
+    lua_Integer k = lua_tointegerx(L, -1, &isnum);
+    if (!isnum || k < 1) luaL_error(L, "%s: option 'checkpoints' must be \"all\", a number of snapshots >= 1 or {ram =, disk =, dir =}", fn);
+    ck->ram = k > N ? 0 : (int)k;
+  } else if ((N + 1) * state_bytes > budget) {
+    ck->ram = (int)(budget / state_bytes) - 2;
+    if (ck->ram < 2) ck->ram = 2;
+  }
+  if (ck->ram + ck->disk > N) ck->ram = ck->disk = 0; /* as many as states: every one kept */
+  lua_pop(L, 1);
+  const char *sched = opt_str(L, 1, "schedule", NULL, fn);
+  if (sched && strcmp(sched, "revolve") && strcmp(sched, "multistage"))
+    luaL_error(L, "%s: option 'schedule' must be \"revolve\" (snapshots in memory) or \"multistage\" (in memory and on disk), got \"%s\"",
+               fn, sched);
+  if (sched && !strcmp(sched, "revolve") && ck->disk)
+    luaL_error(L, "%s: schedule \"revolve\" keeps its snapshots in memory: with disk ones use \"multistage\"", fn);
+}
+
+/* the controls at idx: one, or a table of them (what names them in messages); their number */
+static int read_controls(lua_State *L, int idx, lg_control *c, const char *fn, const char *what) {
+  int nc = 0;
+  if (lua_istable(L, idx) && !luaL_testudata(L, idx, MT_EXPR)) {
+    lua_Integer n = luaL_len(L, idx);
+    if (n < 1 || n > LG_MAXCONTROL) return luaL_error(L, "%s: %s must list 1 to %d controls", fn, what, LG_MAXCONTROL);
+    for (int i = 1; i <= n; i++) {
+      lua_geti(L, idx, i);
+      to_control(L, -1, &c[nc], fn, i);
+      for (int j = 0; j < nc; j++)
+        if (c[j].kind == c[nc].kind && c[j].f == c[nc].f && c[j].param == c[nc].param)
+          return luaL_error(L, "%s: %s lists control %d twice (entries %d and %d)", fn, what, i, j + 1, i);
+      nc++;
+      lua_pop(L, 1);
+    }
+  } else if (lua_isnoneornil(L, idx))
+    return luaL_error(L, "%s: %s is required (a discrete function, a parameter or a table of them)", fn, what);
+  else
+    to_control(L, idx, &c[nc++], fn, 1);
+  return nc;
+}
+
+/* the reduced functional of a time-dependent problem */
 static lg_reduced *time_reduced(lua_State *L, lg_time *T, const ud_functional *uf, int nc, const lg_control *c, const char *fn) {
   lg_env *env = get_env(L);
   lg_time_term terms[LG_TIME_MAXTERMS];
   int nterm = 0;
   if (uf->f) terms[nterm++] = (lg_time_term){uf->f, LG_TJ_FINAL, 0};
   for (int i = 0; i < uf->nterm; i++) terms[nterm++] = (lg_time_term){uf->tf[i], uf->kind[i], uf->at[i]};
-  double state_bytes = 8.0 * lg_time_state_size(T), budget = 1024.0 * 1024 * 1024;
-  int N = lg_time_nsteps(T), snaps = 0;
-  int ty = lua_getfield(L, 1, "checkpoints");
-  if (ty == LUA_TSTRING) {
-    if (strcmp(lua_tostring(L, -1), "all")) luaL_error(L, "%s: option 'checkpoints' must be \"all\" or a number of snapshots, got \"%s\"", fn, lua_tostring(L, -1));
-  } else if (ty != LUA_TNIL) {
-    int isnum;
-    lua_Integer k = lua_tointegerx(L, -1, &isnum);
-    if (!isnum || k < 1) luaL_error(L, "%s: option 'checkpoints' must be \"all\" or a number of snapshots >= 1", fn);
-    snaps = k > N ? 0 : (int)k;
-  } else if ((N + 1) * state_bytes > budget) {
-    snaps = (int)(budget / state_bytes) - 2;
-    if (snaps < 2) snaps = 2;
-  }
-  lua_pop(L, 1);
+  lg_checkpoints ck;
+  read_checkpoints(L, T, &ck, fn);
   lua_getfield(L, 1, "monitor");
   int monitor = lua_toboolean(L, -1);
   lua_pop(L, 1);
-  return lg_reduced_new_time(env, T, nterm, terms, nc, c, snaps, monitor);
+  return lg_reduced_new_time(env, T, nterm, terms, nc, c, &ck, monitor);
 }
 
 static int l_reduced_functional(lua_State *L) {
   gc_point(L, 1);
   const char *fn = "lg.reduced_functional";
   if (!lua_istable(L, 1)) return typeerror(L, fn, 1, "a table {problem=, functional=, control=}");
-  static const char *const keys[] = {"problem", "functional", "control", "checkpoints", "monitor", NULL};
+  static const char *const keys[] = {"problem", "functional", "control", "checkpoints", "schedule", "monitor", NULL};
   check_keys(L, 1, fn, keys);
   lua_getfield(L, 1, "problem");
   ud_prob *up = luaL_testudata(L, -1, MT_PROB);
@@ -226,27 +274,14 @@ static int l_reduced_functional(lua_State *L) {
   lua_getfield(L, 1, "control");
   int cidx = lua_gettop(L);
   lg_control c[LG_MAXCONTROL];
-  int nc = 0;
-  if (lua_istable(L, cidx)) {
-    lua_Integer n = luaL_len(L, cidx);
-    if (n < 1 || n > LG_MAXCONTROL) return luaL_error(L, "%s: option 'control' must list 1 to %d controls", fn, LG_MAXCONTROL);
-    for (int i = 1; i <= n; i++) {
-      lua_geti(L, cidx, i);
-      to_control(L, -1, &c[nc], fn, i);
-      for (int j = 0; j < nc; j++)
-        if (c[j].kind == c[nc].kind && c[j].f == c[nc].f && c[j].param == c[nc].param)
-          return luaL_error(L, "%s: option 'control' lists control %d twice (entries %d and %d)", fn, i, j + 1, i);
-      nc++;
-      lua_pop(L, 1);
-    }
-  } else if (lua_isnil(L, cidx)) return luaL_error(L, "%s: option 'control' is required (a discrete function, a parameter or a table of them)", fn);
-  else to_control(L, cidx, &c[nc++], fn, 1);
+  int nc = read_controls(L, cidx, c, fn, "option 'control'");
   lg_env *env = get_env(L);
   lg_reduced *rf;
   if (T) rf = time_reduced(L, T, uf, nc, c, fn);
   else {
     if (!uf->f) return luaL_error(L, "%s: a functional with final, running or observed terms is for a time-dependent problem", fn);
     if (lua_getfield(L, 1, "checkpoints") != LUA_TNIL) return luaL_error(L, "%s: option 'checkpoints' is for a time-dependent problem", fn);
+    if (lua_getfield(L, 1, "schedule") != LUA_TNIL) return luaL_error(L, "%s: option 'schedule' is for a time-dependent problem", fn);
     lua_pop(L, 1);
     rf = lg_reduced_new(env, up->p, uf->f, nc, c);
   }
@@ -522,15 +557,132 @@ static int reduced_hessian(lua_State *L) {
 }
 
 /* rf:stats(): {recomputed = forward steps the last gradient solved beyond the value's march,
- * states = the states it holds at most} (a time-dependent problem's; 0 and 1 otherwise) */
+ * states = the states it holds at most, in_memory = of them in memory, disk_writes,
+ * disk_reads = checkpoint files written and read, dir = their directory} (a time-dependent
+ * problem's; 0 and 1 otherwise) */
 static int reduced_stats(lua_State *L) {
   ud_reduced *u = check_reduced(L, 1, "rf:stats");
-  long rec = 0;
-  int states = 1;
-  lg_time_rf_stats(u->rf, &rec, &states);
-  push_info_table(L, 2);
-  lua_pushinteger(L, rec); lua_setfield(L, -2, "recomputed");
-  lua_pushinteger(L, states ? states : 1); lua_setfield(L, -2, "states");
+  lg_time_stats st;
+  lg_time_rf_stats(u->rf, &st);
+  push_info_table(L, 6);
+  lua_pushinteger(L, st.recomputed); lua_setfield(L, -2, "recomputed");
+  lua_pushinteger(L, st.states ? st.states : 1); lua_setfield(L, -2, "states");
+  lua_pushinteger(L, st.states ? st.in_memory : 1); lua_setfield(L, -2, "in_memory");
+  lua_pushinteger(L, st.disk_writes); lua_setfield(L, -2, "disk_writes");
+  lua_pushinteger(L, st.disk_reads); lua_setfield(L, -2, "disk_reads");
+  if (st.dir) { lua_pushstring(L, st.dir); lua_setfield(L, -2, "dir"); }
+  return 1;
+}
+
+/* ---------------------------------------------------------------- sensitivities */
+
+typedef struct {
+  int nf, N, history;
+  size_t stride;               /* values of one step's tangent (every field) */
+  int ndof[KER_MAXFIELD];
+  double *buf;
+} sens_rec;
+
+static void sens_take(void *ud, int k, const double *const *du) {
+  sens_rec *r = ud;
+  if (!r->history && k != r->N) return;
+  double *o = r->buf + (r->history ? (size_t)k * r->stride : 0);
+  for (int a = 0; a < r->nf; a++) {
+    memcpy(o, du[a], sizeof(double) * (size_t)r->ndof[a]);
+    o += r->ndof[a];
+  }
+}
+
+/* step k's tangent as new functions (one per unknown) on the stack */
+static void push_tangent(lua_State *L, lg_time *T, const sens_rec *r, int k, const char *fn) {
+  lg_env *env = get_env(L);
+  lg_function *out[KER_MAXFIELD];
+  const double *x = r->buf + (size_t)k * r->stride;
+  for (int a = 0; a < r->nf; a++) {
+    lg_function *p = lg_time_previous(T, 0, a);
+    expr_func_info *fi = expr_func_get(env->c, p->fid);
+    char nm[80];
+    snprintf(nm, sizeof nm, "d%s", fi ? fi->name : "u");
+    if (!(out[a] = lg_function_new(env, p->mesh, p->dm, nm))) {
+      for (int b = 0; b < a; b++) lg_function_free(out[b]);
+      lgerror(L, fn, env);
+    }
+    memcpy(out[a]->x, x, sizeof(double) * (size_t)r->ndof[a]);
+    x += r->ndof[a];
+  }
+  push_functions_of(L, 1, out, r->nf);
+}
+
+/* step:sensitivity(m[, dm][, {history = true}]): the tangent-linear march along dm of the
+ * controls m (as for rf:hessian: fields, parameters, initial states, per-step controls; a
+ * parameter's direction defaults to 1): du(t1)/dm dm, one function per unknown, or with
+ * history every step's (a table of N + 1, t0 .. t1; of tables of one per unknown when there
+ * are several) */
+int lg_lua_time_sensitivity(lua_State *L) {
+  gc_point(L, 1);
+  const char *fn = "step:sensitivity";
+  lg_time *T = time_of(L, 1);
+  if (!T) return typeerror(L, fn, 1, "a time-dependent problem (lg.time_problem)");
+  lua_settop(L, 4);
+  int oidx = 4, didx = 3;
+  if (lua_isnil(L, 4) && lua_istable(L, 3) && !luaL_testudata(L, 3, MT_EXPR) && lua_getfield(L, 3, "history") != LUA_TNIL) {
+    oidx = 3;
+    didx = 0;
+  }
+  lua_settop(L, 4);
+  int history = 0;
+  if (!lua_isnil(L, oidx)) {
+    if (!lua_istable(L, oidx)) return typeerror(L, fn, oidx, "an options table {history = true}");
+    static const char *const keys[] = {"history", NULL};
+    check_keys(L, oidx, fn, keys);
+    lua_getfield(L, oidx, "history");
+    history = lua_toboolean(L, -1);
+    lua_pop(L, 1);
+  }
+  if (didx && lua_isnil(L, didx)) didx = 0;
+  lg_control c[LG_MAXCONTROL];
+  int nc = read_controls(L, 2, c, fn, "argument 2 (the control)");
+  lg_env *env = get_env(L);
+  lg_reduced *rf = lg_reduced_new_time(env, T, 0, NULL, nc, c, NULL, 0);
+  if (!rf) return lgerror(L, fn, env);
+  ud_reduced *u = new_ud(L, sizeof *u, MT_REDUCED, 0, NULL); /* frees rf at an error too */
+  u->rf = rf;
+  double *dm[LG_MAXCONTROL];
+  if (didx) read_direction(L, rf, didx, dm, fn);
+  else
+    for (int i = 0; i < nc; i++) {
+      if (c[i].kind != LG_CONTROL_PARAM)
+        return luaL_error(L, "%s: argument 3 (the direction) is required for control %d, a field or an initial state", fn, i + 1);
+      dm[i] = lua_newuserdatauv(L, sizeof(double) * 2, 0);
+      dm[i][0] = 1;
+    }
+  sens_rec r = {0};
+  lg_field_info fi[KER_MAXFIELD];
+  r.nf = lg_problem_fields(lg_time_step_problem(T), fi);
+  r.N = lg_time_nsteps(T);
+  r.history = history;
+  for (int a = 0; a < r.nf; a++) {
+    r.ndof[a] = fi[a].dm->ndof;
+    r.stride += (size_t)r.ndof[a];
+  }
+  r.buf = lua_newuserdatauv(L, sizeof(double) * r.stride * (history ? (size_t)r.N + 1 : 1) + 8, 0);
+  if (lg_time_sensitivity(env, rf, dm, sens_take, &r)) return lgerror(L, fn, env);
+  if (!history) {
+    int base = lua_gettop(L);
+    push_tangent(L, T, &r, 0, fn);
+    return lua_gettop(L) - base;
+  }
+  lua_createtable(L, r.N + 1, 0);
+  int t = lua_gettop(L);
+  for (int k = 0; k <= r.N; k++) {
+    push_tangent(L, T, &r, k, fn);
+    if (r.nf > 1) {
+      lua_createtable(L, r.nf, 0);
+      lua_insert(L, -r.nf - 1);
+      for (int a = r.nf; a >= 1; a--) lua_rawseti(L, -a - 1, a); /* f_a on top, the table below the a of them */
+    }
+    lua_rawseti(L, t, k + 1);
+  }
   return 1;
 }
 

@@ -278,7 +278,8 @@ static int time_times(lua_State *L) {
 
 void lg_lua_time_register(lua_State *L) {
   static const luaL_Reg mm[] = {{"__gc", time_gc}, {NULL, NULL}};
-  static const luaL_Reg methods[] = {{"solve", time_solve}, {"times", time_times}, {NULL, NULL}};
+  static const luaL_Reg methods[] = {{"solve", time_solve}, {"times", time_times}, {"sensitivity", lg_lua_time_sensitivity},
+                                          {NULL, NULL}};
   new_mt(L, MT_TIME, mm, methods);
 }
 

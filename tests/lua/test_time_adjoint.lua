@@ -35,6 +35,21 @@ local function revolve(l, s)
   return math.floor(r * l - binom(s + r, s + 1) + 0.5)
 end
 
+-- checkpoint files: a folder of this run's, the names in a folder, a schedule's name
+local ckdir = os.tmpname()
+os.remove(ckdir)
+local function files(dir)
+  local out, p = {}, io.popen('ls -A "' .. dir .. '" 2>/dev/null')
+  for l in p:lines() do out[#out + 1] = l end
+  p:close()
+  return out
+end
+local function ckname(ck)
+  if type(ck) ~= "table" then return tostring(ck) end
+  return string.format("{ram = %d, disk = %d}", ck.ram, ck.disk)
+end
+local lastrec
+
 -- 1. step:solve() against a hand-written loop of linear solves (the same bits), the initial
 -- state left as it was, the time parameter too
 do
@@ -84,19 +99,42 @@ do
     local J = lg.functional{final = lg.integral(mesh:cells(), 0.5*(u - d)^2), running = lg.integral(mesh:cells(), 0.5*u^2),
                             at = {[0.25] = lg.integral(mesh:cells(), u*x)}}
     local grads = {}
-    for _, ck in ipairs{"all", 4, 2, 1} do
+    for _, ck in ipairs{"all", 4, 2, 1, {ram = 2, disk = 2, dir = ckdir}, {ram = 1, disk = 3}} do
       local rf = lg.reduced_functional{problem = step, functional = J, control = {f, kappa, u0}, checkpoints = ck}
       local tt = lg.taylor_test(rf, {1 + x, 0.4, lg.sin(pi*x)*lg.sin(pi*y)}, {x*y, 0.3, x*(1 - x)*y*(1 - y)}, {h = 0.05, steps = 4})
-      local r = rate_ok(tt, scheme .. ", checkpoints " .. tostring(ck))
+      local r = rate_ok(tt, scheme .. ", checkpoints " .. ckname(ck))
+      local disk = type(ck) == "table"
+      if disk then -- the value's march leaves the outer snapshots on disk; the gradient spends them
+        rf:value({1 + x, 0.4, lg.sin(pi*x)*lg.sin(pi*y)})
+        T.check(#files(rf:stats().dir) == ck.disk, "%d checkpoint files after the value's march (want %d)", #files(rf:stats().dir), ck.disk)
+      end
       local gf, gk, gu = rf:gradient({1 + x, 0.4, lg.sin(pi*x)*lg.sin(pi*y)}, {riesz = "none"})
-      grads[#grads + 1] = {gf:values(), gk, gu:values(), tostring(ck)}
-      if ck ~= "all" then
+      grads[#grads + 1] = {gf:values(), gk, gu:values(), ckname(ck)}
+      lastrec = rf:stats().recomputed
+      if disk then
+        local st = rf:stats()
+        T.check(#files(st.dir) == 0, "checkpoint files left after the gradient: %d", #files(st.dir))
+        T.check(st.disk_reads > 0 and st.disk_writes >= ck.disk, "disk snapshots written %d, read %d", st.disk_writes, st.disk_reads)
+        T.check(st.in_memory == ck.ram + 2 and st.states == ck.ram + ck.disk + 2, "states %d, in memory %d", st.states, st.in_memory)
+        if ck.dir then T.check(st.dir:sub(1, #ckdir + 1) == ckdir .. "/", "the private directory %s is not under %s", st.dir, ckdir) end
+        local dir = st.dir
+        rf = nil
+        collectgarbage()
+        collectgarbage()
+        T.check(not os.rename(dir, dir), "the private checkpoint directory %s outlived its reduced functional", dir)
+        print(string.format("time adjoint: %s, %d snapshots in memory and %d on disk: %d files written, %d read, all removed",
+                            scheme, ck.ram, ck.disk, st.disk_writes, st.disk_reads))
+      end
+      if rf == nil then
+        local st_ck = ck.ram + ck.disk
+        T.check(lastrec == revolve(10, st_ck) - 10 + 1, "%s, %s: %d recomputed, the minimum is %d", scheme, ckname(ck), lastrec,
+                revolve(10, st_ck) - 10 + 1)
+      elseif ck ~= "all" then
         local want = revolve(10, ck) - 10 + 1
         T.check(rf:stats().recomputed == want, "%s, %d snapshots: %d forward steps recomputed, the minimum is %d", scheme, ck,
                 rf:stats().recomputed, want)
       else T.check(rf:stats().recomputed == 0, "every state kept: nothing to recompute") end
-      print(string.format("time adjoint: %s, checkpoints %-3s Taylor rate %.3f, %d steps recomputed, %d states", scheme,
-                          tostring(ck), r, rf:stats().recomputed, rf:stats().states))
+      print(string.format("time adjoint: %s, checkpoints %-3s Taylor rate %.3f, %d steps recomputed", scheme, ckname(ck), r, lastrec))
     end
     for k = 2, #grads do
       local a, b = grads[1], grads[k]
@@ -160,17 +198,18 @@ do
                                nonlinear = true, bc = lg.essential_bc(mesh:boundary(), v*u), monitor = false}
   local J = lg.functional{final = lg.integral(mesh:cells(), 0.5*(u - d)^2*(1 + f^2)), running = lg.integral(mesh:cells(), 0.5*u^2*kappa)}
   local q
-  for _, ck in ipairs{"all", 3} do
+  for _, ck in ipairs{"all", 3, {ram = 1, disk = 2}} do
     local rf = lg.reduced_functional{problem = step, functional = J, control = {f, kappa, u0}, checkpoints = ck}
     local tt = lg.taylor_test(rf, {1 + x, 0.4, lg.sin(pi*x)*lg.sin(pi*y)}, {x*y, 0.3, x*(1 - x)*y*(1 - y)},
                               {h = 0.1, steps = 4, hessian = true})
-    local r = hess_ok(tt, "nonlinear Crank-Nicolson Hessian, checkpoints " .. tostring(ck))
+    local r = hess_ok(tt, "nonlinear Crank-Nicolson Hessian, checkpoints " .. ckname(ck))
     local hf, hk, hu = rf:hessian({x*y, 0.3, x*(1 - x)*y*(1 - y)}, nil, {riesz = "none"})
     local s = hk
     for _, val in ipairs(hf:values()) do s = s + val end
     for _, val in ipairs(hu:values()) do s = s + 2*val end
-    if not q then q = s else T.close(s, q, 1e-12, "the Hessian action with 3 snapshots") end
-    print(string.format("time Hessian: nonlinear Crank-Nicolson, checkpoints %-3s second-order rate %.3f", tostring(ck), r))
+    if not q then q = s else T.close(s, q, 1e-12, "the Hessian action with checkpoints " .. ckname(ck)) end
+    if type(ck) == "table" then T.check(rf:stats().disk_reads > 0, "the Hessian's sweeps read no disk snapshot") end
+    print(string.format("time Hessian: nonlinear Crank-Nicolson, checkpoints %-3s second-order rate %.3f", ckname(ck), r))
   end
   -- and a symmetric one: a.H b = b.H a
   local rf = lg.reduced_functional{problem = step, functional = J, control = {f, kappa, u0}}
@@ -303,6 +342,70 @@ do
   print(string.format("time_problem: before_step, %d calls (the march's 6, then the replays'), the same gradient", calls))
 end
 
+-- 4b. step:sensitivity: the tangent-linear march against central differences of step:solve()
+-- (nonlinear steps, a parameter in time-dependent diffusion; a field and the initial state at
+-- once, every step's tangent)
+do
+  local t = lg.parameter("t", 0)
+  local kappa = lg.parameter("kappa", 0.4)
+  local u0 = lg.interpolate(P1, mesh, lg.sin(pi*x)*lg.sin(pi*y), "u0")
+  local f = lg.control(P1, mesh, "f", 1 + x)
+  local dt = 0.05
+  local F = lg.integral(mesh:cells(), (u - u0)/dt*v + kappa*(1 + t)*(1 + u^2)*lg.dot(lg.grad(u), lg.grad(v)) - f*(1 + t)*v)
+  local step = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = dt, t1 = 0.5, time = t,
+                               nonlinear = true, bc = lg.essential_bc(mesh:boundary(), v*u), monitor = false}
+  local h = 1e-5
+  local function diff(a, p, m)
+    local e, n = 0, 0
+    for i = 1, #a do
+      e = math.max(e, math.abs(a[i] - (p[i] - m[i])/(2*h)))
+      n = math.max(n, math.abs(a[i]))
+    end
+    return e, n
+  end
+  local du = step:sensitivity(kappa)
+  kappa:set(0.4 + h)
+  local up = step:solve()
+  kappa:set(0.4 - h)
+  local um = step:solve()
+  kappa:set(0.4)
+  local e, n = diff(du:values(), up:values(), um:values())
+  T.check(n > 0.1 and e < 1e-8*n, "du(t1)/dkappa against central differences: %.3g (max %.3g)", e, n)
+  local hist = step:sensitivity({f, u0}, {x*y, x*(1 - x)}, {history = true})
+  T.check(#hist == 11, "history of %d tangents (want 11)", #hist)
+  local dx0, d0 = hist[1]:values(), lg.interpolate(P1, mesh, x*(1 - x), "d0"):values()
+  for i = 1, #d0 do T.check(dx0[i] == d0[i], "the tangent at t0 is the initial state's direction (dof %d)", i) end
+  local fv, u0v = f:values(), u0:values()
+  local df, d0v = lg.interpolate(P1, mesh, x*y, "df"):values(), d0
+  local function shift(sg)
+    local a, b = {}, {}
+    for i = 1, #fv do a[i], b[i] = fv[i] + sg*h*df[i], u0v[i] + sg*h*d0v[i] end
+    f:assign(a)
+    u0:assign(b)
+  end
+  local worst = 0
+  for _, k in ipairs{1, 5, 10} do
+    local s2 = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = dt, steps = k, time = t,
+                               nonlinear = true, bc = lg.essential_bc(mesh:boundary(), v*u), monitor = false}
+    shift(1)
+    local p = s2:solve()
+    shift(-1)
+    local m = s2:solve()
+    shift(0)
+    local e2, n2 = diff(hist[k + 1]:values(), p:values(), m:values())
+    T.check(n2 > 0.01 and e2 < 1e-7*n2, "step %d's tangent along (f, u0) against central differences: %.3g (max %.3g)", k, e2, n2)
+    worst = math.max(worst, e2/n2)
+  end
+  T.fails(function() step:sensitivity(f) end, "step:sensitivity", "direction")
+  T.fails(function() step:sensitivity(kappa, 1, {histroy = true}) end, "histroy")
+  local a = lg.parameter("a", 0)
+  local sd = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = dt, steps = 2, time = t,
+                             nonlinear = true, bc = lg.essential_bc(mesh:boundary(), v*(u - a)), monitor = false}
+  T.fails(function() sd:sensitivity(a) end, "step:sensitivity", "Dirichlet control")
+  print(string.format("step:sensitivity: du(t1)/dkappa to %.2g of central differences, every step's tangent along (f, u0) to %.2g",
+                      e/n, worst))
+end
+
 -- 5. refused with a message naming the call
 do
   local u0 = lg.interpolate(P1, mesh, x, "u0")
@@ -321,6 +424,32 @@ do
                                            control = f} end, "appears in neither")
   T.fails(function() lg.reduced_functional{problem = step, functional = lg.functional{final = lg.integral(mesh:cells(), u)},
                                            control = u0, checkpoints = 0} end, "checkpoints")
+  local Ju = lg.functional{final = lg.integral(mesh:cells(), u^2)}
+  T.fails(function() lg.reduced_functional{problem = step, functional = Ju, control = u0, checkpoints = {ram = 0, disk = 0}} end,
+          "lg.reduced_functional", "at least one")
+  T.fails(function() lg.reduced_functional{problem = step, functional = Ju, control = u0, checkpoints = {ram = 1, disc = 2}} end,
+          "disc")
+  T.fails(function() lg.reduced_functional{problem = step, functional = Ju, control = u0, checkpoints = {ram = 1, disk = 1},
+                                           schedule = "revolve"} end, "multistage")
+  T.fails(function() lg.reduced_functional{problem = step, functional = Ju, control = u0, checkpoints = 2, schedule = "mixed"} end,
+          "option 'schedule'", "mixed")
+  T.fails(function() lg.reduced_functional{problem = step, functional = Ju, control = u0, checkpoints = {ram = 1, disk = 1},
+                                           dir = "/proc/no/such"} end, "option 'dir'")
+  T.fails(function() lg.reduced_functional{problem = step, functional = Ju, control = u0,
+                                           checkpoints = {ram = 1, disk = 1, dir = "/proc/no/such"}} end, "/proc/no/such")
+  -- a disk snapshot changed between the value's march and the gradient is refused, not read
+  local long = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = 0.1, steps = 8, monitor = false}
+  local rfk = lg.reduced_functional{problem = long, functional = Ju, control = u0, checkpoints = {ram = 1, disk = 2}}
+  rfk:value(x)
+  local dir = rfk:stats().dir
+  for _, name in ipairs(files(dir)) do
+    local fh = io.open(dir .. "/" .. name, "r+b")
+    fh:seek("set", 16)
+    fh:write("\1\2\3\4")
+    fh:close()
+  end
+  T.fails(function() rfk:gradient() end, "rf:gradient", "checkpoint file", "is not the state of step")
+  T.check(#files(dir) == 0, "checkpoint files left after an error: %d", #files(dir))
   T.fails(function() lg.reduced_functional{problem = step, functional = lg.functional{at = {[0.15] = lg.integral(mesh:cells(), u)}},
                                            control = u0} end, "not at a step's time")
   local a = lg.parameter("a", 0)

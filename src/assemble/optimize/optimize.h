@@ -113,17 +113,35 @@ typedef struct {
   int kind;
   double at;
 } lg_time_term;
+/* where the states go: ram + disk = 0 (or NULL) keeps every state; else ram + disk
+ * snapshots of the binomial schedule (the initial state's included; ram + disk >= N + 1
+ * keeps every state), the outer levels' disk snapshots in files of a private directory
+ * made under dir (NULL: TMPDIR, else /tmp) */
+typedef struct {
+  int ram, disk;
+  const char *dir;
+} lg_checkpoints;
 /* j(m) = J(u^0 .. u^N, m) of the march of T (problem.h, lg_time): the controls are fields
- * or parameters the step or the terms read, and initial states (a previous function of T);
- * checkpoints 0 keeps every state, s >= 1 takes s snapshots (binomial checkpointing, the
- * initial state's included; s >= N + 1 keeps every state). monitor: a line per 100 steps of
- * each sweep. lg_reduced_value, lg_reduced_gradient, lg_reduced_hessian (not with a Dirichlet
- * control yet) and what uses them (lg_minimize) work on it as on a steady reduced functional */
+ * or parameters the step or the terms read, and initial states (a previous function of T).
+ * monitor: a line per 100 steps of each sweep. lg_reduced_value, lg_reduced_gradient,
+ * lg_reduced_hessian (not with a Dirichlet control yet) and what uses them (lg_minimize)
+ * work on it as on a steady reduced functional */
 lg_reduced *lg_reduced_new_time(lg_env *env, lg_time *T, int nterm, const lg_time_term *terms, int nc, const lg_control *c,
-                                int checkpoints, int monitor);
-/* the last gradient's forward steps beyond the value's march, and the states it holds at
- * most (snapshots + 2, or N + 1) */
-void lg_time_rf_stats(const lg_reduced *rf, long *recomputed, int *states);
+                                const lg_checkpoints *ck, int monitor);
+/* the last gradient's forward steps beyond the value's march, the states held at most
+ * (snapshots + 2, or N + 1) and of them in memory, the checkpoint files written and read
+ * since the reduced functional was made, and their directory (NULL without disk) */
+typedef struct {
+  long recomputed, disk_writes, disk_reads;
+  int states, in_memory;
+  const char *dir;
+} lg_time_stats;
+void lg_time_rf_stats(const lg_reduced *rf, lg_time_stats *st);
+/* the tangent-linear march (sensitivities) of rf's problem along the controls' direction dm
+ * (as for lg_reduced_hessian): rec(ud, k, du) gets du^k = (du^k/dm) dm, one array per field
+ * of the step (k = 0 .. N). rf may have no terms (nterm = 0: made for sensitivities only) */
+typedef void (*lg_time_tangent_cb)(void *ud, int k, const double *const *du);
+int lg_time_sensitivity(lg_env *env, lg_reduced *rf, double **dm, lg_time_tangent_cb rec, void *ud);
 /* Griewank and Walther's minimal number of forward steps of a reversal of l steps with s
  * snapshots, t(l, s) = r l - C(s + r, s + 1), r the least with C(s + r, s) >= l */
 long lg_revolve_steps(long l, int s);

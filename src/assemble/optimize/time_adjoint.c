@@ -45,17 +45,17 @@ struct lg_time_rf {
   lg_form_kernels *dLdprev[LG_TIME_MAXLEV][KER_MAXFIELD]; /* lam^T dR/d prev_j[b] */
   int ic[LG_MAXCONTROL];   /* a control that is an initial state: level * KER_MAXFIELD + field, else -1 */
   const int *skip_ic;      /* ic[i] >= 0 (construction only) */
-  int snaps;               /* 0: every state kept; else the snapshots of the binomial schedule */
-  /* the states: every one (all[0 .. N]), or the snapshots (slot[k] holds X_{slot_at[k]}, -1
-   * free), the held X_{k} and the working X_{k-1} the value's march leaves */
+  int snaps, ram;          /* 0: every state kept; else the snapshots of the binomial schedule, ram of them in memory */
+  /* the states: every one (all[0 .. N]), or the snapshots (ck), the held X_{k} and the
+   * working X_{k-1} the value's march leaves */
   double **all;
-  double **slot;
-  int *slot_at;
+  lg_ckstore *ck;
   double *held, *work;
   int held_at, work_at;
   double *u, *rhs, *tmp, *pend[LG_TIME_MAXLEV + 1], *dX0;
   double **g;              /* the gradient being summed (the caller's) */
   int SY;                  /* the stored states' size: S, or 2 S in a Hessian sweep (the tangent after the state) */
+  int grown;               /* the buffers hold 2 S values (a Hessian action was asked once) */
   struct tm_hess *hs;      /* Hessian actions' state (built on first use), or NULL */
   double *ps[LG_MAXCONTROL]; /* per-step controls: N + 1 blocks of their dofs */
   double *ps_keep[LG_MAXCONTROL][2]; /* their functions' own values (and the companions'), put back after a sweep */
@@ -188,36 +188,32 @@ static void monitor_line(const lg_time_rf *R, int k, const char *what) {
   }
 }
 
-/* a snapshot slot for X_k: the first free one */
-static double *take_slot(lg_time_rf *R, int k) {
-  for (int i = 0; i < R->snaps; i++)
-    if (R->slot_at[i] < 0) { R->slot_at[i] = k; return R->slot[i]; }
-  return NULL;
+/* a snapshot for a reversal with s snapshots (its own included) goes to disk when s > ram:
+ * the multistage schedule keeps on disk the outer levels' snapshots, read least often (a
+ * snapshot of a reversal with s snapshots is read about s times, one with 1 at each step),
+ * and in memory the inner ones */
+static int put_snapshot(lg_env *env, lg_time_rf *R, int k, int s, const double *X) {
+  return lg_ckstore_put(env, R->ck, k, s > R->ram, X, (size_t)R->SY);
 }
 
-static void free_slot(lg_time_rf *R, int k) {
-  for (int i = 0; i < R->snaps; i++)
-    if (R->slot_at[i] == k) R->slot_at[i] = -1;
-}
+static const double *get_snapshot(lg_env *env, lg_time_rf *R, int k) { return lg_ckstore_get(env, R->ck, k, (size_t)R->SY); }
 
-static double *find_slot(lg_time_rf *R, int k) {
-  for (int i = 0; i < R->snaps; i++)
-    if (R->slot_at[i] == k) return R->slot[i];
-  return NULL;
-}
-
-/* the positions the schedule's first descent snapshots (spine[k] = 1), and where its
- * innermost reversal starts (one snapshot left, or one step) */
-static void first_descent(const lg_time_rf *R, unsigned char *spine) {
-  int a = 0, n = R->N, s = R->snaps;
-  spine[0] = 1;
+/* the positions the schedule's first descent snapshots (at[i], for a reversal with bud[i]
+ * snapshots), down to where its innermost reversal starts (one snapshot left, or one step);
+ * returns their number (at most snaps) */
+static int first_descent(const lg_time_rf *R, int *at, int *bud) {
+  int a = 0, n = R->N, s = R->snaps, c = 0;
+  at[c] = 0;
+  bud[c++] = s;
   while (n >= 2 && s >= 2) {
     int m = best_split(n, s);
     a += m;
     n -= m;
     s--;
-    spine[a] = 1;
+    at[c] = a;
+    bud[c++] = s;
   }
+  return c;
 }
 
 /* the value's march: J, and the states the gradient starts from (every one, or the first
@@ -225,37 +221,42 @@ static void first_descent(const lg_time_rf *R, unsigned char *spine) {
 static int march(lg_env *env, lg_reduced *rf) {
   lg_time_rf *R = rf->tm;
   lg_time *T = R->T;
-  unsigned char *spine = NULL;
+  int *at = NULL, *bud = NULL, nsp = 0, next = 1;
   if (R->snaps) {
-    if (!(spine = calloc((size_t)R->N + 1, 1))) { lg_seterr(env, "out of memory"); return 1; }
-    first_descent(R, spine);
-    for (int i = 0; i < R->snaps; i++) R->slot_at[i] = -1;
+    at = malloc(sizeof(int) * (size_t)R->snaps * 2 + 8);
+    if (!at) { lg_seterr(env, "out of memory"); return 1; }
+    bud = at + R->snaps;
+    nsp = first_descent(R, at, bud);
+    lg_ckstore_clear(R->ck);
   }
   R->fresh = 0;
-  if (lg_time_begin(env, T)) { free(spine); return 1; }
+  if (lg_time_begin(env, T)) { free(at); return 1; }
   sweep_begin(rf);
   double J = 0, *X = R->snaps ? R->held : R->all[0];
   ystate_get(rf, X);
   lg_time_prepare(env, T, 0);
   set_step_controls(rf, 0);
-  if (R->snaps) memcpy(take_slot(R, 0), X, sizeof(double) * (size_t)R->SY);
-  int rc = value_at(env, rf, 0, X, &J);
+  int rc = R->snaps ? put_snapshot(env, R, 0, R->snaps, X) : 0;
+  if (!rc) rc = value_at(env, rf, 0, X, &J);
   for (int k = 1; !rc && k <= R->N; k++) {
     if (R->snaps && k == R->N) memcpy(R->work, R->held, sizeof(double) * (size_t)R->SY); /* X_{N-1} */
     if ((rc = full_step(env, rf, k))) break;
     X = R->snaps ? R->held : R->all[k];
     ystate_get(rf, X);
-    if (R->snaps && spine[k] && k < R->N) {
-      double *sl = take_slot(R, k);
-      if (sl) memcpy(sl, X, sizeof(double) * (size_t)R->SY);
+    if (next < nsp && at[next] == k && k < R->N) {
+      rc = put_snapshot(env, R, k, bud[next], X);
+      next++;
     }
-    rc = value_at(env, rf, k, X, &J);
+    if (!rc) rc = value_at(env, rf, k, X, &J);
     monitor_line(R, k, "forward");
   }
   sweep_end(rf);
   lg_time_end(env, T);
-  free(spine);
-  if (rc) return 1;
+  free(at);
+  if (rc) {
+    lg_ckstore_clear(R->ck);
+    return 1;
+  }
   R->J = J;
   R->held_at = R->N;
   R->work_at = R->N - 1;
@@ -361,22 +362,22 @@ static int adjoint_step(lg_env *env, lg_reduced *rf, int n, const double *Xp, co
 static int reverse(lg_env *env, lg_reduced *rf, int a, int n, int s) {
   lg_time_rf *R = rf->tm;
   size_t bytes = sizeof(double) * (size_t)R->SY;
-  const double *Xa = find_slot(R, a);
-  if (!Xa) { lg_seterr(env, "internal error: no snapshot of step %d", a); return 1; }
+  const double *Xa; /* read where it is used: a disk snapshot's buffer is the next read's */
   if (n == 1) {
-    if (adjoint_step(env, rf, a + 1, Xa, R->held)) return 1;
+    if (!(Xa = get_snapshot(env, R, a)) || adjoint_step(env, rf, a + 1, Xa, R->held)) return 1;
     memcpy(R->held, Xa, bytes);
     R->held_at = a;
     return 0;
   }
   if (s == 1) { /* each step's input from X_a (the value's march left the last one) */
     for (int k = n; k >= 1; k--) {
-      const double *in = Xa;
+      const double *in;
       if (k > 1) {
-        if (R->work_at != a + k - 1 && advance(env, rf, Xa, a, a + k - 1, R->work)) return 1;
+        if (R->work_at != a + k - 1 && (!(Xa = get_snapshot(env, R, a)) || advance(env, rf, Xa, a, a + k - 1, R->work))) return 1;
         R->work_at = a + k - 1;
         in = R->work;
-      }
+      } else if (!(in = get_snapshot(env, R, a)))
+        return 1;
       if (adjoint_step(env, rf, a + k, in, R->held)) return 1;
       memcpy(R->held, in, bytes);
       R->held_at = a + k - 1;
@@ -384,13 +385,13 @@ static int reverse(lg_env *env, lg_reduced *rf, int a, int n, int s) {
     return 0;
   }
   int m = best_split(n, s);
-  if (!find_slot(R, a + m)) {
-    double *sl = take_slot(R, a + m);
-    if (!sl) { lg_seterr(env, "internal error: no free snapshot"); return 1; }
-    if (advance(env, rf, Xa, a, a + m, sl)) return 1;
+  if (!lg_ckstore_has(R->ck, a + m)) {
+    if (!(Xa = get_snapshot(env, R, a)) || advance(env, rf, Xa, a, a + m, R->work)) return 1;
+    R->work_at = a + m;
+    if (put_snapshot(env, R, a + m, s - 1, R->work)) return 1;
   }
   if (reverse(env, rf, a + m, n - m, s - 1)) return 1;
-  free_slot(R, a + m);
+  lg_ckstore_drop(R->ck, a + m);
   return reverse(env, rf, a, m, s);
 }
 
@@ -398,6 +399,7 @@ static int reverse(lg_env *env, lg_reduced *rf, int a, int n, int s) {
 
 int lg_time_value(lg_env *env, lg_reduced *rf, double *J) {
   lg_time_rf *R = rf->tm;
+  if (!R->all && !R->snaps) { lg_seterr(env, "internal error: a reduced functional made for sensitivities has no value"); return 1; }
   if (!R->fresh || !rf->solved) {
     if (march(env, rf)) return 1;
     rf->solved = 1;
@@ -426,8 +428,9 @@ static int backward(lg_env *env, lg_reduced *rf, double **g) {
   else
     for (int n = R->N; n >= 1 && !rc; n--) rc = adjoint_step(env, rf, n, R->all[n - 1], R->all[n]);
   /* step 0: the terms at the initial state (their dJ/du into dX0's level 0, dJ/dm) */
-  const double *X0 = R->snaps ? find_slot(R, 0) : R->all[0];
-  if (!rc && X0) {
+  const double *X0 = rc ? NULL : R->snaps ? get_snapshot(env, R, 0) : R->all[0];
+  if (!X0) rc = 1;
+  if (!rc) {
     ystate_set(rf, X0);
     lg_time_prepare(env, T, 0);
     set_step_controls(rf, 0);
@@ -453,13 +456,16 @@ static int backward(lg_env *env, lg_reduced *rf, double **g) {
       }
     }
   }
-  if (!rc && X0 && hess_on(rf)) rc = hessian_step0(env, rf, X0);
+  if (!rc && hess_on(rf)) rc = hessian_step0(env, rf, X0);
   sweep_end(rf);
   lg_time_end(env, T);
   if (!rc) add_initial(rf, R->dX0, g); /* the initial states' gradients */
   for (int i = 0; i < rf->nc && !rc; i++) rc = lg_reduced_dirichlet_ghosts(env, rf, i, g[i]);
   /* the stored states are spent (the snapshots were reused): the next gradient marches */
-  if (R->snaps) R->fresh = 0;
+  if (R->snaps) {
+    R->fresh = 0;
+    lg_ckstore_clear(R->ck);
+  }
   return rc;
 }
 
@@ -471,10 +477,14 @@ int lg_time_gradient(lg_env *env, lg_reduced *rf, double **g) {
   return rc;
 }
 
-void lg_time_rf_stats(const lg_reduced *rf, long *recomputed, int *states) {
+void lg_time_rf_stats(const lg_reduced *rf, lg_time_stats *st) {
   const lg_time_rf *R = rf->tm;
-  if (recomputed) *recomputed = R ? R->recomputed : 0;
-  if (states) *states = !R ? 0 : R->snaps ? R->snaps + 2 : R->N + 1;
+  memset(st, 0, sizeof *st);
+  if (!R) return;
+  st->recomputed = R->recomputed;
+  st->states = R->snaps ? R->snaps + 2 : R->N + 1;
+  st->in_memory = R->snaps ? R->ram + 2 : R->N + 1;
+  lg_ckstore_stats(R->ck, &st->disk_writes, &st->disk_reads, &st->dir);
 }
 
 /* ---------------------------------------------------------------- Hessian actions */
@@ -817,15 +827,16 @@ static lg_function *scratch(lg_env *env, lg_reduced *rf, const dofmap *dm, const
 /* the stored states made room for their tangents (2 S values each) */
 static int grow_states(lg_env *env, lg_time_rf *R) {
   size_t bytes = sizeof(double) * (2 * (size_t)R->S + 1);
-  double **bufs[4] = {R->all, R->slot, &R->held, &R->work};
-  int counts[4] = {R->all ? R->N + 1 : 0, R->slot ? R->snaps : 0, R->held ? 1 : 0, R->work ? 1 : 0};
-  for (int b = 0; b < 4; b++)
+  double **bufs[3] = {R->all, &R->held, &R->work};
+  int counts[3] = {R->all ? R->N + 1 : 0, R->held ? 1 : 0, R->work ? 1 : 0};
+  for (int b = 0; b < 3; b++)
     for (int k = 0; k < counts[b]; k++) {
       double *n = realloc(bufs[b][k], bytes);
       if (!n) { lg_seterr(env, "out of memory for the states' tangents (Hessian actions)"); return 1; }
       bufs[b][k] = n;
     }
-  R->SY = 2 * R->S;
+  if (R->ck && lg_ckstore_resize(env, R->ck, 2 * (size_t)R->S)) return 1;
+  R->grown = 1;
   return 0;
 }
 
@@ -834,8 +845,8 @@ static int hess_setup(lg_env *env, lg_reduced *rf) {
   if (R->hs) return 0;
   for (int i = 0; i < rf->nc; i++)
     if (rf->bcdep[i]) {
-      lg_seterr(env, "Hessian actions of a time-dependent reduced functional with a Dirichlet control (control %d) are not "
-                     "available yet: use a quasi-Newton method (lmvm, blmvm)", i + 1);
+      lg_seterr(env, "Hessian actions and sensitivities of a time-dependent problem with a Dirichlet control (control %d) are "
+                     "not available yet (for Hessians: use a quasi-Newton method, lmvm or blmvm)", i + 1);
       return 1;
     }
   struct tm_hess *H = R->hs = calloc(1, sizeof *H);
@@ -882,22 +893,19 @@ static int hess_setup(lg_env *env, lg_reduced *rf) {
   form_free(T);
   form_free(DL);
   form_free(G);
-  if (!rc) rc = grow_states(env, R);
+  if (!rc && !R->grown) rc = grow_states(env, R);
   if (rc) { hess_free(rf); return 1; }
   return 0;
 }
 
-int lg_time_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
+/* the directions dm: fields and parameters, per-step blocks, initial states as dX_0 */
+static void set_directions(lg_env *env, lg_reduced *rf, double **dm) {
   lg_time_rf *R = rf->tm;
-  if (hess_setup(env, rf)) return 1;
   struct tm_hess *H = R->hs;
-  int N = lg_problem_size(rf->p);
-  /* the directions: fields and parameters, per-step blocks, initial states as dX_0 */
   for (int j = 0; j < R->nlev; j++)
     for (int a = 0; a < rf->nf; a++) memset(H->dprev[j][a]->x, 0, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
   for (int i = 0; i < rf->nc; i++) {
     int n = lg_reduced_control_size(rf, i);
-    memset(out[i], 0, sizeof(double) * (size_t)n);
     if (R->ic[i] >= 0) {
       lg_function *f = H->dprev[R->ic[i] / KER_MAXFIELD][R->ic[i] % KER_MAXFIELD];
       memcpy(f->x, dm[i], sizeof(double) * (size_t)f->dm->ndof);
@@ -905,6 +913,41 @@ int lg_time_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
     else if (H->dps[i]) memcpy(H->dps[i], dm[i], sizeof(double) * (size_t)n);
     else memcpy(H->dmf[i]->x, dm[i], sizeof(double) * (size_t)n);
   }
+}
+
+/* the tangent-linear march along dm, level 0's tangent handed to rec at every step */
+int lg_time_sensitivity(lg_env *env, lg_reduced *rf, double **dm, lg_time_tangent_cb rec, void *ud) {
+  lg_time_rf *R = rf->tm;
+  if (!R) { lg_seterr(env, "internal error: a sensitivity of a steady reduced functional"); return 1; }
+  if (hess_setup(env, rf)) return 1;
+  struct tm_hess *H = R->hs;
+  set_directions(env, rf, dm);
+  if (lg_time_begin(env, R->T)) return 1;
+  H->on = 1;
+  sweep_begin(rf);
+  lg_time_prepare(env, R->T, 0);
+  set_step_controls(rf, 0);
+  double *du[KER_MAXFIELD];
+  for (int a = 0; a < rf->nf; a++) du[a] = H->dprev[0][a]->x;
+  rec(ud, 0, (const double *const *)du);
+  int rc = 0;
+  for (int k = 1; k <= R->N && !rc; k++) {
+    if (!(rc = full_step(env, rf, k))) rec(ud, k, (const double *const *)du);
+    monitor_line(R, k, "tangent");
+  }
+  sweep_end(rf);
+  H->on = 0;
+  lg_time_end(env, R->T);
+  return rc;
+}
+
+int lg_time_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
+  lg_time_rf *R = rf->tm;
+  if (hess_setup(env, rf)) return 1;
+  struct tm_hess *H = R->hs;
+  int N = lg_problem_size(rf->p);
+  set_directions(env, rf, dm);
+  for (int i = 0; i < rf->nc; i++) memset(out[i], 0, sizeof(double) * (size_t)lg_reduced_control_size(rf, i));
   for (int l = 0; l <= R->nlev; l++) memset(H->pend2[l], 0, sizeof(double) * (size_t)N);
   memset(H->dX0b, 0, sizeof(double) * (size_t)R->S);
   H->h = out;
@@ -913,8 +956,10 @@ int lg_time_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
   for (int i = 0; i < rf->nc && !rc; i++) rc = !(g[i] = malloc(sizeof(double) * ((size_t)lg_reduced_control_size(rf, i) + 1)));
   if (rc) lg_seterr(env, "out of memory");
   H->on = 1;
+  R->SY = 2 * R->S;
   if (!rc) rc = march(env, rf) || backward(env, rf, g);
   H->on = 0;
+  R->SY = R->S;
   R->fresh = 0; /* the stored states held tangents: the next value marches again */
   for (int i = 0; i < rf->nc; i++) free(g[i]);
   if (!rc) add_initial(rf, H->dX0b, out); /* the initial states' part */
@@ -937,9 +982,8 @@ void lg_time_rf_free(lg_reduced *rf) {
     for (int a = 0; a < KER_MAXFIELD; a++) lg_form_kernels_free(R->dLdprev[j][a]);
   if (R->all)
     for (int k = 0; k <= R->N; k++) free(R->all[k]);
-  if (R->slot)
-    for (int k = 0; k < R->snaps; k++) free(R->slot[k]);
-  free(R->all); free(R->slot); free(R->slot_at); free(R->held); free(R->work);
+  lg_ckstore_free(R->ck);
+  free(R->all); free(R->held); free(R->work);
   free(R->u); free(R->rhs); free(R->tmp); free(R->dX0);
   for (int l = 0; l <= LG_TIME_MAXLEV; l++) free(R->pend[l]);
   for (int i = 0; i < LG_MAXCONTROL; i++) {
@@ -956,7 +1000,7 @@ void lg_time_rf_free(lg_reduced *rf) {
 /* the functional's terms: checked, copied, their kernels; every control used somewhere */
 static int setup_terms(lg_env *env, lg_reduced *rf, int nterm, const lg_time_term *terms) {
   lg_time_rf *R = rf->tm;
-  if (nterm < 1 || nterm > LG_TIME_MAXTERMS) {
+  if (nterm < 0 || nterm > LG_TIME_MAXTERMS) { /* 0: for sensitivities (j = 0) */
     lg_seterr(env, "a time-dependent functional has 1 to %d terms (got %d)", LG_TIME_MAXTERMS, nterm);
     return 1;
   }
@@ -990,7 +1034,7 @@ static int setup_terms(lg_env *env, lg_reduced *rf, int nterm, const lg_time_ter
 }
 
 lg_reduced *lg_reduced_new_time(lg_env *env, lg_time *T, int nterm, const lg_time_term *terms, int nc, const lg_control *c,
-                                int checkpoints, int monitor) {
+                                const lg_checkpoints *ck, int monitor) {
   lg_reduced *rf = calloc(1, sizeof *rf);
   lg_time_rf *R = calloc(1, sizeof *R);
   if (!rf || !R) { free(rf); free(R); lg_seterr(env, "out of memory"); return NULL; }
@@ -1077,15 +1121,15 @@ lg_reduced *lg_reduced_new_time(lg_env *env, lg_time *T, int nterm, const lg_tim
   R->dX0 = malloc(sizeof(double) * ((size_t)R->S + 1));
   int bad = !R->u || !R->rhs || !R->tmp || !R->dX0;
   for (int l = 0; l <= R->nlev; l++) bad |= !(R->pend[l] = malloc(sizeof(double) * ((size_t)N + 1)));
-  if (checkpoints > 0 && checkpoints < R->N + 1) {
-    R->snaps = checkpoints;
-    R->slot = calloc((size_t)R->snaps, sizeof(double *));
-    R->slot_at = malloc(sizeof(int) * (size_t)R->snaps);
+  int ram = ck ? ck->ram : 0, disk = ck ? ck->disk : 0;
+  if (ram + disk > 0 && ram + disk < R->N + 1) {
+    R->snaps = ram + disk;
+    R->ram = ram;
     R->held = malloc(sizeof(double) * ((size_t)R->S + 1));
     R->work = malloc(sizeof(double) * ((size_t)R->S + 1));
-    bad |= !R->slot || !R->slot_at || !R->held || !R->work;
-    for (int k = 0; !bad && k < R->snaps; k++) bad |= !(R->slot[k] = malloc(sizeof(double) * ((size_t)R->S + 1)));
-  } else {
+    bad |= !R->held || !R->work;
+    if (!bad && !(R->ck = lg_ckstore_new(env, ram, disk, ck->dir, (size_t)R->S))) goto fail;
+  } else if (nterm > 0) { /* (made for sensitivities, it stores no state) */
     R->all = calloc((size_t)R->N + 1, sizeof(double *));
     bad |= !R->all;
     for (int k = 0; !bad && k <= R->N; k++) bad |= !(R->all[k] = malloc(sizeof(double) * ((size_t)R->S + 1)));

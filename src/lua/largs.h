@@ -42,6 +42,9 @@ typedef struct {
   char *output;
   lua_State *hook_L;   /* before_step's own thread (kept in the userdata's uservalue), or NULL */
   int hook_ref;        /* before_step in the registry */
+  double t1;           /* an adaptive march's end */
+  double *sizes;       /* the last adaptive march's step sizes (nsizes), or NULL */
+  int nsizes;
 } ud_time;
 /* format: VTU_*; pieces: 0 for .vtu steps, else .pvtu steps of so many pieces */
 typedef struct { char *path; int n, cap; double *t; char **files; int format, pieces; } ud_series;

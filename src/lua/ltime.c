@@ -93,27 +93,85 @@ static int before_step(lg_env *env, void *ud, int k, double t) {
   return 0;
 }
 
+/* a parameter option (or -1) */
+static int param_option(lua_State *L, const char *key, const char *what, const char *fn) {
+  int id = -1;
+  if (lua_getfield(L, 1, key) != LUA_TNIL) {
+    ud_expr *ue = luaL_testudata(L, -1, MT_EXPR);
+    if (!ue || expr_of(L, ue)->kind != E_PARAM)
+      return luaL_error(L, "%s: option '%s' must be a parameter (lg.parameter), %s, got %s", fn, key, what,
+                        ue ? "an expression" : luaL_typename(L, -1));
+    id = expr_of(L, ue)->i0;
+  }
+  lua_pop(L, 1);
+  return id;
+}
+
+/* option 'dt' as a list of step sizes into *dts (a userdata buffer left on the stack);
+ * their number */
+static int read_sizes(lua_State *L, double **dts, const char *fn) {
+  lua_getfield(L, 1, "dt");
+  int n = (int)luaL_len(L, -1);
+  if (n < 1 || n > 100000000) luaL_error(L, "%s: option 'dt' as a table must list the step sizes (1 or more numbers)", fn);
+  double *d = lua_newuserdatauv(L, sizeof(double) * (size_t)n, 0);
+  for (int k = 0; k < n; k++) {
+    lua_geti(L, -2, k + 1);
+    int isnum;
+    d[k] = lua_tonumberx(L, -1, &isnum);
+    if (!isnum || !(d[k] > 0) || !isfinite(d[k]))
+      luaL_error(L, "%s: option 'dt': step size %d must be a positive number, got %s", fn, k + 1, luaL_tolstring(L, -1, NULL));
+    lua_pop(L, 1);
+  }
+  lua_remove(L, -2);
+  *dts = d;
+  return n;
+}
+
 /* lg.time_problem{mesh=, test=, unknown=, previous=, eqn=, bc=, dt=, t0=, t1= | steps=,
- * time=, nonlinear=, symmetric=, prefix=, output=, every=, monitor=} */
+ * time=, step_size=, nonlinear=, symmetric=, prefix=, output=, every=, monitor=}; dt a
+ * number, a list of step sizes, or a function(k, t, last) choosing each (adaptive) */
 static int l_time_problem(lua_State *L) {
   gc_point(L, 1);
   const char *fn = "lg.time_problem";
   if (!lua_istable(L, 1)) return typeerror(L, fn, 1, "a table {mesh=, eqn=, test=, unknown=, previous=, dt=, t1=}");
   static const char *const keys[] = {"mesh", "eqn", "bc", "test", "unknown", "symmetric", "prefix", "nullspace", "previous", "dt",
-                                     "t0", "t1", "steps", "time", "nonlinear", "output", "every", "monitor", "before_step", NULL};
+                                     "t0", "t1", "steps", "time", "step_size", "nonlinear", "output", "every", "monitor",
+                                     "before_step", NULL};
   check_keys(L, 1, fn, keys);
-  lua_getfield(L, 1, "dt");
-  int have_dt = !lua_isnil(L, -1);
+  int dty = lua_getfield(L, 1, "dt");
   lua_getfield(L, 1, "t1");
   int have_t1 = !lua_isnil(L, -1);
   lua_pop(L, 2);
-  if (!have_dt) return luaL_error(L, "%s: option 'dt' (the time step) is required, a positive number", fn);
-  double dt = opt_num(L, 1, "dt", 1, fn), t0 = opt_num(L, 1, "t0", 0, fn), t1 = opt_num(L, 1, "t1", 0, fn);
-  if (!(dt > 0)) return luaL_error(L, "%s: option 'dt' must be a positive number, got %f", fn, dt);
+  if (dty == LUA_TNIL) return luaL_error(L, "%s: option 'dt' (the time step) is required, a positive number", fn);
+  if (dty != LUA_TNUMBER && dty != LUA_TTABLE && dty != LUA_TFUNCTION)
+    return luaL_error(L, "%s: option 'dt' must be a positive number, a list of step sizes or a function(k, t, last) "
+                         "choosing each step's size, got %s", fn, lua_typename(L, dty));
+  int adaptive = dty == LUA_TFUNCTION, dtsz = param_option(L, "step_size", "set to each step's size", fn);
+  if (dty != LUA_TNUMBER && dtsz < 0)
+    return luaL_error(L, "%s: with step sizes that change (option 'dt' a %s) the step's equation must read them: give "
+                         "step_size = a parameter (lg.parameter) and write the equation with it", fn, lua_typename(L, dty));
+  double *dts = NULL;
+  int nsizes = dty == LUA_TTABLE ? read_sizes(L, &dts, fn) : 0;
+  double dt = dty == LUA_TNUMBER ? opt_num(L, 1, "dt", 1, fn) : dts ? dts[0] : 0, t0 = opt_num(L, 1, "t0", 0, fn),
+         t1 = opt_num(L, 1, "t1", 0, fn);
+  if (dty == LUA_TNUMBER && !(dt > 0)) return luaL_error(L, "%s: option 'dt' must be a positive number, got %f", fn, dt);
   int steps = opt_int(L, 1, "steps", 0, fn);
   if (steps < 0) return luaL_error(L, "%s: option 'steps' must be a positive whole number, got %d", fn, steps);
-  if (have_t1 == (steps > 0)) return luaL_error(L, "%s: give the end time 't1' or the number of 'steps' (one of them)", fn);
-  if (!steps) {
+  if (adaptive && (!have_t1 || steps)) return luaL_error(L, "%s: with option 'dt' a function give the end time 't1' (not 'steps')", fn);
+  if (adaptive && !(t1 > t0)) return luaL_error(L, "%s: option 't1' must be after t0", fn);
+  if (nsizes) {
+    double end = t0;
+    for (int k = 0; k < nsizes; k++) end += dts[k];
+    if (steps && steps != nsizes) return luaL_error(L, "%s: option 'steps' (%d) differs from the %d step sizes of option 'dt'", fn, steps, nsizes);
+    if (have_t1 && fabs(end - t1) > 1e-9 * (fabs(t1) + (end - t0))) {
+      char why[160];
+      snprintf(why, sizeof why, "the step sizes of option 'dt' end at %.12g, not at t1 = %.12g", end, t1);
+      return luaL_error(L, "%s: %s", fn, why);
+    }
+    steps = nsizes;
+  } else if (!adaptive && have_t1 == (steps > 0))
+    return luaL_error(L, "%s: give the end time 't1' or the number of 'steps' (one of them)", fn);
+  if (!steps && !adaptive) {
     double x = (t1 - t0) / dt;
     if (!(x >= 0.5) || fabs(x - nearbyint(x)) > 1e-9 * x || x > 1e8)
     {
@@ -123,15 +181,8 @@ static int l_time_problem(lua_State *L) {
     }
     steps = (int)nearbyint(x);
   }
-  int tparam = -1;
-  if (lua_getfield(L, 1, "time") != LUA_TNIL) {
-    ud_expr *ue = luaL_testudata(L, -1, MT_EXPR);
-    if (!ue || expr_of(L, ue)->kind != E_PARAM)
-      return luaL_error(L, "%s: option 'time' must be a parameter (lg.parameter), set to each step's time, got %s", fn,
-                        ue ? "an expression" : luaL_typename(L, -1));
-    tparam = expr_of(L, ue)->i0;
-  }
-  lua_pop(L, 1);
+  int tparam = param_option(L, "time", "set to each step's time", fn);
+  if (tparam >= 0 && tparam == dtsz) return luaL_error(L, "%s: options 'time' and 'step_size' must be two parameters", fn);
   lua_getfield(L, 1, "nonlinear");
   int nonlinear = lua_toboolean(L, -1);
   lua_pop(L, 1);
@@ -145,7 +196,7 @@ static int l_time_problem(lua_State *L) {
   const char *output = opt_str(L, 1, "output", NULL, fn);
   if (output && (strlen(output) < 5 || strcmp(output + strlen(output) - 4, ".pvd")))
     return luaL_error(L, "%s: option 'output' must be a path ending in .pvd, got \"%s\"", fn, output);
-  int every = opt_int(L, 1, "every", steps >= 10 ? steps / 10 : 1, fn);
+  int every = opt_int(L, 1, "every", adaptive ? 10 : steps >= 10 ? steps / 10 : 1, fn);
   if (every < 1) return luaL_error(L, "%s: option 'every' must be >= 1, got %d", fn, every);
   /* the unknowns' count first (previous is read against it), then the step problem */
   int ids[KER_MAXFIELD], nfield = check_symbols(L, 1, "unknown", FK_UNKNOWN, ids, fn);
@@ -162,9 +213,13 @@ static int l_time_problem(lua_State *L) {
   u->monitor = monitor;
   s.step = u->p;
   s.time_param = tparam;
+  s.dt_param = dtsz;
   s.t0 = t0;
-  s.dt = dt;
+  s.dt = adaptive ? t1 - t0 : dt;
+  s.dts = dts;
   s.nsteps = steps;
+  s.adaptive = adaptive;
+  u->t1 = t1;
   lg_env *env = get_env(L);
   if (!(u->T = lg_time_new(env, &s))) return lgerror(L, fn, env);
   /* what it reads stays alive: the mesh, the forms, the previous functions */
@@ -176,6 +231,10 @@ static int l_time_problem(lua_State *L) {
   }
   lua_getfield(L, 1, "previous");
   lua_setfield(L, -2, "__previous");
+  if (adaptive) {
+    lua_getfield(L, 1, "dt");
+    lua_setfield(L, -2, "__dt");
+  }
   if (bty == LUA_TFUNCTION) {
     u->hook_L = lua_newthread(L);
     lua_setfield(L, -2, "__before_step_thread");
@@ -195,6 +254,8 @@ static int time_gc(lua_State *L) {
   lg_time_free(u->T);
   lg_problem_free(u->p);
   free(u->output);
+  free(u->sizes);
+  u->sizes = NULL;
   u->T = NULL;
   u->p = NULL;
   u->output = NULL;
@@ -202,46 +263,158 @@ static int time_gc(lua_State *L) {
 }
 
 /* the fields of level 0 (the state after the last step) for output */
-static int write_state(lg_env *env, ud_time *u, lg_series *s, int k) {
+static int write_state(lg_env *env, ud_time *u, lg_series *s, double t) {
   mesh_field fl[KER_MAXFIELD];
   for (int a = 0; a < u->nfield; a++) {
     lg_function *f = lg_time_previous(u->T, 0, a);
     expr_func_info *fi = expr_func_get(env->c, f->fid);
     fl[a] = (mesh_field){fi ? fi->name : "u", f->dm->bs, f->dm->degree == 0, f->x};
   }
-  return lg_series_write(env, s, lg_time_previous(u->T, 0, 0)->mesh, u->nfield, fl, lg_time_at(u->T, k));
+  return lg_series_write(env, s, lg_time_previous(u->T, 0, 0)->mesh, u->nfield, fl, t);
+}
+
+/* a march's counts, and the progress line of step k */
+typedef struct {
+  long its, lits;
+  int steps, retries;
+  double t0;
+} march_info;
+
+static void progress(const ud_time *u, const march_info *m, int k, int N, double t, double dt, const lg_solve_info *info) {
+  if (!u->monitor || lg_mpi_rank() != 0) return;
+  char of[32] = "";
+  if (N > 0) snprintf(of, sizeof of, " of %d", N);
+  printf("step %d%s: t = %.6g, dt = %.3g, %d %s, %.3f s\n", k, of, t, dt, info->iterations,
+         lg_problem_is_nonlinear(u->p) ? "Newton iterations" : "linear iterations", (lg_now_ms() * 1e-3) - m->t0);
+  fflush(stdout);
+}
+
+/* the step sizes' function: dt(k, t, last) with last = nil (the first step) or {dt =,
+ * iterations =, linear_iterations =, failed =, message =}; the size it gives, checked and
+ * agreed by the ranks (their least), or an error (a message in env) */
+static int ask_dt(lua_State *L, lg_env *env, int k, double t, const lg_solve_info *last, double last_dt, int failed, double *h) {
+  lua_getiuservalue(L, 1, 1);
+  lua_getfield(L, -1, "__dt");
+  lua_remove(L, -2);
+  lua_pushinteger(L, k);
+  lua_pushnumber(L, t);
+  if (k == 1 && !failed) lua_pushnil(L);
+  else {
+    lua_createtable(L, 0, 5);
+    lua_pushnumber(L, last_dt); lua_setfield(L, -2, "dt");
+    lua_pushinteger(L, last->iterations); lua_setfield(L, -2, "iterations");
+    lua_pushinteger(L, last->linear_iterations); lua_setfield(L, -2, "linear_iterations");
+    lua_pushboolean(L, failed); lua_setfield(L, -2, "failed");
+    if (failed) { lua_pushstring(L, env->err); lua_setfield(L, -2, "message"); }
+  }
+  int rc = 0;
+  if (lua_pcall(L, 3, 1, 0) != LUA_OK) {
+    lg_seterr(env, "dt(%d, %g): %s", k, t, lua_tostring(L, -1) ? lua_tostring(L, -1) : "an error");
+    rc = 1;
+  } else {
+    int isnum;
+    *h = lua_tonumberx(L, -1, &isnum);
+    if (!isnum || !(*h > 0) || !isfinite(*h)) {
+      lg_seterr(env, "dt(%d, %g) must return a positive number, got %s", k, t, luaL_tolstring(L, -1, NULL));
+      lua_pop(L, 1);
+      rc = 1;
+    }
+  }
+  lua_pop(L, 1);
+  double x[2] = {rc ? 1 : 0, rc ? 1e300 : *h};
+  lg_allreduce(x, 2, LG_MAX); /* one rank's error stops them all */
+  if (x[0] > 0 && !rc) { lg_seterr(env, "dt(%d, %g) failed on another rank", k, t); rc = 1; }
+  if (!rc) {
+    double m = *h;
+    lg_allreduce(&m, 1, LG_MIN);
+    *h = m;
+  }
+  return rc;
+}
+
+/* the adaptive march: sizes from the script's dt function, the last clipped to end at t1; a
+ * failed step (Newton not converging) is tried again when the function, told it failed,
+ * gives a smaller size (10 tries at most) */
+static int adaptive_march(lua_State *L, lg_env *env, ud_time *u, lg_series *series, march_info *m) {
+  double t0 = lg_time_at(u->T, 0), t = t0, t1 = u->t1, span = t1 - t0, h = 0;
+  lg_solve_info info = {0};
+  int cap = 64, n = 0;
+  free(u->sizes);
+  u->nsizes = 0;
+  if (!(u->sizes = malloc(sizeof(double) * (size_t)cap))) { lg_seterr(env, "out of memory"); return 1; }
+  for (int k = 1; t < t1 - 1e-12 * span; k++) {
+    int failed = 0, tries = 0;
+    for (;;) {
+      double prev = h;
+      if (ask_dt(L, env, k, t, &info, h, failed, &h)) return 1;
+      if (failed && !(h < prev)) {
+        char why[LG_ERRLEN];
+        snprintf(why, sizeof why, "%s", env->err);
+        lg_seterr(env, "%s (dt(%d, %g), told the step failed, gave %g, not a smaller step)", why, k, t, h);
+        return 1;
+      }
+      if (t + h >= t1 - 1e-9 * h) h = t1 - t;
+      if (h < 1e-14 * span) { lg_seterr(env, "step %d (t = %.9g): the step size %g is below 1e-14 of the interval", k, t, h); return 1; }
+      int r = lg_time_step_at(env, u->T, k, t + h, h, &info);
+      if (!r) break;
+      if (r != 2 || ++tries >= 10) return 1; /* before_step's errors are the script's */
+      failed = 1;
+      m->retries++;
+    }
+    t += h; /* as lg_time_at sums a list of sizes: the list replays these times to the bit */
+    m->its += info.iterations;
+    m->lits += info.linear_iterations;
+    m->steps = k;
+    if (n == cap) {
+      double *g = realloc(u->sizes, sizeof(double) * (size_t)(cap *= 2));
+      if (!g) { lg_seterr(env, "out of memory"); return 1; }
+      u->sizes = g;
+    }
+    u->sizes[n++] = h;
+    u->nsizes = n;
+    int last = !(t < t1 - 1e-12 * span);
+    if (k % u->every == 0 || last) {
+      if (series && write_state(env, u, series, t)) return 1;
+      progress(u, m, k, 0, t, h, &info);
+    }
+  }
+  return 0;
+}
+
+/* the march of fixed steps */
+static int fixed_march(lg_env *env, ud_time *u, lg_series *series, march_info *m) {
+  lg_time *T = u->T;
+  int N = lg_time_nsteps(T);
+  for (int k = 1; k <= N; k++) {
+    lg_solve_info info;
+    if (lg_time_step(env, T, k, &info)) return 1;
+    m->its += info.iterations;
+    m->lits += info.linear_iterations;
+    m->steps = k;
+    if (k % u->every == 0 || k == N) {
+      if (series && write_state(env, u, series, lg_time_at(T, k))) return 1;
+      progress(u, m, k, N, lg_time_at(T, k), lg_time_step_size(T, k), &info);
+    }
+  }
+  return 0;
 }
 
 /* step:solve(): the march from t0 to t1; the final state (new functions, one per unknown) and
- * {steps=, iterations=, linear_iterations=, seconds=}; the previous functions keep the
- * initial state */
+ * {steps=, iterations=, linear_iterations=, seconds=[, retries=]}; the previous functions
+ * keep the initial state */
 static int time_solve(lua_State *L) {
   gc_point(L, 1);
   const char *fn = "step:solve";
   ud_time *u = check_time(L, 1, fn);
+  lua_settop(L, 1);
   lg_env *env = get_env(L);
   lg_time *T = u->T;
-  int N = lg_time_nsteps(T);
   lg_series *series = NULL;
   if (u->output && !(series = lg_series_new(env, u->output))) return lgerror(L, fn, env);
-  double t0 = (lg_now_ms() * 1e-3);
-  long its = 0, lits = 0;
+  march_info m = {0, 0, 0, 0, lg_now_ms() * 1e-3};
   if (lg_time_begin(env, T)) { lg_series_free(series); return lgerror(L, fn, env); }
-  int rc = series ? write_state(env, u, series, 0) : 0;
-  for (int k = 1; k <= N && !rc; k++) {
-    lg_solve_info info;
-    if ((rc = lg_time_step(env, T, k, &info))) break;
-    its += info.iterations;
-    lits += info.linear_iterations;
-    if (k % u->every == 0 || k == N) {
-      if (series && (rc = write_state(env, u, series, k))) break;
-      if (u->monitor && lg_mpi_rank() == 0) {
-        printf("step %d of %d: t = %.6g, %d %s, %.3f s\n", k, N, lg_time_at(T, k), info.iterations,
-               lg_problem_is_nonlinear(u->p) ? "Newton iterations" : "linear iterations", (lg_now_ms() * 1e-3) - t0);
-        fflush(stdout);
-      }
-    }
-  }
+  int rc = series ? write_state(env, u, series, lg_time_at(T, 0)) : 0;
+  if (!rc) rc = lg_time_adaptive(T) ? adaptive_march(L, env, u, series, &m) : fixed_march(env, u, series, &m);
   lg_function *out[KER_MAXFIELD] = {NULL};
   for (int a = 0; !rc && a < u->nfield; a++) {
     lg_function *f = lg_time_previous(T, 0, a);
@@ -259,26 +432,49 @@ static int time_solve(lua_State *L) {
   }
   int base = lua_gettop(L);
   push_functions_of(L, 1, out, u->nfield);
-  push_info_table(L, 4);
-  lua_pushinteger(L, N); lua_setfield(L, -2, "steps");
-  lua_pushinteger(L, its); lua_setfield(L, -2, "iterations");
-  lua_pushinteger(L, lits); lua_setfield(L, -2, "linear_iterations");
-  lua_pushnumber(L, (lg_now_ms() * 1e-3) - t0); lua_setfield(L, -2, "seconds");
+  push_info_table(L, 5);
+  lua_pushinteger(L, m.steps); lua_setfield(L, -2, "steps");
+  lua_pushinteger(L, m.its); lua_setfield(L, -2, "iterations");
+  lua_pushinteger(L, m.lits); lua_setfield(L, -2, "linear_iterations");
+  lua_pushnumber(L, (lg_now_ms() * 1e-3) - m.t0); lua_setfield(L, -2, "seconds");
+  if (lg_time_adaptive(T)) { lua_pushinteger(L, m.retries); lua_setfield(L, -2, "retries"); }
   return lua_gettop(L) - base;
 }
 
-/* step:times(): t0 + k dt for k = 0 .. steps */
-static int time_times(lua_State *L) {
-  ud_time *u = check_time(L, 1, "step:times");
+/* step:times() and step:sizes(): the step times t_0 .. t_N and sizes t_k - t_{k-1} (an
+ * adaptive march's: those of the last one, the times summed from t0 as a list of sizes
+ * sums them, so that dt = step:sizes() replays the march to the bit) */
+static int times_or_sizes(lua_State *L, int sizes) {
+  const char *fn = sizes ? "step:sizes" : "step:times";
+  ud_time *u = check_time(L, 1, fn);
+  if (lg_time_adaptive(u->T)) {
+    if (!u->sizes) return luaL_error(L, "%s: the step %s of an adaptive march are known after step:solve()", fn, sizes ? "sizes" : "times");
+    lua_createtable(L, u->nsizes + 1, 0);
+    double t = lg_time_at(u->T, 0);
+    if (!sizes) { lua_pushnumber(L, t); lua_rawseti(L, -2, 1); }
+    for (int k = 0; k < u->nsizes; k++) {
+      t += u->sizes[k];
+      lua_pushnumber(L, sizes ? u->sizes[k] : t);
+      lua_rawseti(L, -2, k + 1 + !sizes);
+    }
+    return 1;
+  }
   int N = lg_time_nsteps(u->T);
   lua_createtable(L, N + 1, 0);
-  for (int k = 0; k <= N; k++) { lua_pushnumber(L, lg_time_at(u->T, k)); lua_rawseti(L, -2, k + 1); }
+  for (int k = !!sizes; k <= N; k++) {
+    lua_pushnumber(L, sizes ? lg_time_step_size(u->T, k) : lg_time_at(u->T, k));
+    lua_rawseti(L, -2, k + !sizes);
+  }
   return 1;
 }
 
+static int time_sizes(lua_State *L) { return times_or_sizes(L, 1); }
+
+static int time_times(lua_State *L) { return times_or_sizes(L, 0); }
+
 void lg_lua_time_register(lua_State *L) {
   static const luaL_Reg mm[] = {{"__gc", time_gc}, {NULL, NULL}};
-  static const luaL_Reg methods[] = {{"solve", time_solve}, {"times", time_times}, {"sensitivity", lg_lua_time_sensitivity},
+  static const luaL_Reg methods[] = {{"solve", time_solve}, {"times", time_times}, {"sizes", time_sizes}, {"sensitivity", lg_lua_time_sensitivity},
                                           {NULL, NULL}};
   new_mt(L, MT_TIME, mm, methods);
 }

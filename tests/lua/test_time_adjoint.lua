@@ -145,6 +145,13 @@ do
   end
 end
 
+local function hess_ok(t, what)
+  local r = t.rates2[#t.rates2]
+  T.check(math.abs(r - 3) < 0.1, "%s: second-order Taylor rate %.3f (want 3.0 +- 0.1)\n%s", what, r, tostring(t))
+  T.check(math.abs(t.rates1[#t.rates1] - 2) < 0.05, "%s: first-order rate\n%s", what, tostring(t))
+  return r
+end
+
 -- 3. a nonlinear step (u_t - div((1 + u^2) grad u) + u^3 = f), BDF2 (two previous states,
 -- both controls), a Dirichlet control (the boundary value a)
 do
@@ -162,8 +169,10 @@ do
   local g1
   for _, ck in ipairs{"all", 3} do
     local rf = lg.reduced_functional{problem = step, functional = J, control = {f, a, u0, u00}, checkpoints = ck}
-    local tt = lg.taylor_test(rf, {1 - y, 0.2, 0.2 + x*y, 0.2 + 0.9*x*y}, {x, 0.1, x*y*(1 - x), y*(1 - y)}, {h = 0.05, steps = 4})
+    local tt = lg.taylor_test(rf, {1 - y, 0.2, 0.2 + x*y, 0.2 + 0.9*x*y}, {x, 0.1, x*y*(1 - x), y*(1 - y)},
+                              {h = 0.05, steps = 4, hessian = true})
     local r = rate_ok(tt, "nonlinear BDF2, checkpoints " .. tostring(ck))
+    local r2 = hess_ok(tt, "nonlinear BDF2 Hessian with a Dirichlet control, checkpoints " .. tostring(ck))
     local gf, ga, g0, g00 = rf:gradient({1 - y, 0.2, 0.2 + x*y, 0.2 + 0.9*x*y}, {riesz = "none"})
     if not g1 then g1 = {ga, g0:values()} else
       T.close(ga, g1[1], 1e-12, "the Dirichlet gradient with 3 snapshots")
@@ -171,7 +180,8 @@ do
       for i = 1, #b do T.close(b[i], g1[2][i], 1e-12, "the initial state's gradient with 3 snapshots") end
       T.check(rf:stats().recomputed == revolve(6, 3) - 6 + 1, "recomputed %d", rf:stats().recomputed)
     end
-    print(string.format("time adjoint: nonlinear BDF2 with a Dirichlet control, checkpoints %-3s Taylor rate %.3f", tostring(ck), r))
+    print(string.format("time adjoint: nonlinear BDF2 with a Dirichlet control, checkpoints %-3s Taylor rates %.3f, %.3f (Hessian)",
+                        tostring(ck), r, r2))
   end
 end
 
@@ -179,12 +189,6 @@ end
 -- a nonlinear Crank-Nicolson step with a parameter in time-dependent diffusion, a field and
 -- the initial state; BDF2 with a control per step and its companion in the step and a rate
 -- term, both initial levels, an initial term; every state kept and 2 or 3 snapshots alike
-local function hess_ok(t, what)
-  local r = t.rates2[#t.rates2]
-  T.check(math.abs(r - 3) < 0.1, "%s: second-order Taylor rate %.3f (want 3.0 +- 0.1)\n%s", what, r, tostring(t))
-  T.check(math.abs(t.rates1[#t.rates1] - 2) < 0.05, "%s: first-order rate\n%s", what, tostring(t))
-  return r
-end
 do
   local t = lg.parameter("t", 0)
   local kappa = lg.parameter("kappa", 0.4)
@@ -244,6 +248,31 @@ do
                               {h = 0.1, steps = 4, hessian = true})
     local r = hess_ok(tt, "BDF2 with a per-step control, checkpoints " .. tostring(ck))
     print(string.format("time Hessian: BDF2, a control per step, both initial levels, checkpoints %-3s second-order rate %.3f", tostring(ck), r))
+  end
+end
+
+-- 3c. a boundary value per step time (a Dirichlet control per step) in a nonlinear step:
+-- gradient and Hessian, every state kept and disk snapshots; its sensitivity
+do
+  local t = lg.parameter("t", 0)
+  local u0 = lg.interpolate(P1, mesh, x*y, "u0")
+  local g = lg.control(P1, mesh, "gb", 0*x, {per_step = true})
+  local d = lg.interpolate(P1, mesh, lg.sin(pi*x)*y, "d")
+  local dt = 0.1
+  local F = lg.integral(mesh:cells(), (u - u0)/dt*v + (1 + u^2)*lg.dot(lg.grad(u), lg.grad(v)))
+  local step = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = dt, steps = 5, time = t,
+                               nonlinear = true, bc = lg.essential_bc(mesh:boundary(), v*(u - g)), monitor = false}
+  local J = lg.functional{final = lg.integral(mesh:cells(), (u - d)^2), running = lg.integral(mesh:cells(), 0.5*u^2)}
+  local h1
+  for _, ck in ipairs{"all", {ram = 1, disk = 1}} do
+    local rf = lg.reduced_functional{problem = step, functional = J, control = g, checkpoints = ck}
+    local tt = lg.taylor_test(rf, lg.sin(pi*t)*x, lg.cos(2*t)*(y + x), {h = 0.1, steps = 4, hessian = true})
+    local r = hess_ok(tt, "a boundary value per step, checkpoints " .. ckname(ck))
+    local hs = rf:hessian(lg.cos(2*t)*(y + x), lg.sin(pi*t)*x, {riesz = "none"})
+    local sum = 0
+    for k = 1, #hs do for _, w in ipairs(hs[k]:values()) do sum = sum + w end end
+    if not h1 then h1 = sum else T.close(sum, h1, 1e-12, "the Hessian action with disk snapshots") end
+    print(string.format("time Hessian: a boundary value per step (nonlinear), checkpoints %-3s second-order rate %.3f", ckname(ck), r))
   end
 end
 
@@ -401,9 +430,83 @@ do
   local a = lg.parameter("a", 0)
   local sd = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = dt, steps = 2, time = t,
                              nonlinear = true, bc = lg.essential_bc(mesh:boundary(), v*(u - a)), monitor = false}
-  T.fails(function() sd:sensitivity(a) end, "step:sensitivity", "Dirichlet control")
-  print(string.format("step:sensitivity: du(t1)/dkappa to %.2g of central differences, every step's tangent along (f, u0) to %.2g",
-                      e/n, worst))
+  local dua = sd:sensitivity(a)
+  a:set(h)
+  local pa = sd:solve()
+  a:set(-h)
+  local ma = sd:solve()
+  a:set(0)
+  local ea, na = diff(dua:values(), pa:values(), ma:values())
+  T.check(na > 0.9 and ea < 1e-7*na, "du/da of a Dirichlet value a against central differences: %.3g (max %.3g)", ea, na)
+  print(string.format("step:sensitivity: du(t1)/dkappa to %.2g of central differences, every step's tangent along (f, u0) to %.2g, "
+                      .. "a Dirichlet value's to %.2g", e/n, worst, ea/na))
+end
+
+-- 4c. step sizes that change: adaptive (dt a function: Newton failures retried with a smaller
+-- step, the last step clipped to t1), the same sizes given as a list march to the same bits
+-- and are differentiable (the running term's trapezoidal rule on the step times); a list
+-- of equal sizes gives dt's gradient
+do
+  local h = lg.parameter("h", 0.1)
+  local t = lg.parameter("t", 0)
+  local u0 = lg.interpolate(P1, mesh, 5*lg.sin(pi*x)*lg.sin(pi*y), "u0")
+  local m = lg.parameter("m", 10)
+  local F = lg.integral(mesh:cells(), (u - u0)/h*v + (1 + u^2)*lg.dot(lg.grad(u), lg.grad(v)) - m*(1 + t)*v)
+  local bc = lg.essential_bc(mesh:boundary(), v*u)
+  local asked = 0
+  local step = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, t1 = 0.5, time = t, step_size = h,
+    nonlinear = true, bc = bc, prefix = "adapt_", monitor = false,
+    dt = function(k, tk, last)
+      asked = asked + 1
+      if not last then return 0.2 end
+      if last.failed then return last.dt/2 end
+      return last.iterations <= 3 and last.dt*1.5 or last.dt
+    end}
+  -- MUMPS from the start: a failed Newton solve with PETSc's own LU switches it to MUMPS (the
+  -- fallback of nonlinear solves), and the replay below, a new problem, would start without
+  lg.options("-adapt_snes_max_it 4 -adapt_pc_factor_mat_solver_type mumps")
+  local uA, info = step:solve()
+  local times = step:times()
+  T.check(info.retries >= 3 and info.steps == #times - 1 and asked == info.steps + info.retries,
+          "adaptive march: %d steps, %d retries, %d calls of dt", info.steps, info.retries, asked)
+  T.check(math.abs(times[#times] - 0.5) < 1e-15 and times[2] < 0.2/4, "adaptive times: first %.4g, last %.17g", times[2], times[#times])
+  local sizes = step:sizes()
+  T.check(#sizes == info.steps and math.abs(times[3] - times[2] - sizes[2]) < 1e-15, "step:sizes()")
+  local fixed = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = sizes, time = t, step_size = h,
+                                nonlinear = true, bc = bc, prefix = "adapt_", monitor = false}
+  local uF = fixed:solve()
+  local a, b = uA:values(), uF:values()
+  for i = 1, #a do T.check(a[i] == b[i], "the list of the adaptive march's sizes marches to other values at dof %d", i) end
+  T.fails(function() lg.reduced_functional{problem = step, functional = lg.functional{final = lg.integral(mesh:cells(), u^2)},
+                                           control = m} end, "lg.reduced_functional", "adaptive")
+  T.fails(function() step:sensitivity(m) end, "step:sensitivity", "adaptive")
+  T.fails(function() lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, t1 = 0.5, nonlinear = true,
+                                     dt = function() return 0.1 end} end, "lg.time_problem", "step_size")
+  T.fails(function() lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, t1 = 0.6, step_size = h,
+                                     nonlinear = true, dt = {0.1, 0.2, 0.2}} end, "lg.time_problem", "end at 0.5")
+  local bad = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, t1 = 0.5, step_size = h, nonlinear = true,
+                              bc = bc, monitor = false, dt = function() return -1 end}
+  T.fails(function() bad:times() end, "step:times", "after step:solve")
+  T.fails(function() bad:solve() end, "step:solve", "must return a positive number")
+  T.check(#bad:times() == 1, "a march that failed at its first step: %d step times", #bad:times())
+  -- differentiable: the list's Taylor test, a running term on uneven steps
+  local J = lg.functional{final = lg.integral(mesh:cells(), u^2), running = lg.integral(mesh:cells(), u*x)}
+  local rf = lg.reduced_functional{problem = fixed, functional = J, control = {m, u0}, checkpoints = 3}
+  local tt = lg.taylor_test(rf, {10, 5*lg.sin(pi*x)*lg.sin(pi*y)}, {1, x*y*(1 - x)}, {h = 0.05, steps = 4})
+  local r = rate_ok(tt, "steps of the adaptive march's sizes")
+  -- equal sizes as a list: dt's value and gradient
+  local lin = lg.integral(mesh:cells(), (u - u0)/h*v + lg.dot(lg.grad(u), lg.grad(v)) - m*(1 + t)*v)
+  local function rfof(dt)
+    local st = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = lin, dt = dt, t1 = 0.5, time = t,
+                               step_size = h, bc = bc, monitor = false}
+    return lg.reduced_functional{problem = st, functional = lg.functional{running = lg.integral(mesh:cells(), u*x),
+                                 at = {[0.3] = lg.integral(mesh:cells(), u^2)}}, control = m}
+  end
+  local r1, r2 = rfof(0.1), rfof({0.1, 0.1, 0.1, 0.1, 0.1})
+  T.close(r2:value(3), r1:value(3), 1e-13, "a list of equal sizes: the value")
+  T.close(r2:gradient(3), r1:gradient(3), 1e-13, "a list of equal sizes: the gradient")
+  print(string.format("time_problem: adaptive steps (%d steps, %d retried), replayed from their sizes to the bit, Taylor rate %.3f",
+                      info.steps, info.retries, r))
 end
 
 -- 5. refused with a message naming the call
@@ -455,7 +558,9 @@ do
   local a = lg.parameter("a", 0)
   local sd = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = 0.1, steps = 3, monitor = false,
                              bc = lg.essential_bc(mesh:boundary(), v*(u - a))}
-  local rfd = lg.reduced_functional{problem = sd, functional = lg.functional{final = lg.integral(mesh:cells(), u^2)}, control = a}
-  T.fails(function() rfd:hessian(1) end, "rf:hessian", "Dirichlet control")
+  local sq = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = 0.1, steps = 3, monitor = false,
+                             bc = lg.essential_bc(mesh:boundary(), v*(u - a^2))}
+  local rfd = lg.reduced_functional{problem = sq, functional = lg.functional{final = lg.integral(mesh:cells(), u^2)}, control = a}
+  T.fails(function() rfd:hessian(1) end, "rf:hessian", "essential condition nonlinearly")
   print("time_problem: bad input refused with messages")
 end

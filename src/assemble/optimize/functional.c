@@ -516,7 +516,7 @@ int lg_reduced_bc_transpose(lg_env *env, lg_reduced *rf, int i, const double *w,
 }
 
 /* and the forward action: out[r] += (dg/dm dm)_r on the essential rows */
-static int add_bc_action(lg_env *env, lg_reduced *rf, int i, const double *dm, double *out) {
+int lg_reduced_bc_action(lg_env *env, lg_reduced *rf, int i, const double *dm, double *out) {
   int *r, *c;
   double *v;
   int n = lg_problem_bc_derivative(env, rf->p, rf->c[i].kind == LG_CONTROL_FIELD ? rf->c[i].f->fid : -1, rf->c[i].param, &r, &c, &v);
@@ -530,7 +530,10 @@ static int add_bc_action(lg_env *env, lg_reduced *rf, int i, const double *dm, d
  * owned dofs, which the ghost dofs now take */
 int lg_reduced_dirichlet_ghosts(lg_env *env, lg_reduced *rf, int i, double *v) {
   if (!rf->lm->dist || !rf->bcdep[i] || rf->c[i].kind != LG_CONTROL_FIELD) return 0;
-  return lg_dist_ghosts(env, rf->lm, rf->c[i].f->dm, v);
+  int nd = rf->c[i].f->dm->ndof, nb = lg_reduced_control_blocks(rf, i); /* a per-step control: block by block */
+  for (int k = 0; k < nb; k++)
+    if (lg_dist_ghosts(env, rf->lm, rf->c[i].f->dm, v + (size_t)k * (size_t)nd)) return 1;
+  return 0;
 }
 
 int lg_reduced_dot(lg_env *env, lg_reduced *rf, double **a, double **b, double *out) {
@@ -724,12 +727,9 @@ static int check_kinks(lg_env *env, lg_reduced *rf, const form *F) {
   return 0;
 }
 
-static int hessian_setup(lg_env *env, lg_reduced *rf) {
-  if (rf->hess_ready) return 0;
-  const form *F = lg_problem_equation(rf->p);
-  if (check_kinks(env, rf, F)) return 1;
-  /* Dirichlet values must be affine in the controls (jointly): their second derivatives
-   * would need the adjoint on the essential rows in the Lagrangian */
+/* Dirichlet values must be affine in the controls (jointly) for Hessian actions: their
+ * second derivatives would need the adjoint on the essential rows in the Lagrangian */
+int lg_reduced_bc_affine(lg_env *env, lg_reduced *rf) {
   for (int i = 0; i < rf->nc; i++)
     for (int j = i; j < rf->nc && rf->bcdep[i]; j++) {
       if (!rf->bcdep[j]) continue;
@@ -745,6 +745,13 @@ static int hessian_setup(lg_env *env, lg_reduced *rf) {
         return 1;
       }
     }
+  return 0;
+}
+
+static int hessian_setup(lg_env *env, lg_reduced *rf) {
+  if (rf->hess_ready) return 0;
+  const form *F = lg_problem_equation(rf->p);
+  if (check_kinks(env, rf, F) || lg_reduced_bc_affine(env, rf)) return 1;
   for (int i = 0; i < rf->nc; i++) {
     if (rf->c[i].kind == LG_CONTROL_FIELD) {
       if (!(rf->dmf[i] = lg_function_new(env, rf->lm, rf->c[i].f->dm, "dm"))) { hessian_free(rf); return 1; }
@@ -833,7 +840,7 @@ int lg_reduced_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
     for (int i = 0; i < N; i++) rf->rhs[i] = -rf->rhs[i];
     lg_problem_zero_essential(rf->p, rf->rhs);
     for (int i = 0; i < rf->nc && !rc; i++)
-      if (rf->bcdep[i]) rc = add_bc_action(env, rf, i, dm[i], rf->rhs); /* du_r = dg_r/dm dm */
+      if (rf->bcdep[i]) rc = lg_reduced_bc_action(env, rf, i, dm[i], rf->rhs); /* du_r = dg_r/dm dm */
     if (!rc) rc = lg_problem_tangent(env, rf->p, rf->rhs, v);
   }
   for (int a = 0; a < rf->nf && !rc; a++) memcpy(rf->du[a]->x, v + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);

@@ -55,6 +55,10 @@ int lg_functional_kernels(lg_env *env, lg_reduced *rf, const form *J, const int 
  * distributed mesh a Dirichlet control's derivative completed on the ghost dofs */
 int lg_reduced_bc_transpose(lg_env *env, lg_reduced *rf, int i, const double *w, double s, double *out);
 int lg_reduced_dirichlet_ghosts(lg_env *env, lg_reduced *rf, int i, double *v);
+/* out += (dg/dm_i) dm on the essential rows (a Dirichlet control's tangent there); whether
+ * every essential value is affine in the controls (0; 1 with a message naming them) */
+int lg_reduced_bc_action(lg_env *env, lg_reduced *rf, int i, const double *dm, double *out);
+int lg_reduced_bc_affine(lg_env *env, lg_reduced *rf);
 /* lam (N values) into the adjoint functions rf->lam with the essential rows zero (the
  * equation's test space: lam^T dR/dm does not see the rows u_i - g_i) */
 int lg_reduced_set_adjoint(lg_env *env, lg_reduced *rf, const double *lam);

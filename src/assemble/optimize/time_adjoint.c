@@ -160,8 +160,8 @@ static double weight(const lg_time_rf *R, const tj_term *t, int k) {
   if (t->kind == LG_TJ_FINAL) return k == R->N ? 1 : 0;
   if (t->kind == LG_TJ_AT) return k == t->atk ? 1 : 0;
   if (t->kind == LG_TJ_INITIAL) return k == 0 ? 1 : 0;
-  double dt = lg_time_dt(R->T);
-  return k == 0 || k == R->N ? 0.5 * dt : dt;
+  /* the trapezoidal rule on the step times: (t_{k+1} - t_{k-1}) / 2 */
+  return 0.5 * ((k < R->N ? lg_time_step_size(R->T, k + 1) : 0) + (k > 0 ? lg_time_step_size(R->T, k) : 0));
 }
 
 /* the terms' value at step k, from the state X_k (its level 0: the unknowns u^k) */
@@ -572,6 +572,11 @@ static int full_step(lg_env *env, lg_reduced *rf, int k) {
     if (lg_form_kernels_eval(env, rf->lm, H->tan[a], nb, b, R->rhs + rf->fld[a].offset)) return 1;
   for (int i = 0; i < N; i++) R->rhs[i] = -R->rhs[i];
   lg_problem_zero_essential(p, R->rhs);
+  for (int i = 0; i < rf->nc; i++) /* a Dirichlet control's rows: du_r = dg_r/dm dm at step k */
+    if (rf->bcdep[i]) {
+      const double *d = rf->c[i].kind == LG_CONTROL_PARAM ? &expr_param_values(env->c)[H->dpar[i]] : H->dmf[i]->x;
+      if (lg_reduced_bc_action(env, rf, i, d, R->rhs)) return 1;
+    }
   if (lg_problem_tangent(env, p, R->rhs, H->v)) return 1;
   /* the new state and its tangent: the levels shifted, level 0 du^k */
   lg_time_set_state(R->T, H->xk);
@@ -647,6 +652,11 @@ static int second_order_step(lg_env *env, lg_reduced *rf, int n, const double *Y
     }
   }
   if (lg_problem_adjoint(env, p, R->rhs, H->v)) return 1;
+  for (int i = 0; i < rf->nc; i++) /* a Dirichlet control's rows u_r - g_r(m), affine in m: -dlam_r dg_r/dm */
+    if (rf->bcdep[i]) {
+      int m = lg_reduced_control_size(rf, i) / lg_reduced_control_blocks(rf, i);
+      if (lg_reduced_bc_transpose(env, rf, i, H->v, -1, H->h[i] + (R->ps[i] ? (size_t)n * (size_t)m : 0))) return 1;
+    }
   lg_problem_zero_essential(p, H->v);
   for (int a = 0; a < rf->nf; a++) memcpy(H->dlam[a]->x, H->v + rf->fld[a].offset, sizeof(double) * (size_t)rf->fld[a].dm->ndof);
   /* H dm: dD/dm + dG/dm (a per-step control's block n, its companion's block n - 1) */
@@ -843,12 +853,6 @@ static int grow_states(lg_env *env, lg_time_rf *R) {
 static int hess_setup(lg_env *env, lg_reduced *rf) {
   lg_time_rf *R = rf->tm;
   if (R->hs) return 0;
-  for (int i = 0; i < rf->nc; i++)
-    if (rf->bcdep[i]) {
-      lg_seterr(env, "Hessian actions and sensitivities of a time-dependent problem with a Dirichlet control (control %d) are "
-                     "not available yet (for Hessians: use a quasi-Newton method, lmvm or blmvm)", i + 1);
-      return 1;
-    }
   struct tm_hess *H = R->hs = calloc(1, sizeof *H);
   if (!H) { lg_seterr(env, "out of memory"); return 1; }
   int N = lg_problem_size(rf->p), rc = 0;
@@ -943,7 +947,7 @@ int lg_time_sensitivity(lg_env *env, lg_reduced *rf, double **dm, lg_time_tangen
 
 int lg_time_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
   lg_time_rf *R = rf->tm;
-  if (hess_setup(env, rf)) return 1;
+  if (lg_reduced_bc_affine(env, rf) || hess_setup(env, rf)) return 1;
   struct tm_hess *H = R->hs;
   int N = lg_problem_size(rf->p);
   set_directions(env, rf, dm);
@@ -963,6 +967,7 @@ int lg_time_hessian(lg_env *env, lg_reduced *rf, double **dm, double **out) {
   R->fresh = 0; /* the stored states held tangents: the next value marches again */
   for (int i = 0; i < rf->nc; i++) free(g[i]);
   if (!rc) add_initial(rf, H->dX0b, out); /* the initial states' part */
+  for (int i = 0; i < rf->nc && !rc; i++) rc = lg_reduced_dirichlet_ghosts(env, rf, i, out[i]);
   return rc;
 }
 
@@ -1008,10 +1013,13 @@ static int setup_terms(lg_env *env, lg_reduced *rf, int nterm, const lg_time_ter
     tj_term *t = &R->t[R->nterm];
     t->kind = terms[i].kind;
     if (t->kind == LG_TJ_AT) {
-      double x = (terms[i].at - lg_time_at(R->T, 0)) / lg_time_dt(R->T);
-      long k = lround(x);
-      if (!(fabs(x - (double)k) <= 1e-9 * (1 + fabs(x))) || k < 0 || k > R->N) {
-        lg_seterr(env, "an observation at t = %.9g is not at a step's time (t0 + k dt, k = 0 .. %d)", terms[i].at, R->N);
+      long k = -1; /* the step whose time it is, to 1e-9 of a step */
+      for (int j = 0; j <= R->N && k < 0; j++) {
+        double h = lg_time_step_size(R->T, j > 0 ? j : 1);
+        if (fabs(terms[i].at - lg_time_at(R->T, j)) <= 1e-9 * h * (1 + j)) k = j;
+      }
+      if (k < 0) {
+        lg_seterr(env, "an observation at t = %.9g is not at a step's time (t_k, k = 0 .. %d)", terms[i].at, R->N);
         return 1;
       }
       t->atk = (int)k;
@@ -1035,6 +1043,11 @@ static int setup_terms(lg_env *env, lg_reduced *rf, int nterm, const lg_time_ter
 
 lg_reduced *lg_reduced_new_time(lg_env *env, lg_time *T, int nterm, const lg_time_term *terms, int nc, const lg_control *c,
                                 const lg_checkpoints *ck, int monitor) {
+  if (lg_time_adaptive(T)) {
+    lg_seterr(env, "the problem's step sizes are adaptive (dt a function): an adjoint, a Hessian or a sensitivity replays the "
+                   "steps at fixed times; give dt a number (or march adaptively first and use the step sizes it chose)");
+    return NULL;
+  }
   lg_reduced *rf = calloc(1, sizeof *rf);
   lg_time_rf *R = calloc(1, sizeof *R);
   if (!rf || !R) { free(rf); free(R); lg_seterr(env, "out of memory"); return NULL; }

@@ -125,17 +125,20 @@ long lg_problem_nnz(const lg_problem *p);
 /* a step problem R(u_{n+1}; u_n[, u_{n-1}], t) = 0 (its unknowns the new state, the
  * previous states discrete functions it reads: prev[level][field], level 0 u_n) marched
  * from t0 by nsteps steps of dt; the time parameter (or -1) is set to each step's new
- * time t0 + k dt before it is solved. The step problem's kept factorizations are turned
- * off (lg_problem_replayable): a step solved again gives the same bits */
+ * time t0 + k dt, the step-size parameter (or -1) to dt, before it is solved. adaptive: the
+ * caller gives each step's size (lg_time_step_at; nsteps 0, no reduced functional). The
+ * step problem's kept factorizations are turned off (lg_problem_replayable): a step solved
+ * again gives the same bits */
 #define LG_TIME_MAXLEV 2
 typedef struct lg_time lg_time;
 typedef struct {
   lg_problem *step;
   int nlev;
   lg_function *prev[LG_TIME_MAXLEV][KER_MAXFIELD];
-  int time_param;
+  int time_param, dt_param;
   double t0, dt;
-  int nsteps;
+  const double *dts;  /* or each step's size (nsteps of them, copied): fixed, not uniform */
+  int nsteps, adaptive;
 } lg_time_spec;
 lg_time *lg_time_new(lg_env *env, const lg_time_spec *s);
 void lg_time_free(lg_time *T);
@@ -149,9 +152,11 @@ void lg_time_set_control_hook(lg_time *T, lg_time_hook hook, void *ud);
 lg_problem *lg_time_step_problem(const lg_time *T);
 int lg_time_levels(const lg_time *T);
 int lg_time_nsteps(const lg_time *T);
-double lg_time_dt(const lg_time *T);
-double lg_time_at(const lg_time *T, int k);      /* t0 + k dt */
+double lg_time_dt(const lg_time *T);             /* the (first) step's size */
+double lg_time_at(const lg_time *T, int k);      /* t0 + k dt, or t0 + the first k sizes */
+double lg_time_step_size(const lg_time *T, int k); /* t_k - t_{k-1} (k >= 1) */
 long lg_time_steps_solved(const lg_time *T);     /* steps solved since it was made */
+int lg_time_adaptive(const lg_time *T);           /* its step sizes come from the caller */
 lg_function *lg_time_previous(const lg_time *T, int lev, int field);
 /* the march's state X_n: the previous functions' values after step n, level after level,
  * field after field (lg_time_state_size values); lg_time_unknowns puts level 0 of X into
@@ -169,5 +174,9 @@ void lg_time_end(lg_env *env, lg_time *T);
  * step problem solved from level 0 as its initial guess, the levels shifted */
 int lg_time_prepare(lg_env *env, lg_time *T, int k);
 int lg_time_step(lg_env *env, lg_time *T, int k, lg_solve_info *info);
+/* step k to the time t by a step of dt (an adaptive march's): 0; 1 when the hooks failed;
+ * 2 when the step's solve failed (the state is the one before the step: it may be tried
+ * again with a smaller dt) */
+int lg_time_step_at(lg_env *env, lg_time *T, int k, double t, double dt, lg_solve_info *info);
 
 #endif

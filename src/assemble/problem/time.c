@@ -18,14 +18,15 @@ struct lg_time {
   int nf, nlev;
   lg_function *prev[LG_TIME_MAXLEV][KER_MAXFIELD];
   int off[KER_MAXFIELD], ndof[KER_MAXFIELD]; /* each field's place in the problem's arrays */
-  int tparam;                                /* the time parameter, or -1 */
+  int tparam, dtparam;                       /* the time and step-size parameters, or -1 */
   double t0, dt;
-  int nsteps;
+  double *times;                             /* t_0 .. t_N for steps of given sizes (then their sizes from times[N + 1]), or NULL */
+  int nsteps, adaptive;
   lg_time_hook hook, chook;                  /* the script's (before_step), a reduced functional's (controls) */
   void *hook_ud, *chook_ud;
   long steps;                                /* steps solved since it was made */
   int marching;                              /* between lg_time_begin and lg_time_end */
-  double *x0, tsave;                         /* what a march found, restored at its end */
+  double *x0, tsave, dtsave;                 /* what a march found, restored at its end */
 };
 
 lg_time *lg_time_new(lg_env *env, const lg_time_spec *s) {
@@ -38,7 +39,7 @@ lg_time *lg_time_new(lg_env *env, const lg_time_spec *s) {
     lg_seterr(env, "the time step must be a positive finite number and t0 finite (dt = %g, t0 = %g)", s->dt, s->t0);
     return NULL;
   }
-  if (s->nsteps < 1) { lg_seterr(env, "a time-dependent problem takes at least one step (got %d)", s->nsteps); return NULL; }
+  if (s->nsteps < 1 && !s->adaptive) { lg_seterr(env, "a time-dependent problem takes at least one step (got %d)", s->nsteps); return NULL; }
   lg_time *T = calloc(1, sizeof *T);
   if (!T) { lg_seterr(env, "out of memory"); return NULL; }
   T->p = p;
@@ -70,10 +71,33 @@ lg_time *lg_time_new(lg_env *env, const lg_time_spec *s) {
     T->ndof[a] = fi[a].dm->ndof;
   }
   T->tparam = s->time_param;
+  T->dtparam = s->dt_param;
   T->t0 = s->t0;
   T->dt = s->dt;
-  T->nsteps = s->nsteps;
-  if (!(T->x0 = malloc(sizeof(double) * ((size_t)lg_time_state_size(T) + 1)))) { free(T); lg_seterr(env, "out of memory"); return NULL; }
+  T->nsteps = s->adaptive ? 0 : s->nsteps;
+  T->adaptive = s->adaptive;
+  if (s->dts && !s->adaptive) {
+    if (!(T->times = malloc(sizeof(double) * (2 * (size_t)s->nsteps + 1)))) { free(T); lg_seterr(env, "out of memory"); return NULL; }
+    memcpy(T->times + s->nsteps + 1, s->dts, sizeof(double) * (size_t)s->nsteps); /* the sizes as given: the step-size parameter's bits */
+    T->times[0] = s->t0;
+    for (int k = 1; k <= s->nsteps; k++) {
+      double h = s->dts[k - 1];
+      if (!(h > 0) || !isfinite(h)) {
+        lg_seterr(env, "step size %d must be a positive finite number (got %g)", k, h);
+        free(T->times);
+        free(T);
+        return NULL;
+      }
+      T->times[k] = T->times[k - 1] + h;
+    }
+    T->dt = s->dts[0];
+  }
+  if (!(T->x0 = malloc(sizeof(double) * ((size_t)lg_time_state_size(T) + 1)))) {
+    free(T->times);
+    free(T);
+    lg_seterr(env, "out of memory");
+    return NULL;
+  }
   /* replayed steps (checkpointing) must give the bits of the first march */
   lg_problem_replayable(p);
   return T;
@@ -81,6 +105,7 @@ lg_time *lg_time_new(lg_env *env, const lg_time_spec *s) {
 
 void lg_time_free(lg_time *T) {
   if (!T) return;
+  free(T->times);
   free(T->x0);
   free(T);
 }
@@ -99,8 +124,10 @@ lg_problem *lg_time_step_problem(const lg_time *T) { return T->p; }
 int lg_time_levels(const lg_time *T) { return T->nlev; }
 int lg_time_nsteps(const lg_time *T) { return T->nsteps; }
 double lg_time_dt(const lg_time *T) { return T->dt; }
-double lg_time_at(const lg_time *T, int k) { return T->t0 + k * T->dt; }
+double lg_time_at(const lg_time *T, int k) { return T->times ? T->times[k] : T->t0 + k * T->dt; }
+double lg_time_step_size(const lg_time *T, int k) { return T->times ? T->times[T->nsteps + k] : T->dt; }
 long lg_time_steps_solved(const lg_time *T) { return T->steps; }
+int lg_time_adaptive(const lg_time *T) { return T->adaptive; }
 lg_function *lg_time_previous(const lg_time *T, int lev, int field) { return T->prev[lev][field]; }
 
 int lg_time_state_size(const lg_time *T) {
@@ -136,6 +163,7 @@ int lg_time_begin(lg_env *env, lg_time *T) {
   if (T->marching) { lg_seterr(env, "the time-dependent problem is already marching (a before_step that solves it?)"); return 1; }
   lg_time_get_state(T, T->x0);
   T->tsave = T->tparam >= 0 ? expr_param_values(env->c)[T->tparam] : 0;
+  T->dtsave = T->dtparam >= 0 ? expr_param_values(env->c)[T->dtparam] : 0;
   T->marching = 1;
   return 0;
 }
@@ -144,24 +172,34 @@ void lg_time_end(lg_env *env, lg_time *T) {
   if (!T->marching) return;
   lg_time_set_state(T, T->x0);
   if (T->tparam >= 0) expr_param_values(env->c)[T->tparam] = T->tsave;
+  if (T->dtparam >= 0) expr_param_values(env->c)[T->dtparam] = T->dtsave;
   T->marching = 0;
 }
 
-int lg_time_prepare(lg_env *env, lg_time *T, int k) {
-  if (T->tparam >= 0) expr_param_values(env->c)[T->tparam] = lg_time_at(T, k);
+static int prepare_at(lg_env *env, lg_time *T, int k, double t, double dt) {
+  if (T->tparam >= 0) expr_param_values(env->c)[T->tparam] = t;
+  if (T->dtparam >= 0) expr_param_values(env->c)[T->dtparam] = dt;
   if (k < 1) return 0;
-  if (T->hook && T->hook(env, T->hook_ud, k, lg_time_at(T, k))) return 1;
-  return T->chook && T->chook(env, T->chook_ud, k, lg_time_at(T, k));
+  if (T->hook && T->hook(env, T->hook_ud, k, t)) return 1;
+  return T->chook && T->chook(env, T->chook_ud, k, t);
+}
+
+int lg_time_prepare(lg_env *env, lg_time *T, int k) {
+  return prepare_at(env, T, k, lg_time_at(T, k), k >= 1 ? lg_time_step_size(T, k) : T->dt);
 }
 
 int lg_time_step(lg_env *env, lg_time *T, int k, lg_solve_info *info) {
-  if (lg_time_prepare(env, T, k)) return 1;
+  return lg_time_step_at(env, T, k, lg_time_at(T, k), lg_time_step_size(T, k), info);
+}
+
+int lg_time_step_at(lg_env *env, lg_time *T, int k, double t, double dt, lg_solve_info *info) {
+  if (prepare_at(env, T, k, t, dt)) return 1;
   lg_problem *p = T->p;
   if (lg_problem_solve(env, p, T->prev[0], NULL, info)) {
     char why[LG_ERRLEN];
     snprintf(why, sizeof why, "%s", env->err);
-    lg_seterr(env, "step %d (t = %.6g): %s", k, lg_time_at(T, k), why);
-    return 1;
+    lg_seterr(env, "step %d (t = %.6g, dt = %.6g): %s", k, t, dt, why);
+    return 2;
   }
   T->steps++;
   const double *u = lg_problem_solution(p);

@@ -623,6 +623,7 @@ lg_problem *lg_reduced_gram(lg_env *env, lg_reduced *rf, int i, int h1) {
   if (!F || form_add_term(F, &all, e, -1)) { form_free(F); lg_seterr(env, "out of memory"); return NULL; }
   lg_problem_spec s = {rf->lm, F, NULL, 1, &ft, &fu, 0, 0, NULL, 0, NULL, 0};
   rf->riesz[i][h1] = lg_problem_new(env, &s);
+  if (rf->riesz[i][h1] && !h1) lg_problem_mass_solver(rf->riesz[i][h1]); /* no factor of the mass matrix kept in memory */
   form_free(F);
   return rf->riesz[i][h1];
 }

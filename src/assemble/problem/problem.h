@@ -99,6 +99,11 @@ int lg_problem_bind_values(const lg_problem *p, const double *u, coef_binding *b
 /* never solve with a kept factor of an earlier matrix (solver.h, lg_keep): every solve of
  * the same data gives the same bits, as replayed time steps must */
 void lg_problem_replayable(lg_problem *p);
+/* the problem's matrix is a mass matrix (a Gram matrix in L2): its solves by CG with Jacobi
+ * to a relative residual of 1e-14 (the Jacobi-scaled mass matrix is well conditioned
+ * whatever the mesh size: about 30 iterations, no factor in memory), falling back to LU
+ * when CG does not get there; before the options (-ksp_type, ...) without a prefix */
+void lg_problem_mass_solver(lg_problem *p);
 /* the adjoint: (dR/du)^T lam = rhs at the last solution (N values each), R the discrete
  * residual whose essential rows are u_i - g_i */
 int lg_problem_adjoint(lg_env *env, lg_problem *p, const double *rhs, double *lam);

@@ -128,6 +128,7 @@ struct lg_problem {
   int have_solution;
   unsigned long solved_geometry; /* the mesh's geometry count at the last solve */
   int no_keep;        /* never solve with a kept factor of an earlier matrix (lg_problem_replayable) */
+  int mass_cg;        /* a mass matrix: CG with Jacobi before LU (lg_problem_mass_solver); 2 once it fell back to LU */
   form *eqn, *bcf;    /* copies of the forms, for derived operators */
   int test[KER_MAXFIELD], unk[KER_MAXFIELD];
   int matrix_ready;   /* lg_problem_solve_vector: the matrix is assembled and factored */

@@ -169,11 +169,33 @@ static int ensure_ksp(lg_env *env, lg_problem *p) {
   PCHK(KSPCreate(PetscObjectComm((PetscObject)p->A), &p->ksp), "KSPCreate");
   if (p->prefix[0]) PCHK(KSPSetOptionsPrefix(p->ksp, p->prefix), "KSPSetOptionsPrefix");
   PC pc;
+  PCHK(KSPGetPC(p->ksp, &pc), "KSPGetPC");
+  if (p->mass_cg == 1) {
+    PCHK(KSPSetType(p->ksp, KSPCG), "KSPSetType");
+    PCHK(PCSetType(pc, PCJACOBI), "PCSetType");
+    PCHK(KSPSetTolerances(p->ksp, 1e-14, 0, PETSC_DEFAULT, 500), "KSPSetTolerances");
+    PCHK(KSPSetNormType(p->ksp, KSP_NORM_UNPRECONDITIONED), "KSPSetNormType");
+  } else {
+    PCHK(KSPSetType(p->ksp, KSPPREONLY), "KSPSetType");
+    if (default_lu(env, p, pc)) return 1;
+  }
+  PCHK(KSPSetFromOptions(p->ksp), "KSPSetFromOptions");
+  return lg_problem_near_nullspace(env, p, p->ksp);
+}
+
+void lg_problem_mass_solver(lg_problem *p) {
+  if (!p->ksp) p->mass_cg = 1;
+}
+
+/* a mass matrix's CG that did not converge: LU from now on */
+static int mass_to_lu(lg_env *env, lg_problem *p) {
+  PC pc;
+  p->mass_cg = 2;
   PCHK(KSPSetType(p->ksp, KSPPREONLY), "KSPSetType");
   PCHK(KSPGetPC(p->ksp, &pc), "KSPGetPC");
   if (default_lu(env, p, pc)) return 1;
-  PCHK(KSPSetFromOptions(p->ksp), "KSPSetFromOptions");
-  return lg_problem_near_nullspace(env, p, p->ksp);
+  PCHK(lg_lu_prepare(p->ksp, p->A, p->own_rows, p->nown, p->prefix, 1), "the factorization's choice");
+  return 0;
 }
 
 /* the solution's null space part: constants to mean zero, rigid motions projected out */
@@ -952,6 +974,10 @@ int lg_problem_solve_vector(lg_env *env, lg_problem *p, const double *rhs, doubl
     ierr = KSPSolve(p->ksp, p->b, p->x);
     if (ierr) return lg_petsc_fail(env, ierr, "a solve with the problem's matrix");
     KSPGetConvergedReason(p->ksp, &reason);
+    if (reason < 0 && p->mass_cg == 1) { /* CG on a mass matrix short of 1e-14: LU */
+      if (mass_to_lu(env, p)) return 1;
+      continue;
+    }
     if (reason >= 0 || !lg_lu_native(p->ksp, p->prefix)) break;
     PCHK(lg_lu_fallback(p->ksp, p->A), "the switch to MUMPS"); /* PETSc's LU failed: MUMPS, once */
   }

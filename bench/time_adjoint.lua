@@ -4,12 +4,15 @@
 -- after the control changed), the backward sweep (rf:gradient right after), their ratio, the
 -- forward steps the sweep recomputed and the peak resident memory, for every state kept and
 -- for s snapshots; with "plain" the march alone (step:solve()), for its time and memory.
---   lugal bench/time_adjoint.lua N steps [snapshots | plain]
+-- "r+d" takes r snapshots in memory and d on disk (the multistage schedule; files in $TMPDIR).
+--   lugal bench/time_adjoint.lua N steps [snapshots | r+d | plain]
 local lg = require "lugal"
 local N = tonumber(arg[1]) or 32
 local steps = tonumber(arg[2]) or 100
-local snaps = tonumber(arg[3])
+local snaps = tonumber(arg[3]) -- "all" (or nothing): every state
 local plain = arg[3] == "plain"
+local ram, disk = (arg[3] or ""):match("^(%d+)%+(%d+)$")
+if ram then snaps = {ram = tonumber(ram), disk = tonumber(disk)} end
 local mesh = lg.mesh.rectangle{nx = N}
 local P1 = lg.lagrange(1)
 local u, v = lg.unknown(P1, "u"), lg.test(P1, "v")
@@ -51,6 +54,8 @@ for r = 1, 3 do
 end
 table.sort(tf)
 table.sort(tg)
+local st = rf:stats()
 print(string.format("time_adjoint N=%d steps=%d checkpoints=%s: forward %.3f s, gradient sweep %.3f s (%.2f x the forward), "
-                    .. "%d steps recomputed, %d states held, peak RSS %.0f MB, J %.12e", N, steps, snaps and tostring(snaps) or "all",
-                    tf[2], tg[2], tg[2] / tf[2], rf:stats().recomputed, rf:stats().states, hwm(), J1))
+                    .. "%d steps recomputed, %d states held (%d in memory, %d files written, %d read), peak RSS %.0f MB, J %.12e",
+                    N, steps, ram and arg[3] or snaps and tostring(snaps) or "all", tf[2], tg[2], tg[2] / tf[2], st.recomputed,
+                    st.states, st.in_memory, st.disk_writes, st.disk_reads, hwm(), J1))

@@ -25,13 +25,23 @@ cat /proc/loadavg
     [ $have_pa = 1 ] && PYTHONPATH="$PYADJOINT" /usr/bin/python3 "$ROOT/bench/time_adjoint_pyadjoint.py" $cfg 2> /dev/null | grep -v "^Calling FFC"
   done
 done
-# memory over a long march: the plain forward run, 16 snapshots, every state kept
-for cfg in "32 5000" "128 1000"; do
-  # shellcheck disable=SC2086
-  "$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" $cfg plain
-  # shellcheck disable=SC2086
-  "$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" $cfg 16
-  # shellcheck disable=SC2086
-  "$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" $cfg
+# memory over a long march: the plain forward run, 16 snapshots, every state kept; with
+# lugal's defaults, then without huge pages (-lugal_hugepages 0: their 2 MB grain moves the
+# figures by a few MB from run to run)
+for pages in "" "-lugal_hugepages 0"; do
+  for cfg in "32 5000" "64 5000" "128 1000"; do
+    # shellcheck disable=SC2086
+    "$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" $cfg plain $pages
+    # shellcheck disable=SC2086
+    "$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" $cfg 16 $pages
+    # shellcheck disable=SC2086
+    "$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" $cfg all $pages
+  done
+done
+# snapshots on disk (the multistage schedule) against the same number in memory
+[ "$1" = memory ] || for round in 1 2 3; do
+  for ck in 16 14+2 8+8; do
+    "$ROOT/build/lugal" "$ROOT/bench/time_adjoint.lua" 64 1000 $ck
+  done
 done
 cat /proc/loadavg

@@ -209,6 +209,10 @@ static void read_checkpoints(lua_State *L, lg_time *T, lg_checkpoints *ck, const
   if (ck->ram + ck->disk > N) ck->ram = ck->disk = 0; /* as many as states: every one kept */
   lua_pop(L, 1);
   const char *sched = opt_str(L, 1, "schedule", NULL, fn);
+  if (sched && !strcmp(sched, "mixed"))
+    luaL_error(L, "%s: schedule \"mixed\" is not provided: lugal's binomial schedule never re-runs a step for its own adjoint "
+                  "(the step's output is held from the later step), the saving the mixed schedule makes over revolve; at equal "
+                  "memory it recomputes within 1 to 4 percent of the mixed schedule's steps (bench/RESULTS.md). Use \"revolve\"", fn);
   if (sched && strcmp(sched, "revolve") && strcmp(sched, "multistage"))
     luaL_error(L, "%s: option 'schedule' must be \"revolve\" (snapshots in memory) or \"multistage\" (in memory and on disk), got \"%s\"",
                fn, sched);
@@ -247,10 +251,14 @@ static lg_reduced *time_reduced(lua_State *L, lg_time *T, const ud_functional *u
   for (int i = 0; i < uf->nterm; i++) terms[nterm++] = (lg_time_term){uf->tf[i], uf->kind[i], uf->at[i]};
   lg_checkpoints ck;
   read_checkpoints(L, T, &ck, fn);
+  /* monitor = true: a line per sweep as often as the problem's own (its option 'every') */
   lua_getfield(L, 1, "monitor");
   int monitor = lua_toboolean(L, -1);
   lua_pop(L, 1);
-  return lg_reduced_new_time(env, T, nterm, terms, nc, c, &ck, monitor);
+  lua_getfield(L, 1, "problem");
+  ud_time *ut = luaL_testudata(L, -1, MT_TIME);
+  lua_pop(L, 1);
+  return lg_reduced_new_time(env, T, nterm, terms, nc, c, &ck, monitor && ut ? ut->every : 0);
 }
 
 static int l_reduced_functional(lua_State *L) {
@@ -643,7 +651,8 @@ int lg_lua_time_sensitivity(lua_State *L) {
   lg_control c[LG_MAXCONTROL];
   int nc = read_controls(L, 2, c, fn, "argument 2 (the control)");
   lg_env *env = get_env(L);
-  lg_reduced *rf = lg_reduced_new_time(env, T, 0, NULL, nc, c, NULL, 0);
+  ud_time *ut = luaL_testudata(L, 1, MT_TIME); /* its progress lines as the problem's own */
+  lg_reduced *rf = lg_reduced_new_time(env, T, 0, NULL, nc, c, NULL, ut->monitor ? ut->every : 0);
   if (!rf) return lgerror(L, fn, env);
   ud_reduced *u = new_ud(L, sizeof *u, MT_REDUCED, 0, NULL); /* frees rf at an error too */
   u->rf = rf;

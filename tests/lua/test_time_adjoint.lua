@@ -535,7 +535,7 @@ do
   T.fails(function() lg.reduced_functional{problem = step, functional = Ju, control = u0, checkpoints = {ram = 1, disk = 1},
                                            schedule = "revolve"} end, "multistage")
   T.fails(function() lg.reduced_functional{problem = step, functional = Ju, control = u0, checkpoints = 2, schedule = "mixed"} end,
-          "option 'schedule'", "mixed")
+          "schedule \"mixed\" is not provided", "revolve")
   T.fails(function() lg.reduced_functional{problem = step, functional = Ju, control = u0, checkpoints = {ram = 1, disk = 1},
                                            dir = "/proc/no/such"} end, "option 'dir'")
   T.fails(function() lg.reduced_functional{problem = step, functional = Ju, control = u0,

@@ -123,7 +123,7 @@ typedef struct {
 } lg_checkpoints;
 /* j(m) = J(u^0 .. u^N, m) of the march of T (problem.h, lg_time): the controls are fields
  * or parameters the step or the terms read, and initial states (a previous function of T).
- * monitor: a line per 100 steps of each sweep. lg_reduced_value, lg_reduced_gradient,
+ * monitor: a progress line every so many steps of each sweep (0: none). lg_reduced_value, lg_reduced_gradient,
  * lg_reduced_hessian (not with a Dirichlet control yet) and what uses them (lg_minimize)
  * work on it as on a steady reduced functional */
 lg_reduced *lg_reduced_new_time(lg_env *env, lg_time *T, int nterm, const lg_time_term *terms, int nc, const lg_control *c,

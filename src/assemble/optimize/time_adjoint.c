@@ -63,7 +63,8 @@ struct lg_time_rf {
   double J;
   int fresh;               /* J and the stored states are those of the current controls */
   long recomputed;         /* forward steps the last gradient solved */
-  int monitor;
+  int monitor;             /* a progress line every so many steps, 0 none */
+  double t_sweep;          /* when the sweep began (lg_now_ms) */
 };
 
 /* Hessian mode (below): states carry their tangents; the step solves the tangent too; the
@@ -136,6 +137,7 @@ static int step_hook(lg_env *env, void *ud, int k, double t) {
  * and cleared */
 static void sweep_begin(lg_reduced *rf) {
   lg_time_rf *R = rf->tm;
+  R->t_sweep = lg_now_ms();
   for (int i = 0; i < rf->nc; i++)
     if (R->ps[i]) {
       memcpy(R->ps_keep[i][0], rf->c[i].f->x, sizeof(double) * (size_t)rf->c[i].f->dm->ndof);
@@ -181,9 +183,11 @@ static int value_at(lg_env *env, lg_reduced *rf, int k, const double *X, double 
 
 /* ---------------------------------------------------------------- the forward march */
 
+/* a progress line every R->monitor steps (and at the last), the sweep's seconds so far */
 static void monitor_line(const lg_time_rf *R, int k, const char *what) {
-  if (R->monitor && lg_mpi_rank() == 0 && (k == R->N || k % 100 == 0)) {
-    printf("%s: step %d of %d (t = %.6g)\n", what, k, R->N, lg_time_at(R->T, k));
+  int last = strcmp(what, "adjoint") ? k == R->N : k == 1;
+  if (R->monitor > 0 && lg_mpi_rank() == 0 && (last || k % R->monitor == 0)) {
+    printf("%s: step %d of %d (t = %.6g), %.3f s\n", what, k, R->N, lg_time_at(R->T, k), 1e-3 * (lg_now_ms() - R->t_sweep));
     fflush(stdout);
   }
 }

@@ -127,6 +127,141 @@ static int read_sizes(lua_State *L, double **dts, const char *fn) {
   return n;
 }
 
+/* the value at idx as a list: itself when there is one unknown, else the table */
+static void push_item(lua_State *L, int list, int a, int n) {
+  if (n == 1 && !(lua_istable(L, list) && !luaL_testudata(L, list, MT_EXPR) && !luaL_testudata(L, list, MT_FUNC)))
+    lua_pushvalue(L, list);
+  else
+    lua_geti(L, list, a + 1);
+}
+
+/* out = a*x + b*y (Lua arithmetic on expressions and forms; b = 0: a*x) */
+static void push_combination(lua_State *L, double a, int x, double b, int y) {
+  lua_pushnumber(L, a);
+  lua_pushvalue(L, x);
+  lua_arith(L, LUA_OPMUL);
+  if (b == 0) return;
+  lua_pushnumber(L, b);
+  lua_pushvalue(L, y);
+  lua_arith(L, LUA_OPMUL);
+  lua_arith(L, LUA_OPADD);
+}
+
+/* option 'scheme': the step's equation from eqn = function(u_t, u, t) returning M(u_t) +
+ * A(u, t) (linear in u_t): backward Euler eqn((u - u0)/dt, u, t); theta (Crank-Nicolson: 1/2)
+ * theta eqn(u_t, u, t) + (1 - theta) eqn(u_t, u0, t - dt), u_t = (u - u0)/dt; BDF2
+ * eqn((3/2 u - 2 u0 + 1/2 u00)/dt, u, t). dt the step_size parameter when there is one. With
+ * several unknowns u_t, u and u0 are tables (one per unknown). The options table at 1 is
+ * replaced by a copy whose eqn is the form made; tprev receives the hidden parameter t - dt
+ * (or -1) */
+static void scheme_equation(lua_State *L, int nfield, int nlev, int *tprev, const char *fn) {
+  const char *scheme = opt_str(L, 1, "scheme", NULL, fn);
+  double theta = opt_num(L, 1, "theta", 0.5, fn);
+  *tprev = -1;
+  if (!scheme) {
+    if (lua_getfield(L, 1, "theta") != LUA_TNIL) luaL_error(L, "%s: option 'theta' goes with scheme = \"theta\"", fn);
+    lua_pop(L, 1);
+    return;
+  }
+  int be = !strcmp(scheme, "backward_euler"), cn = !strcmp(scheme, "crank_nicolson"), th = !strcmp(scheme, "theta"),
+      bdf2 = !strcmp(scheme, "bdf2");
+  if (!be && !cn && !th && !bdf2)
+    luaL_error(L, "%s: option 'scheme' must be \"backward_euler\", \"crank_nicolson\", \"theta\" or \"bdf2\", got \"%s\"", fn, scheme);
+  if (!th && lua_getfield(L, 1, "theta") != LUA_TNIL) luaL_error(L, "%s: option 'theta' goes with scheme = \"theta\"", fn);
+  if (!th) lua_pop(L, 1);
+  if (cn) theta = 0.5;
+  if (be || bdf2) theta = 1; /* (BDF2 is implicit in A) */
+  if (th && !(theta >= 0 && theta <= 1)) luaL_error(L, "%s: option 'theta' must be in [0, 1], got %f", fn, theta);
+  if (bdf2 != (nlev == 2))
+    luaL_error(L, "%s: scheme \"%s\" reads %d previous state%s: option 'previous' %s", fn, scheme, bdf2 ? 2 : 1, bdf2 ? "s" : "",
+               bdf2 ? "= {u0, u00} (u00 the state a step before u0; u0 again for a first-order start)" : "lists one level");
+  int top = lua_gettop(L);
+  if (lua_getfield(L, 1, "eqn") != LUA_TFUNCTION)
+    luaL_error(L, "%s: with option 'scheme' the equation is a function(u_t, u, t) returning the form M(u_t) + A(u, t), got %s", fn,
+               luaL_typename(L, -1));
+  int eqn = lua_gettop(L);
+  lua_getfield(L, 1, "unknown");
+  int unk = lua_gettop(L);
+  lua_getfield(L, 1, "previous");
+  int prev = lua_gettop(L), lev[2];
+  for (int j = 0; j < nlev; j++) { /* level j's list of previous functions */
+    if (nlev == 1) lua_pushvalue(L, prev);
+    else lua_geti(L, prev, j + 1);
+    lev[j] = lua_gettop(L);
+  }
+  if (lua_getfield(L, 1, "step_size") == LUA_TNIL) {
+    lua_pop(L, 1);
+    lua_getfield(L, 1, "dt");
+  }
+  int dt = lua_gettop(L);
+  lua_getfield(L, 1, "time");
+  int t = lua_gettop(L);
+  /* u_t per unknown, into a list (or the one value) */
+  lua_createtable(L, nfield, 0);
+  int ut = lua_gettop(L);
+  for (int a = 0; a < nfield; a++) {
+    push_item(L, unk, a, nfield);
+    int u = lua_gettop(L);
+    push_item(L, lev[0], a, nfield);
+    int u0 = lua_gettop(L);
+    if (bdf2) {
+      push_item(L, lev[1], a, nfield);
+      int u00 = lua_gettop(L);
+      push_combination(L, 1.5, u, -2, u0);
+      push_combination(L, 0.5, u00, 0, 0);
+      lua_arith(L, LUA_OPADD);
+    } else
+      push_combination(L, 1, u, -1, u0);
+    lua_pushvalue(L, dt);
+    lua_arith(L, LUA_OPDIV);
+    lua_rawseti(L, ut, a + 1);
+    lua_settop(L, ut);
+  }
+  if (nfield == 1) {
+    lua_geti(L, ut, 1);
+    lua_replace(L, ut);
+  }
+  /* the implicit part, then the explicit part at (u0, t - dt) */
+  lua_pushvalue(L, eqn);
+  lua_pushvalue(L, ut);
+  lua_pushvalue(L, unk);
+  lua_pushvalue(L, t);
+  lua_call(L, 3, 1);
+  int F = lua_gettop(L);
+  if (!luaL_testudata(L, F, MT_FORM)) luaL_error(L, "%s: the equation function must return a form (lg.integral ...), got %s", fn, luaL_typename(L, F));
+  if (theta < 1) {
+    if (!lua_isnil(L, t)) { /* t - dt: a parameter of its own the march sets */
+      lg_env *env = get_env(L);
+      *tprev = expr_param_new(env->c, "t_prev", 0);
+      if (*tprev < 0) luaL_error(L, "%s: out of memory", fn);
+      push_expr(L, expr_param(env->c, *tprev), 0, NULL, fn);
+      lua_replace(L, t);
+    }
+    lua_pushvalue(L, eqn);
+    lua_pushvalue(L, ut);
+    lua_pushvalue(L, lev[0]);
+    lua_pushvalue(L, t);
+    lua_call(L, 3, 1);
+    int G = lua_gettop(L);
+    if (!luaL_testudata(L, G, MT_FORM)) luaL_error(L, "%s: the equation function must return a form (lg.integral ...), got %s", fn, luaL_typename(L, G));
+    push_combination(L, theta, F, 1 - theta, G);
+    lua_replace(L, F);
+    lua_settop(L, F);
+  }
+  /* the options, copied, with the form as eqn */
+  lua_newtable(L);
+  lua_pushnil(L);
+  while (lua_next(L, 1)) {
+    lua_pushvalue(L, -2);
+    lua_insert(L, -2);
+    lua_rawset(L, -4);
+  }
+  lua_pushvalue(L, F);
+  lua_setfield(L, -2, "eqn");
+  lua_replace(L, 1);
+  lua_settop(L, top);
+}
+
 /* lg.time_problem{mesh=, test=, unknown=, previous=, eqn=, bc=, dt=, t0=, t1= | steps=,
  * time=, step_size=, nonlinear=, symmetric=, prefix=, output=, every=, monitor=}; dt a
  * number, a list of step sizes, or a function(k, t, last) choosing each (adaptive) */
@@ -136,7 +271,7 @@ static int l_time_problem(lua_State *L) {
   if (!lua_istable(L, 1)) return typeerror(L, fn, 1, "a table {mesh=, eqn=, test=, unknown=, previous=, dt=, t1=}");
   static const char *const keys[] = {"mesh", "eqn", "bc", "test", "unknown", "symmetric", "prefix", "nullspace", "previous", "dt",
                                      "t0", "t1", "steps", "time", "step_size", "nonlinear", "output", "every", "monitor",
-                                     "before_step", NULL};
+                                     "before_step", "scheme", "theta", NULL};
   check_keys(L, 1, fn, keys);
   int dty = lua_getfield(L, 1, "dt");
   lua_getfield(L, 1, "t1");
@@ -203,6 +338,8 @@ static int l_time_problem(lua_State *L) {
   lg_time_spec s;
   memset(&s, 0, sizeof s);
   s.nlev = read_previous(L, 1, nfield, s.prev, fn);
+  int tprev;
+  scheme_equation(L, nfield, s.nlev, &tprev, fn); /* (eqn from a function and a scheme) */
   ud_time *u = new_ud(L, sizeof *u, MT_TIME, 0, NULL); /* anchors what is made below */
   int uidx = lua_gettop(L);
   if (output && !(u->output = strdup(output))) return luaL_error(L, "%s: out of memory", fn);
@@ -214,6 +351,7 @@ static int l_time_problem(lua_State *L) {
   s.step = u->p;
   s.time_param = tparam;
   s.dt_param = dtsz;
+  s.tprev_param = tprev;
   s.t0 = t0;
   s.dt = adaptive ? t1 - t0 : dt;
   s.dts = dts;

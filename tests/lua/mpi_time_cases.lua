@@ -24,8 +24,9 @@ do
   out("time_uT_sum", "direct", sum(uT:values()))
   local J = lg.functional{final = lg.integral(mesh:cells(), 0.5*(u - d)^2), running = lg.integral(mesh:cells(), 0.5*u^2),
                           at = {[0.25] = lg.integral(mesh:cells(), u*x)}}
-  for _, ck in ipairs{"all", 3} do
+  for _, ck in ipairs{"all", 3, {ram = 1, disk = 2}} do
     local rf = lg.reduced_functional{problem = step, functional = J, control = {f, kappa, u0}, checkpoints = ck}
+    if type(ck) == "table" then ck = "disk" end -- each rank its own folder of files
     out("time_J_" .. ck, "direct", rf:value())
     local gf, gk, gu = rf:gradient(nil, {riesz = "none"})
     local a, b = gf:values(), gu:values()
@@ -37,6 +38,27 @@ do
     out("time_grad_u0_" .. ck, "direct", s2)
     out("time_recomputed_" .. ck, "count", rf:stats().recomputed)
   end
+end
+
+-- the tangent march (step:sensitivity) and an adaptive march on the ranks: the ranks agree on
+-- each step's size (the least they choose), so the steps and the state are the serial run's
+do
+  local mesh = lg.mesh.rectangle{nx = 10}
+  local P1 = lg.lagrange(1)
+  local u, v = lg.unknown(P1, "u"), lg.test(P1, "v")
+  local t, h, kappa = lg.parameter("t", 0), lg.parameter("h", 0.1), lg.parameter("kappa", 0.3)
+  local u0 = lg.interpolate(P1, mesh, lg.sin(pi*x)*lg.sin(pi*y), "u0")
+  local F = lg.integral(mesh:cells(), (u - u0)/h*v + kappa*(1 + u^2)*lg.dot(lg.grad(u), lg.grad(v)) - (1 + t)*v)
+  local bc = lg.essential_bc(mesh:boundary(), v*u)
+  local step = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, dt = 0.1, steps = 4, time = t,
+                               step_size = h, nonlinear = true, bc = bc, monitor = false}
+  out("time_sens_kappa", "direct", sum(step:sensitivity(kappa):values()))
+  local ad = lg.time_problem{mesh = mesh, test = v, unknown = u, previous = u0, eqn = F, t1 = 0.4, time = t, step_size = h,
+                             nonlinear = true, bc = bc, monitor = false,
+                             dt = function(k, tk, last) return last and math.min(2*last.dt, 0.15) or 0.02 end}
+  local uA, info = ad:solve()
+  out("time_adaptive_steps", "count", info.steps)
+  out("time_adaptive_sum", "direct", sum(uA:values()))
 end
 
 -- a control per step time (and its companion) on the ranks: the gradient's blocks as the serial run's

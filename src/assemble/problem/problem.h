@@ -140,7 +140,7 @@ typedef struct {
   lg_problem *step;
   int nlev;
   lg_function *prev[LG_TIME_MAXLEV][KER_MAXFIELD];
-  int time_param, dt_param;
+  int time_param, dt_param, tprev_param; /* tprev: set to the step's start time t - dt (a theta scheme's explicit part) */
   double t0, dt;
   const double *dts;  /* or each step's size (nsteps of them, copied): fixed, not uniform */
   int nsteps, adaptive;

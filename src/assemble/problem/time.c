@@ -18,7 +18,7 @@ struct lg_time {
   int nf, nlev;
   lg_function *prev[LG_TIME_MAXLEV][KER_MAXFIELD];
   int off[KER_MAXFIELD], ndof[KER_MAXFIELD]; /* each field's place in the problem's arrays */
-  int tparam, dtparam;                       /* the time and step-size parameters, or -1 */
+  int tparam, dtparam, tprevparam;           /* the time, step-size and step-start parameters, or -1 */
   double t0, dt;
   double *times;                             /* t_0 .. t_N for steps of given sizes (then their sizes from times[N + 1]), or NULL */
   int nsteps, adaptive;
@@ -72,6 +72,7 @@ lg_time *lg_time_new(lg_env *env, const lg_time_spec *s) {
   }
   T->tparam = s->time_param;
   T->dtparam = s->dt_param;
+  T->tprevparam = s->tprev_param;
   T->t0 = s->t0;
   T->dt = s->dt;
   T->nsteps = s->adaptive ? 0 : s->nsteps;
@@ -179,6 +180,7 @@ void lg_time_end(lg_env *env, lg_time *T) {
 static int prepare_at(lg_env *env, lg_time *T, int k, double t, double dt) {
   if (T->tparam >= 0) expr_param_values(env->c)[T->tparam] = t;
   if (T->dtparam >= 0) expr_param_values(env->c)[T->dtparam] = dt;
+  if (T->tprevparam >= 0) expr_param_values(env->c)[T->tprevparam] = k >= 1 ? t - dt : t;
   if (k < 1) return 0;
   if (T->hook && T->hook(env, T->hook_ud, k, t)) return 1;
   return T->chook && T->chook(env, T->chook_ud, k, t);

@@ -21,7 +21,7 @@ if command -v lua5.4 > /dev/null 2>&1; then
 fi
 [ -f "$T/d$prefix/share/doc/lugal/LICENSE" ] || fail "no LICENSE installed"
 inc="$T/d$prefix/include/lugal"
-for h in problem/problem_int.h problem/solver.h kernel/vmath.h parallel/parallel_int.h optimize/optimize_int.h; do [ ! -e "$inc/assemble/$h" ] || fail "internal header $h installed"; done
+for h in problem/problem_int.h problem/solver.h kernel/vmath.h parallel/parallel_int.h optimize/optimize_int.h optimize/checkpoint.h; do [ ! -e "$inc/assemble/$h" ] || fail "internal header $h installed"; done
 for h in untangle/untangle_int.h quality/quality_int.h tuplehash.h dense.h io/deflate.h; do [ ! -e "$inc/mesh/$h" ] || fail "internal header $h installed"; done
 [ ! -e "$inc/expr/expr_int.h" ] || fail "internal header expr_int.h installed"
 cflags=$(pkg-config --cflags PETSc 2> /dev/null || echo "-I/usr/lib/petscdir/petsc3.18/x86_64-linux-gnu-real/include")

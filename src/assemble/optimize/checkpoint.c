@@ -4,11 +4,12 @@
  *
  * Disk slots live in a private directory made under the caller's (mkdtemp, one per store and
  * rank), one file per slot, written atomically (a temporary file renamed over the slot's)
- * with a header naming the step and the number of values that a read checks: a slot read
- * back is the state that was asked for, or an error. Files are removed when their slot is
+ * with a header naming the step, the number of values and a hash of them (64-bit FNV-1a)
+ * that a read checks: a slot read back is the state that was asked for, or an error
+ * (tests/fuzz/fuzz_checkpoint.c found a changed value read back before the hash). Files are removed when their slot is
  * freed or the store cleared (at the end of a backward sweep, at an error), and the
  * directory with the store. */
-#include "optimize_int.h"
+#include "checkpoint.h"
 
 #include <errno.h>
 #include <stdint.h>
@@ -24,7 +25,15 @@ typedef struct {
   uint32_t magic, version;
   int64_t step, n;
   uint64_t store; /* the store's nonce: a file of another store is not read */
+  uint64_t hash;  /* of the values' bytes */
 } ck_header;
+
+static uint64_t fnv1a(const void *p, size_t n) {
+  const unsigned char *b = p;
+  uint64_t h = 1469598103934665603ull;
+  for (size_t i = 0; i < n; i++) h = (h ^ b[i]) * 1099511628211ull;
+  return h;
+}
 
 struct lg_ckstore {
   int ram, disk;
@@ -153,7 +162,7 @@ static int write_file(lg_env *env, lg_ckstore *s, int i, int k, const double *X,
   slot_path(s, i, 0, path, sizeof path);
   FILE *f = fopen(tmp, "wb");
   if (!f) { lg_seterr(env, "checkpoint file %s cannot be written: %s", tmp, strerror(errno)); return 1; }
-  ck_header h = {CK_MAGIC, 1, k, (int64_t)len, s->nonce};
+  ck_header h = {CK_MAGIC, 2, k, (int64_t)len, s->nonce, fnv1a(X, sizeof(double) * len)};
   int bad = fwrite(&h, sizeof h, 1, f) != 1 || fwrite(X, sizeof(double), len, f) != len;
   int err = errno;
   bad |= fclose(f) != 0;
@@ -187,8 +196,9 @@ const double *lg_ckstore_get(lg_env *env, lg_ckstore *s, int k, size_t len) {
   FILE *f = fopen(path, "rb");
   if (!f) { lg_seterr(env, "checkpoint file %s (step %d) cannot be read: %s", path, k, strerror(errno)); return NULL; }
   ck_header h;
-  int ok = fread(&h, sizeof h, 1, f) == 1 && h.magic == CK_MAGIC && h.version == 1 && h.store == s->nonce && h.step == k &&
-           h.n == (int64_t)len && fread(s->buf, sizeof(double), len, f) == len && fgetc(f) == EOF;
+  int ok = fread(&h, sizeof h, 1, f) == 1 && h.magic == CK_MAGIC && h.version == 2 && h.store == s->nonce && h.step == k &&
+           h.n == (int64_t)len && fread(s->buf, sizeof(double), len, f) == len && fgetc(f) == EOF &&
+           h.hash == fnv1a(s->buf, sizeof(double) * len);
   fclose(f);
   if (!ok) {
     lg_seterr(env, "checkpoint file %s is not the state of step %d this sweep wrote (changed or truncated on disk?)", path, k);

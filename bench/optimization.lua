@@ -59,6 +59,7 @@ local dm = lg.sin(pi*x)*lg.sin(pi*y)
 build():value(m)                                   -- compiles every kernel once
 -- a third argument names one method to run alone (for -log_view of the optimization only)
 local only = arg and arg[3]
+if only and only:sub(1, 1) == "-" then only = nil end -- an option (-lugal_jit tcc), not a method
 local function median(t) table.sort(t); return t[(#t + 1) // 2] end
 local ts, tg, th = {}, {}, {}
 for _ = 1, only and 0 or 3 do

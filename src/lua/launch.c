@@ -13,8 +13,17 @@
  * problem is mostly first touches (bench/RESULTS.md, "Huge pages").
  *
  * The user keeps control: an existing glibc.malloc.hugetlb in GLIBC_TUNABLES is left as it
- * is, and -lugal_hugepages 0 among the arguments leaves the environment untouched. Links
- * libc only: this costs one exec of a small program (about a millisecond). */
+ * is, and -lugal_hugepages 0 among the arguments leaves the environment untouched.
+ *
+ * And GOMP_SPINCOUNT=1000 (libgomp reads it when the runner loads), unless the user set it
+ * or OMP_WAIT_POLICY: a thread that waits at a barrier or between parallel regions spins
+ * 1000 times (microseconds), not libgomp's default 300 000, before it sleeps. Spinning
+ * threads took the core the working thread or the tiered JIT's background compiler needed:
+ * beside one busy process the P2 elasticity reassembly at N = 24 took 0.52-0.70 s with the
+ * default against 0.36-0.46 s, and the first matrix 1.05-1.34 s against 0.58-0.78 s; on a
+ * quiet machine the first matrix 0.31-1.06 s against 0.33-0.38 s, the reassembly about the
+ * same (bench/RESULTS.md, issue 56). Links libc only: this costs one exec of a small program
+ * (about a millisecond). */
 #include <errno.h>
 #include <limits.h>
 #include <stdio.h>
@@ -66,6 +75,7 @@ int main(int argc, char **argv) {
       }
     }
   }
+  if (!getenv("GOMP_SPINCOUNT") && !getenv("OMP_WAIT_POLICY")) setenv("GOMP_SPINCOUNT", "1000", 1);
   execv(core, argv);
   fprintf(stderr, "lugal: cannot run %s: %s\n", core, strerror(errno));
   return 127;

@@ -4,8 +4,8 @@
 # overriding a glibc.malloc.hugetlb the user chose, left out with -lugal_hugepages 0; the
 # core's exit status and arguments pass through; where the kernel offers transparent huge
 # pages, a problem's large arrays land on them (AnonHugePages in /proc/self/smaps_rollup);
-# the single-process MPI settings are made unless the user made them; 2000 arguments reach
-# the script.
+# the single-process MPI settings are made unless the user made them; GOMP_SPINCOUNT=1000
+# unless the user chose a spin count or a waiting policy; 2000 arguments reach the script.
 BUILD=$1
 T=$(mktemp -d)
 trap 'rm -rf "$T"' EXIT
@@ -39,6 +39,16 @@ out=$(env -u HWLOC_COMPONENTS -u OMPI_MCA_coll "$BUILD/lugal" "$T/mpienv.lua" 2>
 [ "$out" = "-linuxio	basic,self,libnbc" ] || fail "single-process settings: got '$out'"
 out=$(HWLOC_COMPONENTS=linux OMPI_MCA_coll=^hcoll "$BUILD/lugal" "$T/mpienv.lua" 2>/dev/null)
 [ "$out" = "linux	^hcoll" ] || fail "the user's settings: got '$out'"
+
+# libgomp's waiting threads spin briefly (GOMP_SPINCOUNT=1000) unless the user chose a spin
+# count or a waiting policy
+printf 'print(os.getenv("GOMP_SPINCOUNT") or "(unset)")\n' > "$T/spin.lua"
+out=$(env -u GOMP_SPINCOUNT -u OMP_WAIT_POLICY "$BUILD/lugal" "$T/spin.lua" 2>/dev/null)
+[ "$out" = "1000" ] || fail "GOMP_SPINCOUNT: got '$out'"
+out=$(env -u OMP_WAIT_POLICY GOMP_SPINCOUNT=50 "$BUILD/lugal" "$T/spin.lua" 2>/dev/null)
+[ "$out" = "50" ] || fail "the user's GOMP_SPINCOUNT: got '$out'"
+out=$(env -u GOMP_SPINCOUNT OMP_WAIT_POLICY=active "$BUILD/lugal" "$T/spin.lua" 2>/dev/null)
+[ "$out" = "(unset)" ] || fail "with the user's OMP_WAIT_POLICY: got '$out'"
 
 printf 'error("boom")\n' > "$T/err.lua"
 "$BUILD/lugal" "$T/err.lua" > /dev/null 2>&1

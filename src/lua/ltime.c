@@ -459,9 +459,9 @@ static int ask_dt(lua_State *L, lg_env *env, int k, double t, const lg_solve_inf
     }
   }
   lua_pop(L, 1);
-  double x[2] = {rc ? 1 : 0, rc ? 1e300 : *h};
-  lg_allreduce(x, 2, LG_MAX); /* one rank's error stops them all */
-  if (x[0] > 0 && !rc) { lg_seterr(env, "dt(%d, %g) failed on another rank", k, t); rc = 1; }
+  double any = rc;
+  lg_allreduce(&any, 1, LG_MAX); /* one rank's error stops them all */
+  if (any > 0 && !rc) { lg_seterr(env, "dt(%d, %g) failed on another rank", k, t); rc = 1; }
   if (!rc) {
     double m = *h;
     lg_allreduce(&m, 1, LG_MIN);

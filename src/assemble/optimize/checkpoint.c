@@ -74,7 +74,7 @@ lg_ckstore *lg_ckstore_new(lg_env *env, int ram, int disk, const char *parent, s
     }
     size_t len = strlen(p) + 40;
     if (!(s->dir = malloc(len))) { lg_ckstore_free(s); lg_seterr(env, "out of memory"); return NULL; }
-    snprintf(s->dir, len, "%s/lugal-ckpt-%d-XXXXXX", p, lg_mpi_rank());
+    snprintf(s->dir, len, "%s/lugal-ckpt-%d-XXXXXX", p, lg_mpi_rank()); /* mkdtemp's template: it fills the Xs */
     if (!mkdtemp(s->dir)) {
       lg_seterr(env, "no private checkpoint directory can be made in %s: %s", p, strerror(errno));
       free(s->dir);
@@ -213,5 +213,3 @@ void lg_ckstore_stats(const lg_ckstore *s, long *writes, long *reads, const char
   if (reads) *reads = s ? s->reads : 0;
   if (dir) *dir = s ? s->dir : NULL;
 }
-
-int lg_ckstore_ram(const lg_ckstore *s) { return s->ram; }

@@ -23,7 +23,6 @@ int lg_ckstore_has(const lg_ckstore *s, int k);
 void lg_ckstore_drop(lg_ckstore *s, int k);
 void lg_ckstore_clear(lg_ckstore *s);
 int lg_ckstore_resize(lg_env *env, lg_ckstore *s, size_t n);
-int lg_ckstore_ram(const lg_ckstore *s);
 void lg_ckstore_stats(const lg_ckstore *s, long *writes, long *reads, const char **dir);
 
 #endif

@@ -157,7 +157,6 @@ void lg_time_set_control_hook(lg_time *T, lg_time_hook hook, void *ud);
 lg_problem *lg_time_step_problem(const lg_time *T);
 int lg_time_levels(const lg_time *T);
 int lg_time_nsteps(const lg_time *T);
-double lg_time_dt(const lg_time *T);             /* the (first) step's size */
 double lg_time_at(const lg_time *T, int k);      /* t0 + k dt, or t0 + the first k sizes */
 double lg_time_step_size(const lg_time *T, int k); /* t_k - t_{k-1} (k >= 1) */
 long lg_time_steps_solved(const lg_time *T);     /* steps solved since it was made */

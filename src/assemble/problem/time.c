@@ -124,7 +124,6 @@ void lg_time_set_control_hook(lg_time *T, lg_time_hook hook, void *ud) {
 lg_problem *lg_time_step_problem(const lg_time *T) { return T->p; }
 int lg_time_levels(const lg_time *T) { return T->nlev; }
 int lg_time_nsteps(const lg_time *T) { return T->nsteps; }
-double lg_time_dt(const lg_time *T) { return T->dt; }
 double lg_time_at(const lg_time *T, int k) { return T->times ? T->times[k] : T->t0 + k * T->dt; }
 double lg_time_step_size(const lg_time *T, int k) { return T->times ? T->times[T->nsteps + k] : T->dt; }
 long lg_time_steps_solved(const lg_time *T) { return T->steps; }

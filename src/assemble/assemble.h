@@ -117,24 +117,61 @@ typedef struct {
   const double *vals;
 } coef_binding;
 
-/* run kernel k over items a chunk at a time into two buffers: chunk c (items c*chunk ..) goes
- * into buf[c % 2] and is handed to use(ud, first, n, tensors) in item order on one thread
- * while the other OpenMP threads compute chunk c + 1. A non-zero return from use stops the
- * loop (its message in env). Arity 1 and 2. */
-typedef int (*lg_chunk_use)(void *ud, int first, int n, const double *tensors);
-int lg_assemble_chunks(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, const int *cells, const int *facets,
-                       const coef_binding *bind, int chunk, double *const buf[2], lg_chunk_use use, void *ud);
-/* items per chunk for element tensors of size values: buffers of LG_CHUNK_VALUES doubles
- * (256 KiB, in the cache while one thread adds them into the matrix) */
+/* The element loop of a vector or a matrix (arity 1 and 2). The items are cut into windows
+ * of consecutive items, and each of the consumer's rows (its own numbering, 0 .. nrows - 1)
+ * belongs to the window of the first item that has it. Each window is one task, taken by
+ * the next free OpenMP thread, which runs the items that have rows of the window in item
+ * order, a run of consecutive such items at a time into its own buffer, and hands the run
+ * to use(ud, first, n, tensors, ew, w): ew gives the window of each of the run's element
+ * rows (item after item, in the order rows() lists them; NULL: all of them are w's), and
+ * use adds the rows of window w only. Every entry thus gets its items' terms in item order
+ * whatever the number of threads or windows (the same bits as one thread), with no barrier
+ * and no serial section: an item with rows of two windows is evaluated by both (the items
+ * along the cuts). A non-zero return from use stops the loop (its message in env). */
+typedef int (*lg_chunk_use)(void *ud, int first, int n, const double *tensors, const unsigned char *ew, int w);
+/* item it's element rows in the consumer's numbering, in its order, into rows; returns
+ * their number (the same for every item of a list). A row outside 0 .. nrows - 1 is not the
+ * consumer's (another rank's) */
+typedef int (*lg_item_rows)(void *ud, int it, int *rows);
+#define LG_ITEM_ROWS (2 * KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS)
+/* an element row of no window (not the consumer's) */
+#define LG_NO_WINDOW 255
+/* a list's windows, kept by the consumer between assemblies (built again when the window
+ * count, the rows or the items change) */
+typedef struct {
+  int n, nrows, nitems, first; /* first: the list's first item (a rank's share) */
+  int nr;                      /* element rows per item */
+  unsigned char *ew;           /* nr per item: each element row's window, or LG_NO_WINDOW */
+  int *range;                  /* 2 per window: its first item and one past its last */
+} lg_windows;
+void lg_windows_free(lg_windows *w);
+/* an element row er of a run is window w's (use()'s test) */
+#define LG_IN_WINDOW(ew, er, w) (!(ew) || (ew)[er] == (w))
+/* items per run for element tensors of size values: buffers of LG_CHUNK_VALUES doubles
+ * (256 KiB, in the cache while the thread adds them into the matrix) */
 #define LG_CHUNK_VALUES 32768
 int lg_chunk_items(int size);
-/* the two chunk buffers of a loop, kept between assemblies and grown for larger tensors */
+/* one buffer per thread, kept between assemblies and grown for larger tensors */
 typedef struct {
-  double *b[2];
+  double **b;
+  int nb;
   size_t cap;
 } lg_chunk_bufs;
-int lg_chunk_bufs_reserve(lg_env *env, lg_chunk_bufs *cb, int size);
 void lg_chunk_bufs_free(lg_chunk_bufs *cb);
+typedef struct {
+  lg_chunk_use use;
+  lg_item_rows rows;
+  int nrows;
+  void *ud;
+  lg_windows *win;
+  lg_chunk_bufs *bufs;
+  int first; /* the list's first item in the consumer's (a rank's share), for the windows' key */
+} lg_consumer;
+int lg_assemble_chunks(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, const int *cells, const int *facets,
+                       const coef_binding *bind, const lg_consumer *cons);
+/* a functional's kernel (arity 0) over the items, on one thread in item order, added to *out */
+int lg_assemble_sum(lg_env *env, lg_mesh *lm, const lg_kernel *k, int total, const int *cells, const int *facets,
+                    const coef_binding *bind, double *out);
 /* the terms of a sum over the ranks of a parallel run (functionals, arity 0, into out[0];
  * their derivatives, arity 1, through use): each rank runs its share of the items, a
  * contiguous slice from *first (interior facet terms: all of them on rank 0, none elsewhere);
@@ -143,7 +180,7 @@ void lg_chunk_bufs_free(lg_chunk_bufs *cb);
  * the rank's owned cells, a vector every local item (its owned dofs' entries are then
  * complete; lg_dist_ghosts gives the ghost dofs theirs) */
 int lg_assemble_share(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nitems, const int *cells, const int *facets,
-                      const coef_binding *bind, double *out, lg_chunk_bufs *cb, lg_chunk_use use, void *ud, int *first);
+                      const coef_binding *bind, double *out, lg_consumer *cons, int *first);
 int lg_sum_ranks(lg_env *env, double *out, size_t n, int rc);
 /* bindings for every discrete function the kernel uses (unknowns need extra bindings) */
 int lg_bind_discrete(lg_env *env, lg_mesh *lm, const lg_kernel *k, int nextra,

@@ -63,6 +63,10 @@ int luaopen_lugal(lua_State *L) {
     PetscOptionsGetReal(NULL, NULL, "-lugal_jit_tier_ms", &tier_ms, &tset);
     if (tset && !(tier_ms >= 0)) return luaL_error(L, "lugal: -lugal_jit_tier_ms must be >= 0");
     jit_set_tier_ms(ue->env->jit, tier_ms);
+    PetscInt nice = JIT_NICE;
+    PetscOptionsGetInt(NULL, NULL, "-lugal_jit_nice", &nice, NULL);
+    if (nice < 0 || nice > 19) return luaL_error(L, "lugal: -lugal_jit_nice must be 0 .. 19, got %d", (int)nice);
+    jit_set_nice(ue->env->jit, (int)nice);
     PetscBool verbose = PETSC_FALSE;
     PetscOptionsHasName(NULL, NULL, "-lugal_verbose", &verbose);
     ue->env->verbose = verbose;

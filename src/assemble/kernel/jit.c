@@ -29,6 +29,7 @@ static void tcc_delete(TCCState *s) { (void)s; }
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <time.h>
@@ -53,6 +54,7 @@ typedef struct {
   /* tiers (JIT_AUTO) */
   char *src;     /* kept until the system compiler has it */
   double ms;     /* time spent in assemblies with this kernel */
+  double item_ms; /* the last assembly's thread time per item (jit_cost), 0: none yet */
   int tier;      /* JIT_TIER_* */
   pid_t pid;     /* the background compiler */
   cc_job *job;   /* the background build's files (JIT_TIER_COMPILING) */
@@ -66,6 +68,7 @@ struct lg_jit {
   size_t n, cap;
   jit_entry *e;
   double tier_ms;
+  int nice;           /* the background compilers' nice level (jit_set_nice) */
   int verbose;
   int cc_failed_told; /* the system compiler's failure was reported (once a run) */
 };
@@ -78,6 +81,7 @@ lg_jit *jit_new(jit_backend b, const char *libdir) {
 #endif
   j->backend = b;
   j->tier_ms = JIT_TIER_MS;
+  j->nice = JIT_NICE;
   snprintf(j->libdir, sizeof j->libdir, "%s", libdir ? libdir : "");
   return j;
 }
@@ -115,6 +119,7 @@ void jit_set_backend(lg_jit *j, jit_backend b) {
   j->backend = b;
 }
 void jit_set_tier_ms(lg_jit *j, double ms) { j->tier_ms = ms; }
+void jit_set_nice(lg_jit *j, int nice) { j->nice = nice; }
 void jit_set_verbose(lg_jit *j, int v) { j->verbose = v; }
 int jit_verbose(const lg_jit *j) { return j->verbose; }
 size_t jit_count(const lg_jit *j) { return j->n; }
@@ -627,7 +632,12 @@ void jit_account(lg_jit *j, int id, double ms) {
       have = cc_prepare(e->src, e->h1, h2, e->job, err, sizeof err); /* built again below */
     }
   }
-  if (have || cc_spawn(e->job, -1, &e->pid, err, sizeof err)) {
+  int spawned = !have && !cc_spawn(e->job, -1, &e->pid, err, sizeof err);
+  /* the compiler's whole process group (the driver and the cc1, as and ld it starts) yields
+   * to the run: at this nice level it takes a core only where none of the run's threads
+   * wants it */
+  if (spawned && j->nice > 0) setpriority(PRIO_PGRP, (id_t)e->pid, j->nice);
+  if (!spawned) {
     if (!have) job_cleanup(e->job);
     if (e->tier != JIT_TIER_CC) e->tier = JIT_TIER_STAYS;
     free(e->job);
@@ -638,6 +648,16 @@ void jit_account(lg_jit *j, int id, double ms) {
   }
   e->tier = JIT_TIER_COMPILING;
   if (j->verbose) fprintf(stderr, "lugal: kernel %d: %.0f ms in libtcc code, compiling it in the background\n", (int)id, e->ms);
+}
+
+void jit_cost(lg_jit *j, int id, long items, double thread_ms) {
+  if (id < 0 || (size_t)id >= j->n || items <= 0) return;
+  j->e[id].item_ms = thread_ms / (double)items;
+}
+
+double jit_item_ms(const lg_jit *j, int id) {
+  if (id < 0 || (size_t)id >= j->n) return 0;
+  return j->e[id].item_ms;
 }
 
 int jit_wait(lg_jit *j) {

@@ -92,6 +92,9 @@ lg_jit *jit_new(jit_backend b, const char *tcc_libdir);
 void jit_free(lg_jit *j); /* stops background compilers */
 void jit_set_backend(lg_jit *j, jit_backend b);
 void jit_set_tier_ms(lg_jit *j, double ms);
+/* the nice level of the background builds (-lugal_jit_nice; 0: the run's own) */
+#define JIT_NICE 10
+void jit_set_nice(lg_jit *j, int nice);
 void jit_set_verbose(lg_jit *j, int verbose);
 int jit_verbose(const lg_jit *j);
 /* compile (or find compiled) a source defining `lugal_kernel`: its code and its id */
@@ -100,6 +103,11 @@ int jit_compile(lg_jit *j, const char *src, kernel_fn *fn, int *id, double *ms, 
 kernel_fn jit_current(lg_jit *j, int id, kernel_fn fallback);
 /* ms more spent in kernel id (may start its background build) */
 void jit_account(lg_jit *j, int id, double ms);
+/* an assembly with kernel id took thread_ms of thread time (wall time times threads) over
+ * items items; jit_item_ms gives the last such cost per item (0: not measured yet), by
+ * which an assembly decides whether threads pay */
+void jit_cost(lg_jit *j, int id, long items, double thread_ms);
+double jit_item_ms(const lg_jit *j, int id);
 /* wait for every background build; returns how many were swapped in */
 int jit_wait(lg_jit *j);
 /* kernels per tier: libtcc, compiling, system compiler, staying in libtcc */

@@ -12,6 +12,7 @@
  * equation with its test functions replaced by the adjoint (form_replace_function). */
 #include "optimize_int.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -25,6 +26,7 @@ typedef struct {
   int interior;                /* arity 1: the element vector is func on '+', then on '-' */
   lg_kernel k;
   coef_table tab;
+  lg_windows win;               /* arity 1: its items' windows of the dofs (lg_assemble_chunks) */
 } fk_term;
 
 struct lg_form_kernels {
@@ -33,7 +35,7 @@ struct lg_form_kernels {
   const dofmap *dm;
   int n;
   fk_term *t;
-  lg_chunk_bufs chunks; /* element vectors of two chunks of items */
+  lg_chunk_bufs chunks; /* element vectors of a run of items per thread */
 };
 
 void lg_form_kernels_free(lg_form_kernels *K) {
@@ -43,6 +45,7 @@ void lg_form_kernels_free(lg_form_kernels *K) {
     kernel_release(&K->t[i].k);
     free(K->t[i].cells);
     free(K->t[i].facets);
+    lg_windows_free(&K->t[i].win);
   }
   free(K->t);
   lg_chunk_bufs_free(&K->chunks);
@@ -163,7 +166,8 @@ lg_form_kernels *lg_form_kernels_new(lg_env *env, lg_mesh *lm, const form *F, in
 
 int lg_form_kernels_empty(const lg_form_kernels *K) { return K->n == 0; }
 
-/* one chunk of element vectors added into out (lg_assemble_chunks' consumer, item order) */
+/* a run of element vectors, their dofs in the window added into out (lg_assemble_chunks'
+ * consumer) */
 typedef struct {
   const lg_form_kernels *K;
   const fk_term *t;
@@ -171,17 +175,30 @@ typedef struct {
   int first; /* the rank's first item (lg_assemble_share) */
 } vec_ctx;
 
-static int add_vector_chunk(void *ud, int first, int n, const double *v) {
+static int add_vector_chunk(void *ud, int first, int n, const double *v, const unsigned char *ew, int w) {
   const vec_ctx *vc = ud;
   const fk_term *t = vc->t;
   int nl = vc->K->dm->nloc, sides = t->interior ? 2 : 1;
   for (int it = first; it < first + n; it++)
     for (int sd = 0; sd < sides; sd++) {
       const int *cd = vc->K->dm->cell_dofs + (size_t)t->cells[sd * t->nitems + vc->first + it] * nl;
-      const double *ev = v + ((size_t)(it - first) * sides + sd) * nl;
-      for (int k = 0; k < nl; k++) vc->out[cd[k]] += ev[k];
+      size_t er = ((size_t)(it - first) * sides + sd) * nl;
+      const double *ev = v + er;
+      for (int k = 0; k < nl; k++)
+        if (LG_IN_WINDOW(ew, er + k, w)) vc->out[cd[k]] += ev[k];
     }
   return 0;
+}
+
+static int vector_item_dofs(void *ud, int it, int *rows) {
+  const vec_ctx *vc = ud;
+  const fk_term *t = vc->t;
+  int nl = vc->K->dm->nloc, sides = t->interior ? 2 : 1;
+  for (int sd = 0; sd < sides; sd++) {
+    const int *cd = vc->K->dm->cell_dofs + (size_t)t->cells[sd * t->nitems + vc->first + it] * nl;
+    memcpy(rows + sd * nl, cd, sizeof(int) * (size_t)nl);
+  }
+  return sides * nl;
 }
 
 int lg_form_kernels_eval(lg_env *env, lg_mesh *lm, lg_form_kernels *K, int nextra, const coef_binding *extra, double *out) {
@@ -193,9 +210,9 @@ int lg_form_kernels_eval(lg_env *env, lg_mesh *lm, lg_form_kernels *K, int nextr
   for (int i = 0; i < K->n && !rc; i++) {
     fk_term *t = &K->t[i];
     vec_ctx vc = {K, t, out, 0};
+    lg_consumer cons = {add_vector_chunk, vector_item_dofs, K->arity ? K->dm->ndof : 1, &vc, &t->win, &K->chunks, 0};
     rc = lg_bind_discrete(env, lm, &t->k, nextra, extra, bind) ||
-         lg_assemble_share(env, lm, &t->k, t->nitems, t->cells, t->facets, bind, out, &K->chunks, add_vector_chunk, &vc,
-                           &vc.first);
+         lg_assemble_share(env, lm, &t->k, t->nitems, t->cells, t->facets, bind, out, &cons, &vc.first);
   }
   size_t n = K->arity ? (size_t)K->dm->ndof : 1;
   if (lm->dist && K->arity) {

@@ -6,6 +6,7 @@
 #include "solver.h"
 
 #include <ctype.h>
+#include <limits.h>
 #include <math.h>
 #include <stdint.h>
 #include <petscsnes.h>
@@ -529,6 +530,8 @@ void lg_problem_free(lg_problem *p) {
     kernel_release(&p->t[i].kres);
     free(p->t[i].cells);
     free(p->t[i].facets);
+    lg_windows_free(&p->t[i].wmat);
+    lg_windows_free(&p->t[i].wres);
   }
   free(p->t);
   for (int i = 0; i < p->nbct; i++) {
@@ -762,9 +765,9 @@ static int check_element_tensors(lg_env *env, lg_problem *p, int term, int first
   return 0;
 }
 
-/* one chunk of element tensors of a term, checked and added in place into the matrix's
- * value array or the vector (lg_assemble_chunks calls it in item order on one thread while
- * the others compute the next chunk) */
+/* a run of element tensors of a term, checked, and their rows in the window added in place
+ * into the matrix's value array or the vector (lg_assemble_chunks: each window's runs in
+ * item order, windows on any thread) */
 typedef struct {
   lg_env *env;
   lg_problem *p;
@@ -785,13 +788,13 @@ typedef struct {
       const double *vr = v;                                                                         \
       if (cn == 4) /* P1 tetrahedra, Q1 quadrilaterals: straight-line code */                     \
         for (size_t er = 0, ner = (size_t)n * rn; er < ner; er++, rk += 4, vr += 4) {               \
-          if (rs[er] < 0) continue; /* another rank's row */                                       \
+          if (rs[er] < 0 || !LG_IN_WINDOW(ew, er, w)) continue; /* another rank's or window's row */ \
           PetscScalar *row0 = a + rs[er];                                                           \
           row0[rk[0]] += vr[0]; row0[rk[1]] += vr[1]; row0[rk[2]] += vr[2]; row0[rk[3]] += vr[3];   \
         }                                                                                           \
       else                                                                                          \
         for (size_t er = 0, ner = (size_t)n * rn; er < ner; er++, rk += cn, vr += cn) {             \
-          if (rs[er] < 0) continue;                                                                 \
+          if (rs[er] < 0 || !LG_IN_WINDOW(ew, er, w)) continue;                                     \
           PetscScalar *row0 = a + rs[er];                                                           \
           for (int j = 0; j < cn; j++) row0[rk[j]] += vr[j];                                        \
         }                                                                                           \
@@ -802,7 +805,7 @@ typedef struct {
       const double *ve = v + (size_t)e * size;                                                      \
       lg_term_nodes(p, t, first + e, 1, B, 1, R);                                                   \
       for (int i = 0; i < rn; i++) {                                                                \
-        if (R[i] < R0 || R[i] >= R1) continue; /* another rank's row */                             \
+        if (R[i] < R0 || R[i] >= R1 || !LG_IN_WINDOW(ew, e * rn + i, w)) continue;                  \
         const T *ri = rk + i * cn;                                                                  \
         const PetscInt *ir = ia + (size_t)(R[i] - R0) * B;                                         \
         PetscScalar *row0 = a + ir[0];                                                              \
@@ -835,7 +838,7 @@ typedef struct {
       const double *vr = v;                                                                         \
       for (size_t er = 0, ner = (size_t)n * rn; er < ner; er++, rk += cn, vr += cn) {               \
         PetscInt row = rs[er];                                                                      \
-        if (row < 0) continue; /* another rank's row */                                             \
+        if (row < 0 || !LG_IN_WINDOW(ew, er, w)) continue; /* another rank's or window's row */     \
         if (p->so_i[row + 1] == p->so_i[row]) {                                                     \
           PetscScalar *dd = da + p->sd_i[row];                                                      \
           if (cn == 4) { dd[rk[0]] += vr[0]; dd[rk[1]] += vr[1]; dd[rk[2]] += vr[2]; dd[rk[3]] += vr[3]; } \
@@ -853,7 +856,7 @@ typedef struct {
       const double *ve = v + (size_t)e * size;                                                      \
       lg_term_nodes(p, t, first + e, 1, B, 1, R);                                                   \
       for (int i = 0; i < rn; i++) {                                                                \
-        if (R[i] < R0 || R[i] >= R1) continue; /* another rank's row */                             \
+        if (R[i] < R0 || R[i] >= R1 || !LG_IN_WINDOW(ew, e * rn + i, w)) continue;                  \
         const T *ri = rk + i * cn;                                                                  \
         for (int r = 0; r < B; r++) {                                                               \
           lg_split_row S = lg_split_row_at(p, (R[i] - R0) * B + r, da, oa);                         \
@@ -865,7 +868,7 @@ typedef struct {
     }                                                                                               \
   } while (0)
 
-static int scatter_matrix_chunk(void *ud, int first, int n, const double *v) {
+static int scatter_matrix_chunk(void *ud, int first, int n, const double *v, const unsigned char *ew, int w) {
   scatter_ctx *sc = ud;
   lg_problem *p = sc->p;
   const prob_term *t = &p->t[sc->term];
@@ -888,7 +891,7 @@ static int scatter_matrix_chunk(void *ud, int first, int n, const double *v) {
 #undef SCATTER_RANKS
 #undef SCATTER_SPLIT
 
-static int scatter_vector_chunk(void *ud, int first, int n, const double *v) {
+static int scatter_vector_chunk(void *ud, int first, int n, const double *v, const unsigned char *ew, int w) {
   scatter_ctx *sc = ud;
   lg_problem *p = sc->p;
   const prob_term *t = &p->t[sc->term];
@@ -898,9 +901,32 @@ static int scatter_vector_chunk(void *ud, int first, int n, const double *v) {
   for (int e = 0; e < n; e++) {
     const double *ev = v + (size_t)e * size;
     lg_term_nodes(p, t, first + e, 1, 1, 0, rg);
-    for (int k = 0; k < size; k++) sc->r[rg[k]] += ev[k];
+    for (int k = 0; k < size; k++)
+      if (LG_IN_WINDOW(ew, (size_t)e * size + k, w)) sc->r[rg[k]] += ev[k];
   }
   return 0;
+}
+
+/* an item's element rows for the windows (lg_item_rows): the matrix's owned node rows from
+ * 0 (B rows per node; another rank's: -1), the vector's problem dofs */
+static int matrix_item_rows(void *ud, int it, int *rows) {
+  const scatter_ctx *sc = ud;
+  const lg_problem *p = sc->p;
+  const prob_term *t = &p->t[sc->term];
+  int B = lg_matrix_block_size(p), R0 = p->lo / B, R1 = p->hi / B, rn = t->rl.size / B;
+  PetscInt R[KER_MAXFIELD * FEM_MAXLOC * 2];
+  lg_term_nodes(p, t, it, 1, B, 1, R);
+  for (int i = 0; i < rn; i++) rows[i] = R[i] >= R0 && R[i] < R1 ? (int)(R[i] - R0) : -1;
+  return rn;
+}
+
+static int vector_item_rows(void *ud, int it, int *rows) {
+  const scatter_ctx *sc = ud;
+  const prob_term *t = &sc->p->t[sc->term];
+  PetscInt rg[2 * KER_MAXFIELD * FEM_MAXLOC * FEM_MAXBS];
+  lg_term_nodes(sc->p, t, it, 1, 1, 0, rg);
+  for (int k = 0; k < t->rl.size; k++) rows[k] = (int)rg[k];
+  return t->rl.size;
 }
 
 int lg_problem_assemble_into(lg_env *env, lg_problem *p, const double *state, Mat A) {
@@ -923,10 +949,10 @@ int lg_problem_assemble_into(lg_env *env, lg_problem *p, const double *state, Ma
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
     scatter_ctx sc = {env, p, i, a, NULL, da, oa};
-    int size = t->rl.size * t->cl.size;
-    rc = lg_chunk_bufs_reserve(env, &p->chunks, size) || lg_bind_discrete(env, p->lm, &t->kmat, ne, extra, bind) ||
-         lg_assemble_chunks(env, p->lm, &t->kmat, t->nitems, t->cells, t->facets, bind, lg_chunk_items(size),
-                            p->chunks.b, scatter_matrix_chunk, &sc);
+    int B = lg_matrix_block_size(p);
+    lg_consumer cons = {scatter_matrix_chunk, matrix_item_rows, (p->hi - p->lo) / B, &sc, &t->wmat, &p->chunks, 0};
+    rc = lg_bind_discrete(env, p->lm, &t->kmat, ne, extra, bind) ||
+         lg_assemble_chunks(env, p->lm, &t->kmat, t->nitems, t->cells, t->facets, bind, &cons);
   }
   if (!p->par) PCHK(MatSeqAIJRestoreArray(A, &a), "matrix assembly");
   else if (lg_problem_split_close(env, p, da, oa, !rc)) return 1;
@@ -942,9 +968,9 @@ int lg_problem_residual_into(lg_env *env, lg_problem *p, const double *state, do
     prob_term *t = &p->t[i];
     if (!t->have_res) continue;
     scatter_ctx sc = {env, p, i, NULL, r, NULL, NULL};
-    if (lg_chunk_bufs_reserve(env, &p->chunks, t->rl.size) || lg_bind_discrete(env, p->lm, &t->kres, ne, extra, bind) ||
-        lg_assemble_chunks(env, p->lm, &t->kres, t->nitems, t->cells, t->facets, bind, lg_chunk_items(t->rl.size),
-                           p->chunks.b, scatter_vector_chunk, &sc))
+    lg_consumer cons = {scatter_vector_chunk, vector_item_rows, p->N, &sc, &t->wres, &p->chunks, 0};
+    if (lg_bind_discrete(env, p->lm, &t->kres, ne, extra, bind) ||
+        lg_assemble_chunks(env, p->lm, &t->kres, t->nitems, t->cells, t->facets, bind, &cons))
       return 1;
   }
   return 0;

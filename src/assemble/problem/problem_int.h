@@ -25,6 +25,8 @@ typedef struct {
   field_layout rl, cl; /* the element tensor's rows and columns (the problem's layout, or it twice) */
   size_t rank_off;     /* its first element entry (node pair) in the problem's ranks */
   size_t erow_first;   /* B = 1: its first element row in row_start */
+  lg_windows wmat, wres; /* its items' windows of the matrix's owned node rows and of the
+                          * problem's dofs (lg_assemble_chunks) */
 } prob_term;
 
 typedef struct {
@@ -96,7 +98,7 @@ struct lg_problem {
                          * run: its owned row's number, -1 for another rank's), so that the
                          * scatter reads no dof map (the loads of cell, dof and row start
                          * one after another made the P1 scatter latency-bound) */
-  lg_chunk_bufs chunks; /* element tensors of two chunks of items (lg_assemble_chunks) */
+  lg_chunk_bufs chunks; /* element tensors of a run of items per thread (lg_assemble_chunks) */
   PetscInt nnz;
   double setup_ms[2]; /* lg_problem_setup_matrix's phases: pattern, PETSc matrix */
   int pattern_threads; /* the pattern pass's blocks, one per OpenMP thread */
@@ -129,6 +131,11 @@ struct lg_problem {
   unsigned long solved_geometry; /* the mesh's geometry count at the last solve */
   int no_keep;        /* never solve with a kept factor of an earlier matrix (lg_problem_replayable) */
   int mass_cg;        /* a mass matrix: CG with Jacobi before LU (lg_problem_mass_solver); 2 once it fell back to LU */
+  int iter;           /* a linear problem's default solver (problem_solve.c, choose_solver): 0 not
+                       * chosen yet, 1 CG with GAMG, 2 direct */
+  int sym_elim;       /* A's essential rows and columns were eliminated (symmetric = true, or
+                       * for CG): the solves with it of a problem without symmetric = true
+                       * correct for the columns (bcc_*) */
   form *eqn, *bcf;    /* copies of the forms, for derived operators */
   int test[KER_MAXFIELD], unk[KER_MAXFIELD];
   int matrix_ready;   /* lg_problem_solve_vector: the matrix is assembled and factored */

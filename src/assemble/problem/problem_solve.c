@@ -198,6 +198,77 @@ static int mass_to_lu(lg_env *env, lg_problem *p) {
   return 0;
 }
 
+/* whether option name was given for this problem (its prefix) */
+static int option_set(const lg_problem *p, const char *name) {
+  PetscBool set = PETSC_FALSE;
+  PetscOptionsHasName(NULL, p->prefix[0] ? p->prefix : NULL, name, &set);
+  return set != PETSC_FALSE;
+}
+
+/* the direct solver from now on (CG did not converge, or the matrix is no longer SPD) */
+static int iterative_to_direct(lg_env *env, lg_problem *p, const char *why) {
+  PC pc;
+  p->iter = 2;
+  PCHK(KSPSetType(p->ksp, KSPPREONLY), "KSPSetType");
+  PCHK(KSPGetPC(p->ksp, &pc), "KSPGetPC");
+  if (default_lu(env, p, pc)) return 1;
+  PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
+  if (env->verbose) fprintf(stderr, "[lugal] linear solver: the direct solver from now on (%s)\n", why);
+  return 0;
+}
+
+/* A linear problem's default solver, chosen at its first assembly (A as assembled, before
+ * the essential rows): CG with GAMG (solver.c, lg_iterative_setup) for a single field (scalar
+ * or vector) of at least lg_iterative_size unknowns without a null space, serial, whose
+ * matrix is symmetric with a positive diagonal, unless the user chose the solver (-ksp_type,
+ * -pc_type, -pc_factor_mat_solver_type) or -lugal_iterative 0; the direct solver otherwise.
+ * Each later assembly checks the matrix again (a coefficient may make it unsymmetric). With
+ * CG the essential rows and columns are eliminated (solve_linear), whatever symmetric=
+ * says; solve_with_jacobian corrects the adjoint and tangent solves for the columns. */
+static int choose_solver(lg_env *env, lg_problem *p) {
+  if (p->iter == 2) return 0;
+  if (ensure_ksp(env, p)) return 1;
+  if (p->iter == 0) {
+    PetscBool on = PETSC_TRUE;
+    PetscOptionsGetBool(NULL, NULL, "-lugal_iterative", &on, NULL);
+    p->iter = 2;
+    if (!on || p->nonlinear || p->mass_cg || p->nnull || p->par || p->rows.n != 1 || p->cols.n != 1 ||
+        p->Nglob < lg_iterative_size(p->lm->m->dim) || option_set(p, "-ksp_type") || option_set(p, "-pc_type") ||
+        option_set(p, "-pc_factor_mat_solver_type"))
+      return 0;
+    if (!lg_spd_candidate(p->A)) {
+      if (env->verbose) fprintf(stderr, "[lugal] linear solver: direct (%d unknowns, but the matrix is not symmetric with a positive diagonal)\n", p->Nglob);
+      return 0;
+    }
+    PCHK(lg_iterative_setup(p->ksp), "the iterative solver's setup");
+    if (lg_problem_near_nullspace(env, p, p->ksp)) return 1;
+    p->iter = 1;
+    if (env->verbose)
+      fprintf(stderr, "[lugal] linear solver: CG with GAMG (%d unknowns, symmetric, positive diagonal; "
+                      "-lugal_iterative 0 or -pc_type lu for the direct solver)\n", p->Nglob);
+    return 0;
+  }
+  if (!lg_spd_candidate(p->A)) return iterative_to_direct(env, p, "the reassembled matrix is not symmetric with a positive diagonal");
+  return 0;
+}
+
+/* the corrections of a solve with a matrix whose essential columns were eliminated for a
+ * problem that keeps them (sym_elim without bc_symmetric), from the eliminated entries a_ib
+ * (bcc_*), D the essential diagonal: the tangent's right side r_i -= a_ib r_b / D before
+ * the solve; the adjoint's (transposed) solution λ_b -= a_ib λ_i / D after it */
+static int column_correction(lg_env *env, lg_problem *p, Vec v, int transpose, double D) {
+  if (!p->sym_elim || p->bc_symmetric || p->nonlinear || !p->bcc_n) return 0;
+  PetscScalar *a;
+  PCHK(VecGetArray(v, &a), "VecGetArray");
+  for (size_t e = 0; e < p->bcc_n; e++) {
+    PetscInt i = p->bcc_row[e] - p->lo, b = lg_petsc_row(p, p->bc_rows[p->bcc_col[e]]) - p->lo;
+    if (transpose) a[b] -= p->bcc_val[e] * a[i] / D;
+    else a[i] -= p->bcc_val[e] * a[b] / D;
+  }
+  PCHK(VecRestoreArray(v, &a), "VecRestoreArray");
+  return 0;
+}
+
 /* the solution's null space part: constants to mean zero, rigid motions projected out */
 static int remove_null(lg_env *env, lg_problem *p) {
   if (!p->null) return 0;
@@ -217,8 +288,9 @@ static int remove_null(lg_env *env, lg_problem *p) {
   return 0;
 }
 
-/* one KSPSolve of a linear problem with its checks: 0, 1 with a message, or 2 when the
- * default PETSc LU failed and MUMPS should try (lg_lu_fallback) */
+/* one KSPSolve of a linear problem with its checks: 0, 1 with a message, 2 when the
+ * default PETSc LU failed and MUMPS should try (lg_lu_fallback), 3 when the default CG did
+ * not converge and the direct solver should */
 static int linear_solve_checked(lg_env *env, lg_problem *p, lg_solve_info *info) {
   int native = lg_lu_native(p->ksp, p->prefix);
   PetscErrorCode ierr = KSPSolve(p->ksp, p->b, p->x);
@@ -231,6 +303,7 @@ static int linear_solve_checked(lg_env *env, lg_problem *p, lg_solve_info *info)
   info->iterations = info->linear_iterations = (int)its;
   snprintf(info->reason, sizeof info->reason, "%s", ksp_reason_name(reason));
   if (reason < 0 && native) return 2;
+  if (reason < 0 && p->iter == 1) return 3;
   char why[512];
   lg_solve_failure(p->ksp, why, sizeof why);
   if (reason < 0 && why[0]) {
@@ -467,6 +540,7 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
   if (!reuse) {
     p->matrix_ready = 0;
     if (lg_problem_assemble_into(env, p, p->state, p->A) || essential_diagonal(env, p, &p->bc_diag)) return 1;
+    if (choose_solver(env, p)) return 1;
   }
   PetscScalar *b;
   int rc = assemble_rhs(env, p);
@@ -482,7 +556,7 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
     for (size_t i = 0; i < p->bcc_n; i++) b[p->bcc_row[i] - p->lo] -= p->bcc_val[i] * p->bc_vals[p->bcc_col[i]];
     for (int i = 0; i < p->nown; i++) b[p->own_rows[i] - p->lo] = p->bc_diag * p->own_vals[i];
     PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
-  } else if (p->bc_symmetric) {
+  } else if ((p->sym_elim = p->bc_symmetric || p->iter == 1)) {
     if (keep_bc_columns(env, p)) return 1;
     PCHK(MatZeroRowsColumns(p->A, p->nown, p->own_rows, p->bc_diag, p->x, p->b), "MatZeroRowsColumns");
   } else PCHK(MatZeroRows(p->A, p->nown, p->own_rows, p->bc_diag, p->x, p->b), "MatZeroRows");
@@ -517,9 +591,18 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
   if (!kept) {
     if (refactor) PCHK(lg_lu_prepare(p->ksp, p->A, p->own_rows, p->nown, p->prefix, 1), "the factorization's choice");
     lg_mumps_detect_null_pivots(p->ksp);
-    while ((rc = linear_solve_checked(env, p, info)) == 2)
+    while ((rc = linear_solve_checked(env, p, info)) >= 2) {
+      if (rc == 3) { /* CG did not converge: the direct solver */
+        char why[160];
+        snprintf(why, sizeof why, "CG stopped with %s after %d iterations", info->reason, info->iterations);
+        if (iterative_to_direct(env, p, why)) return 1;
+        PCHK(lg_lu_prepare(p->ksp, p->A, p->own_rows, p->nown, p->prefix, 1), "the factorization's choice");
+        lg_mumps_detect_null_pivots(p->ksp);
+        continue;
+      }
       /* PETSc's LU (no pivoting) found a zero pivot or solved inaccurately: MUMPS, once */
       PCHK(lg_lu_fallback(p->ksp, p->A), "the switch to MUMPS");
+    }
     if (refactor && !rc) lg_keep_factored(&p->keep, p->ksp);
     lg_solver_name(p->ksp, info->solver, sizeof info->solver);
   }
@@ -828,7 +911,11 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
    * there scales with them, an adjoint's values there are bc_diag times those of the
    * transposed solve (the rows are scaled: A_D = S A, A_D^T λ' = r gives λ = S λ') */
   double D = p->nonlinear ? 1 : p->bc_diag;
-  if (!transpose && scale_essential(env, p, r, D)) { VecDestroy(&r); VecDestroy(&l); return 1; }
+  if (!transpose && (scale_essential(env, p, r, D) || column_correction(env, p, r, 0, D))) {
+    VecDestroy(&r);
+    VecDestroy(&l);
+    return 1;
+  }
   PetscErrorCode ierr = 0;
   KSPConvergedReason reason = KSP_CONVERGED_ITS;
   PetscBool kept = PETSC_FALSE;
@@ -841,13 +928,24 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
     ierr = lg_keep_solve(&p->keep, ksp, p->A, r, l, transpose, 0, guess, &kept, &its);
   }
   while (!ierr && !kept) {
-    ierr = transpose ? KSPSolveTranspose(ksp, r, l) : KSPSolve(ksp, r, l);
+    /* CG's matrix is symmetric (choose_solver): the transposed solve is the solve */
+    ierr = transpose && p->iter != 1 ? KSPSolveTranspose(ksp, r, l) : KSPSolve(ksp, r, l);
     reason = KSP_CONVERGED_ITS;
     if (!ierr) KSPGetConvergedReason(ksp, &reason);
+    if (!ierr && reason < 0 && !p->nonlinear && p->iter == 1) { /* CG did not converge: the direct solver */
+      if (iterative_to_direct(env, p, "CG did not converge in an adjoint or tangent solve")) {
+        VecDestroy(&r);
+        VecDestroy(&l);
+        return 1;
+      }
+      ierr = lg_lu_prepare(ksp, p->A, p->own_rows, p->nown, p->prefix, 1);
+      continue;
+    }
     if (ierr || reason >= 0 || !lg_lu_native(ksp, p->prefix)) break;
     /* PETSc's LU (no pivoting) failed: MUMPS, once */
     if ((ierr = lg_lu_fallback(ksp, p->A))) break;
   }
+  if (!ierr && reason >= 0 && transpose && column_correction(env, p, l, 1, D)) ierr = PETSC_ERR_LIB;
   if (!ierr && !kept && stale) lg_keep_factored(&p->keep, ksp);
   /* the next solve's initial guess, where a factor may be kept */
   if (!ierr && !p->nonlinear && !env->no_keep_factor && !p->no_keep && lg_keep_applies(ksp, p->prefix))
@@ -887,7 +985,8 @@ int lg_problem_restore(lg_env *env, lg_problem *p, const double *u) {
       p->matrix_ready = 0;
       if (lg_problem_assemble_into(env, p, p->state, p->A) || essential_diagonal(env, p, &p->bc_diag)) return 1;
       if (lg_problem_compute_bcs(env, p)) return 1;
-      if (p->bc_symmetric) {
+      if (choose_solver(env, p)) return 1;
+      if ((p->sym_elim = p->bc_symmetric || p->iter == 1)) {
         if (keep_bc_columns(env, p)) return 1;
         PCHK(MatZeroRowsColumns(p->A, p->nown, p->own_rows, p->bc_diag, NULL, NULL), "MatZeroRowsColumns");
       } else PCHK(MatZeroRows(p->A, p->nown, p->own_rows, p->bc_diag, NULL, NULL), "MatZeroRows");
@@ -925,6 +1024,7 @@ static int prepare_matrix(lg_env *env, lg_problem *p) {
     if (lg_problem_assemble_into(env, p, p->state, p->A)) return 1;
     if (lg_problem_compute_bcs(env, p)) return 1;
     PCHK(MatZeroRows(p->A, p->nown, p->own_rows, 1.0, NULL, NULL), "MatZeroRows");
+    p->sym_elim = 0;
     if (ensure_ksp(env, p)) return 1;
     PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
     PCHK(lg_lu_prepare(p->ksp, p->A, p->own_rows, p->nown, p->prefix, !p->nonlinear), "the factorization's choice");
@@ -963,6 +1063,10 @@ int lg_problem_matrix_norm(lg_env *env, lg_problem *p, double *norm) {
  * right-hand side: the Riesz maps of gradients (a mass or H1 matrix) */
 int lg_problem_solve_vector(lg_env *env, lg_problem *p, const double *rhs, double *x) {
   if (prepare_matrix(env, p)) return 1;
+  if (p->iter == 1) { /* its essential rows only replaced: not for CG */
+    if (iterative_to_direct(env, p, "a solve with the matrix's essential rows only replaced")) return 1;
+    PCHK(lg_lu_prepare(p->ksp, p->A, p->own_rows, p->nown, p->prefix, !p->nonlinear), "the factorization's choice");
+  }
   if (lg_problem_vec_set(env, p, p->b, rhs)) return 1;
   PetscScalar *b;
   PCHK(VecGetArray(p->b, &b), "VecGetArray");

@@ -20,6 +20,19 @@ int lg_lu_native(KSP ksp, const char *prefix);
  * and with may_cholesky (a linear problem's fixed form) Cholesky while A is symmetric */
 PetscErrorCode lg_lu_prepare(KSP ksp, Mat A, const PetscInt *bc_rows, int nbc, const char *prefix, int may_cholesky);
 
+/* The default solver of a large symmetric positive definite system: the LU's fill and time
+ * grow far faster than CG's with algebraic multigrid (3D P1 Poisson, N = 40: 20 s against
+ * 0.9 s; bench/RESULTS.md, "Default solvers"). lg_iterative_size: the least number of
+ * unknowns for which CG with GAMG is the default, by the mesh's dimension. */
+PetscInt lg_iterative_size(int dim);
+/* whether A (a sequential AIJ matrix, before the essential rows are replaced) is symmetric
+ * to rounding with a positive diagonal: what lets CG run */
+int lg_spd_candidate(Mat A);
+/* ksp to CG with GAMG, the residual of the system itself (not the preconditioned one) to
+ * LG_ITERATIVE_RTOL of the right side's, the user's -ksp_* and -pc_* options after */
+#define LG_ITERATIVE_RTOL 1e-10
+PetscErrorCode lg_iterative_setup(KSP ksp);
+
 /* replace the native LU by MUMPS (with null pivot detection) after a failure */
 PetscErrorCode lg_lu_fallback(KSP ksp, Mat A);
 

@@ -15,6 +15,10 @@ void lg_seterr(lg_env *env, const char *fmt, ...) {
   va_start(ap, fmt);
   vsnprintf(tmp, sizeof tmp, fmt, ap);
   va_end(ap);
+  /* element loops' threads may report at once (lg_assemble_chunks): one whole message */
+#ifdef _OPENMP
+#pragma omp critical(lg_seterr)
+#endif
   memcpy(env->err, tmp, sizeof tmp);
 }
 

@@ -1,0 +1,68 @@
+-- The default linear solver (src/assemble/problem/problem_solve.c, choose_solver): CG with
+-- GAMG for a large symmetric positive definite system (3D, at least 20 000 unknowns), the
+-- direct solver below that size, for an unsymmetric or indefinite matrix (after CG fails),
+-- and with -lugal_iterative 0. The solutions agree with the direct solver's to the
+-- tolerance CG is given (1e-10 of the residual); the adjoint gradient of a Dirichlet
+-- control and a source parameter (the essential columns eliminated for CG and corrected
+-- for in the adjoint, problem_solve.c, column_correction) agrees with the direct solver's.
+package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path
+local T = require "testlib"
+local lg = require "lugal"
+local x, y, z, pi = lg.x, lg.y, lg.z, math.pi
+local P1 = lg.lagrange(1)
+local u, v = lg.unknown(P1, "u"), lg.test(P1, "v")
+
+-- -Δu + k u = f, u = c (1 + x) on the boundary; J = ∫ (u - 1/2)² over the cube
+local c, s = lg.parameter("c", 0.3), lg.parameter("s", 1.0)
+local meshes = {}
+local function solve(N, k, extra)
+  meshes[N] = meshes[N] or lg.mesh.box{nx = N}
+  local mesh = meshes[N]
+  local f = s*3*pi^2*lg.sin(pi*x)*lg.sin(pi*y)*lg.sin(pi*z)
+  local prob = lg.linear_problem{mesh = mesh, test = v, unknown = u,
+    eqn = lg.integral(mesh:cells(), lg.dot(lg.grad(v), lg.grad(u)) + k*u*v - f*v + (extra or 0)*lg.grad(u)[1]*v),
+    bc = lg.essential_bc(mesh:boundary(), v*(u - c*(1 + x)))}
+  local uh, info = prob:solve()
+  local J = lg.functional(lg.integral(mesh:cells(), (u - 0.5)^2))
+  return prob, uh, info, mesh, J
+end
+
+local function gradient(prob, J)
+  local rf = lg.reduced_functional{problem = prob, functional = J, control = {c, s}}
+  local g1, g2 = rf:gradient()
+  return rf:value(), g1, g2
+end
+
+-- below the size: direct
+local _, _, small = solve(16, 0)
+T.check(not small.solver:find("cg"), "16³ cubes (4 913 unknowns) keep the direct solver, got %s", small.solver)
+
+-- above it: CG with GAMG, against the direct solver
+local prob, uh, info, mesh, J = solve(28, 0)
+T.check(info.solver == "cg/gamg", "28³ cubes (24 389 unknowns) get CG with GAMG, got %s", info.solver)
+T.check(info.iterations > 3 and info.iterations < 40, "GAMG's CG iterations %d", info.iterations)
+local J1, gc1, gs1 = gradient(prob, J)
+lg.options("-lugal_iterative 0")
+local prob2, uh2, info2, _, J2 = solve(28, 0)
+T.check(not info2.solver:find("cg"), "-lugal_iterative 0 gives the direct solver, got %s", info2.solver)
+local d = math.sqrt(lg.integrate(mesh, (uh - uh2)^2) / lg.integrate(mesh, uh2^2))
+T.check(d < 1e-8, "CG's solution is the direct solver's to 1e-8 (relative L2 %.2e)", d)
+local J0, gc0, gs0 = gradient(prob2, J2)
+T.check(math.abs(J1 - J0) < 1e-9 * math.abs(J0), "J %.12e against %.12e", J1, J0)
+T.check(math.abs(gc1 - gc0) < 1e-7 * math.abs(gc0), "dJ/dc (a Dirichlet control) %.12e against the direct solver's %.12e", gc1, gc0)
+T.check(math.abs(gs1 - gs0) < 1e-7 * math.abs(gs0), "dJ/ds %.12e against %.12e", gs1, gs0)
+lg.options("-lugal_iterative 1")
+
+-- unsymmetric (convection): direct from the start
+local _, _, conv = solve(28, 0, 5)
+T.check(not conv.solver:find("cg"), "a convection term keeps the direct solver, got %s", conv.solver)
+
+-- indefinite (Helmholtz, -Δu - k² u with a positive diagonal): CG fails, the direct solver
+-- takes over and solves it
+local _, uk, ik = solve(28, -60)
+lg.options("-lugal_iterative 0")
+local _, uk2 = solve(28, -60)
+local dk = math.sqrt(lg.integrate(mesh, (uk - uk2)^2) / lg.integrate(mesh, uk2^2))
+T.check(dk < 1e-8, "the indefinite system's solution after the fallback is the direct solver's (relative L2 %.2e, %s)", dk, ik.solver)
+print(string.format("default solver: %s, %d iterations at 24 389 unknowns; dJ/dc %.10e (direct %.10e), dJ/ds %.10e (%.10e); Helmholtz: %s",
+                    info.solver, info.iterations, gc1, gc0, gs1, gs0, ik.solver))

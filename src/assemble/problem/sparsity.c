@@ -489,7 +489,9 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   for (int R = R0; !bad && R < R1; R++) nown += E.start[ROW_NODE(&in, R) + 1] - E.start[ROW_NODE(&in, R)];
   int nb = 1;
 #ifdef _OPENMP
-  if (nown > 200000) nb = omp_get_max_threads();
+  /* threads for the idle cores: the blocks are static, and a block whose thread waits for a
+   * busy core holds up the pass */
+  if (nown > 200000) nb = lg_threads_for_load(omp_get_max_threads());
   if (nb > 64) nb = 64;
 #endif
   p->pattern_threads = nb;

@@ -15,12 +15,34 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <fcntl.h>
 #include <unistd.h>
 
 double lg_now_ms(void) {
   struct timespec ts;
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+int lg_runnable_tasks(void) {
+  /* /proc/stat is small (a line per core): its procs_running line, read in one go */
+  static _Thread_local char buf[65536];
+  int fd = open("/proc/stat", O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return -1;
+  ssize_t n = read(fd, buf, sizeof buf - 1);
+  close(fd);
+  if (n <= 0) return -1;
+  buf[n] = 0;
+  const char *at = strstr(buf, "\nprocs_running ");
+  return at ? atoi(at + 15) : -1;
+}
+
+int lg_threads_for_load(int T) {
+#ifdef _OPENMP
+  int run = lg_runnable_tasks(), idle = omp_get_num_procs() - run; /* run counts this thread */
+  if (run > 0 && T > idle + 1) T = idle < 0 ? 1 : idle + 1;
+#endif
+  return T;
 }
 
 int lg_petsc_init(int *argc, char ***argv) {

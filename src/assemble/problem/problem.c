@@ -931,6 +931,7 @@ static int vector_item_rows(void *ud, int it, int *rows) {
 
 int lg_problem_assemble_into(lg_env *env, lg_problem *p, const double *state, Mat A) {
   coef_binding extra[2 * KER_MAXFIELD], bind[KER_MAXCOEF];
+  if (A == p->A) p->a_version++;
   int ne = lg_problem_bind_unknowns(p, state, extra);
   /* element matrices a chunk of items at a time, added in place into the value array (no
    * per-entry buffer beyond two chunks) */

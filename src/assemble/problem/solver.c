@@ -72,7 +72,24 @@ int lg_lu_native(KSP ksp, const char *prefix) {
  * entries of 2.7e-6, the mass part that the stiffness parts cancel down to, whose triangles
  * differ by 3.5e-18 next to diagonals of 4-6, and it was taken for unsymmetric). Read
  * only: MatIsSymmetric marks the matrix changed, which refactors it */
-static PetscErrorCode symmetric(Mat A, PetscBool *sym) {
+static PetscErrorCode symmetric_skip(Mat A, const char *skip, PetscBool *sym);
+static PetscErrorCode symmetric(Mat A, PetscBool *sym) { return symmetric_skip(A, NULL, sym); }
+
+int lg_symmetric_besides(Mat A, const PetscInt *rows, int nrows) {
+  PetscBool seq = PETSC_FALSE, sym = PETSC_FALSE;
+  PetscInt n;
+  if (PetscObjectTypeCompare((PetscObject)A, MATSEQAIJ, &seq) || !seq || MatGetLocalSize(A, &n, NULL)) return 0;
+  char *skip = calloc((size_t)n + 1, 1);
+  if (!skip) return 0;
+  for (int i = 0; i < nrows; i++)
+    if (rows[i] >= 0 && rows[i] < n) skip[rows[i]] = 1;
+  PetscErrorCode ierr = symmetric_skip(A, skip, &sym);
+  free(skip);
+  return !ierr && sym;
+}
+
+/* symmetric(), the entries in a skipped row or column left out */
+static PetscErrorCode symmetric_skip(Mat A, const char *skip, PetscBool *sym) {
   const PetscInt *ia, *ja;
   const PetscScalar *a;
   PetscInt n;
@@ -92,7 +109,7 @@ static PetscErrorCode symmetric(Mat A, PetscBool *sym) {
   for (PetscInt i = 0; i < n && ok; i++)
     for (PetscInt k = ia[i]; k < ia[i + 1] && ok; k++) {
       PetscInt j = ja[k];
-      if (j <= i) continue;
+      if (j <= i || (skip && (skip[i] || skip[j]))) continue;
       /* a_ji: binary search in row j's sorted columns */
       PetscInt lo = ia[j], hi = ia[j + 1] - 1;
       PetscScalar aji = 0;

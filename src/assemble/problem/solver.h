@@ -33,6 +33,11 @@ int lg_spd_candidate(Mat A);
 #define LG_ITERATIVE_RTOL 1e-10
 PetscErrorCode lg_iterative_setup(KSP ksp);
 
+/* whether A (sequential AIJ) is symmetric to rounding apart from the given rows and their
+ * columns (the essential rows, replaced by identity rows): then the transposed solve of A
+ * is a solve of A and a product with Aᵀ (problem_solve.c, solve_with_jacobian) */
+int lg_symmetric_besides(Mat A, const PetscInt *rows, int nrows);
+
 /* replace the native LU by MUMPS (with null pivot detection) after a failure */
 PetscErrorCode lg_lu_fallback(KSP ksp, Mat A);
 

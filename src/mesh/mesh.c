@@ -1,6 +1,9 @@
 /* mesh.c — mesh construction, names, generators, derived adjacency, geometry, the
  * validity check and uniform refinement. Reference-cell numbering follows Gmsh/VTK for
  * vertices; simplex edges and facets are numbered opposite-vertex style (as in Basix). */
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 #include "mesh.h"
 #include "tuplehash.h"
 
@@ -424,7 +427,8 @@ static double vec_length(const double *t, int d) {
   return a * sqrt(s);
 }
 
-double mesh_hmax(const mesh *m) {
+/* the old loop: each edge's length without overflow or underflow (vec_length) */
+static double hmax_scaled(const mesh *m) {
   double h = 0;
   int ne = cell_nedges(m->type), d = m->dim;
   for (int c = 0; c < m->ncell; c++) {
@@ -439,6 +443,41 @@ double mesh_hmax(const mesh *m) {
     }
   }
   return h;
+}
+
+/* One pass (on threads for large meshes) of the longest squared edge and the largest
+ * coordinate difference: where that difference is in the range where squares neither
+ * overflow nor underflow the longest edge is the square root of the first, the same bits as
+ * the edge-by-edge lengths (sqrt is monotone and correctly rounded; an edge too short for
+ * its square is not the longest), else that loop runs (hmax_scaled). With the validity
+ * check this ran before every first assembly: 15% of a P1 N = 64 setup and assembly. */
+double mesh_hmax(const mesh *m) {
+  int ne = cell_nedges(m->type), d = m->dim, nc = m->ncell, nvc = m->nvc;
+  int ev[12][2];
+  for (int e = 0; e < ne; e++) ev[e][0] = cell_edge_verts(m->type, e)[0], ev[e][1] = cell_edge_verts(m->type, e)[1];
+  double h2 = 0, amax = 0;
+  int bad = 0;
+  const double *x = m->x;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) reduction(max : h2, amax) reduction(| : bad) if (nc > 100000)
+#endif
+  for (int c = 0; c < nc; c++) {
+    const int *v = m->cells + (size_t)c * (size_t)nvc;
+    for (int e = 0; e < ne; e++) {
+      const double *a = x + (size_t)d * (size_t)v[ev[e][0]], *b = x + (size_t)d * (size_t)v[ev[e][1]];
+      double s2 = 0;
+      for (int k = 0; k < d; k++) {
+        double t = a[k] - b[k];
+        s2 += t * t;
+        if (fabs(t) > amax) amax = fabs(t);
+        bad |= t != t;
+      }
+      if (s2 > h2) h2 = s2;
+    }
+  }
+  if (bad) return NAN;
+  if (amax > 1e-150 && amax < 1e150) return sqrt(h2);
+  return hmax_scaled(m);
 }
 
 int points_normalized(int nv, int d, const double *in, double *out) {

@@ -7,6 +7,7 @@
 #include "../../src/mesh/untangle/untangle.h"
 #include "check.h"
 
+#include <math.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -391,8 +392,50 @@ static void read_parts(const char *data) {
   }
 }
 
+/* the longest edge, edge by edge with hypot (no overflow or underflow) */
+static double hmax_ref(const mesh *m) {
+  double h = 0;
+  for (int c = 0; c < m->ncell; c++)
+    for (int e = 0; e < cell_nedges(m->type); e++) {
+      const int *ev = cell_edge_verts(m->type, e), *v = m->cells + (size_t)c * m->nvc;
+      double t[3] = {0, 0, 0};
+      for (int k = 0; k < m->dim; k++) t[k] = m->x[(size_t)m->dim * v[ev[0]] + k] - m->x[(size_t)m->dim * v[ev[1]] + k];
+      double l = hypot(hypot(t[0], t[1]), t[2]);
+      if (l > h) h = l;
+    }
+  return h;
+}
+
+/* mesh_hmax's one pass (threads above 100 000 cells) against the edge-by-edge lengths: a
+ * perturbed box of 6·24·24·40 tetrahedra, the same scaled by 1e-200 and 1e200 (the scaled
+ * loop), and a NaN coordinate */
+static void hmax(void) {
+  char err[MESH_ERRLEN];
+  mesh_box_opts b = {24, 24, 40, 0, 1, 0, 1, 0, 1, CELL_TETRAHEDRON, 0, 0, 0};
+  mesh *m = mesh_box(&b, err);
+  CHECK(m && m->ncell > 100000, "box: %s", err);
+  if (!m) return;
+  unsigned r = 12345;
+  for (int i = 0; i < m->nvert * 3; i++) {
+    r = r * 1103515245u + 12345u;
+    m->x[i] += 0.004 * ((r >> 8) / 16777216.0 - 0.5);
+  }
+  double h = mesh_hmax(m), ref = hmax_ref(m);
+  CHECK(fabs(h - ref) <= 1e-15 * ref && h > 1.0 / 40, "hmax %.17g against %.17g", h, ref);
+  for (int i = 0; i < m->nvert * 3; i++) m->x[i] *= 1e-200;
+  h = mesh_hmax(m);
+  CHECK(fabs(h - ref * 1e-200) <= 1e-14 * ref * 1e-200, "tiny hmax %g against %g", h, ref * 1e-200);
+  for (int i = 0; i < m->nvert * 3; i++) m->x[i] *= 1e200, m->x[i] *= 1e200;
+  h = mesh_hmax(m);
+  CHECK(fabs(h - ref * 1e200) <= 1e-14 * ref * 1e200, "huge hmax %g against %g", h, ref * 1e200);
+  m->x[5] = NAN;
+  CHECK(isnan(mesh_hmax(m)), "a NaN coordinate makes hmax NaN");
+  mesh_free(m);
+}
+
 int main(int argc, char **argv) {
   const char *data = argc > 1 ? argv[1] : "tests/data";
+  hmax();
   untangle_option_defaults();
   pack(data);
   parts(data);

@@ -1,7 +1,8 @@
 -- The default linear solver (src/assemble/problem/problem_solve.c, choose_solver): CG with
--- GAMG for a large symmetric positive definite system (3D, at least 20 000 unknowns), the
--- direct solver below that size, for an unsymmetric or indefinite matrix (after CG fails),
--- and with -lugal_iterative 0. The solutions agree with the direct solver's to the
+-- GAMG for a large symmetric positive definite system (3D, at least 20 000 unknowns), GMRES
+-- with GAMG for an unsymmetric one with a positive diagonal (convection-diffusion), the
+-- direct solver below that size, after a Krylov solver fails (an indefinite matrix, strong
+-- convection), and with -lugal_iterative 0. The solutions agree with the direct solver's to the
 -- tolerance CG is given (1e-10 of the residual); the adjoint gradient of a Dirichlet
 -- control and a source parameter (the essential columns eliminated for CG and corrected
 -- for in the adjoint, problem_solve.c, column_correction) agrees with the direct solver's.
@@ -53,9 +54,26 @@ T.check(math.abs(gc1 - gc0) < 1e-7 * math.abs(gc0), "dJ/dc (a Dirichlet control)
 T.check(math.abs(gs1 - gs0) < 1e-7 * math.abs(gs0), "dJ/ds %.12e against %.12e", gs1, gs0)
 lg.options("-lugal_iterative 1")
 
--- unsymmetric (convection): direct from the start
-local _, _, conv = solve(28, 0, 5)
-T.check(not conv.solver:find("cg"), "a convection term keeps the direct solver, got %s", conv.solver)
+-- unsymmetric (convection): GMRES with GAMG, against the direct solver, gradients too (the
+-- transposed solve); strongly convective: GMRES fails, the direct solver takes over
+local pc, uc, conv, _, Jc = solve(28, 0, 5)
+T.check(conv.solver == "gmres/gamg", "a convection term gets GMRES with GAMG, got %s", conv.solver)
+local Jc1, gcc1, gsc1 = gradient(pc, Jc)
+local _, ub, strong = solve(28, 0, 200)
+T.check(not strong.solver:find("gmres"), "strong convection falls back to the direct solver, got %s", strong.solver)
+lg.options("-lugal_iterative 0")
+local pc2, uc2, conv2, _, Jc2 = solve(28, 0, 5)
+T.check(not conv2.solver:find("gmres"), "-lugal_iterative 0: direct, got %s", conv2.solver)
+local Jc0, gcc0, gsc0 = gradient(pc2, Jc2)
+local dc = math.sqrt(lg.integrate(mesh, (uc - uc2)^2) / lg.integrate(mesh, uc2^2))
+T.check(dc < 1e-8, "GMRES's solution is the direct solver's to 1e-8 (relative L2 %.2e)", dc)
+T.check(math.abs(Jc1 - Jc0) < 1e-9 * math.abs(Jc0) and math.abs(gcc1 - gcc0) < 1e-7 * math.abs(gcc0) and
+        math.abs(gsc1 - gsc0) < 1e-7 * math.abs(gsc0), "GMRES's J and gradient %.12e %.12e %.12e against %.12e %.12e %.12e",
+        Jc1, gcc1, gsc1, Jc0, gcc0, gsc0)
+local _, ub2 = solve(28, 0, 200)
+local db = math.sqrt(lg.integrate(mesh, (ub - ub2)^2) / lg.integrate(mesh, ub2^2))
+T.check(db < 1e-10, "the fallback's solution is the direct solver's (relative L2 %.2e)", db)
+lg.options("-lugal_iterative 1")
 
 -- indefinite (Helmholtz, -Δu - k² u with a positive diagonal): CG fails, the direct solver
 -- takes over and solves it
@@ -64,5 +82,5 @@ lg.options("-lugal_iterative 0")
 local _, uk2 = solve(28, -60)
 local dk = math.sqrt(lg.integrate(mesh, (uk - uk2)^2) / lg.integrate(mesh, uk2^2))
 T.check(dk < 1e-8, "the indefinite system's solution after the fallback is the direct solver's (relative L2 %.2e, %s)", dk, ik.solver)
-print(string.format("default solver: %s, %d iterations at 24 389 unknowns; dJ/dc %.10e (direct %.10e), dJ/ds %.10e (%.10e); Helmholtz: %s",
-                    info.solver, info.iterations, gc1, gc0, gs1, gs0, ik.solver))
+print(string.format("default solver: %s, %d iterations at 24 389 unknowns; dJ/dc %.10e (direct %.10e), dJ/ds %.10e (%.10e); convection: %s, %d iterations; strong convection: %s; Helmholtz: %s",
+                    info.solver, info.iterations, gc1, gc0, gs1, gs0, conv.solver, conv.iterations, strong.solver, ik.solver))

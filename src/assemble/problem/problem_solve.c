@@ -218,15 +218,18 @@ static int iterative_to_direct(lg_env *env, lg_problem *p, const char *why) {
 }
 
 /* A linear problem's default solver, chosen at its first assembly (A as assembled, before
- * the essential rows): CG with GAMG (solver.c, lg_iterative_setup) for a single field (scalar
- * or vector) of at least lg_iterative_size unknowns without a null space, serial, whose
- * matrix is symmetric with a positive diagonal, unless the user chose the solver (-ksp_type,
- * -pc_type, -pc_factor_mat_solver_type) or -lugal_iterative 0; the direct solver otherwise.
- * Each later assembly checks the matrix again (a coefficient may make it unsymmetric). With
- * CG the essential rows and columns are eliminated (solve_linear), whatever symmetric=
- * says; solve_with_jacobian corrects the adjoint and tangent solves for the columns. */
+ * the essential rows), for a single field (scalar or vector) of at least lg_iterative_size
+ * unknowns without a null space, serial, unless the user chose the solver (-ksp_type,
+ * -pc_type, -pc_factor_mat_solver_type) or -lugal_iterative 0: CG with GAMG (solver.c,
+ * lg_iterative_setup) where the matrix is symmetric with a positive diagonal, GMRES with
+ * GAMG where its diagonal is positive (convection-diffusion), the direct solver otherwise.
+ * Each later assembly checks the matrix again for CG (a coefficient may make it
+ * unsymmetric). With CG the essential rows and columns are eliminated (solve_linear),
+ * whatever symmetric= says; solve_with_jacobian corrects the adjoint and tangent solves for
+ * the columns. A Krylov solve that does not converge hands the problem to the direct
+ * solver for good. */
 static int choose_solver(lg_env *env, lg_problem *p) {
-  if (p->iter == 2) return 0;
+  if (p->iter == 2 || p->iter == 3) return 0;
   if (ensure_ksp(env, p)) return 1;
   if (p->iter == 0) {
     PetscBool on = PETSC_TRUE;
@@ -236,16 +239,18 @@ static int choose_solver(lg_env *env, lg_problem *p) {
         p->Nglob < lg_iterative_size(p->lm->m->dim) || option_set(p, "-ksp_type") || option_set(p, "-pc_type") ||
         option_set(p, "-pc_factor_mat_solver_type"))
       return 0;
-    if (!lg_spd_candidate(p->A)) {
-      if (env->verbose) fprintf(stderr, "[lugal] linear solver: direct (%d unknowns, but the matrix is not symmetric with a positive diagonal)\n", p->Nglob);
+    int spd = lg_spd_candidate(p->A);
+    if (!spd && !lg_positive_diagonal(p->A)) {
+      if (env->verbose) fprintf(stderr, "[lugal] linear solver: direct (%d unknowns, but the matrix's diagonal is not positive)\n", p->Nglob);
       return 0;
     }
-    PCHK(lg_iterative_setup(p->ksp), "the iterative solver's setup");
+    PCHK(lg_iterative_setup(p->ksp, spd), "the iterative solver's setup");
     if (lg_problem_near_nullspace(env, p, p->ksp)) return 1;
-    p->iter = 1;
+    p->iter = spd ? 1 : 3;
     if (env->verbose)
-      fprintf(stderr, "[lugal] linear solver: CG with GAMG (%d unknowns, symmetric, positive diagonal; "
-                      "-lugal_iterative 0 or -pc_type lu for the direct solver)\n", p->Nglob);
+      fprintf(stderr, "[lugal] linear solver: %s with GAMG (%d unknowns, %s; -lugal_iterative 0 or -pc_type lu for the "
+                      "direct solver)\n", spd ? "CG" : "GMRES", p->Nglob,
+              spd ? "symmetric, positive diagonal" : "unsymmetric, positive diagonal");
     return 0;
   }
   if (!lg_spd_candidate(p->A)) return iterative_to_direct(env, p, "the reassembled matrix is not symmetric with a positive diagonal");
@@ -303,7 +308,7 @@ static int linear_solve_checked(lg_env *env, lg_problem *p, lg_solve_info *info)
   info->iterations = info->linear_iterations = (int)its;
   snprintf(info->reason, sizeof info->reason, "%s", ksp_reason_name(reason));
   if (reason < 0 && native) return 2;
-  if (reason < 0 && p->iter == 1) return 3;
+  if (reason < 0 && (p->iter == 1 || p->iter == 3)) return 3;
   char why[512];
   lg_solve_failure(p->ksp, why, sizeof why);
   if (reason < 0 && why[0]) {
@@ -592,9 +597,9 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
     if (refactor) PCHK(lg_lu_prepare(p->ksp, p->A, p->own_rows, p->nown, p->prefix, 1), "the factorization's choice");
     lg_mumps_detect_null_pivots(p->ksp);
     while ((rc = linear_solve_checked(env, p, info)) >= 2) {
-      if (rc == 3) { /* CG did not converge: the direct solver */
+      if (rc == 3) { /* CG or GMRES did not converge: the direct solver */
         char why[160];
-        snprintf(why, sizeof why, "CG stopped with %s after %d iterations", info->reason, info->iterations);
+        snprintf(why, sizeof why, "%s stopped with %s after %d iterations", p->iter == 1 ? "CG" : "GMRES", info->reason, info->iterations);
         if (iterative_to_direct(env, p, why)) return 1;
         PCHK(lg_lu_prepare(p->ksp, p->A, p->own_rows, p->nown, p->prefix, 1), "the factorization's choice");
         lg_mumps_detect_null_pivots(p->ksp);
@@ -983,8 +988,10 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
     else ierr = transpose && p->iter != 1 ? KSPSolveTranspose(ksp, r, l) : KSPSolve(ksp, r, l);
     reason = KSP_CONVERGED_ITS;
     if (!ierr) KSPGetConvergedReason(ksp, &reason);
-    if (!ierr && reason < 0 && !p->nonlinear && p->iter == 1) { /* CG did not converge: the direct solver */
-      if (iterative_to_direct(env, p, "CG did not converge in an adjoint or tangent solve")) {
+    /* CG or GMRES did not converge (or GAMG has no transposed application): the direct solver */
+    if ((ierr || reason < 0) && !p->nonlinear && (p->iter == 1 || p->iter == 3)) {
+      if (iterative_to_direct(env, p, ierr ? "the iterative solver failed in an adjoint or tangent solve"
+                                            : "the iterative solver did not converge in an adjoint or tangent solve")) {
         VecDestroy(&r);
         VecDestroy(&l);
         return 1;

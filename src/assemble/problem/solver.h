@@ -26,12 +26,14 @@ PetscErrorCode lg_lu_prepare(KSP ksp, Mat A, const PetscInt *bc_rows, int nbc, c
  * unknowns for which CG with GAMG is the default, by the mesh's dimension. */
 PetscInt lg_iterative_size(int dim);
 /* whether A (a sequential AIJ matrix, before the essential rows are replaced) is symmetric
- * to rounding with a positive diagonal: what lets CG run */
+ * to rounding with a positive diagonal (what lets CG run), or has a positive diagonal */
 int lg_spd_candidate(Mat A);
-/* ksp to CG with GAMG, the residual of the system itself (not the preconditioned one) to
- * LG_ITERATIVE_RTOL of the right side's, the user's -ksp_* and -pc_* options after */
+int lg_positive_diagonal(Mat A);
+/* ksp to CG (spd) or GMRES (restart 100, preconditioned on the right) with GAMG, the
+ * residual of the system itself (not the preconditioned one) to LG_ITERATIVE_RTOL of the
+ * right side's, the user's -ksp_* and -pc_* options after */
 #define LG_ITERATIVE_RTOL 1e-10
-PetscErrorCode lg_iterative_setup(KSP ksp);
+PetscErrorCode lg_iterative_setup(KSP ksp, int spd);
 
 /* whether A (sequential AIJ) is symmetric to rounding apart from the given rows and their
  * columns (the essential rows, replaced by identity rows): then the transposed solve of A

@@ -61,8 +61,30 @@ dofmap *lg_mesh_dofmap(lg_env *env, lg_mesh *lm, int degree, int ncomp, int disc
  * one at 1e-110 was reported "inverted or zero-size") */
 #define LG_SCALE_EXP 280
 
+static int mesh_check_passes(lg_env *env, lg_mesh *lm);
+
+/* the mesh room's threaded passes (mesh_hmax, mesh_count_invalid) on the idle cores only:
+ * their halves are static, and one whose thread waits for a busy core holds up the pass */
+static int mesh_threads(void) {
+  int old = 1;
+#ifdef _OPENMP
+  old = omp_get_max_threads();
+  if (old > 1) omp_set_num_threads(lg_threads_for_load(old));
+#endif
+  return old;
+}
+
 int lg_mesh_check(lg_env *env, lg_mesh *lm) {
   if (lm->validated) return 0;
+  int old = mesh_threads();
+  int rc = mesh_check_passes(env, lm);
+#ifdef _OPENMP
+  omp_set_num_threads(old);
+#endif
+  return rc;
+}
+
+static int mesh_check_passes(lg_env *env, lg_mesh *lm) {
   double h = lm->m->ncell ? mesh_hmax(lm->m) : 1;
   int d = lm->m->dim;
   if (h > 0 && isfinite(h) && fabs(d * log10(h)) > LG_SCALE_EXP) {

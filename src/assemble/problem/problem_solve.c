@@ -474,6 +474,17 @@ static int keep_bc_columns(lg_env *env, lg_problem *p) {
   return 0;
 }
 
+/* A's essential rows replaced by bc_diag identity rows; their columns eliminated too (kept
+ * in bcc_*) with symmetric = true or for CG (choose_solver). x, b: the essential values and
+ * the right side to adjust, or NULL */
+static int eliminate_essential(lg_env *env, lg_problem *p, Vec x, Vec b) {
+  if ((p->sym_elim = p->bc_symmetric || p->iter == 1)) {
+    if (keep_bc_columns(env, p)) return 1;
+    PCHK(MatZeroRowsColumns(p->A, p->nown, p->own_rows, p->bc_diag, x, b), "MatZeroRowsColumns");
+  } else PCHK(MatZeroRows(p->A, p->nown, p->own_rows, p->bc_diag, x, b), "MatZeroRows");
+  return 0;
+}
+
 /* whether a solve with a matrix other than the factored one may iterate with the old factor
  * (solver.h, lg_keep): linear problems, unless -lugal_keep_factor 0 */
 static int keep_usable(lg_env *env, lg_problem *p) {
@@ -561,10 +572,7 @@ static int solve_linear(lg_env *env, lg_problem *p, lg_function **out, lg_solve_
     for (size_t i = 0; i < p->bcc_n; i++) b[p->bcc_row[i] - p->lo] -= p->bcc_val[i] * p->bc_vals[p->bcc_col[i]];
     for (int i = 0; i < p->nown; i++) b[p->own_rows[i] - p->lo] = p->bc_diag * p->own_vals[i];
     PCHK(VecRestoreArray(p->b, &b), "VecRestoreArray");
-  } else if ((p->sym_elim = p->bc_symmetric || p->iter == 1)) {
-    if (keep_bc_columns(env, p)) return 1;
-    PCHK(MatZeroRowsColumns(p->A, p->nown, p->own_rows, p->bc_diag, p->x, p->b), "MatZeroRowsColumns");
-  } else PCHK(MatZeroRows(p->A, p->nown, p->own_rows, p->bc_diag, p->x, p->b), "MatZeroRows");
+  } else if (eliminate_essential(env, p, p->x, p->b)) return 1;
   info->assemble_ms = lg_now_ms() - t0;
   t0 = lg_now_ms();
   if (ensure_ksp(env, p)) return 1;
@@ -1044,10 +1052,7 @@ int lg_problem_restore(lg_env *env, lg_problem *p, const double *u) {
       if (lg_problem_assemble_into(env, p, p->state, p->A) || essential_diagonal(env, p, &p->bc_diag)) return 1;
       if (lg_problem_compute_bcs(env, p)) return 1;
       if (choose_solver(env, p)) return 1;
-      if ((p->sym_elim = p->bc_symmetric || p->iter == 1)) {
-        if (keep_bc_columns(env, p)) return 1;
-        PCHK(MatZeroRowsColumns(p->A, p->nown, p->own_rows, p->bc_diag, NULL, NULL), "MatZeroRowsColumns");
-      } else PCHK(MatZeroRows(p->A, p->nown, p->own_rows, p->bc_diag, NULL, NULL), "MatZeroRows");
+      if (eliminate_essential(env, p, NULL, NULL)) return 1;
       if (ensure_ksp(env, p)) return 1;
       PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
       PCHK(lg_lu_prepare(p->ksp, p->A, p->own_rows, p->nown, p->prefix, 1), "the factorization's choice");

@@ -6,6 +6,7 @@
 # of that build alternate with this one's (before/after).
 #   sh bench/assembly_threads.sh [rounds] [other-build-dir]
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
+. "$ROOT/bench/busy.sh"
 rounds=${1:-3}
 other=$2
 cases="40:1:laplace 64:1:laplace 24:2:elasticity 16:2:neohookean"
@@ -18,8 +19,7 @@ run() { # build threads case
 builds="$ROOT/build"
 [ -n "$other" ] && builds="$other $ROOT/build"
 for load in quiet busy; do
-  busy=
-  if [ $load = busy ]; then sh -c 'while :; do :; done' & busy=$!; fi
+  [ $load = busy ] && busy_start
   echo "$load: /proc/loadavg $(cat /proc/loadavg)"
   r=1
   while [ "$r" -le "$rounds" ]; do
@@ -32,7 +32,7 @@ for load in quiet busy; do
     done
     r=$((r + 1))
   done
-  [ -n "$busy" ] && { kill "$busy"; wait "$busy" 2>/dev/null; }
+  busy_stop
 done
 echo "/proc/loadavg $(cat /proc/loadavg)"
 # medians: reassembly and first matrix (s) per load, build, threads (2 = the default here) and case

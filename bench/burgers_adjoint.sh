@@ -9,9 +9,8 @@ PYADJOINT=${PYADJOINT:-/opt/pyadjoint}
 export OMP_NUM_THREADS=1
 have_pa=0
 PYTHONPATH="$PYADJOINT" /usr/bin/python3 -c "import fenics_adjoint" 2> /dev/null && have_pa=1
-sh -c 'while :; do :; done' &
-busy=$!
-trap 'kill $busy 2> /dev/null' EXIT INT TERM
+. "$ROOT/bench/busy.sh"
+busy_start
 cat /proc/loadavg
 for round in 1 2 3; do
   "$ROOT/build/lugal" "$ROOT/bench/burgers_adjoint.lua" 1000 1000

@@ -8,9 +8,8 @@
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 OLD=$(cd "$1" && pwd) NEW=$(cd "$2" && pwd)
 export OMP_NUM_THREADS=1
-sh -c 'while :; do :; done' &
-busy=$!
-trap 'kill $busy 2> /dev/null' EXIT INT TERM
+. "$ROOT/bench/busy.sh"
+busy_start
 cat /proc/loadavg
 for r in 1 2 3; do
   for b in "$OLD" "$NEW"; do

@@ -6,11 +6,11 @@
 # busy process; rounds alternating, every line printed (medians by eye or awk).
 #   sh bench/default_solver.sh [rounds] [sizes]
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
+. "$ROOT/bench/busy.sh"
 rounds=${1:-3}
 sizes=${2:-"40 64"}
 for load in quiet busy; do
-  busy=
-  if [ $load = busy ]; then sh -c 'while :; do :; done' & busy=$!; fi
+  [ $load = busy ] && busy_start
   echo "$load: /proc/loadavg $(cat /proc/loadavg)"
   r=1
   while [ "$r" -le "$rounds" ]; do
@@ -24,6 +24,6 @@ for load in quiet busy; do
     done
     r=$((r + 1))
   done
-  [ -n "$busy" ] && { kill "$busy"; wait "$busy" 2>/dev/null; }
+  busy_stop
 done
 echo "/proc/loadavg $(cat /proc/loadavg)"

@@ -10,9 +10,8 @@ PYADJOINT=${PYADJOINT:-/opt/pyadjoint}
 export OMP_NUM_THREADS=1
 have_pa=0
 PYTHONPATH="$PYADJOINT" /usr/bin/python3 -c "import fenics_adjoint, scipy" 2> /dev/null && have_pa=1
-sh -c 'while :; do :; done' &
-busy=$!
-trap 'kill $busy 2> /dev/null' EXIT INT TERM
+. "$ROOT/bench/busy.sh"
+busy_start
 cat /proc/loadavg
 for cfg in "8 1" "8 2" "8 3" "16 1"; do
   n=${cfg% *}

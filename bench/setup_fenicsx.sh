@@ -8,9 +8,9 @@
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 rounds=${1:-3}
 out=$(mktemp -d)
-trap 'rm -rf "$out"' EXIT
-busy=
-if [ "$2" = busy ]; then sh -c 'while :; do :; done' & busy=$!; fi
+. "$ROOT/bench/busy.sh"
+bench_cleanup() { rm -rf "$out"; }
+[ "$2" = busy ] && busy_start
 echo "${2:-quiet}: /proc/loadavg $(cat /proc/loadavg)"
 key() { echo "$1" | tr ' ' '_'; }
 r=1
@@ -26,7 +26,7 @@ while [ "$r" -le "$rounds" ]; do
   done
   r=$((r + 1))
 done
-[ -n "$busy" ] && { kill "$busy"; wait "$busy" 2>/dev/null; }
+busy_stop
 echo "/proc/loadavg $(cat /proc/loadavg)"
 for c in "40 1 5 laplace" "64 1 5 laplace" "24 2 5 laplace" "16 2 5 neohookean"; do
   k=$(key "$c")

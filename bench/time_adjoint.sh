@@ -11,9 +11,8 @@ PYADJOINT=${PYADJOINT:-/opt/pyadjoint}
 export OMP_NUM_THREADS=1
 have_pa=0
 PYTHONPATH="$PYADJOINT" /usr/bin/python3 -c "import fenics_adjoint" 2> /dev/null && have_pa=1
-sh -c 'while :; do :; done' &
-busy=$!
-trap 'kill $busy 2> /dev/null' EXIT INT TERM
+. "$ROOT/bench/busy.sh"
+busy_start
 cat /proc/loadavg
 [ "$1" = memory ] || for cfg in "32 100" "32 1000" "64 100" "64 1000"; do
   for round in 1 2 3; do

@@ -7,14 +7,14 @@
 # launcher's 1000 is what `GOMP_SPINCOUNT=1000` measures).
 #   sh bench/waiting_threads.sh [rounds]
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
+. "$ROOT/bench/busy.sh"
 rounds=${1:-3}
 run() {
   env "$@" "$ROOT/build/lugal" "$ROOT/bench/assembly.lua" 24 2 5 elasticity 2>&1 | tail -1 |
     sed 's/.*assemble_median_s=\([0-9.]*\).*first_s=\([0-9.]*\).*/reassembly \1 s, first matrix \2 s/'
 }
 for load in quiet busy; do
-  busy=
-  if [ $load = busy ]; then sh -c 'while :; do :; done' & busy=$!; fi
+  [ $load = busy ] && busy_start
   cat /proc/loadavg
   r=1
   while [ $r -le "$rounds" ]; do
@@ -24,6 +24,6 @@ for load in quiet busy; do
     done
     r=$((r + 1))
   done
-  [ -n "$busy" ] && kill "$busy"
+  busy_stop
 done
 cat /proc/loadavg

@@ -208,13 +208,39 @@ static int option_set(const lg_problem *p, const char *name) {
 /* the direct solver from now on (CG did not converge, or the matrix is no longer SPD) */
 static int iterative_to_direct(lg_env *env, lg_problem *p, const char *why) {
   PC pc;
-  p->iter = 2;
-  PCHK(KSPSetType(p->ksp, KSPPREONLY), "KSPSetType");
-  PCHK(KSPGetPC(p->ksp, &pc), "KSPGetPC");
+  KSP ksp = p->ksp;
+  if (p->nonlinear) {
+    p->newton_iter = 2;
+    PCHK(SNESGetKSP(p->snes, &ksp), "SNESGetKSP");
+  } else p->iter = 2;
+  PCHK(KSPSetType(ksp, KSPPREONLY), "KSPSetType");
+  PCHK(KSPGetPC(ksp, &pc), "KSPGetPC");
   if (default_lu(env, p, pc)) return 1;
-  PCHK(KSPSetOperators(p->ksp, p->A, p->A), "KSPSetOperators");
-  if (env->verbose) fprintf(stderr, "[lugal] linear solver: the direct solver from now on (%s)\n", why);
+  PCHK(KSPSetOperators(ksp, p->A, p->A), "KSPSetOperators");
+  if (env->verbose) fprintf(stderr, "[lugal] %s solver: the direct solver from now on (%s)\n", p->nonlinear ? "Newton's linear" : "linear", why);
   return 0;
+}
+
+/* lugal's default solver of the problem's solves with its matrix (1 CG, 3 GMRES with GAMG;
+ * 2, 0 or -1 otherwise): a linear problem's KSP's, a nonlinear one's SNES's */
+static int default_mode(const lg_problem *p) { return p->nonlinear ? p->newton_iter : p->iter; }
+
+/* whether ksp is CG (lugal's default or the user's -ksp_type cg): its matrix must be
+ * symmetric, so the essential columns are eliminated with the rows */
+static int ksp_is_cg(KSP ksp) {
+  PetscBool cg = PETSC_FALSE;
+  if (ksp) PetscObjectTypeCompare((PetscObject)ksp, KSPCG, &cg);
+  return cg != PETSC_FALSE;
+}
+
+/* whether an iterative default may apply: one unknown (scalar or vector) of at least
+ * lg_iterative_size unknowns, serial, no null space, no solver chosen by the user */
+static int iterative_allowed(lg_problem *p) {
+  PetscBool on = PETSC_TRUE;
+  PetscOptionsGetBool(NULL, NULL, "-lugal_iterative", &on, NULL);
+  return on && !p->mass_cg && !p->nnull && !p->par && p->rows.n == 1 && p->cols.n == 1 &&
+         p->Nglob >= lg_iterative_size(p->lm->m->dim) && !option_set(p, "-ksp_type") && !option_set(p, "-pc_type") &&
+         !option_set(p, "-pc_factor_mat_solver_type");
 }
 
 /* A linear problem's default solver, chosen at its first assembly (A as assembled, before
@@ -232,13 +258,8 @@ static int choose_solver(lg_env *env, lg_problem *p) {
   if (p->iter == 2 || p->iter == 3) return 0;
   if (ensure_ksp(env, p)) return 1;
   if (p->iter == 0) {
-    PetscBool on = PETSC_TRUE;
-    PetscOptionsGetBool(NULL, NULL, "-lugal_iterative", &on, NULL);
     p->iter = 2;
-    if (!on || p->nonlinear || p->mass_cg || p->nnull || p->par || p->rows.n != 1 || p->cols.n != 1 ||
-        p->Nglob < lg_iterative_size(p->lm->m->dim) || option_set(p, "-ksp_type") || option_set(p, "-pc_type") ||
-        option_set(p, "-pc_factor_mat_solver_type"))
-      return 0;
+    if (!iterative_allowed(p)) return 0;
     int spd = lg_spd_candidate(p->A);
     if (!spd && !lg_positive_diagonal(p->A)) {
       if (env->verbose) fprintf(stderr, "[lugal] linear solver: direct (%d unknowns, but the matrix's diagonal is not positive)\n", p->Nglob);
@@ -262,7 +283,7 @@ static int choose_solver(lg_env *env, lg_problem *p) {
  * (bcc_*), D the essential diagonal: the tangent's right side r_i -= a_ib r_b / D before
  * the solve; the adjoint's (transposed) solution λ_b -= a_ib λ_i / D after it */
 static int column_correction(lg_env *env, lg_problem *p, Vec v, int transpose, double D) {
-  if (!p->sym_elim || p->bc_symmetric || p->nonlinear || !p->bcc_n) return 0;
+  if (!p->sym_elim || (p->bc_symmetric && !p->nonlinear) || !p->bcc_n) return 0;
   PetscScalar *a;
   PCHK(VecGetArray(v, &a), "VecGetArray");
   for (size_t e = 0; e < p->bcc_n; e++) {
@@ -478,7 +499,7 @@ static int keep_bc_columns(lg_env *env, lg_problem *p) {
  * in bcc_*) with symmetric = true or for CG (choose_solver). x, b: the essential values and
  * the right side to adjust, or NULL */
 static int eliminate_essential(lg_env *env, lg_problem *p, Vec x, Vec b) {
-  if ((p->sym_elim = p->bc_symmetric || p->iter == 1)) {
+  if ((p->sym_elim = p->bc_symmetric || p->iter == 1 || ksp_is_cg(p->ksp))) {
     if (keep_bc_columns(env, p)) return 1;
     PCHK(MatZeroRowsColumns(p->A, p->nown, p->own_rows, p->bc_diag, x, b), "MatZeroRowsColumns");
   } else PCHK(MatZeroRows(p->A, p->nown, p->own_rows, p->bc_diag, x, b), "MatZeroRows");
@@ -656,6 +677,47 @@ static PetscErrorCode snes_function(SNES snes, Vec X, Vec F, void *ctx) {
   return 0;
 }
 
+/* Newton's linear solver for the Jacobian just assembled into A, and A's essential rows
+ * replaced by identity rows. By default (iterative_allowed, SNES newtonls) each Jacobian is
+ * looked at as choose_solver looks at a linear problem's matrix: CG with GAMG where it is
+ * symmetric with a positive diagonal (a hyperelastic energy's second derivative), GMRES with
+ * GAMG where only its diagonal is positive (a convection term's Jacobian is unsymmetric once
+ * u is not zero), the direct solver for good otherwise. For CG the essential columns are
+ * eliminated too, which changes no Newton step: the initial guess satisfies the essential
+ * conditions (solve_nonlinear), so F_b = 0 and every step's essential part δ_b = −F_b = 0,
+ * and J_ib δ_b vanishes; the adjoint and tangent solves correct for the columns (kept in
+ * bcc_*, column_correction), as a linear problem's do. */
+static int newton_matrix(lg_env *env, lg_problem *p, KSP ksp) {
+  if (p->newton_iter == 0) {
+    PetscBool newton = PETSC_FALSE;
+    PetscObjectTypeCompare((PetscObject)p->snes, SNESNEWTONLS, &newton);
+    p->newton_iter = newton && iterative_allowed(p) ? -1 : 2; /* -1: iterative, not set up yet */
+  }
+  if (p->newton_iter != 2) {
+    int spd = !p->newton_nocg && lg_spd_candidate(p->A), mode = spd ? 1 : lg_positive_diagonal(p->A) ? 3 : 2;
+    if (mode == 2 && p->newton_iter < 0) {
+      p->newton_iter = 2;
+      if (env->verbose)
+        fprintf(stderr, "[lugal] Newton's linear solver: direct (%d unknowns, but the Jacobian's diagonal is not positive)\n", p->Nglob);
+    } else if (mode == 2) {
+      if (iterative_to_direct(env, p, "a Jacobian's diagonal is not positive")) return 1;
+    } else if (mode != p->newton_iter) {
+      PCHK(lg_iterative_setup(ksp, spd), "the iterative solver's setup");
+      if (lg_problem_near_nullspace(env, p, ksp)) return 1; /* the rigid body modes of a vector field */
+      if (env->verbose && p->newton_iter < 0)
+        fprintf(stderr, "[lugal] Newton's linear solver: %s with GAMG (%d unknowns, %s; -lugal_iterative 0 or -pc_type lu for "
+                        "the direct solver)\n", spd ? "CG" : "GMRES", p->Nglob, spd ? "symmetric Jacobian, positive diagonal" : "unsymmetric Jacobian, positive diagonal");
+      else if (env->verbose) fprintf(stderr, "[lugal] Newton's linear solver: %s from this Jacobian on\n", spd ? "CG" : "GMRES");
+      p->newton_iter = mode;
+    }
+  }
+  if ((p->sym_elim = p->newton_iter == 1 || ksp_is_cg(ksp))) {
+    if (keep_bc_columns(env, p)) return 1;
+    PCHK(MatZeroRowsColumns(p->A, p->nown, p->own_rows, 1.0, NULL, NULL), "MatZeroRowsColumns");
+  } else PCHK(MatZeroRows(p->A, p->nown, p->own_rows, 1.0, NULL, NULL), "MatZeroRows");
+  return 0;
+}
+
 /* the residual reduction of a step with a kept Jacobian that keeps it for the next step */
 #define LAG_CONTRACTION 0.1
 
@@ -701,9 +763,13 @@ static PetscErrorCode snes_jacobian(SNES snes, Vec X, Mat J, Mat P, void *ctx) {
     PetscCall(SNESSetJacobianDomainError(snes));
     return 0;
   }
-  PetscCall(MatZeroRows(P, p->nown, p->own_rows, 1.0, NULL, NULL));
   KSP ksp;
   PetscCall(SNESGetKSP(snes, &ksp));
+  if (newton_matrix(p->env, p, ksp)) {
+    p->failed = 1;
+    PetscCall(SNESSetJacobianDomainError(snes));
+    return 0;
+  }
   PetscCall(lg_lu_prepare(ksp, P, p->own_rows, p->nown, p->prefix, 0));
   /* with a null space given, MUMPS's null pivot detection, as for a linear problem: without
    * it the pressure constant's pivot of an enclosed flow's Jacobian (rounding, about 1e-16)
@@ -833,6 +899,21 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
   KSP sksp;
   PCHK(SNESGetKSP(p->snes, &sksp), "SNESGetKSP");
   lg_solver_name(sksp, info->solver, sizeof info->solver);
+  if (reason == SNES_DIVERGED_LINEAR_SOLVE && (p->newton_iter == 1 || p->newton_iter == 3)) {
+    /* CG did not converge on a Jacobian (an iterate where the energy is not convex: CG
+     * stops on the indefinite matrix): GMRES from now on; GMRES did not: the direct solver.
+     * And Newton again */
+    char why[160];
+    KSPConvergedReason kr = KSP_CONVERGED_ITERATING;
+    KSPGetConvergedReason(sksp, &kr);
+    snprintf(why, sizeof why, "%s stopped with %s in Newton iteration %d", p->newton_iter == 1 ? "CG" : "GMRES", ksp_reason_name(kr), (int)its);
+    if (p->newton_iter == 1 && !p->newton_nocg) {
+      p->newton_nocg = 1;
+      if (env->verbose) fprintf(stderr, "[lugal] Newton's linear solver: GMRES with GAMG from now on (%s)\n", why);
+    } else if (iterative_to_direct(env, p, why)) return 1;
+    p->adj_stale = 1;
+    return solve_nonlinear(env, p, initial, out, info, warm);
+  }
   if (reason < 0 && lg_lu_native(sksp, p->prefix)) {
     /* PETSc's LU (no pivoting) may be what failed: again with MUMPS, once */
     PCHK(lg_lu_fallback(sksp, p->A), "the switch to MUMPS");
@@ -894,8 +975,7 @@ static int jacobian_solver(lg_env *env, lg_problem *p, KSP *out) {
     PCHK(SNESGetKSP(p->snes, &ksp), "SNESGetKSP");
     if (p->adj_stale) {
       memcpy(p->state, p->solution, sizeof(double) * (size_t)p->N);
-      if (lg_problem_assemble_into(env, p, p->state, p->A)) return 1;
-      PCHK(MatZeroRows(p->A, p->nown, p->own_rows, 1.0, NULL, NULL), "MatZeroRows");
+      if (lg_problem_assemble_into(env, p, p->state, p->A) || newton_matrix(env, p, ksp)) return 1;
       PCHK(KSPSetOperators(ksp, p->A, p->A), "KSPSetOperators");
       PCHK(lg_lu_prepare(ksp, p->A, p->own_rows, p->nown, p->prefix, 0), "the factorization's choice");
       if (p->nnull) lg_mumps_detect_null_pivots(ksp); /* as snes_jacobian's */
@@ -992,12 +1072,13 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   while (!ierr && !kept) {
     /* CG's matrix is symmetric (choose_solver): the transposed solve is the solve; a matrix
      * symmetric apart from its essential rows: a solve and a product */
-    if (transpose && p->iter != 1 && symmetric_besides_bcs(p)) ierr = solve_as_transpose(p, ksp, r, l, D);
-    else ierr = transpose && p->iter != 1 ? KSPSolveTranspose(ksp, r, l) : KSPSolve(ksp, r, l);
+    int cg = ksp_is_cg(ksp), mode = default_mode(p);
+    if (transpose && !cg && symmetric_besides_bcs(p)) ierr = solve_as_transpose(p, ksp, r, l, D);
+    else ierr = transpose && !cg ? KSPSolveTranspose(ksp, r, l) : KSPSolve(ksp, r, l);
     reason = KSP_CONVERGED_ITS;
     if (!ierr) KSPGetConvergedReason(ksp, &reason);
     /* CG or GMRES did not converge (or GAMG has no transposed application): the direct solver */
-    if ((ierr || reason < 0) && !p->nonlinear && (p->iter == 1 || p->iter == 3)) {
+    if ((ierr || reason < 0) && (mode == 1 || mode == 3)) {
       if (iterative_to_direct(env, p, ierr ? "the iterative solver failed in an adjoint or tangent solve"
                                             : "the iterative solver did not converge in an adjoint or tangent solve")) {
         VecDestroy(&r);

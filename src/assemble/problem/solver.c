@@ -128,7 +128,11 @@ static PetscErrorCode symmetric_skip(Mat A, const char *skip, PetscBool *sym) {
   PetscFunctionReturn(0);
 }
 
-PetscInt lg_iterative_size(int dim) { return dim >= 3 ? LG_ITERATIVE_MIN_3D : LG_ITERATIVE_MIN_2D; }
+PetscInt lg_iterative_size(int dim) {
+  PetscInt n = dim >= 3 ? LG_ITERATIVE_MIN_3D : LG_ITERATIVE_MIN_2D;
+  PetscOptionsGetInt(NULL, NULL, "-lugal_iterative_min", &n, NULL); /* the user's size, if given */
+  return n;
+}
 
 int lg_positive_diagonal(Mat A) {
   PetscBool seq = PETSC_FALSE;

@@ -84,3 +84,47 @@ local dk = math.sqrt(lg.integrate(mesh, (uk - uk2)^2) / lg.integrate(mesh, uk2^2
 T.check(dk < 1e-8, "the indefinite system's solution after the fallback is the direct solver's (relative L2 %.2e, %s)", dk, ik.solver)
 print(string.format("default solver: %s, %d iterations at 24 389 unknowns; dJ/dc %.10e (direct %.10e), dJ/ds %.10e (%.10e); convection: %s, %d iterations; strong convection: %s; Helmholtz: %s",
                     info.solver, info.iterations, gc1, gc0, gs1, gs0, conv.solver, conv.iterations, strong.solver, ik.solver))
+
+-- a saddle point (Taylor–Hood Stokes, the second unknown's diagonal block zero): GMRES with a
+-- Schur complement fieldsplit (the size lowered by -lugal_iterative_min), against the direct
+-- solver: the solution, and the gradient of the dissipation with respect to the inflow's
+-- amplitude (a Dirichlet value) and the viscosity (the transposed solve)
+local box = lg.mesh.box{nx = 5}
+local V2, Q1 = lg.vector(lg.lagrange(2)), P1
+local su, sp = lg.unknown(V2, "su"), lg.unknown(Q1, "sp")
+local sv, sq = lg.test(V2, "sv"), lg.test(Q1, "sq")
+local amp, visc = lg.parameter("amp", 1.0), lg.parameter("visc", 1.0)
+local function stokes(prefix)
+  local prob = lg.linear_problem{mesh = box, test = {sv, sq}, unknown = {su, sp}, prefix = prefix,
+    eqn = lg.integral(box:cells(), visc*lg.inner(lg.grad(su), lg.grad(sv)) - sp*lg.div(sv) - sq*lg.div(su)),
+    bc = {lg.essential_bc(box:boundary("left"), lg.dot(sv, su - {amp*16*y*(1 - y)*z*(1 - z), 0, 0})),
+          lg.essential_bc(box:boundary("front", "back", "bottom", "top"), lg.dot(sv, su))}}
+  local uh, ph, sinfo = prob:solve()
+  local rf = lg.reduced_functional{problem = prob, control = {amp, visc},
+    functional = lg.functional(lg.integral(box:cells(), lg.inner(lg.grad(su), lg.grad(su)) + sp^2))}
+  local ga, gv = rf:gradient()
+  local _, _, after = prob:solve() -- the adjoint kept the fieldsplit (a forward solve: the matrix is symmetric)
+  return uh, ph, sinfo, rf:value(), ga, gv, after
+end
+lg.options("-lugal_iterative 1 -lugal_iterative_min 2000")
+local su1, sp1, si1, sJ1, sga1, sgv1, safter = stokes()
+lg.options("-lugal_iterative 0")
+local su0, sp0, si0, sJ0, sga0, sgv0 = stokes()
+-- the user's own fieldsplit gets the unknowns as its splits ("0" the velocity, "1" the pressure)
+lg.options("-lugal_iterative 1 -fs_ksp_type fgmres -fs_ksp_rtol 1e-12 -fs_pc_type fieldsplit -fs_pc_fieldsplit_type schur " ..
+           "-fs_pc_fieldsplit_schur_precondition selfp -fs_fieldsplit_0_pc_type lu -fs_fieldsplit_1_pc_type jacobi")
+local suf, spf, sif = stokes("fs_")
+T.check(sif.solver == "fgmres/fieldsplit", "the user's fieldsplit, got %s", sif.solver)
+local dsf = math.sqrt(lg.integrate(box, lg.dot(suf - su0, suf - su0)) / lg.integrate(box, lg.dot(su0, su0)))
+T.check(dsf < 1e-9, "the user's fieldsplit's velocity is the direct solver's (relative L2 %.2e)", dsf)
+T.check(si1.solver == "gmres/fieldsplit" and si1.iterations < 150, "Stokes gets GMRES with a Schur fieldsplit, got %s (%d iterations)", si1.solver, si1.iterations)
+T.check(not si0.solver:find("fieldsplit"), "-lugal_iterative 0: direct, got %s", si0.solver)
+T.check(safter.solver == "gmres/fieldsplit", "after the gradient Stokes keeps the fieldsplit (the adjoint did not fail), got %s", safter.solver)
+local dsu = math.sqrt(lg.integrate(box, lg.dot(su1 - su0, su1 - su0)) / lg.integrate(box, lg.dot(su0, su0)))
+local dsp = math.sqrt(lg.integrate(box, (sp1 - sp0)^2) / lg.integrate(box, sp0^2))
+T.check(dsu < 1e-8 and dsp < 1e-8, "the fieldsplit's velocity and pressure are the direct solver's (relative L2 %.2e, %.2e)", dsu, dsp)
+T.check(math.abs(sJ1 - sJ0) < 1e-9 * math.abs(sJ0) and math.abs(sga1 - sga0) < 1e-7 * math.abs(sga0) and
+        math.abs(sgv1 - sgv0) < 1e-7 * math.abs(sgv0), "Stokes J %.12e and gradient %.12e %.12e against %.12e %.12e %.12e",
+        sJ1, sga1, sgv1, sJ0, sga0, sgv0)
+print(string.format("Stokes (%d unknowns): %s, %d iterations; dJ/damp %.10e (direct %.10e), dJ/dnu %.10e (%.10e)", si1.dofs,
+                    si1.solver, si1.iterations, sga1, sga0, sgv1, sgv0))

@@ -132,9 +132,11 @@ struct lg_problem {
   int no_keep;        /* never solve with a kept factor of an earlier matrix (lg_problem_replayable) */
   int mass_cg;        /* a mass matrix: CG with Jacobi before LU (lg_problem_mass_solver); 2 once it fell back to LU */
   int iter;           /* a linear problem's default solver (problem_solve.c, choose_solver): 0 not
-                       * chosen yet, 1 CG with GAMG, 2 direct, 3 GMRES with GAMG */
+                       * chosen yet, 1 CG with GAMG, 2 direct, 3 GMRES with GAMG, 4 GMRES with
+                       * a Schur complement fieldsplit (a saddle point) */
   int newton_iter;    /* a nonlinear problem's: the same for its SNES's solver (newton_matrix),
                        * -1 iterative but not set up yet */
+  int splits_set;     /* the fieldsplit PC has its fields (problem_solve.c, field_splits) */
   int newton_nocg;    /* CG failed on one of its Jacobians: GMRES from then on */
   unsigned a_version;  /* assemblies into A (lg_problem_assemble_into) */
   unsigned isym_version; /* the a_version whose symmetry isym holds */

@@ -164,6 +164,46 @@ static uint64_t matrix_fingerprint(lg_env *env, lg_problem *p) {
 
 /* the linear solver of a linear problem: direct LU by default (default_lu), every -ksp_* and
  * -pc_* option (with the problem's prefix) applied once */
+/* A fieldsplit PC's splits (the user's -pc_type fieldsplit, or the saddle-point default):
+ * the owned rows of each unknown, in the order of the problem's unknowns, named "0", "1", ...
+ * (the options -fieldsplit_0_..., as PETSc names them) */
+static int field_splits(lg_env *env, lg_problem *p, PC pc) {
+  PetscBool fs = PETSC_FALSE;
+  PCHK(PetscObjectTypeCompare((PetscObject)pc, PCFIELDSPLIT, &fs), "PetscObjectTypeCompare");
+  if (!fs || p->splits_set || p->rows.n < 2) return 0;
+  int n = p->hi - p->lo, nf = p->rows.n;
+  PetscInt *rows = malloc(sizeof(PetscInt) * ((size_t)n + 1));
+  int *field = malloc(sizeof(int) * ((size_t)n + 1));
+  if (!rows || !field) {
+    free(rows); free(field);
+    lg_seterr(env, "out of memory for the field splits");
+    return 1;
+  }
+  for (PetscInt r = p->lo; r < p->hi; r++) {
+    PetscInt i = lg_problem_row(p, r);
+    int a = 0;
+    while (a < nf - 1 && i >= p->rglob[a + 1]) a++;
+    field[r - p->lo] = a;
+  }
+  PetscErrorCode ierr = 0;
+  for (int a = 0; a < nf && !ierr; a++) {
+    PetscInt m = 0;
+    for (PetscInt r = p->lo; r < p->hi; r++)
+      if (field[r - p->lo] == a) rows[m++] = r;
+    IS is;
+    char name[16];
+    snprintf(name, sizeof name, "%d", a);
+    ierr = ISCreateGeneral(PetscObjectComm((PetscObject)pc), m, rows, PETSC_COPY_VALUES, &is);
+    if (!ierr) ierr = PCFieldSplitSetIS(pc, name, is);
+    ISDestroy(&is);
+  }
+  free(rows);
+  free(field);
+  if (ierr) return lg_petsc_fail(env, ierr, "the field splits");
+  p->splits_set = 1;
+  return 0;
+}
+
 static int ensure_ksp(lg_env *env, lg_problem *p) {
   if (p->ksp) return 0;
   PCHK(KSPCreate(PetscObjectComm((PetscObject)p->A), &p->ksp), "KSPCreate");
@@ -180,6 +220,7 @@ static int ensure_ksp(lg_env *env, lg_problem *p) {
     if (default_lu(env, p, pc)) return 1;
   }
   PCHK(KSPSetFromOptions(p->ksp), "KSPSetFromOptions");
+  if (field_splits(env, p, pc)) return 1;
   return lg_problem_near_nullspace(env, p, p->ksp);
 }
 
@@ -225,6 +266,10 @@ static int iterative_to_direct(lg_env *env, lg_problem *p, const char *why) {
  * 2, 0 or -1 otherwise): a linear problem's KSP's, a nonlinear one's SNES's */
 static int default_mode(const lg_problem *p) { return p->nonlinear ? p->newton_iter : p->iter; }
 
+/* whether a default_mode is one of lugal's Krylov defaults: 1 CG, 3 GMRES with GAMG, 4 GMRES
+ * with a Schur complement fieldsplit (a saddle point) */
+static int krylov_default(int mode) { return mode == 1 || mode == 3 || mode == 4; }
+
 /* whether ksp is CG (lugal's default or the user's -ksp_type cg): its matrix must be
  * symmetric, so the essential columns are eliminated with the rows */
 static int ksp_is_cg(KSP ksp) {
@@ -233,12 +278,12 @@ static int ksp_is_cg(KSP ksp) {
   return cg != PETSC_FALSE;
 }
 
-/* whether an iterative default may apply: one unknown (scalar or vector) of at least
- * lg_iterative_size unknowns, serial, no null space, no solver chosen by the user */
-static int iterative_allowed(lg_problem *p) {
+/* whether an iterative default may apply: nfield unknowns (scalar or vector) of at least
+ * lg_iterative_size unknowns together, serial, no null space, no solver chosen by the user */
+static int iterative_allowed(lg_problem *p, int nfield) {
   PetscBool on = PETSC_TRUE;
   PetscOptionsGetBool(NULL, NULL, "-lugal_iterative", &on, NULL);
-  return on && !p->mass_cg && !p->nnull && !p->par && p->rows.n == 1 && p->cols.n == 1 &&
+  return on && !p->mass_cg && !p->nnull && !p->par && p->rows.n == nfield && p->cols.n == nfield &&
          p->Nglob >= lg_iterative_size(p->lm->m->dim) && !option_set(p, "-ksp_type") && !option_set(p, "-pc_type") &&
          !option_set(p, "-pc_factor_mat_solver_type");
 }
@@ -255,11 +300,23 @@ static int iterative_allowed(lg_problem *p) {
  * the columns. A Krylov solve that does not converge hands the problem to the direct
  * solver for good. */
 static int choose_solver(lg_env *env, lg_problem *p) {
-  if (p->iter == 2 || p->iter == 3) return 0;
+  if (p->iter >= 2) return 0;
   if (ensure_ksp(env, p)) return 1;
   if (p->iter == 0) {
     p->iter = 2;
-    if (!iterative_allowed(p)) return 0;
+    if (iterative_allowed(p, 2) && lg_saddle_point(p->A, p->rglob[1])) {
+      /* Stokes-like: GMRES with a Schur complement fieldsplit (solver.c) */
+      PC pc;
+      PCHK(lg_saddle_setup(p->ksp, p->prefix), "the saddle point solver's setup");
+      PCHK(KSPGetPC(p->ksp, &pc), "KSPGetPC");
+      if (field_splits(env, p, pc)) return 1;
+      p->iter = 4;
+      if (env->verbose)
+        fprintf(stderr, "[lugal] linear solver: GMRES with a Schur complement fieldsplit (%d unknowns, a saddle point: the "
+                        "second unknown's diagonal block is zero; -lugal_iterative 0 or -pc_type lu for the direct solver)\n", p->Nglob);
+      return 0;
+    }
+    if (!iterative_allowed(p, 1)) return 0;
     int spd = lg_spd_candidate(p->A);
     if (!spd && !lg_positive_diagonal(p->A)) {
       if (env->verbose) fprintf(stderr, "[lugal] linear solver: direct (%d unknowns, but the matrix's diagonal is not positive)\n", p->Nglob);
@@ -329,7 +386,7 @@ static int linear_solve_checked(lg_env *env, lg_problem *p, lg_solve_info *info)
   info->iterations = info->linear_iterations = (int)its;
   snprintf(info->reason, sizeof info->reason, "%s", ksp_reason_name(reason));
   if (reason < 0 && native) return 2;
-  if (reason < 0 && (p->iter == 1 || p->iter == 3)) return 3;
+  if (reason < 0 && krylov_default(p->iter)) return 3;
   char why[512];
   lg_solve_failure(p->ksp, why, sizeof why);
   if (reason < 0 && why[0]) {
@@ -691,7 +748,7 @@ static int newton_matrix(lg_env *env, lg_problem *p, KSP ksp) {
   if (p->newton_iter == 0) {
     PetscBool newton = PETSC_FALSE;
     PetscObjectTypeCompare((PetscObject)p->snes, SNESNEWTONLS, &newton);
-    p->newton_iter = newton && iterative_allowed(p) ? -1 : 2; /* -1: iterative, not set up yet */
+    p->newton_iter = newton && iterative_allowed(p, 1) ? -1 : 2; /* -1: iterative, not set up yet */
   }
   if (p->newton_iter != 2) {
     int spd = !p->newton_nocg && lg_spd_candidate(p->A), mode = spd ? 1 : lg_positive_diagonal(p->A) ? 3 : 2;
@@ -1078,7 +1135,7 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
     reason = KSP_CONVERGED_ITS;
     if (!ierr) KSPGetConvergedReason(ksp, &reason);
     /* CG or GMRES did not converge (or GAMG has no transposed application): the direct solver */
-    if ((ierr || reason < 0) && (mode == 1 || mode == 3)) {
+    if ((ierr || reason < 0) && krylov_default(mode)) {
       if (iterative_to_direct(env, p, ierr ? "the iterative solver failed in an adjoint or tangent solve"
                                             : "the iterative solver did not converge in an adjoint or tangent solve")) {
         VecDestroy(&r);

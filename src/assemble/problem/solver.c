@@ -70,8 +70,11 @@ int lg_lu_native(KSP ksp, const char *prefix) {
  * identity row with a column of tiny entries symmetric; the diagonals' share counts the
  * rounding of entries that cancel: a 64² P2 stiffness-plus-mass matrix has edge-vertex
  * entries of 2.7e-6, the mass part that the stiffness parts cancel down to, whose triangles
- * differ by 3.5e-18 next to diagonals of 4-6, and it was taken for unsymmetric). Read
- * only: MatIsSymmetric marks the matrix changed, which refactors it */
+ * differ by 3.5e-18 next to diagonals of 4-6, and it was taken for unsymmetric). A row
+ * whose diagonal is zero (a saddle point's pressure rows) counts its largest entry instead:
+ * Taylor-Hood's divergence entries that cancel to rounding made a Stokes matrix
+ * unsymmetric, and its adjoint took the transposed solve. Read only: MatIsSymmetric marks
+ * the matrix changed, which refactors it */
 static PetscErrorCode symmetric_skip(Mat A, const char *skip, PetscBool *sym);
 static PetscErrorCode symmetric(Mat A, PetscBool *sym) { return symmetric_skip(A, NULL, sym); }
 
@@ -101,10 +104,14 @@ static PetscErrorCode symmetric_skip(Mat A, const char *skip, PetscBool *sym) {
   PetscCall(MatSeqAIJGetArrayRead(A, &a));
   double *dg = malloc(sizeof(double) * ((size_t)n + 1));
   int ok = dg != NULL;
-  for (PetscInt i = 0; ok && i < n; i++) { /* |a_ii|, 0 where the row has no diagonal */
+  for (PetscInt i = 0; ok && i < n; i++) { /* |a_ii|, or the row's largest |a_ik| where a_ii = 0 */
+    double mx = 0;
     dg[i] = 0;
-    for (PetscInt k = ia[i]; k < ia[i + 1]; k++)
+    for (PetscInt k = ia[i]; k < ia[i + 1]; k++) {
       if (ja[k] == i) dg[i] = PetscAbsScalar(a[k]);
+      mx = PetscMax(mx, PetscAbsScalar(a[k]));
+    }
+    if (dg[i] == 0) dg[i] = mx;
   }
   for (PetscInt i = 0; i < n && ok; i++)
     for (PetscInt k = ia[i]; k < ia[i + 1] && ok; k++) {
@@ -169,6 +176,57 @@ PetscErrorCode lg_iterative_setup(KSP ksp, int spd) {
   PetscCall(KSPSetTolerances(ksp, LG_ITERATIVE_RTOL, 1e-300, PETSC_DEFAULT, spd ? 2000 : 150));
   /* an optimization's next matrix keeps the coarse spaces (the pattern is the same) */
   PetscCall(PCGAMGSetReuseInterpolation(pc, PETSC_TRUE));
+  PetscCall(KSPSetFromOptions(ksp));
+  PetscFunctionReturn(0);
+}
+
+int lg_saddle_point(Mat A, PetscInt n0) {
+  PetscBool seq = PETSC_FALSE;
+  if (PetscObjectTypeCompare((PetscObject)A, MATSEQAIJ, &seq) || !seq) return 0;
+  Vec d;
+  PetscInt n = 0;
+  const PetscScalar *a;
+  if (MatCreateVecs(A, &d, NULL)) return 0;
+  int ok = !MatGetDiagonal(A, d) && !VecGetLocalSize(d, &n) && n0 > 0 && n0 < n && !VecGetArrayRead(d, &a);
+  if (ok) {
+    for (PetscInt i = 0; i < n && ok; i++) ok = i < n0 ? a[i] > 0 : a[i] == 0;
+    VecRestoreArrayRead(d, &a);
+  }
+  VecDestroy(&d);
+  return ok;
+}
+
+/* option name (after the prefix) to value, unless the user set it */
+static PetscErrorCode default_option(const char *prefix, const char *name, const char *value) {
+  char full[256];
+  PetscFunctionBeginUser;
+  if (user_set(prefix, name)) PetscFunctionReturn(0);
+  snprintf(full, sizeof full, "-%s%s", prefix ? prefix : "", name + 1);
+  PetscCall(PetscOptionsSetValue(NULL, full, value));
+  PetscFunctionReturn(0);
+}
+
+/* Taylor-Hood Stokes, 29 114 unknowns (bench/stokes3d.lua 10): 100 iterations, 1.9 s against
+ * MUMPS's 12.7 s, the same energy and pressure drop to 9 digits. GAMG on the Schur
+ * complement's approximation did not converge; the full and upper factorizations cost more
+ * per iteration than they save */
+PetscErrorCode lg_saddle_setup(KSP ksp, const char *prefix) {
+  PC pc;
+  PetscFunctionBeginUser;
+  PetscCall(KSPSetType(ksp, KSPGMRES));
+  PetscCall(KSPSetPCSide(ksp, PC_RIGHT));
+  PetscCall(KSPGMRESSetRestart(ksp, 100));
+  PetscCall(KSPSetNormType(ksp, KSP_NORM_UNPRECONDITIONED));
+  PetscCall(KSPSetTolerances(ksp, LG_ITERATIVE_RTOL, 1e-300, PETSC_DEFAULT, 300));
+  PetscCall(KSPGetPC(ksp, &pc));
+  PetscCall(PCSetType(pc, PCFIELDSPLIT));
+  PetscCall(PCFieldSplitSetType(pc, PC_COMPOSITE_SCHUR));
+  PetscCall(PCFieldSplitSetSchurFactType(pc, PC_FIELDSPLIT_SCHUR_FACT_LOWER));
+  PetscCall(PCFieldSplitSetSchurPre(pc, PC_FIELDSPLIT_SCHUR_PRE_SELFP, NULL));
+  PetscCall(default_option(prefix, "-fieldsplit_0_ksp_type", "preonly"));
+  PetscCall(default_option(prefix, "-fieldsplit_0_pc_type", "gamg"));
+  PetscCall(default_option(prefix, "-fieldsplit_1_ksp_type", "preonly"));
+  PetscCall(default_option(prefix, "-fieldsplit_1_pc_type", "jacobi"));
   PetscCall(KSPSetFromOptions(ksp));
   PetscFunctionReturn(0);
 }

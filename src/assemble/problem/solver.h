@@ -35,6 +35,16 @@ int lg_positive_diagonal(Mat A);
 #define LG_ITERATIVE_RTOL 1e-10
 PetscErrorCode lg_iterative_setup(KSP ksp, int spd);
 
+/* A saddle point system (Stokes: a velocity, then a pressure whose diagonal block is zero):
+ * whether A (sequential AIJ, before the essential rows) has a positive diagonal on its first
+ * n0 rows and a zero one on the rest; lg_saddle_setup makes ksp GMRES (preconditioned on the
+ * right, restart 100, at most 300 iterations, the true residual to LG_ITERATIVE_RTOL) with a
+ * Schur complement fieldsplit (lower factorization; the first block by GAMG, the Schur
+ * complement by Jacobi on A11 − A10 diag(A00)⁻¹ A01), each choice only where the user set
+ * none (the prefix's -fieldsplit_0_..., -fieldsplit_1_...); the caller gives the splits */
+int lg_saddle_point(Mat A, PetscInt n0);
+PetscErrorCode lg_saddle_setup(KSP ksp, const char *prefix);
+
 /* whether A (sequential AIJ) is symmetric to rounding apart from the given rows and their
  * columns (the essential rows, replaced by identity rows): then the transposed solve of A
  * is a solve of A and a product with Aᵀ (problem_solve.c, solve_with_jacobian) */

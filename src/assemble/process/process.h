@@ -56,7 +56,7 @@ int lg_petsc_fail(lg_env *env, int ierr, const char *what);
 
 /* milliseconds on the monotonic clock (timings for -lugal_verbose) */
 double lg_now_ms(void);
-/* the machine's runnable tasks now (/proc/stat's procs_running, the caller's thread among
+/* the machine's runnable tasks now (/proc/loadavg's running count, the caller's thread among
  * them), or -1 where that cannot be read: whether a core is idle for another thread */
 int lg_runnable_tasks(void);
 /* at most T threads, one for the calling thread and one per idle core (all T where the load

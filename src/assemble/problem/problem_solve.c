@@ -194,6 +194,10 @@ static int field_splits(lg_env *env, lg_problem *p, PC pc) {
     char name[16];
     snprintf(name, sizeof name, "%d", a);
     ierr = ISCreateGeneral(PetscObjectComm((PetscObject)pc), m, rows, PETSC_COPY_VALUES, &is);
+    /* a vector unknown's components are the split's blocks: its matrix gets them as its block
+     * size, and GAMG aggregates nodes, not components (3D Taylor–Hood's velocity: 100 and 148
+     * iterations at N = 10 and 14 without) */
+    if (!ierr && p->cdm[a]->bs > 1 && m % p->cdm[a]->bs == 0) ierr = ISSetBlockSize(is, p->cdm[a]->bs);
     if (!ierr) ierr = PCFieldSplitSetIS(pc, name, is);
     ISDestroy(&is);
   }

@@ -206,10 +206,12 @@ static PetscErrorCode default_option(const char *prefix, const char *name, const
   PetscFunctionReturn(0);
 }
 
-/* Taylor-Hood Stokes, 29 114 unknowns (bench/stokes3d.lua 10): 100 iterations, 1.9 s against
- * MUMPS's 12.7 s, the same energy and pressure drop to 9 digits. GAMG on the Schur
- * complement's approximation did not converge; the full and upper factorizations cost more
- * per iteration than they save */
+/* Taylor-Hood Stokes, 29 114 unknowns (bench/stokes3d.lua 10): 58 iterations, 1.4-1.8 s
+ * against MUMPS's 12 s, the same energy and pressure drop to 9 digits; 67 iterations at
+ * N = 14 (76 542 unknowns). Tried at N = 10: the upper and full factorizations (57 and 50
+ * iterations, 1.5 and 1.9 s); minus the lumped pressure mass matrix for the Schur
+ * complement (98 and 106 iterations at N = 10 and 14: worse than selfp here); GAMG on the
+ * Schur complement's approximation (no convergence in 400) */
 PetscErrorCode lg_saddle_setup(KSP ksp, const char *prefix) {
   PC pc;
   PetscFunctionBeginUser;

@@ -94,5 +94,38 @@ T.check(i2.solver == "gmres/gamg", "pulled: CG meets an indefinite Jacobian, GMR
 local dw = math.sqrt(lg.integrate(beam, lg.dot(w2 - w3, w2 - w3)) / lg.integrate(beam, lg.dot(w3, w3)))
 T.check(dw < 1e-9 and close(J2, J3, 1e-9) and close(g2, g3, 1e-7),
         "pulled: the direct solver's solution (relative L2 %.2e), J %.12e (%.12e) and dJ/dpull %.12e (%.12e)", dw, J2, J3, g2, g3)
+-- Navier–Stokes (3D Taylor–Hood channel, Re = 20): GMRES with the Schur complement fieldsplit
+-- for Newton's steps, and for the adjoint (unsymmetric: the same fieldsplit on the explicit
+-- transpose, saddle_transpose_solve) without falling back to the direct solver
+local chan = lg.mesh.box{nx = 4}
+local V2, Q1 = lg.vector(lg.lagrange(2)), P1
+local nu_, np_ = lg.unknown(V2, "nu_"), lg.unknown(Q1, "np_")
+local nv_, nq_ = lg.test(V2, "nv_"), lg.test(Q1, "nq_")
+local amp, Re = lg.parameter("amp", 1), lg.parameter("Re", 20)
+local function ns_solve()
+  local prob = lg.nonlinear_problem{mesh = chan, test = {nv_, nq_}, unknown = {nu_, np_},
+    eqn = lg.integral(chan:cells(), 1/Re*lg.inner(lg.grad(nu_), lg.grad(nv_)) + lg.dot(lg.dot(lg.grad(nu_), nu_), nv_)
+                                     - np_*lg.div(nv_) - nq_*lg.div(nu_)),
+    bc = {lg.essential_bc(chan:boundary("left"), lg.dot(nv_, nu_ - {amp*16*y*(1 - y)*z*(1 - z), 0, 0})),
+          lg.essential_bc(chan:boundary("front", "back", "bottom", "top"), lg.dot(nv_, nu_))}}
+  local uh, ph, info = prob:solve()
+  local rf = lg.reduced_functional{problem = prob, control = {amp, Re},
+    functional = lg.functional(lg.integral(chan:cells(), lg.inner(lg.grad(nu_), lg.grad(nu_)) + np_^2))}
+  local ga, gr = rf:gradient()
+  local _, _, after = prob:solve()
+  return uh, info, rf:value(), ga, gr, after
+end
+lg.options("-lugal_iterative_min 1000")
+local nsu, nsi, nsJ, nsga, nsgr, nsafter = ns_solve()
+lg.options("-lugal_iterative 0")
+local nsu0, nsi0, nsJ0, nsga0, nsgr0 = ns_solve()
+lg.options("-lugal_iterative 1 -lugal_iterative_min 20000")
+T.check(nsi.solver == "gmres/fieldsplit" and nsafter.solver == "gmres/fieldsplit" and nsi.iterations == nsi0.iterations,
+        "Navier–Stokes: Newton with the fieldsplit (%s, %d steps against %d), kept after the adjoint (%s)", nsi.solver,
+        nsi.iterations, nsi0.iterations, nsafter.solver)
+local dns = math.sqrt(lg.integrate(chan, lg.dot(nsu - nsu0, nsu - nsu0)) / lg.integrate(chan, lg.dot(nsu0, nsu0)))
+T.check(dns < 1e-9 and close(nsJ, nsJ0, 1e-10) and close(nsga, nsga0, 1e-8) and close(nsgr, nsgr0, 1e-8),
+        "Navier–Stokes: the direct solver's velocity (relative L2 %.2e), J %.12e (%.12e), gradient %.12e %.12e (%.12e %.12e)",
+        dns, nsJ, nsJ0, nsga, nsgr, nsga0, nsgr0)
 print(string.format("newton iterative: CG %d/%d, GMRES %d/%d linear/Newton iterations; dJ/dc %.10e (direct %.10e); beam %s %d/%d, pulled %s, dJ/dpull %.10e (direct %.10e)",
                     ia.linear_iterations, ia.iterations, ib.linear_iterations, ib.iterations, gca, gca0, i1.solver, i1.linear_iterations, i1.iterations, i2.solver, g2, g3))

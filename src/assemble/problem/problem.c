@@ -577,6 +577,8 @@ void lg_problem_free(lg_problem *p) {
   lg_keep_destroy(&p->keep);
   if (p->ksp) KSPDestroy(&p->ksp);
   if (p->snes) SNESDestroy(&p->snes);
+  if (p->kspT) KSPDestroy(&p->kspT);
+  if (p->At) MatDestroy(&p->At);
   free(p);
 }
 

@@ -136,7 +136,9 @@ struct lg_problem {
                        * a Schur complement fieldsplit (a saddle point) */
   int newton_iter;    /* a nonlinear problem's: the same for its SNES's solver (newton_matrix),
                        * -1 iterative but not set up yet */
-  int splits_set;     /* the fieldsplit PC has its fields (problem_solve.c, field_splits) */
+  KSP kspT;           /* a saddle point's transposed solves under the default fieldsplit: on At, */
+  Mat At;             /* A transposed explicitly at assembly At_version (saddle_transpose_solve) */
+  unsigned At_version;
   int newton_nocg;    /* CG failed on one of its Jacobians: GMRES from then on */
   unsigned a_version;  /* assemblies into A (lg_problem_assemble_into) */
   unsigned isym_version; /* the a_version whose symmetry isym holds */

@@ -170,7 +170,9 @@ static uint64_t matrix_fingerprint(lg_env *env, lg_problem *p) {
 static int field_splits(lg_env *env, lg_problem *p, PC pc) {
   PetscBool fs = PETSC_FALSE;
   PCHK(PetscObjectTypeCompare((PetscObject)pc, PCFIELDSPLIT, &fs), "PetscObjectTypeCompare");
-  if (!fs || p->splits_set || p->rows.n < 2) return 0;
+  IS have = NULL;
+  if (fs) PCHK(PCFieldSplitGetIS(pc, "0", &have), "PCFieldSplitGetIS");
+  if (!fs || have || p->rows.n < 2) return 0;
   int n = p->hi - p->lo, nf = p->rows.n;
   PetscInt *rows = malloc(sizeof(PetscInt) * ((size_t)n + 1));
   int *field = malloc(sizeof(int) * ((size_t)n + 1));
@@ -204,7 +206,6 @@ static int field_splits(lg_env *env, lg_problem *p, PC pc) {
   free(rows);
   free(field);
   if (ierr) return lg_petsc_fail(env, ierr, "the field splits");
-  p->splits_set = 1;
   return 0;
 }
 
@@ -753,8 +754,19 @@ static int newton_matrix(lg_env *env, lg_problem *p, KSP ksp) {
     PetscBool newton = PETSC_FALSE;
     PetscObjectTypeCompare((PetscObject)p->snes, SNESNEWTONLS, &newton);
     p->newton_iter = newton && iterative_allowed(p, 1) ? -1 : 2; /* -1: iterative, not set up yet */
+    if (newton && iterative_allowed(p, 2) && lg_saddle_point(p->A, p->rglob[1])) {
+      /* Navier–Stokes: the Schur complement fieldsplit of a linear saddle point, for good */
+      PC pc;
+      PCHK(lg_saddle_setup(ksp, p->prefix), "the saddle point solver's setup");
+      PCHK(KSPGetPC(ksp, &pc), "KSPGetPC");
+      if (field_splits(env, p, pc)) return 1;
+      p->newton_iter = 4;
+      if (env->verbose)
+        fprintf(stderr, "[lugal] Newton's linear solver: GMRES with a Schur complement fieldsplit (%d unknowns, a saddle point; "
+                        "-lugal_iterative 0 or -pc_type lu for the direct solver)\n", p->Nglob);
+    }
   }
-  if (p->newton_iter != 2) {
+  if (p->newton_iter != 2 && p->newton_iter != 4) {
     int spd = !p->newton_nocg && lg_spd_candidate(p->A), mode = spd ? 1 : lg_positive_diagonal(p->A) ? 3 : 2;
     if (mode == 2 && p->newton_iter < 0) {
       p->newton_iter = 2;
@@ -920,6 +932,7 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
      * step where it converges in 14 (-snes_divergence_tolerance restores it) */
     PCHK(SNESSetDivergenceTolerance(p->snes, -1), "SNESSetDivergenceTolerance");
     PCHK(SNESSetFromOptions(p->snes), "SNESSetFromOptions");
+    if (field_splits(env, p, pc)) return 1; /* the user's -pc_type fieldsplit */
     if (lg_problem_near_nullspace(env, p, ksp)) return 1;
   }
   static PetscReal hist[128];
@@ -960,7 +973,7 @@ static int solve_nonlinear(lg_env *env, lg_problem *p, lg_function **initial, lg
   KSP sksp;
   PCHK(SNESGetKSP(p->snes, &sksp), "SNESGetKSP");
   lg_solver_name(sksp, info->solver, sizeof info->solver);
-  if (reason == SNES_DIVERGED_LINEAR_SOLVE && (p->newton_iter == 1 || p->newton_iter == 3)) {
+  if (reason == SNES_DIVERGED_LINEAR_SOLVE && krylov_default(p->newton_iter)) {
     /* CG did not converge on a Jacobian (an iterate where the energy is not convex: CG
      * stops on the indefinite matrix): GMRES from now on; GMRES did not: the direct solver.
      * And Newton again */
@@ -1092,6 +1105,29 @@ static PetscErrorCode solve_as_transpose(lg_problem *p, KSP ksp, Vec r, Vec l, d
   PetscFunctionReturn(0);
 }
 
+/* The transposed solve of a saddle point under lugal's fieldsplit, whose Schur complement
+ * PETSc cannot apply transposed (the Navier–Stokes adjoint ran 300 GMRES iterations, then
+ * fell back to MUMPS for good): GMRES with the same fieldsplit on Aᵀ, made explicit once per
+ * assembly of A. *used: the KSP that solved, for its reason */
+static int saddle_transpose_solve(lg_env *env, lg_problem *p, Vec r, Vec l, KSP *used) {
+  if (!p->kspT) {
+    PC pc;
+    PCHK(KSPCreate(PetscObjectComm((PetscObject)p->A), &p->kspT), "KSPCreate");
+    if (p->prefix[0]) PCHK(KSPSetOptionsPrefix(p->kspT, p->prefix), "KSPSetOptionsPrefix");
+    PCHK(lg_saddle_setup(p->kspT, p->prefix), "the saddle point solver's setup");
+    PCHK(KSPGetPC(p->kspT, &pc), "KSPGetPC");
+    if (field_splits(env, p, pc)) return 1;
+  }
+  if (!p->At || p->At_version != p->a_version) {
+    PCHK(MatTranspose(p->A, p->At ? MAT_REUSE_MATRIX : MAT_INITIAL_MATRIX, &p->At), "MatTranspose");
+    PCHK(KSPSetOperators(p->kspT, p->At, p->At), "KSPSetOperators");
+    p->At_version = p->a_version;
+  }
+  *used = p->kspT;
+  PCHK(KSPSolve(p->kspT, r, l), "the transposed saddle point solve");
+  return 0;
+}
+
 /* A symmetric apart from its essential rows (checked once per assembly; serial runs) */
 static int symmetric_besides_bcs(lg_problem *p) {
   if (p->par) return 0;
@@ -1134,10 +1170,12 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
     /* CG's matrix is symmetric (choose_solver): the transposed solve is the solve; a matrix
      * symmetric apart from its essential rows: a solve and a product */
     int cg = ksp_is_cg(ksp), mode = default_mode(p);
+    KSP used = ksp;
     if (transpose && !cg && symmetric_besides_bcs(p)) ierr = solve_as_transpose(p, ksp, r, l, D);
+    else if (transpose && mode == 4) ierr = saddle_transpose_solve(env, p, r, l, &used) ? PETSC_ERR_LIB : 0;
     else ierr = transpose && !cg ? KSPSolveTranspose(ksp, r, l) : KSPSolve(ksp, r, l);
     reason = KSP_CONVERGED_ITS;
-    if (!ierr) KSPGetConvergedReason(ksp, &reason);
+    if (!ierr) KSPGetConvergedReason(used, &reason);
     /* CG or GMRES did not converge (or GAMG has no transposed application): the direct solver */
     if ((ierr || reason < 0) && krylov_default(mode)) {
       if (iterative_to_direct(env, p, ierr ? "the iterative solver failed in an adjoint or tangent solve"

@@ -1,7 +1,9 @@
 -- mpi_shared.lua — cases that tests/lua/mpi_cases.lua (meshes whole on every rank) and
 -- mpi_dist.lua (distributed meshes, -lugal_distribute) both compare with the serial run:
 -- Bratu by Newton, a heat loop on quadrilaterals, vector P2 elasticity with CG + GAMG and
--- the rigid body modes, SIPG with interior facets. require("mpi_shared")(lg, out), out(name, class, value) printing a line.
+-- the rigid body modes, SIPG with interior facets; the iterative defaults (CG, GMRES and
+-- Newton's CG with GAMG, the size lowered by -lugal_iterative_min) with the adjoint and
+-- tangent of a Dirichlet control, whose eliminated columns are corrected across the ranks. require("mpi_shared")(lg, out), out(name, class, value) printing a line.
 return function(lg, out)
 local x, y, pi = lg.x, lg.y, math.pi
 
@@ -264,5 +266,33 @@ do
   mesh:displace(function(x, y) return 0.3*y*y, 0.1*x end)
   local eh = el:solve()
   out("moved_rigid", "direct", math.sqrt(lg.integrate(mesh, lg.dot(eh, eh))))
+end
+
+-- the iterative defaults in parallel (problem_solve.c, column_correction_par; solver.c,
+-- mpi_symmetric): -Δu (+ 3 ∂u/∂x, + 10 u³) = f, u = c (1 + x) on the boundary
+do
+  local z = lg.z
+  lg.options("-lugal_iterative_min 1000")
+  local mesh = lg.mesh.box{nx = 12}
+  local P1 = lg.lagrange(1)
+  local u, v = lg.unknown(P1, "ui"), lg.test(P1, "vi")
+  local c, s = lg.parameter("ci", 0.3), lg.parameter("si", 1.0)
+  for _, case in ipairs{{"cg", 0, false}, {"gmres", 3, false}, {"newton", 0, true}} do
+    local name, conv, nl = case[1], case[2], case[3]
+    local f = s*3*pi^2*lg.sin(pi*x)*lg.sin(pi*y)*lg.sin(pi*z)
+    local eqn = lg.dot(lg.grad(v), lg.grad(u)) - f*v + conv*lg.grad(u)[1]*v + (nl and 10*u^3*v or 0)
+    local prob = (nl and lg.nonlinear_problem or lg.linear_problem){mesh = mesh, test = v, unknown = u,
+      eqn = lg.integral(mesh:cells(), eqn), bc = lg.essential_bc(mesh:boundary(), v*(u - c*(1 + x)))}
+    local uh, info = prob:solve()
+    assert(info.solver:find("gamg"), "the iterative default on " .. lg.size() .. " ranks, got " .. info.solver)
+    local rf = lg.reduced_functional{problem = prob, functional = lg.functional(lg.integral(mesh:cells(), (u - 0.5)^2)),
+                                     control = {c, s}}
+    local gc, gs = rf:gradient()
+    out("iterative_" .. name .. "_J", "iter", rf:value())
+    out("iterative_" .. name .. "_dJdc", "iter", gc)
+    out("iterative_" .. name .. "_dJds", "iter", gs)
+    out("iterative_" .. name .. "_tangent", "iter", lg.integrate(mesh, 2*(uh - 0.5)*prob:sensitivity(c)))
+  end
+  lg.options("-lugal_iterative_min 20000")
 end
 end

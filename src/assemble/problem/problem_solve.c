@@ -288,7 +288,8 @@ static int ksp_is_cg(KSP ksp) {
 static int iterative_allowed(lg_problem *p, int nfield) {
   PetscBool on = PETSC_TRUE;
   PetscOptionsGetBool(NULL, NULL, "-lugal_iterative", &on, NULL);
-  return on && !p->mass_cg && !p->nnull && !p->par && p->rows.n == nfield && p->cols.n == nfield &&
+  /* the saddle point's checks and splits read a serial matrix's field order */
+  return on && !p->mass_cg && !p->nnull && !(p->par && nfield > 1) && p->rows.n == nfield && p->cols.n == nfield &&
          p->Nglob >= lg_iterative_size(p->lm->m->dim) && !option_set(p, "-ksp_type") && !option_set(p, "-pc_type") &&
          !option_set(p, "-pc_factor_mat_solver_type");
 }
@@ -340,12 +341,53 @@ static int choose_solver(lg_env *env, lg_problem *p) {
   return 0;
 }
 
+/* column_correction in a parallel run, where an essential column's row may be another
+ * rank's: the tangent reads r_b from the whole vector (lg_problem_vec_get), the adjoint adds
+ * its corrections to λ_b where b lives (VecSetValues, ADD_VALUES). Collective */
+static int column_correction_par(lg_env *env, lg_problem *p, Vec v, int transpose, double D) {
+  if (!transpose) {
+    double *whole = malloc(sizeof(double) * ((size_t)p->N + 1));
+    if (!whole) { lg_seterr(env, "out of memory"); return 1; }
+    if (lg_problem_vec_get(env, p, v, whole)) { free(whole); return 1; }
+    PetscScalar *a;
+    PetscErrorCode ierr = VecGetArray(v, &a);
+    if (!ierr) {
+      for (size_t e = 0; e < p->bcc_n; e++) a[p->bcc_row[e] - p->lo] -= p->bcc_val[e] * whole[p->bc_rows[p->bcc_col[e]]] / D;
+      ierr = VecRestoreArray(v, &a);
+    }
+    free(whole);
+    if (ierr) return lg_petsc_fail(env, ierr, "the column correction");
+    return 0;
+  }
+  PetscInt *rows = malloc(sizeof(PetscInt) * (p->bcc_n + 1));
+  PetscScalar *vals = malloc(sizeof(PetscScalar) * (p->bcc_n + 1));
+  const PetscScalar *a;
+  PetscErrorCode ierr = rows && vals ? VecGetArrayRead(v, &a) : PETSC_ERR_MEM;
+  if (!ierr) {
+    for (size_t e = 0; e < p->bcc_n; e++) {
+      rows[e] = lg_petsc_row(p, p->bc_rows[p->bcc_col[e]]);
+      vals[e] = -p->bcc_val[e] * a[p->bcc_row[e] - p->lo] / D;
+    }
+    ierr = VecRestoreArrayRead(v, &a);
+  }
+  if (!ierr) ierr = VecSetValues(v, (PetscInt)p->bcc_n, rows, vals, ADD_VALUES);
+  /* every rank assembles, with entries or without */
+  if (!ierr) ierr = VecAssemblyBegin(v);
+  if (!ierr) ierr = VecAssemblyEnd(v);
+  free(rows);
+  free(vals);
+  if (ierr) return lg_petsc_fail(env, ierr, "the column correction");
+  return 0;
+}
+
 /* the corrections of a solve with a matrix whose essential columns were eliminated for a
  * problem that keeps them (sym_elim without bc_symmetric), from the eliminated entries a_ib
  * (bcc_*), D the essential diagonal: the tangent's right side r_i -= a_ib r_b / D before
  * the solve; the adjoint's (transposed) solution λ_b -= a_ib λ_i / D after it */
 static int column_correction(lg_env *env, lg_problem *p, Vec v, int transpose, double D) {
-  if (!p->sym_elim || (p->bc_symmetric && !p->nonlinear) || !p->bcc_n) return 0;
+  if (!p->sym_elim || (p->bc_symmetric && !p->nonlinear)) return 0;
+  if (p->par) return column_correction_par(env, p, v, transpose, D);
+  if (!p->bcc_n) return 0;
   PetscScalar *a;
   PCHK(VecGetArray(v, &a), "VecGetArray");
   for (size_t e = 0; e < p->bcc_n; e++) {

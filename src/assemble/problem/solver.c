@@ -141,9 +141,7 @@ PetscInt lg_iterative_size(int dim) {
   return n;
 }
 
-int lg_positive_diagonal(Mat A) {
-  PetscBool seq = PETSC_FALSE;
-  if (PetscObjectTypeCompare((PetscObject)A, MATSEQAIJ, &seq) || !seq) return 0;
+int lg_positive_diagonal(Mat A) { /* collective */
   Vec d;
   PetscReal mn = 0;
   if (MatCreateVecs(A, &d, NULL)) return 0;
@@ -152,9 +150,46 @@ int lg_positive_diagonal(Mat A) {
   return ok;
 }
 
+/* a parallel matrix's symmetry: against its explicit transpose, row by row over the owned
+ * rows (MatGetRow's columns are sorted), the test of symmetric_skip with the row's own
+ * diagonal (or largest entry) for the diagonals' share; collective */
+static int mpi_symmetric(Mat A) {
+  Mat At;
+  PetscInt lo, hi;
+  if (MatTranspose(A, MAT_INITIAL_MATRIX, &At)) return 0;
+  int ok = !MatGetOwnershipRange(A, &lo, &hi);
+  for (PetscInt i = lo; ok && i < hi; i++) {
+    PetscInt na = 0, nt = 0;
+    const PetscInt *ca = NULL, *ct = NULL;
+    const PetscScalar *va = NULL, *vt = NULL;
+    if (MatGetRow(A, i, &na, &ca, &va)) { ok = 0; break; }
+    if (MatGetRow(At, i, &nt, &ct, &vt)) { MatRestoreRow(A, i, &na, &ca, &va); ok = 0; break; }
+    double dg = 0, mx = 0;
+    for (PetscInt k = 0; k < na; k++) {
+      if (ca[k] == i) dg = PetscAbsScalar(va[k]);
+      mx = PetscMax(mx, PetscAbsScalar(va[k]));
+    }
+    if (dg == 0) dg = mx;
+    for (PetscInt a = 0, t = 0; ok && (a < na || t < nt);) {
+      PetscInt col = a < na && (t >= nt || ca[a] <= ct[t]) ? ca[a] : ct[t];
+      PetscScalar x = a < na && ca[a] == col ? va[a++] : 0, y = t < nt && ct[t] == col ? vt[t++] : 0;
+      PetscReal m = PetscMax(PetscMax(PetscAbsScalar(x), PetscAbsScalar(y)), 1e-4 * dg);
+      ok = PetscAbsScalar(x - y) <= 1e-12 * m;
+    }
+    MatRestoreRow(At, i, &nt, &ct, &vt);
+    MatRestoreRow(A, i, &na, &ca, &va);
+  }
+  MatDestroy(&At);
+  int all = 0;
+  if (MPI_Allreduce(&ok, &all, 1, MPI_INT, MPI_MIN, PetscObjectComm((PetscObject)A)) != MPI_SUCCESS) return 0;
+  return all;
+}
+
 int lg_spd_candidate(Mat A) {
-  PetscBool sym = PETSC_FALSE;
-  return lg_positive_diagonal(A) && !symmetric(A, &sym) && sym;
+  PetscBool sym = PETSC_FALSE, seq = PETSC_FALSE;
+  if (!lg_positive_diagonal(A)) return 0;
+  if (PetscObjectTypeCompare((PetscObject)A, MATSEQAIJ, &seq)) return 0;
+  return seq ? !symmetric(A, &sym) && sym : mpi_symmetric(A);
 }
 
 PetscErrorCode lg_iterative_setup(KSP ksp, int spd) {

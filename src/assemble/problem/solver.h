@@ -25,8 +25,9 @@ PetscErrorCode lg_lu_prepare(KSP ksp, Mat A, const PetscInt *bc_rows, int nbc, c
  * 0.9 s; bench/RESULTS.md, "Default solvers"). lg_iterative_size: the least number of
  * unknowns for which CG with GAMG is the default, by the mesh's dimension. */
 PetscInt lg_iterative_size(int dim);
-/* whether A (a sequential AIJ matrix, before the essential rows are replaced) is symmetric
- * to rounding with a positive diagonal (what lets CG run), or has a positive diagonal */
+/* whether A (AIJ, sequential or parallel, before the essential rows are replaced) is
+ * symmetric to rounding with a positive diagonal (what lets CG run), or has a positive
+ * diagonal; collective */
 int lg_spd_candidate(Mat A);
 int lg_positive_diagonal(Mat A);
 /* ksp to CG (spd) or GMRES (restart 100, preconditioned on the right) with GAMG, the

@@ -1,5 +1,5 @@
 #!/bin/sh
-# bench/solver_case.sh newton|stokes|navier [rounds] [size] — a default solver as a user gets it
+# bench/solver_case.sh newton|stokes|navier|elasticity|convection [rounds] [size] — a default solver as a user gets it
 # (issue 56), whole process times, rounds alternating, every line printed; quiet, then beside
 # one busy process:
 #   newton: the Neo-Hookean beam of bench/newton3d.lua (size 12: 30 927 unknowns), solve and
@@ -7,14 +7,20 @@
 #           gamg -ksp_rtol 1e-8) and the former default, the direct solver (-lugal_iterative 0);
 #   stokes: the Taylor–Hood channel of bench/stokes3d.lua (size 10: 29 114 unknowns), the
 #           same without the hand-tuned run;
-#   navier: the same channel at Re = 20 (Navier–Stokes, Newton), solve and gradient.
+#   navier: the same channel at Re = 20 (Navier–Stokes, Newton), solve and gradient;
+#   elasticity: vector P1 linear elasticity of bench/elasticity3d.lua (size 24: 46 875
+#           unknowns), with the hand-tuned run;
+#   convection: convection-diffusion of bench/convection3d.lua (size 28, b = 5: 24 389
+#           unknowns), solve and gradient.
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 . "$ROOT/bench/busy.sh"
 case ${1:-} in
   newton) script=newton3d.lua size=${3:-12} extra=0 modes="default one_thread tuned direct" ;;
   stokes) script=stokes3d.lua size=${3:-10} extra= modes="default one_thread direct" ;;
   navier) script=stokes3d.lua size=${3:-10} extra=20 modes="default one_thread direct" ;;
-  *) echo "usage: sh bench/solver_case.sh newton|stokes|navier [rounds] [size]" >&2; exit 2 ;;
+  elasticity) script=elasticity3d.lua size=${3:-24} extra= modes="default one_thread tuned direct" ;;
+  convection) script=convection3d.lua size=${3:-28} extra=5 modes="default one_thread direct" ;;
+  *) echo "usage: sh bench/solver_case.sh newton|stokes|navier|elasticity|convection [rounds] [size]" >&2; exit 2 ;;
 esac
 rounds=${2:-3}
 for load in quiet busy; do

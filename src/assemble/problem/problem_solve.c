@@ -209,6 +209,14 @@ static int field_splits(lg_env *env, lg_problem *p, PC pc) {
   return 0;
 }
 
+/* ksp to the saddle point default (solver.c, lg_saddle_setup) with the unknowns as splits */
+static int saddle_solver(lg_env *env, lg_problem *p, KSP ksp) {
+  PC pc;
+  PCHK(lg_saddle_setup(ksp, p->prefix), "the saddle point solver's setup");
+  PCHK(KSPGetPC(ksp, &pc), "KSPGetPC");
+  return field_splits(env, p, pc);
+}
+
 static int ensure_ksp(lg_env *env, lg_problem *p) {
   if (p->ksp) return 0;
   PCHK(KSPCreate(PetscObjectComm((PetscObject)p->A), &p->ksp), "KSPCreate");
@@ -312,10 +320,7 @@ static int choose_solver(lg_env *env, lg_problem *p) {
     p->iter = 2;
     if (iterative_allowed(p, 2) && lg_saddle_point(p->A, p->rglob[1])) {
       /* Stokes-like: GMRES with a Schur complement fieldsplit (solver.c) */
-      PC pc;
-      PCHK(lg_saddle_setup(p->ksp, p->prefix), "the saddle point solver's setup");
-      PCHK(KSPGetPC(p->ksp, &pc), "KSPGetPC");
-      if (field_splits(env, p, pc)) return 1;
+      if (saddle_solver(env, p, p->ksp)) return 1;
       p->iter = 4;
       if (env->verbose)
         fprintf(stderr, "[lugal] linear solver: GMRES with a Schur complement fieldsplit (%d unknowns, a saddle point: the "
@@ -798,10 +803,7 @@ static int newton_matrix(lg_env *env, lg_problem *p, KSP ksp) {
     p->newton_iter = newton && iterative_allowed(p, 1) ? -1 : 2; /* -1: iterative, not set up yet */
     if (newton && iterative_allowed(p, 2) && lg_saddle_point(p->A, p->rglob[1])) {
       /* Navier–Stokes: the Schur complement fieldsplit of a linear saddle point, for good */
-      PC pc;
-      PCHK(lg_saddle_setup(ksp, p->prefix), "the saddle point solver's setup");
-      PCHK(KSPGetPC(ksp, &pc), "KSPGetPC");
-      if (field_splits(env, p, pc)) return 1;
+      if (saddle_solver(env, p, ksp)) return 1;
       p->newton_iter = 4;
       if (env->verbose)
         fprintf(stderr, "[lugal] Newton's linear solver: GMRES with a Schur complement fieldsplit (%d unknowns, a saddle point; "
@@ -1153,12 +1155,9 @@ static PetscErrorCode solve_as_transpose(lg_problem *p, KSP ksp, Vec r, Vec l, d
  * assembly of A. *used: the KSP that solved, for its reason */
 static int saddle_transpose_solve(lg_env *env, lg_problem *p, Vec r, Vec l, KSP *used) {
   if (!p->kspT) {
-    PC pc;
     PCHK(KSPCreate(PetscObjectComm((PetscObject)p->A), &p->kspT), "KSPCreate");
     if (p->prefix[0]) PCHK(KSPSetOptionsPrefix(p->kspT, p->prefix), "KSPSetOptionsPrefix");
-    PCHK(lg_saddle_setup(p->kspT, p->prefix), "the saddle point solver's setup");
-    PCHK(KSPGetPC(p->kspT, &pc), "KSPGetPC");
-    if (field_splits(env, p, pc)) return 1;
+    if (saddle_solver(env, p, p->kspT)) return 1;
   }
   if (!p->At || p->At_version != p->a_version) {
     PCHK(MatTranspose(p->A, p->At ? MAT_REUSE_MATRIX : MAT_INITIAL_MATRIX, &p->At), "MatTranspose");

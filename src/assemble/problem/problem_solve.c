@@ -328,8 +328,8 @@ static int choose_solver(lg_env *env, lg_problem *p) {
       return 0;
     }
     if (!iterative_allowed(p, 1)) return 0;
-    int spd = lg_spd_candidate(p->A);
-    if (!spd && !lg_positive_diagonal(p->A)) {
+    int kind = lg_matrix_kind(p->A, 1), spd = kind == 1;
+    if (kind == 2) {
       if (env->verbose) fprintf(stderr, "[lugal] linear solver: direct (%d unknowns, but the matrix's diagonal is not positive)\n", p->Nglob);
       return 0;
     }
@@ -811,7 +811,7 @@ static int newton_matrix(lg_env *env, lg_problem *p, KSP ksp) {
     }
   }
   if (p->newton_iter != 2 && p->newton_iter != 4) {
-    int spd = !p->newton_nocg && lg_spd_candidate(p->A), mode = spd ? 1 : lg_positive_diagonal(p->A) ? 3 : 2;
+    int mode = lg_matrix_kind(p->A, !p->newton_nocg), spd = mode == 1;
     if (mode == 2 && p->newton_iter < 0) {
       p->newton_iter = 2;
       if (env->verbose)

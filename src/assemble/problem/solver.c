@@ -185,12 +185,14 @@ static int mpi_symmetric(Mat A) {
   return all;
 }
 
-int lg_spd_candidate(Mat A) {
+int lg_matrix_kind(Mat A, int check_symmetry) {
   PetscBool sym = PETSC_FALSE, seq = PETSC_FALSE;
-  if (!lg_positive_diagonal(A)) return 0;
-  if (PetscObjectTypeCompare((PetscObject)A, MATSEQAIJ, &seq)) return 0;
-  return seq ? !symmetric(A, &sym) && sym : mpi_symmetric(A);
+  if (!lg_positive_diagonal(A)) return 2;
+  if (!check_symmetry || PetscObjectTypeCompare((PetscObject)A, MATSEQAIJ, &seq)) return 3;
+  return (seq ? !symmetric(A, &sym) && sym : mpi_symmetric(A)) ? 1 : 3;
 }
+
+int lg_spd_candidate(Mat A) { return lg_matrix_kind(A, 1) == 1; }
 
 PetscErrorCode lg_iterative_setup(KSP ksp, int spd) {
   PC pc;

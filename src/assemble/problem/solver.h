@@ -30,6 +30,9 @@ PetscInt lg_iterative_size(int dim);
  * diagonal; collective */
 int lg_spd_candidate(Mat A);
 int lg_positive_diagonal(Mat A);
+/* both tests with one reading of the diagonal: 1 symmetric with a positive diagonal (CG), 3
+ * a positive diagonal only (GMRES; or symmetry not asked for), 2 neither (direct) */
+int lg_matrix_kind(Mat A, int check_symmetry);
 /* ksp to CG (spd) or GMRES (restart 100, preconditioned on the right) with GAMG, the
  * residual of the system itself (not the preconditioned one) to LG_ITERATIVE_RTOL of the
  * right side's, the user's -ksp_* and -pc_* options after */

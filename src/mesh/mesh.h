@@ -180,6 +180,11 @@ double mesh_cell_relative_validity(const mesh *m, int c);
  * (relative validity not above 1e-13, or non-finite coordinates); writes up to maxids ids */
 int mesh_count_invalid(const mesh *m, int maxids, int *ids, int *ninv);
 double mesh_hmax(const mesh *m);
+/* both in one pass (one read of each cell's vertices for triangles and tetrahedra): the
+ * invalid cells as mesh_count_invalid (the same count and cells), the longest edge as
+ * mesh_hmax to rounding (a tetrahedron's edges from the differences to its first vertex;
+ * NaN for a NaN coordinate; 1 for a mesh without cells) */
+int mesh_validate(const mesh *m, double *hmax, int maxids, int *ids, int *ninv);
 /* minimum corner Jacobian determinant of a quadrilateral or hexahedron (the untangling
  * paper's validity: every corner Jacobian positive) */
 double mesh_min_corner_jacobian(const mesh *m, int c);

@@ -433,9 +433,69 @@ static void hmax(void) {
   mesh_free(m);
 }
 
+/* mesh_validate (one pass) gives mesh_hmax's value to rounding and mesh_count_invalid's count and first
+ * cells: the mesh as it is, scaled by 1e-200 and 1e200, with inverted cells, a flattened one
+ * near the threshold (the slow path), a NaN */
+static void validate_same(mesh *m, const char *what) {
+  int ids[5] = {-1, -1, -1, -1, -1}, ids2[5] = {-1, -1, -1, -1, -1}, n, n2;
+  double h;
+  mesh_validate(m, &h, 5, ids, &n);
+  double h2 = mesh_hmax(m);
+  mesh_count_invalid(m, 5, ids2, &n2);
+  CHECK((fabs(h - h2) <= 4e-16 * h2 || (isnan(h) && isnan(h2))) && n == n2 && !memcmp(ids, ids2, sizeof ids),
+        "%s: mesh_validate hmax %.17g, %d invalid (first %d) against %.17g, %d (first %d)", what, h, n, ids[0], h2, n2, ids2[0]);
+}
+
+static void validate(void) {
+  char err[MESH_ERRLEN];
+  mesh_box_opts b3 = {24, 24, 40, 0, 1, 0, 1, 0, 1, CELL_TETRAHEDRON, 0, 0, 0};
+  mesh_box_opts b2 = {300, 200, 0, 0, 1, 0, 1, 0, 0, CELL_TRIANGLE, 0, 0, 0};
+  mesh_box_opts bh = {6, 5, 4, 0, 1, 0, 1, 0, 1, CELL_HEXAHEDRON, 0, 0, 0};
+  mesh *ms[3] = {mesh_box(&b3, err), mesh_rectangle(&b2, err), mesh_box(&bh, err)};
+  for (int i = 0; i < 3; i++) {
+    mesh *m = ms[i];
+    CHECK(m != NULL, "mesh %d: %s", i, err);
+    if (!m) continue;
+    int d = m->dim;
+    unsigned r = 777;
+    for (int k = 0; k < m->nvert * d; k++) {
+      r = r * 1103515245u + 12345u;
+      m->x[k] += 0.001 * ((r >> 8) / 16777216.0 - 0.5);
+    }
+    validate_same(m, "perturbed");
+    for (int k = 0; k < m->nvert * d; k++) m->x[k] *= 1e-200;
+    validate_same(m, "tiny");
+    for (int k = 0; k < m->nvert * d; k++) m->x[k] *= 1e200, m->x[k] *= 1e200;
+    validate_same(m, "huge");
+    for (int k = 0; k < m->nvert * d; k++) m->x[k] *= 1e-200;
+    /* invert three cells (two vertices swapped) */
+    int inv[3] = {7, m->ncell / 2, m->ncell - 1};
+    for (int j = 0; j < 3; j++) {
+      int *v = m->cells + (size_t)inv[j] * m->nvc, t = v[1];
+      v[1] = v[2], v[2] = t;
+    }
+    validate_same(m, "inverted cells");
+    int nbad;
+    mesh_validate(m, &(double){0}, 0, NULL, &nbad);
+    CHECK(nbad >= 3, "the inverted cells are counted (%d)", nbad);
+    /* a cell flattened to about the threshold's relative validity */
+    if (m->type != CELL_HEXAHEDRON) {
+      int *v = m->cells + (size_t)20 * m->nvc;
+      const double *a = m->x + (size_t)d * v[0], *b2v = m->x + (size_t)d * v[1];
+      double *p = m->x + (size_t)d * v[d];
+      for (int k = 0; k < d; k++) p[k] = 0.5 * (a[k] + b2v[k]) + (k == 0 ? 1e-14 : 0);
+      validate_same(m, "a flattened cell");
+    }
+    m->x[5] = NAN;
+    validate_same(m, "a NaN");
+    mesh_free(m);
+  }
+}
+
 int main(int argc, char **argv) {
   const char *data = argc > 1 ? argv[1] : "tests/data";
   hmax();
+  validate();
   untangle_option_defaults();
   pack(data);
   parts(data);

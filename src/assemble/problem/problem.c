@@ -781,7 +781,7 @@ typedef struct {
 
 /* the element matrices of items first .. first + n - 1 into the value array a: each entry
  * at its row's start plus its rank (times B) (T: the ranks' type). B = 1: the element rows'
- * starts read one after another; B > 1: a node row's start and length from its node */
+ * rows read one after another, their starts from csr_i; B > 1: a node row's start and length from its node */
 #define SCATTER_RANKS(T)                                                                            \
   do {                                                                                              \
     const T *rk = (const T *)p->rank + t->rank_off + (size_t)first * (size_t)(rn * cn);            \
@@ -791,13 +791,13 @@ typedef struct {
       if (cn == 4) /* P1 tetrahedra, Q1 quadrilaterals: straight-line code */                     \
         for (size_t er = 0, ner = (size_t)n * rn; er < ner; er++, rk += 4, vr += 4) {               \
           if (rs[er] < 0 || !LG_IN_WINDOW(ew, er, w)) continue; /* another rank's or window's row */ \
-          PetscScalar *row0 = a + rs[er];                                                           \
+          PetscScalar *row0 = a + ia[rs[er]];                                                       \
           row0[rk[0]] += vr[0]; row0[rk[1]] += vr[1]; row0[rk[2]] += vr[2]; row0[rk[3]] += vr[3];   \
         }                                                                                           \
       else                                                                                          \
         for (size_t er = 0, ner = (size_t)n * rn; er < ner; er++, rk += cn, vr += cn) {             \
           if (rs[er] < 0 || !LG_IN_WINDOW(ew, er, w)) continue;                                     \
-          PetscScalar *row0 = a + rs[er];                                                           \
+          PetscScalar *row0 = a + ia[rs[er]];                                                       \
           for (int j = 0; j < cn; j++) row0[rk[j]] += vr[j];                                        \
         }                                                                                           \
       break;                                                                                        \

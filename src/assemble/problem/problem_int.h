@@ -94,10 +94,12 @@ struct lg_problem {
    * csr_i[R*B] + a*(csr_i[R*B+1] - csr_i[R*B]) + rank*B + b, R the row node */
   void *rank;
   int rank_w;           /* bytes per rank: 1 (rows of up to 256 nodes), 2 or 4 */
-  PetscInt *row_start;  /* B = 1: per element row (item, row) its row's csr_i (a parallel
-                         * run: its owned row's number, -1 for another rank's), so that the
-                         * scatter reads no dof map (the loads of cell, dof and row start
-                         * one after another made the P1 scatter latency-bound) */
+  PetscInt *row_start;  /* B = 1: per element row (item, row) its owned row's number from 0
+                         * (-1 for another rank's), so that the scatter reads no dof map (the
+                         * loads of cell, dof and row start one after another made the P1
+                         * scatter latency-bound); csr_i gives the row's start. A number, not
+                         * the start: the pattern's blocks are written before their places
+                         * in csr_j are known (lg_problem_setup_matrix's one pass) */
   lg_chunk_bufs chunks; /* element tensors of a run of items per thread (lg_assemble_chunks) */
   PetscInt nnz;
   double setup_ms[2]; /* lg_problem_setup_matrix's phases: pattern, PETSc matrix */

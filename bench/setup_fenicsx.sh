@@ -15,11 +15,16 @@ echo "${2:-quiet}: /proc/loadavg $(cat /proc/loadavg)"
 key() { echo "$1" | tr ' ' '_'; }
 r=1
 while [ "$r" -le "$rounds" ]; do
-  # the three in a rotating order: the run right after FEniCSx's pays for the memory it
-  # freed (P1 N = 64 beside a busy process: one thread's setup 0.62-0.89 s right after
-  # FEniCSx, 0.26-0.27 s otherwise), so a fixed order charged that to one column
-  case $((r % 3)) in 1) order="lugal lugal1 fenicsx" ;; 2) order="lugal1 fenicsx lugal" ;; *) order="fenicsx lugal lugal1" ;; esac
+  ci=0
   for c in "40 1 5 laplace" "64 1 5 laplace" "24 2 5 laplace" "16 2 5 neohookean"; do
+    # FEniCSx first, then lugal's two in turn: the run right after FEniCSx pays for the
+    # memory it freed (this VM reports freed memory to its host, which takes it back; a
+    # first touch of it then faults in the host too: P1 N = 64 beside a busy process, one
+    # thread's setup 0.62-0.89 s right after FEniCSx, 0.26-0.27 s otherwise). The order
+    # alternates with the round and the case, so that neither lugal column always follows
+    # it (the rotation before this let lugal's default follow FEniCSx in every round)
+    if [ $(((r + ci) % 2)) -eq 0 ]; then order="fenicsx lugal lugal1"; else order="fenicsx lugal1 lugal"; fi
+    ci=$((ci + 1))
     k=$(key "$c")
     for who in $order; do
       # shellcheck disable=SC2086

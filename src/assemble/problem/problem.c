@@ -786,7 +786,7 @@ typedef struct {
   do {                                                                                              \
     const T *rk = (const T *)p->rank + t->rank_off + (size_t)first * (size_t)(rn * cn);            \
     if (B == 1) {                                                                                   \
-      const PetscInt *rs = p->row_start + t->erow_first + (size_t)first * (size_t)rn;              \
+      const PetscInt *rs = t->rows + (size_t)first * (size_t)rn;              \
       const double *vr = v;                                                                         \
       if (cn == 4) /* P1 tetrahedra, Q1 quadrilaterals: straight-line code */                     \
         for (size_t er = 0, ner = (size_t)n * rn; er < ner; er++, rk += 4, vr += 4) {               \
@@ -836,7 +836,7 @@ typedef struct {
   do {                                                                                              \
     const T *rk = (const T *)p->rank + t->rank_off + (size_t)first * (size_t)(rn * cn);             \
     if (B == 1) {                                                                                   \
-      const PetscInt *rs = p->row_start + t->erow_first + (size_t)first * (size_t)rn;               \
+      const PetscInt *rs = t->rows + (size_t)first * (size_t)rn;               \
       const double *vr = v;                                                                         \
       for (size_t er = 0, ner = (size_t)n * rn; er < ner; er++, rk += cn, vr += cn) {               \
         PetscInt row = rs[er];                                                                      \

@@ -194,7 +194,7 @@ static void pattern_fill(const pattern_in *in, pattern_block *bk) {
       r = q > in->start[R] && in->erow[q - 1] == item ? r + 1 : 0;
       while (rg[r] != R) r++;
       size_t at = t->rank_off + (local * (size_t)rn + (size_t)r) * (size_t)cn;
-      if (B == 1) p->row_start[t->erow_first + local * (size_t)rn + (size_t)r] = (PetscInt)(RP - in->R0);
+      if (B == 1 && !t->rows_shared) p->row_start[t->erow_first + local * (size_t)rn + (size_t)r] = (PetscInt)(RP - in->R0);
       if (w == 1)
         for (int k = 0; k < cn; k++) ((uint8_t *)p->rank)[at + k] = (uint8_t)(-2 - mark[en[k]]);
       else if (w == 2)
@@ -476,10 +476,10 @@ static int pattern_two_passes(lg_problem *p, pattern_in *in, pattern_block *blk,
   p->rank_w = maxlen <= 256 ? 1 : maxlen <= 65536 ? 2 : 4;
   PetscInt *ja = *jaout = malloc(sizeof(PetscInt) * (nnz ? nnz : 1));
   p->rank = malloc((size_t)p->rank_w * (nrank + 1));
-  if (B == 1) p->row_start = malloc(sizeof(PetscInt) * (nerow + 1));
-  if (!ja || !p->rank || (B == 1 && !p->row_start)) return 1;
+  if (B == 1 && nerow) p->row_start = malloc(sizeof(PetscInt) * (nerow + 1));
+  if (!ja || !p->rank || (B == 1 && nerow && !p->row_start)) return 1;
   /* element rows of rows another rank owns: -1, skipped by the scatter */
-  if (B == 1 && p->par) memset(p->row_start, 0xff, sizeof(PetscInt) * (nerow + 1));
+  if (B == 1 && nerow && p->par) memset(p->row_start, 0xff, sizeof(PetscInt) * (nerow + 1));
   in->ja = ja;
 #ifdef _OPENMP
 #pragma omp parallel for schedule(static, 1) if (nb > 1)
@@ -515,9 +515,9 @@ static int pattern_passes(lg_problem *p, pattern_in *in, pattern_block *blk, int
   p->rank_w = 1;
   PetscInt *ja = *jaout = malloc(sizeof(PetscInt) * (ubtot ? ubtot : 1));
   p->rank = malloc(nrank + 1);
-  if (B == 1) p->row_start = malloc(sizeof(PetscInt) * (nerow + 1));
-  if (!ja || !p->rank || (B == 1 && !p->row_start)) return 1;
-  if (B == 1 && p->par) memset(p->row_start, 0xff, sizeof(PetscInt) * (nerow + 1));
+  if (B == 1 && nerow) p->row_start = malloc(sizeof(PetscInt) * (nerow + 1));
+  if (!ja || !p->rank || (B == 1 && nerow && !p->row_start)) return 1;
+  if (B == 1 && nerow && p->par) memset(p->row_start, 0xff, sizeof(PetscInt) * (nerow + 1));
   in->ja = ja;
   in->one_pass = 1;
 #ifdef _OPENMP
@@ -559,17 +559,20 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   /* node arrays are indexed by PETSc's node numbers, or on a distributed mesh by its local
    * nodes' (no array of the whole problem's size on any rank) */
   int B = lg_matrix_block_size(p), local = p->lm->dist != NULL, Nn = (local ? p->N : p->Nglob) / B;
+  elem_rows E;
+  int bad = element_rows(p, B, local, Nn, &E);
   size_t nrank = 0, nerow = 0;
-  for (int i = 0; i < p->nterm; i++) {
+  for (int i = 0; i < p->nterm && !bad; i++) {
     prob_term *t = &p->t[i];
     if (!t->have_mat) continue;
     t->rank_off = nrank;
     t->erow_first = nerow;
     nrank += (size_t)t->nitems * (size_t)(t->rl.size / B) * (size_t)(t->cl.size / B);
-    nerow += (size_t)t->nitems * (size_t)t->rl.size;
+    /* a serial run's rows are its dofs: where the row list is the dof map's own, it is the
+     * rows' numbers too */
+    t->rows_shared = B == 1 && !p->par && !E.rown[i];
+    if (!t->rows_shared) nerow += (size_t)t->nitems * (size_t)t->rl.size;
   }
-  elem_rows E;
-  int bad = element_rows(p, B, local, Nn, &E);
   int *mark = malloc(sizeof(int) * ((size_t)Nn + 1));
   PetscInt *nodes = malloc(sizeof(PetscInt) * ((size_t)Nn + 1)); /* one node row */
   if (!bad && (!mark || !nodes)) bad = 1;
@@ -609,6 +612,8 @@ int lg_problem_setup_matrix(lg_env *env, lg_problem *p) {
   blk[0].mark = mark;
   blk[0].nodes = nodes;
   if (!bad) bad = pattern_passes(p, &in, blk, nb, nrank, nerow, &nnz, &ja);
+  for (int i = 0; i < p->nterm && !bad; i++)
+    if (p->t[i].have_mat && B == 1) p->t[i].rows = p->t[i].rows_shared ? E.rnod[i] : p->row_start + p->t[i].erow_first;
   for (int b = 1; b < nb; b++) { free(blk[b].mark); free(blk[b].nodes); }
   elem_rows_free(p, &E);
   free(nodes);

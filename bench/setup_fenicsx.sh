@@ -46,6 +46,7 @@ for c in "40 1 5 laplace" "64 1 5 laplace" "24 2 5 laplace" "16 2 5 neohookean";
       function val(k,   i, n, kv) { n = split($0, kv, " "); for (i = 1; i <= n; i++) if (index(kv[i], k "=") == 1) return substr(kv[i], length(k) + 2) + 0; return -1 }
       function med(a, n,   i, j, t) { for (i = 1; i <= n; i++) for (j = i + 1; j <= n; j++) if (a[j] < a[i]) { t = a[i]; a[i] = a[j]; a[j] = t } return a[int((n + 1) / 2)] }
       { n++; s[n] = val("setup_s") + (who == "fenicsx" ? val("space_s") : 0); f[n] = val("first_s"); a[n] = val("assemble_median_s") }
-      END { printf "%s %-8s setup %.3f s, first matrix %.3f s, reassembly %.4f s (medians of %d)\n", case, who, med(s, n), med(f, n), med(a, n), n }' "$out/$who.$k"
+      function all(a, n,   i, t) { t = ""; for (i = 1; i <= n; i++) t = t (i > 1 ? " " : "") sprintf("%.3f", a[i]); return t }
+      END { printf "%s %-8s setup %.3f s, first matrix %.3f s, reassembly %.4f s (medians of %d; setups %s)\n", case, who, med(s, n), med(f, n), med(a, n), n, all(s, n) }' "$out/$who.$k"
   done
 done

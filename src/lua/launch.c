@@ -3,17 +3,22 @@
  * its place (same process, same arguments, so mpiexec, signals and exit codes are the
  * runner's).
  *
- * What it sets: glibc's malloc tunable glibc.malloc.hugetlb=1, so that the large arrays of
- * a run (sparsity patterns, matrix values, element places, PETSc's vectors and factors)
- * are backed by transparent huge pages where the kernel offers them (THP in "madvise"
- * mode, Debian's default). glibc reads its tunables once, when the process starts, so the
- * runner cannot set it for itself. A first touch of a 4 KiB page costs a page fault; on
- * virtual machines that is expensive (12-20 us per page measured on this project's
- * machines, against 0.3-1.5 us per 4 KiB with huge pages), and the setup of a large
- * problem is mostly first touches (bench/RESULTS.md, "Huge pages").
+ * What it sets, where asked (-lugal_hugepages 1): glibc's malloc tunable
+ * glibc.malloc.hugetlb=1, so that the large arrays of a run (sparsity patterns, element
+ * places, matrix values, PETSc's vectors and factors) are backed by transparent huge pages
+ * where the kernel offers them (THP in "madvise" mode, Debian's default). glibc reads its
+ * tunables once, when the process starts, so the runner cannot set it for itself. It was the
+ * default until issue 56: on the virtual machines this project runs on, a 4 KiB page fault
+ * had cost 12-20 us. Now it costs 1.5 us there, and the machine hands memory that stays free
+ * for about 2 s back to its host (free page reporting, in blocks of 8 MB): a huge page comes
+ * from exactly those blocks, and its first touch faults in the host 512 times (7-10 us per
+ * 4 KiB). A run after a moment's idleness took 2.5-3.7x as long to set up on huge pages
+ * (P2 elasticity N = 24: 0.47 against 0.16 s; the 3D Poisson solve at N = 48, whole
+ * process, 1.28 against 1.07 s), and gained 20-40% only when it followed another run
+ * within a second (bench/hugepages.sh, bench/RESULTS.md "Huge pages, again").
  *
  * The user keeps control: an existing glibc.malloc.hugetlb in GLIBC_TUNABLES is left as it
- * is, and -lugal_hugepages 0 among the arguments leaves the environment untouched.
+ * is, and without -lugal_hugepages 1 the environment is untouched.
  *
  * And GOMP_SPINCOUNT=1000 (libgomp reads it when the runner loads), unless the user set it
  * or OMP_WAIT_POLICY: a thread that waits at a barrier or between parallel regions spins
@@ -52,7 +57,7 @@ static int hugepages_wanted(int argc, char **argv) {
   for (int i = 1; i + 1 < argc; i++)
     if (!strcmp(argv[i], "-lugal_hugepages"))
       return !(!strcmp(argv[i + 1], "0") || !strcmp(argv[i + 1], "false") || !strcmp(argv[i + 1], "no"));
-  return 1;
+  return 0;
 }
 
 int main(int argc, char **argv) {

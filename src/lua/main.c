@@ -55,8 +55,9 @@ static void usage(FILE *f) {
           "                        read whole by rank 0\n"
           "  -lugal_collective_wait S  a rank that waits S seconds (default 10) at a\n"
           "                        collective call for the others says so\n\n"
-          "  -lugal_hugepages 0    leave glibc's malloc on 4 KiB pages (by default the\n"
-          "                        `lugal` command lets it use transparent huge pages)\n");
+          "  -lugal_hugepages 1    let glibc's malloc and the mesh's arrays use transparent\n"
+          "                        huge pages (off by default: slower on virtual machines\n"
+          "                        that hand free memory back to their host)\n");
 }
 
 static int traceback(lua_State *L) {

@@ -68,6 +68,17 @@ const int *cell_edge_verts(cell_type t, int e) {
 #define BIG_MAPPED 0x6c7567616c6d6d70ull
 #define BIG_HEAP 0x6c7567616c686570ull
 
+/* the big arrays on transparent huge pages where malloc's are (the launcher's
+ * -lugal_hugepages 1 sets glibc's tunable; off by default: src/lua/launch.c says why) */
+static int big_huge(void) {
+  static int huge = -1;
+  if (huge < 0) {
+    const char *t = getenv("GLIBC_TUNABLES");
+    huge = t && strstr(t, "glibc.malloc.hugetlb=1") != NULL;
+  }
+  return huge;
+}
+
 void *mesh_big_alloc(size_t bytes) {
   size_t total = bytes + BIG_HEADER;
   unsigned char *p;
@@ -76,7 +87,7 @@ void *mesh_big_alloc(size_t bytes) {
     p = mmap(NULL, total, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
     if (p == MAP_FAILED) return NULL;
 #ifdef MADV_HUGEPAGE
-    madvise(p, total, MADV_HUGEPAGE);
+    if (big_huge()) madvise(p, total, MADV_HUGEPAGE);
 #endif
     kind = BIG_MAPPED;
   } else {

@@ -80,8 +80,8 @@ const int *cell_facet_verts(cell_type t, int f);
 const int *cell_edge_verts(cell_type t, int e);
 
 /* large arrays (coordinates, connectivity, per-cell values): blocks of 2 MiB and more are
- * mapped with transparent huge pages, which makes first touch of a 100 MB array about 30x
- * cheaper on this machine kind; smaller ones come from malloc. Free with mesh_big_free. */
+ * mapped on their own, with transparent huge pages where glibc's malloc uses them too (the
+ * launcher's -lugal_hugepages 1); smaller ones come from malloc. Free with mesh_big_free. */
 void *mesh_big_alloc(size_t bytes);
 void mesh_big_free(void *p);
 

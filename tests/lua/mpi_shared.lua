@@ -3,7 +3,8 @@
 -- Bratu by Newton, a heat loop on quadrilaterals, vector P2 elasticity with CG + GAMG and
 -- the rigid body modes, SIPG with interior facets; the iterative defaults (CG, GMRES and
 -- Newton's CG with GAMG, the size lowered by -lugal_iterative_min) with the adjoint and
--- tangent of a Dirichlet control, whose eliminated columns are corrected across the ranks. require("mpi_shared")(lg, out), out(name, class, value) printing a line.
+-- tangent of a Dirichlet control, whose eliminated columns are corrected across the ranks;
+-- the gradient and sensitivity of a pure Neumann state (nullspace = u). require("mpi_shared")(lg, out), out(name, class, value) printing a line.
 return function(lg, out)
 local x, y, pi = lg.x, lg.y, math.pi
 
@@ -294,5 +295,28 @@ do
     out("iterative_" .. name .. "_tangent", "iter", lg.integrate(mesh, 2*(uh - 0.5)*prob:sensitivity(c)))
   end
   lg.options("-lugal_iterative_min 20000")
+end
+
+-- a pure Neumann state (nullspace = u, its mean set to zero): the adjoint's right side
+-- projected with the mean's transpose (problem_solve.c, null_transpose_project: the sum
+-- of the owned rows and the cells' weights reduced over the ranks), the sensitivity
+-- projected as the state
+do
+  local mesh = lg.mesh.rectangle{nx = 12}
+  local P1 = lg.lagrange(1)
+  local u, v = lg.unknown(P1, "un"), lg.test(P1, "vn")
+  local f = lg.control(P1, mesh, "fn")
+  local kn = lg.parameter("kn", 1.3)
+  local prob = lg.linear_problem{mesh = mesh, test = v, unknown = u, nullspace = u,
+    eqn = lg.integral(mesh:cells(), (kn + f^2)*lg.dot(lg.grad(v), lg.grad(u)) - lg.cos(pi*x)*lg.cos(pi*y)*v)}
+  local rf = lg.reduced_functional{problem = prob, control = f,
+    functional = lg.functional(lg.integral(mesh:cells(), (u - lg.cos(pi*x)*y - 3)^2))}
+  local t = lg.taylor_test(rf, 0.5 + x*y, x - y)
+  -- the rate itself follows rounding in its last remainders (1.99569 on 2 ranks, 1.99578 on one)
+  local rate = t.rates1[#t.rates1]
+  assert(math.abs(rate - 2) < 0.05, "the Neumann state's Taylor rate on " .. lg.size() .. " ranks: " .. rate)
+  out("null_dj", "direct", t.dj)
+  rf:value(0.5 + x*y)
+  out("null_dk", "direct", lg.integrate(mesh, prob:sensitivity(kn)*(x + y)))
 end
 end

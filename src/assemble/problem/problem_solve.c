@@ -57,54 +57,94 @@ static int check_null_pivots(lg_env *env, lg_problem *p, KSP ksp) {
   return 1;
 }
 
-/* a constant null space field: shift it to mean zero (Lagrange bases hold the constants:
- * subtracting c from every dof subtracts c). On a distributed mesh each rank integrates its
- * owned cells and the sums are reduced */
-static void null_mean_zero(lg_env *env, lg_problem *p, double *x) {
+/* the integrals of the basis functions of component j of field a (the weights of its mean:
+ * mean(x) = sum_i x_i m_i / vol), into m (one per node of the field), from the rank's owned
+ * cells (owned) or from all its cells (complete at the dofs it owns, whose cells are all
+ * local); returns the measure of those cells */
+static double null_weights(const lg_problem *p, int a, int j, int owned, double *m) {
   const mesh_part *P = p->lm->dist;
   int rank = lg_mpi_rank();
+  const dofmap *dm = p->cdm[a];
+  int bs = dm->bs;
+  mesh *m_ = p->lm->m;
+  double vol = 0;
+  memset(m, 0, sizeof(double) * (size_t)(dm->ndof / bs + 1));
+  if (cell_is_simplex(m_->type)) {
+    for (int c = 0; c < m_->ncell; c++) {
+      if (owned && P && P->cowner[c] != rank) continue;
+      double J[3][3], K[3][3], det = fabs(simplex_jacobian(m_, c, J, K));
+      const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
+      for (int k = 0; k < dm->el.nloc; k++) m[cd[k * bs + j] / bs] += dm->el.mean[k] * det;
+      vol += det;
+    }
+    return vol;
+  }
+  /* a quadrilateral's or hexahedron's Jacobian varies: a rule of the basis degree + 1 */
+  quad_rule q;
+  quad_cell(m_->type, 0, dm->degree + 1, &q);
+  for (int c = 0; c < m_->ncell; c++) {
+    if (owned && P && P->cowner[c] != rank) continue;
+    const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
+    for (int i = 0; i < q.n; i++) {
+      double J[3][3], K[3][3], val[FEM_MAXLOC], grad[FEM_MAXLOC * 3];
+      double w = q.w[i] * fabs(cell_jacobian(m_, c, q.x + m_->dim * i, J, K));
+      lagrange_eval(&dm->el, q.x + m_->dim * i, val, grad);
+      for (int k = 0; k < dm->el.nloc; k++) m[cd[k * bs + j] / bs] += w * val[k];
+      vol += w;
+    }
+  }
+  return vol;
+}
+
+/* a constant null space field: shift it to mean zero (Lagrange bases hold the constants:
+ * subtracting c from every dof subtracts c): x -> P x = x - 1 (m^T x) / vol. On a
+ * distributed mesh each rank integrates its owned cells and the sums are reduced */
+static int null_mean_zero(lg_env *env, lg_problem *p, double *x) {
   for (int a = 0; a < p->cols.n; a++) {
     if (!p->null_const[a]) continue;
     const dofmap *dm = p->cdm[a];
     int bs = dm->bs;
+    double *m = malloc(sizeof(double) * (size_t)(dm->ndof / bs + 1));
+    if (!m) { lg_seterr(env, "out of memory"); return 1; }
     for (int j = 0; j < bs; j++) {
-      /* the mean of component j: the integral of the interpolant over the mesh's measure */
-      double num = 0, vol = 0;
-      mesh *m = p->lm->m;
-      if (cell_is_simplex(m->type)) {
-        for (int c = 0; c < m->ncell; c++) {
-          if (P && P->cowner[c] != rank) continue;
-          double J[3][3], K[3][3], det = fabs(simplex_jacobian(m, c, J, K));
-          double s = 0;
-          const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
-          for (int k = 0; k < dm->el.nloc; k++) s += x[p->cglob[a] + cd[k * bs + j]] * dm->el.mean[k];
-          num += s * det;
-          vol += det;
-        }
-      } else {
-        /* a quadrilateral's or hexahedron's Jacobian varies: a rule of the basis degree + 1 */
-        quad_rule q;
-        quad_cell(m->type, 0, dm->degree + 1, &q);
-        for (int c = 0; c < m->ncell; c++) {
-          if (P && P->cowner[c] != rank) continue;
-          const int *cd = dm->cell_dofs + (size_t)c * (size_t)dm->nloc;
-          for (int i = 0; i < q.n; i++) {
-            double J[3][3], K[3][3], val[FEM_MAXLOC], grad[FEM_MAXLOC * 3];
-            double w = q.w[i] * fabs(cell_jacobian(m, c, q.x + m->dim * i, J, K)), s = 0;
-            lagrange_eval(&dm->el, q.x + m->dim * i, val, grad);
-            for (int k = 0; k < dm->el.nloc; k++) s += x[p->cglob[a] + cd[k * bs + j]] * val[k];
-            num += w * s;
-            vol += w;
-          }
-        }
-      }
-      double nv[2] = {num, vol};
-      if (P) lg_allreduce(nv, 2, LG_SUM);
+      double nv[2] = {0, null_weights(p, a, j, 1, m)};
+      for (int i = j; i < dm->ndof; i += bs) nv[0] += x[p->cglob[a] + i] * m[i / bs];
+      if (p->lm->dist) lg_allreduce(nv, 2, LG_SUM);
       double mean = nv[1] > 0 ? nv[0] / nv[1] : 0;
       for (int i = j; i < dm->ndof; i += bs) x[p->cglob[a] + i] -= mean;
     }
+    free(m);
   }
-  (void)env;
+  return 0;
+}
+
+/* an adjoint's right side where the state has a constant null space: P^T r = r - m (1^T r)
+ * / vol with P the shift above, so that the transposed system is compatible (1^T P^T r = 0)
+ * and its solution is the adjoint of the shifted state. Without it a functional's gradient
+ * was wrong (a Taylor test's second remainder fell at rate 1, not 2). 1^T r sums the rows
+ * the rank owns, reduced over the ranks */
+static int null_transpose_project(lg_env *env, lg_problem *p, double *r) {
+  for (int a = 0; a < p->cols.n; a++) {
+    if (!p->null_const[a]) continue;
+    const dofmap *dm = p->cdm[a];
+    int bs = dm->bs;
+    double *m = malloc(sizeof(double) * (size_t)(dm->ndof / bs + 1));
+    if (!m) { lg_seterr(env, "out of memory"); return 1; }
+    for (int j = 0; j < bs; j++) {
+      double sv[2] = {0, null_weights(p, a, j, 1, m)};
+      if (p->lm->dist) null_weights(p, a, j, 0, m); /* complete at the owned dofs */
+      for (int i = j; i < dm->ndof; i += bs) {
+        PetscInt row = lg_petsc_row(p, p->cglob[a] + i);
+        if (row >= p->lo && row < p->hi) sv[0] += r[p->cglob[a] + i];
+      }
+      if (p->par) lg_allreduce(sv, 1, LG_SUM);
+      if (p->lm->dist) lg_allreduce(sv + 1, 1, LG_SUM);
+      double c = sv[1] > 0 ? sv[0] / sv[1] : 0;
+      for (int i = j; i < dm->ndof; i += bs) r[p->cglob[a] + i] -= m[i / bs] * c;
+    }
+    free(m);
+  }
+  return 0;
 }
 
 /* a 64-bit finalizer (splitmix64's): every input bit moves every output bit */
@@ -412,15 +452,14 @@ static int remove_null(lg_env *env, lg_problem *p) {
     return 0;
   }
   if (p->par) { /* the mean over the whole mesh, on the whole vector */
-    if (lg_problem_vec_get(env, p, p->x, p->rwhole)) return 1;
-    null_mean_zero(env, p, p->rwhole);
+    if (lg_problem_vec_get(env, p, p->x, p->rwhole) || null_mean_zero(env, p, p->rwhole)) return 1;
     return lg_problem_vec_set(env, p, p->x, p->rwhole);
   }
   PetscScalar *x;
   PCHK(VecGetArray(p->x, &x), "VecGetArray");
-  null_mean_zero(env, p, x);
+  int rc = null_mean_zero(env, p, x);
   PCHK(VecRestoreArray(p->x, &x), "VecRestoreArray");
-  return 0;
+  return rc;
 }
 
 /* one KSPSolve of a linear problem with its checks: 0, 1 with a message, 2 when the
@@ -1186,7 +1225,19 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   Vec r, l;
   PCHK(VecDuplicate(p->b, &r), "VecDuplicate");
   PCHK(VecDuplicate(p->b, &l), "VecDuplicate");
-  if (lg_problem_vec_set(env, p, r, rhs)) { VecDestroy(&r); VecDestroy(&l); return 1; }
+  /* a null space: the state is projected (remove_null), so the adjoint's right side is
+   * projected with its transpose, the tangent's solution with it */
+  double *proj = NULL;
+  if (transpose && p->null && !p->null_rigid) {
+    if (!(proj = malloc(sizeof(double) * ((size_t)p->N + 1)))) { lg_seterr(env, "out of memory"); VecDestroy(&r); VecDestroy(&l); return 1; }
+    memcpy(proj, rhs, sizeof(double) * (size_t)p->N);
+    if (null_transpose_project(env, p, proj)) { free(proj); VecDestroy(&r); VecDestroy(&l); return 1; }
+    rhs = proj;
+  }
+  int setf = lg_problem_vec_set(env, p, r, rhs);
+  free(proj);
+  if (!setf && transpose && p->null_rigid && MatNullSpaceRemove(p->null, r)) setf = lg_petsc_fail(env, 1, "MatNullSpaceRemove");
+  if (setf) { VecDestroy(&r); VecDestroy(&l); return 1; }
   /* a linear problem's essential rows are bc_diag (u_r - g_r): a sensitivity's right side
    * there scales with them, an adjoint's values there are bc_diag times those of the
    * transposed solve (the rows are scaled: A_D = S A, A_D^T λ' = r gives λ = S λ') */
@@ -1238,7 +1289,9 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   if (!ierr && !p->nonlinear && !env->no_keep_factor && !p->no_keep && lg_keep_applies(ksp, p->prefix))
     ierr = lg_keep_remember(&p->keep, transpose, l);
   if (!ierr && reason >= 0 && transpose && scale_essential(env, p, l, D)) ierr = PETSC_ERR_LIB;
+  if (!ierr && reason >= 0 && !transpose && p->null_rigid) ierr = MatNullSpaceRemove(p->null, l);
   if (!ierr && reason >= 0 && lg_problem_vec_get(env, p, l, lam)) ierr = PETSC_ERR_LIB;
+  if (!ierr && reason >= 0 && !transpose && p->null && !p->null_rigid && null_mean_zero(env, p, lam)) ierr = PETSC_ERR_LIB;
   VecDestroy(&r);
   VecDestroy(&l);
   const char *what = transpose ? "the adjoint solve" : "the sensitivity solve";

@@ -1,5 +1,5 @@
 #!/bin/sh
-# bench/solver_case.sh newton|stokes|navier|elasticity|convection [rounds] [size] — a default solver as a user gets it
+# bench/solver_case.sh newton|stokes|navier|elasticity|convection|neumann|rigid|cavity [rounds] [size] — a default solver as a user gets it
 # (issue 56), whole process times, rounds alternating, every line printed; quiet, then beside
 # one busy process:
 #   newton: the Neo-Hookean beam of bench/newton3d.lua (size 12: 30 927 unknowns), solve and
@@ -11,7 +11,9 @@
 #   elasticity: vector P1 linear elasticity of bench/elasticity3d.lua (size 24: 46 875
 #           unknowns), with the hand-tuned run;
 #   convection: convection-diffusion of bench/convection3d.lua (size 28, b = 5: 24 389
-#           unknowns), solve and gradient.
+#           unknowns), solve and gradient;
+#   neumann, rigid, cavity: the null space problems of bench/nullspace3d.lua (sizes 48, 24,
+#           10: 117 649, 46 875 and 29 114 unknowns), solve and gradient.
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 . "$ROOT/bench/busy.sh"
 case ${1:-} in
@@ -20,7 +22,10 @@ case ${1:-} in
   navier) script=stokes3d.lua size=${3:-10} extra=20 modes="default one_thread direct" ;;
   elasticity) script=elasticity3d.lua size=${3:-24} extra= modes="default one_thread tuned direct" ;;
   convection) script=convection3d.lua size=${3:-28} extra=5 modes="default one_thread direct" ;;
-  *) echo "usage: sh bench/solver_case.sh newton|stokes|navier|elasticity|convection [rounds] [size]" >&2; exit 2 ;;
+  neumann) script=nullspace3d.lua size=${3:-48} extra=neumann modes="default one_thread direct" ;;
+  rigid) script=nullspace3d.lua size=${3:-24} extra=rigid modes="default one_thread direct" ;;
+  cavity) script=nullspace3d.lua size=${3:-10} extra=cavity modes="default one_thread direct" ;;
+  *) echo "usage: sh bench/solver_case.sh newton|stokes|navier|elasticity|convection|neumann|rigid|cavity [rounds] [size]" >&2; exit 2 ;;
 esac
 rounds=${2:-3}
 for load in quiet busy; do

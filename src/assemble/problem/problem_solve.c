@@ -332,12 +332,15 @@ static int ksp_is_cg(KSP ksp) {
 }
 
 /* whether an iterative default may apply: nfield unknowns (scalar or vector) of at least
- * lg_iterative_size unknowns together, serial, no null space, no solver chosen by the user */
+ * lg_iterative_size unknowns together, a null space only in a serial run, no solver chosen
+ * by the user. A null space is attached to the matrix (MatSetNullSpace), which CG removes
+ * from its preconditioned residuals; the adjoint's right side is made compatible with it
+ * (null_transpose_project) */
 static int iterative_allowed(lg_problem *p, int nfield) {
   PetscBool on = PETSC_TRUE;
   PetscOptionsGetBool(NULL, NULL, "-lugal_iterative", &on, NULL);
   /* the saddle point's checks and splits read a serial matrix's field order */
-  return on && !p->mass_cg && !p->nnull && !(p->par && nfield > 1) && p->rows.n == nfield && p->cols.n == nfield &&
+  return on && !p->mass_cg && !(p->nnull && p->par) && !(p->par && nfield > 1) && p->rows.n == nfield && p->cols.n == nfield &&
          p->Nglob >= lg_iterative_size(p->lm->m->dim) && !option_set(p, "-ksp_type") && !option_set(p, "-pc_type") &&
          !option_set(p, "-pc_factor_mat_solver_type");
 }

@@ -96,10 +96,17 @@ static double null_weights(const lg_problem *p, int a, int j, int owned, double 
   return vol;
 }
 
-/* a constant null space field: shift it to mean zero (Lagrange bases hold the constants:
- * subtracting c from every dof subtracts c): x -> P x = x - 1 (m^T x) / vol. On a
- * distributed mesh each rank integrates its owned cells and the sums are reduced */
-static int null_mean_zero(lg_env *env, lg_problem *p, double *x) {
+/* the projection of a constant null space field (Lagrange bases hold the constants:
+ * subtracting c from every dof subtracts c), component by component, m the weights above:
+ * the state's shift to mean zero, x -> P x = x - 1 (m^T x) / vol (transpose 0), or its
+ * transpose, r -> P^T r = r - m (1^T r) / vol, for an adjoint's right side (transpose 1):
+ * compatible with the null space (1^T P^T r = 0), its solution the adjoint of the shifted
+ * state. Without the transpose a functional's gradient was wrong (a Taylor test's second
+ * remainder fell at rate 1, not 2). On a distributed mesh each rank integrates its owned
+ * cells (the transpose's weights: all its cells, complete at its owned dofs); 1^T r sums
+ * the owned rows; the sums are reduced over the ranks */
+static int null_project(lg_env *env, lg_problem *p, double *x, int transpose) {
+  const int dist = p->lm->dist != NULL;
   for (int a = 0; a < p->cols.n; a++) {
     if (!p->null_const[a]) continue;
     const dofmap *dm = p->cdm[a];
@@ -107,40 +114,19 @@ static int null_mean_zero(lg_env *env, lg_problem *p, double *x) {
     double *m = malloc(sizeof(double) * (size_t)(dm->ndof / bs + 1));
     if (!m) { lg_seterr(env, "out of memory"); return 1; }
     for (int j = 0; j < bs; j++) {
-      double nv[2] = {0, null_weights(p, a, j, 1, m)};
-      for (int i = j; i < dm->ndof; i += bs) nv[0] += x[p->cglob[a] + i] * m[i / bs];
-      if (p->lm->dist) lg_allreduce(nv, 2, LG_SUM);
-      double mean = nv[1] > 0 ? nv[0] / nv[1] : 0;
-      for (int i = j; i < dm->ndof; i += bs) x[p->cglob[a] + i] -= mean;
-    }
-    free(m);
-  }
-  return 0;
-}
-
-/* an adjoint's right side where the state has a constant null space: P^T r = r - m (1^T r)
- * / vol with P the shift above, so that the transposed system is compatible (1^T P^T r = 0)
- * and its solution is the adjoint of the shifted state. Without it a functional's gradient
- * was wrong (a Taylor test's second remainder fell at rate 1, not 2). 1^T r sums the rows
- * the rank owns, reduced over the ranks */
-static int null_transpose_project(lg_env *env, lg_problem *p, double *r) {
-  for (int a = 0; a < p->cols.n; a++) {
-    if (!p->null_const[a]) continue;
-    const dofmap *dm = p->cdm[a];
-    int bs = dm->bs;
-    double *m = malloc(sizeof(double) * (size_t)(dm->ndof / bs + 1));
-    if (!m) { lg_seterr(env, "out of memory"); return 1; }
-    for (int j = 0; j < bs; j++) {
-      double sv[2] = {0, null_weights(p, a, j, 1, m)};
-      if (p->lm->dist) null_weights(p, a, j, 0, m); /* complete at the owned dofs */
+      double sv[2] = {0, null_weights(p, a, j, 1, m)}; /* the pairing, the measure */
+      if (transpose && dist) null_weights(p, a, j, 0, m);
       for (int i = j; i < dm->ndof; i += bs) {
-        PetscInt row = lg_petsc_row(p, p->cglob[a] + i);
-        if (row >= p->lo && row < p->hi) sv[0] += r[p->cglob[a] + i];
+        if (!transpose) sv[0] += x[p->cglob[a] + i] * m[i / bs];
+        else {
+          PetscInt row = lg_petsc_row(p, p->cglob[a] + i);
+          if (row >= p->lo && row < p->hi) sv[0] += x[p->cglob[a] + i];
+        }
       }
-      if (p->par) lg_allreduce(sv, 1, LG_SUM);
-      if (p->lm->dist) lg_allreduce(sv + 1, 1, LG_SUM);
+      if (transpose ? p->par : dist) lg_allreduce(sv, 1, LG_SUM);
+      if (dist) lg_allreduce(sv + 1, 1, LG_SUM);
       double c = sv[1] > 0 ? sv[0] / sv[1] : 0;
-      for (int i = j; i < dm->ndof; i += bs) r[p->cglob[a] + i] -= m[i / bs] * c;
+      for (int i = j; i < dm->ndof; i += bs) x[p->cglob[a] + i] -= transpose ? m[i / bs] * c : c;
     }
     free(m);
   }
@@ -335,7 +321,7 @@ static int ksp_is_cg(KSP ksp) {
  * lg_iterative_size unknowns together, a null space only in a serial run, no solver chosen
  * by the user. A null space is attached to the matrix (MatSetNullSpace), which CG removes
  * from its preconditioned residuals; the adjoint's right side is made compatible with it
- * (null_transpose_project) */
+ * (null_project) */
 static int iterative_allowed(lg_problem *p, int nfield) {
   PetscBool on = PETSC_TRUE;
   PetscOptionsGetBool(NULL, NULL, "-lugal_iterative", &on, NULL);
@@ -455,12 +441,12 @@ static int remove_null(lg_env *env, lg_problem *p) {
     return 0;
   }
   if (p->par) { /* the mean over the whole mesh, on the whole vector */
-    if (lg_problem_vec_get(env, p, p->x, p->rwhole) || null_mean_zero(env, p, p->rwhole)) return 1;
+    if (lg_problem_vec_get(env, p, p->x, p->rwhole) || null_project(env, p, p->rwhole, 0)) return 1;
     return lg_problem_vec_set(env, p, p->x, p->rwhole);
   }
   PetscScalar *x;
   PCHK(VecGetArray(p->x, &x), "VecGetArray");
-  int rc = null_mean_zero(env, p, x);
+  int rc = null_project(env, p, x, 0);
   PCHK(VecRestoreArray(p->x, &x), "VecRestoreArray");
   return rc;
 }
@@ -1234,7 +1220,7 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   if (transpose && p->null && !p->null_rigid) {
     if (!(proj = malloc(sizeof(double) * ((size_t)p->N + 1)))) { lg_seterr(env, "out of memory"); VecDestroy(&r); VecDestroy(&l); return 1; }
     memcpy(proj, rhs, sizeof(double) * (size_t)p->N);
-    if (null_transpose_project(env, p, proj)) { free(proj); VecDestroy(&r); VecDestroy(&l); return 1; }
+    if (null_project(env, p, proj, 1)) { free(proj); VecDestroy(&r); VecDestroy(&l); return 1; }
     rhs = proj;
   }
   int setf = lg_problem_vec_set(env, p, r, rhs);
@@ -1294,7 +1280,7 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   if (!ierr && reason >= 0 && transpose && scale_essential(env, p, l, D)) ierr = PETSC_ERR_LIB;
   if (!ierr && reason >= 0 && !transpose && p->null_rigid) ierr = MatNullSpaceRemove(p->null, l);
   if (!ierr && reason >= 0 && lg_problem_vec_get(env, p, l, lam)) ierr = PETSC_ERR_LIB;
-  if (!ierr && reason >= 0 && !transpose && p->null && !p->null_rigid && null_mean_zero(env, p, lam)) ierr = PETSC_ERR_LIB;
+  if (!ierr && reason >= 0 && !transpose && p->null && !p->null_rigid && null_project(env, p, lam, 0)) ierr = PETSC_ERR_LIB;
   VecDestroy(&r);
   VecDestroy(&l);
   const char *what = transpose ? "the adjoint solve" : "the sensitivity solve";

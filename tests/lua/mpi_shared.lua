@@ -298,7 +298,7 @@ do
 end
 
 -- a pure Neumann state (nullspace = u, its mean set to zero): the adjoint's right side
--- projected with the mean's transpose (problem_solve.c, null_transpose_project: the sum
+-- projected with the mean's transpose (problem_solve.c, null_project: the sum
 -- of the owned rows and the cells' weights reduced over the ranks), the sensitivity
 -- projected as the state
 do

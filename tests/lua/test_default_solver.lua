@@ -132,7 +132,7 @@ print(string.format("Stokes (%d unknowns): %s, %d iterations; dJ/damp %.10e (dir
 -- null spaces (the size lowered by -lugal_iterative_min): a pure Neumann problem and a free
 -- elastic body get CG with GAMG, an enclosed flow (nullspace = p) the fieldsplit; solutions,
 -- J and the gradients (the adjoint's right side projected, problem_solve.c,
--- null_transpose_project) against the direct solver
+-- null_project) against the direct solver
 local kk = lg.parameter("kk", 1.5)
 local nbox = lg.mesh.box{nx = 12}
 local function null_cases()

@@ -1,7 +1,7 @@
 -- Gradients and sensitivities of problems with a null space (nullspace = u, "rigid", the
 -- pressure of an enclosed flow). The state is projected (problem_solve.c, remove_null: the
 -- constants to mean zero, the rigid motions out), so the adjoint's right side is projected
--- with the projection's transpose (null_transpose_project) and a tangent's solution with
+-- with the projection's transpose (null_project) and a tangent's solution with
 -- it. Without that the gradient was silently wrong: the Taylor test's first-order
 -- remainder fell at rate 1, dJ(m; dm) -0.0113 where it is 0.0002 for the first case.
 package.path = arg[0]:match("(.*/)") .. "?.lua;" .. package.path

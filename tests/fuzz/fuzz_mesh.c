@@ -78,6 +78,27 @@ static void exercise(mesh *m, fuzz_mesh_result *res) {
   const char *dir = fuzz_tmpdir();
   check_structure(m);
   mesh_count_invalid(m, 0, NULL, &res->ninvalid);
+  /* the one-pass check counts what the two passes count */
+  {
+    double h;
+    int ids[5], n1 = -1, ids2[5], n2 = -1;
+    mesh_validate(m, &h, 5, ids, &n1);
+    mesh_count_invalid(m, 5, ids2, &n2);
+    FUZZ_CHECK(n1 == res->ninvalid && n2 == n1, "mesh_validate counts the invalid cells as mesh_count_invalid");
+    for (int i = 0; i < n1 && i < 5; i++) FUZZ_CHECK(ids[i] == ids2[i], "mesh_validate's first invalid cells");
+  }
+  /* edges: each cell's edge ids in range, each naming the cell's own two vertices */
+  if (m->type != CELL_INTERVAL && !mesh_build_edges(m)) {
+    int ne = cell_nedges(m->type);
+    for (int c = 0; c < m->ncell; c++)
+      for (int e = 0; e < ne; e++) {
+        int id = m->cell_edges[(size_t)c * ne + e];
+        FUZZ_CHECK(id >= 0 && id < m->nedge, "an edge id in range");
+        const int *lv = cell_edge_verts(m->type, e), *v = m->cells + (size_t)c * m->nvc;
+        int a = v[lv[0]] < v[lv[1]] ? v[lv[0]] : v[lv[1]], b = v[lv[0]] < v[lv[1]] ? v[lv[1]] : v[lv[0]];
+        FUZZ_CHECK(m->edges[2 * id] == a && m->edges[2 * id + 1] == b, "an edge's vertices are its cells'");
+      }
+  }
   /* interior facets: two distinct cells per facet, local indices in range, a permutation */
   if (!mesh_build_interior_facets(m)) {
     int nf = cell_nfacets(m->type), nperm = 1;

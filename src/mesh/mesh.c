@@ -683,17 +683,15 @@ int mesh_count_invalid(const mesh *m, int maxids, int *ids, int *ninv) {
   return 0;
 }
 
-/* mesh_hmax's edges of one simplex given its vertices: the longest squared edge, the
- * largest coordinate difference, NaN seen */
-MESH_INLINE void simplex_edges_at(const double *const *p, int d, double *h2, double *amax, int *bad) {
-  const int(*ev)[2] = d == 2 ? tri_edges : tet_edges;
-  for (int e = 0; e < (d == 2 ? 3 : 6); e++) {
-    const double *a = p[ev[e][0]], *b = p[ev[e][1]];
+/* a triangle's edges for mesh_validate, given its vertices: the longest squared edge, NaN
+ * seen (a tetrahedron's come from tet_validate) */
+MESH_INLINE void triangle_edges_at(const double *const *p, double *h2, int *bad) {
+  for (int e = 0; e < 3; e++) {
+    const double *a = p[tri_edges[e][0]], *b = p[tri_edges[e][1]];
     double s2 = 0;
-    for (int k = 0; k < d; k++) {
+    for (int k = 0; k < 2; k++) {
       double t = a[k] - b[k];
       s2 += t * t;
-      if (fabs(t) > *amax) *amax = fabs(t);
       *bad |= t != t;
     }
     if (s2 > *h2) *h2 = s2;
@@ -756,8 +754,7 @@ static int simplex_check_pass(const mesh *m, int d, double *h2out, int *badout) 
     if (d == 3) ok = tet_validate(x + 3 * (size_t)v[0], x + 3 * (size_t)v[1], x + 3 * (size_t)v[2], x + 3 * (size_t)v[3], &h2, &bad);
     else {
       const double *p[3] = {x + 2 * (size_t)v[0], x + 2 * (size_t)v[1], x + 2 * (size_t)v[2]};
-      double amax = 0;
-      simplex_edges_at(p, 2, &h2, &amax, &bad);
+      triangle_edges_at(p, &h2, &bad);
       ok = simplex_valid_at(p, 2);
     }
     n += ok < 0 ? !(mesh_cell_relative_validity(m, c) > 1e-13) : !ok;

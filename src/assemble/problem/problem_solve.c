@@ -1225,7 +1225,10 @@ static int solve_with_jacobian(lg_env *env, lg_problem *p, const double *rhs, do
   }
   int setf = lg_problem_vec_set(env, p, r, rhs);
   free(proj);
-  if (!setf && transpose && p->null_rigid && MatNullSpaceRemove(p->null, r)) setf = lg_petsc_fail(env, 1, "MatNullSpaceRemove");
+  if (!setf && transpose && p->null_rigid) {
+    PetscErrorCode e = MatNullSpaceRemove(p->null, r);
+    if (e) setf = lg_petsc_fail(env, e, "the adjoint's right side projected off the rigid modes");
+  }
   if (setf) { VecDestroy(&r); VecDestroy(&l); return 1; }
   /* a linear problem's essential rows are bc_diag (u_r - g_r): a sensitivity's right side
    * there scales with them, an adjoint's values there are bc_diag times those of the
